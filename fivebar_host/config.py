@@ -1,0 +1,294 @@
+"""Machine profiles: TOML (stdlib tomllib) into frozen dataclasses, validated at the edge.
+
+Units are parsed once here: the file says degrees where a human would (`*_deg`), the
+dataclasses hold radians, millimetres and seconds. Unknown keys, missing keys, wrong types and
+out-of-range values raise `ConfigError` naming the file, the key and the bound.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+from kinematics.fivebar import WORKING_MODES, FiveBar
+
+DEFAULT_PROFILE = Path(__file__).resolve().parent.parent / "configs" / "default.toml"
+
+
+class ConfigError(ValueError):
+    """A profile that cannot be used; the message names the file and the key."""
+
+
+@dataclass(frozen=True)
+class Motors:
+    """Stepper setup; steps per revolution come from the drive train, never a constant."""
+
+    full_steps: int
+    microsteps: int
+    gear_ratio: float
+    home_rad: tuple[float, float]
+    limits_rad: tuple[tuple[float, float], tuple[float, float]]
+    endstops: bool
+
+    @property
+    def steps_per_rev(self) -> float:
+        """Motor full steps × microsteps × gear ratio (steps per joint revolution)."""
+        return self.full_steps * self.microsteps * self.gear_ratio
+
+    @property
+    def rad_per_step(self) -> float:
+        """Joint angle of one microstep, rad."""
+        return 2.0 * math.pi / self.steps_per_rev
+
+
+@dataclass(frozen=True)
+class KinematicsCfg:
+    """Working mode and the minimum angular distances to each singularity type."""
+
+    working_mode: str
+    min_type1_margin_rad: float
+    min_type2_margin_rad: float
+
+
+@dataclass(frozen=True)
+class Motion:
+    """Feeds and joint limits used by the planner; the one path tolerance."""
+
+    draw_feed_mm_s: float
+    travel_feed_mm_s: float
+    max_joint_rad_s: float
+    max_joint_rad_s2: float
+    tolerance_mm: float
+
+
+@dataclass(frozen=True)
+class Laser:
+    """Laser (or pen) switching: power 0–255 and the on command."""
+
+    power: int
+    on_command: str
+    off_between_paths: bool
+    silence_timeout_s: float
+
+
+@dataclass(frozen=True)
+class SerialCfg:
+    """Serial link settings."""
+
+    baud: int
+    banner_timeout_s: float
+    reply_timeout_s: float
+
+
+@dataclass(frozen=True)
+class Profile:
+    """A complete machine profile."""
+
+    geometry: FiveBar
+    motors: Motors
+    kinematics: KinematicsCfg
+    motion: Motion
+    laser: Laser
+    serial: SerialCfg
+    source: str
+
+
+class _Table:
+    """Reads one TOML table, remembering which keys were used so leftovers are errors."""
+
+    def __init__(self, doc: dict[str, Any], name: str, source: str) -> None:
+        self.source = source
+        self.name = name
+        if name not in doc:
+            raise ConfigError(f"{source}: missing table [{name}]")
+        raw = doc[name]
+        if not isinstance(raw, dict):
+            raise ConfigError(f"{source}: [{name}] must be a table")
+        self.raw: dict[str, Any] = raw
+        self.used: set[str] = set()
+
+    def where(self, key: str) -> str:
+        return f"{self.source}: [{self.name}] {key}"
+
+    def get(self, key: str) -> Any:
+        if key not in self.raw:
+            raise ConfigError(f"{self.where(key)}: missing key")
+        self.used.add(key)
+        return self.raw[key]
+
+    def number(self, key: str, lo: float | None = None, hi: float | None = None, *,
+               lo_open: bool = False) -> float:
+        """A finite real in [lo, hi] (or (lo, hi] with lo_open)."""
+        v = self.get(key)
+        if isinstance(v, bool) or not isinstance(v, int | float):
+            raise ConfigError(f"{self.where(key)}: must be a number; got {v!r}")
+        v = float(v)
+        if not math.isfinite(v):
+            raise ConfigError(f"{self.where(key)}: must be finite; got {v!r}")
+        if lo is not None and (v <= lo if lo_open else v < lo):
+            op = ">" if lo_open else "≥"
+            raise ConfigError(f"{self.where(key)}: must be {op} {lo:g}; got {v:g}")
+        if hi is not None and v > hi:
+            raise ConfigError(f"{self.where(key)}: must be ≤ {hi:g}; got {v:g}")
+        return v
+
+    def integer(self, key: str, lo: int, hi: int) -> int:
+        v = self.get(key)
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise ConfigError(f"{self.where(key)}: must be an integer; got {v!r}")
+        if not lo <= v <= hi:
+            raise ConfigError(f"{self.where(key)}: must be in [{lo}, {hi}]; got {v}")
+        return v
+
+    def boolean(self, key: str) -> bool:
+        v = self.get(key)
+        if not isinstance(v, bool):
+            raise ConfigError(f"{self.where(key)}: must be true or false; got {v!r}")
+        return v
+
+    def choice(self, key: str, options: tuple[str, ...]) -> str:
+        v = self.get(key)
+        if v not in options:
+            raise ConfigError(f"{self.where(key)}: must be one of {', '.join(options)}; "
+                              f"got {v!r}")
+        return str(v)
+
+    def pair(self, key: str, lo: float, hi: float) -> tuple[float, float]:
+        v = self.get(key)
+        if (not isinstance(v, list) or len(v) != 2
+                or any(isinstance(x, bool) or not isinstance(x, int | float) for x in v)):
+            raise ConfigError(f"{self.where(key)}: must be a list of two numbers; got {v!r}")
+        for x in v:
+            if not lo <= x <= hi:
+                raise ConfigError(f"{self.where(key)}: values must be in [{lo:g}, {hi:g}]; "
+                                  f"got {v!r}")
+        return float(v[0]), float(v[1])
+
+    def done(self) -> None:
+        extra = sorted(set(self.raw) - self.used)
+        if extra:
+            raise ConfigError(f"{self.source}: [{self.name}] unknown key(s): {', '.join(extra)}")
+
+
+KNOWN_TABLES = ("geometry", "motors", "kinematics", "motion", "laser", "serial")
+
+
+def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
+    """Validate a parsed TOML document into a `Profile`."""
+    unknown = sorted(set(doc) - set(KNOWN_TABLES))
+    if unknown:
+        raise ConfigError(f"{source}: unknown table(s): {', '.join(unknown)} "
+                          f"(known: {', '.join(KNOWN_TABLES)})")
+
+    g = _Table(doc, "geometry", source)
+    lengths = {k: g.number(k, 0.0, 1e5, lo_open=True) for k in ("a1", "b1", "a2", "b2", "w")}
+    g.done()
+    try:
+        geometry = FiveBar(**lengths)
+    except ValueError as e:
+        raise ConfigError(f"{source}: [geometry]: {e}") from e
+
+    m = _Table(doc, "motors", source)
+    full_steps = m.integer("full_steps", 1, 100_000)
+    microsteps = m.integer("microsteps", 1, 256)
+    gear_ratio = m.number("gear_ratio", 0.0, 1000.0, lo_open=True)
+    home = m.pair("home_deg", -360.0, 360.0)
+    lims_raw = m.get("limits_deg")
+    if not (isinstance(lims_raw, list) and len(lims_raw) == 2):
+        raise ConfigError(f"{m.where('limits_deg')}: must be [[lo1, hi1], [lo2, hi2]] in "
+                          f"degrees; got {lims_raw!r}")
+    lims: list[tuple[float, float]] = []
+    for i, lim in enumerate(lims_raw):
+        if (not isinstance(lim, list) or len(lim) != 2
+                or any(isinstance(x, bool) or not isinstance(x, int | float) for x in lim)):
+            raise ConfigError(f"{m.where('limits_deg')}[{i}]: must be [lo, hi]; got {lim!r}")
+        lo, hi = float(lim[0]), float(lim[1])
+        if not (-360.0 <= lo < hi <= 360.0 and hi - lo <= 360.0):
+            raise ConfigError(f"{m.where('limits_deg')}[{i}]: need -360 ≤ lo < hi ≤ 360 and "
+                              f"hi − lo ≤ 360; got {lim!r}")
+        if not lo <= home[i] <= hi:
+            raise ConfigError(f"{m.where('home_deg')}[{i}] = {home[i]:g} lies outside "
+                              f"limits_deg[{i}] = [{lo:g}, {hi:g}]")
+        lims.append((math.radians(lo), math.radians(hi)))
+    endstops = m.boolean("endstops")
+    m.done()
+    motors = Motors(full_steps, microsteps, gear_ratio,
+                    (math.radians(home[0]), math.radians(home[1])),
+                    (lims[0], lims[1]), endstops)
+
+    k = _Table(doc, "kinematics", source)
+    kin = KinematicsCfg(
+        k.choice("working_mode", (*WORKING_MODES, "auto")),
+        math.radians(k.number("min_type1_margin_deg", 0.0, 89.0)),
+        math.radians(k.number("min_type2_margin_deg", 0.0, 89.0)),
+    )
+    k.done()
+
+    mo = _Table(doc, "motion", source)
+    motion = Motion(
+        mo.number("draw_feed_mm_s", 0.0, 10_000.0, lo_open=True),
+        mo.number("travel_feed_mm_s", 0.0, 10_000.0, lo_open=True),
+        mo.number("max_joint_rad_s", 0.0, 1_000.0, lo_open=True),
+        mo.number("max_joint_rad_s2", 0.0, 1e6, lo_open=True),
+        mo.number("tolerance_mm", 1e-4, 10.0),
+    )
+    mo.done()
+
+    la = _Table(doc, "laser", source)
+    laser = Laser(
+        la.integer("power", 0, 255),
+        la.choice("on_command", ("M3", "M4")),
+        la.boolean("off_between_paths"),
+        la.number("silence_timeout_s", 0.0, 3600.0, lo_open=True),
+    )
+    la.done()
+
+    se = _Table(doc, "serial", source)
+    serial = SerialCfg(
+        se.integer("baud", 300, 4_000_000),
+        se.number("banner_timeout_s", 0.0, 600.0, lo_open=True),
+        se.number("reply_timeout_s", 0.0, 600.0, lo_open=True),
+    )
+    se.done()
+    return Profile(geometry, motors, kin, motion, laser, serial, source)
+
+
+def load_profile(path: str | Path | None = None) -> Profile:
+    """Read and validate a profile file (the bundled default when `path` is None)."""
+    p = Path(path) if path is not None else DEFAULT_PROFILE
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as e:
+        raise ConfigError(f"{p}: cannot read profile: {e.strerror or e}") from e
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"{p}: not valid TOML: {e}") from e
+    return parse_profile(doc, str(p))
+
+
+def describe(profile: Profile) -> str:
+    """Human-readable summary of a parsed profile (for `fivebar config check`)."""
+    lines = [f"profile {profile.source}"]
+    for name in ("geometry", "motors", "kinematics", "motion", "laser", "serial"):
+        obj = getattr(profile, name)
+        lines.append(f"[{name}]")
+        for f in fields(obj):
+            v = getattr(obj, f.name)
+            if f.name.endswith("_rad") and isinstance(v, float):
+                lines.append(f"  {f.name[:-4]}_deg = {math.degrees(v):g}")
+            elif f.name == "home_rad":
+                lines.append(f"  home_deg = [{', '.join(f'{math.degrees(x):g}' for x in v)}]")
+            elif f.name == "limits_rad":
+                lines.append("  limits_deg = [" + ", ".join(
+                    f"[{math.degrees(lo):g}, {math.degrees(hi):g}]" for lo, hi in v) + "]")
+            else:
+                lines.append(f"  {f.name} = {v!r}")
+        if name == "motors":
+            mot = profile.motors
+            lines.append(f"  # steps_per_rev = {mot.steps_per_rev:g} "
+                         f"({math.degrees(mot.rad_per_step):.5f}° per step)")
+    return "\n".join(lines)

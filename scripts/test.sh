@@ -1,0 +1,9 @@
+#!/usr/bin/env bash
+# Set up everything and run every test: toolchain + package install, lint, types, pytest.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup.sh
+PY=${PYTHON:-python3}
+echo "== ruff";   "$PY" -m ruff check .
+echo "== mypy";   "$PY" -m mypy
+echo "== pytest"; "$PY" -m pytest "$@"
