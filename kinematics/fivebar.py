@@ -459,5 +459,6 @@ def _arm_inverse(dx: FloatArray, dy: FloatArray, a: float, b: float,
     if s < 0:
         rk = -rk
     cc = csq + (a * a - b * b)
-    th = np.arctan2(dy * cc + dx * rk, dx * cc - dy * rk)
+    with np.errstate(invalid="ignore"):
+        th = np.arctan2(dy * cc + dx * rk, dx * cc - dy * rk)
     return th, k, csq

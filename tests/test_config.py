@@ -1,0 +1,126 @@
+"""Machine profiles: the bundled default loads; every kind of bad value names its key."""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import pytest
+from click.testing import CliRunner
+
+from fivebar_host.cli import main
+from fivebar_host.config import DEFAULT_PROFILE, ConfigError, load_profile, parse_profile
+
+
+def _doc() -> dict[str, Any]:
+    return tomllib.loads(DEFAULT_PROFILE.read_text())
+
+
+def test_default_profile_loads_with_units_converted() -> None:
+    prof = load_profile()
+    assert prof.geometry.a1 == 60.0
+    assert prof.motors.steps_per_rev == 200 * 16 * 4.0
+    assert prof.motors.home_rad[0] == pytest.approx(math.radians(120.0))
+    assert prof.motors.limits_rad[1] == pytest.approx((math.radians(10), math.radians(170)))
+    assert prof.kinematics.min_type2_margin_rad == pytest.approx(math.radians(15.0))
+    # The home pose must be assemblable: the arms at home_deg close the loop.
+    import numpy as np
+
+    res = prof.geometry.forward_batch(np.array([prof.motors.home_rad]), "+")
+    assert res.valid.all()
+
+
+def _set(doc: dict[str, Any], table: str, key: str, value: Any) -> dict[str, Any]:
+    doc[table][key] = value
+    return doc
+
+
+@pytest.mark.parametrize(("table", "key", "value", "msg"), [
+    ("geometry", "a1", -5.0, r"\[geometry\] a1: must be > 0"),
+    ("geometry", "w", "wide", r"\[geometry\] w: must be a number"),
+    ("geometry", "w", 1000.0, r"\[geometry\].*never meet"),
+    ("motors", "microsteps", 0, r"\[motors\] microsteps: must be in \[1, 256\]"),
+    ("motors", "microsteps", 16.5, r"\[motors\] microsteps: must be an integer"),
+    ("motors", "gear_ratio", 0, r"\[motors\] gear_ratio: must be > 0"),
+    ("motors", "home_deg", [200.0, 60.0], r"home_deg\[0\] = 200 lies outside limits_deg\[0\]"),
+    ("motors", "limits_deg", [[10, 5], [10, 170]], r"limits_deg\[0\]: need"),
+    ("motors", "endstops", "no", r"\[motors\] endstops: must be true or false"),
+    ("kinematics", "working_mode", "+", r"working_mode: must be one of"),
+    ("kinematics", "min_type2_margin_deg", 95.0, r"min_type2_margin_deg: must be ≤ 89"),
+    ("motion", "tolerance_mm", 0.0, r"tolerance_mm: must be ≥ 0.0001"),
+    ("motion", "draw_feed_mm_s", float("nan"), r"draw_feed_mm_s: must be finite"),
+    ("laser", "power", 300, r"\[laser\] power: must be in \[0, 255\]"),
+    ("laser", "on_command", "M7", r"on_command: must be one of M3, M4"),
+    ("serial", "baud", True, r"\[serial\] baud: must be an integer"),
+])
+def test_bad_values_name_the_key(table: str, key: str, value: Any, msg: str) -> None:
+    with pytest.raises(ConfigError, match=msg):
+        parse_profile(_set(_doc(), table, key, value), "p.toml")
+
+
+def test_unknown_and_missing_keys() -> None:
+    doc = _doc()
+    doc["motion"]["max_speed"] = 3
+    with pytest.raises(ConfigError, match=r"p.toml: \[motion\] unknown key\(s\): max_speed"):
+        parse_profile(doc, "p.toml")
+    doc = _doc()
+    del doc["geometry"]["b2"]
+    with pytest.raises(ConfigError, match=r"\[geometry\] b2: missing key"):
+        parse_profile(doc, "p.toml")
+    doc = _doc()
+    del doc["laser"]
+    with pytest.raises(ConfigError, match=r"missing table \[laser\]"):
+        parse_profile(doc, "p.toml")
+    doc = _doc()
+    doc["extras"] = {}
+    with pytest.raises(ConfigError, match=r"unknown table\(s\): extras"):
+        parse_profile(doc, "p.toml")
+
+
+def test_unreadable_and_malformed_files(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="cannot read profile"):
+        load_profile(tmp_path / "missing.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[geometry\na1 = 3\n")
+    with pytest.raises(ConfigError, match=r"bad.toml: not valid TOML"):
+        load_profile(bad)
+
+
+def test_profile_is_frozen() -> None:
+    prof = load_profile()
+    with pytest.raises(AttributeError):
+        prof.motion.tolerance_mm = 1.0  # type: ignore[misc]
+
+
+def test_cli_config_check(tmp_path: Path) -> None:
+    runner = CliRunner()
+    ok = runner.invoke(main, ["config", "check", str(DEFAULT_PROFILE)])
+    assert ok.exit_code == 0, ok.output
+    assert "steps_per_rev = 12800" in ok.output
+    text = DEFAULT_PROFILE.read_text().replace("b1 = 90.0", "b1 = -90.0")
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text)
+    res = runner.invoke(main, ["config", "check", str(bad)])
+    assert res.exit_code == 2
+    assert "[geometry] b1: must be > 0" in res.output
+
+
+def test_cli_ik_fk_round_trip_and_unreachable() -> None:
+    runner = CliRunner()
+    res = runner.invoke(main, ["ik", "20", "100", "--mode", "+-"])
+    assert res.exit_code == 0, res.output
+    assert "θ1 = 139.866190°" in res.output
+    res = runner.invoke(main, ["fk", "139.866190", "40.133810"])
+    assert res.exit_code == 0
+    assert "P = (20.0000" in res.output and "working mode +-" in res.output
+    res = runner.invoke(main, ["ik", "300", "0"])
+    assert res.exit_code == 2
+    assert "beyond arm 1's reach" in res.output
+
+
+def test_cli_version_and_help() -> None:
+    runner = CliRunner()
+    assert runner.invoke(main, ["--version"]).output.startswith("fivebar, version")
+    assert "five-bar" in runner.invoke(main, ["--help"]).output
