@@ -1,0 +1,145 @@
+/*
+ * board.h - the seam between the portable core and the hardware.
+ *
+ * The core (fb_proto.c, fb_motion.c, fb_main.c) only talks to the machine
+ * through these functions.  board_avr.c implements them for the ATmega328P;
+ * firmware/tests/fake_board.c implements them for the host unit tests.  The
+ * few calls on the step interrupt's hot path are static inline on AVR.
+ *
+ * Axis masks: bit 0 = motor A, bit 1 = motor B.
+ */
+#ifndef FB_BOARD_H
+#define FB_BOARD_H
+
+#include <stdint.h>
+#include "config.h"
+
+#define FB_CAT2(a, b) a##b
+#define FB_CAT(a, b) FB_CAT2(a, b)
+#define FB_ALWAYS_INLINE static inline __attribute__((always_inline))
+
+void board_init(void);
+
+/* Serial: queue one byte for transmission (blocks while the TX ring is full). */
+void board_tx(uint8_t c);
+/* Milliseconds since boot (free running). */
+uint32_t board_ms(void);
+
+/* Step timer: call fb's mo_event() after delay_cycles, then again after each
+ * delay it returns, until it returns 0. */
+void board_timer_start(uint16_t delay_cycles);
+void board_timer_stop(void);
+/* Freeze the step timeline where it is (hold) and continue it later. */
+void board_timer_pause(void);
+void board_timer_resume(void);
+
+/*
+ * Also, inline on AVR (they run in the step interrupt, where a call would
+ * make the compiler save every call-clobbered register on each entry):
+ *   void board_steps_high(uint8_t mask);     raise the step pins in mask
+ *   void board_set_dirs(uint8_t neg_mask);   bit set = that motor steps negative
+ *   void board_enable_motors(uint8_t on);
+ *   void board_laser(uint8_t power);         0 = pin low, 255 = high, else PWM
+ *   uint8_t board_endstops(void);            mask of the switches pressed now
+ *   uint8_t board_irq_save(void);            mask interrupts, return old state
+ *   void board_irq_restore(uint8_t state);
+ */
+
+#ifdef __AVR__
+#include <avr/io.h>
+#include <avr/pgmspace.h>
+
+#define FB_REG_PORT(p) FB_CAT(PORT, p)
+#define FB_REG_DDR(p)  FB_CAT(DDR, p)
+#define FB_REG_PIN(p)  FB_CAT(PIN, p)
+
+FB_ALWAYS_INLINE uint8_t board_irq_save(void)
+{
+	uint8_t s = SREG;
+	__asm__ __volatile__("cli" ::: "memory");
+	return s;
+}
+
+FB_ALWAYS_INLINE void board_irq_restore(uint8_t state)
+{
+	__asm__ __volatile__("" ::: "memory");
+	SREG = state;
+}
+
+FB_ALWAYS_INLINE void board_enable_motors(uint8_t on)
+{
+	if (on)
+		FB_REG_PORT(PIN_ENABLE_PORT) &= (uint8_t)~(1u << PIN_ENABLE_BIT);
+	else
+		FB_REG_PORT(PIN_ENABLE_PORT) |= (uint8_t)(1u << PIN_ENABLE_BIT);
+}
+
+FB_ALWAYS_INLINE void board_laser(uint8_t power)
+{
+	uint8_t s = board_irq_save();
+	if (power == 0 || power == 255) {
+		TCCR2A &= (uint8_t)~((1u << COM2A1) | (1u << COM2A0));
+		if (power)
+			FB_REG_PORT(PIN_LASER_PORT) |= (uint8_t)(1u << PIN_LASER_BIT);
+		else
+			FB_REG_PORT(PIN_LASER_PORT) &= (uint8_t)~(1u << PIN_LASER_BIT);
+	} else {
+		OCR2A = power;
+		TCCR2A |= (uint8_t)(1u << COM2A1);
+	}
+	board_irq_restore(s);
+}
+
+FB_ALWAYS_INLINE uint8_t board_endstops(void)
+{
+	uint8_t v = FB_REG_PIN(PIN_ENDSTOP_PORT);
+	if (CFG_ENDSTOP_ACTIVE_LOW)
+		v = (uint8_t)~v;
+	return (uint8_t)(((v >> PIN_ENDSTOP_A_BIT) & 1u) | (((v >> PIN_ENDSTOP_B_BIT) & 1u) << 1));
+}
+
+#define FB_STEP_PORT  FB_CAT(PORT, PIN_STEP_PORT)
+#define FB_DIR_PORT   FB_CAT(PORT, PIN_DIR_PORT)
+#define FB_STEP_PINS  ((uint8_t)((1u << PIN_STEP_A_BIT) | (1u << PIN_STEP_B_BIT)))
+#define FB_DIR_PINS   ((uint8_t)((1u << PIN_DIR_A_BIT) | (1u << PIN_DIR_B_BIT)))
+
+/* Raise the step pins of the motors in mask (one port write). */
+FB_ALWAYS_INLINE void board_steps_high(uint8_t mask)
+{
+	uint8_t bits = 0;
+	if (mask & 1u)
+		bits |= (uint8_t)(1u << PIN_STEP_A_BIT);
+	if (mask & 2u)
+		bits |= (uint8_t)(1u << PIN_STEP_B_BIT);
+	FB_STEP_PORT |= bits;
+}
+
+/* Set the direction pins: bit set in neg_mask = that motor steps negative. */
+FB_ALWAYS_INLINE void board_set_dirs(uint8_t neg_mask)
+{
+	uint8_t level = (uint8_t)((neg_mask ^ 3u ^ CFG_DIR_INVERT_MASK) & 3u);
+	uint8_t bits = 0;
+	if (level & 1u)
+		bits |= (uint8_t)(1u << PIN_DIR_A_BIT);
+	if (level & 2u)
+		bits |= (uint8_t)(1u << PIN_DIR_B_BIT);
+	FB_DIR_PORT = (uint8_t)((FB_DIR_PORT & (uint8_t)~FB_DIR_PINS) | bits);
+}
+
+#define FB_PSTR(s) PSTR(s)
+#define FB_PROGMEM PROGMEM
+static inline char fb_pgm_char(const char *p) { return (char)pgm_read_byte(p); }
+#else
+void board_steps_high(uint8_t mask);
+void board_set_dirs(uint8_t neg_mask);
+void board_enable_motors(uint8_t on);
+void board_laser(uint8_t power);
+uint8_t board_endstops(void);
+uint8_t board_irq_save(void);
+void board_irq_restore(uint8_t state);
+#define FB_PSTR(s) (s)
+#define FB_PROGMEM
+static inline char fb_pgm_char(const char *p) { return *p; }
+#endif
+
+#endif

@@ -1,0 +1,196 @@
+/*
+ * board_avr.c - ATmega328P implementation of board.h (pure avr-libc).
+ *
+ * Timers:  Timer0  1 kHz tick (CTC, TIMER0_COMPA; Arduino's own TIMER0_OVF
+ *                  never fires in this mode, so the sketch also links
+ *                  against the Arduino core)
+ *          Timer1  free-running at F_CPU; OCR1A schedules step events
+ *          Timer2  8-bit fast PWM at F_CPU/8/256 = 7.8 kHz on OC2A (laser)
+ * UART0 115200 8N1 with U2X (set before UBRR: simavr latches the baud rate
+ * when UBRR0L is written), interrupt-driven receive and transmit.
+ */
+#ifdef __AVR__
+
+#include <avr/io.h>
+#include <avr/interrupt.h>
+#include "board.h"
+#include "config.h"
+#include "fb_main.h"
+#include "fb_motion.h"
+
+#define REG_PORT(p) FB_REG_PORT(p)
+#define REG_DDR(p)  FB_REG_DDR(p)
+
+#define ENDSTOP_PINS ((uint8_t)((1u << PIN_ENDSTOP_A_BIT) | (1u << PIN_ENDSTOP_B_BIT)))
+#define UBRR_VALUE ((FB_F_CPU + 4UL * FB_BAUD) / (8UL * FB_BAUD) - 1UL)
+
+/* Step pulse: the pins go low at least this many cycles after the event
+ * handler starts (>= 2.5 us high, measured in the simavr trace). */
+#define PULSE_CYCLES 56u
+/* Events closer than this are run in the same interrupt (busy-waiting until
+ * their exact cycle) instead of leaving and re-entering it. */
+#define NEAR_CYCLES 160
+
+#if (CFG_TX_SIZE & (CFG_TX_SIZE - 1)) != 0 || CFG_TX_SIZE > 128
+#error "CFG_TX_SIZE must be a power of two up to 128"
+#endif
+
+static volatile uint8_t tx_buf[CFG_TX_SIZE];
+static volatile uint8_t tx_head, tx_tail;
+static volatile uint32_t ms_ticks;
+static uint16_t paused_rem;
+static uint8_t paused;
+
+void board_init(void)
+{
+	cli();
+	REG_PORT(PIN_STEP_PORT) &= (uint8_t)~FB_STEP_PINS;
+	REG_DDR(PIN_STEP_PORT) |= FB_STEP_PINS;
+	REG_PORT(PIN_DIR_PORT) &= (uint8_t)~FB_DIR_PINS;
+	REG_DDR(PIN_DIR_PORT) |= FB_DIR_PINS;
+	REG_PORT(PIN_ENABLE_PORT) |= (uint8_t)(1u << PIN_ENABLE_BIT);   /* disabled */
+	REG_DDR(PIN_ENABLE_PORT) |= (uint8_t)(1u << PIN_ENABLE_BIT);
+	REG_PORT(PIN_LASER_PORT) &= (uint8_t)~(1u << PIN_LASER_BIT);
+	REG_DDR(PIN_LASER_PORT) |= (uint8_t)(1u << PIN_LASER_BIT);
+	REG_DDR(PIN_ENDSTOP_PORT) &= (uint8_t)~ENDSTOP_PINS;
+	if (CFG_ENDSTOP_ACTIVE_LOW)
+		REG_PORT(PIN_ENDSTOP_PORT) |= ENDSTOP_PINS;
+
+	UCSR0A = (uint8_t)(1u << U2X0);
+	UBRR0H = (uint8_t)(UBRR_VALUE >> 8);
+	UBRR0L = (uint8_t)UBRR_VALUE;
+	UCSR0C = (uint8_t)((1u << UCSZ01) | (1u << UCSZ00));
+	UCSR0B = (uint8_t)((1u << RXEN0) | (1u << TXEN0) | (1u << RXCIE0));
+
+	/* start the clocks before writing OCRs: simavr ignores OCR writes to a
+	 * stopped timer */
+	TIMSK0 = 0;
+	TCCR0A = (uint8_t)(1u << WGM01);
+	TCCR0B = (uint8_t)((1u << CS01) | (1u << CS00));
+	OCR0A = (uint8_t)(FB_F_CPU / 64UL / 1000UL - 1UL);
+	TIFR0 = (uint8_t)(1u << OCF0A);
+	TIMSK0 = (uint8_t)(1u << OCIE0A);
+
+	TIMSK1 = 0;
+	TCCR1A = 0;
+	TCCR1C = 0;
+	TCCR1B = (uint8_t)(1u << CS10);
+
+	TIMSK2 = 0;
+	TCCR2A = (uint8_t)((1u << WGM21) | (1u << WGM20));
+	TCCR2B = (uint8_t)(1u << CS21);
+	sei();
+}
+
+ISR(TIMER0_COMPA_vect)
+{
+	ms_ticks++;
+}
+
+uint32_t board_ms(void)
+{
+	uint8_t s = board_irq_save();
+	uint32_t v = ms_ticks;
+	board_irq_restore(s);
+	return v;
+}
+
+ISR(USART_RX_vect)
+{
+	uint8_t c = UDR0;
+	fb_rx_isr(c);
+}
+
+ISR(USART_UDRE_vect)
+{
+	uint8_t t = tx_tail;
+	if (t != tx_head) {
+		UDR0 = tx_buf[t & (CFG_TX_SIZE - 1u)];
+		tx_tail = (uint8_t)(t + 1u);
+	}
+	if (tx_tail == tx_head)
+		UCSR0B &= (uint8_t)~(1u << UDRIE0);
+}
+
+void board_tx(uint8_t c)
+{
+	while ((uint8_t)(tx_head - tx_tail) >= CFG_TX_SIZE)
+		;
+	tx_buf[tx_head & (CFG_TX_SIZE - 1u)] = c;
+	uint8_t s = board_irq_save();
+	tx_head = (uint8_t)(tx_head + 1u);
+	UCSR0B |= (uint8_t)(1u << UDRIE0);
+	board_irq_restore(s);
+}
+
+/* ---- step timer -------------------------------------------------------------- */
+
+ISR(TIMER1_COMPA_vect)
+{
+	uint16_t t = OCR1A;
+	for (;;) {
+		uint16_t t0 = TCNT1;
+		uint16_t d = mo_event();
+		while ((uint16_t)(TCNT1 - t0) < PULSE_CYCLES)
+			;
+		FB_STEP_PORT &= (uint8_t)~FB_STEP_PINS;
+		if (!d) {
+			TIMSK1 &= (uint8_t)~(1u << OCIE1A);
+			return;
+		}
+		t = (uint16_t)(t + d);
+		if ((int16_t)(t - TCNT1) > NEAR_CYCLES) {
+			OCR1A = t;
+			return;
+		}
+		while ((int16_t)(TCNT1 - t) < 0)
+			;
+	}
+}
+
+void board_timer_start(uint16_t delay_cycles)
+{
+	uint8_t s = board_irq_save();
+	paused = 0;
+	OCR1A = (uint16_t)(TCNT1 + delay_cycles);
+	TIFR1 = (uint8_t)(1u << OCF1A);
+	TIMSK1 |= (uint8_t)(1u << OCIE1A);
+	board_irq_restore(s);
+}
+
+void board_timer_stop(void)
+{
+	uint8_t s = board_irq_save();
+	TIMSK1 &= (uint8_t)~(1u << OCIE1A);
+	paused = 0;
+	FB_STEP_PORT &= (uint8_t)~FB_STEP_PINS;
+	board_irq_restore(s);
+}
+
+void board_timer_pause(void)
+{
+	uint8_t s = board_irq_save();
+	if (!paused && (TIMSK1 & (1u << OCIE1A))) {
+		TIMSK1 &= (uint8_t)~(1u << OCIE1A);
+		uint16_t rem = (uint16_t)(OCR1A - TCNT1);
+		if (TIFR1 & (1u << OCF1A))
+			rem = 0;
+		paused_rem = rem;
+		paused = 1;
+	}
+	board_irq_restore(s);
+}
+
+void board_timer_resume(void)
+{
+	uint8_t s = board_irq_save();
+	if (paused) {
+		paused = 0;
+		OCR1A = (uint16_t)(TCNT1 + paused_rem + 64u);
+		TIFR1 = (uint8_t)(1u << OCF1A);
+		TIMSK1 |= (uint8_t)(1u << OCIE1A);
+	}
+	board_irq_restore(s);
+}
+
+#endif

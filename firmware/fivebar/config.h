@@ -1,0 +1,75 @@
+/*
+ * config.h - every pin, size and default of the fivebar firmware, in one place.
+ *
+ * Target: Arduino Uno (ATmega328P, 16 MHz) with the common CNC shield.  Pins are
+ * given as an AVR port letter plus a bit, because the step generator writes both
+ * step pins with one port write.  This header is plain macros with no AVR
+ * includes, so the host unit tests and the simavr harness include it too (the
+ * harness traces exactly these pins).
+ */
+#ifndef FB_CONFIG_H
+#define FB_CONFIG_H
+
+#define FB_VERSION        "1.0.0"
+#define FB_PROTOCOL       1
+
+#define FB_F_CPU          16000000UL
+#define FB_BAUD           115200UL
+
+/* ---- pins (Arduino name in the comment) ---------------------------------- */
+/* Both step pins must sit on one port; so must both direction pins. */
+#define PIN_STEP_PORT     D
+#define PIN_STEP_A_BIT    2     /* D2: X step on the CNC shield -> motor A */
+#define PIN_STEP_B_BIT    3     /* D3: Y step -> motor B */
+#define PIN_DIR_PORT      D
+#define PIN_DIR_A_BIT     5     /* D5: X dir */
+#define PIN_DIR_B_BIT     6     /* D6: Y dir */
+#define PIN_ENABLE_PORT   B
+#define PIN_ENABLE_BIT    0     /* D8: driver enable, active low */
+/* The laser pin must be OC2A (D11): its PWM comes from Timer2. */
+#define PIN_LASER_PORT    B
+#define PIN_LASER_BIT     3     /* D11 */
+#define PIN_ENDSTOP_PORT  B
+#define PIN_ENDSTOP_A_BIT 1     /* D9: X limit */
+#define PIN_ENDSTOP_B_BIT 2     /* D10: Y limit */
+
+/* Direction pin level for positive steps: 0 = high means positive. Bit 0 = A. */
+#define CFG_DIR_INVERT_MASK      0
+/* Endstops are normally-open switches to GND with the internal pull-up:
+ * active (pressed) = pin low.  Set to 0 for active-high switches. */
+#define CFG_ENDSTOP_ACTIVE_LOW   1
+
+/* ---- buffer sizes (reported in the banner) -------------------------------- */
+#define CFG_RX_SIZE       128   /* receive ring, bytes: the character-counting budget */
+#define CFG_TX_SIZE       64    /* transmit ring, bytes */
+#define CFG_LINE_MAX      80    /* longest accepted line, bytes, without the newline */
+#define CFG_QUEUE_SIZE    16    /* segment queue, blocks (power of two) */
+
+/* ---- motion ---------------------------------------------------------------- */
+#define CFG_MAX_RATE_LIMIT  40000L   /* hard cap of $0, steps/s per motor */
+#define CFG_P_MIN_US        100L     /* shortest G1 duration, µs */
+#define CFG_P_MAX_US        100000000L /* longest G1 duration, µs (100 s) */
+#define CFG_POS_LIMIT       100000000L /* |position| bound in steps, always enforced */
+/* Motion starts once this many blocks are queued, or when the oldest queued
+ * block has waited CFG_START_DELAY_MS: gives the host a head start so a
+ * streamed job does not stutter on its first segments. */
+#define CFG_START_BLOCKS    4
+#define CFG_START_DELAY_MS  20
+
+/* ---- defaults of the $ settings ------------------------------------------- */
+#define DEF_MAX_RATE        20000L   /* $0  steps/s per motor */
+#define DEF_LIMIT_A_MIN     (-100000L) /* $1 */
+#define DEF_LIMIT_A_MAX     100000L  /* $2 */
+#define DEF_LIMIT_B_MIN     (-100000L) /* $3 */
+#define DEF_LIMIT_B_MAX     100000L  /* $4 */
+#define DEF_SOFT_LIMITS     1        /* $5  0 off, 1 on */
+#define DEF_LASER_TIMEOUT   2000L    /* $6  ms of host silence tolerated with the laser on */
+#define DEF_HOMING_ENABLE   0        /* $7  1 when the machine has endstops */
+#define DEF_HOMING_RATE     2000L    /* $8  steps/s */
+#define DEF_HOMING_PULLOFF  100L     /* $9  steps */
+#define DEF_HOME_A          0L       /* $10 position of A after homing */
+#define DEF_HOME_B          0L       /* $11 */
+#define DEF_HOMING_TRAVEL   20000L   /* $12 longest seek, steps */
+#define DEF_HOMING_DIR      0        /* $13 bit0: A seeks +, bit1: B seeks + (else -) */
+
+#endif

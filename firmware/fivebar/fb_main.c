@@ -1,0 +1,642 @@
+/*
+ * fb_main.c - protocol state machine of the fivebar firmware.
+ *
+ * Real-time bytes (? ! ~ Ctrl-X) are acted on inside the receive interrupt;
+ * every other byte goes through the receive ring into the line buffer, and
+ * each '\n' gets exactly one reply ("ok" or "error:<code>"), in order, so a
+ * host can count characters against the ring size given in the banner.
+ */
+#include <string.h>
+#include "fb_main.h"
+#include "fb_proto.h"
+#include "fb_motion.h"
+#include "board.h"
+#include "config.h"
+#include "status.h"
+
+#if CFG_RX_SIZE != 128 && CFG_RX_SIZE != 64 && CFG_RX_SIZE != 32
+#error "CFG_RX_SIZE must be 32, 64 or 128"
+#endif
+#define RX_MASK (CFG_RX_SIZE - 1u)
+
+#define CTRL_X 0x18
+
+enum { SET_MAX_RATE, SET_A_MIN, SET_A_MAX, SET_B_MIN, SET_B_MAX, SET_SOFT_LIMITS,
+       SET_LASER_TIMEOUT, SET_HOMING, SET_HOMING_RATE, SET_PULLOFF, SET_HOME_A,
+       SET_HOME_B, SET_TRAVEL, SET_HOMING_DIR, SET_COUNT };
+
+enum { HOLD_HOST = 0, HOLD_LASER_TIMEOUT = 1, HOLD_ERROR = 2 };
+
+/* receive ring: free-running indices, so all CFG_RX_SIZE bytes are usable */
+static volatile uint8_t rx_buf[CFG_RX_SIZE];
+static volatile uint8_t rx_head, rx_tail, rx_discard, rx_overflow;
+static volatile uint32_t last_rx_ms;
+static volatile uint8_t f_status, f_reset, f_home_abort;
+static volatile uint8_t held, hold_reason, homing, alarm;
+
+static char line[CFG_LINE_MAX];
+static uint8_t line_len, line_over;
+static fb_lines_t lines;
+static fb_cmd_t cmd;
+static uint8_t pending;
+
+static int32_t settings[SET_COUNT];
+static uint32_t min_interval;
+static uint8_t absolute, laser_on, laser_s, motors_on;
+static int32_t plan[2];
+static uint32_t first_queued_ms;
+
+/* ---- output ---------------------------------------------------------------- */
+
+static void put_P(const char *s)
+{
+	char c;
+	while ((c = fb_pgm_char(s++)) != 0)
+		board_tx((uint8_t)c);
+}
+
+static void put_u32(uint32_t v)
+{
+	char d[10];
+	uint8_t n = 0;
+	do {
+		d[n++] = (char)('0' + v % 10u);
+		v /= 10u;
+	} while (v);
+	while (n)
+		board_tx((uint8_t)d[--n]);
+}
+
+static void put_i32(int32_t v)
+{
+	if (v < 0) {
+		board_tx('-');
+		put_u32((uint32_t)0 - (uint32_t)v);
+	} else {
+		put_u32((uint32_t)v);
+	}
+}
+
+static void put_eol(void) { put_P(FB_PSTR("\r\n")); }
+
+static void banner(void)
+{
+	put_P(FB_PSTR("fivebar " FB_VERSION " proto:"));
+	put_u32(FB_PROTOCOL);
+	put_P(FB_PSTR(" rx:"));
+	put_u32(CFG_RX_SIZE);
+	put_P(FB_PSTR(" queue:"));
+	put_u32(CFG_QUEUE_SIZE);
+	put_P(FB_PSTR(" line:"));
+	put_u32(CFG_LINE_MAX);
+	put_eol();
+}
+
+static void reply_error(uint8_t code)
+{
+	put_P(FB_PSTR("error:"));
+	put_u32(code);
+	if (fb_is_resend(code)) {
+		put_P(FB_PSTR(" resend:"));
+		put_u32(lines.last + 1u);
+	}
+	put_eol();
+}
+
+static void status_report(void)
+{
+	int32_t pos[2];
+	mo_get_pos(pos);
+	board_tx('<');
+	if (alarm) {
+		put_P(FB_PSTR("Alarm:"));
+		put_u32(alarm);
+	} else if (homing) {
+		put_P(FB_PSTR("Home"));
+	} else if (held) {
+		put_P(FB_PSTR("Hold:"));
+		put_u32(hold_reason);
+	} else if (mo_running() || mo_queue_count()) {
+		put_P(FB_PSTR("Run"));
+	} else {
+		put_P(FB_PSTR("Idle"));
+	}
+	put_P(FB_PSTR("|A:"));
+	put_i32(pos[0]);
+	put_P(FB_PSTR(",B:"));
+	put_i32(pos[1]);
+	put_P(FB_PSTR("|Q:"));
+	put_u32(mo_queue_count());
+	put_P(FB_PSTR("|Ln:"));
+	put_u32(mo_done_line());
+	board_tx(',');
+	put_u32(lines.last);
+	put_P(FB_PSTR("|L:"));
+	put_u32(mo_laser());
+	put_P(FB_PSTR("|U:"));
+	put_u32(mo_underruns());
+	board_tx('>');
+	put_eol();
+}
+
+/* ---- settings -------------------------------------------------------------- */
+
+static void settings_defaults(void)
+{
+	settings[SET_MAX_RATE] = DEF_MAX_RATE;
+	settings[SET_A_MIN] = DEF_LIMIT_A_MIN;
+	settings[SET_A_MAX] = DEF_LIMIT_A_MAX;
+	settings[SET_B_MIN] = DEF_LIMIT_B_MIN;
+	settings[SET_B_MAX] = DEF_LIMIT_B_MAX;
+	settings[SET_SOFT_LIMITS] = DEF_SOFT_LIMITS;
+	settings[SET_LASER_TIMEOUT] = DEF_LASER_TIMEOUT;
+	settings[SET_HOMING] = DEF_HOMING_ENABLE;
+	settings[SET_HOMING_RATE] = DEF_HOMING_RATE;
+	settings[SET_PULLOFF] = DEF_HOMING_PULLOFF;
+	settings[SET_HOME_A] = DEF_HOME_A;
+	settings[SET_HOME_B] = DEF_HOME_B;
+	settings[SET_TRAVEL] = DEF_HOMING_TRAVEL;
+	settings[SET_HOMING_DIR] = DEF_HOMING_DIR;
+}
+
+static uint32_t interval_for(int32_t rate)
+{
+	return (uint32_t)((FB_F_CPU + (uint32_t)rate - 1u) / (uint32_t)rate);
+}
+
+static void settings_apply(void)
+{
+	min_interval = interval_for(settings[SET_MAX_RATE]);
+	mo_set_endstops_enabled((uint8_t)settings[SET_HOMING]);
+}
+
+/* Range of setting n, or 0 when there is no such setting. */
+static uint8_t setting_range(uint8_t n, int32_t *lo, int32_t *hi)
+{
+	switch (n) {
+	case SET_MAX_RATE: case SET_HOMING_RATE:
+		*lo = 1; *hi = CFG_MAX_RATE_LIMIT; return 1;
+	case SET_A_MIN: case SET_A_MAX: case SET_B_MIN: case SET_B_MAX:
+	case SET_HOME_A: case SET_HOME_B:
+		*lo = -CFG_POS_LIMIT; *hi = CFG_POS_LIMIT; return 1;
+	case SET_SOFT_LIMITS: case SET_HOMING:
+		*lo = 0; *hi = 1; return 1;
+	case SET_LASER_TIMEOUT:
+		*lo = 100; *hi = 60000; return 1;
+	case SET_PULLOFF:
+		*lo = 0; *hi = 1000000L; return 1;
+	case SET_TRAVEL:
+		*lo = 1; *hi = 10000000L; return 1;
+	case SET_HOMING_DIR:
+		*lo = 0; *hi = 3; return 1;
+	default:
+		return 0;
+	}
+}
+
+/* ---- state ----------------------------------------------------------------- */
+
+static uint8_t is_idle(void)
+{
+	return !mo_running() && mo_queue_count() == 0 && !homing;
+}
+
+static void sync_plan(void)
+{
+	mo_get_pos(plan);
+}
+
+static void raise_alarm(uint8_t code)
+{
+	mo_stop();
+	mo_clear_queue();
+	held = 0;
+	alarm = code;
+	sync_plan();
+	put_P(FB_PSTR("ALARM:"));
+	put_u32(code);
+	put_eol();
+}
+
+static void do_reset(void)
+{
+	uint8_t sreg = board_irq_save();
+	f_reset = 0;
+	rx_tail = rx_discard;
+	rx_overflow = 0;
+	held = 0;
+	board_irq_restore(sreg);
+	mo_init();
+	mo_set_endstops_enabled((uint8_t)settings[SET_HOMING]);
+	line_len = 0;
+	line_over = 0;
+	pending = 0;
+	lines.last = 0;
+	absolute = 1;
+	laser_on = 0;
+	laser_s = 0;
+	motors_on = 1;
+	board_enable_motors(1);
+	sync_plan();
+	banner();
+}
+
+void fb_rx_isr(uint8_t c)
+{
+	last_rx_ms = board_ms();
+	switch (c) {
+	case '?':
+		f_status = 1;
+		return;
+	case '!':
+		if (homing) {
+			f_home_abort = 1;
+			mo_stop();
+		} else if (!held && !alarm) {
+			held = 1;
+			hold_reason = HOLD_HOST;
+			mo_hold();
+		}
+		return;
+	case '~':
+		if (held) {
+			held = 0;
+			mo_resume();
+		}
+		return;
+	case CTRL_X:
+		mo_stop();
+		if (homing)
+			f_home_abort = 1;
+		f_reset = 1;
+		rx_discard = rx_head;
+		return;
+	default:
+		break;
+	}
+	uint8_t h = rx_head;
+	if ((uint8_t)(h - rx_tail) >= CFG_RX_SIZE) {
+		rx_overflow = 1;
+		return;
+	}
+	rx_buf[h & RX_MASK] = c;
+	rx_head = (uint8_t)(h + 1u);
+}
+
+/* ---- commands -------------------------------------------------------------- */
+
+#define ST_WAIT 0xffu   /* queue full: try again later */
+
+static uint8_t queue_sync_block(uint8_t type, int32_t a, int32_t b)
+{
+	if (!mo_queue_free())
+		return ST_WAIT;
+	fb_block_t *blk = mo_slot();
+	memset(blk, 0, sizeof(*blk));
+	blk->type = type;
+	blk->n[0] = (uint32_t)a;
+	blk->n[1] = (uint32_t)b;
+	blk->line = lines.last;
+	if (!mo_running() && mo_queue_count() == 0)
+		first_queued_ms = board_ms();
+	mo_push();
+	return FB_OK;
+}
+
+static uint8_t exec_g1(const fb_cmd_t *c)
+{
+	if (!mo_queue_free())
+		return ST_WAIT;
+	int32_t t[2] = { plan[0], plan[1] };
+	if (c->has & W_A)
+		t[0] = absolute ? c->a : plan[0] + c->a;
+	if (c->has & W_B)
+		t[1] = absolute ? c->b : plan[1] + c->b;
+	for (uint8_t i = 0; i < 2; i++)
+		if (t[i] > CFG_POS_LIMIT || t[i] < -CFG_POS_LIMIT)
+			return FB_ERR_OUT_OF_RANGE;
+	if (settings[SET_SOFT_LIMITS] &&
+	    (t[0] < settings[SET_A_MIN] || t[0] > settings[SET_A_MAX] ||
+	     t[1] < settings[SET_B_MIN] || t[1] > settings[SET_B_MAX]))
+		return FB_ERR_SOFT_LIMIT;
+	if (!motors_on && (t[0] != plan[0] || t[1] != plan[1]))
+		return FB_ERR_MOTORS_OFF;
+	fb_block_t *blk = mo_slot();
+	uint8_t st = mo_prepare(blk, t[0] - plan[0], t[1] - plan[1], (uint32_t)c->p, min_interval);
+	if (st != FB_OK)
+		return st;
+	if (c->has & W_S)
+		laser_s = (uint8_t)c->s;
+	blk->power = laser_on ? laser_s : 0;
+	blk->line = lines.last;
+	if (!mo_running() && mo_queue_count() == 0)
+		first_queued_ms = board_ms();
+	mo_push();
+	plan[0] = t[0];
+	plan[1] = t[1];
+	return FB_OK;
+}
+
+/* Wait for the generator to stop, serving status requests; 0 if aborted. */
+static uint8_t home_wait(void)
+{
+	while (mo_running()) {
+		if (f_status) {
+			f_status = 0;
+			status_report();
+		}
+		if (f_home_abort)
+			return 0;
+	}
+	return !f_home_abort;
+}
+
+static uint8_t home_move(uint8_t type, uint8_t axes, uint8_t neg, uint32_t steps, uint32_t interval)
+{
+	fb_block_t *blk = mo_slot();
+	memset(blk, 0, sizeof(*blk));
+	blk->type = type;
+	blk->dirs = neg;
+	blk->cycles = steps * interval;
+	blk->line = lines.last;
+	for (uint8_t i = 0; i < 2; i++) {
+		if (axes & (1u << i)) {
+			blk->n[i] = steps;
+			blk->q[i] = interval;
+		}
+	}
+	mo_push();
+	mo_start();
+	return home_wait();
+}
+
+static uint8_t exec_home(void)
+{
+	if (!settings[SET_HOMING])
+		return FB_ERR_HOMING_DISABLED;
+	if (!is_idle() || held)
+		return FB_ERR_BUSY;
+	if (!motors_on)
+		return FB_ERR_MOTORS_OFF;
+	homing = 1;
+	f_home_abort = 0;
+	mo_reset_home_hits();
+	uint32_t interval = interval_for(settings[SET_HOMING_RATE]);
+	uint32_t chunk_max = 0x7fffffffUL / interval;
+	uint8_t seek_neg = (uint8_t)(~settings[SET_HOMING_DIR] & 3);
+	uint32_t left = (uint32_t)settings[SET_TRAVEL];
+	uint8_t result = FB_OK;
+	while (left && (mo_home_hits() & 3u) != 3u) {
+		uint32_t chunk = left < chunk_max ? left : chunk_max;
+		if (!home_move(BLK_HOME, (uint8_t)(~mo_home_hits() & 3u), seek_neg, chunk, interval)) {
+			result = FB_ALARM_HOMING_ABORT;
+			break;
+		}
+		left -= chunk;
+	}
+	if (result == FB_OK && (mo_home_hits() & 3u) != 3u)
+		result = FB_ALARM_HOMING_FAIL;
+	if (result == FB_OK && settings[SET_PULLOFF] > 0 &&
+	    !home_move(BLK_MOVE, 3u, (uint8_t)(~seek_neg & 3u),
+		       (uint32_t)settings[SET_PULLOFF], interval))
+		result = FB_ALARM_HOMING_ABORT;
+	if (result == FB_OK && board_endstops())
+		result = FB_ALARM_HOMING_FAIL;
+	homing = 0;
+	if (result != FB_OK) {
+		raise_alarm(result);
+		return result;
+	}
+	int32_t home[2] = { settings[SET_HOME_A], settings[SET_HOME_B] };
+	mo_set_pos(home);
+	sync_plan();
+	mo_set_endstops_enabled(1);
+	alarm = 0;
+	return FB_OK;
+}
+
+static uint8_t exec_set(const fb_cmd_t *c)
+{
+	int32_t lo, hi;
+	if (!setting_range(c->setting, &lo, &hi))
+		return FB_ERR_UNKNOWN_SETTING;
+	if (c->value < lo || c->value > hi)
+		return FB_ERR_OUT_OF_RANGE;
+	if (!is_idle())
+		return FB_ERR_BUSY;
+	settings[c->setting] = c->value;
+	settings_apply();
+	return FB_OK;
+}
+
+static void list_settings(void)
+{
+	for (uint8_t i = 0; i < SET_COUNT; i++) {
+		board_tx('$');
+		put_u32(i);
+		board_tx('=');
+		put_i32(settings[i]);
+		put_eol();
+	}
+}
+
+static uint8_t execute(const fb_cmd_t *c)
+{
+	if (alarm) {
+		switch (c->kind) {
+		case CMD_NONE: case CMD_M110: case CMD_INFO: case CMD_LIST:
+		case CMD_SET: case CMD_HOME: case CMD_UNLOCK:
+			break;
+		default:
+			return FB_ERR_ALARM_LOCK;
+		}
+	}
+	switch (c->kind) {
+	case CMD_G1:
+		return exec_g1(c);
+	case CMD_G90:
+		absolute = 1;
+		return FB_OK;
+	case CMD_G91:
+		absolute = 0;
+		return FB_OK;
+	case CMD_G92: {
+		int32_t a = (c->has & W_A) ? c->a : plan[0];
+		int32_t b = (c->has & W_B) ? c->b : plan[1];
+		uint8_t st = queue_sync_block(BLK_SETPOS, a, b);
+		if (st == FB_OK) {
+			plan[0] = a;
+			plan[1] = b;
+		}
+		return st;
+	}
+	case CMD_M3:
+		laser_on = 1;
+		if (c->has & W_S)
+			laser_s = (uint8_t)c->s;
+		return FB_OK;
+	case CMD_M5:
+		laser_on = 0;
+		return FB_OK;
+	case CMD_M17:
+	case CMD_M18: {
+		uint8_t st = queue_sync_block(c->kind == CMD_M17 ? BLK_ENABLE : BLK_DISABLE, 0, 0);
+		if (st == FB_OK)
+			motors_on = c->kind == CMD_M17;
+		return st;
+	}
+	case CMD_INFO:
+		banner();
+		return FB_OK;
+	case CMD_LIST:
+		list_settings();
+		return FB_OK;
+	case CMD_HOME:
+		return exec_home();
+	case CMD_UNLOCK:
+		alarm = 0;
+		sync_plan();
+		return FB_OK;
+	case CMD_SET:
+		return exec_set(c);
+	default:
+		return FB_OK;
+	}
+}
+
+/* An error refusing part of a running job stops it: laser off, motion held. */
+static void error_hold(void)
+{
+	uint8_t sreg = board_irq_save();
+	if (!held && (mo_running() || mo_queue_count())) {
+		held = 1;
+		hold_reason = HOLD_ERROR;
+		mo_hold();
+	}
+	board_irq_restore(sreg);
+}
+
+static void finish(uint8_t st)
+{
+	if (st == FB_OK) {
+		put_P(FB_PSTR("ok"));
+		put_eol();
+		return;
+	}
+	if (!fb_is_resend(st))
+		error_hold();
+	reply_error(st);
+}
+
+static void try_execute(void)
+{
+	uint8_t st = execute(&cmd);
+	if (st == ST_WAIT)
+		return;
+	pending = 0;
+	finish(st);
+}
+
+static void handle_line(void)
+{
+	uint8_t over = line_over, len = line_len;
+	line_len = 0;
+	line_over = 0;
+	if (rx_overflow) {
+		rx_overflow = 0;
+		finish(FB_ERR_RX_OVERFLOW);
+		return;
+	}
+	if (over) {
+		finish(FB_ERR_LINE_TOO_LONG);
+		return;
+	}
+	uint8_t st = fb_parse_line(&lines, line, len, &cmd);
+	if (st != FB_OK) {
+		finish(st);
+		return;
+	}
+	pending = 1;
+	try_execute();
+}
+
+/* Move received bytes into the line buffer; handle at most one line. */
+static void assemble(void)
+{
+	while (rx_tail != rx_head) {
+		uint8_t t = rx_tail;
+		uint8_t c = rx_buf[t & RX_MASK];
+		rx_tail = (uint8_t)(t + 1u);
+		if (c == '\n') {
+			handle_line();
+			return;
+		}
+		if (c == '\r')
+			continue;
+		if (line_len < CFG_LINE_MAX)
+			line[line_len++] = (char)c;
+		else
+			line_over = 1;
+	}
+}
+
+static uint32_t since_last_rx(void)
+{
+	uint8_t sreg = board_irq_save();
+	uint32_t t = last_rx_ms;
+	board_irq_restore(sreg);
+	return board_ms() - t;
+}
+
+static void laser_watchdog(void)
+{
+	if (mo_laser() && !held && since_last_rx() > (uint32_t)settings[SET_LASER_TIMEOUT]) {
+		uint8_t sreg = board_irq_save();
+		held = 1;
+		hold_reason = HOLD_LASER_TIMEOUT;
+		mo_hold();
+		board_irq_restore(sreg);
+	}
+}
+
+static void maybe_start(void)
+{
+	if (held || alarm || homing || mo_running())
+		return;
+	uint8_t n = mo_queue_count();
+	if (!n)
+		return;
+	if (n >= CFG_START_BLOCKS || !mo_queue_free() ||
+	    board_ms() - first_queued_ms >= CFG_START_DELAY_MS)
+		mo_start();
+}
+
+void fb_setup(void)
+{
+	board_init();
+	settings_defaults();
+	settings_apply();
+	alarm = 0;
+	do_reset();
+}
+
+void fb_poll(void)
+{
+	if (f_reset)
+		do_reset();
+	uint8_t a = mo_alarm();
+	if (a) {
+		mo_clear_alarm();
+		raise_alarm(a);
+	}
+	if (f_status) {
+		f_status = 0;
+		status_report();
+	}
+	laser_watchdog();
+	maybe_start();
+	if (pending)
+		try_execute();
+	else
+		assemble();
+}

@@ -1,0 +1,85 @@
+/*
+ * fb_motion.h - segment queue and the integer DDA step generator.
+ *
+ * The main loop prepares blocks (all divisions happen here, outside the
+ * interrupt) and pushes them; the step interrupt pops them and calls
+ * mo_event() at each scheduled event.  Each segment of C cycles with n steps
+ * on a motor puts step k (1..n) at cycle floor((2k-1)*C / (2n)) after the
+ * segment start: evenly spread, centred, and summing to exactly n steps in
+ * exactly C cycles.  Segments follow each other with no gap.
+ */
+#ifndef FB_MOTION_H
+#define FB_MOTION_H
+
+#include <stdint.h>
+#include "config.h"
+
+enum fb_block_type {
+	BLK_MOVE = 0,   /* steps both motors over a duration */
+	BLK_HOME,       /* like MOVE, but each motor stops at its endstop */
+	BLK_SETPOS,     /* G92: position := n[] (as int32) */
+	BLK_ENABLE,     /* M17 */
+	BLK_DISABLE     /* M18 */
+};
+
+typedef struct {
+	uint32_t cycles;  /* segment duration in CPU cycles */
+	uint32_t n[2];    /* steps per motor (SETPOS: new position) */
+	uint32_t q[2];    /* cycles / n */
+	uint32_t m[2];    /* cycles % n */
+	uint32_t line;    /* line number of the command */
+	uint8_t type;     /* enum fb_block_type */
+	uint8_t dirs;     /* bit set = motor steps negative */
+	uint8_t power;    /* laser power during the segment */
+} fb_block_t;
+
+#define MO_NEVER 0xffffffffUL
+
+/* Reset the queue and the generator (the motors keep their position). */
+void mo_init(void);
+
+/* Queue: the main loop fills mo_slot() and then calls mo_push(). */
+uint8_t mo_queue_count(void);
+uint8_t mo_queue_free(void);
+fb_block_t *mo_slot(void);
+void mo_push(void);
+/* Drop every queued block; only while the generator is stopped. */
+void mo_clear_queue(void);
+
+/*
+ * Fill a MOVE block for deltas da/db over p_us microseconds.  Returns FB_OK,
+ * or FB_ERR_TOO_FAST when a motor would need an interval below min_interval
+ * cycles between steps.
+ */
+uint8_t mo_prepare(fb_block_t *b, int32_t da, int32_t db, uint32_t p_us,
+		   uint32_t min_interval);
+
+/* Start executing the queue (no-op while running). */
+void mo_start(void);
+/* The step interrupt's body: handle the due event, return cycles until the
+ * next one (1..MO_MAX_DELAY), or 0 once stopped (queue empty, alarm). */
+#define MO_MAX_DELAY 0xc000u
+uint16_t mo_event(void);
+/* Stop at once: no further steps, laser off, the current block is dropped. */
+void mo_stop(void);
+/* Freeze / continue the timeline of the running segment; laser follows. */
+void mo_hold(void);
+void mo_resume(void);
+
+uint8_t mo_running(void);
+void mo_get_pos(int32_t pos[2]);
+/* Only while stopped. */
+void mo_set_pos(const int32_t pos[2]);
+uint32_t mo_done_line(void);
+uint32_t mo_underruns(void);
+uint8_t mo_laser(void);
+/* Endstop supervision outside homing (the $7 setting). */
+void mo_set_endstops_enabled(uint8_t on);
+/* Alarm raised by the generator (0 = none); reading does not clear. */
+uint8_t mo_alarm(void);
+void mo_clear_alarm(void);
+/* Motors whose endstop stopped them during the last HOME block. */
+uint8_t mo_home_hits(void);
+void mo_reset_home_hits(void);
+
+#endif

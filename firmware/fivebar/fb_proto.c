@@ -1,0 +1,287 @@
+/*
+ * fb_proto.c - line framing and command parsing (pure, portable C).
+ *
+ * A line is: [N<n>] <command> [words] [;comment] [*<crc8>]
+ * The checksum covers every byte before the last '*'.  Numbers are decimal
+ * integers; there are no floats anywhere in the firmware.
+ */
+#include <string.h>
+#include "fb_proto.h"
+#include "config.h"
+#include "status.h"
+
+uint8_t fb_crc8(const char *s, uint8_t len)
+{
+	uint8_t crc = 0;
+	for (uint8_t i = 0; i < len; i++) {
+		crc ^= (uint8_t)s[i];
+		for (uint8_t b = 0; b < 8; b++)
+			crc = (uint8_t)((crc & 0x80u) ? (uint8_t)(crc << 1) ^ 0x07u : (uint8_t)(crc << 1));
+	}
+	return crc;
+}
+
+static uint8_t is_ws(char c) { return c == ' ' || c == '\t'; }
+static uint8_t is_digit(char c) { return c >= '0' && c <= '9'; }
+static char upper(char c) { return (c >= 'a' && c <= 'z') ? (char)(c - 'a' + 'A') : c; }
+static uint8_t is_letter(char c) { c = upper(c); return c >= 'A' && c <= 'Z'; }
+
+static uint8_t skip_ws(const char *s, uint8_t i, uint8_t end)
+{
+	while (i < end && is_ws(s[i]))
+		i++;
+	return i;
+}
+
+/* A number must end at the end, at whitespace or at the next word's letter. */
+static uint8_t number_ends(const char *s, uint8_t i, uint8_t end)
+{
+	return i >= end || is_ws(s[i]) || is_letter(s[i]);
+}
+
+/* Unsigned decimal into uint32; FB_ERR_BAD_NUMBER when malformed,
+ * FB_ERR_OUT_OF_RANGE when above max. */
+static uint8_t parse_uint(const char *s, uint8_t *pi, uint8_t end, uint32_t max, uint32_t *out)
+{
+	uint8_t i = *pi, over = 0, digits = 0;
+	uint32_t v = 0;
+	while (i < end && is_digit(s[i])) {
+		uint8_t d = (uint8_t)(s[i] - '0');
+		if (v > (max - d) / 10u)
+			over = 1;
+		else
+			v = v * 10u + d;
+		i++;
+		digits++;
+	}
+	if (!digits || !number_ends(s, i, end))
+		return FB_ERR_BAD_NUMBER;
+	*pi = i;
+	if (over)
+		return FB_ERR_OUT_OF_RANGE;
+	*out = v;
+	return FB_OK;
+}
+
+/* Signed decimal into int32. */
+static uint8_t parse_int(const char *s, uint8_t *pi, uint8_t end, int32_t *out)
+{
+	uint8_t i = *pi, neg = 0;
+	if (i < end && (s[i] == '-' || s[i] == '+')) {
+		neg = s[i] == '-';
+		i++;
+	}
+	uint32_t v = 0;
+	uint8_t st = parse_uint(s, &i, end, neg ? 2147483648UL : 2147483647UL, &v);
+	if (st != FB_OK)
+		return st;
+	*pi = i;
+	*out = neg ? (int32_t)(0u - v) : (int32_t)v;
+	return FB_OK;
+}
+
+static uint8_t allowed_words(uint8_t kind)
+{
+	switch (kind) {
+	case CMD_G1: return W_A | W_B | W_P | W_S;
+	case CMD_G92: return W_A | W_B;
+	case CMD_M3: return W_S;
+	default: return 0;
+	}
+}
+
+static uint8_t parse_dollar(const char *s, uint8_t i, uint8_t end, fb_cmd_t *cmd)
+{
+	if (i >= end)
+		return FB_ERR_UNKNOWN_COMMAND;
+	char c = upper(s[i]);
+	if (is_digit(c)) {
+		uint32_t n = 0;
+		uint8_t j = i;
+		while (j < end && is_digit(s[j]))
+			j++;
+		if (j >= end || s[j] != '=') {
+			/* "$5" alone: the value is missing; "$5x" is malformed */
+			return (skip_ws(s, j, end) >= end) ? FB_ERR_MISSING_WORD : FB_ERR_BAD_NUMBER;
+		}
+		uint8_t k = i;
+		/* the '=' is not a number end, so parse the digits by hand */
+		while (k < j) {
+			n = n * 10u + (uint32_t)(s[k] - '0');
+			if (n > 255u)
+				return FB_ERR_UNKNOWN_SETTING;
+			k++;
+		}
+		j++;
+		int32_t v = 0;
+		uint8_t st = parse_int(s, &j, end, &v);
+		if (st != FB_OK)
+			return st;
+		if (skip_ws(s, j, end) < end)
+			return FB_ERR_BAD_WORD;
+		cmd->kind = CMD_SET;
+		cmd->setting = (uint8_t)n;
+		cmd->value = v;
+		return FB_OK;
+	}
+	switch (c) {
+	case 'I': cmd->kind = CMD_INFO; break;
+	case '$': cmd->kind = CMD_LIST; break;
+	case 'H': cmd->kind = CMD_HOME; break;
+	case 'X': cmd->kind = CMD_UNLOCK; break;
+	default: return FB_ERR_UNKNOWN_COMMAND;
+	}
+	if (skip_ws(s, (uint8_t)(i + 1), end) < end)
+		return FB_ERR_BAD_WORD;
+	return FB_OK;
+}
+
+static uint8_t command_kind(char letter, uint32_t code)
+{
+	if (letter == 'G') {
+		switch (code) {
+		case 1: return CMD_G1;
+		case 90: return CMD_G90;
+		case 91: return CMD_G91;
+		case 92: return CMD_G92;
+		default: return CMD_NONE;
+		}
+	}
+	switch (code) {
+	case 3: return CMD_M3;
+	case 5: return CMD_M5;
+	case 17: return CMD_M17;
+	case 18: return CMD_M18;
+	case 110: return CMD_M110;
+	default: return CMD_NONE;
+	}
+}
+
+static uint8_t check_ranges(fb_cmd_t *cmd)
+{
+	if ((cmd->has & W_A) && (cmd->a > CFG_POS_LIMIT || cmd->a < -CFG_POS_LIMIT))
+		return FB_ERR_OUT_OF_RANGE;
+	if ((cmd->has & W_B) && (cmd->b > CFG_POS_LIMIT || cmd->b < -CFG_POS_LIMIT))
+		return FB_ERR_OUT_OF_RANGE;
+	if ((cmd->has & W_S) && (cmd->s < 0 || cmd->s > 255))
+		return FB_ERR_OUT_OF_RANGE;
+	if ((cmd->has & W_P) && (cmd->p < CFG_P_MIN_US || cmd->p > CFG_P_MAX_US))
+		return FB_ERR_OUT_OF_RANGE;
+	if (cmd->kind == CMD_G1 && !(cmd->has & W_P))
+		return FB_ERR_MISSING_WORD;
+	if (cmd->kind == CMD_G92 && !(cmd->has & (W_A | W_B)))
+		return FB_ERR_MISSING_WORD;
+	return FB_OK;
+}
+
+/* Parse the command part of a line: s[i..end) with the checksum removed. */
+static uint8_t parse_body(const char *s, uint8_t i, uint8_t end, fb_cmd_t *cmd)
+{
+	for (uint8_t k = i; k < end; k++) {
+		uint8_t c = (uint8_t)s[k];
+		if ((c < 0x20u || c > 0x7eu) && c != '\t')
+			return FB_ERR_INVALID_CHAR;
+	}
+	for (uint8_t k = i; k < end; k++) {
+		if (s[k] == ';') {
+			end = k;
+			break;
+		}
+	}
+	i = skip_ws(s, i, end);
+	if (i >= end) {
+		cmd->kind = CMD_NONE;
+		return FB_OK;
+	}
+	char c = upper(s[i]);
+	if (c == '$')
+		return parse_dollar(s, (uint8_t)(i + 1), end, cmd);
+	if (c != 'G' && c != 'M')
+		return FB_ERR_UNKNOWN_COMMAND;
+	i++;
+	uint32_t code = 0;
+	uint8_t st = parse_uint(s, &i, end, 65535u, &code);
+	if (st != FB_OK)
+		return st == FB_ERR_OUT_OF_RANGE ? FB_ERR_UNKNOWN_COMMAND : st;
+	cmd->kind = command_kind(c, code);
+	if (cmd->kind == CMD_NONE)
+		return FB_ERR_UNKNOWN_COMMAND;
+
+	uint8_t allowed = allowed_words(cmd->kind);
+	for (;;) {
+		i = skip_ws(s, i, end);
+		if (i >= end)
+			break;
+		char w = upper(s[i]);
+		uint8_t bit;
+		int32_t *dst;
+		switch (w) {
+		case 'A': bit = W_A; dst = &cmd->a; break;
+		case 'B': bit = W_B; dst = &cmd->b; break;
+		case 'P': bit = W_P; dst = &cmd->p; break;
+		case 'S': bit = W_S; dst = &cmd->s; break;
+		default: return FB_ERR_BAD_WORD;
+		}
+		if (!(allowed & bit) || (cmd->has & bit))
+			return FB_ERR_BAD_WORD;
+		i++;
+		st = parse_int(s, &i, end, dst);
+		if (st != FB_OK)
+			return st;
+		cmd->has |= bit;
+	}
+	return check_ranges(cmd);
+}
+
+uint8_t fb_parse_line(fb_lines_t *lines, const char *line, uint8_t len, fb_cmd_t *cmd)
+{
+	memset(cmd, 0, sizeof(*cmd));
+	uint8_t end = len;
+	uint8_t has_star = 0;
+	for (uint8_t k = 0; k < len; k++) {
+		if (line[k] == '*') {
+			end = k;
+			has_star = 1;
+		}
+	}
+	if (has_star) {
+		uint8_t i = (uint8_t)(end + 1), digits = 0;
+		uint16_t want = 0;
+		while (i < len && is_digit(line[i]) && digits < 4) {
+			want = (uint16_t)(want * 10u + (uint16_t)(line[i] - '0'));
+			i++;
+			digits++;
+		}
+		if (!digits || digits > 3 || want > 255u || skip_ws(line, i, len) < len)
+			return FB_ERR_CHECKSUM;
+		if (fb_crc8(line, end) != (uint8_t)want)
+			return FB_ERR_CHECKSUM;
+	}
+
+	uint8_t i = skip_ws(line, 0, end);
+	if (i < end && upper(line[i]) == 'N') {
+		if (!has_star)
+			return FB_ERR_NO_CHECKSUM;
+		i++;
+		uint32_t n = 0;
+		uint8_t st = parse_uint(line, &i, end, 0xffffffffUL, &n);
+		if (st != FB_OK)
+			return FB_ERR_BAD_NUMBER;
+		cmd->has_n = 1;
+		cmd->n = n;
+	}
+
+	uint8_t st = parse_body(line, i, end, cmd);
+	if (st == FB_OK && cmd->kind == CMD_M110) {
+		lines->last = cmd->has_n ? cmd->n : 0;
+		return FB_OK;
+	}
+	if (cmd->has_n) {
+		if (cmd->n != lines->last + 1u)
+			return FB_ERR_LINE_NUMBER;
+		lines->last = cmd->n;
+	} else {
+		lines->last++;
+	}
+	return st;
+}

@@ -1,0 +1,71 @@
+/*
+ * fb_proto.h - line framing (line number, checksum) and command parsing.
+ *
+ * Pure functions over a line buffer: no I/O, no hardware, so the host unit
+ * tests and the fuzz target run them directly.  See docs/protocol.md.
+ */
+#ifndef FB_PROTO_H
+#define FB_PROTO_H
+
+#include <stdint.h>
+#include "status.h"
+
+enum fb_cmd_kind {
+	CMD_NONE = 0,   /* empty line or comment only */
+	CMD_G1,         /* segment: A B P [S] */
+	CMD_G90,        /* absolute A/B */
+	CMD_G91,        /* relative A/B */
+	CMD_G92,        /* set position: A and/or B */
+	CMD_M3,         /* laser enable [S] */
+	CMD_M5,         /* laser disable */
+	CMD_M17,        /* motors on */
+	CMD_M18,        /* motors off */
+	CMD_M110,       /* set line number */
+	CMD_INFO,       /* $I banner */
+	CMD_LIST,       /* $$ list settings */
+	CMD_HOME,       /* $H */
+	CMD_UNLOCK,     /* $X */
+	CMD_SET         /* $<n>=<v> */
+};
+
+/* Word presence bits in fb_cmd_t.has */
+#define W_A 0x01u
+#define W_B 0x02u
+#define W_P 0x04u
+#define W_S 0x08u
+
+typedef struct {
+	uint8_t kind;       /* enum fb_cmd_kind */
+	uint8_t has;        /* W_* bits */
+	uint8_t has_n;      /* the line started with N<n> */
+	uint8_t setting;    /* CMD_SET: setting number */
+	uint32_t n;         /* line number when has_n */
+	int32_t a, b, p, s; /* word values */
+	int32_t value;      /* CMD_SET: value */
+} fb_cmd_t;
+
+/* Line-number state shared by consecutive lines. */
+typedef struct {
+	uint32_t last;      /* number of the last accepted line */
+} fb_lines_t;
+
+/* CRC-8, polynomial 0x07, init 0, no reflection, no final xor (CRC-8/SMBUS). */
+uint8_t fb_crc8(const char *s, uint8_t len);
+
+/*
+ * Frame and parse one received line (without its newline; at most 255 bytes).
+ * Returns FB_OK or an FB_ERR_* code; on FB_ERR_CHECKSUM, FB_ERR_LINE_NUMBER and
+ * FB_ERR_NO_CHECKSUM the line was not accepted and the host must resend from
+ * lines->last + 1.  Every other outcome accepts the line and advances
+ * lines->last (to N, or by one when the line has no N).
+ */
+uint8_t fb_parse_line(fb_lines_t *lines, const char *line, uint8_t len, fb_cmd_t *cmd);
+
+/* True when a reply code asks the host to resend. */
+static inline uint8_t fb_is_resend(uint8_t code)
+{
+	return code == FB_ERR_CHECKSUM || code == FB_ERR_LINE_NUMBER ||
+	       code == FB_ERR_NO_CHECKSUM;
+}
+
+#endif

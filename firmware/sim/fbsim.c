@@ -1,0 +1,395 @@
+/*
+ * fbsim.c - run the fivebar firmware in simavr with its UART on a pty.
+ *
+ *   fbsim [options] firmware.elf
+ *     -m MCU      AVR core (default atmega328p)
+ *     -f HZ       clock (default 16000000)
+ *     -t FILE     trace file: one "<cycle> <pin> <level>" line per change of a
+ *                 step, direction, enable or laser pin (pins from config.h)
+ *     -w          hold the CPU until a client opens the pty, so the boot
+ *                 banner is not lost to the client's input flush
+ *     -g MS       grace after the client opened (default 50 ms, with -w)
+ *     -c CYCLES   stop after this many cycles
+ *     -R          throttle to real time
+ *     -a STEPS    endstop A is pressed while motor A's position <= STEPS
+ *     -b STEPS    endstop B likewise (positions counted from the trace)
+ *
+ * stdout carries exactly one line, "PTY /dev/pts/N"; simavr's own logging
+ * and the final statistics go to stderr.  SIGTERM or SIGINT stops cleanly
+ * (exit 0); the harness also stops when its parent dies (PR_SET_PDEATHSIG).
+ * Single-threaded: the pty is pumped from a simavr cycle timer every
+ * simulated millisecond.
+ */
+#define _GNU_SOURCE
+#include <errno.h>
+#include <fcntl.h>
+#include <poll.h>
+#include <pty.h>
+#include <signal.h>
+#include <stdarg.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/prctl.h>
+#include <termios.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <sim_avr.h>
+#include <sim_elf.h>
+#include <sim_irq.h>
+#include <sim_io.h>
+#include <sim_cycle_timers.h>
+#include <avr_uart.h>
+#include <avr_ioport.h>
+#include <avr_extint.h>
+
+#include "../fivebar/config.h"
+
+#define STR2(x) #x
+#define PORT_CHAR(p) (STR2(p)[0])
+
+#define BUF_SIZE 65536
+
+typedef struct {
+	uint8_t data[BUF_SIZE];
+	size_t head, len;
+} ring_t;
+
+static volatile sig_atomic_t stop_req;
+static avr_t *avr;
+static int master_fd = -1;
+static FILE *trace;
+static ring_t to_avr, to_host;
+static int uart_xon = 1;
+static avr_irq_t *uart_in_irq;
+static avr_cycle_count_t pump_period;
+static int realtime;
+static struct timespec wall_start;
+static unsigned long long bytes_in, bytes_out;
+
+/* endstop simulation */
+static int32_t pos[2];
+static int dir_level[2];
+static int have_endstop[2];
+static long endstop_at[2];
+static int endstop_pressed[2] = { -1, -1 };
+static avr_irq_t *endstop_irq[2];
+
+static void on_signal(int sig)
+{
+	(void)sig;
+	stop_req = 1;
+}
+
+static void logger(avr_t *a, const int level, const char *fmt, va_list ap)
+{
+	(void)a;
+	if (level <= LOG_WARNING)
+		vfprintf(stderr, fmt, ap);
+}
+
+static void ring_put(ring_t *r, uint8_t c)
+{
+	if (r->len == BUF_SIZE)
+		return;
+	r->data[(r->head + r->len) % BUF_SIZE] = c;
+	r->len++;
+}
+
+static void feed_uart(void)
+{
+	while (uart_xon && to_avr.len) {
+		uint8_t c = to_avr.data[to_avr.head];
+		to_avr.head = (to_avr.head + 1) % BUF_SIZE;
+		to_avr.len--;
+		bytes_in++;
+		avr_raise_irq(uart_in_irq, c);
+	}
+}
+
+static void uart_out_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+	(void)irq;
+	(void)param;
+	ring_put(&to_host, (uint8_t)value);
+	bytes_out++;
+}
+
+static void uart_xon_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+	(void)irq;
+	(void)value;
+	(void)param;
+	uart_xon = 1;
+	feed_uart();
+}
+
+static void uart_xoff_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+	(void)irq;
+	(void)value;
+	(void)param;
+	uart_xon = 0;
+}
+
+static int client_present(void)
+{
+	struct pollfd p = { .fd = master_fd, .events = POLLIN };
+	if (poll(&p, 1, 0) < 0)
+		return 0;
+	return !(p.revents & POLLHUP);
+}
+
+static void pump_io(void)
+{
+	uint8_t buf[4096];
+	size_t room = BUF_SIZE - to_avr.len;
+	if (room > sizeof(buf))
+		room = sizeof(buf);
+	if (room) {
+		ssize_t n = read(master_fd, buf, room);
+		for (ssize_t i = 0; i < n; i++)
+			ring_put(&to_avr, buf[i]);
+	}
+	feed_uart();
+	while (to_host.len) {
+		size_t chunk = to_host.len;
+		if (to_host.head + chunk > BUF_SIZE)
+			chunk = BUF_SIZE - to_host.head;
+		ssize_t n = write(master_fd, to_host.data + to_host.head, chunk);
+		if (n <= 0) {
+			/* no client, or its buffer is full: keep the bytes, bounded */
+			break;
+		}
+		to_host.head = (to_host.head + (size_t)n) % BUF_SIZE;
+		to_host.len -= (size_t)n;
+	}
+}
+
+static double wall_seconds(void)
+{
+	struct timespec now;
+	clock_gettime(CLOCK_MONOTONIC, &now);
+	return (double)(now.tv_sec - wall_start.tv_sec) + (double)(now.tv_nsec - wall_start.tv_nsec) * 1e-9;
+}
+
+static avr_cycle_count_t pump_timer(avr_t *a, avr_cycle_count_t when, void *param)
+{
+	(void)param;
+	pump_io();
+	if (trace)
+		fflush(trace);
+	if (realtime) {
+		double ahead = (double)a->cycle / (double)a->frequency - wall_seconds();
+		if (ahead > 0.0005)
+			usleep((useconds_t)(ahead * 1e6));
+	}
+	return when + pump_period;
+}
+
+static void trace_event(const char *name, uint32_t value)
+{
+	if (trace)
+		fprintf(trace, "%llu %s %u\n", (unsigned long long)avr->cycle, name, value & 1u);
+}
+
+static void update_endstop(int i)
+{
+	if (!have_endstop[i])
+		return;
+	int pressed = pos[i] <= endstop_at[i];
+	if (pressed == endstop_pressed[i])
+		return;
+	endstop_pressed[i] = pressed;
+	int level = CFG_ENDSTOP_ACTIVE_LOW ? !pressed : pressed;
+	avr_raise_irq(endstop_irq[i], (uint32_t)level);
+	trace_event(i ? "esB" : "esA", (uint32_t)pressed);
+}
+
+static void step_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+	(void)irq;
+	int i = (int)(intptr_t)param;
+	trace_event(i ? "stepB" : "stepA", value);
+	if (value & 1u) {
+		int positive = dir_level[i] ^ ((CFG_DIR_INVERT_MASK >> i) & 1);
+		pos[i] += positive ? 1 : -1;
+		update_endstop(i);
+	}
+}
+
+static void dir_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+	(void)irq;
+	int i = (int)(intptr_t)param;
+	dir_level[i] = (int)(value & 1u);
+	trace_event(i ? "dirB" : "dirA", value);
+}
+
+static void named_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+	(void)irq;
+	trace_event((const char *)param, value);
+}
+
+static void no_sleep(avr_t *a, avr_cycle_count_t how_long)
+{
+	(void)a;
+	(void)how_long;
+}
+
+static avr_irq_t *pin_irq(char port, int bit)
+{
+	return avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ(port), bit);
+}
+
+static void usage(void)
+{
+	fprintf(stderr, "usage: fbsim [-m mcu] [-f hz] [-t trace] [-w] [-g ms] [-c cycles] [-R] "
+			"[-a steps] [-b steps] firmware.elf\n");
+	exit(2);
+}
+
+int main(int argc, char **argv)
+{
+	const char *mcu = "atmega328p", *trace_path = NULL;
+	unsigned long freq = FB_F_CPU;
+	unsigned long long max_cycles = 0;
+	int wait_client = 0, grace_ms = 50, opt;
+
+	prctl(PR_SET_PDEATHSIG, SIGTERM);
+	if (getppid() == 1)
+		return 1;
+
+	while ((opt = getopt(argc, argv, "m:f:t:wg:c:Ra:b:")) != -1) {
+		switch (opt) {
+		case 'm': mcu = optarg; break;
+		case 'f': freq = strtoul(optarg, NULL, 10); break;
+		case 't': trace_path = optarg; break;
+		case 'w': wait_client = 1; break;
+		case 'g': grace_ms = atoi(optarg); break;
+		case 'c': max_cycles = strtoull(optarg, NULL, 10); break;
+		case 'R': realtime = 1; break;
+		case 'a': have_endstop[0] = 1; endstop_at[0] = strtol(optarg, NULL, 10); break;
+		case 'b': have_endstop[1] = 1; endstop_at[1] = strtol(optarg, NULL, 10); break;
+		default: usage();
+		}
+	}
+	if (optind + 1 != argc)
+		usage();
+
+	struct sigaction sa;
+	memset(&sa, 0, sizeof(sa));
+	sa.sa_handler = on_signal;
+	sigaction(SIGTERM, &sa, NULL);
+	sigaction(SIGINT, &sa, NULL);
+	signal(SIGPIPE, SIG_IGN);
+
+	avr_global_logger_set(logger);
+
+	elf_firmware_t fw;
+	memset(&fw, 0, sizeof(fw));
+	if (elf_read_firmware(argv[optind], &fw) != 0) {
+		fprintf(stderr, "fbsim: cannot read %s\n", argv[optind]);
+		return 1;
+	}
+	snprintf(fw.mmcu, sizeof(fw.mmcu), "%s", mcu);
+	fw.frequency = (uint32_t)freq;
+	avr = avr_make_mcu_by_name(fw.mmcu);
+	if (!avr) {
+		fprintf(stderr, "fbsim: unknown AVR %s\n", mcu);
+		return 1;
+	}
+	avr_init(avr);
+	avr_load_firmware(avr, &fw);
+	avr->frequency = (uint32_t)freq;
+	avr->sleep = no_sleep;
+	/* simavr 1.6 polls low INT0/INT1 pins every cycle: those are the step
+	 * pins, and the polling costs 3-4x the emulation speed. */
+	avr_extint_set_strict_lvl_trig(avr, 0, 0);
+	avr_extint_set_strict_lvl_trig(avr, 1, 0);
+
+	uint32_t flags = 0;
+	avr_ioctl(avr, AVR_IOCTL_UART_GET_FLAGS('0'), &flags);
+	flags &= ~(uint32_t)(AVR_UART_FLAG_STDIO | AVR_UART_FLAG_POLL_SLEEP);
+	avr_ioctl(avr, AVR_IOCTL_UART_SET_FLAGS('0'), &flags);
+	uart_in_irq = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
+	avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT),
+				uart_out_hook, NULL);
+	avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XON),
+				uart_xon_hook, NULL);
+	avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XOFF),
+				uart_xoff_hook, NULL);
+
+	if (trace_path) {
+		trace = fopen(trace_path, "w");
+		if (!trace) {
+			fprintf(stderr, "fbsim: cannot write %s: %s\n", trace_path, strerror(errno));
+			return 1;
+		}
+		setvbuf(trace, NULL, _IOFBF, 1 << 20);
+		fprintf(trace, "# fbsim trace v1 freq=%lu\n", freq);
+	}
+	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_STEP_PORT), PIN_STEP_A_BIT), step_hook, (void *)0);
+	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_STEP_PORT), PIN_STEP_B_BIT), step_hook, (void *)1);
+	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_DIR_PORT), PIN_DIR_A_BIT), dir_hook, (void *)0);
+	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_DIR_PORT), PIN_DIR_B_BIT), dir_hook, (void *)1);
+	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_ENABLE_PORT), PIN_ENABLE_BIT), named_hook, "enable");
+	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_LASER_PORT), PIN_LASER_BIT), named_hook, "laser");
+	endstop_irq[0] = pin_irq(PORT_CHAR(PIN_ENDSTOP_PORT), PIN_ENDSTOP_A_BIT);
+	endstop_irq[1] = pin_irq(PORT_CHAR(PIN_ENDSTOP_PORT), PIN_ENDSTOP_B_BIT);
+	/* drive both switches to "released" (or to their simulated state) */
+	for (int i = 0; i < 2; i++) {
+		if (have_endstop[i])
+			update_endstop(i);
+		else
+			avr_raise_irq(endstop_irq[i], CFG_ENDSTOP_ACTIVE_LOW ? 1u : 0u);
+	}
+
+	int slave_fd;
+	if (openpty(&master_fd, &slave_fd, NULL, NULL, NULL) != 0) {
+		perror("fbsim: openpty");
+		return 1;
+	}
+	struct termios tio;
+	tcgetattr(slave_fd, &tio);
+	cfmakeraw(&tio);
+	tcsetattr(slave_fd, TCSANOW, &tio);
+	const char *name = ttyname(slave_fd);
+	printf("PTY %s\n", name ? name : "?");
+	fflush(stdout);
+	/* anything printed to stdout by the library from now on goes to stderr */
+	dup2(2, 1);
+	close(slave_fd);
+	fcntl(master_fd, F_SETFL, fcntl(master_fd, F_GETFL) | O_NONBLOCK);
+
+	if (wait_client) {
+		while (!stop_req && !client_present())
+			usleep(1000);
+		if (grace_ms > 0)
+			usleep((useconds_t)grace_ms * 1000u);
+	}
+
+	pump_period = avr->frequency / 1000;
+	avr_cycle_timer_register(avr, pump_period, pump_timer, NULL);
+	clock_gettime(CLOCK_MONOTONIC, &wall_start);
+
+	int state = cpu_Running;
+	while (!stop_req) {
+		state = avr_run(avr);
+		if (state == cpu_Done || state == cpu_Crashed)
+			break;
+		if (max_cycles && avr->cycle >= max_cycles)
+			break;
+	}
+	pump_io();
+	if (trace)
+		fclose(trace);
+	double wall = wall_seconds();
+	fprintf(stderr, "fbsim: %llu cycles in %.3f s = %.1f MHz emulated, %llu bytes in, %llu out%s\n",
+		(unsigned long long)avr->cycle, wall, wall > 0 ? (double)avr->cycle / wall / 1e6 : 0.0,
+		bytes_in, bytes_out, state == cpu_Crashed ? ", CPU crashed" : "");
+	return state == cpu_Crashed ? 1 : 0;
+}

@@ -1,0 +1,110 @@
+/*
+ * fake_board.c - see fake_board.h.
+ */
+#include <string.h>
+#include "fake_board.h"
+#include "board.h"
+#include "fb_motion.h"
+
+uint64_t fake_now;
+uint32_t fake_ms;
+uint8_t fake_endstops, fake_laser, fake_dirs, fake_enabled;
+int fake_timer_on, fake_timer_paused;
+uint16_t fake_timer_delay;
+fake_step_t fake_steps[FAKE_MAX_STEPS];
+size_t fake_nsteps;
+char fake_tx[65536];
+size_t fake_tx_len;
+static char tx_copy[65536];
+
+void fake_reset(void)
+{
+	fake_now = 0;
+	fake_ms = 0;
+	fake_endstops = 0;
+	fake_laser = 0;
+	fake_dirs = 0;
+	fake_enabled = 0;
+	fake_timer_on = 0;
+	fake_timer_paused = 0;
+	fake_timer_delay = 0;
+	fake_nsteps = 0;
+	fake_tx_len = 0;
+}
+
+void board_init(void) {}
+
+void board_tx(uint8_t c)
+{
+	if (fake_tx_len < sizeof(fake_tx) - 1)
+		fake_tx[fake_tx_len++] = (char)c;
+}
+
+const char *fake_take_tx(void)
+{
+	memcpy(tx_copy, fake_tx, fake_tx_len);
+	tx_copy[fake_tx_len] = 0;
+	fake_tx_len = 0;
+	return tx_copy;
+}
+
+uint32_t board_ms(void) { return fake_ms; }
+
+void board_timer_start(uint16_t delay_cycles)
+{
+	fake_timer_on = 1;
+	fake_timer_paused = 0;
+	fake_timer_delay = delay_cycles;
+}
+
+void board_timer_stop(void)
+{
+	fake_timer_on = 0;
+	fake_timer_paused = 0;
+}
+
+void board_timer_pause(void)
+{
+	if (fake_timer_on)
+		fake_timer_paused = 1;
+}
+
+void board_timer_resume(void)
+{
+	fake_timer_paused = 0;
+}
+
+size_t fake_run(uint64_t max_cycles)
+{
+	size_t events = 0;
+	uint64_t limit = fake_now + max_cycles;
+	while (fake_timer_on && !fake_timer_paused && fake_now + fake_timer_delay <= limit) {
+		fake_now += fake_timer_delay;
+		uint16_t d = mo_event();
+		events++;
+		if (!d) {
+			fake_timer_on = 0;
+			break;
+		}
+		fake_timer_delay = d;
+	}
+	return events;
+}
+
+void board_steps_high(uint8_t mask)
+{
+	if (fake_nsteps < FAKE_MAX_STEPS) {
+		fake_steps[fake_nsteps].cycle = fake_now;
+		fake_steps[fake_nsteps].mask = mask;
+		fake_steps[fake_nsteps].dirs = fake_dirs;
+		fake_steps[fake_nsteps].laser = fake_laser;
+		fake_nsteps++;
+	}
+}
+
+void board_set_dirs(uint8_t neg_mask) { fake_dirs = neg_mask; }
+void board_enable_motors(uint8_t on) { fake_enabled = on; }
+void board_laser(uint8_t power) { fake_laser = power; }
+uint8_t board_endstops(void) { return fake_endstops; }
+uint8_t board_irq_save(void) { return 0; }
+void board_irq_restore(uint8_t state) { (void)state; }

@@ -1,0 +1,40 @@
+/*
+ * fake_board.h - host implementation of board.h for the unit tests: records
+ * what the core does to the "hardware" and lets a test drive the step timer.
+ */
+#ifndef FAKE_BOARD_H
+#define FAKE_BOARD_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#define FAKE_MAX_STEPS 200000
+
+typedef struct {
+	uint64_t cycle;  /* fake_now when the pins went high */
+	uint8_t mask;    /* motors stepped */
+	uint8_t dirs;    /* direction mask in force */
+	uint8_t laser;   /* laser power in force */
+} fake_step_t;
+
+extern uint64_t fake_now;            /* simulated cycle counter */
+extern uint32_t fake_ms;             /* value of board_ms() */
+extern uint8_t fake_endstops;        /* pressed switches */
+extern uint8_t fake_laser;           /* last laser power */
+extern uint8_t fake_dirs;
+extern uint8_t fake_enabled;
+extern int fake_timer_on;            /* board_timer_start called, not stopped */
+extern int fake_timer_paused;
+extern uint16_t fake_timer_delay;    /* delay of the pending timer event */
+extern fake_step_t fake_steps[FAKE_MAX_STEPS];
+extern size_t fake_nsteps;
+extern char fake_tx[65536];
+extern size_t fake_tx_len;
+
+void fake_reset(void);
+/* Run the step timer until it stops or max_cycles pass; returns events run. */
+size_t fake_run(uint64_t max_cycles);
+/* Take and clear the transmitted text. */
+const char *fake_take_tx(void);
+
+#endif

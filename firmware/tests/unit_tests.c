@@ -1,0 +1,504 @@
+/*
+ * unit_tests.c - host unit tests of the portable firmware core.
+ *
+ * Built with gcc and the address/undefined sanitizers by `make -C firmware
+ * test`, and run by tests/firmware/test_unit_c.py.  Prints one line per
+ * failed check and exits 1 if any failed.
+ */
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "board.h"
+#include "config.h"
+#include "fake_board.h"
+#include "fb_main.h"
+#include "fb_motion.h"
+#include "fb_proto.h"
+#include "status.h"
+
+static int failures, checks;
+
+#define CHECK(cond, ...) do { checks++; if (!(cond)) { failures++; \
+	printf("FAIL %s:%d: ", __FILE__, __LINE__); printf(__VA_ARGS__); printf("\n"); } } while (0)
+
+/* ---- parser ------------------------------------------------------------------ */
+
+static uint8_t parse(fb_lines_t *ln, const char *s, fb_cmd_t *c)
+{
+	return fb_parse_line(ln, s, (uint8_t)strlen(s), c);
+}
+
+static void framed(char *out, size_t size, const char *body)
+{
+	uint8_t crc = fb_crc8(body, (uint8_t)strlen(body));
+	snprintf(out, size, "%s*%u", body, crc);
+}
+
+static void test_crc(void)
+{
+	CHECK(fb_crc8("123456789", 9) == 0xF4, "CRC-8/SMBUS check value");
+	CHECK(fb_crc8("", 0) == 0, "empty crc");
+}
+
+static void test_parse_table(void)
+{
+	static const struct { const char *line; uint8_t status; uint8_t kind; } cases[] = {
+		{ "G1 A10 B-5 P1000 S3", FB_OK, CMD_G1 },
+		{ "g1a10b-5p1000", FB_OK, CMD_G1 },
+		{ "  G1\tA+10 P100 ; a comment", FB_OK, CMD_G1 },
+		{ "", FB_OK, CMD_NONE },
+		{ "   ; only a comment", FB_OK, CMD_NONE },
+		{ "G1 A10", FB_ERR_MISSING_WORD, CMD_G1 },
+		{ "G1 A1.5 P1000", FB_ERR_BAD_NUMBER, CMD_G1 },
+		{ "G1 A P1000", FB_ERR_BAD_NUMBER, CMD_G1 },
+		{ "G1 A- P1000", FB_ERR_BAD_NUMBER, CMD_G1 },
+		{ "G1 A99999999999 P1000", FB_ERR_OUT_OF_RANGE, CMD_G1 },
+		{ "G1 A100000001 P1000", FB_ERR_OUT_OF_RANGE, CMD_G1 },
+		{ "G1 A-2147483648 P1000", FB_ERR_OUT_OF_RANGE, CMD_G1 },
+		{ "G1 A1 P99", FB_ERR_OUT_OF_RANGE, CMD_G1 },
+		{ "G1 A1 P100000001", FB_ERR_OUT_OF_RANGE, CMD_G1 },
+		{ "G1 A1 P1000 S256", FB_ERR_OUT_OF_RANGE, CMD_G1 },
+		{ "G1 A1 P1000 S-1", FB_ERR_OUT_OF_RANGE, CMD_G1 },
+		{ "G1 X5 P1000", FB_ERR_BAD_WORD, CMD_G1 },
+		{ "G1 A1 A2 P1000", FB_ERR_BAD_WORD, CMD_G1 },
+		{ "G1 G90 P1000", FB_ERR_BAD_WORD, CMD_G1 },
+		{ "G1 A1 P1000 #", FB_ERR_BAD_WORD, CMD_G1 },
+		{ "G2 A1", FB_ERR_UNKNOWN_COMMAND, CMD_NONE },
+		{ "G99999999", FB_ERR_UNKNOWN_COMMAND, CMD_NONE },
+		{ "M999", FB_ERR_UNKNOWN_COMMAND, CMD_NONE },
+		{ "hello", FB_ERR_UNKNOWN_COMMAND, CMD_NONE },
+		{ "A10 P100", FB_ERR_UNKNOWN_COMMAND, CMD_NONE },
+		{ "123", FB_ERR_UNKNOWN_COMMAND, CMD_NONE },
+		{ "G", FB_ERR_BAD_NUMBER, CMD_NONE },
+		{ "G1\x01 P100", FB_ERR_INVALID_CHAR, CMD_NONE },
+		{ "G1 P100 \x7f", FB_ERR_INVALID_CHAR, CMD_NONE },
+		{ "G90", FB_OK, CMD_G90 },
+		{ "G91", FB_OK, CMD_G91 },
+		{ "G90 A1", FB_ERR_BAD_WORD, CMD_G90 },
+		{ "G92", FB_ERR_MISSING_WORD, CMD_G92 },
+		{ "G92 B-7", FB_OK, CMD_G92 },
+		{ "G92 P5", FB_ERR_BAD_WORD, CMD_G92 },
+		{ "M3", FB_OK, CMD_M3 },
+		{ "M3 S255", FB_OK, CMD_M3 },
+		{ "M3 S256", FB_ERR_OUT_OF_RANGE, CMD_M3 },
+		{ "M5", FB_OK, CMD_M5 },
+		{ "M5 S1", FB_ERR_BAD_WORD, CMD_M5 },
+		{ "M17", FB_OK, CMD_M17 },
+		{ "M18", FB_OK, CMD_M18 },
+		{ "$I", FB_OK, CMD_INFO },
+		{ "$i", FB_OK, CMD_INFO },
+		{ "$$", FB_OK, CMD_LIST },
+		{ "$H", FB_OK, CMD_HOME },
+		{ "$X", FB_OK, CMD_UNLOCK },
+		{ "$IX", FB_ERR_BAD_WORD, CMD_INFO },
+		{ "$Q", FB_ERR_UNKNOWN_COMMAND, CMD_NONE },
+		{ "$", FB_ERR_UNKNOWN_COMMAND, CMD_NONE },
+		{ "$0", FB_ERR_MISSING_WORD, CMD_NONE },
+		{ "$0=", FB_ERR_BAD_NUMBER, CMD_NONE },
+		{ "$0=12x", FB_ERR_BAD_WORD, CMD_NONE },
+		{ "$0=1.5", FB_ERR_BAD_NUMBER, CMD_NONE },
+		{ "$0=12 3", FB_ERR_BAD_WORD, CMD_NONE },
+		{ "$999=1", FB_ERR_UNKNOWN_SETTING, CMD_NONE },
+		{ "$13=-3", FB_OK, CMD_SET },
+	};
+	for (size_t i = 0; i < sizeof(cases) / sizeof(cases[0]); i++) {
+		fb_lines_t ln = { 0 };
+		fb_cmd_t c;
+		uint8_t st = parse(&ln, cases[i].line, &c);
+		CHECK(st == cases[i].status, "'%s': status %u, want %u", cases[i].line, st, cases[i].status);
+		if (st == FB_OK || cases[i].kind != CMD_NONE)
+			CHECK(c.kind == cases[i].kind, "'%s': kind %u, want %u", cases[i].line, c.kind,
+			      cases[i].kind);
+		CHECK(ln.last == 1, "'%s': an unnumbered line advances the line count", cases[i].line);
+	}
+	fb_lines_t ln = { 0 };
+	fb_cmd_t c;
+	CHECK(parse(&ln, "G1 A10 B-5 P1000 S3", &c) == FB_OK && c.a == 10 && c.b == -5 && c.p == 1000 &&
+	      c.s == 3 && c.has == (W_A | W_B | W_P | W_S), "G1 values");
+	CHECK(parse(&ln, "$13=-3", &c) == FB_OK && c.setting == 13 && c.value == -3, "setting values");
+	CHECK(parse(&ln, "G1 A-100000000 P100", &c) == FB_OK && c.a == -100000000, "lowest A");
+}
+
+static void test_framing(void)
+{
+	fb_lines_t ln = { 0 };
+	fb_cmd_t c;
+	char buf[128];
+	framed(buf, sizeof buf, "N1 G90");
+	CHECK(parse(&ln, buf, &c) == FB_OK && ln.last == 1 && c.has_n && c.n == 1, "N1 accepted");
+	framed(buf, sizeof buf, "N3 G90");
+	CHECK(parse(&ln, buf, &c) == FB_ERR_LINE_NUMBER && ln.last == 1, "gap refused");
+	framed(buf, sizeof buf, "N1 G90");
+	CHECK(parse(&ln, buf, &c) == FB_ERR_LINE_NUMBER && ln.last == 1, "repeat refused");
+	framed(buf, sizeof buf, "N2 G90");
+	buf[3] = 'X';
+	CHECK(parse(&ln, buf, &c) == FB_ERR_CHECKSUM && ln.last == 1, "corruption refused");
+	CHECK(parse(&ln, "N2 G90", &c) == FB_ERR_NO_CHECKSUM && ln.last == 1, "N needs a checksum");
+	framed(buf, sizeof buf, "N2 G1 A5 P100");
+	CHECK(parse(&ln, buf, &c) == FB_OK && ln.last == 2 && c.a == 5, "N2 accepted");
+	CHECK(parse(&ln, "G91", &c) == FB_OK && ln.last == 3, "unnumbered line counts");
+	framed(buf, sizeof buf, "N4 G5");
+	CHECK(parse(&ln, buf, &c) == FB_ERR_UNKNOWN_COMMAND && ln.last == 4,
+	      "a well-framed bad command is accepted, then refused");
+	framed(buf, sizeof buf, "N100 M110");
+	CHECK(parse(&ln, buf, &c) == FB_OK && ln.last == 100, "M110 sets the line number");
+	CHECK(parse(&ln, "M110", &c) == FB_OK && ln.last == 0, "M110 without N resets");
+	framed(buf, sizeof buf, "G90");
+	CHECK(parse(&ln, buf, &c) == FB_OK && ln.last == 1, "checksum without N");
+	CHECK(parse(&ln, "G90*999", &c) == FB_ERR_CHECKSUM, "checksum > 255");
+	CHECK(parse(&ln, "G90*", &c) == FB_ERR_CHECKSUM, "empty checksum");
+	CHECK(parse(&ln, "G90*12x", &c) == FB_ERR_CHECKSUM, "malformed checksum");
+	CHECK(parse(&ln, "G90*0012", &c) == FB_ERR_CHECKSUM, "four checksum digits");
+	framed(buf, sizeof buf, "N2 G90 ; note");
+	CHECK(parse(&ln, buf, &c) == FB_OK && ln.last == 2, "comment inside the checksum");
+	framed(buf, sizeof buf, "Nx G90");
+	CHECK(parse(&ln, buf, &c) == FB_ERR_BAD_NUMBER && ln.last == 2, "malformed N");
+	CHECK(fb_is_resend(FB_ERR_CHECKSUM) && fb_is_resend(FB_ERR_LINE_NUMBER) &&
+	      fb_is_resend(FB_ERR_NO_CHECKSUM) && !fb_is_resend(FB_ERR_BAD_WORD), "resend codes");
+}
+
+/* ---- step generator -------------------------------------------------------------- */
+
+typedef struct { int32_t a, b; uint32_t p; uint8_t power; } seg_t;
+
+static void queue_segments(const seg_t *segs, size_t n, uint32_t min_interval)
+{
+	for (size_t i = 0; i < n; i++) {
+		fb_block_t *blk = mo_slot();
+		CHECK(mo_prepare(blk, segs[i].a, segs[i].b, segs[i].p, min_interval) == FB_OK, "prepare %zu", i);
+		blk->power = segs[i].power;
+		blk->line = (uint32_t)i + 1u;
+		mo_push();
+	}
+}
+
+/* Every step lands on start + floor((2k-1)C/2n), segments back to back. */
+static void check_schedule(const seg_t *segs, size_t n, uint64_t start)
+{
+	size_t idx[2] = { 0, 0 };
+	size_t cursor[2] = { 0, 0 };
+	uint64_t seg_start = start;
+	for (size_t s = 0; s < n; s++) {
+		uint64_t C = (uint64_t)segs[s].p * 16u;
+		int32_t d[2] = { segs[s].a, segs[s].b };
+		for (int ax = 0; ax < 2; ax++) {
+			uint64_t steps = (uint64_t)(d[ax] < 0 ? -(int64_t)d[ax] : d[ax]);
+			for (uint64_t k = 1; k <= steps; k++) {
+				uint64_t want = seg_start + ((2 * k - 1) * C) / (2 * steps);
+				while (cursor[ax] < fake_nsteps && !(fake_steps[cursor[ax]].mask & (1u << ax)))
+					cursor[ax]++;
+				if (cursor[ax] >= fake_nsteps) {
+					CHECK(0, "segment %zu axis %d: step %llu missing", s, ax,
+					      (unsigned long long)k);
+					return;
+				}
+				const fake_step_t *st = &fake_steps[cursor[ax]];
+				if (st->cycle != want || ((st->dirs >> ax) & 1u) != (d[ax] < 0) ||
+				    st->laser != segs[s].power) {
+					CHECK(0, "segment %zu axis %d step %llu: at %llu want %llu, dir %u, laser %u",
+					      s, ax, (unsigned long long)k, (unsigned long long)st->cycle,
+					      (unsigned long long)want, (st->dirs >> ax) & 1u, st->laser);
+					return;
+				}
+				cursor[ax]++;
+				idx[ax]++;
+			}
+		}
+		seg_start += C;
+	}
+	size_t total = 0;
+	for (size_t i = 0; i < fake_nsteps; i++)
+		total += (fake_steps[i].mask & 1u) + ((fake_steps[i].mask >> 1) & 1u);
+	CHECK(total == idx[0] + idx[1], "no extra steps: %zu recorded, %zu expected", total, idx[0] + idx[1]);
+	CHECK(fake_now == seg_start, "the last boundary is at the end of the last segment: %llu vs %llu",
+	      (unsigned long long)fake_now, (unsigned long long)seg_start);
+}
+
+static void run_job(const seg_t *segs, size_t n, uint32_t min_interval)
+{
+	fake_reset();
+	mo_init();
+	int32_t zero[2] = { 0, 0 };
+	mo_set_pos(zero);
+	queue_segments(segs, n, min_interval);
+	mo_start();
+	uint64_t start = fake_now + fake_timer_delay;
+	fake_run(UINT64_MAX / 2);
+	CHECK(!mo_running(), "generator stopped after the job");
+	CHECK(fake_laser == 0, "laser off at the end of the job");
+	check_schedule(segs, n, start);
+	int32_t pos[2], want[2] = { 0, 0 };
+	for (size_t i = 0; i < n; i++) {
+		want[0] += segs[i].a;
+		want[1] += segs[i].b;
+	}
+	mo_get_pos(pos);
+	CHECK(pos[0] == want[0] && pos[1] == want[1], "position %d,%d want %d,%d", pos[0], pos[1],
+	      want[0], want[1]);
+	CHECK(mo_done_line() == n, "last done line %u", mo_done_line());
+	CHECK(mo_underruns() == 1, "one stop at the end of the job");
+}
+
+static void test_dda_exact(void)
+{
+	static const seg_t job[] = {
+		{ 1, 0, 100, 0 },
+		{ 0, 0, 1000, 10 },
+		{ 3, 7, 1000, 255 },
+		{ -3, -7, 1000, 128 },
+		{ 1000, 999, 50000, 0 },
+		{ -500, 250, 20000, 1 },
+		{ 2, 3, 100000000, 0 },
+		{ 40, -39, 1000, 0 },
+		{ 400, 1, 10000, 0 },
+		{ 1, 400, 10001, 0 },
+		{ 397, 398, 9999, 7 },
+	};
+	run_job(job, sizeof(job) / sizeof(job[0]), 16);
+
+	/* pseudo-random jobs, 16 segments each */
+	uint32_t x = 12345;
+	for (int round = 0; round < 40; round++) {
+		seg_t segs[CFG_QUEUE_SIZE];
+		for (size_t i = 0; i < CFG_QUEUE_SIZE; i++) {
+			x = x * 1103515245u + 12345u;
+			uint32_t p = 100u + (x >> 8) % 200000u;
+			uint32_t max = p * 16u / 400u;
+			x = x * 1103515245u + 12345u;
+			int32_t a = (int32_t)((x >> 4) % (2 * max + 1)) - (int32_t)max;
+			x = x * 1103515245u + 12345u;
+			int32_t b = (int32_t)((x >> 4) % (2 * max + 1)) - (int32_t)max;
+			segs[i] = (seg_t){ a, b, p, (uint8_t)(x >> 24) };
+		}
+		run_job(segs, CFG_QUEUE_SIZE, 400);
+	}
+}
+
+static void test_too_fast(void)
+{
+	fb_block_t b;
+	CHECK(mo_prepare(&b, 4, 0, 100, 400) == FB_OK, "4 steps in 1600 cycles at 400/step");
+	CHECK(mo_prepare(&b, 5, 0, 100, 400) == FB_ERR_TOO_FAST, "5 steps in 1600 cycles");
+	CHECK(mo_prepare(&b, 0, -5, 100, 400) == FB_ERR_TOO_FAST, "B too fast");
+	CHECK(mo_prepare(&b, 100000000, 0, 100000000, 16) == FB_OK, "long segment");
+}
+
+static void test_hold_resume(void)
+{
+	static const seg_t job[] = { { 100, 50, 10000, 200 }, { -100, -50, 10000, 0 } };
+	fake_reset();
+	mo_init();
+	queue_segments(job, 2, 400);
+	mo_start();
+	uint64_t start = fake_now + fake_timer_delay;
+	fake_run(60000);
+	size_t before = fake_nsteps;
+	CHECK(before > 0 && fake_laser == 200, "moving with the laser on");
+	mo_hold();
+	CHECK(fake_laser == 0 && fake_timer_paused, "hold: laser off, timeline frozen");
+	uint64_t held_at = fake_now;
+	fake_run(1000000);
+	CHECK(fake_nsteps == before, "no step while held");
+	fake_now = held_at;
+	mo_resume();
+	CHECK(fake_laser == 200 && !fake_timer_paused, "resume: laser back");
+	fake_run(UINT64_MAX / 2);
+	check_schedule(job, 2, start);
+}
+
+static void test_homing_block(void)
+{
+	fake_reset();
+	mo_init();
+	int32_t zero[2] = { 0, 0 };
+	mo_set_pos(zero);
+	mo_reset_home_hits();
+	fb_block_t *b = mo_slot();
+	memset(b, 0, sizeof(*b));
+	b->type = BLK_HOME;
+	b->dirs = 3;
+	b->cycles = 1000u * 800u;
+	b->n[0] = b->n[1] = 1000;
+	b->q[0] = b->q[1] = 800;
+	mo_push();
+	mo_start();
+	fake_endstops = 1;
+	fake_run(800u * 10u);
+	int32_t pos[2];
+	mo_get_pos(pos);
+	CHECK(pos[0] == -1 && mo_home_hits() == 1, "A stops on its switch: pos %d hits %u", pos[0],
+	      mo_home_hits());
+	fake_endstops = 3;
+	fake_run(UINT64_MAX / 2);
+	mo_get_pos(pos);
+	CHECK(mo_home_hits() == 3 && pos[0] == -1 && pos[1] > -20, "B stops too: %d, %d", pos[0], pos[1]);
+	CHECK(fake_now < 800u * 30u, "the block ends once both switches are found");
+	CHECK(mo_alarm() == 0, "no alarm while homing");
+}
+
+static void test_endstop_alarm(void)
+{
+	static const seg_t job[] = { { 100, 0, 10000, 255 } };
+	fake_reset();
+	mo_init();
+	mo_set_endstops_enabled(1);
+	queue_segments(job, 1, 400);
+	mo_start();
+	fake_run(50000);
+	fake_endstops = 2;
+	fake_run(UINT64_MAX / 2);
+	CHECK(mo_alarm() == FB_ALARM_ENDSTOP, "alarm %u", mo_alarm());
+	CHECK(!mo_running() && fake_laser == 0, "stopped, laser off");
+	CHECK(fake_nsteps < 100, "motion stopped early");
+	mo_clear_alarm();
+	mo_set_endstops_enabled(0);
+}
+
+/* ---- the whole protocol on the fake board -------------------------------------------------- */
+
+static void send(const char *s)
+{
+	for (; *s; s++)
+		fb_rx_isr((uint8_t)*s);
+}
+
+static const char *poll_out(int polls)
+{
+	for (int i = 0; i < polls; i++) {
+		fb_poll();
+		fake_run(UINT64_MAX / 2);
+	}
+	return fake_take_tx();
+}
+
+static void expect(const char *input, const char *want)
+{
+	send(input);
+	const char *got = poll_out(50);
+	CHECK(strcmp(got, want) == 0, "'%s': got '%s' want '%s'", input, got, want);
+}
+
+/* Let time pass: the queue starts CFG_START_DELAY_MS after its first block. */
+static void tick(uint32_t ms)
+{
+	fake_ms += ms;
+	const char *out = poll_out(5);
+	CHECK(out[0] == 0, "no output while time passes: '%s'", out);
+}
+
+static void test_app(void)
+{
+	char buf[256];
+	int32_t zero[2] = { 0, 0 };
+	fake_reset();
+	mo_set_pos(zero);
+	fb_setup();
+	expect("", "fivebar " FB_VERSION " proto:1 rx:128 queue:16 line:80\r\n");
+	expect("$I\n", "fivebar " FB_VERSION " proto:1 rx:128 queue:16 line:80\r\nok\r\n");
+	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,1|L:0|U:0>\r\n");
+	expect("G1 A10 B-4 P1000\n", "ok\r\n");
+	tick(100);
+	expect("?", "<Idle|A:10,B:-4|Q:0|Ln:2,2|L:0|U:1>\r\n");
+	expect("G91\nG1 A5 P1000\nG90\n", "ok\r\nok\r\nok\r\n");
+	tick(100);
+	expect("?", "<Idle|A:15,B:-4|Q:0|Ln:4,5|L:0|U:2>\r\n");
+	expect("G1 A200000 P100000\n", "error:11\r\n");
+	expect("G1 A10 P100\n", "error:12\r\n");
+	memset(buf, 'A', 100);
+	strcpy(buf + 100, "\n");
+	expect(buf, "error:2\r\n");
+	expect("G1 A1 P1000\x01\n", "error:1\r\n");
+	expect("FOO\n", "error:4\r\n");
+	framed(buf, sizeof buf, "N11 G90");
+	strcat(buf, "\n");
+	expect(buf, "error:9 resend:10\r\n");
+	expect("N10 G90*0\n", "error:8 resend:10\r\n");
+	expect("N10 G90\n", "error:10 resend:10\r\n");
+	expect("M110\n", "ok\r\n");
+	framed(buf, sizeof buf, "N1 G1 A0 B0 P1000");
+	strcat(buf, "\n");
+	expect(buf, "ok\r\n");
+	tick(100);
+	expect("?", "<Idle|A:0,B:0|Q:0|Ln:1,1|L:0|U:3>\r\n");
+
+	/* hold before the job starts, then resume */
+	expect("!", "");
+	expect("M3 S77\nG1 A100 P100000\n", "ok\r\nok\r\n");
+	tick(100);
+	expect("?", "<Hold:0|A:0,B:0|Q:1|Ln:1,3|L:0|U:3>\r\n");
+	CHECK(fake_nsteps == 0 || fake_laser == 0, "nothing runs while held");
+	fake_nsteps = 0;
+	fb_rx_isr('~');
+	fb_poll();
+	fake_run(16u * 50000u);
+	CHECK(fake_laser == 77, "laser on during the segment");
+	fb_rx_isr('!');
+	CHECK(fake_laser == 0, "hold turns the laser off at once");
+	expect("?", "<Hold:0|A:50,B:0|Q:0|Ln:1,3|L:0|U:3>\r\n");
+	expect("~", "");
+	expect("?", "<Idle|A:100,B:0|Q:0|Ln:3,3|L:0|U:4>\r\n");
+
+	/* an error while a job runs holds it */
+	expect("G1 A0 P100000\n", "ok\r\n");
+	fake_ms += 100;
+	fb_poll();
+	fake_run(16u * 10000u);
+	expect("G7\n", "error:4\r\n");
+	CHECK(fake_laser == 0, "laser off after an error");
+	expect("?", "<Hold:2|A:90,B:0|Q:0|Ln:3,5|L:0|U:4>\r\n");
+
+	/* reset: banner, queue dropped, position kept */
+	send("\x18");
+	CHECK(fake_laser == 0 && !fake_timer_on, "reset stops at once");
+	expect("", "fivebar " FB_VERSION " proto:1 rx:128 queue:16 line:80\r\n");
+	expect("?", "<Idle|A:90,B:0|Q:0|Ln:0,0|L:0|U:0>\r\n");
+
+	/* the laser watchdog */
+	expect("M3 S255\nG1 A0 P10000000\n", "ok\r\nok\r\n");
+	fake_ms += 100;
+	fb_poll();
+	fake_run(16000u);
+	CHECK(fake_laser == 255, "laser on");
+	fake_ms += DEF_LASER_TIMEOUT + 1;
+	fb_poll();
+	CHECK(fake_laser == 0, "laser off after host silence");
+	expect("?", "<Hold:1|A:90,B:0|Q:0|Ln:0,2|L:0|U:0>\r\n");
+	send("\x18");
+	expect("", "fivebar " FB_VERSION " proto:1 rx:128 queue:16 line:80\r\n");
+
+	/* settings */
+	expect("$0=50000\n", "error:7\r\n");
+	expect("$77=1\n", "error:17\r\n");
+	expect("$5=0\nG1 A200000 P10000000\n", "ok\r\nok\r\n");
+	send("\x18");
+	expect("", "fivebar " FB_VERSION " proto:1 rx:128 queue:16 line:80\r\n");
+	expect("$5=1\n$H\n", "ok\r\nerror:16\r\n");
+	expect("M18\nG1 A0 P1000\n", "ok\r\nerror:15\r\n");
+	send("\x18");
+	poll_out(5);
+
+	/* receive overflow: more than rx bytes without a newline being read */
+	for (int i = 0; i < CFG_RX_SIZE + 10; i++)
+		fb_rx_isr('G');
+	CHECK(poll_out(5)[0] == 0, "no reply before the newline");
+	send("\n");
+	CHECK(strncmp(poll_out(50), "error:18", 8) == 0, "overflow reported");
+	expect("$I\n", "fivebar " FB_VERSION " proto:1 rx:128 queue:16 line:80\r\nok\r\n");
+}
+
+int main(void)
+{
+	test_crc();
+	test_parse_table();
+	test_framing();
+	test_dda_exact();
+	test_too_fast();
+	test_hold_resume();
+	test_homing_block();
+	test_endstop_alarm();
+	test_app();
+	printf("%d checks, %d failed\n", checks, failures);
+	return failures ? 1 : 0;
+}
