@@ -846,8 +846,9 @@ def design_search(page_w: float, page_h: float, mode: str, min_type1_rad: float,
        the page (centre x = w/2 + {−0.15, 0, 0.15}·D, bottom edge y from 0 up to the reach),
        all above the motor axis. The page is grown by three grid cells of the `workspace`
        command's default grid so that its grid search is sure to find it again.
-    2. Vectorised screen on 7 × 5 interior + 32 edge samples: reach, joint limits, both
-       margins, one assembly sign; the best feasible placement per candidate by score.
+    2. Vectorised screen: corners and edge midpoints first (cheap rejection), then 7 × 5
+       interior + 32 edge samples: reach, joint limits, both margins, one assembly sign; the
+       best feasible placement per candidate by score.
     3. The best screened candidates are verified by the exact point test on a dense sample
        of the grown page (`Rect.sample` at one grid cell) and re-scored on a dense grid;
        the first `top` that pass are returned.
@@ -865,6 +866,8 @@ def design_search(page_w: float, page_h: float, mode: str, min_type1_rad: float,
     ux = np.concatenate([gx.ravel(), t, t, -np.ones(8), np.ones(8)])
     uy = np.concatenate([gy.ravel(), -np.ones(7), np.ones(7), np.linspace(-1, 1, 8),
                          np.linspace(-1, 1, 8)])
+    qx = np.array([-1.0, 1.0, -1.0, 1.0, 0.0, 0.0, -1.0, 1.0])
+    qy = np.array([-1.0, -1.0, 1.0, 1.0, -1.0, 1.0, 0.0, 0.0])
     shifts = np.array([-0.15, 0.0, 0.15]) * diag
     fracs = np.linspace(0.0, 1.0, 12)
     best_score = np.full(n_candidates, np.inf)
@@ -881,10 +884,20 @@ def design_search(page_w: float, page_h: float, mode: str, min_type1_rad: float,
         cy = y0 + hh[:, None]
         pcx = np.repeat(cx, fracs.size, axis=1)                         # (C, 36)
         pcy = np.tile(cy, (1, shifts.size))
-        x = pcx[:, :, None] + ux[None, None, :] * hw[:, None, None]
-        y = pcy[:, :, None] + uy[None, None, :] * hh[:, None, None]
-        feas, mudev, sens = _screen(g, x, y, mode, min_type1_rad, min_type2_rad, limits_rad)
-        score = np.where(feas, mudev / math.radians(50.0) + sens / diag, np.inf)
+        # Quick rejection on the 4 corners and 4 edge midpoints, then the full sample set
+        # only for the placements that survive (most candidates fail on reach).
+        x = pcx[:, :, None] + qx[None, None, :] * hw[:, None, None]
+        y = pcy[:, :, None] + qy[None, None, :] * hh[:, None, None]
+        quick, _, _ = _screen(g, x, y, mode, min_type1_rad, min_type2_rad, limits_rad)
+        ci, ki = np.nonzero(quick)
+        score = np.full(quick.shape, np.inf)
+        if ci.size:
+            xs_ = pcx[ci, ki][:, None, None] + ux[None, None, :] * hw[ci, None, None]
+            ys_ = pcy[ci, ki][:, None, None] + uy[None, None, :] * hh[ci, None, None]
+            feas, mudev, sens = _screen(g[ci], xs_, ys_, mode, min_type1_rad, min_type2_rad,
+                                        limits_rad)
+            score[ci, ki] = np.where(feas[:, 0], mudev[:, 0] / math.radians(50.0)
+                                     + sens[:, 0] / diag, np.inf)
         k = np.argmin(score, axis=1)
         rows = np.arange(g.shape[0])
         best_score[c0:c0 + chunk] = score[rows, k]
