@@ -59,8 +59,10 @@ def test_workspace_default_profile_prints_figures_and_writes_files(tmp_path: Pat
 
 
 def test_workspace_page_that_does_not_fit_exits_1() -> None:
-    code, out = _run(["workspace", "--no-plot", "--page", "300x200"])
+    code, out = _run(["workspace", "--no-plot", "--page", "300x200", "--mode", "auto"])
     assert code == 1 and "does NOT fit" in out
+    # "auto" analyses the mode with the largest page: "+-" (both elbows outward) here.
+    assert "working mode +-, assembly +" in out
     code, out = _run(["workspace", "--no-plot", "--page", "300by200"])
     assert code == 2 and "200x150" in out
 
