@@ -1208,7 +1208,9 @@ def plan_working_modes(fb: FiveBar, strokes: Sequence[ArrayLike], start_mode: st
     run from that point is longest is taken. A stroke split between two modes resumes at the
     last point of the previous piece, so the segment joining them is drawn in the new mode.
     Every mode change gets a `plan_joint_move` from the last pose of the previous piece (or
-    `start_angles`, the pose before the job) to the first pose of the next piece.
+    `start_angles`, the pose before the job) to the first pose of the next piece. Without
+    `start_angles` the first piece may begin in a mode other than `start_mode` with no
+    transition planned before it: pass the homed pose.
 
     Only sample points are tested: the caller must segment strokes finely (the pipeline's
     one tolerance does). Raises `NoSafeRegionError` naming the stroke and point if a point is
