@@ -365,9 +365,18 @@ def bbox(drawing: Drawing, rel_tol: float = 1e-4) -> tuple[float, float, float, 
         ext_pts = np.concatenate((ext_pts, p[:, 0:2] + r[:, None], p[:, 0:2] - r[:, None]))
     span = float(np.ptp(ext_pts, axis=0).max()) if ext_pts.size else 0.0
     tol = max(span * rel_tol, 1e-9)
-    poly = flatten(drawing, tol)
-    lo = poly.points.min(axis=0) - tol
-    hi = poly.points.max(axis=0) + tol
+    line = drawing.kind == LINE
+    pts = [drawing.params[line][:, 0:4].reshape(-1, 2)]  # exact end points
+    if (~line).any():
+        curves = Drawing(drawing.file, drawing.kind[~line], drawing.params[~line],
+                         np.arange(int((~line).sum()), dtype=np.int64),
+                         drawing.line[~line], drawing.stroke_source, drawing.stroke_power,
+                         drawing.stroke_feed_mm_s, drawing.sources)
+        poly = flatten(curves, tol).points
+        pts += [poly - tol, poly + tol]  # chords are within tol of the curves
+    allp = np.concatenate(pts)
+    lo = allp.min(axis=0)
+    hi = allp.max(axis=0)
     return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
 
 
