@@ -113,6 +113,129 @@ def fk(theta1_deg: float, theta2_deg: float, assembly: str, config_path: Path | 
     click.echo(f"P = ({p[0]:.6f}, {p[1]:.6f}) mm  (assembly {assembly}, working mode {mode})")
 
 
+# --------------------------------------------------------------------- jobs: convert, plot
+def _xy(text: str | None) -> tuple[float, float] | None:
+    """Parse "X,Y" (mm) for --origin."""
+    if text is None:
+        return None
+    parts = text.replace(" ", "").split(",")
+    try:
+        x, y = (float(v) for v in parts)
+    except ValueError:
+        raise click.BadParameter(f"must look like X,Y in mm (e.g. 10,95); got {text!r}",
+                                 param_hint="--origin") from None
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise click.BadParameter(f"must be finite; got {text!r}", param_hint="--origin")
+    return x, y
+
+
+def job_options(fn: F) -> F:
+    """The options that choose how a drawing becomes a job (shared by convert and plot)."""
+    opts = [
+        config_option,
+        click.option("--mode", type=click.Choice(["++", "+-", "-+", "--", "auto"]),
+                     default=None, help="Working mode; auto tries all four and picks one "
+                     "that clears every check (default: the profile's)."),
+        click.option("--tolerance", type=click.FloatRange(min=1e-4, max=10.0), default=None,
+                     help="Largest deviation of the drawn path, mm (default: the profile's)."),
+        click.option("--origin", "origin_text", default=None, metavar="X,Y",
+                     help="Put the drawing's origin (SVG: page bottom-left) at machine X,Y mm "
+                     "(default: centred in the largest safe rectangle)."),
+        click.option("--scale", type=float, default=None, help="Scale factor (default 1)."),
+        click.option("--rotate", "rotate_deg", type=float, default=0.0,
+                     help="Rotate the drawing, degrees counter-clockwise."),
+        click.option("--fit", is_flag=True, help="Scale the drawing to fill the largest "
+                     "singularity-safe rectangle of the working mode."),
+        click.option("--layer", "layers", multiple=True, metavar="NAME",
+                     help="Only this Inkscape layer (label or id); repeatable."),
+        click.option("--keep-order", is_flag=True,
+                     help="Draw paths in file order (no reordering to cut travel)."),
+    ]
+    for o in reversed(opts):
+        fn = o(fn)
+    return fn
+
+
+def compile_from_cli(drawing: Path, config_path: Path | None, mode: str | None,
+                     tolerance: float | None, origin_text: str | None, scale: float | None,
+                     rotate_deg: float, fit: bool, layers: tuple[str, ...],
+                     keep_order: bool) -> tuple[Profile, Any]:
+    """Compile and check a drawing from `job_options` values: (profile, Job). Raises the
+    pipeline's errors (`InputError`, `JobError`, `ConfigError`, `ValueError`)."""
+    from fivebar_host.job import CompileOptions, compile_job
+
+    prof = _profile(config_path)
+    opts = CompileOptions(mode=mode, tolerance_mm=tolerance, origin_mm=_xy(origin_text),
+                          scale=scale, rotate_deg=rotate_deg, fit=fit, layers=tuple(layers),
+                          keep_order=keep_order)
+    return prof, compile_job(drawing, prof, opts)
+
+
+def handle_job_errors(fn: F) -> F:
+    """Like `handle_errors`, also for drawing and job errors (exit status 2, one message)."""
+
+    @wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return fn(*args, **kwargs)
+        except (ConfigError, KinematicsError, ValueError) as e:
+            _fail(str(e))
+        except OSError as e:
+            _fail(f"{getattr(e, 'filename', '') or ''}: {e.strerror or e}".lstrip(": "))
+        return None
+
+    return wrapper  # type: ignore[return-value]
+
+
+@main.command("convert")
+@click.argument("drawing", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
+              required=True, help="Where to write the firmware lines.")
+@click.option("--relative", is_flag=True,
+              help="Relative step moves (G91) instead of absolute targets (G90).")
+@job_options
+@handle_job_errors
+def convert(drawing: Path, output: Path, relative: bool, config_path: Path | None,
+            mode: str | None, tolerance: float | None, origin_text: str | None,
+            scale: float | None, rotate_deg: float, fit: bool, layers: tuple[str, ...],
+            keep_order: bool) -> None:
+    """Compile DRAWING (SVG or G-code) into firmware-ready step lines (G1 A B P S)."""
+    from fivebar_host.job import encode_lines, write_atomic
+
+    prof, job = compile_from_cli(drawing, config_path, mode, tolerance, origin_text, scale,
+                                 rotate_deg, fit, layers, keep_order)
+    lines = encode_lines(job, prof, relative=relative)
+    write_atomic(output, "\n".join(lines) + "\n")
+    click.echo(f"wrote {output}: {job.n_segments} segments, mode {job.mode}, "
+               f"≈ {job.total_time_s:.1f} s, max deviation {job.max_dev_mm:.4f} mm")
+
+
+@main.command("plot")
+@click.argument("drawing", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--dry-run", is_flag=True,
+              help="Run everything except the serial link: preview picture and report.")
+@click.option("--preview", "preview_path", type=click.Path(dir_okay=False, path_type=Path),
+              default=Path("preview.png"), show_default=True, help="Dry-run picture (PNG).")
+@job_options
+@handle_job_errors
+def plot(drawing: Path, dry_run: bool, preview_path: Path, config_path: Path | None,
+         mode: str | None, tolerance: float | None, origin_text: str | None,
+         scale: float | None, rotate_deg: float, fit: bool, layers: tuple[str, ...],
+         keep_order: bool) -> None:
+    """Compile and check DRAWING, then plot it (--dry-run: preview and report only)."""
+    if not dry_run:
+        _fail("plotting on a machine needs the serial link, which is not available in this "
+              "version yet; use --dry-run for the preview and report")
+    from fivebar_host.preview import draw_preview, report_lines
+
+    prof, job = compile_from_cli(drawing, config_path, mode, tolerance, origin_text, scale,
+                                 rotate_deg, fit, layers, keep_order)
+    for line in report_lines(job):
+        click.echo(line)
+    draw_preview(job, prof, preview_path)
+    click.echo(f"preview       {preview_path}")
+
+
 # --------------------------------------------------------------------- workspace and design
 def _page_size(text: str) -> tuple[float, float]:
     """Parse a page size "WxH" in mm (also "W×H"), e.g. "200x150"."""

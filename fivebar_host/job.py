@@ -1,0 +1,658 @@
+"""The compiled job: from a drawing file to checked, timed, quantised joint targets.
+
+`compile_job(path, profile, options)` runs the whole pipeline:
+
+    read (SVG / G-code) → place (layout) → flatten curves (tol_f = tol/2) → order and join
+    paths → inverse kinematics + checks on every vertex → refine chords in joint space
+    (interpolation budget tol_i, `toolpath.segment`) → pen-up travel (checked joint-space
+    moves, Cartesian fallback) → absolute steps (quantised once) → plan durations →
+    validate: forward kinematics of the *quantised* steps, including the joint-space
+    interpolation between them, against the requested curves.
+
+Tolerance budget (one `tol`, default from the profile): a curve is flattened so every chord is
+within tol_f = tol/2 of it; each chord is refined so the joint-interpolated pen path stays
+within tol_i of the chord: tol_i = tol − tol_f for chords of curves, tol for straight input
+lines (nothing was flattened), tol − gap/2 for the short pen-down bridge that joins two paths
+whose ends are closer than tol. By the triangle inequality every pen point is within tol of
+the requested path; rounding to whole steps adds at most one step quantum (reported).
+
+`Job` holds everything streaming, resuming and the reports need, indexed per target (row 0 =
+the homed pose, absolute steps (0, 0)) and per segment k (target k → k+1).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fivebar_host import planner, steps
+from fivebar_host.config import Profile
+from fivebar_host.errors import InputError, JobError, Where
+from fivebar_host.toolpath import layout, order
+from fivebar_host.toolpath.gcode import read_gcode
+from fivebar_host.toolpath.geometry import (
+    LINE,
+    Drawing,
+    Polylines,
+    flatten,
+    nearest_distance,
+)
+from fivebar_host.toolpath.segment import (
+    REASON_KEY,
+    CheckFailedError,
+    PoseChecker,
+    joint_moves,
+    refine,
+)
+from fivebar_host.toolpath.svg import read_svg
+from kinematics.fivebar import WORKING_MODES, FiveBar
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
+
+#: Order in which `--mode auto` tries the working modes (ties keep this order).
+AUTO_ORDER = ("+-", "-+", "++", "--")
+#: Joint-space step cap per segment (rad): keeps the planner's rate staircase fine.
+MAX_STEP_RAD = 0.05
+#: Interpolation tolerance for the Cartesian fallback of pen-up travel, mm.
+TRAVEL_TOL_MM = 1.0
+GCODE_SUFFIXES = {".gcode", ".nc", ".ngc", ".gc", ".g", ".tap", ".cnc"}
+
+
+@dataclass(frozen=True)
+class CompileOptions:
+    """What the command line can change (None: the profile's value)."""
+
+    mode: str | None = None  # "++", "+-", "-+", "--", "auto"
+    tolerance_mm: float | None = None
+    origin_mm: tuple[float, float] | None = None
+    scale: float | None = None
+    rotate_deg: float = 0.0
+    fit: bool = False
+    layers: tuple[str, ...] = ()
+    keep_order: bool = False
+    validate: bool = True
+    validation_samples: int = 4
+
+
+@dataclass(frozen=True)
+class PathStats:
+    """Per job path (in drawing order): where it came from and how well it is drawn."""
+
+    source: IntArray  # (P,) index of the first source element of the path
+    reversed: BoolArray  # (P,)
+    first_seg: IntArray  # (P,) first draw segment
+    end_seg: IntArray  # (P,) one past the last draw segment
+    max_dev_mm: FloatArray  # (P,) from the quantised steps (validation), NaN if not validated
+    mean_dev_mm: FloatArray
+
+
+@dataclass(frozen=True)
+class Job:
+    """A compiled job (see module doc). Per target (T+1 rows; row 0 = homed pose):
+    `points_mm`, `angles_rad`, `steps` (absolute, int64). Per segment (T rows, target k →
+    k+1): `draw`, `power` (0–255, 0 on travel), `path` (job path the segment draws or travels
+    to; P for the final park move), `source` (source element index, −1 on travel),
+    `source_line` (0 if unknown), `duration_us` (int64), `length_mm` (requested pen path)."""
+
+    file: str
+    mode: str
+    assembly: int
+    tolerance_mm: float
+    flatten_tol_mm: float
+    placement: layout.Placement
+    drawing: Drawing
+    steps_per_rev: float
+    home_rad: tuple[float, float]
+    points_mm: FloatArray
+    angles_rad: FloatArray
+    steps: IntArray
+    draw: BoolArray
+    power: NDArray[np.uint8]
+    path: IntArray
+    source: IntArray
+    source_line: IntArray
+    duration_us: IntArray
+    length_mm: FloatArray
+    paths: PathStats
+    min_margin_rad: FloatArray  # (3,) smallest margins on targets and samples (draw+travel)
+    step_quantum_mm: float
+    travel_before_mm: float
+    travel_after_mm: float
+    joined: int
+    notes: list[str] = field(default_factory=list)
+    # validation data (requested geometry of each draw segment)
+    seg_prim: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))
+    seg_tlo: FloatArray = field(default_factory=lambda: np.zeros(0))
+    seg_thi: FloatArray = field(default_factory=lambda: np.zeros(0))
+    seg_rev: BoolArray = field(default_factory=lambda: np.zeros(0, bool))
+    seg_sa: FloatArray = field(default_factory=lambda: np.zeros(0))
+    seg_sb: FloatArray = field(default_factory=lambda: np.zeros(0))
+    seg_ca: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    seg_cb: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    max_dev_mm: float = math.nan
+    mean_dev_mm: float = math.nan
+    ideal_max_dev_mm: float = math.nan
+
+    # ------------------------------------------------------------------ derived
+    @property
+    def n_segments(self) -> int:
+        return int(self.draw.shape[0])
+
+    @property
+    def relative_steps(self) -> IntArray:
+        """Per-segment step differences (T, 2): their running sum is `steps[1:]` exactly."""
+        return steps.relative_steps(self.steps)
+
+    @property
+    def total_time_s(self) -> float:
+        return float(self.duration_us.sum()) * 1e-6
+
+    @property
+    def draw_length_mm(self) -> float:
+        return float(self.length_mm[self.draw].sum())
+
+    @property
+    def travel_length_mm(self) -> float:
+        return float(self.length_mm[~self.draw].sum())
+
+    @property
+    def n_paths(self) -> int:
+        return int(self.paths.source.shape[0])
+
+    def rel_or_abs(self, relative: bool) -> IntArray:
+        """Per-segment step words: absolute targets `steps[1:]` or relative moves."""
+        return self.relative_steps if relative else self.steps[1:]
+
+    def executed_points(self, fb: FiveBar, samples: int = 4) -> FloatArray:
+        """Pen positions along the whole job from the quantised steps, `samples` per segment
+        plus the final target (forward kinematics of the joint-space interpolation)."""
+        th = steps.step_angles(self.steps, self.home_rad, self.steps_per_rev)
+        s = np.arange(samples) / samples
+        dth = np.diff(th, axis=0)
+        q = (th[:-1, None, :] + s[None, :, None] * dth[:, None, :]).reshape(-1, 2)
+        q = np.concatenate((q, th[-1:]))
+        return fb.forward_batch(q, "+" if self.assembly > 0 else "-").points
+
+
+@dataclass(frozen=True)
+class _Chords:
+    """The ordered, joined polylines in machine mm with per-chord provenance."""
+
+    pts: FloatArray  # (M, 2)
+    offsets: IntArray  # (P+1,)
+    vert_prim: IntArray  # (M,) primitive the vertex lies on (for messages)
+    chord_from: IntArray  # (C,) vertex index a of chord a → a+1
+    prim: IntArray  # (C,) primitive, −1 for a join bridge
+    tlo: FloatArray
+    thi: FloatArray
+    rev: BoolArray
+    tol_i: FloatArray
+    path_of_chord: IntArray  # (C,) job path
+    path_source: IntArray  # (P,) first source element
+    path_reversed: BoolArray
+    power: FloatArray  # (P,) fraction
+    feed: FloatArray  # (P,) mm/s or NaN
+    joined: int
+    travel_before: float
+    travel_after: float
+
+
+def read_drawing(path: str | Path, layers: tuple[str, ...] = ()) -> Drawing:
+    """Read an SVG or G-code file, chosen by suffix (or by content when unknown)."""
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix == ".svg":
+        return read_svg(p, layers or None)
+    if suffix in GCODE_SUFFIXES:
+        if layers:
+            raise InputError("--layer applies to SVG files only", str(p))
+        return read_gcode(p)
+    try:
+        head = p.read_bytes()[:512].lstrip()
+    except OSError as e:
+        raise InputError(f"cannot read file: {e.strerror or e}", str(p)) from e
+    if head.startswith((b"<?xml", b"<svg", b"<!--", b"<!DOCTYPE")):
+        return read_svg(p, layers or None)
+    return read_gcode(p)
+
+
+def _where(job_file: str, drawing: Drawing, pl: layout.Placement, point: tuple[float, float],
+           prim: int, what: str = "path") -> Where:
+    """Where for a failing point on primitive `prim` (−1: unknown)."""
+    pm = np.array(point, dtype=np.float64)
+    dxy: tuple[float, float] | None = None
+    mxy: tuple[float, float] | None = None
+    if np.all(np.isfinite(pm)):
+        d = drawing.to_file_frame(pl.to_drawing(pm.reshape(1, 2)))[0]
+        dxy = (float(d[0]), float(d[1]))
+        mxy = (float(pm[0]), float(pm[1]))
+    if prim < 0:
+        return Where(file=job_file, drawing_xy=dxy, machine_xy=mxy, what=what)
+    src = drawing.sources[int(drawing.stroke_source[drawing.stroke[prim]])]
+    return Where(file=job_file, path_index=src.index, path_id=src.ident,
+                 source_line=int(drawing.line[prim]) or src.line, drawing_xy=dxy,
+                 machine_xy=mxy, what=what)
+
+
+def _prepare_chords(drawing: Drawing, poly: Polylines, tol: float, tol_f: float,
+                    start: FloatArray, keep_order: bool) -> _Chords:
+    """Order, reverse and join the flattened strokes; per-chord provenance and budgets."""
+    pts0 = poly.points
+    offs = poly.offsets
+    npath = offs.shape[0] - 1
+    starts = pts0[offs[:-1]]
+    ends = pts0[offs[1:] - 1]
+    od = order.order_paths(starts, ends, start, start, keep_order=keep_order)
+    lens = np.diff(offs)
+    ordered_lens = lens[od.order]
+    # Vertex index map in the new order (reversed paths walk their vertices backwards).
+    base = np.repeat(offs[:-1][od.order], ordered_lens)
+    k = np.arange(int(ordered_lens.sum())) - np.repeat(np.cumsum(ordered_lens) - ordered_lens,
+                                                       ordered_lens)
+    revv = np.repeat(od.reverse, ordered_lens)
+    idx = np.where(revv, base + np.repeat(ordered_lens, ordered_lens) - 1 - k, base + k)
+    pts = pts0[idx]
+    new_offs = np.concatenate(([0], np.cumsum(ordered_lens))).astype(np.int64)
+    # Per-vertex chord metadata (chord v → v+1 in the new order).
+    # forward: chord lies on prim[idx[v+1]] over [t0, t] of idx[v+1]; reversed: on idx[v].
+    m = pts.shape[0]
+    nxt = np.minimum(np.arange(m) + 1, m - 1)
+    owner = np.where(revv, idx, idx[nxt])
+    c_prim = poly.prim[owner]
+    c_tlo = poly.t0[owner]
+    c_thi = poly.t[owner]
+    is_end = np.zeros(m, dtype=bool)
+    is_end[new_offs[1:] - 1] = True
+    path_idx = np.repeat(np.arange(npath), ordered_lens)
+    stroke = poly.stroke[od.order]
+    power = drawing.stroke_power[stroke]
+    feed = drawing.stroke_feed_mm_s[stroke]
+    source = drawing.stroke_source[stroke]
+    # Join consecutive paths whose gap is below the tolerance and whose settings match.
+    gap = np.hypot(*(pts[new_offs[1:-1]] - pts[new_offs[1:-1] - 1]).T)
+    same = (power[1:] == power[:-1]) & ((feed[1:] == feed[:-1])
+                                        | (np.isnan(feed[1:]) & np.isnan(feed[:-1])))
+    join = (gap < tol) & same
+    bridge_tol = np.full(m, np.nan)
+    bridge_at = new_offs[1:-1][join] - 1  # vertex that ends path p and starts the bridge
+    is_end[bridge_at] = False
+    bridge_tol[bridge_at] = tol - gap[join] / 2
+    c_prim = c_prim.copy()
+    c_prim[bridge_at] = -1
+    keep_path = np.concatenate(([True], ~join))
+    new_path_of_old = np.cumsum(keep_path) - 1
+    joined_offs = np.concatenate((new_offs[:-1][keep_path], [m])).astype(np.int64)
+    chord_from = np.flatnonzero(~is_end)
+    # Drop zero-length chords by merging their vertices (keeps paths ≥ 1 chord if possible).
+    kind = drawing.kind
+    is_line = np.zeros(chord_from.shape[0], dtype=bool)
+    cp = c_prim[chord_from]
+    is_line[cp >= 0] = kind[cp[cp >= 0]] == LINE
+    tol_i = np.where(is_line, tol, tol - tol_f)
+    bt = bridge_tol[chord_from]
+    tol_i = np.where(np.isnan(bt), tol_i, bt)
+    return _Chords(pts=pts, offsets=joined_offs, vert_prim=poly.prim[idx],
+                   chord_from=chord_from, prim=cp, tlo=c_tlo[chord_from],
+                   thi=c_thi[chord_from], rev=revv[chord_from], tol_i=tol_i,
+                   path_of_chord=new_path_of_old[path_idx[chord_from]],
+                   path_source=source[keep_path], path_reversed=od.reverse[keep_path],
+                   power=power[keep_path], feed=feed[keep_path], joined=int(join.sum()),
+                   travel_before=od.travel_before_mm, travel_after=od.travel_after_mm)
+
+
+def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
+                  mode: str) -> Job:
+    fb = profile.geometry
+    kin = profile.kinematics
+    mot = profile.motors
+    motion = profile.motion
+    tol = float(opts.tolerance_mm if opts.tolerance_mm is not None else motion.tolerance_mm)
+    if not (math.isfinite(tol) and tol > 0):
+        raise ValueError(f"tolerance must be a positive number of mm; got {tol!r}")
+    tol_f = tol / 2.0
+    min1, min2, limits = kin.min_type1_margin_rad, kin.min_type2_margin_rad, mot.limits_rad
+    file = drawing.file
+    pl = layout.place(drawing, fb, mode, min1, min2, limits, origin_mm=opts.origin_mm,
+                      scale=opts.scale, rotate_deg=opts.rotate_deg, fit=opts.fit)
+    mdraw = drawing.transformed(pl.matrix, pl.offset)
+    poly = flatten(mdraw, tol_f)
+
+    def fail(cf: CheckFailedError, prim: int, what: str = "path") -> JobError:
+        w = _where(file, drawing, pl, cf.point, prim, what)
+        msg = f"{cf.message} (working mode {mode})"
+        if cf.reason in ("reach", "joint_limit", "type1_margin", "type2_margin", "assembly"):
+            msg += "; " + layout.does_not_fit_hint(pl, fb, mode, min1, min2, limits)
+        return JobError(msg, w, cf.reason)
+
+    # Assembly: from the first vertex (inverse kinematics decide it; all must agree).
+    first = poly.points[:1]
+    inv0 = fb.inverse_batch(first, mode)
+    if not inv0.valid[0]:
+        probe = PoseChecker(fb, mode, 1, min1, min2, limits)
+        try:
+            probe.inverse(first)
+        except CheckFailedError as cf:
+            raise fail(cf, int(poly.prim[0])) from None
+    assembly = int(fb.assembly_of(inv0.angles, first)[0]) or 1
+    checker = PoseChecker(fb, mode, assembly, min1, min2, limits)
+    home = np.array(mot.home_rad, dtype=np.float64).reshape(1, 2)
+    home_fk = fb.forward_batch(home, "+" if assembly > 0 else "-")
+    if not home_fk.valid[0]:
+        raise JobError(f"the homed pose {np.degrees(home[0]).round(3).tolist()}° has no pen "
+                       f"position in assembly {'+' if assembly > 0 else '-'} (working mode "
+                       f"{mode})", Where(file=file, what="move from home"), "assembly")
+    home_pt = home_fk.points[0]
+
+    ch = _prepare_chords(drawing, poly, tol, tol_f, home_pt, opts.keep_order)
+    # Checked inverse kinematics of every vertex.
+    try:
+        th_v = checker.inverse(ch.pts)
+    except CheckFailedError as cf:
+        raise fail(cf, int(ch.vert_prim[cf.index])) from None
+    a = ch.chord_from
+    try:
+        iv = refine(checker, ch.pts[a], ch.pts[a + 1], th_v[a], th_v[a + 1], ch.tol_i,
+                    MAX_STEP_RAD)
+    except CheckFailedError as cf:
+        raise fail(cf, int(ch.prim[cf.index]) if ch.prim[cf.index] >= 0
+                   else int(ch.vert_prim[a[cf.index]])) from None
+
+    # ------------------------------------------------------------ travel
+    npath = ch.offsets.shape[0] - 1
+    p_start = ch.offsets[:-1]
+    p_end = ch.offsets[1:] - 1
+    t_from = np.concatenate((home, th_v[p_end]))  # travel j goes into path j (j = P: park)
+    t_to = np.concatenate((th_v[p_start], home))
+    is_home_move = np.zeros(npath + 1, dtype=bool)
+    is_home_move[0] = is_home_move[-1] = True
+    pieces, ok, code, tmarg = joint_moves(checker, t_from, t_to, MAX_STEP_RAD,
+                                          check_type1=~is_home_move)
+    notes: list[str] = []
+    # Cartesian fallback for the inter-path travels that fail in joint space.
+    cart_pts: dict[int, tuple[FloatArray, FloatArray]] = {}
+    bad = np.flatnonzero(~ok)
+    for j in bad.tolist():
+        what = ("move from home" if j == 0 else "move to home" if j == npath
+                else "travel")
+        if is_home_move[j]:
+            pt = (math.nan, math.nan)
+            home_fail = CheckFailedError(
+                0, pt, REASON_KEY.get(int(code[j]), "reach"),
+                "the joint-space move between the homed pose and the drawing fails the "
+                "checks: " + checker.explain(int(code[j]), home[0], home_pt, tmarg[j]))
+            raise fail(home_fail, -1, what)
+    if bad.size:
+        pa = np.concatenate([ch.pts[p_end[j - 1]][None] for j in bad])
+        pb = np.concatenate([ch.pts[p_start[j]][None] for j in bad])
+        try:
+            civ = refine(checker, pa, pb, t_from[bad], t_to[bad],
+                         np.full(bad.size, max(TRAVEL_TOL_MM, tol)), MAX_STEP_RAD)
+        except CheckFailedError as cf:
+            j = int(bad[cf.index])
+            raise fail(cf, -1, f"travel to path #{int(ch.path_source[j])}") from None
+        for n_, j in enumerate(bad.tolist()):
+            sel = civ.chord == n_
+            cart_pts[j] = (civ.sa[sel], civ.thb[sel])
+        notes.append(f"{bad.size} pen-up travel(s) run as straight lines (a joint-space move "
+                     "would have passed too close to a singularity)")
+
+    # ------------------------------------------------------------ assemble segments
+    # Draw segments, in order (intervals are sorted by chord, chords by job order).
+    dc = iv.chord
+    d_path = ch.path_of_chord[dc]
+    d_end_pts = ch.pts[a[dc]] + iv.sb[:, None] * (ch.pts[a[dc] + 1] - ch.pts[a[dc]])
+    # Travel pieces: uniform in joint space, or the Cartesian pieces.
+    t_pieces = pieces.copy()
+    for j, (sa_, _) in cart_pts.items():
+        t_pieces[j] = sa_.shape[0]
+    t_move = np.repeat(np.arange(npath + 1), t_pieces)
+    t_k = np.arange(t_move.shape[0]) - np.repeat(np.cumsum(t_pieces) - t_pieces, t_pieces)
+    frac = (t_k + 1) / t_pieces[t_move]
+    t_th = t_from[t_move] + frac[:, None] * (t_to[t_move] - t_from[t_move])
+    for j, (_, thb) in cart_pts.items():
+        t_th[t_move == j] = thb
+    t_pts = checker.forward(t_th)[0]
+    # Merge: key (path, part, sequence); travel into path j precedes its draw segments.
+    n_d, n_t = dc.shape[0], t_move.shape[0]
+    key_path = np.concatenate((d_path, t_move))
+    key_part = np.concatenate((np.ones(n_d, np.int64), np.zeros(n_t, np.int64)))
+    key_seq = np.concatenate((np.arange(n_d), t_k))
+    perm = np.lexsort((key_seq, key_part, key_path))
+    seg_draw = np.concatenate((np.ones(n_d, bool), np.zeros(n_t, bool)))[perm]
+    end_th = np.concatenate((iv.thb, t_th))[perm]
+    end_pts = np.concatenate((d_end_pts, t_pts))[perm]
+    seg_path = key_path[perm]
+    th_all = np.concatenate((home, end_th))
+    pts_all = np.concatenate((home_pt[None], end_pts))
+    # Per-segment provenance (draw only; −1 / 0 on travel).
+    d_prim = ch.prim[dc]
+    d_vprim = np.where(d_prim >= 0, d_prim, ch.vert_prim[a[dc]])
+    d_src = drawing.stroke_source[drawing.stroke[d_vprim]]
+    d_line = drawing.line[d_vprim]
+    seg_source = np.concatenate((d_src, np.full(n_t, -1)))[perm]
+    seg_line = np.concatenate((d_line, np.zeros(n_t, np.int64)))[perm]
+    length = np.concatenate((
+        (iv.sb - iv.sa) * np.hypot(*(ch.pts[a[dc] + 1] - ch.pts[a[dc]]).T),
+        np.zeros(n_t)))[perm]
+    # Travel length: distance between consecutive target points.
+    tl = np.hypot(*np.diff(pts_all, axis=0).T)
+    length = np.where(seg_draw, length, tl)
+
+    # ------------------------------------------------------------ steps
+    st = steps.absolute_steps(th_all, mot.home_rad, mot.steps_per_rev)
+    rel = np.diff(st, axis=0)
+    moving = (rel != 0).any(axis=1)
+    keep_t = np.concatenate(([True], moving))
+    st = st[keep_t]
+    th_all = th_all[keep_t]
+    pts_all = pts_all[keep_t]
+    seg_draw, seg_path = seg_draw[moving], seg_path[moving]
+    seg_source, seg_line, length = seg_source[moving], seg_line[moving], length[moving]
+    perm_kept = perm[moving]
+
+    # ------------------------------------------------------------ plan
+    power_frac = np.where(seg_draw, ch.power[np.minimum(seg_path, npath - 1)], 0.0)
+    power = np.where(seg_draw, np.clip(np.rint(power_frac * profile.laser.power), 0, 255),
+                     0).astype(np.uint8)
+    pfeed = ch.feed[np.minimum(seg_path, npath - 1)]
+    feed = np.where(seg_draw, np.where(np.isnan(pfeed), motion.draw_feed_mm_s, pfeed),
+                    motion.travel_feed_mm_s)
+    dq = np.diff(steps.step_angles(st, mot.home_rad, mot.steps_per_rev), axis=0)
+    stop = np.zeros(seg_draw.shape[0], dtype=bool)
+    stop[:-1] = (seg_draw[1:] != seg_draw[:-1]) | (power[1:] != power[:-1])
+    pln = planner.plan(dq, length, feed, motion.max_joint_rad_s, motion.max_joint_rad_s2,
+                       stop_after=stop)
+
+    # ------------------------------------------------------------ per-path bookkeeping
+    draw_idx = np.flatnonzero(seg_draw)
+    dp = seg_path[draw_idx]
+    first_seg = np.full(npath, -1, dtype=np.int64)
+    end_seg = np.full(npath, -1, dtype=np.int64)
+    if draw_idx.size:
+        u, fi = np.unique(dp, return_index=True)
+        first_seg[u] = draw_idx[fi]
+        li = np.unique(dp[::-1], return_index=True)[1]
+        end_seg[u] = draw_idx[::-1][li] + 1
+    # Requested geometry per draw segment (for validation and previews).
+    src_rows = perm_kept[seg_draw]  # rows into the draw-interval arrays
+    chord_rows = dc[src_rows]
+    # Smallest margins over targets and samples; the moves from/to home may pass a type-1
+    # singularity on purpose (pen up, changing working mode), so their type-1 columns and
+    # targets are left out.
+    tmarg_rep = tmarg.copy()
+    tmarg_rep[is_home_move, :2] = np.inf
+    jmargin = np.minimum(iv.min_margin.min(axis=0) if iv.min_margin.size else np.inf,
+                         tmarg_rep.min(axis=0))
+    tm = fb.singularity_margins(th_all, pts_all) * np.concatenate(
+        (checker.signs, [float(assembly)]))
+    home_leg = np.concatenate(([True], ~seg_draw & ((seg_path == 0) | (seg_path == npath))))
+    tm[home_leg, :2] = np.inf
+    jmargin = np.minimum(jmargin, tm.min(axis=0))
+    jac = fb.jacobian(th_all, pts_all)
+    quantum = float(steps.step_quantum_mm(jac, mot.rad_per_step).max())
+    mode_note = f"working mode {mode}, assembly {'+' if assembly > 0 else '-'}"
+    notes.insert(0, f"{mode_note}; at the homed pose the pen is at ({home_pt[0]:.1f}, "
+                    f"{home_pt[1]:.1f}) mm")
+    notes.extend(drawing.warnings)
+    job = Job(
+        file=file, mode=mode, assembly=assembly, tolerance_mm=tol, flatten_tol_mm=tol_f,
+        placement=pl, drawing=mdraw, steps_per_rev=mot.steps_per_rev, home_rad=mot.home_rad,
+        points_mm=pts_all, angles_rad=th_all, steps=st, draw=seg_draw, power=power,
+        path=seg_path, source=seg_source, source_line=seg_line, duration_us=pln.duration_us,
+        length_mm=length,
+        paths=PathStats(ch.path_source, ch.path_reversed, first_seg, end_seg,
+                        np.full(npath, np.nan), np.full(npath, np.nan)),
+        min_margin_rad=jmargin, step_quantum_mm=quantum,
+        travel_before_mm=ch.travel_before, travel_after_mm=ch.travel_after, joined=ch.joined,
+        notes=notes,
+        seg_prim=ch.prim[chord_rows], seg_tlo=ch.tlo[chord_rows], seg_thi=ch.thi[chord_rows],
+        seg_rev=ch.rev[chord_rows], seg_sa=iv.sa[src_rows], seg_sb=iv.sb[src_rows],
+        seg_ca=ch.pts[a[chord_rows]], seg_cb=ch.pts[a[chord_rows] + 1],
+        ideal_max_dev_mm=float(iv.dev_mm.max()) if iv.dev_mm.size else 0.0,
+    )
+    if opts.validate:
+        job = validate(job, profile, opts.validation_samples)
+    return job
+
+
+def deviations(job: Job, profile: Profile, samples: int = 4) -> tuple[FloatArray, IntArray]:
+    """Deviation (mm) of the executed pen path from the requested path, measured on the
+    quantised steps: for every draw segment, `samples` points of the joint-space
+    interpolation between its quantised end targets (s = 0, 1/samples, …) plus each path's
+    last target, through forward kinematics, each measured to the requested curve (Newton's
+    method on the primitive; a join bridge is measured to its two end points). Returns the
+    distances and the segment index of each."""
+    fb = profile.geometry
+    th = steps.step_angles(job.steps, job.home_rad, job.steps_per_rev)
+    di = np.flatnonzero(job.draw)
+    s = np.arange(samples + 1) / samples
+    tha, thb = th[di], th[di + 1]
+    q = (tha[:, None, :] + s[None, :, None] * (thb - tha)[:, None, :]).reshape(-1, 2)
+    fk = fb.forward_batch(q, "+" if job.assembly > 0 else "-")
+    e = fk.points
+    seg = np.repeat(np.arange(di.shape[0]), samples + 1)
+    sig = job.seg_sa[seg] + np.tile(s, di.shape[0]) * (job.seg_sb - job.seg_sa)[seg]
+    span = job.seg_thi - job.seg_tlo
+    tg = np.where(job.seg_rev[seg], job.seg_thi[seg] - sig * span[seg],
+                  job.seg_tlo[seg] + sig * span[seg])
+    prim = job.seg_prim[seg]
+    dist = np.empty(e.shape[0])
+    real = prim >= 0
+    if real.any():
+        dist[real] = nearest_distance(job.drawing.kind[prim[real]],
+                                      job.drawing.params[prim[real]], e[real], tg[real])
+    if (~real).any():
+        ca, cb = job.seg_ca[seg[~real]], job.seg_cb[seg[~real]]
+        dist[~real] = np.minimum(np.hypot(*(e[~real] - ca).T), np.hypot(*(e[~real] - cb).T))
+    dist[~fk.valid] = np.inf
+    return dist, di[seg]
+
+
+def validate(job: Job, profile: Profile, samples: int = 4) -> Job:
+    """Fill the per-path and overall max/mean deviation from the quantised steps."""
+    if not job.draw.any():
+        return job
+    dist, seg = deviations(job, profile, samples)
+    path = job.path[seg]
+    n = job.n_paths
+    mx = np.full(n, -np.inf)
+    np.maximum.at(mx, path, dist)
+    cnt = np.bincount(path, minlength=n)
+    mean = np.bincount(path, weights=dist, minlength=n) / np.maximum(cnt, 1)
+    mx[cnt == 0] = np.nan
+    mean[cnt == 0] = np.nan
+    ps = replace(job.paths, max_dev_mm=mx, mean_dev_mm=mean)
+    return replace(job, paths=ps, max_dev_mm=float(dist.max()), mean_dev_mm=float(dist.mean()))
+
+
+def compile_drawing(drawing: Drawing, profile: Profile, opts: CompileOptions) -> Job:
+    """Compile an already-read drawing; `opts.mode` "auto" tries every working mode."""
+    mode = opts.mode or profile.kinematics.working_mode
+    if mode != "auto":
+        if mode not in WORKING_MODES:
+            raise ValueError(f"working mode must be one of {', '.join(WORKING_MODES)} or "
+                             f"auto; got {mode!r}")
+        return _compile_mode(drawing, profile, opts, mode)
+    results: list[Job] = []
+    failures: list[tuple[str, JobError]] = []
+    for m in AUTO_ORDER:
+        try:
+            results.append(_compile_mode(drawing, profile, opts, m))
+        except JobError as e:
+            failures.append((m, e))
+    if not results:
+        lines = "\n".join(f"  mode {m}: {e}" for m, e in failures)
+        raise JobError("no working mode clears every check (--mode auto):\n" + lines,
+                       Where(file=drawing.file), "no_mode")
+    best = max(results, key=lambda j: float(np.min(j.min_margin_rad)))
+    why = (f"--mode auto chose {best.mode}: it clears every check with the largest smallest "
+           f"singularity margin ({math.degrees(float(np.min(best.min_margin_rad))):.1f}°)")
+    others = [f"{j.mode}: passes, smallest margin "
+              f"{math.degrees(float(np.min(j.min_margin_rad))):.1f}°"
+              for j in results if j is not best]
+    others += [f"{m}: {e.detail.split(';')[0]}" for m, e in failures]
+    notes = [why] + ([f"  other modes — {o}" for o in others]) + best.notes
+    return replace(best, notes=notes)
+
+
+def compile_job(path: str | Path, profile: Profile, opts: CompileOptions | None = None) -> Job:
+    """Read and compile a drawing file (see module doc). Raises `InputError` or `JobError`."""
+    o = opts or CompileOptions()
+    drawing = read_drawing(path, o.layers)
+    return compile_drawing(drawing, profile, o)
+
+
+# ---------------------------------------------------------------------- firmware lines
+def encode_lines(job: Job, profile: Profile, relative: bool = False) -> list[str]:
+    """Firmware-ready lines for a job, per ARCHITECTURE.md's wire sketch (one small function
+    until `fivebar_host.protocol` provides the encoder):
+
+        G90 | G91                      absolute or relative step coordinates
+        M3 S0 | M4 S0                  laser mode on at zero power (profile's on_command)
+        G1 A<steps> B<steps> P<µs> S<0-255>   one per segment; S0 on pen-up travel
+        M5                             laser off at the end
+
+    The job starts at the homed pose (absolute steps 0, 0); the sender must make sure the
+    firmware's position is that before streaming (e.g. after `fivebar home`)."""
+    st = job.rel_or_abs(relative)
+    head = [
+        f"; fivebar job from {Path(job.file).name}: working mode {job.mode}, "
+        f"{job.n_segments} segments, {job.n_paths} paths, estimated {job.total_time_s:.1f} s",
+        f"; tolerance {job.tolerance_mm:g} mm, max deviation {job.max_dev_mm:.4f} mm, "
+        "steps count from the homed pose θ = "
+        f"({math.degrees(job.home_rad[0]):g}°, {math.degrees(job.home_rad[1]):g}°)",
+        "G91" if relative else "G90",
+        f"{profile.laser.on_command} S0",
+    ]
+    a = st[:, 0].astype(str)
+    b = st[:, 1].astype(str)
+    p = job.duration_us.astype(str)
+    s = job.power.astype(str)
+    body = np.char.add(np.char.add(np.char.add(np.char.add(np.char.add(np.char.add(
+        np.char.add("G1 A", a), " B"), b), " P"), p), " S"), s)
+    return [*head, *body.tolist(), "M5"]
+
+
+def write_atomic(path: str | Path, text: str) -> None:
+    """Write text to `path` through a temporary file in the same folder and a rename, so a
+    failure never leaves a half-written file."""
+    import os
+    import tempfile
+
+    out = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp",
+                               dir=str(out.parent) if str(out.parent) else ".")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as f:
+            f.write(text)
+        os.replace(tmp, out)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise

@@ -1,0 +1,100 @@
+"""`fivebar convert` and `fivebar plot --dry-run` from the command line: outputs, reports,
+and bad input (clear error, non-zero exit, no output file written or half-written)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from fivebar_host.cli import main
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+
+
+def run(*args: str) -> tuple[int, str]:
+    r = CliRunner().invoke(main, list(args))
+    return r.exit_code, r.output + (r.stderr if r.stderr_bytes is not None else "")
+
+
+def test_convert_absolute_and_relative(tmp_path: Path) -> None:
+    out = tmp_path / "job.gcode"
+    code, text = run("convert", str(EXAMPLES / "simple.svg"), "-o", str(out))
+    assert code == 0, text
+    lines = out.read_text().splitlines()
+    assert "G90" in lines and lines[-1] == "M5"
+    assert sum(ln.startswith("G1 A") for ln in lines) > 100
+    code, text = run("convert", str(EXAMPLES / "simple.svg"), "-o", str(out), "--relative",
+                     "--tolerance", "0.2")
+    assert code == 0 and "G91" in out.read_text()
+    assert not list(tmp_path.glob(".*tmp"))  # no temporary files left behind
+
+
+def test_plot_dry_run_writes_preview_and_report(tmp_path: Path) -> None:
+    png = tmp_path / "preview.png"
+    code, text = run("plot", str(EXAMPLES / "fivebar_text.svg"), "--dry-run", "--preview",
+                     str(png))
+    assert code == 0, text
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20_000
+    for key in ("paths", "segments", "drawing", "travel", "time", "deviation", "margins",
+                "working mode  +-"):
+        assert key in text
+
+
+def test_plot_mode_auto_says_which(tmp_path: Path) -> None:
+    code, text = run("plot", str(EXAMPLES / "underside_machine_coords.gcode"), "--origin",
+                     "0,0", "--mode", "auto", "--dry-run", "--preview", str(tmp_path / "p.png"))
+    assert code == 0, text
+    assert "--mode auto chose ++" in text
+
+
+def test_plot_without_dry_run_says_link_missing() -> None:
+    code, text = run("plot", str(EXAMPLES / "simple.svg"))
+    assert code != 0 and "serial link" in text and "--dry-run" in text
+
+
+@pytest.mark.parametrize(("content", "suffix", "message"), [
+    ("<svg xmlns='http://www.w3.org/2000/svg'><path d='M0 0 L1 1'></svg>", ".svg",
+     "malformed XML"),
+    ("<svg xmlns='http://www.w3.org/2000/svg' width='10mm' height='10mm'><text>x</text></svg>",
+     ".svg", "no strokes"),
+    ("<svg xmlns='http://www.w3.org/2000/svg' width='10mm' height='10mm'>"
+     "<path d='M0 0 L1e999 0'/></svg>", ".svg", "not finite or larger than"),
+    ("<svg xmlns='http://www.w3.org/2000/svg' width='10mm' height='10mm'>"
+     "<path d='M0 0 L 1e12 0'/></svg>", ".svg", "not finite or larger than"),
+    ("G1 X1\nG1 X2 Z-1\n", ".gcode", ":2: unsupported axis word Z-1"),
+    ("G1 X1\nM7\n", ".gcode", ":2: unsupported M-code word M7"),
+])
+def test_bad_input_clear_error_and_no_output(tmp_path: Path, content: str, suffix: str,
+                                             message: str) -> None:
+    src = tmp_path / f"bad{suffix}"
+    src.write_text(content)
+    out = tmp_path / "out.gcode"
+    code, text = run("convert", str(src), "-o", str(out))
+    assert code != 0 and message in text and text.startswith("error: ")
+    assert not out.exists()
+    # an existing output stays as it was
+    out.write_text("previous job\n")
+    code, _ = run("convert", str(src), "-o", str(out))
+    assert code != 0 and out.read_text() == "previous job\n"
+    png = tmp_path / "p.png"
+    code, text = run("plot", str(src), "--dry-run", "--preview", str(png))
+    assert code != 0 and message in text and not png.exists()
+
+
+def test_unreadable_file(tmp_path: Path) -> None:
+    code, text = run("convert", str(tmp_path / "missing.svg"), "-o", str(tmp_path / "o"))
+    assert code != 0 and "cannot read file" in text
+    d = tmp_path / "dir.svg"
+    d.mkdir()
+    code, text = run("plot", str(d), "--dry-run")
+    assert code != 0
+
+
+def test_bad_options(tmp_path: Path) -> None:
+    code, text = run("plot", str(EXAMPLES / "simple.svg"), "--dry-run", "--origin", "1;2")
+    assert code != 0 and "--origin" in text
+    code, text = run("plot", str(EXAMPLES / "simple.svg"), "--dry-run", "--fit", "--scale", "2",
+                     "--preview", str(tmp_path / "p.png"))
+    assert code != 0 and "--fit and --scale" in text
