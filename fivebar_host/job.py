@@ -521,15 +521,18 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
     return job
 
 
-def deviations(job: Job, profile: Profile, samples: int = 4) -> tuple[FloatArray, IntArray]:
+def deviations(job: Job, profile: Profile, samples: int = 4,
+               quantised: bool = True) -> tuple[FloatArray, IntArray]:
     """Deviation (mm) of the executed pen path from the requested path, measured on the
     quantised steps: for every draw segment, `samples` points of the joint-space
     interpolation between its quantised end targets (s = 0, 1/samples, …) plus each path's
     last target, through forward kinematics, each measured to the requested curve (Newton's
     method on the primitive; a join bridge is measured to its two end points). Returns the
-    distances and the segment index of each."""
+    distances and the segment index of each. `quantised=False` measures the ideal
+    (unrounded) joint targets instead: the tolerance bound itself, without the step quantum."""
     fb = profile.geometry
-    th = steps.step_angles(job.steps, job.home_rad, job.steps_per_rev)
+    th = (steps.step_angles(job.steps, job.home_rad, job.steps_per_rev) if quantised
+          else job.angles_rad)
     di = np.flatnonzero(job.draw)
     s = np.arange(samples + 1) / samples
     tha, thb = th[di], th[di + 1]

@@ -1,0 +1,122 @@
+"""Job pipeline benchmark: time and peak memory from a large SVG to steps, and the tolerance
+against segment count and measured deviation.
+
+1. An SVG of 10^4 paths / 10^5 segments (7 lines and 3 quadratic curves per path, random
+   "handwriting" strokes on an 80 × 36 mm page, fixed seed) → read, place, flatten, order,
+   inverse kinematics + checks, joint-space segmentation, travel, steps, plan. Target ≤ 2 s.
+   Wall time (best and median of --repeat runs) and peak Python memory (tracemalloc, one
+   separate run, since tracing slows numpy-heavy code down). Validation (forward kinematics of
+   the quantised steps against the requested curves) is timed on its own.
+2. For tolerances 0.5, 0.1, 0.05, 0.01 mm on the bundled text example (examples/
+   fivebar_text.svg, fitted to the safe rectangle): segments produced and the max deviation
+   measured with 16 samples per segment, on the ideal joint targets (the tolerance bound) and
+   on the quantised steps (tolerance + one step quantum).
+
+Run: python benchmarks/pipeline.py [--repeat 3] [--paths 10000]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import tempfile
+import time
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+
+# Run as a script, this folder comes first on sys.path and benchmarks/kinematics.py would
+# shadow the `kinematics` package: drop the folder before importing the project.
+_HERE = Path(__file__).resolve().parent
+sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
+from fivebar_host.config import load_profile  # noqa: E402
+from fivebar_host.job import CompileOptions, compile_job, deviations, validate  # noqa: E402
+
+ROOT = _HERE.parent
+
+
+def make_svg(n_paths: int = 10_000, segs: int = 10, seed: int = 0, w: float = 80.0,
+             h: float = 36.0) -> str:
+    """Random pen strokes: every third segment a quadratic Bézier, the rest lines."""
+    rng = np.random.default_rng(seed)
+    out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}mm" height="{h}mm" '
+           f'viewBox="0 0 {w} {h}">']
+    cx = rng.uniform(3, w - 3, n_paths)
+    cy = rng.uniform(3, h - 3, n_paths)
+    for i in range(n_paths):
+        ang = np.cumsum(rng.normal(0, 0.9, segs + 1))
+        st = rng.uniform(0.3, 1.2, segs + 1)
+        x = np.clip(cx[i] + np.cumsum(st * np.cos(ang)), 0.5, w - 0.5)
+        y = np.clip(cy[i] + np.cumsum(st * np.sin(ang)), 0.5, h - 0.5)
+        d = [f"M{x[0]:.3f} {y[0]:.3f}"]
+        for k in range(1, segs + 1):
+            if k % 3 == 0:
+                d.append(f"Q{(x[k - 1] + x[k]) / 2 + 0.3:.3f} {(y[k - 1] + y[k]) / 2 - 0.3:.3f} "
+                         f"{x[k]:.3f} {y[k]:.3f}")
+            else:
+                d.append(f"L{x[k]:.3f} {y[k]:.3f}")
+        out.append(f'<path d="{"".join(d)}" stroke="black" fill="none"/>')
+    out.append("</svg>")
+    return "\n".join(out)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--paths", type=int, default=10_000)
+    args = ap.parse_args()
+    prof = load_profile()
+    with tempfile.TemporaryDirectory() as tmp:
+        svg = Path(tmp) / "big.svg"
+        svg.write_text(make_svg(args.paths))
+        opts = CompileOptions(validate=False)
+        times = []
+        job = None
+        for _ in range(args.repeat):
+            t0 = time.perf_counter()
+            job = compile_job(svg, prof, opts)
+            times.append(time.perf_counter() - t0)
+        assert job is not None
+        tracemalloc.start()
+        compile_job(svg, prof, opts)
+        _, peak = tracemalloc.get_traced_memory()
+        tracemalloc.stop()
+        t0 = time.perf_counter()
+        vjob = validate(job, prof)
+        t_val = time.perf_counter() - t0
+    n_in = args.paths * 10
+    print(f"pipeline: SVG of {args.paths} paths / {n_in} segments → steps "
+          f"({job.n_segments} segments out: {int(job.draw.sum())} drawing, "
+          f"{int((~job.draw).sum())} travel; {job.n_paths} paths after joining)")
+    print(f"  time to steps   best {min(times):.3f} s, median {statistics.median(times):.3f} s "
+          f"over {args.repeat} runs (target ≤ 2 s) — "
+          f"{'MET' if min(times) <= 2.0 else 'NOT MET'}")
+    print(f"  peak memory     {peak / 2**20:.1f} MiB (tracemalloc, Python allocations)")
+    print(f"  validation      {t_val:.3f} s (4 samples per segment from the quantised steps): "
+          f"max deviation {vjob.max_dev_mm:.4f} mm, mean {vjob.mean_dev_mm:.4f} mm, "
+          f"step quantum {vjob.step_quantum_mm:.4f} mm")
+    print(f"  travel          {job.travel_before_mm:.0f} mm in file order → "
+          f"{job.travel_after_mm:.0f} mm after ordering (pen-up straight lines); "
+          f"plot time {job.total_time_s / 60:.1f} min")
+    print()
+    text = ROOT / "examples" / "fivebar_text.svg"
+    print(f"tolerance vs segments and measured deviation ({text.name}, --fit, 16 samples per "
+          "segment):")
+    print(f"  {'tol mm':>7} {'segments':>9} {'drawing':>8} {'ideal max':>10} {'quantised max':>14} "
+          f"{'quantum':>8} {'bound':>8} {'compile s':>9}")
+    for tol in (0.5, 0.1, 0.05, 0.01):
+        t0 = time.perf_counter()
+        j = compile_job(text, prof, CompileOptions(tolerance_mm=tol, fit=True, validate=False))
+        dt = time.perf_counter() - t0
+        ideal, _ = deviations(j, prof, samples=16, quantised=False)
+        quant, _ = deviations(j, prof, samples=16, quantised=True)
+        ok = ideal.max() <= tol and quant.max() <= tol + j.step_quantum_mm
+        print(f"  {tol:>7g} {j.n_segments:>9d} {int(j.draw.sum()):>8d} {ideal.max():>10.4f} "
+              f"{quant.max():>14.4f} {j.step_quantum_mm:>8.4f} "
+              f"{tol + j.step_quantum_mm:>8.4f} {dt:>9.3f}  {'ok' if ok else 'EXCEEDED'}")
+
+
+if __name__ == "__main__":
+    main()
