@@ -6,3 +6,6 @@ bash scripts/setup.sh
 fivebar config check configs/default.toml
 fivebar ik 20 100
 fivebar fk 139.866 40.134
+# The job pipeline on a bundled drawing: compile, check, time and validate, no hardware.
+fivebar plot examples/fivebar_text.svg --dry-run --preview preview.png
+fivebar convert examples/simple.svg -o "${TMPDIR:-/tmp}/simple.job.gcode"
