@@ -1,0 +1,278 @@
+"""Rigidity constraints of the point-line-plane representation, with analytic derivatives.
+
+Sharma & Purwar (2020). A point is homogeneous: (x, y, w) in the plane, (x, y, z, w) on the
+sphere and in space. A planar line is (L1, L2, L4) with L1·x + L2·y + L4·w = 0; a spherical
+prismatic joint is a plane through the centre, (L1, L2, L3, 0). Each function below is one of the
+paper's equations written exactly as C = left side − right side, vectorised over leading axes,
+and returns C with its partial derivatives with respect to *every* coordinate, homogenising
+factors included. The paper's Eqs. 26–41 set those factors to 1, print ∂C/∂a = 2(a − b) for
+Eq. 1 (the derivative of −C), and divide by ‖L‖² in Eq. 37 where ‖L‖ is meant; the formulas
+here were derived again and are checked against central finite differences in the tests.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+ConstraintKind = Literal["RR", "RP", "PP", "PPsin", "NORM", "SPHERE", "ACT"]
+
+#: Which of the paper's equations each constraint kind implements (planar / spherical-spatial).
+EQUATIONS: dict[str, str] = {
+    "RR": "Eq. 2 (plane) / Eq. 1 (sphere, space)",
+    "RP": "Eq. 5 (plane) / Eq. 4 (sphere)",
+    "PP": "Eq. 7 (plane) / Eq. 6 (sphere)",
+    "PPsin": "Eq. 7 with the sine of the angle (near-parallel lines)",
+    "NORM": "Eq. 8",
+    "SPHERE": "Eq. 9",
+    "ACT": "Eq. 1 with a driven length (linear actuator)",
+}
+
+
+def _dot(u: FloatArray, v: FloatArray) -> FloatArray:
+    """Row-wise dot product over the last axis."""
+    return np.asarray(np.einsum("...i,...i->...", u, v), dtype=np.float64)
+
+
+def rr_value(a: FloatArray, b: FloatArray, r: FloatArray | float) -> FloatArray:
+    """Value of Eq. 1 / 2 alone (see `rr`)."""
+    av, aw = a[..., :-1], a[..., -1]
+    bv, bw = b[..., :-1], b[..., -1]
+    r2 = np.asarray(r, dtype=np.float64) ** 2
+    return np.asarray(2.0 * _dot(av, bv) + (aw * r2 - _dot(av, av) / aw) * bw
+                      - aw * _dot(bv, bv) / bw, dtype=np.float64)
+
+
+def rp_value(a: FloatArray, line: FloatArray, d: FloatArray | float) -> FloatArray:
+    """Value of Eqs. 3–5 alone (see `rp`)."""
+    av, aw = a[..., :-1], a[..., -1]
+    lv, l4 = line[..., :-1], line[..., -1]
+    return np.asarray(_dot(av, lv) + aw * l4 - np.asarray(d) * aw * np.sqrt(_dot(lv, lv)),
+                      dtype=np.float64)
+
+
+def rr(a: FloatArray, b: FloatArray, r: FloatArray | float
+       ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """RR link, Eqs. 1–2: the points a, b (weights last) stay a distance r apart.
+
+    C = 2 a·b + a0·b_w − a_w·|b|²/b_w with a0 = a_w r² − |a|²/a_w, which equals
+    a_w b_w (r² − |a/a_w − b/b_w|²). Returns (C, ∂C/∂a, ∂C/∂b).
+    """
+    av, aw = a[..., :-1], a[..., -1]
+    bv, bw = b[..., :-1], b[..., -1]
+    aa, bb = _dot(av, av), _dot(bv, bv)
+    r2 = np.asarray(r, dtype=np.float64) ** 2
+    a0 = aw * r2 - aa / aw
+    c = rr_value(a, b, r)
+    da = np.empty_like(a)
+    db = np.empty_like(b)
+    da[..., :-1] = 2.0 * bv - 2.0 * av * (bw / aw)[..., None]
+    da[..., -1] = r2 * bw + aa * bw / aw**2 - bb / bw
+    db[..., :-1] = 2.0 * av - 2.0 * bv * (aw / bw)[..., None]
+    db[..., -1] = a0 + aw * bb / bw**2
+    return c, da, db
+
+
+def rp(a: FloatArray, line: FloatArray, d: FloatArray | float
+       ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """RP / PR link, Eqs. 3–5: point a keeps the signed distance d from a line or plane.
+
+    C = a_v·L_v + a_w·L_4 − d·a_w·‖L_v‖, L_v the normal part of the line (L1, L2) or plane
+    (L1, L2, L3), L_4 its offset (0 for a spherical plane, Eq. 4). Returns (C, ∂C/∂a, ∂C/∂L).
+    """
+    av, aw = a[..., :-1], a[..., -1]
+    lv, l4 = line[..., :-1], line[..., -1]
+    dd = np.asarray(d, dtype=np.float64)
+    nl = np.sqrt(_dot(lv, lv))
+    c = rp_value(a, line, d)
+    da = np.empty_like(a)
+    dl = np.empty_like(line)
+    da[..., :-1] = lv
+    da[..., -1] = l4 - dd * nl
+    dl[..., :-1] = av - (dd * aw / nl)[..., None] * lv
+    dl[..., -1] = aw
+    return c, da, dl
+
+
+def pp(line: FloatArray, other: FloatArray, k: FloatArray | float
+       ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """PP link, Eqs. 6–7: two lines (planes) keep the angle arccos k between their normals.
+
+    C = L_v·M_v − k‖L_v‖‖M_v‖. Returns (C, ∂C/∂L, ∂C/∂M); offsets L_4, M_4 do not appear.
+    """
+    lv, mv = line[..., :-1], other[..., :-1]
+    kk = np.asarray(k, dtype=np.float64)
+    nl, nm = np.sqrt(_dot(lv, lv)), np.sqrt(_dot(mv, mv))
+    c = _dot(lv, mv) - kk * nl * nm
+    dl = np.zeros_like(line)
+    dm = np.zeros_like(other)
+    dl[..., :-1] = mv - (kk * nm / nl)[..., None] * lv
+    dm[..., :-1] = lv - (kk * nl / nm)[..., None] * mv
+    return c, dl, dm
+
+
+def pp_sin(line: FloatArray, other: FloatArray, s: FloatArray | float
+           ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Planar PP link through the sine of the angle: L1·M2 − L2·M1 = s‖L_v‖‖M_v‖.
+
+    Eq. 7 fixes the cosine k, whose gradient vanishes as the lines become parallel (k → ±1);
+    the sine form is well conditioned there and also keeps the sense of the angle. Used for
+    planar PP pairs with |k| > |s|. Returns (C, ∂C/∂L, ∂C/∂M).
+    """
+    l1, l2 = line[..., 0], line[..., 1]
+    m1, m2 = other[..., 0], other[..., 1]
+    ss = np.asarray(s, dtype=np.float64)
+    nl = np.sqrt(l1 * l1 + l2 * l2)
+    nm = np.sqrt(m1 * m1 + m2 * m2)
+    c = l1 * m2 - l2 * m1 - ss * nl * nm
+    dl = np.zeros_like(line)
+    dm = np.zeros_like(other)
+    dl[..., 0] = m2 - ss * nm * l1 / nl
+    dl[..., 1] = -m1 - ss * nm * l2 / nl
+    dm[..., 0] = -l2 - ss * nl * m1 / nm
+    dm[..., 1] = l1 - ss * nl * m2 / nm
+    return c, dl, dm
+
+
+def norm(line: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Prismatic normalisation, Eq. 8: ‖L_v‖² − 1 = 0 fixes the homogeneous scale of a line
+    or plane (the offset L_4 is not part of it). Returns (C, ∂C/∂L) (Eq. 40)."""
+    lv = line[..., :-1]
+    c = _dot(lv, lv) - 1.0
+    dl = np.zeros_like(line)
+    dl[..., :-1] = 2.0 * lv
+    return c, dl
+
+
+def sphere(a: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Unit sphere, Eq. 9: |a_v/a_w|² − 1 = 0 for a spherical revolute joint.
+
+    Returns (C, ∂C/∂a); with a_w = 1 the derivative is 2a_v (Eq. 41).
+    """
+    av, aw = a[..., :-1], a[..., -1]
+    aa = _dot(av, av)
+    c = aa / aw**2 - 1.0
+    da = np.empty_like(a)
+    da[..., :-1] = 2.0 * av / (aw**2)[..., None]
+    da[..., -1] = -2.0 * aa / aw**3
+    return c, da
+
+
+@dataclass(frozen=True)
+class Constraint:
+    """One scalar equation of the mechanism.
+
+    `prims` are primitive (joint) indices: (i, j) for RR/ACT (points), (point, line) for RP,
+    (line, line) for PP/PPsin, (i,) for NORM/SPHERE. `value` is the metric kept constant: the
+    distance r, the offset d, the cosine k or sine s, and for ACT the initial actuator length.
+    `link` names the link (or joint) the equation comes from. `scale` turns the equation's units
+    into a residual relative to the mechanism size (see `row_scale`).
+    """
+
+    kind: ConstraintKind
+    prims: tuple[int, ...]
+    value: float
+    link: str
+    scale: float
+
+    @property
+    def equation(self) -> str:
+        """The paper's equation number(s) this row implements."""
+        return EQUATIONS[self.kind]
+
+
+def row_scale(kind: str, value: float, size: float) -> float:
+    """Factor that makes a residual dimensionless and relative to the mechanism size.
+
+    RR/ACT: C ≈ 2r·δ for a length error δ, so 1/(2 r size); RP: C is a length when ‖L_v‖ = 1,
+    so 1/size; PP: already an angle-like number; NORM/SPHERE: C ≈ 2δ, so 1/2.
+    """
+    if kind in ("RR", "ACT"):
+        return 1.0 / (2.0 * max(abs(value), 1e-300) * size)
+    if kind == "RP":
+        return 1.0 / size
+    if kind in ("NORM", "SPHERE"):
+        return 0.5
+    return 1.0
+
+
+def homogeneous(coords: FloatArray, is_line: NDArray[np.bool_], planar: bool) -> FloatArray:
+    """Stored coordinates (..., n, 3) → homogeneous ones the equations take.
+
+    Planar coordinates are stored homogeneous already ((x, y, 1) and (L1, L2, L4)); spherical
+    and spatial points get w = 1 and planes through the centre get L4 = 0.
+    """
+    if planar:
+        return coords
+    extra = np.where(is_line, 0.0, 1.0)
+    shape = (*coords.shape[:-1], 1)
+    return np.concatenate((coords, np.broadcast_to(extra[:, None], shape)), axis=-1)
+
+
+@dataclass(frozen=True, eq=False)
+class RowGroups:
+    """Rows of one constraint tuple grouped by kind, for vectorised exact evaluation."""
+
+    groups: tuple[tuple[str, IntArray, IntArray, IntArray, FloatArray], ...]
+    scale: FloatArray
+    m: int
+
+
+def group_rows(constraints: tuple[Constraint, ...]) -> RowGroups:
+    """Index arrays (rows, first primitive, second primitive) and metrics per kind."""
+    kinds = [c.kind for c in constraints]
+    out = []
+    for kind in sorted(set(kinds)):
+        rows = np.array([r for r, k in enumerate(kinds) if k == kind], dtype=np.intp)
+        first = np.array([constraints[r].prims[0] for r in rows], dtype=np.intp)
+        second = np.array([constraints[r].prims[-1] for r in rows], dtype=np.intp)
+        val = np.array([constraints[r].value for r in rows], dtype=np.float64)
+        out.append((kind, rows, first, second, val))
+    scale = np.array([c.scale for c in constraints], dtype=np.float64)
+    return RowGroups(tuple(out), scale, len(constraints))
+
+
+def exact_residuals(coords: FloatArray, is_line: NDArray[np.bool_], planar: bool,
+                    constraints: tuple[Constraint, ...] | RowGroups,
+                    act_lengths: FloatArray | None = None) -> FloatArray:
+    """Scaled residuals of the exact equations for a batch of states.
+
+    coords is (S, n, 3) (or (n, 3)); act_lengths is (S, n_act) (actuator lengths in the order
+    the ACT rows appear). Returns (S, m) (or (m,)). Vectorised per constraint kind; used to
+    verify and report every solved state independently of the solver's own arithmetic.
+    """
+    grp = constraints if isinstance(constraints, RowGroups) else group_rows(constraints)
+    single = coords.ndim == 2
+    xs = coords[None] if single else coords
+    h = homogeneous(xs, is_line, planar)
+    s = xs.shape[0]
+    out = np.empty((s, grp.m))
+    for kind, rows, first, second, v in grp.groups:
+        a = h[:, first]
+        b = h[:, second]
+        if kind == "RR":
+            c = rr_value(a, b, v)
+        elif kind == "ACT":
+            if act_lengths is None:
+                lengths = np.broadcast_to(v, (s, rows.size))
+            else:
+                lengths = np.asarray(act_lengths, dtype=np.float64).reshape(s, -1)
+            c = rr_value(a, b, lengths)
+        elif kind == "RP":
+            c = rp_value(a, b, v)
+        elif kind == "PP":
+            c = pp(a, b, v)[0]
+        elif kind == "PPsin":
+            c = pp_sin(a, b, v)[0]
+        elif kind == "NORM":
+            c = norm(a)[0]
+        else:
+            c = sphere(a)[0]
+        out[:, rows] = c * grp.scale[rows]
+    return out[0] if single else out

@@ -1,0 +1,508 @@
+"""Simulation (Algorithm 1): perturb the inputs, solve by Newton–Raphson from the previous state.
+
+On top of the paper's loop:
+- predictor: the Newton start is extrapolated from the last (up to four) states along the input
+  path (Lagrange in the input value), or from the tangent q' = −J⁺ ∂Φ/∂u when there is no
+  history; from the previous state alone Newton would need several more iterations;
+- branch-flip guard: a step is accepted only if Newton's correction from the predictor is at
+  most half the predicted motion (continuity). A jump to the other assembly is a correction of
+  the order of the distance between the branches that does not shrink with the step, so the
+  step is halved until the correction is small, or the step falls below the resolution;
+- motion limit: when even the smallest step (2^-max_halvings of an input step) fails, the input
+  value reached and the one that failed are reported with the reason (singular Jacobian or no
+  convergence); `sweep(..., reverse_at_limit=True)` then runs the input back to trace a rocker's
+  whole range;
+- least squares: with more equations than unknowns the steps are Gauss–Newton steps; redundant
+  equations that disagree on every motion (rounded data of an over-constrained linkage) are
+  reported as `INCONSISTENT`, not as a limit.
+Every solved state is checked again with the paper's exact equations (`Mechanism.residuals`);
+that is the residual reported per step.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import IntEnum
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from kinematics.nbar.constraints import FloatArray
+from kinematics.nbar.model import Mechanism, Settings
+from kinematics.nbar.system import newton
+
+#: Newton may correct the predictor by at most this fraction of the predicted motion.
+CONTINUITY = 0.5
+#: Largest first-order inconsistency (relative) of redundant equations still taken as mobile.
+LOCK_TOLERANCE = 1e-7
+#: Largest sum of |Lagrange weights| accepted for the predictor (bounds noise amplification).
+MAX_WEIGHT = 16.0
+
+
+class Status(IntEnum):
+    """Per-step outcome. OK and SUBDIVIDED rows hold a solved state."""
+
+    OK = 0  # solved with the full step
+    SUBDIVIDED = 1  # solved after splitting the step (continuity or convergence)
+    LIMIT = 2  # motion limit: this row holds the last configuration reached, at its input value
+    INCONSISTENT = 3  # redundant equations admit no motion (see LimitReport.reason)
+    UNREACHED = 4  # after a limit: not attempted
+
+
+@dataclass(frozen=True)
+class LimitReport:
+    """Where and why the motion stopped."""
+
+    kind: Literal["limit", "inconsistent"]
+    row: int
+    reached: FloatArray
+    failed: FloatArray
+    requested: FloatArray
+    reason: str
+    residual: float
+
+    def __str__(self) -> str:
+        fmt = ", ".join
+        if self.kind == "inconsistent":
+            return (f"inconsistent constraints at input ({fmt(f'{v:.10g}' for v in self.reached)}"
+                    f"): {self.reason}")
+        return (f"motion limit between input ({fmt(f'{v:.10g}' for v in self.reached)}) and "
+                f"({fmt(f'{v:.10g}' for v in self.failed)}) on the way to "
+                f"({fmt(f'{v:.10g}' for v in self.requested)}): {self.reason}")
+
+
+@dataclass(frozen=True, eq=False)
+class Simulation:
+    """A simulated motion: per row the input values, every joint's coordinates (NaN where
+    not solved), the exact scaled residual, Newton iterations, accepted sub-steps and status."""
+
+    mechanism: Mechanism
+    inputs: FloatArray
+    coords: FloatArray
+    residual: FloatArray
+    iterations: NDArray[np.int64]
+    substeps: NDArray[np.int64]
+    status: NDArray[np.int8]
+    limits: tuple[LimitReport, ...]
+    reversed_at: int | None
+
+    @property
+    def completed(self) -> bool:
+        """True when every requested row was solved."""
+        return bool(np.all(self.status <= Status.SUBDIVIDED))
+
+    @property
+    def solved(self) -> NDArray[np.bool_]:
+        """(N,) mask of rows that hold a configuration (OK, SUBDIVIDED or LIMIT)."""
+        return np.asarray(self.status <= Status.LIMIT, dtype=bool)
+
+    def path(self, name: str) -> FloatArray:
+        """Trajectory (N, 2|3) of a point joint, or (N, 3) coordinates of a line / plane."""
+        return self.mechanism.positions(self.coords, name)
+
+    @property
+    def status_names(self) -> list[str]:
+        """Status per row as lower-case names."""
+        return [Status(int(s)).name.lower() for s in self.status]
+
+
+#: Most states the predictor extrapolates through (order HISTORY − 1 on equal steps).
+HISTORY = 7
+#: The predicted motion may exceed the previous step's by at most this factor (per unit step).
+MAX_SPEEDUP = 4.0
+
+
+def _binomial_weights(points: int) -> FloatArray:
+    """Weights (oldest first, padded to HISTORY) extrapolating one equal step beyond
+    `points` equally spaced states: q_new = Σ (−1)^(j+1) C(p, j) q_(k+1−j)."""
+    w = np.zeros(HISTORY)
+    for j in range(1, points + 1):
+        w[HISTORY - j] = (-1) ** (j + 1) * math.comb(points, j)
+    return w
+
+
+_UNIFORM = {k: _binomial_weights(k) for k in range(2, HISTORY + 1)}
+
+
+class _Tracker:
+    """Follows one branch of the solution set as the inputs change."""
+
+    def __init__(self, mech: Mechanism, settings: Settings) -> None:
+        self.mech = mech
+        self.sys = mech.system
+        self.settings = settings
+        self.tol = settings.tolerance
+        self.max_iter = settings.max_iterations
+        self.min_frac = 2.0 ** -settings.max_halvings
+        self.n = self.sys.n_u
+        self.nd = self.sys.n_d
+        self.single = len(mech.inputs) == 1
+        self.lsq = mech.overdetermined
+        self.x = self.sys.new_x()
+        self.u = mech.input0.copy()
+        self.q = mech.q0.copy()
+        self.floor2 = (1e-9 * max(mech.size, 1.0)) ** 2
+        self.hist = np.zeros((HISTORY, self.n))  # last states along the input path, newest last
+        self.hist_s: list[float] = []
+        self.run = 0  # trailing equally spaced states in the history
+        self.last_m2 = 0.0  # predicted motion² and parameter step of the last accepted step
+        self.last_h = 0.0
+        self.origin = self.u.copy()
+        self.direction = np.zeros_like(self.u)
+        self.tangent_cache: FloatArray | None = None
+        self._push(self.q, self._param(self.u))
+
+    # -- state helpers
+    def _set_inputs(self, u: FloatArray, pre: tuple[FloatArray, FloatArray] | None) -> None:
+        """Put the driven coordinates and actuator entries for u into x (Eqs. 10–22)."""
+        b = self.mech.basis
+        n, nd = self.n, self.nd
+        if pre is not None:
+            xd, sq = pre
+        else:
+            xd = b.x0 + b.basis @ b.coefficients(u) if nd else b.x0
+            sq = b.actuators(u)
+        if nd:
+            self.x[n: n + nd] = xd
+        if b.n_act:
+            self.x[n + nd: -1] = sq
+
+    def _param(self, u: FloatArray) -> float:
+        if self.single:
+            return float(u[0])
+        return float((u - self.origin) @ self.direction)
+
+    def _push(self, q: FloatArray, s: float) -> None:
+        hs = self.hist_s
+        if s in hs:  # an input value revisited (back from a limit): restart the history
+            del hs[:-1]
+            self.run = 1
+        if len(hs) >= 2:
+            h_new, h_old = s - hs[-1], hs[-1] - hs[-2]
+            self.run = self.run + 1 if abs(h_new - h_old) <= 1e-9 * abs(h_new) else 2
+        else:
+            self.run = len(hs) + 1
+        self.hist[:-1] = self.hist[1:]
+        self.hist[-1] = q
+        hs.append(s)
+        if len(hs) > HISTORY:
+            del hs[0]
+        self.run = min(self.run, len(hs))
+
+    def _reset_history(self, direction: FloatArray) -> None:
+        self.origin = self.u.copy()
+        self.direction = direction
+        self.hist_s = []
+        self._push(self.q, 0.0)
+
+    def current_g(self) -> FloatArray:
+        """G = ∂Φ/∂x at the current state."""
+        self._set_inputs(self.u, None)
+        self.x[: self.n] = self.q
+        return self.sys.evaluate(self.x)[0]
+
+    def tangent(self) -> tuple[FloatArray, float]:
+        """(∂q/∂u (n, n_in), first-order inconsistency) at the current state.
+
+        ∂Φ/∂u follows from G's driven columns and the input motion's derivative; the
+        inconsistency ‖J q' + ∂Φ/∂u‖ / ‖∂Φ/∂u‖ is zero when the equations allow the motion and
+        stays finite when redundant equations lock the mechanism.
+        """
+        n, nd = self.n, self.nd
+        dxd, ds = self.mech.basis.derivatives(self.u)
+        g = self.current_g()
+        dphi = g[:, n: n + nd] @ dxd + g[:, n + nd: -1] @ ds
+        jac = g[:, :n]
+        scale = float(np.linalg.norm(dphi))
+        if scale == 0.0:
+            return np.zeros((n, dphi.shape[1])), 0.0
+        try:
+            if self.lsq:
+                sens = -np.linalg.lstsq(jac, dphi, rcond=None)[0]
+            else:
+                sens = -np.linalg.solve(jac, dphi)
+        except np.linalg.LinAlgError:
+            return np.zeros((n, dphi.shape[1])), math.inf
+        return (np.asarray(sens, dtype=np.float64),
+                float(np.linalg.norm(jac @ sens + dphi)) / scale)
+
+    def predict(self, u_new: FloatArray) -> FloatArray:
+        """Newton start for input u_new: polynomial extrapolation along the input path through
+        the last states (up to HISTORY equally spaced ones, else up to four with bounded
+        Lagrange weights), or the tangent when fewer than two lie on the current line."""
+        if not self.single:
+            du = u_new - self.u
+            nrm = float(np.linalg.norm(du))
+            e = du / nrm if nrm > 0 else du
+            if len(self.hist_s) < 2 or abs(float(e @ self.direction)) < 1.0 - 1e-12:
+                self._reset_history(e)
+        hs = self.hist_s
+        k = len(hs)
+        if k >= 2:
+            s_new = self._param(u_new)
+            h = s_new - hs[-1]
+            if self.run >= 2 and abs(h - (hs[-1] - hs[-2])) <= 1e-9 * abs(h):
+                return np.asarray(_UNIFORM[self.run] @ self.hist, dtype=np.float64)
+            for order in range(min(k, 4), 1, -1):
+                pts = hs[-order:]
+                w = [1.0] * order
+                for a in range(order):
+                    for b in range(order):
+                        if a != b:
+                            w[a] *= (s_new - pts[b]) / (pts[a] - pts[b])
+                if sum(map(abs, w)) <= MAX_WEIGHT:
+                    wf = np.zeros(HISTORY)
+                    wf[HISTORY - order:] = w
+                    return np.asarray(wf @ self.hist, dtype=np.float64)
+        if self.tangent_cache is None:
+            self.tangent_cache = self.tangent()[0]
+        return np.asarray(self.q + self.tangent_cache @ (u_new - self.u), dtype=np.float64)
+
+    def attempt(self, u_new: FloatArray, pre: tuple[FloatArray, FloatArray] | None = None
+                ) -> tuple[bool, int, float, str]:
+        """Try one step to u_new from the current state; on success the state moves.
+
+        Returns (accepted, Newton iterations, residual bound at the end, why refused).
+        """
+        q_pred = self.predict(u_new)
+        self._set_inputs(u_new, pre)
+        res = newton(self.sys, self.x, q_pred, self.tol, self.max_iter)
+        if not res.converged:
+            return False, res.iterations, res.residual, (
+                "no convergence" if math.isfinite(res.residual) else "diverged")
+        dm = q_pred - self.q
+        m2 = float(dm @ dm)
+        if res.iterations <= 1:
+            c2 = res.last_step2  # one Newton step: the correction is that step
+        else:
+            dc = res.q - q_pred
+            c2 = float(dc @ dc)
+        if c2 > CONTINUITY * CONTINUITY * m2 + self.floor2:
+            return False, res.iterations, res.residual, "discontinuous"
+        s_new = self._param(u_new)
+        h = abs(s_new - self.hist_s[-1]) if self.single else float(np.linalg.norm(u_new - self.u))
+        if self.last_m2 > 0.0 and m2 > (MAX_SPEEDUP * h / self.last_h) ** 2 * self.last_m2 \
+                + self.floor2:
+            return False, res.iterations, res.residual, "discontinuous"
+        self.last_m2, self.last_h = m2, h
+        self.u = u_new
+        self.q = res.q
+        self.tangent_cache = None
+        self._push(res.q, s_new)
+        return True, res.iterations, res.residual, ""
+
+    def advance(self, target: FloatArray, pre: tuple[FloatArray, FloatArray] | None = None
+                ) -> tuple[Status, int, int, str, FloatArray, float]:
+        """Move the inputs to `target`, subdividing the step as needed.
+
+        Returns (status, iterations, accepted sub-steps, reason, failed input, residual).
+        """
+        ok, iters, res, why = self.attempt(target, pre)
+        if ok:
+            return Status.OK, iters, 1, "", target, res
+        start = self.u
+        delta = target - start
+        done = 0.0
+        frac = 0.5
+        subs = 0
+        while True:
+            last = done + frac >= 1.0
+            u_try = target if last else start + (done + frac) * delta
+            ok, it, res, why = self.attempt(u_try, pre if last else None)
+            iters += it
+            if ok:
+                subs += 1
+                if last:
+                    return Status.SUBDIVIDED, iters, subs, "", target, res
+                done += frac
+                frac = min(2.0 * frac, 1.0 - done)
+                continue
+            frac *= 0.5
+            if frac < self.min_frac:
+                return Status.LIMIT, iters, subs, why, u_try, res
+
+    def explain(self, why: str, residual: float) -> tuple[Literal["limit", "inconsistent"], str]:
+        """Classify a failure at the smallest step: locked redundant equations, or a limit."""
+        if self.lsq:
+            lock = self.tangent()[1]
+            if lock > LOCK_TOLERANCE:
+                return "inconsistent", _lock_reason(lock)
+        g = self.current_g()
+        sv = np.linalg.svd(g[:, : self.n], compute_uv=False) if self.n else np.ones(1)
+        ratio = float(sv[-1] / sv[0]) if sv[0] > 0 else 0.0
+        if ratio < 1e-3:
+            return "limit", (f"the constraint Jacobian is nearly singular there (σmin/σmax = "
+                             f"{ratio:.2g}): a dead centre, the mechanism cannot go further "
+                             f"({why} beyond it)")
+        return "limit", (f"Newton found no continuous solution beyond it ({why}, residual "
+                         f"{residual:.2g}; σmin/σmax = {ratio:.2g})")
+
+
+def _lock_reason(lock: float) -> str:
+    return (f"the equations outnumber the unknowns and the redundant ones admit no common "
+            f"motion (first-order residual {lock:.2g} of the input's effect): the data of an "
+            "over-constrained linkage does not close exactly (e.g. rounded coordinates)")
+
+
+def _finish(mech: Mechanism, inputs: FloatArray, q: FloatArray, iters: list[int],
+            subs: list[int], status: list[Status], limits: list[LimitReport],
+            reversed_at: int | None) -> Simulation:
+    """Assemble the result and verify every solved row with the exact equations."""
+    st = np.array([int(s) for s in status], dtype=np.int8)
+    ok = st <= Status.LIMIT
+    coords = np.full((len(status), *mech.coords0.shape), np.nan)
+    resid = np.full(len(status), np.nan)
+    if ok.any():
+        c = mech.coords_batch(q[ok], inputs[ok])
+        coords[ok] = c
+        if mech.constraints:
+            resid[ok] = np.max(np.abs(mech.residuals(c, inputs[ok])), axis=1)
+        else:
+            resid[ok] = 0.0
+    return Simulation(mech, inputs, coords, resid, np.array(iters, dtype=np.int64),
+                      np.array(subs, dtype=np.int64), st, tuple(limits), reversed_at)
+
+
+def _settings(mech: Mechanism, tolerance: float | None, max_halvings: int | None) -> Settings:
+    s = mech.settings
+    return Settings(s.steps, s.tolerance if tolerance is None else tolerance, s.max_iterations,
+                    s.max_halvings if max_halvings is None else max_halvings,
+                    s.reverse_at_limit)
+
+
+def simulate(mech: Mechanism, inputs: ArrayLike, *, tolerance: float | None = None,
+             max_halvings: int | None = None) -> Simulation:
+    """Follow the mechanism through the given input values (N,) or (N, n_inputs).
+
+    Starts from the initial configuration (moving first to inputs[0] if that differs, without
+    recording the way there). Rows after a motion limit are UNREACHED; the limit row holds the
+    last configuration reached and its input value.
+    """
+    u_all = np.asarray(inputs, dtype=np.float64)
+    n_in = len(mech.inputs)
+    if u_all.ndim == 1 and n_in == 1:
+        u_all = u_all[:, None]
+    if u_all.ndim != 2 or u_all.shape[1] != n_in:
+        raise ValueError(f"inputs must have shape (N, {n_in}); got {np.shape(inputs)}")
+    if not np.all(np.isfinite(u_all)):
+        raise ValueError("inputs must be finite")
+    tr = _Tracker(mech, _settings(mech, tolerance, max_halvings))
+    n_rows = u_all.shape[0]
+    xd_tab = mech.basis.driven_batch(u_all)
+    s_tab = mech.basis.actuators_batch(u_all)
+    q = np.full((n_rows, mech.system.n_u), np.nan)
+    out_u = u_all.copy()
+    iters = [0] * n_rows
+    subs = [0] * n_rows
+    status = [Status.UNREACHED] * n_rows
+    limits: list[LimitReport] = []
+    locked = _locked(tr)
+    for k in range(n_rows):
+        if np.array_equal(u_all[k], tr.u):
+            st, it, sb, why, failed, res = Status.OK, 0, 0, "", tr.u, 0.0
+        elif locked is not None:
+            status[k] = Status.INCONSISTENT
+            limits.append(LimitReport("inconsistent", k, tr.u.copy(), u_all[k].copy(),
+                                      u_all[k].copy(), locked, math.nan))
+            break
+        else:
+            st, it, sb, why, failed, res = tr.advance(u_all[k], (xd_tab[k], s_tab[k]))
+        iters[k], subs[k] = it, sb
+        if st == Status.LIMIT:
+            kind, reason = tr.explain(why, res)
+            limits.append(LimitReport(kind, k, tr.u.copy(), failed.copy(), u_all[k].copy(),
+                                      reason, res))
+            if kind == "inconsistent":
+                status[k] = Status.INCONSISTENT
+                break
+            status[k] = Status.LIMIT
+            out_u[k] = tr.u
+            q[k] = tr.q
+            break
+        status[k] = st
+        q[k] = tr.q
+    return _finish(mech, out_u, q, iters, subs, status, limits, None)
+
+
+def _locked(tr: _Tracker) -> str | None:
+    """For over-determined systems: the reason if the redundant equations lock the start."""
+    if not tr.lsq:
+        return None
+    lock = tr.tangent()[1]
+    return _lock_reason(lock) if lock > LOCK_TOLERANCE else None
+
+
+def sweep(mech: Mechanism, steps: int | None = None, step: ArrayLike | None = None, *,
+          reverse_at_limit: bool | None = None, tolerance: float | None = None,
+          max_halvings: int | None = None) -> Simulation:
+    """Drive every input from its initial value by `step` (default: the file's) per step.
+
+    Rows: the initial configuration, then one per step taken. At a motion limit a LIMIT row
+    holds the extreme configuration reached; with `reverse_at_limit` the inputs then run back
+    (and past the start) until the other limit or until `steps` steps were taken, so a
+    rocker's whole range is traced.
+    """
+    s = mech.settings
+    n_steps = s.steps if steps is None else int(steps)
+    inc = mech.step if step is None else np.broadcast_to(
+        np.asarray(step, dtype=np.float64), (len(mech.inputs),)).copy()
+    rev = s.reverse_at_limit if reverse_at_limit is None else reverse_at_limit
+    tr = _Tracker(mech, _settings(mech, tolerance, max_halvings))
+    base = tr.u.copy()
+    # Driven coordinates of every grid point the sweep can visit, in one batch.
+    offset = n_steps + 1
+    grid = base + np.arange(-offset, offset + 1)[:, None] * inc
+    xd_tab = mech.basis.driven_batch(grid)
+    s_tab = mech.basis.actuators_batch(grid)
+    us: list[FloatArray] = [tr.u.copy()]
+    qs: list[FloatArray] = [tr.q.copy()]
+    iters = [0]
+    subs = [0]
+    status = [Status.OK]
+    limits: list[LimitReport] = []
+    reversed_at: int | None = None
+    locked = _locked(tr)
+    if locked is not None:
+        limits.append(LimitReport("inconsistent", 1, tr.u.copy(), tr.u + inc, tr.u + inc,
+                                  locked, math.nan))
+        us.append(tr.u + inc)
+        qs.append(np.full_like(tr.q, np.nan))
+        iters.append(0)
+        subs.append(0)
+        status.append(Status.INCONSISTENT)
+        n_steps = 0
+    index = 0
+    direction = 1
+    for _ in range(n_steps):
+        g = offset + index + direction
+        target = grid[g]
+        st, it, sb, why, failed, res = tr.advance(target, (xd_tab[g], s_tab[g]))
+        if st == Status.LIMIT:
+            kind, reason = tr.explain(why, res)
+            limits.append(LimitReport(kind, len(us), tr.u.copy(), failed.copy(),
+                                      target.copy(), reason, res))
+            us.append(tr.u.copy())
+            iters.append(it)
+            subs.append(sb)
+            if kind == "inconsistent":
+                qs.append(np.full_like(tr.q, np.nan))
+                status.append(Status.INCONSISTENT)
+                break
+            qs.append(tr.q)
+            status.append(Status.LIMIT)
+            if not rev or reversed_at is not None:
+                break
+            reversed_at = len(us) - 1
+            # Back from the extreme: the grid point before the limit is the next target.
+            index += direction
+            direction = -direction
+            continue
+        index += direction
+        us.append(target)
+        qs.append(tr.q)
+        iters.append(it)
+        subs.append(sb)
+        status.append(st)
+    return _finish(mech, np.array(us), np.array(qs), iters, subs, status, limits, reversed_at)
