@@ -226,11 +226,12 @@ def plot(drawing: Path, dry_run: bool, preview_path: Path, config_path: Path | N
     if not dry_run:
         _fail("plotting on a machine needs the serial link, which is not available in this "
               "version yet; use --dry-run for the preview and report")
+    from fivebar_host.job import nbar_opinion
     from fivebar_host.preview import draw_preview, report_lines
 
     prof, job = compile_from_cli(drawing, config_path, mode, tolerance, origin_text, scale,
                                  rotate_deg, fit, layers, keep_order)
-    for line in report_lines(job):
+    for line in report_lines(job, nbar_opinion(job, prof)):
         click.echo(line)
     draw_preview(job, prof, preview_path)
     click.echo(f"preview       {preview_path}")

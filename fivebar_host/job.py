@@ -538,7 +538,14 @@ def deviations(job: Job, profile: Profile, samples: int = 4,
     tha, thb = th[di], th[di + 1]
     q = (tha[:, None, :] + s[None, :, None] * (thb - tha)[:, None, :]).reshape(-1, 2)
     fk = fb.forward_batch(q, "+" if job.assembly > 0 else "-")
-    e = fk.points
+    return _deviation_of(job, fk.points, fk.valid, di, samples)
+
+
+def _deviation_of(job: Job, e: FloatArray, valid: BoolArray, di: IntArray,
+                  samples: int) -> tuple[FloatArray, IntArray]:
+    """Distances of pen points e ((len(di)·(samples+1), 2), samples s = 0, 1/S, …, 1 of each
+    draw segment di) to the requested curves; invalid rows count as infinitely far."""
+    s = np.arange(samples + 1) / samples
     seg = np.repeat(np.arange(di.shape[0]), samples + 1)
     sig = job.seg_sa[seg] + np.tile(s, di.shape[0]) * (job.seg_sb - job.seg_sa)[seg]
     span = job.seg_thi - job.seg_tlo
@@ -553,8 +560,56 @@ def deviations(job: Job, profile: Profile, samples: int = 4,
     if (~real).any():
         ca, cb = job.seg_ca[seg[~real]], job.seg_cb[seg[~real]]
         dist[~real] = np.minimum(np.hypot(*(e[~real] - ca).T), np.hypot(*(e[~real] - cb).T))
-    dist[~fk.valid] = np.inf
+    dist[~valid] = np.inf
     return dist, di[seg]
+
+
+#: Most poses the n-bar second opinion follows (continuation is ~25 µs per pose).
+NBAR_MAX_POSES = 20_000
+
+
+@dataclass(frozen=True)
+class NbarOpinion:
+    """The general n-bar solver's view of the executed path (quantised steps, `samples` per
+    segment): its largest deviation from the requested path, its largest disagreement with the
+    closed form, and how many poses were followed (of how many)."""
+
+    max_dev_mm: float
+    max_disagreement_mm: float
+    poses: int
+    total_poses: int
+
+    def describe(self) -> str:
+        part = ("" if self.poses == self.total_poses
+                else f" (the first {self.poses} of {self.total_poses} poses)")
+        return (f"n-bar solver: max deviation {self.max_dev_mm:.4f} mm, differs from the closed "
+                f"form by at most {self.max_disagreement_mm:.2g} mm{part}")
+
+
+def nbar_opinion(job: Job, profile: Profile, samples: int = 4,
+                 max_poses: int = NBAR_MAX_POSES) -> NbarOpinion | None:
+    """Second opinion on the validation through `kinematics.nbar` (continuation along the
+    whole executed path from the homed pose); None if that solver is not installed."""
+    try:
+        from kinematics.nbar.validate import validate_fivebar_path
+    except ImportError:  # pragma: no cover - the n-bar package ships with the project
+        return None
+    th = steps.step_angles(job.steps, job.home_rad, job.steps_per_rev)
+    s = np.arange(samples) / samples
+    q = (th[:-1, None, :] + s[None, :, None] * np.diff(th, axis=0)[:, None, :]).reshape(-1, 2)
+    q = np.concatenate((q, th[-1:]))
+    total = q.shape[0]
+    n = min(total, max_poses)
+    v = validate_fivebar_path(profile.geometry, q[:n], job.assembly)
+    pts, ok = v.nbar_points, v.valid
+    # draw segments whose samples (incl. the end, the next segment's first) were all followed
+    di = np.flatnonzero(job.draw)
+    di = di[(di + 1) * samples < n]
+    idx = (di[:, None] * samples + np.arange(samples + 1)[None, :]).ravel()
+    dist, _ = _deviation_of(job, pts[idx], ok[idx], di, samples)
+    dis = v.deviation[ok]
+    return NbarOpinion(float(dist.max()) if dist.size else 0.0,
+                       float(dis.max()) if dis.size else math.nan, n, total)
 
 
 def validate(job: Job, profile: Profile, samples: int = 4) -> Job:

@@ -27,7 +27,7 @@ from matplotlib.patches import Circle, Patch
 from numpy.typing import NDArray
 
 from fivebar_host.config import Profile
-from fivebar_host.job import Job
+from fivebar_host.job import Job, NbarOpinion
 from fivebar_host.steps import step_angles
 from fivebar_host.toolpath.geometry import flatten
 from kinematics import analysis
@@ -195,8 +195,9 @@ def _fmt_time(t: float) -> str:
     return f"{int(h)} h {int(m)} min"
 
 
-def report_lines(job: Job) -> list[str]:
-    """The dry-run report: paths, segments, lengths, time, deviation, margins, mode."""
+def report_lines(job: Job, nbar: NbarOpinion | None = None) -> list[str]:
+    """The dry-run report: paths, segments, lengths, time, deviation, margins, mode (and the
+    n-bar solver's second opinion on the deviation when given)."""
     deg = math.degrees
     mm = job.min_margin_rad
     pl = job.placement
@@ -223,6 +224,8 @@ def report_lines(job: Job) -> list[str]:
         f"(from the quantised steps; bound {job.tolerance_mm:g} + step quantum "
         f"{job.step_quantum_mm:.4f} = {job.tolerance_mm + job.step_quantum_mm:.4f} mm)",
     ]
+    if nbar is not None:
+        lines.append(f"2nd opinion   {nbar.describe()}")
     if worst >= 0 and job.n_paths > 1:
         lines.append(f"worst path    #{worst} (source element "
                      f"#{int(job.paths.source[worst])}): max "

@@ -152,3 +152,15 @@ def test_layer_selection(tmp_path: Path) -> None:
     job = compile_job(EXAMPLES / "fivebar_text.svg", PROF, CompileOptions(layers=("underline",)))
     d = read_svg(EXAMPLES / "fivebar_text.svg", ["underline"])
     assert job.n_paths == d.n_strokes == 1
+
+
+def test_nbar_second_opinion_agrees() -> None:
+    from fivebar_host.job import nbar_opinion
+
+    job = compile_job(EXAMPLES / "fivebar_text.svg", PROF)
+    op = nbar_opinion(job, PROF)
+    assert op is not None and op.poses == op.total_poses
+    assert op.max_disagreement_mm < 1e-8
+    assert op.max_dev_mm == pytest.approx(job.max_dev_mm, abs=1e-8)
+    part = nbar_opinion(job, PROF, max_poses=300)
+    assert part is not None and part.poses == 300 and "first 300" in part.describe()
