@@ -32,6 +32,10 @@ void board_timer_stop(void);
 /* Freeze the step timeline where it is (hold) and continue it later. */
 void board_timer_pause(void);
 void board_timer_resume(void);
+/* Called while the core busy-waits for the step generator (homing): nothing
+ * to do on the AVR, where the interrupt makes progress; the host fake runs
+ * its simulated timer here. */
+void board_idle(void);
 
 /*
  * Also, inline on AVR (they run in the step interrupt, where a call would

@@ -148,6 +148,10 @@ ISR(TIMER1_COMPA_vect)
 	}
 }
 
+void board_idle(void)
+{
+}
+
 void board_timer_start(uint16_t delay_cycles)
 {
 	uint8_t s = board_irq_save();

@@ -341,6 +341,7 @@ static uint8_t exec_g1(const fb_cmd_t *c)
 static uint8_t home_wait(void)
 {
 	while (mo_running()) {
+		board_idle();
 		if (f_status) {
 			f_status = 0;
 			status_report();

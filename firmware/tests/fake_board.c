@@ -74,6 +74,13 @@ void board_timer_resume(void)
 	fake_timer_paused = 0;
 }
 
+/* One simulated second per call: homing at a few steps/s stays fast. */
+void board_idle(void)
+{
+	fake_ms += 1000;
+	fake_run(16000000);
+}
+
 size_t fake_run(uint64_t max_cycles)
 {
 	size_t events = 0;

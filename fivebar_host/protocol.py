@@ -1,0 +1,279 @@
+"""Wire protocol of the fivebar firmware: encoding and decoding, no I/O.
+
+The contract is docs/protocol.md.  This module mirrors the firmware's reply
+codes (firmware/fivebar/status.h; tests/test_protocol_codes.py keeps the two
+equal), builds command lines with optional line number and CRC-8 checksum,
+and parses every kind of line the firmware sends: ``ok``, ``error:<code>``
+(with ``resend:<n>`` for framing errors), status reports, the banner,
+``ALARM:<code>`` pushes and ``$<n>=<v>`` setting lines.
+
+It is pure so the link, the mock device and the tests share one
+implementation of the format.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from typing import Final
+
+#: Real-time bytes: acted on by the firmware at once, never buffered, never
+#: answered with ``ok`` and not counted against the receive buffer.
+RT_STATUS: Final = b"?"
+RT_HOLD: Final = b"!"
+RT_RESUME: Final = b"~"
+RT_RESET: Final = b"\x18"
+REALTIME_BYTES: Final = frozenset(RT_STATUS + RT_HOLD + RT_RESUME + RT_RESET)
+
+#: Reply line terminator sent by the firmware (the host sends ``\n``).
+EOL: Final = "\r\n"
+
+#: Ranges enforced by the firmware (firmware/fivebar/config.h).
+P_MIN_US: Final = 100
+P_MAX_US: Final = 100_000_000
+POS_LIMIT: Final = 100_000_000
+POWER_MAX: Final = 255
+
+
+@dataclass(frozen=True)
+class Code:
+    """One reply code of the firmware: number, status.h name and meaning."""
+
+    code: int
+    name: str
+    description: str
+    alarm: bool = False
+
+
+def _codes(*items: Code) -> dict[int, Code]:
+    return {c.code: c for c in items}
+
+
+#: Every code of firmware/fivebar/status.h (errors 1-29, alarms 30+).
+CODES: Final[dict[int, Code]] = _codes(
+    Code(1, "INVALID_CHAR", "byte outside printable ASCII in the line"),
+    Code(2, "LINE_TOO_LONG", "line longer than the banner's line: limit"),
+    Code(3, "BAD_NUMBER", "word letter not followed by a valid integer"),
+    Code(4, "UNKNOWN_COMMAND", "no command, or an unsupported G/M/$ command"),
+    Code(5, "BAD_WORD", "word not allowed for the command, or repeated"),
+    Code(6, "MISSING_WORD", "a required word is missing"),
+    Code(7, "OUT_OF_RANGE", "value outside its documented range"),
+    Code(8, "CHECKSUM", "checksum mismatch or malformed: resend"),
+    Code(9, "LINE_NUMBER", "N is not the expected line number: resend"),
+    Code(10, "NO_CHECKSUM", "line number without checksum: resend"),
+    Code(11, "SOFT_LIMIT", "target outside the soft limits"),
+    Code(12, "TOO_FAST", "segment needs a step rate above $0"),
+    Code(13, "BUSY", "command needs an idle machine"),
+    Code(14, "ALARM_LOCK", "alarm active: clear it with $X or $H"),
+    Code(15, "MOTORS_OFF", "motion while the motors are disabled (M18)"),
+    Code(16, "HOMING_DISABLED", "$H without endstops ($7=0)"),
+    Code(17, "UNKNOWN_SETTING", "no such $ setting"),
+    Code(18, "RX_OVERFLOW", "receive buffer overflowed: bytes were lost"),
+    Code(30, "ENDSTOP", "endstop hit outside homing", alarm=True),
+    Code(31, "HOMING_FAIL", "homing found no switch, or the switch stayed pressed", alarm=True),
+    Code(32, "HOMING_ABORT", "homing interrupted by hold or reset", alarm=True),
+)
+
+#: Codes after which the host resends from the line number in the reply.
+RESEND_CODES: Final = frozenset({8, 9, 10})
+
+#: Hold reasons shown as ``Hold:<reason>`` in status reports.
+HOLD_REASONS: Final[dict[int, str]] = {
+    0: "host sent !",
+    1: "host silent too long while the laser was on",
+    2: "a line was refused while a job was queued or running",
+}
+
+#: The $ settings: number -> (name, minimum, maximum).
+SETTINGS: Final[dict[int, tuple[str, int, int]]] = {
+    0: ("max_rate_steps_s", 1, 40_000),
+    1: ("a_min", -POS_LIMIT, POS_LIMIT),
+    2: ("a_max", -POS_LIMIT, POS_LIMIT),
+    3: ("b_min", -POS_LIMIT, POS_LIMIT),
+    4: ("b_max", -POS_LIMIT, POS_LIMIT),
+    5: ("soft_limits", 0, 1),
+    6: ("laser_timeout_ms", 100, 60_000),
+    7: ("homing_enable", 0, 1),
+    8: ("homing_rate_steps_s", 1, 40_000),
+    9: ("homing_pulloff", 0, 1_000_000),
+    10: ("home_a", -POS_LIMIT, POS_LIMIT),
+    11: ("home_b", -POS_LIMIT, POS_LIMIT),
+    12: ("homing_travel", 1, 10_000_000),
+    13: ("homing_dir_mask", 0, 3),
+}
+
+
+class ProtocolError(ValueError):
+    """A line does not follow docs/protocol.md (host side or firmware side)."""
+
+
+def crc8(data: bytes) -> int:
+    """CRC-8/SMBUS (poly 0x07, init 0, no reflection): the line checksum.
+
+    Stronger than Marlin's XOR: it catches every 1- and 2-bit error in a line.
+    """
+    crc = 0
+    for byte in data:
+        crc ^= byte
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x07) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
+    return crc
+
+
+_FORBIDDEN = re.compile(r"[^\x20-\x7e\t]|[*?!~;]")
+
+
+def encode_line(body: str, line_number: int | None = None, checksum: bool = False) -> bytes:
+    """Encode one command line, ready to write, ending in ``\\n``.
+
+    With ``line_number`` the line becomes ``N<n> <body>*<crc>`` (a number
+    always carries a checksum); with only ``checksum`` it is ``<body>*<crc>``.
+    Raises ProtocolError for bodies the firmware would misread (real-time
+    bytes, ``*``, ``;``, control characters).
+    """
+    if _FORBIDDEN.search(body):
+        raise ProtocolError(f"line body {body!r} holds a reserved or non-printable character")
+    text = body
+    if line_number is not None:
+        if not 0 <= line_number <= 0xFFFFFFFF:
+            raise ProtocolError(f"line number {line_number} outside 0..4294967295")
+        text = f"N{line_number} {body}"
+        checksum = True
+    if checksum:
+        text = f"{text}*{crc8(text.encode('ascii'))}"
+    return (text + "\n").encode("ascii")
+
+
+def g1(a: int | None, b: int | None, p_us: int, s: int | None = None) -> str:
+    """The body of a G1 segment; raises ProtocolError for out-of-range values."""
+    if not P_MIN_US <= p_us <= P_MAX_US:
+        raise ProtocolError(f"segment duration P{p_us} outside {P_MIN_US}..{P_MAX_US} us")
+    words = ["G1"]
+    for letter, value in (("A", a), ("B", b)):
+        if value is not None:
+            if not -POS_LIMIT <= value <= POS_LIMIT:
+                raise ProtocolError(f"{letter}{value} outside +-{POS_LIMIT} steps")
+            words.append(f"{letter}{value}")
+    words.append(f"P{p_us}")
+    if s is not None:
+        if not 0 <= s <= POWER_MAX:
+            raise ProtocolError(f"laser power S{s} outside 0..{POWER_MAX}")
+        words.append(f"S{s}")
+    return " ".join(words)
+
+
+@dataclass(frozen=True)
+class Ok:
+    """``ok``: the line was accepted (queued or done), not necessarily executed."""
+
+
+@dataclass(frozen=True)
+class ErrorReply:
+    """``error:<code>`` and, for resend codes, the line number to send next."""
+
+    code: int
+    resend: int | None = None
+
+    @property
+    def info(self) -> Code:
+        """The table entry of the code (KeyError for codes not in status.h)."""
+        return CODES[self.code]
+
+
+@dataclass(frozen=True)
+class StatusReport:
+    """A ``<...>`` report, the answer to the real-time ``?``."""
+
+    state: str  # Idle, Run, Hold, Home or Alarm
+    detail: int | None  # hold reason or alarm code
+    a: int
+    b: int
+    queued: int  # blocks waiting in the queue
+    done_line: int  # line number of the last block executed to its end
+    accepted_line: int  # line number of the last line accepted
+    laser: int  # laser power output now
+    underruns: int  # motion stops because the queue ran empty, since reset
+
+
+@dataclass(frozen=True)
+class Banner:
+    """The boot banner (also the answer to ``$I``)."""
+
+    version: str
+    proto: int
+    rx: int  # receive buffer bytes: the character-counting budget
+    queue: int  # segment queue blocks
+    line_max: int  # longest accepted line without its newline
+
+
+@dataclass(frozen=True)
+class AlarmPush:
+    """``ALARM:<code>``: pushed once when an alarm is raised."""
+
+    code: int
+
+
+@dataclass(frozen=True)
+class SettingLine:
+    """``$<n>=<value>``: one line of the ``$$`` listing."""
+
+    number: int
+    value: int
+
+
+Message = Ok | ErrorReply | StatusReport | Banner | AlarmPush | SettingLine
+
+_ERROR = re.compile(r"error:(\d+)(?: resend:(\d+))?")
+_STATUS = re.compile(
+    r"<(Idle|Run|Hold|Home|Alarm)(?::(\d+))?\|A:(-?\d+),B:(-?\d+)\|Q:(\d+)"
+    r"\|Ln:(\d+),(\d+)\|L:(\d+)\|U:(\d+)>"
+)
+_BANNER = re.compile(r"fivebar (\S+) proto:(\d+) rx:(\d+) queue:(\d+) line:(\d+)")
+_ALARM = re.compile(r"ALARM:(\d+)")
+_SETTING = re.compile(r"\$(\d+)=(-?\d+)")
+
+
+def parse_message(line: str) -> Message:
+    """Classify and decode one line received from the firmware.
+
+    Trailing ``\\r\\n`` is ignored.  Raises ProtocolError for anything else,
+    naming the line, so a corrupted reply is never taken for another.
+    """
+    text = line.rstrip("\r\n")
+    if text == "ok":
+        return Ok()
+    if m := _ERROR.fullmatch(text):
+        code = int(m.group(1))
+        resend = int(m.group(2)) if m.group(2) is not None else None
+        if (resend is not None) != (code in RESEND_CODES):
+            raise ProtocolError(f"error reply {text!r}: resend number does not match the code")
+        return ErrorReply(code, resend)
+    if m := _STATUS.fullmatch(text):
+        state, detail = m.group(1), m.group(2)
+        if (detail is not None) != (state in ("Hold", "Alarm")):
+            raise ProtocolError(f"status report {text!r}: state detail mismatch")
+        return StatusReport(
+            state=state,
+            detail=int(detail) if detail is not None else None,
+            a=int(m.group(3)),
+            b=int(m.group(4)),
+            queued=int(m.group(5)),
+            done_line=int(m.group(6)),
+            accepted_line=int(m.group(7)),
+            laser=int(m.group(8)),
+            underruns=int(m.group(9)),
+        )
+    if m := _BANNER.fullmatch(text):
+        return Banner(
+            m.group(1), int(m.group(2)), int(m.group(3)), int(m.group(4)), int(m.group(5))
+        )
+    if m := _ALARM.fullmatch(text):
+        return AlarmPush(int(m.group(1)))
+    if m := _SETTING.fullmatch(text):
+        return SettingLine(int(m.group(1)), int(m.group(2)))
+    raise ProtocolError(f"unrecognised line from the firmware: {text!r}")
+
+
+def is_reply(message: Message) -> bool:
+    """True for the messages that answer a line (``ok`` / ``error``)."""
+    return isinstance(message, Ok | ErrorReply)

@@ -1,0 +1,101 @@
+"""The Python protocol table equals firmware/fivebar/status.h, and the codec works."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+from fivebar_host import protocol
+from fivebar_host.protocol import (
+    AlarmPush,
+    Banner,
+    ErrorReply,
+    Ok,
+    ProtocolError,
+    SettingLine,
+    StatusReport,
+)
+
+STATUS_H = Path(__file__).resolve().parents[1] / "firmware" / "fivebar" / "status.h"
+DEFINE = re.compile(r"#define FB_(ERR|ALARM)_(\w+)\s+(\d+)\s*/\*\s*(.*?)\s*\*/")
+
+
+def firmware_codes() -> dict[int, protocol.Code]:
+    codes = {}
+    for kind, name, number, text in DEFINE.findall(STATUS_H.read_text()):
+        code = int(number)
+        assert code not in codes, f"code {code} defined twice in status.h"
+        codes[code] = protocol.Code(code, name, text, alarm=kind == "ALARM")
+    return codes
+
+
+def test_code_table_matches_status_h() -> None:
+    fw = firmware_codes()
+    assert len(fw) >= 20
+    assert fw == protocol.CODES
+
+
+def test_crc8_check_value() -> None:
+    assert protocol.crc8(b"123456789") == 0xF4
+
+
+def test_encode_line_with_number_and_checksum() -> None:
+    line = protocol.encode_line("G1 A10 P1000", line_number=7)
+    text = line.decode()
+    assert text.startswith("N7 G1 A10 P1000*") and text.endswith("\n")
+    body, crc = text[:-1].rsplit("*", 1)
+    assert int(crc) == protocol.crc8(body.encode())
+    assert protocol.encode_line("G90") == b"G90\n"
+    assert protocol.encode_line("G90", checksum=True) == f"G90*{protocol.crc8(b'G90')}\n".encode()
+
+
+@pytest.mark.parametrize("body", ["G1 A1 P100 ?", "M3!", "G1*", "G1 ; x", "G1\x01"])
+def test_encode_refuses_reserved_characters(body: str) -> None:
+    with pytest.raises(ProtocolError):
+        protocol.encode_line(body)
+
+
+def test_g1_ranges() -> None:
+    assert protocol.g1(5, -3, 1000, 255) == "G1 A5 B-3 P1000 S255"
+    assert protocol.g1(None, 2, 100) == "G1 B2 P100"
+    for args in [(0, 0, 99), (0, 0, 100_000_001), (100_000_001, 0, 1000)]:
+        with pytest.raises(ProtocolError):
+            protocol.g1(*args)
+    with pytest.raises(ProtocolError):
+        protocol.g1(0, 0, 1000, 256)
+
+
+def test_parse_every_message_kind() -> None:
+    assert protocol.parse_message("ok\r\n") == Ok()
+    assert protocol.parse_message("error:4\r\n") == ErrorReply(4)
+    assert protocol.parse_message("error:8 resend:12") == ErrorReply(8, 12)
+    alarm_error = protocol.parse_message("error:30")
+    assert isinstance(alarm_error, ErrorReply) and alarm_error.info.alarm
+    assert protocol.parse_message("<Hold:1|A:-5,B:7|Q:3|Ln:10,12|L:0|U:2>") == StatusReport(
+        "Hold", 1, -5, 7, 3, 10, 12, 0, 2
+    )
+    run = protocol.parse_message("<Run|A:0,B:0|Q:0|Ln:0,0|L:255|U:0>")
+    assert isinstance(run, StatusReport) and run.state == "Run"
+    assert protocol.parse_message("fivebar 1.0.0 proto:1 rx:128 queue:16 line:80") == Banner(
+        "1.0.0", 1, 128, 16, 80
+    )
+    assert protocol.parse_message("ALARM:31") == AlarmPush(31)
+    assert protocol.parse_message("$12=-40") == SettingLine(12, -40)
+
+
+@pytest.mark.parametrize(
+    "line",
+    [
+        "okay",
+        "error:8",
+        "error:4 resend:3",
+        "<Idle:1|A:0,B:0|Q:0|Ln:0,0|L:0|U:0>",
+        "<Hold|A:0>",
+        "",
+    ],
+)
+def test_parse_refuses_malformed(line: str) -> None:
+    with pytest.raises(ProtocolError):
+        protocol.parse_message(line)
