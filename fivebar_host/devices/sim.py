@@ -313,9 +313,14 @@ def start_device(
     endstop_a: int | None = None,
     endstop_b: int | None = None,
     timeout: float = 10.0,
+    realtime: bool = False,
 ) -> SimDevice:
-    """Start the harness, open its pty and read the boot banner."""
-    emu = Emulator(build.elf, build.harness, trace_path, endstop_a, endstop_b)
+    """Start the harness, open its pty and read the boot banner.
+
+    ``realtime`` throttles emulation to wall-clock speed (harness ``-R``), so
+    a host streaming in wall time meets the link at its real rate.
+    """
+    emu = Emulator(build.elf, build.harness, trace_path, endstop_a, endstop_b, realtime)
     try:
         port = open_port(emu.start(), timeout=0.5)
     except Exception:
