@@ -218,3 +218,22 @@ def test_curvature_bounds_the_newton_remainder(path: Path) -> None:
     step = np.linalg.solve(g[:, : sys.n_u], phi)
     _, phi1 = sys.evaluate(_x_at(mech, q - step))
     assert np.linalg.norm(phi1) <= 0.5 * sys.curvature * float(step @ step) * (1 + 1e-9)
+
+
+def test_newton_linear_solve_matches_numpy_and_flags_singular_matrices() -> None:
+    """The Newton step's solver (LAPACK gesv, called without np.linalg.solve's wrapper when
+    available) agrees with np.linalg.solve; a singular matrix gives a non-finite step (or
+    LinAlgError), which the Newton loop treats as a failed attempt."""
+    from kinematics.nbar.system import solve
+
+    for n in (2, 5, 18):
+        a = RNG.normal(size=(n, n)) + n * np.eye(n)
+        b = RNG.normal(size=n)
+        np.testing.assert_allclose(solve(a[:, :], b), np.linalg.solve(a, b), rtol=1e-12)
+    sing = np.array([[1.0, 2.0], [2.0, 4.0]])
+    with np.errstate(all="ignore"):
+        try:
+            out = solve(sing, np.ones(2))
+        except np.linalg.LinAlgError:
+            return
+    assert not np.all(np.isfinite(out))

@@ -88,7 +88,7 @@ class Settings:
 
     steps: int = 180
     tolerance: float = 1e-10
-    max_iterations: int = 10
+    max_iterations: int = 6
     max_halvings: int = 24
     reverse_at_limit: bool = False
 

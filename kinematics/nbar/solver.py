@@ -31,7 +31,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from kinematics.nbar.constraints import FloatArray
 from kinematics.nbar.model import Mechanism, Settings
-from kinematics.nbar.system import newton
+from kinematics.nbar.system import newton, solve
 
 #: Newton may correct the predictor by at most this fraction of the predicted motion.
 CONTINUITY = 0.5
@@ -114,16 +114,19 @@ HISTORY = 7
 MAX_SPEEDUP = 4.0
 
 
-def _binomial_weights(points: int) -> FloatArray:
-    """Weights (oldest first, padded to HISTORY) extrapolating one equal step beyond
-    `points` equally spaced states: q_new = Σ (−1)^(j+1) C(p, j) q_(k+1−j)."""
-    w = np.zeros(HISTORY)
+def _ring_weights(points: int, newest: int) -> FloatArray:
+    """(2, HISTORY) weights over the ring buffer of states whose newest entry is in slot
+    `newest`: row 0 extrapolates one equal step beyond `points` equally spaced states,
+    q_new = Σ_j (−1)^(j+1) C(p, j) q_(k+1−j); row 1 gives the predicted motion q_new − q_k."""
+    w = np.zeros((2, HISTORY))
     for j in range(1, points + 1):
-        w[HISTORY - j] = (-1) ** (j + 1) * math.comb(points, j)
+        w[0, (newest - j + 1) % HISTORY] = (-1) ** (j + 1) * math.comb(points, j)
+    w[1] = w[0]
+    w[1, newest] -= 1.0
     return w
 
 
-_UNIFORM = {k: _binomial_weights(k) for k in range(2, HISTORY + 1)}
+_UNIFORM = {(k, p): _ring_weights(k, p) for k in range(2, HISTORY + 1) for p in range(HISTORY)}
 
 
 class _Tracker:
@@ -144,14 +147,32 @@ class _Tracker:
         self.u = mech.input0.copy()
         self.q = mech.q0.copy()
         self.floor2 = (1e-9 * max(mech.size, 1.0)) ** 2
-        self.hist = np.zeros((HISTORY, self.n))  # last states along the input path, newest last
-        self.hist_s: list[float] = []
+        self.ring = np.zeros((HISTORY, self.n))  # last states along the input path
+        self.slot = HISTORY - 1  # ring slot of the newest state
+        self.hist_s: list[float] = []  # their path parameters, oldest first
         self.run = 0  # trailing equally spaced states in the history
         self.last_m2 = 0.0  # predicted motion² and parameter step of the last accepted step
         self.last_h = 0.0
         self.origin = self.u.copy()
         self.direction = np.zeros_like(self.u)
+        self.line: FloatArray | None = None  # sweeps: parameter = step index along `line`
         self.tangent_cache: FloatArray | None = None
+        sysm = self.sys
+        self.hs = sysm.hs
+        self.m = sysm.m
+        self.nact = sysm.n_act
+        self.tol2 = self.tol * self.tol
+        self.bound = 0.5 * sysm.curvature
+        self.quarter = 0.25 * self.tol
+        self._push(self.q, self._param(self.u))
+
+    def set_line(self, base: FloatArray, inc: FloatArray) -> None:
+        """Sweep mode: the inputs move along u = base + s·inc, and s is the parameter the
+        predictor extrapolates in (the step index), whatever the number of inputs."""
+        self.origin = np.asarray(base, dtype=np.float64).copy()
+        self.line = np.asarray(inc, dtype=np.float64) / float(inc @ inc)
+        self.hist_s = []
+        self.run = 0
         self._push(self.q, self._param(self.u))
 
     # -- state helpers
@@ -170,6 +191,8 @@ class _Tracker:
             self.x[n + nd: -1] = sq
 
     def _param(self, u: FloatArray) -> float:
+        if self.line is not None:
+            return float((u - self.origin) @ self.line)
         if self.single:
             return float(u[0])
         return float((u - self.origin) @ self.direction)
@@ -184,12 +207,13 @@ class _Tracker:
             self.run = self.run + 1 if abs(h_new - h_old) <= 1e-9 * abs(h_new) else 2
         else:
             self.run = len(hs) + 1
-        self.hist[:-1] = self.hist[1:]
-        self.hist[-1] = q
+        self.slot = slot = (self.slot + 1) % HISTORY
+        self.ring[slot] = q
         hs.append(s)
         if len(hs) > HISTORY:
             del hs[0]
-        self.run = min(self.run, len(hs))
+        if self.run > len(hs):
+            self.run = len(hs)
 
     def _reset_history(self, direction: FloatArray) -> None:
         self.origin = self.u.copy()
@@ -232,7 +256,7 @@ class _Tracker:
         """Newton start for input u_new: polynomial extrapolation along the input path through
         the last states (up to HISTORY equally spaced ones, else up to four with bounded
         Lagrange weights), or the tangent when fewer than two lie on the current line."""
-        if not self.single:
+        if not self.single and self.line is None:
             du = u_new - self.u
             nrm = float(np.linalg.norm(du))
             e = du / nrm if nrm > 0 else du
@@ -244,7 +268,8 @@ class _Tracker:
             s_new = self._param(u_new)
             h = s_new - hs[-1]
             if self.run >= 2 and abs(h - (hs[-1] - hs[-2])) <= 1e-9 * abs(h):
-                return np.asarray(_UNIFORM[self.run] @ self.hist, dtype=np.float64)
+                return np.asarray(_UNIFORM[self.run, self.slot][0] @ self.ring,
+                                  dtype=np.float64)
             for order in range(min(k, 4), 1, -1):
                 pts = hs[-order:]
                 w = [1.0] * order
@@ -254,8 +279,9 @@ class _Tracker:
                             w[a] *= (s_new - pts[b]) / (pts[a] - pts[b])
                 if sum(map(abs, w)) <= MAX_WEIGHT:
                     wf = np.zeros(HISTORY)
-                    wf[HISTORY - order:] = w
-                    return np.asarray(wf @ self.hist, dtype=np.float64)
+                    for j, wj in enumerate(reversed(w)):  # newest first
+                        wf[(self.slot - j) % HISTORY] = wj
+                    return np.asarray(wf @ self.ring, dtype=np.float64)
         if self.tangent_cache is None:
             self.tangent_cache = self.tangent()[0]
         return np.asarray(self.q + self.tangent_cache @ (u_new - self.u), dtype=np.float64)
@@ -282,7 +308,8 @@ class _Tracker:
         if c2 > CONTINUITY * CONTINUITY * m2 + self.floor2:
             return False, res.iterations, res.residual, "discontinuous"
         s_new = self._param(u_new)
-        h = abs(s_new - self.hist_s[-1]) if self.single else float(np.linalg.norm(u_new - self.u))
+        h = (abs(s_new - self.hist_s[-1]) if self.single or self.line is not None
+             else float(np.linalg.norm(u_new - self.u)))
         if self.last_m2 > 0.0 and m2 > (MAX_SPEEDUP * h / self.last_h) ** 2 * self.last_m2 \
                 + self.floor2:
             return False, res.iterations, res.residual, "discontinuous"
@@ -292,6 +319,62 @@ class _Tracker:
         self.tangent_cache = None
         self._push(res.q, s_new)
         return True, res.iterations, res.residual, ""
+
+    def step_fast(self, s_new: float, u_new: FloatArray, xd: FloatArray, sq: FloatArray
+                  ) -> tuple[int, float] | None:
+        """The common case of `attempt`, inlined: an equal step after at least two equal
+        steps (binomial extrapolation), a square system, at most one Newton solve accepted by
+        the quadratic remainder bound, the same two continuity tests. Returns (iterations,
+        residual bound) with the state moved, or None — then nothing changed and the caller
+        takes the general path (`advance`)."""
+        hs_ = self.hist_s
+        run = self.run
+        if run < 2 or self.lsq:
+            return None
+        h = s_new - hs_[-1]
+        if abs(h - (hs_[-1] - hs_[-2])) > 1e-9 * abs(h):
+            return None
+        n = self.n
+        x = self.x
+        pred = _UNIFORM[run, self.slot] @ self.ring  # (prediction, predicted motion)
+        q_pred = pred[0]
+        if self.nd:
+            x[n: n + self.nd] = xd
+        if self.nact:
+            x[n + self.nd: -1] = sq
+        x[:n] = q_pred
+        g = (self.hs @ x).reshape(self.m, -1)
+        phi = 0.5 * (g @ x)
+        r2 = float(phi @ phi)
+        if r2 <= self.tol2:
+            q, it, c2, res = q_pred, 0, 0.0, math.sqrt(r2)
+        else:
+            step = solve(g[:, :n], phi)
+            c2 = float(step @ step)
+            if not c2 < math.inf:  # singular Jacobian
+                return None
+            q, it, res = q_pred - step, 1, self.bound * c2
+            if not res <= self.quarter:  # not yet converged: carry on with Newton
+                more = newton(self.sys, x, q, self.tol, self.max_iter - 1)
+                if not more.converged:
+                    return None
+                q, it, res = more.q, 1 + more.iterations, more.residual
+                dc = q - q_pred
+                c2 = float(dc @ dc)
+        dm = pred[1]
+        m2 = float(dm @ dm)
+        if c2 > CONTINUITY * CONTINUITY * m2 + self.floor2:
+            return None
+        ah = abs(h)
+        if self.last_m2 > 0.0 and m2 > (MAX_SPEEDUP * ah / self.last_h) ** 2 * self.last_m2 \
+                + self.floor2:
+            return None
+        self.last_m2, self.last_h = m2, ah
+        self.u = u_new
+        self.q = q
+        self.tangent_cache = None
+        self._push(q, s_new)
+        return it, res
 
     def advance(self, target: FloatArray, pre: tuple[FloatArray, FloatArray] | None = None
                 ) -> tuple[Status, int, int, str, FloatArray, float]:
@@ -307,6 +390,7 @@ class _Tracker:
         done = 0.0
         frac = 0.5
         subs = 0
+        streak = 0  # successes in a row since the last failure
         while True:
             last = done + frac >= 1.0
             u_try = target if last else start + (done + frac) * delta
@@ -317,8 +401,12 @@ class _Tracker:
                 if last:
                     return Status.SUBDIVIDED, iters, subs, "", target, res
                 done += frac
-                frac = min(2.0 * frac, 1.0 - done)
+                streak += 1
+                # Grow only after two successes in a row: right after a failure, growing
+                # would retry what just failed (near a limit it fails again).
+                frac = min(2.0 * frac if streak >= 2 else frac, 1.0 - done)
                 continue
+            streak = 0
             frac *= 0.5
             if frac < self.min_frac:
                 return Status.LIMIT, iters, subs, why, u_try, res
@@ -451,6 +539,7 @@ def sweep(mech: Mechanism, steps: int | None = None, step: ArrayLike | None = No
     rev = s.reverse_at_limit if reverse_at_limit is None else reverse_at_limit
     tr = _Tracker(mech, _settings(mech, tolerance, max_halvings))
     base = tr.u.copy()
+    tr.set_line(base, inc)
     # Driven coordinates of every grid point the sweep can visit, in one batch.
     offset = n_steps + 1
     grid = base + np.arange(-offset, offset + 1)[:, None] * inc
@@ -475,34 +564,55 @@ def sweep(mech: Mechanism, steps: int | None = None, step: ArrayLike | None = No
         n_steps = 0
     index = 0
     direction = 1
-    for _ in range(n_steps):
-        g = offset + index + direction
-        target = grid[g]
-        st, it, sb, why, failed, res = tr.advance(target, (xd_tab[g], s_tab[g]))
-        if st == Status.LIMIT:
-            kind, reason = tr.explain(why, res)
-            limits.append(LimitReport(kind, len(us), tr.u.copy(), failed.copy(),
-                                      target.copy(), reason, res))
-            us.append(tr.u.copy())
-            iters.append(it)
-            subs.append(sb)
-            if kind == "inconsistent":
-                qs.append(np.full_like(tr.q, np.nan))
-                status.append(Status.INCONSISTENT)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        for _ in range(n_steps):
+            g = offset + index + direction
+            target = grid[g]
+            fast = tr.step_fast(float(index + direction), target, xd_tab[g], s_tab[g])
+            if fast is not None:
+                index += direction
+                us.append(target)
+                qs.append(tr.q)
+                iters.append(fast[0])
+                subs.append(1)
+                status.append(Status.OK)
+                continue
+            st, it, sb, why, failed, res = tr.advance(target, (xd_tab[g], s_tab[g]))
+            if _record(tr, st, it, sb, why, failed, res, target, us, qs, iters, subs, status,
+                       limits):
                 break
-            qs.append(tr.q)
-            status.append(Status.LIMIT)
-            if not rev or reversed_at is not None:
-                break
-            reversed_at = len(us) - 1
-            # Back from the extreme: the grid point before the limit is the next target.
+            if st == Status.LIMIT:
+                if not rev or reversed_at is not None:
+                    break
+                reversed_at = len(us) - 1
+                # Back from the extreme: the grid point before the limit is the next target.
+                index += direction
+                direction = -direction
+                continue
             index += direction
-            direction = -direction
-            continue
-        index += direction
+    return _finish(mech, np.array(us), np.array(qs), iters, subs, status, limits, reversed_at)
+
+
+def _record(tr: _Tracker, st: Status, it: int, sb: int, why: str, failed: FloatArray,
+            res: float, target: FloatArray, us: list[FloatArray], qs: list[FloatArray],
+            iters: list[int], subs: list[int], status: list[Status],
+            limits: list[LimitReport]) -> bool:
+    """Append one sweep row; at a failure classify it. True when the sweep must stop."""
+    iters.append(it)
+    subs.append(sb)
+    if st != Status.LIMIT:
         us.append(target)
         qs.append(tr.q)
-        iters.append(it)
-        subs.append(sb)
         status.append(st)
-    return _finish(mech, np.array(us), np.array(qs), iters, subs, status, limits, reversed_at)
+        return False
+    kind, reason = tr.explain(why, res)
+    limits.append(LimitReport(kind, len(us), tr.u.copy(), failed.copy(), target.copy(),
+                              reason, res))
+    us.append(tr.u.copy())
+    if kind == "inconsistent":
+        qs.append(np.full_like(tr.q, np.nan))
+        status.append(Status.INCONSISTENT)
+        return True
+    qs.append(tr.q)
+    status.append(Status.LIMIT)
+    return False
