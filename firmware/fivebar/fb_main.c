@@ -126,7 +126,7 @@ static void status_report(void)
 	put_P(FB_PSTR(",B:"));
 	put_i32(pos[1]);
 	put_P(FB_PSTR("|Q:"));
-	put_u32(mo_queue_count());
+	put_u32(mo_queue_waiting());
 	put_P(FB_PSTR("|Ln:"));
 	put_u32(mo_done_line());
 	board_tx(',');
@@ -164,10 +164,16 @@ static uint32_t interval_for(int32_t rate)
 	return (uint32_t)((FB_F_CPU + (uint32_t)rate - 1u) / (uint32_t)rate);
 }
 
+/* Motors whose switch lies in the negative direction ($13 clear bits). */
+static uint8_t seek_neg_mask(void)
+{
+	return (uint8_t)(~settings[SET_HOMING_DIR] & 3);
+}
+
 static void settings_apply(void)
 {
 	min_interval = interval_for(settings[SET_MAX_RATE]);
-	mo_set_endstops_enabled((uint8_t)settings[SET_HOMING]);
+	mo_set_endstops((uint8_t)settings[SET_HOMING], seek_neg_mask());
 }
 
 /* Range of setting n, or 0 when there is no such setting. */
@@ -227,7 +233,6 @@ static void do_reset(void)
 	held = 0;
 	board_irq_restore(sreg);
 	mo_init();
-	mo_set_endstops_enabled((uint8_t)settings[SET_HOMING]);
 	line_len = 0;
 	line_over = 0;
 	pending = 0;
@@ -294,8 +299,8 @@ static uint8_t queue_sync_block(uint8_t type, int32_t a, int32_t b)
 	fb_block_t *blk = mo_slot();
 	memset(blk, 0, sizeof(*blk));
 	blk->type = type;
-	blk->n[0] = (uint32_t)a;
-	blk->n[1] = (uint32_t)b;
+	blk->q[0] = (uint32_t)a;
+	blk->q[1] = (uint32_t)b;
 	blk->line = lines.last;
 	if (!mo_running() && mo_queue_count() == 0)
 		first_queued_ms = board_ms();
@@ -355,17 +360,13 @@ static uint8_t home_wait(void)
 static uint8_t home_move(uint8_t type, uint8_t axes, uint8_t neg, uint32_t steps, uint32_t interval)
 {
 	fb_block_t *blk = mo_slot();
-	memset(blk, 0, sizeof(*blk));
+	int32_t d[2];
+	for (uint8_t i = 0; i < 2; i++)
+		d[i] = (axes & (1u << i)) ? ((neg & (1u << i)) ? -(int32_t)steps : (int32_t)steps) : 0;
+	mo_prepare_cycles(blk, d[0], d[1], steps * interval, 0);
 	blk->type = type;
-	blk->dirs = neg;
-	blk->cycles = steps * interval;
+	blk->power = 0;
 	blk->line = lines.last;
-	for (uint8_t i = 0; i < 2; i++) {
-		if (axes & (1u << i)) {
-			blk->n[i] = steps;
-			blk->q[i] = interval;
-		}
-	}
 	mo_push();
 	mo_start();
 	return home_wait();
@@ -384,7 +385,7 @@ static uint8_t exec_home(void)
 	mo_reset_home_hits();
 	uint32_t interval = interval_for(settings[SET_HOMING_RATE]);
 	uint32_t chunk_max = 0x7fffffffUL / interval;
-	uint8_t seek_neg = (uint8_t)(~settings[SET_HOMING_DIR] & 3);
+	uint8_t seek_neg = seek_neg_mask();
 	uint32_t left = (uint32_t)settings[SET_TRAVEL];
 	uint8_t result = FB_OK;
 	while (left && (mo_home_hits() & 3u) != 3u) {
@@ -411,7 +412,6 @@ static uint8_t exec_home(void)
 	int32_t home[2] = { settings[SET_HOME_A], settings[SET_HOME_B] };
 	mo_set_pos(home);
 	sync_plan();
-	mo_set_endstops_enabled(1);
 	alarm = 0;
 	return FB_OK;
 }

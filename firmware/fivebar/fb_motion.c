@@ -22,11 +22,10 @@ static volatile uint8_t q_head; /* written by the main loop */
 static volatile uint8_t q_tail; /* written by the step interrupt */
 
 /* generator state, owned by the step interrupt while running */
-static uint32_t s_now, s_end;
-static uint32_t s_next[2], s_q[2], s_r2[2], s_den[2], s_err[2];
-static uint32_t s_line;
-static uint8_t s_due, s_dirs, s_type, s_have, s_power, s_home_axes;
-static uint8_t s_es_last, s_es_enabled;
+static fb_block_t *volatile cur; /* executing block (still in the queue), or 0 */
+static uint32_t s_now;           /* cycle of the pending event within cur */
+static uint8_t s_due;            /* motors stepping at that event */
+static uint8_t s_home_axes, s_es_enabled, s_seek_neg;
 static volatile uint8_t s_running, s_alarm, s_home_hits, s_laser;
 static volatile int32_t s_pos[2];
 static volatile uint32_t s_done_line, s_underruns;
@@ -35,11 +34,10 @@ void mo_init(void)
 {
 	board_timer_stop();
 	q_head = q_tail = 0;
-	s_now = s_end = 0;
+	cur = 0;
+	s_now = 0;
 	s_due = 0;
-	s_have = 0;
 	s_running = 0;
-	s_power = 0;
 	s_laser = 0;
 	s_done_line = 0;
 	s_underruns = 0;
@@ -47,6 +45,15 @@ void mo_init(void)
 }
 
 uint8_t mo_queue_count(void) { return (uint8_t)((q_head - q_tail) & 0xffu); }
+
+uint8_t mo_queue_waiting(void)
+{
+	uint8_t sreg = board_irq_save();
+	uint8_t n = (uint8_t)(mo_queue_count() - (cur ? 1u : 0u));
+	board_irq_restore(sreg);
+	return n;
+}
+
 uint8_t mo_queue_free(void) { return (uint8_t)(CFG_QUEUE_SIZE - mo_queue_count()); }
 fb_block_t *mo_slot(void) { return &queue[q_head & QMASK]; }
 void mo_push(void) { q_head = (uint8_t)(q_head + 1u); }
@@ -65,28 +72,39 @@ static uint8_t prep_axis(fb_block_t *b, uint8_t i, int32_t d, uint32_t min_inter
 	} else {
 		n = (uint32_t)d;
 	}
-	b->n[i] = n;
 	if (n == 0) {
-		b->q[i] = 0;
-		b->m[i] = 0;
+		b->next[i] = MO_NEVER;
+		b->err[i] = b->q[i] = b->r2[i] = 0;
+		b->den[i] = 1;
 		return FB_OK;
 	}
-	b->q[i] = b->cycles / n;
-	b->m[i] = b->cycles % n;
-	if (b->q[i] < min_interval)
+	uint32_t q = b->cycles / n, m = b->cycles - q * n;
+	if (q < min_interval)
 		return FB_ERR_TOO_FAST;
+	b->q[i] = q;
+	b->r2[i] = m << 1;
+	b->den[i] = n << 1;
+	/* step 1 at floor(C / 2n) with remainder C % 2n: see the header */
+	b->next[i] = q >> 1;
+	b->err[i] = (q & 1u) ? n + m : m;
 	return FB_OK;
 }
 
-uint8_t mo_prepare(fb_block_t *b, int32_t da, int32_t db, uint32_t p_us, uint32_t min_interval)
+uint8_t mo_prepare_cycles(fb_block_t *b, int32_t da, int32_t db, uint32_t cycles,
+			  uint32_t min_interval)
 {
 	b->type = BLK_MOVE;
 	b->dirs = 0;
-	b->cycles = p_us * (FB_F_CPU / 1000000UL);
+	b->cycles = cycles;
 	uint8_t st = prep_axis(b, 0, da, min_interval);
 	if (st == FB_OK)
 		st = prep_axis(b, 1, db, min_interval);
 	return st;
+}
+
+uint8_t mo_prepare(fb_block_t *b, int32_t da, int32_t db, uint32_t p_us, uint32_t min_interval)
+{
+	return mo_prepare_cycles(b, da, db, p_us * (FB_F_CPU / 1000000UL), min_interval);
 }
 
 FB_ALWAYS_INLINE void set_laser(uint8_t p)
@@ -99,9 +117,9 @@ void mo_start(void)
 {
 	uint8_t sreg = board_irq_save();
 	if (!s_running && q_head != q_tail) {
-		s_now = s_end = 0;
+		cur = 0;
+		s_now = 0;
 		s_due = 0;
-		s_have = 0;
 		s_running = 1;
 		board_timer_start(64);
 	}
@@ -113,7 +131,11 @@ void mo_stop(void)
 	uint8_t sreg = board_irq_save();
 	board_timer_stop();
 	s_running = 0;
-	s_have = 0;
+	if (cur) {
+		/* the interrupted block is dropped */
+		q_tail = (uint8_t)(q_tail + 1u);
+		cur = 0;
+	}
 	s_due = 0;
 	set_laser(0);
 	board_irq_restore(sreg);
@@ -132,154 +154,133 @@ void mo_resume(void)
 {
 	uint8_t sreg = board_irq_save();
 	if (s_running) {
-		if (s_have)
-			set_laser(s_power);
+		if (cur)
+			set_laser(cur->power);
 		board_timer_resume();
 	}
 	board_irq_restore(sreg);
 }
 
-/* Load the next block(s) from the queue; 0 when none is left. */
-static __attribute__((noinline)) uint8_t load_next(void)
+/*
+ * Segment boundary: retire the finished block, apply queued G92/M17/M18,
+ * point at the next segment.  Returns it, or 0 when the queue is empty.
+ */
+FB_ALWAYS_INLINE fb_block_t *boundary(void)
 {
-	for (;;) {
-		uint8_t t = q_tail;
-		if (t == q_head)
+	uint8_t t = q_tail;
+	if (cur) {
+		s_done_line = cur->line;
+		t = (uint8_t)(t + 1u);
+		cur = 0;
+	}
+	for (;; t = (uint8_t)(t + 1u)) {
+		if (t == q_head) {
+			q_tail = t;
+			s_running = 0;
+			s_underruns++;
+			set_laser(0);
 			return 0;
-		const fb_block_t *b = &queue[t & QMASK];
+		}
+		fb_block_t *b = &queue[t & QMASK];
 		switch (b->type) {
 		case BLK_SETPOS:
-			s_pos[0] = (int32_t)b->n[0];
-			s_pos[1] = (int32_t)b->n[1];
+			s_pos[0] = (int32_t)b->q[0];
+			s_pos[1] = (int32_t)b->q[1];
 			s_done_line = b->line;
-			q_tail = (uint8_t)(t + 1u);
 			continue;
 		case BLK_ENABLE:
 		case BLK_DISABLE:
 			board_enable_motors(b->type == BLK_ENABLE);
 			s_done_line = b->line;
-			q_tail = (uint8_t)(t + 1u);
 			continue;
 		default:
 			break;
 		}
-		s_type = b->type;
-		s_dirs = b->dirs;
-		board_set_dirs(s_dirs);
-		s_end = b->cycles;
-		s_line = b->line;
-		s_power = b->power;
-		s_home_axes = 0;
-		for (uint8_t i = 0; i < 2; i++) {
-			uint32_t n = b->n[i];
-			if (n == 0) {
-				s_next[i] = MO_NEVER;
-				continue;
-			}
-			uint32_t q = b->q[i], m = b->m[i];
-			s_home_axes |= (uint8_t)(1u << i);
-			s_q[i] = q;
-			s_r2[i] = m << 1;
-			s_den[i] = n << 1;
-			/* step 1 at floor(C / 2n): see the header */
-			s_next[i] = q >> 1;
-			s_err[i] = (q & 1u) ? n + m : m;
-		}
-		q_tail = (uint8_t)(t + 1u);
-		s_have = 1;
+		q_tail = t;
+		board_set_dirs(b->dirs);
+		s_home_axes = (uint8_t)((b->next[0] != MO_NEVER ? 1u : 0u) |
+					(b->next[1] != MO_NEVER ? 2u : 0u));
 		s_now = 0;
-		set_laser(s_power);
-		return 1;
+		cur = b;
+		set_laser(b->power);
+		return b;
 	}
+}
+
+/* Endstops while stepping: homing stops, or the alarm; 0 when stopped. */
+FB_ALWAYS_INLINE uint8_t check_endstops(fb_block_t *b, uint8_t due)
+{
+	uint8_t es = board_endstops();
+	if (b->type == BLK_HOME) {
+		uint8_t hit = (uint8_t)(es & due & s_home_axes);
+		if (hit) {
+			s_home_hits |= hit;
+			if (hit & 1u)
+				b->next[0] = MO_NEVER;
+			if (hit & 2u)
+				b->next[1] = MO_NEVER;
+			if ((s_home_hits & s_home_axes) == s_home_axes)
+				b->cycles = s_now + 1u;
+		}
+	} else if (es & due & (uint8_t)~(b->dirs ^ s_seek_neg)) {
+		/* pressed, and this motor just stepped towards its switch */
+		s_alarm = FB_ALARM_ENDSTOP;
+		s_running = 0;
+		q_tail = (uint8_t)(q_tail + 1u);
+		cur = 0;
+		set_laser(0);
+		return 0;
+	}
+	return 1;
 }
 
 /*
  * One step of motor i.  No step counter is needed: after the last step
  * (k = n) the next time, floor((2n+1)C/2n), is >= C, past the segment end.
  */
-FB_ALWAYS_INLINE void step_axis(uint8_t i)
+FB_ALWAYS_INLINE void step_axis(fb_block_t *b, uint8_t i)
 {
-	if (s_dirs & (1u << i))
+	if (b->dirs & (1u << i))
 		s_pos[i]--;
 	else
 		s_pos[i]++;
-	uint32_t e = s_err[i] + s_r2[i];
-	uint32_t t = s_next[i] + s_q[i];
-	if (e >= s_den[i]) {
-		e -= s_den[i];
+	uint32_t e = b->err[i] + b->r2[i];
+	uint32_t t = b->next[i] + b->q[i];
+	if (e >= b->den[i]) {
+		e -= b->den[i];
 		t++;
 	}
-	s_err[i] = e;
-	s_next[i] = t;
-}
-
-/* Segment boundary: finish the block, load the next; 0 when stopped. */
-static __attribute__((noinline)) uint8_t boundary(void)
-{
-	if (s_have) {
-		s_done_line = s_line;
-		s_have = 0;
-	}
-	if (!load_next()) {
-		s_running = 0;
-		s_underruns++;
-		set_laser(0);
-		return 0;
-	}
-	return 1;
-}
-
-/* Endstops while stepping: homing stops, or the alarm; 0 when stopped. */
-static __attribute__((noinline)) uint8_t check_endstops(uint8_t due)
-{
-	uint8_t es = board_endstops();
-	if (s_type == BLK_HOME) {
-		uint8_t hit = (uint8_t)(es & due & s_home_axes);
-		if (hit) {
-			s_home_hits |= hit;
-			if (hit & 1u)
-				s_next[0] = MO_NEVER;
-			if (hit & 2u)
-				s_next[1] = MO_NEVER;
-			if ((s_home_hits & s_home_axes) == s_home_axes)
-				s_end = s_now + 1u;
-		}
-	} else if (es & (uint8_t)~s_es_last) {
-		s_es_last = es;
-		s_alarm = FB_ALARM_ENDSTOP;
-		s_running = 0;
-		s_have = 0;
-		set_laser(0);
-		return 0;
-	}
-	s_es_last = es;
-	return 1;
+	b->err[i] = e;
+	b->next[i] = t;
 }
 
 uint16_t mo_event(void)
 {
+	fb_block_t *b = cur;
 	uint8_t due = s_due;
 	if (due) {
 		board_steps_high(due);
 		if (due & 1u)
-			step_axis(0);
+			step_axis(b, 0);
 		if (due & 2u)
-			step_axis(1);
-		if ((s_es_enabled || s_type == BLK_HOME) && !check_endstops(due))
+			step_axis(b, 1);
+		if ((s_es_enabled || b->type == BLK_HOME) && !check_endstops(b, due))
 			return 0;
-	} else if (s_now == s_end && !boundary()) {
-		return 0;
+	} else if (!b || s_now == b->cycles) {
+		b = boundary();
+		if (!b)
+			return 0;
 	}
-	uint32_t t = s_end;
+	uint32_t t = b->cycles;
 	uint8_t m = 0;
-	if (s_next[0] < t) {
-		t = s_next[0];
+	if (b->next[0] < t) {
+		t = b->next[0];
 		m = 1;
 	}
-	if (s_next[1] < t) {
-		t = s_next[1];
+	if (b->next[1] < t) {
+		t = b->next[1];
 		m = 2;
-	} else if (m && s_next[1] == t) {
+	} else if (m && b->next[1] == t) {
 		m = 3;
 	}
 	t -= s_now;
@@ -329,11 +330,11 @@ uint32_t mo_underruns(void)
 
 uint8_t mo_laser(void) { return s_laser; }
 
-void mo_set_endstops_enabled(uint8_t on)
+void mo_set_endstops(uint8_t on, uint8_t seek_neg)
 {
 	uint8_t sreg = board_irq_save();
 	s_es_enabled = on;
-	s_es_last = board_endstops();
+	s_seek_neg = seek_neg & 3u;
 	board_irq_restore(sreg);
 }
 

@@ -22,15 +22,23 @@ enum fb_block_type {
 	BLK_DISABLE     /* M18 */
 };
 
+/*
+ * One queue entry.  The main loop fills every field (all divisions happen
+ * there); while the block executes, the step interrupt updates next[] and
+ * err[] in place, so starting a segment copies nothing.
+ * For BLK_SETPOS the new position is in q[] (as int32).
+ */
 typedef struct {
-	uint32_t cycles;  /* segment duration in CPU cycles */
-	uint32_t n[2];    /* steps per motor (SETPOS: new position) */
-	uint32_t q[2];    /* cycles / n */
-	uint32_t m[2];    /* cycles % n */
-	uint32_t line;    /* line number of the command */
-	uint8_t type;     /* enum fb_block_type */
-	uint8_t dirs;     /* bit set = motor steps negative */
-	uint8_t power;    /* laser power during the segment */
+	uint32_t next[2];  /* cycle of the motor's next step within the segment */
+	uint32_t err[2];   /* Bresenham remainder of that time, < den */
+	uint32_t q[2];     /* cycles / n: whole cycles between steps */
+	uint32_t r2[2];    /* 2 * (cycles % n) */
+	uint32_t den[2];   /* 2 * n */
+	uint32_t cycles;   /* segment duration in CPU cycles */
+	uint32_t line;     /* line number of the command */
+	uint8_t type;      /* enum fb_block_type */
+	uint8_t dirs;      /* bit set = motor steps negative */
+	uint8_t power;     /* laser power during the segment */
 } fb_block_t;
 
 #define MO_NEVER 0xffffffffUL
@@ -38,8 +46,10 @@ typedef struct {
 /* Reset the queue and the generator (the motors keep their position). */
 void mo_init(void);
 
-/* Queue: the main loop fills mo_slot() and then calls mo_push(). */
+/* Queue: the main loop fills mo_slot() and then calls mo_push().  The count
+ * includes the block executing now; mo_queue_waiting() does not. */
 uint8_t mo_queue_count(void);
+uint8_t mo_queue_waiting(void);
 uint8_t mo_queue_free(void);
 fb_block_t *mo_slot(void);
 void mo_push(void);
@@ -47,12 +57,14 @@ void mo_push(void);
 void mo_clear_queue(void);
 
 /*
- * Fill a MOVE block for deltas da/db over p_us microseconds.  Returns FB_OK,
- * or FB_ERR_TOO_FAST when a motor would need an interval below min_interval
- * cycles between steps.
+ * Fill a MOVE block for deltas da/db over p_us microseconds (or over a
+ * number of CPU cycles).  Returns FB_OK, or FB_ERR_TOO_FAST when a motor
+ * would need an interval below min_interval cycles between steps.
  */
 uint8_t mo_prepare(fb_block_t *b, int32_t da, int32_t db, uint32_t p_us,
 		   uint32_t min_interval);
+uint8_t mo_prepare_cycles(fb_block_t *b, int32_t da, int32_t db, uint32_t cycles,
+			  uint32_t min_interval);
 
 /* Start executing the queue (no-op while running). */
 void mo_start(void);
@@ -73,8 +85,10 @@ void mo_set_pos(const int32_t pos[2]);
 uint32_t mo_done_line(void);
 uint32_t mo_underruns(void);
 uint8_t mo_laser(void);
-/* Endstop supervision outside homing (the $7 setting). */
-void mo_set_endstops_enabled(uint8_t on);
+/* Endstop supervision outside homing (the $7 setting): a motor stepping
+ * towards its switch (negative where seek_neg has its bit) while the switch
+ * is pressed raises FB_ALARM_ENDSTOP; stepping away is allowed. */
+void mo_set_endstops(uint8_t on, uint8_t seek_neg);
 /* Alarm raised by the generator (0 = none); reading does not clear. */
 uint8_t mo_alarm(void);
 void mo_clear_alarm(void);

@@ -316,12 +316,9 @@ static void test_homing_block(void)
 	mo_set_pos(zero);
 	mo_reset_home_hits();
 	fb_block_t *b = mo_slot();
-	memset(b, 0, sizeof(*b));
+	CHECK(mo_prepare_cycles(b, -1000, -1000, 1000u * 800u, 400) == FB_OK, "home block");
 	b->type = BLK_HOME;
-	b->dirs = 3;
-	b->cycles = 1000u * 800u;
-	b->n[0] = b->n[1] = 1000;
-	b->q[0] = b->q[1] = 800;
+	b->power = 0;
 	mo_push();
 	mo_start();
 	fake_endstops = 1;
@@ -340,20 +337,29 @@ static void test_homing_block(void)
 
 static void test_endstop_alarm(void)
 {
-	static const seg_t job[] = { { 100, 0, 10000, 255 } };
+	static const seg_t job[] = { { 100, 0, 10000, 255 }, { 50, 0, 10000, 0 } };
 	fake_reset();
 	mo_init();
-	mo_set_endstops_enabled(1);
-	queue_segments(job, 1, 400);
+	mo_set_endstops(1, 1);
+	queue_segments(job, 2, 400);
 	mo_start();
 	fake_run(50000);
-	fake_endstops = 2;
+	fake_endstops = 3;
+	fake_run(UINT64_MAX / 2);
+	CHECK(mo_alarm() == 0 && fake_nsteps == 150,
+	      "A moving away from its switch and B standing still raise no alarm");
+	fake_reset();
+	mo_init();
+	static const seg_t back[] = { { 10, 0, 10000, 255 }, { -100, 0, 10000, 255 } };
+	queue_segments(back, 2, 400);
+	mo_start();
+	fake_endstops = 1;
 	fake_run(UINT64_MAX / 2);
 	CHECK(mo_alarm() == FB_ALARM_ENDSTOP, "alarm %u", mo_alarm());
 	CHECK(!mo_running() && fake_laser == 0, "stopped, laser off");
-	CHECK(fake_nsteps < 100, "motion stopped early");
+	CHECK(fake_nsteps == 11, "stopped on the first step towards the switch: %zu", fake_nsteps);
 	mo_clear_alarm();
-	mo_set_endstops_enabled(0);
+	mo_set_endstops(0, 3);
 }
 
 /* ---- the whole protocol on the fake board -------------------------------------------------- */

@@ -279,10 +279,18 @@ def test_endstop_outside_homing_raises_alarm(start_device: Callable[..., Device]
     assert AlarmPush(30) in session.messages
     assert session.send(protocol.g1(0, 0, 1000)) == ErrorReply(14)
     assert session.send("$X") == Ok()
-    assert session.status().state == "Idle"
+    assert (session.status().state, session.status().laser) == ("Idle", 0)
+    # moving away from the pressed switch is allowed ...
+    assert session.send("M5") == Ok()
+    assert session.send(protocol.g1(0, 0, 100_000)) == Ok()
+    assert (session.wait_idle().a, session.status().state) == (0, "Idle")
+    # ... moving into it again is not
+    assert session.send(protocol.g1(-300, 0, 100_000)) == Ok()
+    assert session.wait_state({"Alarm"}).a == -100
     trace = dev.finish()
+    assert [p for _, p in trace.positions("A")].count(-100) == 2
     assert min(p for _, p in trace.positions("A")) == -100
-    assert trace.laser_intervals()[-1][1] <= trace.steps("A")[-1].cycle + 5000
+    assert trace.laser_intervals()[-1][1] <= trace.steps("A")[99].cycle + 5000
 
 
 def test_host_silence_turns_the_laser_off(device: Device) -> None:
