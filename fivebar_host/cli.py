@@ -368,3 +368,44 @@ def design(page_text: str, margin_deg: float | None, motor_spacing: str | None,
     output.write_text(text, encoding="utf-8")
     click.echo(f"wrote {output} (rank 1); check it with: fivebar workspace --config {output} "
                f"--page {pw:g}x{ph:g}")
+
+
+@main.group()
+def linkage() -> None:
+    """General linkages through the n-bar solver (mechanism files: docs/mechanisms.md)."""
+
+
+@linkage.command("simulate")
+@click.argument("file", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--steps", type=click.IntRange(min=1), default=None,
+              help="Input steps to take (default: the file's [simulation] steps).")
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Write every step (inputs, joints, residual, status) to a .csv or .json.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
+              default=None, help="Draw the mechanism and the tracer curve (.png, .svg, .pdf).")
+def linkage_simulate(file: Path, steps: int | None, output: Path | None,
+                     plot_path: Path | None) -> None:
+    """Simulate the mechanism FILE from its initial pose in equal input steps.
+
+    Prints a summary; a motion limit is reported with its input value (exit 0), inconsistent
+    constraints (nothing could move) exit with 1, an unusable file with 2.
+    """
+    from fivebar_host.linkage import load_mechanism, plot_simulation, summary, write_result
+    from kinematics.nbar import MechanismError, sweep
+
+    if output is not None and output.suffix.lower() not in (".csv", ".json"):
+        _fail(f"{output}: -o must end in .csv or .json")
+        return
+    try:
+        mech = load_mechanism(file)
+    except MechanismError as e:
+        _fail(str(e))
+        return
+    sim = sweep(mech, steps)
+    click.echo(summary(sim))
+    if output is not None:
+        click.echo(f"wrote {write_result(sim, output)}")
+    if plot_path is not None:
+        click.echo(f"wrote {plot_simulation(sim, plot_path)}")
+    if any(lim.kind == "inconsistent" for lim in sim.limits):
+        sys.exit(1)

@@ -76,3 +76,33 @@ def test_summary_reports_limits_and_adjustments() -> None:
     text = summary(sim)
     assert "motion limit" in text and "projected onto the unit sphere" in text
     assert "tracer J8" in text
+
+
+def test_cli_linkage_simulate(tmp_path: Path) -> None:
+    from click.testing import CliRunner
+
+    from fivebar_host.cli import main
+
+    out, png = tmp_path / "r.json", tmp_path / "r.png"
+    res = CliRunner().invoke(main, ["linkage", "simulate", str(MECH / "five_ss.toml"),
+                                    "--steps", "30", "-o", str(out), "--plot", str(png)])
+    assert res.exit_code == 0, res.output
+    assert "18 unknowns, 18 equations" in res.output and "31 rows, 31 ok" in res.output
+    assert len(json.loads(out.read_text())["steps"]) == 31 and png.stat().st_size > 10_000
+
+
+def test_cli_linkage_reports_limits_and_refuses_bad_files(tmp_path: Path) -> None:
+    from click.testing import CliRunner
+
+    from fivebar_host.cli import main
+
+    runner = CliRunner()
+    res = runner.invoke(main, ["linkage", "simulate", str(MECH / "spherical_watt1.toml")])
+    assert res.exit_code == 0 and res.output.count("motion limit") == 2
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[mechanism]\nkind = 'planar'\n")
+    res = runner.invoke(main, ["linkage", "simulate", str(bad)])
+    assert res.exit_code == 2 and "bad.toml" in res.output
+    res = runner.invoke(main, ["linkage", "simulate", str(MECH / "five_ss.toml"), "-o",
+                               str(tmp_path / "x.txt")])
+    assert res.exit_code == 2 and ".csv or .json" in res.output

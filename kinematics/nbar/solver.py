@@ -39,6 +39,8 @@ CONTINUITY = 0.5
 LOCK_TOLERANCE = 1e-7
 #: Largest sum of |Lagrange weights| accepted for the predictor (bounds noise amplification).
 MAX_WEIGHT = 16.0
+#: Several inputs: a turn of the input path sharper than 10° restarts the predictor.
+CORNER_COS = math.cos(math.radians(10.0))
 
 
 class Status(IntEnum):
@@ -154,9 +156,12 @@ class _Tracker:
         self.last_m2 = 0.0  # predicted motion² and parameter step of the last accepted step
         self.last_h = 0.0
         self.origin = self.u.copy()
-        self.direction = np.zeros_like(self.u)
+        self.direction = np.zeros_like(self.u)  # several inputs: direction of the last step
+        self.arc = 0.0  # several inputs: arc length of the input path to the current state
         self.line: FloatArray | None = None  # sweeps: parameter = step index along `line`
         self.tangent_cache: FloatArray | None = None
+        self.s_new = self.h_new = 0.0  # path parameter and length of the step being tried
+        self.e_new = self.direction
         sysm = self.sys
         self.hs = sysm.hs
         self.m = sysm.m
@@ -191,11 +196,13 @@ class _Tracker:
             self.x[n + nd: -1] = sq
 
     def _param(self, u: FloatArray) -> float:
+        """Path parameter of input u reached from the current state: the step index along a
+        sweep, the input itself for one input, else the arc length along the input path."""
         if self.line is not None:
             return float((u - self.origin) @ self.line)
         if self.single:
             return float(u[0])
-        return float((u - self.origin) @ self.direction)
+        return self.arc + float(np.linalg.norm(u - self.u))
 
     def _push(self, q: FloatArray, s: float) -> None:
         hs = self.hist_s
@@ -216,8 +223,8 @@ class _Tracker:
             self.run = len(hs)
 
     def _reset_history(self, direction: FloatArray) -> None:
-        self.origin = self.u.copy()
         self.direction = direction
+        self.arc = 0.0
         self.hist_s = []
         self._push(self.q, 0.0)
 
@@ -256,16 +263,27 @@ class _Tracker:
         """Newton start for input u_new: polynomial extrapolation along the input path through
         the last states (up to HISTORY equally spaced ones, else up to four with bounded
         Lagrange weights), or the tangent when fewer than two lie on the current line."""
-        if not self.single and self.line is None:
+        if self.line is not None:
+            s_new = float((u_new - self.origin) @ self.line)
+            self.h_new = abs(s_new - self.hist_s[-1])
+        elif self.single:
+            s_new = float(u_new[0])
+            self.h_new = abs(s_new - self.hist_s[-1])
+        else:
+            # Several inputs along a path: extrapolate in arc length while the path turns
+            # gently; at a corner (> 10°) restart from the tangent.
             du = u_new - self.u
-            nrm = float(np.linalg.norm(du))
+            nrm = math.sqrt(float(du @ du))
             e = du / nrm if nrm > 0 else du
-            if len(self.hist_s) < 2 or abs(float(e @ self.direction)) < 1.0 - 1e-12:
+            if len(self.hist_s) < 2 or float(e @ self.direction) < CORNER_COS:
                 self._reset_history(e)
+            s_new = self.arc + nrm
+            self.h_new = nrm
+            self.e_new = e
+        self.s_new = s_new
         hs = self.hist_s
         k = len(hs)
         if k >= 2:
-            s_new = self._param(u_new)
             h = s_new - hs[-1]
             if self.run >= 2 and abs(h - (hs[-1] - hs[-2])) <= 1e-9 * abs(h):
                 return np.asarray(_UNIFORM[self.run, self.slot][0] @ self.ring,
@@ -307,13 +325,15 @@ class _Tracker:
             c2 = float(dc @ dc)
         if c2 > CONTINUITY * CONTINUITY * m2 + self.floor2:
             return False, res.iterations, res.residual, "discontinuous"
-        s_new = self._param(u_new)
-        h = (abs(s_new - self.hist_s[-1]) if self.single or self.line is not None
-             else float(np.linalg.norm(u_new - self.u)))
+        s_new, h = self.s_new, self.h_new
         if self.last_m2 > 0.0 and m2 > (MAX_SPEEDUP * h / self.last_h) ** 2 * self.last_m2 \
                 + self.floor2:
             return False, res.iterations, res.residual, "discontinuous"
         self.last_m2, self.last_h = m2, h
+        if not self.single and self.line is None:
+            if h > 0:
+                self.direction = self.e_new
+            self.arc = s_new
         self.u = u_new
         self.q = res.q
         self.tangent_cache = None
@@ -487,8 +507,9 @@ def simulate(mech: Mechanism, inputs: ArrayLike, *, tolerance: float | None = No
     status = [Status.UNREACHED] * n_rows
     limits: list[LimitReport] = []
     locked = _locked(tr)
+    same = np.all(u_all == np.vstack((tr.u, u_all[:-1])), axis=1)  # input unchanged
     for k in range(n_rows):
-        if np.array_equal(u_all[k], tr.u):
+        if same[k] and (k == 0 or status[k - 1] <= Status.SUBDIVIDED):
             st, it, sb, why, failed, res = Status.OK, 0, 0, "", tr.u, 0.0
         elif locked is not None:
             status[k] = Status.INCONSISTENT
