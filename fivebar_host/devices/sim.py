@@ -99,6 +99,7 @@ class Emulator:
         self.proc: subprocess.Popen[str] | None = None
         self.pty: str | None = None
         self.stats = ""
+        self.returncode: int | None = None
 
     def command(self) -> list[str]:
         """The harness command line (waits for the client: ``-w``)."""
@@ -148,6 +149,7 @@ class Emulator:
             self.proc.kill()
             _, err = self.proc.communicate()
         self.stats = err
+        self.returncode = self.proc.returncode
         self.proc = None
         return err
 

@@ -310,3 +310,11 @@ def test_host_silence_turns_the_laser_off(device: Device) -> None:
     # silence counts from the last byte received (the G1 line); the laser came
     # on when the queue started, CFG_START_DELAY_MS = 20 ms later
     assert 75 * 16_000 <= off - on <= 110 * 16_000, f"laser on for {(off - on) / 16e3:.1f} ms"
+
+
+def test_harness_stops_cleanly_on_sigterm(device: Device) -> None:
+    assert device.session.send("G1 A10 P1000") == Ok()
+    device.session.wait_idle()
+    device.finish()
+    assert device.emulator.returncode == 0
+    assert "MHz emulated" in device.emulator.stats
