@@ -1,8 +1,11 @@
 ; fivebar example: a laser job written in *machine* coordinates (mm, motor M1 at the origin),
-; below and to the right of the motors. Made for this project. Run it as written:
-;   fivebar plot examples/underside_machine_coords.gcode --origin 0,0 --mode auto --dry-run
+; below and to the right of the motors. Made for this project. It is only reachable with the
+; pen below the elbows (assembly "-"), so it needs a machine built that way:
+;   fivebar plot examples/underside_machine_coords.gcode --origin 0,0 --mode auto --dry-run \
+;     --config configs/underside.toml
 ; The profile's working mode "+-" cannot reach it within the joint limits; --mode auto finds a
-; mode that can ("++" with the default profile) and says why the others fail.
+; mode that can ("++") and says why the others fail. With the default profile (assembly "+")
+; every mode refuses it, naming the assembly.
 G21 G90 G17
 G0 X75 Y-46
 M3 S200

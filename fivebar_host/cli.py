@@ -99,13 +99,16 @@ def ik(x_mm: float, y_mm: float, mode: str | None, config_path: Path | None) -> 
 @main.command("fk")
 @click.argument("theta1_deg", type=float)
 @click.argument("theta2_deg", type=float)
-@click.option("--assembly", type=click.Choice(["+", "-"]), default="+",
-              help="Assembly mode: '+' puts P left of R1→R2.")
+@click.option("--assembly", type=click.Choice(["+", "-"]), default=None,
+              help="Assembly mode: '+' puts P left of R1→R2 (default: the profile's).")
 @config_option
 @handle_errors
-def fk(theta1_deg: float, theta2_deg: float, assembly: str, config_path: Path | None) -> None:
+def fk(theta1_deg: float, theta2_deg: float, assembly: str | None,
+       config_path: Path | None) -> None:
     """Pen position for motor angles THETA1_DEG, THETA2_DEG (from +x, counter-clockwise)."""
-    fb = _profile(config_path).geometry
+    prof = _profile(config_path)
+    fb = prof.geometry
+    assembly = assembly or prof.kinematics.assembly
     th = np.radians([theta1_deg, theta2_deg])
     p = np.asarray(fb.forward(th, assembly))
     modes = fb.mode_of(p, th)[0]
@@ -284,7 +287,8 @@ def workspace(config_path: Path | None, output: Path, no_plot: bool, mode: str |
         rep = workspace_report(
             prof.geometry, mode or kin.working_mode, kin.min_type1_margin_rad,
             kin.min_type2_margin_rad, prof.motors.limits_rad, prof.motors.rad_per_step,
-            delta_rad=math.radians(delta_deg), resolution_mm=resolution, page=page)
+            delta_rad=math.radians(delta_deg), resolution_mm=resolution, page=page,
+            assembly=kin.assembly)
     except NoSafeRegionError as e:
         _fail(str(e))
         return

@@ -13,8 +13,12 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from kinematics.fivebar import WORKING_MODES, FiveBar
 
+#: Assembly modes: "+" iff the pen lies left of the directed line R1→R2 (elbow to elbow).
+ASSEMBLY_MODES = ("+", "-")
 DEFAULT_PROFILE = Path(__file__).resolve().parent.parent / "configs" / "default.toml"
 
 
@@ -46,9 +50,15 @@ class Motors:
 
 @dataclass(frozen=True)
 class KinematicsCfg:
-    """Working mode and the minimum angular distances to each singularity type."""
+    """Working mode, the assembly mode the machine is built in, and the minimum angular
+    distances to each singularity type.
+
+    `assembly` ("+" iff the pen lies left of the directed line R1→R2) is a fact of the
+    hardware, not a choice per job: a five-bar cannot change it under control (that would
+    pass a type-2 singularity), so every pose of every job must have this sign."""
 
     working_mode: str
+    assembly: str
     min_type1_margin_rad: float
     min_type2_margin_rad: float
 
@@ -222,10 +232,20 @@ def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
     k = _Table(doc, "kinematics", source)
     kin = KinematicsCfg(
         k.choice("working_mode", (*WORKING_MODES, "auto")),
+        k.choice("assembly", ASSEMBLY_MODES),
         math.radians(k.number("min_type1_margin_deg", 0.0, 89.0)),
         math.radians(k.number("min_type2_margin_deg", 0.0, 89.0)),
     )
     k.done()
+    home_fk = geometry.forward_batch(np.array([motors.home_rad]), kin.assembly)
+    if not home_fk.valid[0]:
+        raise ConfigError(f"{m.where('home_deg')} = [{home[0]:g}, {home[1]:g}]: the floating "
+                          "links cannot close the loop at the homed pose (elbows too far "
+                          "apart or too close for b1 and b2)")
+    if geometry.assembly_of(np.array([motors.home_rad]), home_fk.points)[0] == 0:
+        raise ConfigError(f"{m.where('home_deg')} = [{home[0]:g}, {home[1]:g}]: the homed pose "
+                          "is a type-2 singularity (floating links collinear); its assembly "
+                          "mode is undefined")
 
     mo = _Table(doc, "motion", source)
     motion = Motion(

@@ -318,8 +318,10 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
     tol_f = tol / 2.0
     min1, min2, limits = kin.min_type1_margin_rad, kin.min_type2_margin_rad, mot.limits_rad
     file = drawing.file
+    asm = kin.assembly
     pl = layout.place(drawing, fb, mode, min1, min2, limits, origin_mm=opts.origin_mm,
-                      scale=opts.scale, rotate_deg=opts.rotate_deg, fit=opts.fit)
+                      scale=opts.scale, rotate_deg=opts.rotate_deg, fit=opts.fit,
+                      assembly=asm)
     mdraw = drawing.transformed(pl.matrix, pl.offset)
     poly = flatten(mdraw, tol_f)
 
@@ -327,26 +329,19 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
         w = _where(file, drawing, pl, cf.point, prim, what)
         msg = f"{cf.message} (working mode {mode})"
         if cf.reason in ("reach", "joint_limit", "type1_margin", "type2_margin", "assembly"):
-            msg += "; " + layout.does_not_fit_hint(pl, fb, mode, min1, min2, limits)
+            msg += "; " + layout.does_not_fit_hint(pl, fb, mode, min1, min2, limits, asm)
         return JobError(msg, w, cf.reason)
 
-    # Assembly: from the first vertex (inverse kinematics decide it; all must agree).
-    first = poly.points[:1]
-    inv0 = fb.inverse_batch(first, mode)
-    if not inv0.valid[0]:
-        probe = PoseChecker(fb, mode, 1, min1, min2, limits)
-        try:
-            probe.inverse(first)
-        except CheckFailedError as cf:
-            raise fail(cf, int(poly.prim[0])) from None
-    assembly = int(fb.assembly_of(inv0.angles, first)[0]) or 1
+    # Assembly: the machine's, from the profile (every pose must have it; the checker
+    # refuses a point that is only reachable in the other one).
+    assembly = 1 if asm == "+" else -1
     checker = PoseChecker(fb, mode, assembly, min1, min2, limits)
     home = np.array(mot.home_rad, dtype=np.float64).reshape(1, 2)
-    home_fk = fb.forward_batch(home, "+" if assembly > 0 else "-")
-    if not home_fk.valid[0]:
+    home_fk = fb.forward_batch(home, asm)
+    if not home_fk.valid[0]:  # pragma: no cover - the profile parser checks the homed pose
         raise JobError(f"the homed pose {np.degrees(home[0]).round(3).tolist()}° has no pen "
-                       f"position in assembly {'+' if assembly > 0 else '-'} (working mode "
-                       f"{mode})", Where(file=file, what="move from home"), "assembly")
+                       f"position in assembly {asm}", Where(file=file, what="move from home"),
+                       "assembly")
     home_pt = home_fk.points[0]
 
     ch = _prepare_chords(drawing, poly, tol, tol_f, home_pt, opts.keep_order)

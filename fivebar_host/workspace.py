@@ -377,14 +377,17 @@ def _set_toml_value(text: str, table: str, key: str, literal: str, source: str) 
 
 def design_profile_text(base_text: str, base_source: str, cand: DesignCandidate,
                         min_type1_rad: float, min_type2_rad: float) -> str:
-    """The base profile's TOML with the candidate's geometry, working mode, margins and a
-    home pose at the page centre (motor angles in that mode, rounded to 0.1°, within
+    """The base profile's TOML with the candidate's geometry, working mode, assembly mode
+    (the one the page was found in: build the machine that way), margins and a home pose at
+    the page centre (motor angles in that mode, rounded to 0.1°, within
     limits), validated by the profile parser."""
     fb = cand.geometry
     text = base_text
     for key in ("a1", "b1", "a2", "b2", "w"):
         text = _set_toml_value(text, "geometry", key, f"{getattr(fb, key):.1f}", base_source)
     text = _set_toml_value(text, "kinematics", "working_mode", f'"{cand.mode}"', base_source)
+    text = _set_toml_value(text, "kinematics", "assembly", f'"{cand.stats.assembly}"',
+                           base_source)
     text = _set_toml_value(text, "kinematics", "min_type1_margin_deg",
                            f"{math.degrees(min_type1_rad):.6g}", base_source)
     text = _set_toml_value(text, "kinematics", "min_type2_margin_deg",

@@ -1316,27 +1316,33 @@ def _max_disp(d: FloatArray) -> FloatArray:
 def workspace_report(fb: FiveBar, mode: str, min_type1_rad: float, min_type2_rad: float,
                      limits_rad: Limits | None, rad_per_step: float, *,
                      delta_rad: float = math.radians(5.0), resolution_mm: float | None = None,
-                     page: tuple[float, float] | None = None) -> WorkspaceReport:
+                     page: tuple[float, float] | None = None,
+                     assembly: str | None = None) -> WorkspaceReport:
     """Analyse a machine: page rectangle per working mode, then for `mode` ("auto": the mode
     with the largest rectangle) the maps of transmission angle, step and ±δ displacement,
     sensitivity and condition number, the type-2 traces, and the figures over the page.
-    With `page` = (width, height) mm, also place a page of that size (fixed aspect search)."""
+    With `page` = (width, height) mm, also place a page of that size (fixed aspect search).
+    `assembly` ("+"/"-") is the assembly mode the machine is built in: the page rectangles
+    are searched in it only (None: in both, the larger wins — for a machine not yet built)."""
+    _check_assembly(assembly)
     fits: dict[str, PageFit | None] = {}
     for m in WORKING_MODES:
         try:
             fits[m] = find_page_rectangle(fb, m, min_type1_rad, min_type2_rad, limits_rad,
-                                          resolution_mm=resolution_mm)
+                                          resolution_mm=resolution_mm, assembly=assembly)
         except NoSafeRegionError:
             fits[m] = None
     if mode == "auto":
         ranked = [m for m in WORKING_MODES if fits[m] is not None]
         if not ranked:
-            raise NoSafeRegionError("no working mode has a safe region with these margins")
+            asm = "" if assembly is None else f" in assembly {assembly}"
+            raise NoSafeRegionError(f"no working mode has a safe region{asm} with these margins")
         mode = max(ranked, key=lambda m: fits[m].rect.area)  # type: ignore[union-attr]
     fit = fits.get(mode)
     if fit is None:
         raise NoSafeRegionError(
-            f"working mode {mode} has no safe region (margins type 1 ≥ "
+            f"working mode {mode} has no safe region"
+            f"{'' if assembly is None else f' in assembly {assembly}'} (margins type 1 ≥ "
             f"{math.degrees(min_type1_rad):g}°, type 2 ≥ {math.degrees(min_type2_rad):g}°)")
     stats = page_stats(fb, mode, fit.rect, rad_per_step)
     xs, ys = fit.xs, fit.ys

@@ -44,9 +44,15 @@ def test_plot_dry_run_writes_preview_and_report(tmp_path: Path) -> None:
 
 def test_plot_mode_auto_says_which(tmp_path: Path) -> None:
     code, text = run("plot", str(EXAMPLES / "underside_machine_coords.gcode"), "--origin",
-                     "0,0", "--mode", "auto", "--dry-run", "--preview", str(tmp_path / "p.png"))
+                     "0,0", "--mode", "auto", "--dry-run", "--preview", str(tmp_path / "p.png"),
+                     "--config", str(EXAMPLES.parent / "configs" / "underside.toml"))
     assert code == 0, text
-    assert "--mode auto chose ++" in text
+    assert "--mode auto chose ++" in text and "working mode  ++ (assembly -)" in text
+    # the default machine is built in assembly "+": refused, naming the assembly
+    code, text = run("plot", str(EXAMPLES / "underside_machine_coords.gcode"), "--origin",
+                     "0,0", "--mode", "auto", "--dry-run", "--preview", str(tmp_path / "q.png"))
+    assert code != 0 and "only reachable in assembly -" in text
+    assert not (tmp_path / "q.png").exists()
 
 
 def test_plot_without_dry_run_says_link_missing() -> None:

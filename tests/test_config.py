@@ -25,11 +25,16 @@ def test_default_profile_loads_with_units_converted() -> None:
     assert prof.motors.home_rad[0] == pytest.approx(math.radians(120.0))
     assert prof.motors.limits_rad[1] == pytest.approx((math.radians(10), math.radians(170)))
     assert prof.kinematics.min_type2_margin_rad == pytest.approx(math.radians(15.0))
+    assert prof.kinematics.assembly == "+"
     # The home pose must be assemblable: the arms at home_deg close the loop.
     import numpy as np
 
     res = prof.geometry.forward_batch(np.array([prof.motors.home_rad]), "+")
     assert res.valid.all()
+    # ... and in the configured assembly "+" the pen is above the elbows (left of R1→R2).
+    r1, r2 = prof.geometry.elbows(np.array([prof.motors.home_rad]))
+    d, e = r2[0] - r1[0], res.points[0] - r1[0]
+    assert d[0] * e[1] - d[1] * e[0] > 0 and res.points[0, 1] > max(r1[0, 1], r2[0, 1])
 
 
 def _set(doc: dict[str, Any], table: str, key: str, value: Any) -> dict[str, Any]:
@@ -48,6 +53,8 @@ def _set(doc: dict[str, Any], table: str, key: str, value: Any) -> dict[str, Any
     ("motors", "limits_deg", [[10, 5], [10, 170]], r"limits_deg\[0\]: need"),
     ("motors", "endstops", "no", r"\[motors\] endstops: must be true or false"),
     ("kinematics", "working_mode", "+", r"working_mode: must be one of"),
+    ("kinematics", "assembly", "up", r"\[kinematics\] assembly: must be one of \+, -; got 'up'"),
+    ("kinematics", "assembly", 1, r"\[kinematics\] assembly: must be one of \+, -; got 1"),
     ("kinematics", "min_type2_margin_deg", 95.0, r"min_type2_margin_deg: must be ≤ 89"),
     ("motion", "tolerance_mm", 0.0, r"tolerance_mm: must be ≥ 0.0001"),
     ("motion", "draw_feed_mm_s", float("nan"), r"draw_feed_mm_s: must be finite"),
@@ -70,12 +77,33 @@ def test_unknown_and_missing_keys() -> None:
     with pytest.raises(ConfigError, match=r"\[geometry\] b2: missing key"):
         parse_profile(doc, "p.toml")
     doc = _doc()
+    del doc["kinematics"]["assembly"]
+    with pytest.raises(ConfigError, match=r"p.toml: \[kinematics\] assembly: missing key"):
+        parse_profile(doc, "p.toml")
+    doc = _doc()
     del doc["laser"]
     with pytest.raises(ConfigError, match=r"missing table \[laser\]"):
         parse_profile(doc, "p.toml")
     doc = _doc()
     doc["extras"] = {}
     with pytest.raises(ConfigError, match=r"unknown table\(s\): extras"):
+        parse_profile(doc, "p.toml")
+
+
+def test_assembly_minus_parses_and_homed_pose_is_checked() -> None:
+    prof = parse_profile(_set(_doc(), "kinematics", "assembly", "-"), "p.toml")
+    assert prof.kinematics.assembly == "-"
+    # a homed pose whose elbows are further apart than b1 + b2 cannot be assembled
+    doc = _set(_doc(), "motors", "home_deg", [170.0, 10.0])
+    doc["geometry"]["b1"] = doc["geometry"]["b2"] = 40.0
+    with pytest.raises(ConfigError, match=r"\[motors\] home_deg = \[170, 10\]: the floating "
+                                          r"links cannot close the loop"):
+        parse_profile(doc, "p.toml")
+    # elbows exactly b1 + b2 apart: the homed pose is a type-2 singularity
+    doc = _set(_doc(), "motors", "home_deg", [90.0, 90.0])
+    doc["geometry"]["w"] = 180.0
+    with pytest.raises(ConfigError, match=r"home_deg = \[90, 90\]: the homed pose is a type-2 "
+                                          r"singularity"):
         parse_profile(doc, "p.toml")
 
 

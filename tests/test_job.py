@@ -17,7 +17,10 @@ from fivebar_host.steps import step_angles
 from fivebar_host.toolpath.svg import read_svg
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 PROF = load_profile()
+#: The default machine built in the other assembly mode (pen below the elbows).
+UNDERSIDE = load_profile(CONFIGS / "underside.toml")
 
 
 def svg_file(tmp_path: Path, body: str, w: float = 60, h: float = 30) -> Path:
@@ -106,17 +109,38 @@ def test_gcode_error_names_source_line() -> None:
     g = EXAMPLES / "underside_machine_coords.gcode"
     with pytest.raises(JobError) as ei:
         compile_job(g, PROF, CompileOptions(origin_mm=(0.0, 0.0), mode="+-", keep_order=True))
-    assert ei.value.where is not None and ei.value.where.source_line == 9
-    assert "underside_machine_coords.gcode:9" in str(ei.value)
+    assert ei.value.where is not None and ei.value.where.source_line == 12
+    assert "underside_machine_coords.gcode:12" in str(ei.value)
 
 
 def test_mode_auto_picks_a_mode_that_passes_and_says_which() -> None:
     g = EXAMPLES / "underside_machine_coords.gcode"
-    job = compile_job(g, PROF, CompileOptions(origin_mm=(0.0, 0.0), mode="auto"))
-    assert job.mode != "+-"
+    job = compile_job(g, UNDERSIDE, CompileOptions(origin_mm=(0.0, 0.0), mode="auto"))
+    assert job.mode != "+-" and job.assembly == -1
     assert job.notes[0].startswith(f"--mode auto chose {job.mode}")
     assert any("+-:" in n for n in job.notes)
     assert job.max_dev_mm <= job.tolerance_mm + job.step_quantum_mm
+    # every executed pose (quantised steps, interpolated) is in the configured assembly
+    th = step_angles(job.steps, job.home_rad, job.steps_per_rev)
+    q = th[:-1] + 0.5 * np.diff(th, axis=0)
+    fk = UNDERSIDE.geometry.forward_batch(np.concatenate((th, q)), "-")
+    assert fk.valid.all()
+    assert (UNDERSIDE.geometry.assembly_of(np.concatenate((th, q)), fk.points) == -1).all()
+
+
+def test_drawing_only_reachable_in_the_other_assembly_is_refused() -> None:
+    """The default machine is built in assembly "+"; the underside drawing needs "-": every
+    working mode refuses it, and the ones that reach it within the joint limits say why."""
+    g = EXAMPLES / "underside_machine_coords.gcode"
+    with pytest.raises(JobError) as ei:
+        compile_job(g, PROF, CompileOptions(origin_mm=(0.0, 0.0), mode="++", keep_order=True))
+    assert ei.value.reason == "assembly"
+    assert "only reachable in assembly -" in str(ei.value)
+    assert "built in assembly + ([kinematics] assembly)" in str(ei.value)
+    assert ei.value.where is not None and ei.value.where.source_line == 12
+    with pytest.raises(JobError, match=r"no working mode clears every check") as ei:
+        compile_job(g, PROF, CompileOptions(origin_mm=(0.0, 0.0), mode="auto"))
+    assert "only reachable in assembly -" in str(ei.value)
 
 
 def test_executed_path_from_steps_matches_targets() -> None:

@@ -93,12 +93,41 @@ def test_design_then_workspace_confirms_the_page_fits(tmp_path: Path) -> None:
     assert m is not None
     page = Rect(float(m[1]), float(m[2]), 80.0, 50.0)
     fb, k = prof.geometry, prof.kinematics
+    # the profile records the assembly the page was found in (the machine must be built so)
+    assert data["assembly"] == k.assembly
     assert point_safety(fb, k.working_mode, page.sample(0.5), k.min_type1_margin_rad,
                         k.min_type2_margin_rad, prof.motors.limits_rad,
-                        assembly=data["assembly"]).all()
-    pen = np.asarray(fb.forward(np.asarray(prof.motors.home_rad), data["assembly"]))
+                        assembly=k.assembly).all()
+    pen = np.asarray(fb.forward(np.asarray(prof.motors.home_rad), k.assembly))
     # home_deg rounded to 0.1° (≤ 0.05° · ~300 mm/rad per motor), page corner to 0.1 mm.
     assert np.hypot(*(pen - np.asarray(page.center))) < 0.6
+
+
+def test_workspace_searches_the_configured_assembly_only(tmp_path: Path) -> None:
+    """Mode "++" of the default machine has a larger safe rectangle in assembly "-" (below
+    the motors) than in "+"; the machine is built in "+", so `fivebar workspace` reports the
+    "+" one — and the underside profile (assembly "-") the other."""
+    from kinematics.analysis import find_page_rectangle
+
+    prof = load_profile()
+    k = prof.kinematics
+    args = (prof.geometry, "++", k.min_type1_margin_rad, k.min_type2_margin_rad,
+            prof.motors.limits_rad)
+    plus = find_page_rectangle(*args, assembly="+").rect
+    minus = find_page_rectangle(*args, assembly="-").rect
+    assert minus.area > plus.area
+    for cfg, rect, sign in ((None, plus, "+"),
+                            (Path(__file__).resolve().parent.parent / "configs" / "underside.toml",
+                             minus, "-")):
+        js = tmp_path / f"w{sign}.json"
+        extra = ["--config", str(cfg)] if cfg is not None else []
+        code, out = _run(["workspace", "--no-plot", "--mode", "++", "--json", str(js), *extra])
+        assert code == 0, out
+        data = json.loads(js.read_text())
+        assert data["assembly"] == sign
+        got = data["page_rectangle"]
+        assert (got["x0_mm"], got["y0_mm"], got["width_mm"], got["height_mm"]) == pytest.approx(
+            (rect.x0, rect.y0, rect.width, rect.height))
 
 
 def test_design_impossible_page_fails_cleanly(tmp_path: Path) -> None:

@@ -6,8 +6,8 @@ the machine frame (mm, motor M1 at the origin) by a similarity x ↦ s·R(φ)·x
 - `--origin X,Y`: the drawing's origin lands at machine (X, Y) (scale and rotation about the
   drawing origin). The per-point checks then decide whether it can be drawn.
 - default: the drawing's bounding box (after rotation and scale) is centred in the largest
-  singularity-safe rectangle of the drawing's aspect in the working mode
-  (`kinematics.analysis.find_page_rectangle`).
+  singularity-safe rectangle of the drawing's aspect in the working mode and the machine's
+  assembly mode (`kinematics.analysis.find_page_rectangle`).
 - `--fit`: as the default, and scaled so the box fills that rectangle.
 
 `does_not_fit_hint` words the "drawing is W × H mm, the safe area is w × h mm" message used
@@ -58,10 +58,12 @@ class Placement:
 
 def safe_area(fb: FiveBar, mode: str, min_type1_rad: float, min_type2_rad: float,
               limits_rad: tuple[tuple[float, float], tuple[float, float]],
-              aspect: float | None) -> PageFit | None:
-    """The largest safe rectangle (of `aspect` = width/height if given) in `mode`, or None."""
+              aspect: float | None, assembly: str | None = None) -> PageFit | None:
+    """The largest safe rectangle (of `aspect` = width/height if given) in `mode` and
+    `assembly` ("+"/"-"; None: either), or None."""
     try:
-        return find_page_rectangle(fb, mode, min_type1_rad, min_type2_rad, limits_rad, aspect)
+        return find_page_rectangle(fb, mode, min_type1_rad, min_type2_rad, limits_rad, aspect,
+                                   assembly=assembly)
     except NoSafeRegionError:
         return None
 
@@ -69,8 +71,10 @@ def safe_area(fb: FiveBar, mode: str, min_type1_rad: float, min_type2_rad: float
 def place(drawing: Drawing, fb: FiveBar, mode: str, min_type1_rad: float,
           min_type2_rad: float, limits_rad: tuple[tuple[float, float], tuple[float, float]],
           *, origin_mm: tuple[float, float] | None = None, scale: float | None = None,
-          rotate_deg: float = 0.0, fit: bool = False) -> Placement:
-    """Place `drawing` on the machine in working mode `mode` (see module doc)."""
+          rotate_deg: float = 0.0, fit: bool = False,
+          assembly: str | None = None) -> Placement:
+    """Place `drawing` on the machine in working mode `mode` and assembly mode `assembly`
+    (the machine's; None: either) (see module doc)."""
     if scale is not None and not (math.isfinite(scale) and scale > 0):
         raise ValueError(f"--scale must be a positive number; got {scale!r}")
     if not math.isfinite(rotate_deg):
@@ -93,10 +97,12 @@ def place(drawing: Drawing, fb: FiveBar, mode: str, min_type1_rad: float,
     big = max(bw, bh)
     eps = max(big * 1e-3, 1e-6)
     aspect = max(bw, eps) / max(bh, eps)
-    pf = safe_area(fb, mode, min_type1_rad, min_type2_rad, limits_rad, aspect)
+    pf = safe_area(fb, mode, min_type1_rad, min_type2_rad, limits_rad, aspect, assembly)
     if pf is None:
-        raise JobError(f"working mode {mode} has no singularity-safe area at all with these "
-                       "margins and joint limits", Where(file=drawing.file), "does_not_fit")
+        asm = "" if assembly is None else f" in assembly {assembly}"
+        raise JobError(f"working mode {mode} has no singularity-safe area at all{asm} with "
+                       "these margins and joint limits", Where(file=drawing.file),
+                       "does_not_fit")
     area = pf.rect
     if fit:
         s = min(area.width / max(bw, eps), area.height / max(bh, eps))
@@ -115,17 +121,19 @@ def _finish(a: FloatArray, b: FloatArray, s: float, rot_deg: float,
 
 def does_not_fit_hint(pl: Placement, fb: FiveBar, mode: str, min_type1_rad: float,
                       min_type2_rad: float,
-                      limits_rad: tuple[tuple[float, float], tuple[float, float]]) -> str:
+                      limits_rad: tuple[tuple[float, float], tuple[float, float]],
+                      assembly: str | None = None) -> str:
     """'the drawing is 120.0 × 80.0 mm; the largest safe area of that shape in mode +- is
     61.9 × 41.3 mm at (x, y) (largest of any shape: …); try --fit or --scale 0.52'."""
     w, h = pl.size_mm
     eps = max(max(w, h) * 1e-3, 1e-6)
     pf = safe_area(fb, mode, min_type1_rad, min_type2_rad, limits_rad,
-                   max(w, eps) / max(h, eps))
-    anyshape = safe_area(fb, mode, min_type1_rad, min_type2_rad, limits_rad, None)
+                   max(w, eps) / max(h, eps), assembly)
+    anyshape = safe_area(fb, mode, min_type1_rad, min_type2_rad, limits_rad, None, assembly)
     msg = f"the drawing is {w:.1f} × {h:.1f} mm"
     if pf is None or anyshape is None:
-        return msg + f"; working mode {mode} has no safe area"
+        return msg + f"; working mode {mode} has no safe area" + (
+            "" if assembly is None else f" in assembly {assembly}")
     r, q = pf.rect, anyshape.rect
     msg += (f"; the largest safe area of that shape in mode {mode} is {r.width:.1f} × "
             f"{r.height:.1f} mm at ({r.x0:.1f}, {r.y0:.1f}) mm (largest of any shape: "

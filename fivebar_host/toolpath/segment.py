@@ -139,8 +139,11 @@ class PoseChecker:
                     f"(a{i + 1} and b{i + 1} stretched or folded); the minimum is "
                     f"{deg(self.min_type1_rad):g}°")
         if code == ASSEMBLY:
-            return ("the assembly mode would change (the pen crosses the line of the floating "
-                    "links, a type-2 singularity)")
+            other = "-" if self.assembly > 0 else "+"
+            return (f"the pose is only reachable in assembly {other} (the pen on the other side "
+                    f"of the line through the elbows R1, R2, beyond a type-2 singularity); the "
+                    f"machine is built in assembly {'+' if self.assembly > 0 else '-'} "
+                    "([kinematics] assembly), which a five-bar cannot change under control")
         if code == T2:
             return (f"the floating links are {deg(margin[2]):.2f}° from collinear (type-2 "
                     f"singularity); the minimum is {deg(self.min_type2_rad):g}°")
