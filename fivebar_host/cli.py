@@ -132,6 +132,12 @@ def _xy(text: str | None) -> tuple[float, float] | None:
     return x, y
 
 
+laser_option = click.option(
+    "--laser", is_flag=True,
+    help="Laser job: drawing segments carry the profile's power (S > 0). Without it every "
+    "line says S0 (pen plotter: pen down/up = M3/M5 around drawing strokes).")
+
+
 def job_options(fn: F) -> F:
     """The options that choose how a drawing becomes a job (shared by convert and plot)."""
     opts = [
@@ -196,20 +202,25 @@ def handle_job_errors(fn: F) -> F:
               required=True, help="Where to write the firmware lines.")
 @click.option("--relative", is_flag=True,
               help="Relative step moves (G91) instead of absolute targets (G90).")
+@laser_option
 @job_options
 @handle_job_errors
-def convert(drawing: Path, output: Path, relative: bool, config_path: Path | None,
-            mode: str | None, tolerance: float | None, origin_text: str | None,
-            scale: float | None, rotate_deg: float, fit: bool, layers: tuple[str, ...],
-            keep_order: bool) -> None:
-    """Compile DRAWING (SVG or G-code) into firmware-ready step lines (G1 A B P S)."""
+def convert(drawing: Path, output: Path, relative: bool, laser: bool,
+            config_path: Path | None, mode: str | None, tolerance: float | None,
+            origin_text: str | None, scale: float | None, rotate_deg: float, fit: bool,
+            layers: tuple[str, ...], keep_order: bool) -> None:
+    """Compile DRAWING (SVG or G-code) into firmware-ready step lines (G1 A B P S).
+
+    Without --laser the job is a pen plot: S0 on every line."""
     from fivebar_host.job import encode_lines, write_atomic
 
     prof, job = compile_from_cli(drawing, config_path, mode, tolerance, origin_text, scale,
                                  rotate_deg, fit, layers, keep_order)
-    lines = encode_lines(job, prof, relative=relative)
+    lines = encode_lines(job, prof, relative=relative, laser=laser)
     write_atomic(output, "\n".join(lines) + "\n")
-    click.echo(f"wrote {output}: {job.n_segments} segments, mode {job.mode}, "
+    tool = (f"laser (power up to S{int(job.power.max(initial=0))})" if laser
+            else "pen (S0, no laser power)")
+    click.echo(f"wrote {output}: {job.n_segments} segments, mode {job.mode}, {tool}, "
                f"≈ {job.total_time_s:.1f} s, max deviation {job.max_dev_mm:.4f} mm")
 
 
@@ -219,12 +230,13 @@ def convert(drawing: Path, output: Path, relative: bool, config_path: Path | Non
               help="Run everything except the serial link: preview picture and report.")
 @click.option("--preview", "preview_path", type=click.Path(dir_okay=False, path_type=Path),
               default=Path("preview.png"), show_default=True, help="Dry-run picture (PNG).")
+@laser_option
 @job_options
 @handle_job_errors
-def plot(drawing: Path, dry_run: bool, preview_path: Path, config_path: Path | None,
-         mode: str | None, tolerance: float | None, origin_text: str | None,
-         scale: float | None, rotate_deg: float, fit: bool, layers: tuple[str, ...],
-         keep_order: bool) -> None:
+def plot(drawing: Path, dry_run: bool, preview_path: Path, laser: bool,
+         config_path: Path | None, mode: str | None, tolerance: float | None,
+         origin_text: str | None, scale: float | None, rotate_deg: float, fit: bool,
+         layers: tuple[str, ...], keep_order: bool) -> None:
     """Compile and check DRAWING, then plot it (--dry-run: preview and report only)."""
     if not dry_run:
         _fail("plotting on a machine needs the serial link, which is not available in this "
@@ -234,7 +246,7 @@ def plot(drawing: Path, dry_run: bool, preview_path: Path, config_path: Path | N
 
     prof, job = compile_from_cli(drawing, config_path, mode, tolerance, origin_text, scale,
                                  rotate_deg, fit, layers, keep_order)
-    for line in report_lines(job, nbar_opinion(job, prof)):
+    for line in report_lines(job, nbar_opinion(job, prof), laser=laser):
         click.echo(line)
     draw_preview(job, prof, preview_path)
     click.echo(f"preview       {preview_path}")

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from fivebar_host import planner, steps
+from fivebar_host import planner, protocol, steps
 from fivebar_host.config import Profile
 from fivebar_host.errors import InputError, JobError, Where
 from fivebar_host.toolpath import layout, order
@@ -662,34 +662,70 @@ def compile_job(path: str | Path, profile: Profile, opts: CompileOptions | None 
 
 
 # ---------------------------------------------------------------------- firmware lines
-def encode_lines(job: Job, profile: Profile, relative: bool = False) -> list[str]:
-    """Firmware-ready lines for a job, per ARCHITECTURE.md's wire sketch (one small function
-    until `fivebar_host.protocol` provides the encoder):
+#: Longest line the firmware accepts, bytes (docs/protocol.md section 5; the banner repeats it).
+MAX_LINE_BYTES = 80
+
+
+def _comment(text: str) -> str:
+    """A comment line the firmware accepts (docs/protocol.md section 5: printable ASCII, at
+    most `MAX_LINE_BYTES`): non-ASCII characters become '?', long text is cut."""
+    line = "; " + text.encode("ascii", "replace").decode("ascii")
+    return line[:MAX_LINE_BYTES]
+
+
+def encode_lines(job: Job, profile: Profile, relative: bool = False,
+                 laser: bool = False) -> list[str]:
+    """Firmware-ready lines for a job (docs/protocol.md; each G1 body from
+    `protocol.g1`, which checks the word ranges):
 
         G90 | G91                      absolute or relative step coordinates
-        M3 S0 | M4 S0                  laser mode on at zero power (profile's on_command)
-        G1 A<steps> B<steps> P<µs> S<0-255>   one per segment; S0 on pen-up travel
-        M5                             laser off at the end
+        G1 A<steps> B<steps> P<µs> S<0-255>   one per segment, in job order
+        M5                             at the end
+
+    Laser power is opt-in (issue 6): only with `laser=True` (the CLI's `--laser`) do the
+    drawing segments carry the profile's power — `M3 S0` (or `M4 S0`, the profile's
+    on_command) once at the start, `S<power>` on drawing segments and S0 on travel. Without
+    it every line says S0 and the laser output never turns on; the job is a pen plot, and
+    pen down / pen up are signalled by `M3 S0` before and `M5` after each run of drawing
+    segments (the firmware's laser-enable state, which a pen-lift output can follow; at S0
+    it switches no power). The header lines are comments the firmware ignores.
 
     The job starts at the homed pose (absolute steps 0, 0); the sender must make sure the
     firmware's position is that before streaming (e.g. after `fivebar home`)."""
     st = job.rel_or_abs(relative)
+    power = job.power if laser else np.zeros_like(job.power)
+    if not laser and job.power.size and int(power.max()) != 0:  # pragma: no cover
+        raise AssertionError("pen mode must never send power")
+    h = job.home_rad
     head = [
-        f"; fivebar job from {Path(job.file).name}: working mode {job.mode}, "
-        f"{job.n_segments} segments, {job.n_paths} paths, estimated {job.total_time_s:.1f} s",
-        f"; tolerance {job.tolerance_mm:g} mm, max deviation {job.max_dev_mm:.4f} mm, "
-        "steps count from the homed pose θ = "
-        f"({math.degrees(job.home_rad[0]):g}°, {math.degrees(job.home_rad[1]):g}°)",
+        _comment(f"fivebar job from {Path(job.file).name}"),
+        _comment(f"working mode {job.mode}, assembly {'+' if job.assembly > 0 else '-'}, "
+                 f"{job.n_segments} segments, {job.n_paths} paths, "
+                 f"estimated {job.total_time_s:.1f} s"),
+        _comment(f"tolerance {job.tolerance_mm:g} mm, max deviation {job.max_dev_mm:.4f} mm"),
+        _comment(f"steps count from the homed pose ({math.degrees(h[0]):g}, "
+                 f"{math.degrees(h[1]):g}) deg"),
+        _comment(f"laser: power from the profile, S up to {int(power.max(initial=0))}"
+                 if laser else "pen: S0 on every line; pen down = M3, pen up = M5"),
         "G91" if relative else "G90",
-        f"{profile.laser.on_command} S0",
     ]
-    a = st[:, 0].astype(str)
-    b = st[:, 1].astype(str)
-    p = job.duration_us.astype(str)
-    s = job.power.astype(str)
-    body = np.char.add(np.char.add(np.char.add(np.char.add(np.char.add(np.char.add(
-        np.char.add("G1 A", a), " B"), b), " P"), p), " S"), s)
-    return [*head, *body.tolist(), "M5"]
+    body = [protocol.g1(int(a), int(b), int(p), int(s)) for a, b, p, s in
+            zip(st[:, 0].tolist(), st[:, 1].tolist(), job.duration_us.tolist(),
+                power.tolist(), strict=True)]
+    if laser:
+        return [*head, f"{profile.laser.on_command} S0", *body, "M5"]
+    out = [*head, "M5"]
+    draw = job.draw.tolist()
+    n = len(draw)
+    for k, line in enumerate(body):
+        if draw[k] and (k == 0 or not draw[k - 1]):
+            out.append("M3 S0")
+        out.append(line)
+        if draw[k] and (k == n - 1 or not draw[k + 1]):
+            out.append("M5")
+    if out[-1] != "M5":
+        out.append("M5")
+    return out
 
 
 def write_atomic(path: str | Path, text: str) -> None:

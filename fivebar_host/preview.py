@@ -195,9 +195,10 @@ def _fmt_time(t: float) -> str:
     return f"{int(h)} h {int(m)} min"
 
 
-def report_lines(job: Job, nbar: NbarOpinion | None = None) -> list[str]:
-    """The dry-run report: paths, segments, lengths, time, deviation, margins, mode (and the
-    n-bar solver's second opinion on the deviation when given)."""
+def report_lines(job: Job, nbar: NbarOpinion | None = None, laser: bool = False) -> list[str]:
+    """The dry-run report: paths, segments, lengths, time, deviation, margins, mode, tool (pen,
+    or laser with `laser`: the power the job would send) and the n-bar solver's second
+    opinion on the deviation when given."""
     deg = math.degrees
     mm = job.min_margin_rad
     pl = job.placement
@@ -210,6 +211,10 @@ def report_lines(job: Job, nbar: NbarOpinion | None = None) -> list[str]:
         f"working mode  {job.mode} (assembly {'+' if job.assembly > 0 else '-'})",
         f"placement     {pl.how}: scale {pl.scale:.4g}, rotation {pl.rotate_deg:g}°, "
         f"{w:.1f} × {h:.1f} mm at ({bx[0]:.1f}, {bx[1]:.1f})–({bx[2]:.1f}, {bx[3]:.1f}) mm",
+        ("tool          laser: S up to "
+         f"{int(job.power.max(initial=0))} while drawing, S0 on travel (--laser)" if laser
+         else "tool          pen: S0 on every line (no laser power without --laser); pen "
+              "down/up = M3/M5 around drawing strokes"),
         f"paths         {job.n_paths} ({job.joined} joined across gaps < tolerance)",
         f"segments      {job.n_segments} ({int(job.draw.sum())} drawing, "
         f"{int((~job.draw).sum())} travel)",

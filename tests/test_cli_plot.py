@@ -31,6 +31,25 @@ def test_convert_absolute_and_relative(tmp_path: Path) -> None:
     assert not list(tmp_path.glob(".*tmp"))  # no temporary files left behind
 
 
+def test_convert_sends_power_only_with_laser(tmp_path: Path) -> None:
+    """Issue 6: no S > 0 unless --laser is given."""
+    out = tmp_path / "job.gcode"
+    src = str(EXAMPLES / "square.gcode")
+    code, text = run("convert", src, "-o", str(out))
+    assert code == 0 and "pen (S0, no laser power)" in text, text
+    g1 = [ln for ln in out.read_text().splitlines() if ln.startswith("G1 ")]
+    assert g1 and all(ln.endswith(" S0") for ln in g1)
+    assert "M3 S0" in out.read_text()  # pen down
+    code, text = run("convert", src, "-o", str(out), "--laser")
+    assert code == 0 and "laser (power up to S255)" in text, text
+    g1 = [ln for ln in out.read_text().splitlines() if ln.startswith("G1 ")]
+    assert {ln.rsplit(" ", 1)[1] for ln in g1} == {"S0", "S255"}
+    code, text = run("plot", src, "--dry-run", "--preview", str(tmp_path / "p.png"))
+    assert code == 0 and "tool          pen: S0 on every line" in text
+    code, text = run("plot", src, "--dry-run", "--laser", "--preview", str(tmp_path / "p.png"))
+    assert code == 0 and "tool          laser: S up to 255" in text
+
+
 def test_plot_dry_run_writes_preview_and_report(tmp_path: Path) -> None:
     png = tmp_path / "preview.png"
     code, text = run("plot", str(EXAMPLES / "fivebar_text.svg"), "--dry-run", "--preview",

@@ -5,6 +5,7 @@ the source line and the point in both frames, --mode auto, steps and durations."
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -157,6 +158,64 @@ def test_tolerance_option_changes_segment_count() -> None:
     assert fine.draw.sum() > coarse.draw.sum()
     assert fine.max_dev_mm <= 0.01 + fine.step_quantum_mm
     assert coarse.max_dev_mm <= 0.5 + coarse.step_quantum_mm
+
+
+def _g1_words(lines: list[str]) -> list[dict[str, int]]:
+    """The words of every G1 line, parsed independently of the encoder."""
+    out = []
+    for ln in lines:
+        if ln.startswith("G1 "):
+            assert re.fullmatch(r"G1 A-?\d+ B-?\d+ P\d+ S\d+", ln), ln
+            out.append({w[0]: int(w[1:]) for w in ln.split()[1:]})
+    return out
+
+
+def _firmware_acceptable(lines: list[str]) -> None:
+    """docs/protocol.md section 5: printable ASCII (or tab), at most 80 bytes per line."""
+    for ln in lines:
+        assert len(ln.encode()) <= 80 and all(0x20 <= ord(c) <= 0x7E or c == "\t"
+                                              for c in ln), ln
+
+
+def test_pen_mode_never_sends_power_and_brackets_strokes_with_m3_m5() -> None:
+    job = compile_job(EXAMPLES / "simple.svg", PROF)
+    assert (job.power[job.draw] > 0).all()  # what --laser would send
+    lines = encode_lines(job, PROF)  # no laser: a pen plot
+    _firmware_acceptable(lines)
+    words = _g1_words(lines)
+    assert len(words) == job.n_segments and all(w["S"] == 0 for w in words)
+    assert not any(re.search(r"S[1-9]", ln) for ln in lines if not ln.startswith(";"))
+    # Pen state from M3 / M5 as the firmware would track it: down exactly on drawing segments.
+    down, state = False, []
+    for ln in lines:
+        if ln.startswith("M3"):
+            assert ln == "M3 S0" and not down
+            down = True
+        elif ln == "M5":
+            down = False
+        elif ln.startswith("G1 "):
+            state.append(down)
+    assert np.array_equal(np.array(state), job.draw)
+    assert lines[-1] == "M5" and not down
+    # as many pen-down runs as M3 lines
+    runs = int(np.count_nonzero(np.diff(np.concatenate(([0], job.draw.astype(int)))) == 1))
+    assert sum(ln == "M3 S0" for ln in lines) == runs
+
+
+def test_laser_mode_sends_the_profile_power_on_drawing_segments_only() -> None:
+    job = compile_job(EXAMPLES / "underside_machine_coords.gcode", UNDERSIDE,
+                      CompileOptions(origin_mm=(0.0, 0.0), mode="++"))
+    lines = encode_lines(job, UNDERSIDE, laser=True)
+    _firmware_acceptable(lines)
+    words = _g1_words(lines)
+    s = np.array([w["S"] for w in words])
+    assert np.array_equal(s, job.power)
+    assert (s[~job.draw] == 0).all() and (s[job.draw] > 0).all()
+    # the file's S200 frame and S255 circle: fractions of the file's largest S × profile power
+    assert set(s[job.draw].tolist()) == {round(200 / 255 * UNDERSIDE.laser.power),
+                                         UNDERSIDE.laser.power}
+    assert lines[lines.index("G90") + 1] == f"{UNDERSIDE.laser.on_command} S0"
+    assert lines[-1] == "M5"
 
 
 def test_encode_lines_absolute_and_relative() -> None:
