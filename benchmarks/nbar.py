@@ -1,7 +1,7 @@
 """Speed and accuracy of the n-bar solver on the paper's examples, against scipy.optimize.
 
 For every mechanism file in configs/mechanisms: wall time of `sweep` (the file's 180 steps;
-median of several runs; setup, solving and the exact-equation check of every state included),
+median of interleaved runs; setup, solving and the exact-equation check of every state included),
 steps per second, Newton iterations per step and the largest residual, side by side with a
 baseline that solves the same equations (the same Φ and analytic Jacobian callables) along the
 same input values with scipy: `fsolve` (MINPACK hybrj) for square systems, `least_squares`
@@ -14,7 +14,7 @@ limits, its time includes locating them (to 2^-24 of a step), which the baseline
 Targets (issue 3): ≤ 5 ms per 180 steps, ≥ 5× the baseline. The machine's load average is
 printed first: on a shared machine the wall times scale with it.
 
-Run: python benchmarks/nbar.py [--runs N] [--baseline-runs N]
+Run: python benchmarks/nbar.py [--runs N]
 """
 
 from __future__ import annotations
@@ -29,7 +29,6 @@ import warnings
 from collections.abc import Callable
 from functools import partial
 from pathlib import Path
-from typing import TypeVar
 
 import numpy as np
 import scipy
@@ -48,7 +47,6 @@ TARGET_MS = 5.0
 TARGET_SPEEDUP = 5.0
 
 FloatArray = np.ndarray
-T = TypeVar("T")
 
 
 def _callables(mech: Mechanism, u: FloatArray
@@ -103,29 +101,32 @@ def baseline(mech: Mechanism, inputs: FloatArray, extrapolate: bool
     return out, nfev, fails
 
 
-def timed(fn: Callable[[], T], runs: int) -> tuple[float, T]:
-    """Median wall time of `runs` calls (after one warm-up) and the last result."""
-    result = fn()
-    times = []
+def interleaved(fns: list[Callable[[], object]], runs: int) -> list[float]:
+    """Median wall time of each function over `runs` rounds (after one warm-up round); the
+    functions take turns within a round, so on a shared machine they meet the same load."""
+    for fn in fns:
+        fn()
+    times: list[list[float]] = [[] for _ in fns]
     for _ in range(runs):
-        t0 = time.perf_counter()
-        result = fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times), result
+        for fn, ts in zip(fns, times, strict=True):
+            t0 = time.perf_counter()
+            fn()
+            ts.append(time.perf_counter() - t0)
+    return [statistics.median(ts) for ts in times]
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--runs", type=int, default=21, help="timed runs of the solver")
-    ap.add_argument("--baseline-runs", type=int, default=5, help="timed runs of scipy")
+    ap.add_argument("--runs", type=int, default=15,
+                    help="timed rounds (solver and both scipy variants take turns)")
     args = ap.parse_args()
 
     load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
     print(f"python {platform.python_version()}, numpy {np.__version__}, scipy "
           f"{scipy.__version__}, {os.cpu_count()} cpu(s), load average "
           f"{load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
-    print(f"wall time: median of {args.runs} runs (solver) / {args.baseline_runs} (scipy); "
-          "steps = input steps actually taken\n")
+    print(f"wall time: median of {args.runs} interleaved runs each; steps = input steps "
+          "actually taken\n")
     head = (f"{'example':22s} {'steps':>5s} {'ms':>7s} {'steps/s':>9s} {'it/step':>7s} "
             f"{'max res':>8s} | {'scipy ms':>9s} {'×':>6s} {'nfev/st':>7s} {'max res':>8s} "
             f"| {'scipy+pred':>10s} {'×':>5s} | {'paper s':>7s} {'× paper':>8s}  target")
@@ -135,16 +136,17 @@ def main() -> None:
     for path in sorted((ROOT / "configs" / "mechanisms").glob("*.toml")):
         name = path.stem
         mech = load_mechanism(path)
-        t_ours, sim = timed(partial(sweep, mech), args.runs)
+        sim = sweep(mech)
         steps = len(sim.status) - 1
         moving = sim.iterations[1:]
         res = float(np.nanmax(sim.residual))
         rows = sim.inputs
-        t_base, (qb, nfev, fails) = timed(partial(baseline, mech, rows, False),
-                                          args.baseline_runs)
+        qb, nfev, fails = baseline(mech, rows, False)
         cb = mech.coords_batch(qb, rows)
         res_b = float(np.max(np.abs(mech.residuals(cb, rows))))
-        t_pred, _ = timed(partial(baseline, mech, rows, True), args.baseline_runs)
+        t_ours, t_base, t_pred = interleaved(
+            [partial(sweep, mech), partial(baseline, mech, rows, False),
+             partial(baseline, mech, rows, True)], args.runs)
         ours_ms = 1e3 * t_ours
         speedup = t_base / t_ours
         paper = PAPER_S.get(name)

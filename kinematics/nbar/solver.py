@@ -130,6 +130,30 @@ def _ring_weights(points: int, newest: int) -> FloatArray:
 
 _UNIFORM = {(k, p): _ring_weights(k, p) for k in range(2, HISTORY + 1) for p in range(HISTORY)}
 
+#: Equal sweep steps predicted and corrected together once HISTORY of them are known.
+BLOCK = 8
+
+
+def _block_weights(newest: int) -> FloatArray:
+    """(2·BLOCK, HISTORY) ring weights: rows j < BLOCK extrapolate the degree-(HISTORY − 1)
+    polynomial through the last HISTORY equally spaced states j + 1 steps ahead; row
+    BLOCK + j gives the predicted motion of that step (from the state before it)."""
+    nodes = [-float(i) for i in range(HISTORY)]  # node i (t = −i) sits in slot newest − i
+    pred = np.zeros((BLOCK, HISTORY))
+    for j in range(1, BLOCK + 1):
+        for i, ti in enumerate(nodes):
+            w = 1.0
+            for k, tk in enumerate(nodes):
+                if k != i:
+                    w *= (j - tk) / (ti - tk)
+            pred[j - 1, (newest - i) % HISTORY] = w
+    before = np.vstack((np.eye(HISTORY)[newest], pred[:-1]))
+    return np.vstack((pred, pred - before))
+
+
+_BLOCKS = [_block_weights(p) for p in range(HISTORY)]
+_ARANGE = np.arange(BLOCK + 1)
+
 
 class _Tracker:
     """Follows one branch of the solution set as the inputs change."""
@@ -164,6 +188,9 @@ class _Tracker:
         self.e_new = self.direction
         sysm = self.sys
         self.hs = sysm.hs
+        self.hs_t = np.ascontiguousarray(sysm.hs.T)
+        self.xs = np.ones((BLOCK, sysm.size))  # work rows for blocks (last column stays 1)
+        self.bsize = BLOCK  # current block size of `run_fast`
         self.m = sysm.m
         self.nact = sysm.n_act
         self.tol2 = self.tol * self.tol
@@ -340,61 +367,121 @@ class _Tracker:
         self._push(res.q, s_new)
         return True, res.iterations, res.residual, ""
 
-    def step_fast(self, s_new: float, u_new: FloatArray, xd: FloatArray, sq: FloatArray
-                  ) -> tuple[int, float] | None:
-        """The common case of `attempt`, inlined: an equal step after at least two equal
-        steps (binomial extrapolation), a square system, at most one Newton solve accepted by
-        the quadratic remainder bound, the same two continuity tests. Returns (iterations,
-        residual bound) with the state moved, or None — then nothing changed and the caller
-        takes the general path (`advance`)."""
+    def run_fast(self, index: int, direction: int, count: int, grid: FloatArray,
+                 xd_tab: FloatArray, s_tab: FloatArray, out_u: list[FloatArray],
+                 out_q: list[FloatArray], out_it: list[int]) -> int:
+        """Take up to `count` sweep steps in the common case, in a tight loop: the history ends
+        in equal steps of this sweep (binomial extrapolation), the system is square, and one
+        Newton step is accepted by the quadratic remainder bound and the same two continuity
+        tests as `attempt`. Stops at the first step that needs anything else (leaving the state
+        at the last accepted one) and returns the number of steps taken; `grid`, `xd_tab` and
+        `s_tab` are the sweep's grid tables indexed by `index` (the sweep's `offset + k`)."""
         hs_ = self.hist_s
-        run = self.run
-        if run < 2 or self.lsq:
-            return None
-        h = s_new - hs_[-1]
-        if abs(h - (hs_[-1] - hs_[-2])) > 1e-9 * abs(h):
-            return None
-        n = self.n
-        x = self.x
-        pred = _UNIFORM[run, self.slot] @ self.ring  # (prediction, predicted motion)
-        q_pred = pred[0]
-        if self.nd:
-            x[n: n + self.nd] = xd
-        if self.nact:
-            x[n + self.nd: -1] = sq
-        x[:n] = q_pred
-        g = (self.hs @ x).reshape(self.m, -1)
-        phi = 0.5 * (g @ x)
-        r2 = float(phi @ phi)
-        if r2 <= self.tol2:
-            q, it, c2, res = q_pred, 0, 0.0, math.sqrt(r2)
-        else:
-            step = solve(g[:, :n], phi)
+        h = float(direction)
+        if self.lsq or self.run < 2 or abs(hs_[-1] - hs_[-2] - h) > 1e-9:
+            return 0
+        x, n, nd, nact, hsm, m = self.x, self.n, self.nd, self.nact, self.hs, self.m
+        ring, slot, run = self.ring, self.slot, self.run
+        bound, quarter, floor2 = self.bound, self.quarter, self.floor2
+        cont2, speed2 = CONTINUITY * CONTINUITY, MAX_SPEEDUP * MAX_SPEEDUP
+        last_m2 = self.last_m2 if self.last_h == 1.0 else 0.0
+        s = hs_[-1]
+        taken = 0
+        q = self.q
+        xs = self.xs
+        bsize = self.bsize
+        while taken < count:
+            if run == HISTORY and bsize >= 2 and count - taken >= 2:
+                # Several steps at once: predict b states from the ring, one Newton step for
+                # all of them (one product evaluates every Φ and J, one call solves all the
+                # systems), the same tests per state; accept those before the first failure.
+                # The block size adapts like a step size: doubled after a block accepted
+                # whole, cut to what was accepted otherwise.
+                b = min(bsize, count - taken)
+                rows = index + direction * (taken + 1 + _ARANGE[:b])
+                pw = _BLOCKS[slot] @ ring
+                preds, dms = pw[:b], pw[BLOCK: BLOCK + b]
+                xb = xs[:b]
+                xb[:, :n] = preds
+                if nd:
+                    xb[:, n: n + nd] = xd_tab[rows]
+                if nact:
+                    xb[:, n + nd: -1] = s_tab[rows]
+                gb = (xb @ self.hs_t).reshape(b, m, -1)
+                steps = solve(gb[:, :, :n], 0.5 * (gb @ xb[:, :, None])[:, :, 0])
+                c2s = np.einsum("ij,ij->i", steps, steps)
+                m2s = np.einsum("ij,ij->i", dms, dms)
+                prev = np.empty(b)
+                prev[0] = last_m2
+                prev[1:] = m2s[:-1]
+                good = ((bound * c2s <= quarter) & (c2s <= cont2 * m2s + floor2)
+                        & ((prev <= 0.0) | (m2s <= speed2 * prev + floor2)))
+                a = b if good.all() else int(np.argmin(good))
+                bsize = min(2 * b, BLOCK) if a == b else a
+                if a:
+                    qs_b = preds[:a] - steps[:a]
+                    keep = min(a, HISTORY)
+                    slots = (slot + _ARANGE[a - keep + 1: a + 1]) % HISTORY
+                    ring[slots] = qs_b[a - keep:]
+                    slot = int(slots[-1])
+                    hs_.extend(s + h * (j + 1) for j in range(a))
+                    s += h * a
+                    del hs_[:-HISTORY]
+                    last_m2 = float(m2s[a - 1])
+                    q = qs_b[a - 1]
+                    out_u.extend(grid[rows[:a]])
+                    out_q.extend(qs_b)
+                    out_it.extend([1] * a)
+                    taken += a
+                    continue
+            g_i = index + direction * (taken + 1)
+            pred = _UNIFORM[run, slot] @ ring  # (prediction, predicted motion)
+            q_pred = pred[0]
+            x[:n] = q_pred
+            if nd:
+                x[n: n + nd] = xd_tab[g_i]
+            if nact:
+                x[n + nd: -1] = s_tab[g_i]
+            gm = (hsm @ x).reshape(m, -1)
+            step = solve(gm[:, :n], 0.5 * (gm @ x))
             c2 = float(step @ step)
             if not c2 < math.inf:  # singular Jacobian
-                return None
-            q, it, res = q_pred - step, 1, self.bound * c2
-            if not res <= self.quarter:  # not yet converged: carry on with Newton
-                more = newton(self.sys, x, q, self.tol, self.max_iter - 1)
+                break
+            q_new = q_pred - step
+            its = 1
+            if not bound * c2 <= quarter:  # not converged yet: carry on with Newton
+                more = newton(self.sys, x, q_new, self.tol, self.max_iter - 1)
                 if not more.converged:
-                    return None
-                q, it, res = more.q, 1 + more.iterations, more.residual
-                dc = q - q_pred
+                    break
+                q_new, its = more.q, 1 + more.iterations
+                dc = q_new - q_pred
                 c2 = float(dc @ dc)
-        dm = pred[1]
-        m2 = float(dm @ dm)
-        if c2 > CONTINUITY * CONTINUITY * m2 + self.floor2:
-            return None
-        ah = abs(h)
-        if self.last_m2 > 0.0 and m2 > (MAX_SPEEDUP * ah / self.last_h) ** 2 * self.last_m2 \
-                + self.floor2:
-            return None
-        self.last_m2, self.last_h = m2, ah
-        self.u = u_new
-        self.q = q
-        self.tangent_cache = None
-        self._push(q, s_new)
-        return it, res
+            dm = pred[1]
+            m2 = float(dm @ dm)
+            if c2 > cont2 * m2 + floor2 or (last_m2 > 0.0 and m2 > speed2 * last_m2 + floor2):
+                break
+            q = q_new
+            slot = (slot + 1) % HISTORY
+            ring[slot] = q
+            s += h
+            hs_.append(s)
+            if len(hs_) > HISTORY:
+                del hs_[0]
+            if run < HISTORY:
+                run += 1
+            last_m2 = m2
+            out_u.append(grid[g_i])
+            out_q.append(q)
+            out_it.append(its)
+            taken += 1
+            bsize = min(bsize + 1, BLOCK)
+        self.bsize = bsize
+        if taken:
+            self.slot, self.run, self.q = slot, run, q
+            self.u = grid[index + direction * taken]
+            self.last_m2, self.last_h = last_m2, 1.0
+            self.tangent_cache = None
+        return taken
 
     def advance(self, target: FloatArray, pre: tuple[FloatArray, FloatArray] | None = None
                 ) -> tuple[Status, int, int, str, FloatArray, float]:
@@ -585,19 +672,20 @@ def sweep(mech: Mechanism, steps: int | None = None, step: ArrayLike | None = No
         n_steps = 0
     index = 0
     direction = 1
+    taken = 0
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        for _ in range(n_steps):
+        while taken < n_steps:
+            k = tr.run_fast(offset + index, direction, n_steps - taken, grid, xd_tab, s_tab,
+                            us, qs, iters)
+            if k:
+                index += direction * k
+                taken += k
+                subs.extend([1] * k)
+                status.extend([Status.OK] * k)
+                continue
+            taken += 1
             g = offset + index + direction
             target = grid[g]
-            fast = tr.step_fast(float(index + direction), target, xd_tab[g], s_tab[g])
-            if fast is not None:
-                index += direction
-                us.append(target)
-                qs.append(tr.q)
-                iters.append(fast[0])
-                subs.append(1)
-                status.append(Status.OK)
-                continue
             st, it, sb, why, failed, res = tr.advance(target, (xd_tab[g], s_tab[g]))
             if _record(tr, st, it, sb, why, failed, res, target, us, qs, iters, subs, status,
                        limits):
