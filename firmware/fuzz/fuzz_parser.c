@@ -53,6 +53,7 @@ static void parse_pieces(const uint8_t *data, size_t size)
 static void run_firmware(const uint8_t *data, size_t size)
 {
 	fake_reset();
+	fake_budget = 200000;
 	fb_setup();
 	for (size_t i = 0; i < size; i++) {
 		fb_rx_isr(data[i]);

@@ -15,6 +15,7 @@ fake_step_t fake_steps[FAKE_MAX_STEPS];
 size_t fake_nsteps;
 char fake_tx[65536];
 size_t fake_tx_len;
+uint64_t fake_budget = UINT64_MAX;
 static char tx_copy[65536];
 
 void fake_reset(void)
@@ -30,6 +31,7 @@ void fake_reset(void)
 	fake_timer_delay = 0;
 	fake_nsteps = 0;
 	fake_tx_len = 0;
+	fake_budget = UINT64_MAX;
 }
 
 void board_init(void) {}
@@ -79,13 +81,17 @@ void board_idle(void)
 {
 	fake_ms += 1000;
 	fake_run(16000000);
+	if (!fake_budget)
+		mo_stop();
 }
 
 size_t fake_run(uint64_t max_cycles)
 {
 	size_t events = 0;
 	uint64_t limit = fake_now + max_cycles;
-	while (fake_timer_on && !fake_timer_paused && fake_now + fake_timer_delay <= limit) {
+	while (fake_timer_on && !fake_timer_paused && fake_now + fake_timer_delay <= limit &&
+	       fake_budget) {
+		fake_budget--;
 		fake_now += fake_timer_delay;
 		uint16_t d = mo_event();
 		events++;

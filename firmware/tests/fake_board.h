@@ -30,6 +30,9 @@ extern fake_step_t fake_steps[FAKE_MAX_STEPS];
 extern size_t fake_nsteps;
 extern char fake_tx[65536];
 extern size_t fake_tx_len;
+/* Step-timer events left for this run (the fuzz target bounds its inputs);
+ * once spent, the timer stops and a busy-wait of the core gets mo_stop(). */
+extern uint64_t fake_budget;
 
 void fake_reset(void);
 /* Run the step timer until it stops or max_cycles pass; returns events run. */
