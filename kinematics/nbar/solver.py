@@ -130,8 +130,10 @@ def _ring_weights(points: int, newest: int) -> FloatArray:
 
 _UNIFORM = {(k, p): _ring_weights(k, p) for k in range(2, HISTORY + 1) for p in range(HISTORY)}
 
-#: Equal sweep steps predicted and corrected together once HISTORY of them are known.
-BLOCK = 8
+#: Equal sweep steps predicted and corrected together once HISTORY of them are known, and
+#: the fewest worth a block.
+BLOCK = 12
+MIN_BLOCK = 4
 
 
 def _block_weights(newest: int) -> FloatArray:
@@ -190,12 +192,13 @@ class _Tracker:
         self.hs = sysm.hs
         self.hs_t = np.ascontiguousarray(sysm.hs.T)
         self.xs = np.ones((BLOCK, sysm.size))  # work rows for blocks (last column stays 1)
-        self.bsize = BLOCK  # current block size of `run_fast`
+        self.bsize = BLOCK  # block size of `run_fast`, and single steps to take before the next
+        self.cool = 0  # block after one that accepted too few states
         self.m = sysm.m
         self.nact = sysm.n_act
         self.tol2 = self.tol * self.tol
         self.bound = 0.5 * sysm.curvature
-        self.quarter = 0.25 * self.tol
+        self.quarter = 0.5 * self.tol  # margin for the rounding of the linear solve
         self._push(self.q, self._param(self.u))
 
     def set_line(self, base: FloatArray, inc: FloatArray) -> None:
@@ -371,11 +374,13 @@ class _Tracker:
                  xd_tab: FloatArray, s_tab: FloatArray, out_u: list[FloatArray],
                  out_q: list[FloatArray], out_it: list[int]) -> int:
         """Take up to `count` sweep steps in the common case, in a tight loop: the history ends
-        in equal steps of this sweep (binomial extrapolation), the system is square, and one
-        Newton step is accepted by the quadratic remainder bound and the same two continuity
-        tests as `attempt`. Stops at the first step that needs anything else (leaving the state
-        at the last accepted one) and returns the number of steps taken; `grid`, `xd_tab` and
-        `s_tab` are the sweep's grid tables indexed by `index` (the sweep's `offset + k`)."""
+        in equal steps of this sweep (binomial extrapolation), the system is square, Newton
+        converges (a single step accepted by the quadratic remainder bound, or more from there)
+        and the result passes the same two continuity tests as `attempt`. Once HISTORY equal
+        steps are known, up to BLOCK steps are predicted and corrected together. Stops at the
+        first step that needs anything else (subdivision, a limit), leaving the state at the
+        last accepted one, and returns the number of steps taken; `grid`, `xd_tab` and `s_tab`
+        are the sweep's grid tables, `index` the current row in them."""
         hs_ = self.hist_s
         h = float(direction)
         if self.lsq or self.run < 2 or abs(hs_[-1] - hs_[-2] - h) > 1e-9:
@@ -389,14 +394,14 @@ class _Tracker:
         taken = 0
         q = self.q
         xs = self.xs
-        bsize = self.bsize
+        bsize, cool = self.bsize, self.cool
         while taken < count:
-            if run == HISTORY and bsize >= 2 and count - taken >= 2:
+            if run == HISTORY and cool == 0 and count - taken >= MIN_BLOCK:
                 # Several steps at once: predict b states from the ring, one Newton step for
                 # all of them (one product evaluates every Φ and J, one call solves all the
                 # systems), the same tests per state; accept those before the first failure.
-                # The block size adapts like a step size: doubled after a block accepted
-                # whole, cut to what was accepted otherwise.
+                # A block costs about as much as four single steps whatever its size: after
+                # one that accepts fewer than MIN_BLOCK states, take BLOCK single steps first.
                 b = min(bsize, count - taken)
                 rows = index + direction * (taken + 1 + _ARANGE[:b])
                 pw = _BLOCKS[slot] @ ring
@@ -417,7 +422,12 @@ class _Tracker:
                 good = ((bound * c2s <= quarter) & (c2s <= cont2 * m2s + floor2)
                         & ((prev <= 0.0) | (m2s <= speed2 * prev + floor2)))
                 a = b if good.all() else int(np.argmin(good))
-                bsize = min(2 * b, BLOCK) if a == b else a
+                if a == b:
+                    bsize = BLOCK
+                elif a >= MIN_BLOCK:
+                    bsize = a
+                else:
+                    bsize, cool = BLOCK, BLOCK
                 if a:
                     qs_b = preds[:a] - steps[:a]
                     keep = min(a, HISTORY)
@@ -474,8 +484,9 @@ class _Tracker:
             out_q.append(q)
             out_it.append(its)
             taken += 1
-            bsize = min(bsize + 1, BLOCK)
-        self.bsize = bsize
+            if cool:
+                cool -= 1
+        self.bsize, self.cool = bsize, cool
         if taken:
             self.slot, self.run, self.q = slot, run, q
             self.u = grid[index + direction * taken]
