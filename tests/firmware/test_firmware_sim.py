@@ -318,3 +318,44 @@ def test_harness_stops_cleanly_on_sigterm(device: Device) -> None:
     device.finish()
     assert device.emulator.returncode == 0
     assert "MHz emulated" in device.emulator.stats
+
+
+def test_refused_line_during_a_laser_job_holds_it(device: Device) -> None:
+    session = device.session
+    assert session.send("M3 S255") == Ok()
+    assert session.send(protocol.g1(1000, 0, 500_000)) == Ok()
+    while session.status().a < 100:
+        time.sleep(0.005)
+    assert session.send("G5") == ErrorReply(4)
+    report = session.status()
+    assert (report.state, report.detail, report.laser) == ("Hold", 2, 0)
+    session.realtime(protocol.RT_RESUME)
+    assert session.wait_idle().a == 1000
+    trace = device.finish()
+    assert len(trace.steps("A")) == 1000
+    assert len(trace.laser_intervals()) == 2, "laser off during the hold, back on after"
+
+
+def test_g92_and_motor_enable_are_queued_in_order(device: Device) -> None:
+    session = device.session
+    lines = [
+        protocol.g1(100, 50, 10_000),
+        "G92 A1000 B-5",
+        protocol.g1(1010, -5, 10_000),
+        "M18",
+    ]
+    assert session.stream(lines) == [Ok()] * 4
+    report = session.wait_idle()
+    assert (report.a, report.b, report.done_line) == (1010, -5, 4)
+    assert session.send(protocol.g1(0, 0, 10_000)) == ErrorReply(15)
+    assert session.send("M17") == Ok()
+    assert session.send(protocol.g1(1000, -5, 10_000)) == Ok()
+    assert session.wait_idle().a == 1000
+    trace = device.finish()
+    assert len(trace.steps("A")) == 100 + 10 + 10
+    assert len(trace.steps("B")) == 50
+    enable = [level for _, level in trace.pin("enable")]
+    assert enable[-3:] == [0, 1, 0], "enabled (low), disabled by M18, enabled by M17"
+    last_disable = [c for c, level in trace.pin("enable") if level == 1][-1]
+    a_steps = [s.cycle for s in trace.steps("A")]
+    assert a_steps[109] < last_disable < a_steps[110], "M18 took effect after the queued moves"
