@@ -47,6 +47,10 @@ def _lapack_solve() -> Callable[[FloatArray, FloatArray], FloatArray]:
     return cast(Callable[[FloatArray, FloatArray], FloatArray], fn) if ok else public
 
 
+#: With `monotone`, each Newton iteration must shrink ‖Φ‖² at least this much (‖Φ‖ by 10×):
+#: from a good predictor Newton converges quadratically, slower progress means a bad step.
+CONTRACTION = 0.01
+
 #: Linear solve used by the Newton steps (see `_lapack_solve`).
 solve = _lapack_solve()
 
@@ -199,8 +203,9 @@ def newton(system: QuadraticSystem, x: FloatArray, q0: FloatArray, tol: float,
     is accepted without evaluating Φ again (the caller verifies stored states with the exact
     equations). With more rows than unknowns each step is the least-squares (Gauss–Newton) step
     from the normal equations JᵀJΔ = JᵀΦ. `monotone` gives up as soon as an iteration fails to
-    halve ‖Φ‖: from a good predictor Newton converges quadratically, so slower progress means
-    the step was too large (or past a limit) and the caller should subdivide. x is overwritten.
+    cut ‖Φ‖ tenfold: from a good predictor Newton converges quadratically, so slower progress
+    means the step was too large (or past a limit) and the caller should subdivide. x is
+    overwritten.
     """
     n = system.n_u
     m = system.m
@@ -221,7 +226,7 @@ def newton(system: QuadraticSystem, x: FloatArray, q0: FloatArray, tol: float,
             r2 = float(phi @ phi)
             if r2 <= tol2:
                 return NewtonResult(q, it, math.sqrt(r2), True, d2)
-            if it >= max_iter or not r2 < math.inf or (monotone and r2 > 0.25 * prev):
+            if it >= max_iter or not r2 < math.inf or (monotone and r2 > CONTRACTION * prev):
                 return NewtonResult(q, it, math.sqrt(r2), False, d2)
             prev = r2
             jac = g[:, :n]
