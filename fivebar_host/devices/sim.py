@@ -197,10 +197,12 @@ class FirmwareSession:
     def read_message(self) -> Message:
         """Read and decode the next line; EmulatorError on timeout."""
         deadline = time.monotonic() + self.timeout
+        partial = b""
         while time.monotonic() < deadline:
-            raw = self.port.readline()
-            if not raw:
-                continue
+            partial += self.port.readline()
+            if not partial.endswith(b"\n"):
+                continue  # nothing yet, or a line cut by the port's read timeout
+            raw, partial = partial, b""
             msg = protocol.parse_message(raw.decode("ascii", errors="replace"))
             if isinstance(msg, Banner):
                 self.banner = msg
