@@ -193,6 +193,7 @@ class StatusReport:
     accepted_line: int  # line number of the last line accepted
     laser: int  # laser power output now
     underruns: int  # motion stops because the queue ran empty, since reset
+    homed: bool = False  # position set by G92 or $H since boot or reset (field H:1)
 
 
 @dataclass(frozen=True)
@@ -226,7 +227,7 @@ Message = Ok | ErrorReply | StatusReport | Banner | AlarmPush | SettingLine
 _ERROR = re.compile(r"error:(\d+)(?: resend:(\d+))?")
 _STATUS = re.compile(
     r"<(Idle|Run|Hold|Home|Alarm)(?::(\d+))?\|A:(-?\d+),B:(-?\d+)\|Q:(\d+)"
-    r"\|Ln:(\d+),(\d+)\|L:(\d+)\|U:(\d+)>"
+    r"\|Ln:(\d+),(\d+)\|L:(\d+)\|U:(\d+)(?:\|H:([01]))?>"
 )
 _BANNER = re.compile(r"fivebar (\S+) proto:(\d+) rx:(\d+) queue:(\d+) line:(\d+)")
 _ALARM = re.compile(r"ALARM:(\d+)")
@@ -262,6 +263,7 @@ def parse_message(line: str) -> Message:
             accepted_line=int(m.group(7)),
             laser=int(m.group(8)),
             underruns=int(m.group(9)),
+            homed=m.group(10) == "1",
         )
     if m := _BANNER.fullmatch(text):
         return Banner(
