@@ -22,8 +22,12 @@ the homed pose, absolute steps (0, 0)) and per segment k (target k → k+1).
 
 from __future__ import annotations
 
+import itertools
 import math
+import re
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -44,11 +48,19 @@ from fivebar_host.toolpath.geometry import (
 from fivebar_host.toolpath.segment import (
     REASON_KEY,
     CheckFailedError,
+    Intervals,
     PoseChecker,
     joint_moves,
     refine,
+    wrap_to_limits,
 )
 from fivebar_host.toolpath.svg import read_svg
+from kinematics.analysis import (
+    NoSafeRegionError,
+    plan_joint_move,
+    plan_working_modes,
+    point_safety,
+)
 from kinematics.fivebar import WORKING_MODES, FiveBar
 
 FloatArray = NDArray[np.float64]
@@ -61,6 +73,9 @@ AUTO_ORDER = ("+-", "-+", "++", "--")
 MAX_STEP_RAD = 0.05
 #: Interpolation tolerance for the Cartesian fallback of pen-up travel, mm.
 TRAVEL_TOL_MM = 1.0
+#: Largest spacing (mm) of the pen points at which `--mode auto` tests the working modes when
+#: it plans working-mode changes (every chord is sampled at least this finely).
+MODE_SAMPLE_MM = 0.5
 GCODE_SUFFIXES = {".gcode", ".nc", ".ngc", ".gc", ".g", ".tap", ".cnc"}
 
 
@@ -90,6 +105,39 @@ class PathStats:
     end_seg: IntArray  # (P,) one past the last draw segment
     max_dev_mm: FloatArray  # (P,) from the quantised steps (validation), NaN if not validated
     mean_dev_mm: FloatArray
+
+
+@dataclass(frozen=True)
+class ModeChange:
+    """A pen-up change of working mode compiled into the job (thesis Sec. 7.2), planned by
+    `kinematics.analysis.plan_working_modes` (or `plan_joint_move` for a move home): travel
+    segments `first_seg` … `end_seg` − 1, laser off, drive the arm(s) whose working-mode sign
+    changes through their type-1 singularity (stretched or folded) on the way into job path
+    `path` (= `Job.n_paths`: the park move back to the homed pose). Measured on the executed
+    move (quantised steps, sampled ≤ 0.5° apart): where each arm crosses (arm, "stretched" /
+    "folded", x, y mm) and the smallest type-2 margin."""
+
+    from_mode: str
+    to_mode: str
+    path: int
+    first_seg: int
+    end_seg: int
+    lift_mm: tuple[float, float]
+    land_mm: tuple[float, float]
+    crossings: tuple[tuple[int, str, float, float], ...]
+    min_type2_rad: float
+    duration_s: float
+
+    def describe(self, n_paths: int) -> str:
+        """One line for the dry-run report."""
+        into = "back to the homed pose" if self.path >= n_paths else f"into path #{self.path}"
+        how = "; ".join(f"arm {a} {k} at ({x:.1f}, {y:.1f}) mm"
+                        for a, k, x, y in self.crossings) or "no arm crossing"
+        return (f"{self.from_mode} → {self.to_mode} {into}: pen up at ({self.lift_mm[0]:.1f}, "
+                f"{self.lift_mm[1]:.1f}) mm, {how}, pen down at ({self.land_mm[0]:.1f}, "
+                f"{self.land_mm[1]:.1f}) mm; segments {self.first_seg}–{self.end_seg - 1} "
+                f"(laser off), {self.duration_s:.2f} s, type-2 margin ≥ "
+                f"{math.degrees(self.min_type2_rad):.1f}°")
 
 
 @dataclass(frozen=True)
@@ -138,6 +186,10 @@ class Job:
     max_dev_mm: float = math.nan
     mean_dev_mm: float = math.nan
     ideal_max_dev_mm: float = math.nan
+    # working modes: per job path, at the homed pose, and the pen-up changes between them
+    path_modes: tuple[str, ...] = ()
+    home_mode: str = ""
+    mode_changes: tuple[ModeChange, ...] = ()
 
     # ------------------------------------------------------------------ derived
     @property
@@ -306,8 +358,218 @@ def _prepare_chords(drawing: Drawing, poly: Polylines, tol: float, tol_f: float,
                    travel_before=od.travel_before_mm, travel_after=od.travel_after_mm)
 
 
+def _mode_at(fb: FiveBar, angles: FloatArray, point: FloatArray, fallback: str) -> str:
+    """Working mode of one pose; `fallback` if an arm sits exactly on a type-1 singularity."""
+    s = fb.mode_of(point.reshape(1, 2), angles.reshape(1, 2))[0]
+    if (s == 0).any():
+        return fallback
+    return ("+" if s[0] > 0 else "-") + ("+" if s[1] > 0 else "-")
+
+
+def _merge_intervals(parts: list[Intervals]) -> Intervals:
+    """Intervals refined per working mode, merged back into job order (chord, then σ)."""
+    if len(parts) == 1:
+        return parts[0]
+    cat = [np.concatenate([getattr(p, f) for p in parts])
+           for f in ("chord", "sa", "sb", "tha", "thb", "min_margin", "dev_mm")]
+    o = np.lexsort((cat[1], cat[0]))
+    return Intervals(*(c[o] for c in cat))
+
+
+def _transition_targets(path: FloatArray, start: FloatArray, end: FloatArray,
+                        max_step_rad: float) -> FloatArray:
+    """Targets (K, 2) that execute a planned pen-up joint path (samples of straight legs, as
+    `plan_joint_move` returns it) exactly under the firmware's linear interpolation: the
+    corners of the path, each leg split into pieces of at most `max_step_rad`. The first and
+    last samples are replaced by the job's own poses `start`, `end` (they agree to rounding)."""
+    p = np.asarray(path, dtype=np.float64).copy()
+    if (np.abs(p[0] - start).max() > 1e-6 or np.abs(p[-1] - end).max() > 1e-6):
+        raise JobError("internal: the planned working-mode change does not start and end at "
+                       "the job's poses", None, "internal")
+    p[0], p[-1] = start, end
+    d = np.diff(p, axis=0)
+    scale = max(float(np.abs(d).max(initial=0.0)), 1e-12)
+    turn = np.flatnonzero(np.abs(np.diff(d, axis=0)).max(axis=1) > 1e-9 * scale) + 1
+    way = p[np.concatenate(([0], turn, [p.shape[0] - 1]))]
+    out = []
+    for q0, q1 in itertools.pairwise(way):
+        n = max(1, math.ceil(float(np.abs(q1 - q0).max()) / max_step_rad))
+        out.append(q0 + (np.arange(1, n + 1) / n)[:, None] * (q1 - q0))
+    return np.concatenate(out)
+
+
+def _type1_crossings(fb: FiveBar, th: FloatArray,
+                     pts: FloatArray) -> tuple[tuple[int, str, float, float], ...]:
+    """Where an arm's type-1 margin changes sign along sampled poses: (arm, "stretched" or
+    "folded", x, y), the pen position interpolated linearly between the samples."""
+    mar = fb.singularity_margins(th, pts)
+    out: list[tuple[int, str, float, float]] = []
+    for arm in (0, 1):
+        m = mar[:, arm]
+        for k in np.flatnonzero(np.sign(m[:-1]) * np.sign(m[1:]) < 0).tolist():
+            t = m[k] / (m[k] - m[k + 1])
+            q = pts[k] + t * (pts[k + 1] - pts[k])
+            a, b = (fb.a1, fb.b1) if arm == 0 else (fb.a2, fb.b2)
+            d = math.hypot(float(q[0]) - (0.0 if arm == 0 else fb.w), float(q[1]))
+            kind = "stretched" if abs(d - (a + b)) < abs(d - abs(a - b)) else "folded"
+            out.append((arm + 1, kind, float(q[0]), float(q[1])))
+    return tuple(out)
+
+
+def _break_paths(ch: _Chords, brk_chord: IntArray, brk_frac: FloatArray) -> _Chords:
+    """Start a new job path at each break: chord `brk_chord[k]` at chord parameter
+    `brk_frac[k]` ∈ (0, 1] (1: at the chord's end vertex). The break point ends one path and
+    starts the next (it appears twice, once in each), an interior break also splits its
+    chord in two collinear chords. Geometry is unchanged; every new chord keeps its source
+    chord's primitive, budget and direction, with the parameter range cut to its part."""
+    o = np.lexsort((brk_frac, brk_chord))
+    bc, bf = np.asarray(brk_chord, np.int64)[o], np.asarray(brk_frac, np.float64)[o]
+    nb = bc.shape[0]
+    a = ch.chord_from
+    m_old = ch.pts.shape[0]
+    interior = bf < 1.0
+    at = np.where(interior[:, None],
+                  ch.pts[a[bc]] + bf[:, None] * (ch.pts[a[bc] + 1] - ch.pts[a[bc]]),
+                  ch.pts[a[bc] + 1])
+    count = np.where(interior, 2, 1)
+    rep = np.repeat(np.arange(nb), count)
+    copy_k = np.arange(rep.shape[0]) - np.repeat(np.cumsum(count) - count, count)
+    start_copy = ~interior[rep] | (copy_k == 1)
+    ins_pos = np.where(interior, a[bc] + 1, a[bc] + 2)[rep]
+    prim_at = np.where(interior, np.where(ch.prim[bc] >= 0, ch.prim[bc], ch.vert_prim[a[bc]]),
+                       ch.vert_prim[a[bc] + 1])
+    pts = np.insert(ch.pts, ins_pos, at[rep], axis=0)
+    vert_prim = np.insert(ch.vert_prim, ins_pos, prim_at[rep])
+    m_new = pts.shape[0]
+    old_new = np.arange(m_old) + np.searchsorted(ins_pos, np.arange(m_old), side="right")
+    ins_new = ins_pos + np.arange(ins_pos.shape[0])
+    is_start = np.zeros(m_new, bool)
+    is_start[old_new[ch.offsets[:-1]]] = True
+    is_start[ins_new[start_copy]] = True
+    is_end = np.zeros(m_new, bool)
+    is_end[old_new[ch.offsets[1:] - 1]] = True
+    is_end[ins_new[~start_copy]] = True
+    is_end[old_new[a[bc[~interior]] + 1]] = True
+    offsets = np.concatenate((np.flatnonzero(is_start), [m_new])).astype(np.int64)
+    # Per new vertex: the source chord of the chord that starts there and its σ there; per
+    # interior end copy: the chord and σ it ends.
+    src = np.full(m_new, -1, np.int64)
+    f0 = np.zeros(m_new)
+    src[old_new[a]] = np.arange(a.shape[0])
+    isc = start_copy & interior[rep]
+    src[ins_new[isc]] = bc[rep[isc]]
+    f0[ins_new[isc]] = bf[rep[isc]]
+    vsc = ~interior[rep]
+    nxt = np.searchsorted(a, a[bc[rep[vsc]]] + 1)
+    src[ins_new[vsc]] = nxt
+    end_c = np.full(m_new, -1, np.int64)
+    end_f = np.ones(m_new)
+    iec = ~start_copy
+    end_c[ins_new[iec]] = bc[rep[iec]]
+    end_f[ins_new[iec]] = bf[rep[iec]]
+    cf = np.flatnonzero(~is_end)
+    c = src[cf]
+    lo = f0[cf]
+    hi = np.where(end_c[cf + 1] == c, end_f[cf + 1], 1.0)
+    span = ch.thi[c] - ch.tlo[c]
+    rev = ch.rev[c]
+    tlo = np.where(rev, ch.thi[c] - hi * span, ch.tlo[c] + lo * span)
+    thi = np.where(rev, ch.thi[c] - lo * span, ch.tlo[c] + hi * span)
+    old_path_v = np.insert(np.repeat(np.arange(offsets.shape[0] - 1 - nb),
+                                     np.diff(ch.offsets)),
+                           ins_pos, ch.path_of_chord[bc][rep])
+    po = old_path_v[offsets[:-1]]
+    return replace(ch, pts=pts, offsets=offsets, vert_prim=vert_prim, chord_from=cf,
+                   prim=ch.prim[c], tlo=tlo, thi=thi, rev=rev, tol_i=ch.tol_i[c],
+                   path_of_chord=np.searchsorted(offsets, cf, side="right") - 1,
+                   path_source=ch.path_source[po], path_reversed=ch.path_reversed[po],
+                   power=ch.power[po], feed=ch.feed[po])
+
+
+def _point_text(points: FloatArray, match: re.Match[str]) -> str:
+    """'point (x, y) mm' for a 'point <index>' in a planner message."""
+    x, y = points[int(match[1])]
+    return f"point ({x:.3f}, {y:.3f}) mm"
+
+
+def _plan_modes(ch: _Chords, fb: FiveBar, home_th: FloatArray, home_mode: str, asm: str,
+                min1: float, min2: float,
+                limits: tuple[tuple[float, float], tuple[float, float]],
+                where_of: Callable[[int, FloatArray], Where]
+                ) -> tuple[_Chords, NDArray[np.str_], dict[int, FloatArray]]:
+    """Working modes per job path with pen-up changes (`--mode auto` when no single mode
+    clears every check): every path, sampled at most `MODE_SAMPLE_MM` apart, goes through
+    `kinematics.analysis.plan_working_modes` in job order, from the homed pose, in the
+    machine's assembly. Paths that change mode inside are broken there (`_break_paths`).
+    Returns the new chords, the mode of each job path and the planned joint path of each
+    mode change by the travel that runs it (travel j goes into path j)."""
+    offs = ch.offsets
+    npath = offs.shape[0] - 1
+    a = ch.chord_from
+    d = ch.pts[a + 1] - ch.pts[a]
+    n = np.maximum(1, np.ceil(np.hypot(*d.T) / MODE_SAMPLE_MM)).astype(np.int64)
+    rep = np.repeat(np.arange(a.shape[0]), n)
+    frac = (np.arange(rep.shape[0]) - np.repeat(np.cumsum(n) - n, n) + 1) / n[rep]
+    dense = ch.pts[a[rep]] + frac[:, None] * d[rep]
+    c_off = np.searchsorted(a, offs)
+    s_off = np.concatenate(([0], np.cumsum(n)))[c_off]
+    modes = WORKING_MODES
+    cur, pose = home_mode, home_th
+    brk_c: list[int] = []
+    brk_f: list[float] = []
+    path_mode: list[str] = []
+    changes: dict[int, FloatArray] = {}
+    for p in range(npath):
+        g0, g1 = int(s_off[p]), int(s_off[p + 1])
+        stroke = np.concatenate((ch.pts[offs[p]][None], dense[g0:g1]))
+        safe = np.zeros(stroke.shape[0], bool)
+        for m in modes:
+            safe |= point_safety(fb, m, stroke, min1, min2, limits, assembly=asm)
+        if not safe.all():
+            k = int(np.flatnonzero(~safe)[0])
+            why = []
+            for m in modes:
+                try:
+                    PoseChecker(fb, m, 1 if asm == "+" else -1, min1, min2,
+                                limits).inverse(stroke[k:k + 1])
+                except CheckFailedError as cf:
+                    why.append(f"{m}: {cf.message}")
+            raise JobError("no working mode is safe at this point in assembly "
+                           f"{asm}, so no working-mode change can help (" + "; ".join(why)
+                           + ")", where_of(p, stroke[k]), "no_mode")
+        try:
+            mp = plan_working_modes(fb, [stroke], cur, min1, min2, limits, assembly=asm,
+                                    start_angles=pose, modes=modes)
+        except NoSafeRegionError as e:
+            msg = re.sub(r"stroke 0:? ", "", str(e))
+            msg = re.sub(r"point (\d+)", partial(_point_text, stroke), msg)
+            raise JobError(f"working-mode change impossible: {msg}", where_of(p, stroke[0]),
+                           "no_mode") from None
+        for i, pc in enumerate(mp.pieces):
+            if pc.stop - pc.start < 2 or (i > 0 and pc.start == 0):
+                raise JobError("internal: the working-mode plan has a piece without a "
+                               "chord", where_of(p, stroke[pc.start]), "internal")
+            if i > 0:
+                g = g0 + pc.start - 1
+                brk_c.append(int(rep[g]))
+                brk_f.append(float(frac[g]))
+            if pc.transition is not None:
+                changes[len(path_mode)] = pc.transition.joint_path
+            path_mode.append(pc.mode)
+        last = mp.pieces[-1]
+        cur = last.mode
+        pose = np.asarray(fb.inverse(stroke[last.stop - 1], cur), dtype=np.float64)
+    if brk_c:
+        ch = _break_paths(ch, np.array(brk_c, np.int64), np.array(brk_f))
+    return ch, np.array(path_mode), changes
+
+
 def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
-                  mode: str) -> Job:
+                  mode: str, plan_modes: bool = False) -> Job:
+    """Compile `drawing`, placed for working mode `mode`. Without `plan_modes` every path is
+    drawn in `mode`. With it (`--mode auto` when no single mode clears every check), the
+    modes come from `_plan_modes` and every change of mode becomes a checked pen-up
+    joint-space move (`ModeChange`)."""
     fb = profile.geometry
     kin = profile.kinematics
     mot = profile.motors
@@ -325,17 +587,18 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
     mdraw = drawing.transformed(pl.matrix, pl.offset)
     poly = flatten(mdraw, tol_f)
 
-    def fail(cf: CheckFailedError, prim: int, what: str = "path") -> JobError:
+    def fail(cf: CheckFailedError, prim: int, what: str = "path",
+             in_mode: str | None = None) -> JobError:
+        m = in_mode or mode
         w = _where(file, drawing, pl, cf.point, prim, what)
-        msg = f"{cf.message} (working mode {mode})"
+        msg = f"{cf.message} (working mode {m})"
         if cf.reason in ("reach", "joint_limit", "type1_margin", "type2_margin", "assembly"):
-            msg += "; " + layout.does_not_fit_hint(pl, fb, mode, min1, min2, limits, asm)
+            msg += "; " + layout.does_not_fit_hint(pl, fb, m, min1, min2, limits, asm)
         return JobError(msg, w, cf.reason)
 
     # Assembly: the machine's, from the profile (every pose must have it; the checker
     # refuses a point that is only reachable in the other one).
     assembly = 1 if asm == "+" else -1
-    checker = PoseChecker(fb, mode, assembly, min1, min2, limits)
     home = np.array(mot.home_rad, dtype=np.float64).reshape(1, 2)
     home_fk = fb.forward_batch(home, asm)
     if not home_fk.valid[0]:  # pragma: no cover - the profile parser checks the homed pose
@@ -343,34 +606,77 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
                        f"position in assembly {asm}", Where(file=file, what="move from home"),
                        "assembly")
     home_pt = home_fk.points[0]
+    home_mode = _mode_at(fb, home[0], home_pt,
+                         kin.working_mode if kin.working_mode != "auto" else AUTO_ORDER[0])
 
     ch = _prepare_chords(drawing, poly, tol, tol_f, home_pt, opts.keep_order)
-    # Checked inverse kinematics of every vertex.
-    try:
-        th_v = checker.inverse(ch.pts)
-    except CheckFailedError as cf:
-        raise fail(cf, int(ch.vert_prim[cf.index])) from None
+    changes: dict[int, FloatArray] = {}
+    if plan_modes:
+        def where_of(p: int, point: FloatArray) -> Where:
+            return _where(file, drawing, pl, (float(point[0]), float(point[1])),
+                          int(ch.vert_prim[ch.offsets[p]]))
+
+        ch, path_mode, changes = _plan_modes(ch, fb, home[0], home_mode, asm, min1, min2,
+                                             limits, where_of)
+    else:
+        path_mode = np.full(ch.offsets.shape[0] - 1, mode)
+    npath = ch.offsets.shape[0] - 1
+    checkers = {m: PoseChecker(fb, m, assembly, min1, min2, limits)
+                for m in dict.fromkeys(path_mode.tolist())}
+    checker = next(iter(checkers.values()))  # forward kinematics (the same in every mode)
+    # Checked inverse kinematics of every vertex, in its path's working mode.
+    vert_mode = np.repeat(path_mode, np.diff(ch.offsets))
+    th_v = np.empty_like(ch.pts)
+    for m, chk in checkers.items():
+        idx = np.flatnonzero(vert_mode == m)
+        try:
+            th_v[idx] = chk.inverse(ch.pts[idx], idx)
+        except CheckFailedError as cf:
+            raise fail(cf, int(ch.vert_prim[cf.index]), in_mode=m) from None
     a = ch.chord_from
-    try:
-        iv = refine(checker, ch.pts[a], ch.pts[a + 1], th_v[a], th_v[a + 1], ch.tol_i,
-                    MAX_STEP_RAD)
-    except CheckFailedError as cf:
-        raise fail(cf, int(ch.prim[cf.index]) if ch.prim[cf.index] >= 0
-                   else int(ch.vert_prim[a[cf.index]])) from None
+    chord_mode = path_mode[ch.path_of_chord]
+    parts: list[Intervals] = []
+    for m, chk in checkers.items():
+        cs = np.flatnonzero(chord_mode == m)
+        try:
+            r = refine(chk, ch.pts[a[cs]], ch.pts[a[cs] + 1], th_v[a[cs]], th_v[a[cs] + 1],
+                       ch.tol_i[cs], MAX_STEP_RAD)
+        except CheckFailedError as cf:
+            c = int(cs[cf.index])
+            raise fail(cf, int(ch.prim[c]) if ch.prim[c] >= 0
+                       else int(ch.vert_prim[a[c]]), in_mode=m) from None
+        parts.append(r if len(checkers) == 1 else replace(r, chord=cs[r.chord]))
+    iv = _merge_intervals(parts)
 
     # ------------------------------------------------------------ travel
-    npath = ch.offsets.shape[0] - 1
     p_start = ch.offsets[:-1]
     p_end = ch.offsets[1:] - 1
     t_from = np.concatenate((home, th_v[p_end]))  # travel j goes into path j (j = P: park)
     t_to = np.concatenate((th_v[p_start], home))
     is_home_move = np.zeros(npath + 1, dtype=bool)
     is_home_move[0] = is_home_move[-1] = True
-    pieces, ok, code, tmarg = joint_moves(checker, t_from, t_to, MAX_STEP_RAD,
-                                          check_type1=~is_home_move)
+    t_mode = path_mode[np.minimum(np.arange(npath + 1), npath - 1)]
+    is_change = np.zeros(npath + 1, dtype=bool)
+    is_change[list(changes)] = True
+    pieces = np.ones(npath + 1, dtype=np.int64)
+    ok = np.ones(npath + 1, dtype=bool)
+    code = np.zeros(npath + 1, dtype=np.int64)
+    tmarg = np.full((npath + 1, 3), np.inf)
+    for m, chk in checkers.items():
+        js = np.flatnonzero((t_mode == m) & ~is_change)
+        if js.size:
+            pieces[js], ok[js], code[js], tmarg[js] = joint_moves(
+                chk, t_from[js], t_to[js], MAX_STEP_RAD, check_type1=~is_home_move[js])
+    if plan_modes:
+        # A move from or to the homed pose that fails in a straight line: plan it like a
+        # working-mode change (through a type-1 singularity if need be).
+        for j in np.flatnonzero(~ok & is_home_move).tolist():
+            planned = plan_joint_move(fb, t_from[j], t_to[j], asm, min2, limits)
+            if planned is not None:
+                changes[j] = planned[0]
+                is_change[j] = ok[j] = True
     notes: list[str] = []
-    # Cartesian fallback for the inter-path travels that fail in joint space.
-    cart_pts: dict[int, tuple[FloatArray, FloatArray]] = {}
+    travel_targets: dict[int, FloatArray] = {}  # travel j → its targets (K, 2), last = t_to[j]
     bad = np.flatnonzero(~ok)
     for j in bad.tolist():
         what = ("move from home" if j == 0 else "move to home" if j == npath
@@ -380,38 +686,57 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
             home_fail = CheckFailedError(
                 0, pt, REASON_KEY.get(int(code[j]), "reach"),
                 "the joint-space move between the homed pose and the drawing fails the "
-                "checks: " + checker.explain(int(code[j]), home[0], home_pt, tmarg[j]))
-            raise fail(home_fail, -1, what)
-    if bad.size:
-        pa = np.concatenate([ch.pts[p_end[j - 1]][None] for j in bad])
-        pb = np.concatenate([ch.pts[p_start[j]][None] for j in bad])
+                "checks: " + checkers[str(t_mode[j])].explain(int(code[j]), home[0], home_pt,
+                                                              tmarg[j]))
+            raise fail(home_fail, -1, what, str(t_mode[j]))
+    for m, chk in checkers.items():
+        bm = bad[t_mode[bad] == m]
+        if not bm.size:
+            continue
+        # Cartesian fallback for the inter-path travels that fail in joint space.
         try:
-            civ = refine(checker, pa, pb, t_from[bad], t_to[bad],
-                         np.full(bad.size, max(TRAVEL_TOL_MM, tol)), MAX_STEP_RAD)
+            civ = refine(chk, ch.pts[p_end[bm - 1]], ch.pts[p_start[bm]], t_from[bm],
+                         t_to[bm], np.full(bm.size, max(TRAVEL_TOL_MM, tol)), MAX_STEP_RAD)
         except CheckFailedError as cf:
-            j = int(bad[cf.index])
-            raise fail(cf, -1, f"travel to path #{int(ch.path_source[j])}") from None
-        for n_, j in enumerate(bad.tolist()):
-            sel = civ.chord == n_
-            cart_pts[j] = (civ.sa[sel], civ.thb[sel])
+            j = int(bm[cf.index])
+            raise fail(cf, -1, f"travel to path #{int(ch.path_source[j])}", m) from None
+        for n_, j in enumerate(bm.tolist()):
+            travel_targets[j] = civ.thb[civ.chord == n_]
+    if bad.size:
         notes.append(f"{bad.size} pen-up travel(s) run as straight lines (a joint-space move "
                      "would have passed too close to a singularity)")
+    # Working-mode changes: the planned joint paths, checked again here sample by sample
+    # (joint limits, type-2 margin, assembly; type-1 singularities may be crossed).
+    for j, jpath in sorted(changes.items()):
+        tg = _transition_targets(jpath, t_from[j], t_to[j], MAX_STEP_RAD)
+        legs_a = np.concatenate((t_from[j][None], tg[:-1]))
+        _, okc, cc, mc = joint_moves(checker, legs_a, tg, MAX_STEP_RAD, check_type1=False)
+        if not okc.all():
+            k = int(np.flatnonzero(~okc)[0])
+            pt = checker.forward(tg[k:k + 1])[0][0]
+            change_fail = CheckFailedError(
+                0, (float(pt[0]), float(pt[1])), REASON_KEY.get(int(cc[k]), "reach"),
+                "the pen-up working-mode change fails the checks: "
+                + checker.explain(int(cc[k]), tg[k], pt, mc[k]))
+            raise fail(change_fail, -1, "working-mode change", str(t_mode[j])) from None
+        tmarg[j] = mc.min(axis=0)
+        travel_targets[j] = tg
 
     # ------------------------------------------------------------ assemble segments
     # Draw segments, in order (intervals are sorted by chord, chords by job order).
     dc = iv.chord
     d_path = ch.path_of_chord[dc]
     d_end_pts = ch.pts[a[dc]] + iv.sb[:, None] * (ch.pts[a[dc] + 1] - ch.pts[a[dc]])
-    # Travel pieces: uniform in joint space, or the Cartesian pieces.
+    # Travel pieces: uniform in joint space, or the given targets (Cartesian, mode change).
     t_pieces = pieces.copy()
-    for j, (sa_, _) in cart_pts.items():
-        t_pieces[j] = sa_.shape[0]
+    for j, tg in travel_targets.items():
+        t_pieces[j] = tg.shape[0]
     t_move = np.repeat(np.arange(npath + 1), t_pieces)
     t_k = np.arange(t_move.shape[0]) - np.repeat(np.cumsum(t_pieces) - t_pieces, t_pieces)
     frac = (t_k + 1) / t_pieces[t_move]
     t_th = t_from[t_move] + frac[:, None] * (t_to[t_move] - t_from[t_move])
-    for j, (_, thb) in cart_pts.items():
-        t_th[t_move == j] = thb
+    for j, tg in travel_targets.items():
+        t_th[t_move == j] = tg
     t_pts = checker.forward(t_th)[0]
     # Merge: key (path, part, sequence); travel into path j precedes its draw segments.
     n_d, n_t = dc.shape[0], t_move.shape[0]
@@ -477,26 +802,69 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
     # Requested geometry per draw segment (for validation and previews).
     src_rows = perm_kept[seg_draw]  # rows into the draw-interval arrays
     chord_rows = dc[src_rows]
-    # Smallest margins over targets and samples; the moves from/to home may pass a type-1
-    # singularity on purpose (pen up, changing working mode), so their type-1 columns and
-    # targets are left out.
+    # Smallest margins over targets and samples; the moves from/to home and the working-mode
+    # changes may pass a type-1 singularity on purpose (pen up, changing working mode), so
+    # their type-1 columns and targets are left out.
+    free1 = is_home_move | is_change
     tmarg_rep = tmarg.copy()
-    tmarg_rep[is_home_move, :2] = np.inf
+    tmarg_rep[free1, :2] = np.inf
     jmargin = np.minimum(iv.min_margin.min(axis=0) if iv.min_margin.size else np.inf,
                          tmarg_rep.min(axis=0))
+    seg_mode = np.where(seg_draw, path_mode[np.minimum(seg_path, npath - 1)],
+                        t_mode[seg_path])
+    sgn = np.stack([np.where(np.char.startswith(seg_mode, "+"), 1.0, -1.0),
+                    np.where(np.char.endswith(seg_mode, "+"), 1.0, -1.0),
+                    np.full(seg_mode.shape[0], float(assembly))], axis=1)
     tm = fb.singularity_margins(th_all, pts_all) * np.concatenate(
-        (checker.signs, [float(assembly)]))
-    home_leg = np.concatenate(([True], ~seg_draw & ((seg_path == 0) | (seg_path == npath))))
+        ([[1.0, 1.0, float(assembly)]], sgn))
+    home_leg = np.concatenate(([True], ~seg_draw & free1[seg_path]))
     tm[home_leg, :2] = np.inf
     jmargin = np.minimum(jmargin, tm.min(axis=0))
     jac = fb.jacobian(th_all, pts_all)
     quantum = float(steps.step_quantum_mm(jac, mot.rad_per_step).max())
-    mode_note = f"working mode {mode}, assembly {'+' if assembly > 0 else '-'}"
+    # The working-mode changes as executed (quantised steps, sampled ≤ 0.5° apart).
+    mode_changes: list[ModeChange] = []
+    th_q = steps.step_angles(st, mot.home_rad, mot.steps_per_rev)
+    for j in sorted(changes):
+        segs = np.flatnonzero(~seg_draw & (seg_path == j))
+        if not segs.size:
+            continue
+        s0, s1 = int(segs[0]), int(segs[-1]) + 1
+        q = th_q[s0:s1 + 1]
+        dense = _densify_joint(q, math.radians(0.5))
+        fk = fb.forward_batch(dense, asm)
+        marg = (fb.singularity_margins(dense, fk.points)[:, 2] * assembly if fk.valid.all()
+                else np.array([-np.inf]))
+        lim_ok = wrap_to_limits(dense, limits)[1:]
+        if not (fk.valid.all() and (marg > 0).all() and lim_ok[0].all() and lim_ok[1].all()):
+            raise JobError("the working-mode change before path "
+                           f"#{j} leaves the assembly mode or the joint limits once its "
+                           "targets are rounded to whole steps", Where(file=file),
+                           "assembly")
+        mode_changes.append(ModeChange(
+            from_mode=str(path_mode[j - 1]) if j > 0 else home_mode,
+            to_mode=str(path_mode[j]) if j < npath else home_mode,
+            path=j, first_seg=s0, end_seg=s1,
+            lift_mm=(float(pts_all[s0, 0]), float(pts_all[s0, 1])),
+            land_mm=(float(pts_all[s1, 0]), float(pts_all[s1, 1])),
+            crossings=_type1_crossings(fb, dense, fk.points),
+            min_type2_rad=float(marg.min()),
+            duration_s=float(pln.duration_us[s0:s1].sum()) * 1e-6))
+    if mode_changes:
+        seq = [str(path_mode[0])]
+        for m in path_mode[1:].tolist():
+            if m != seq[-1]:
+                seq.append(m)
+        mode_note = (f"working modes {' → '.join(seq)} with {len(mode_changes)} pen-up "
+                     f"working-mode change(s), assembly {asm}")
+    else:
+        mode_note = f"working mode {path_mode[0]}, assembly {asm}"
     notes.insert(0, f"{mode_note}; at the homed pose the pen is at ({home_pt[0]:.1f}, "
-                    f"{home_pt[1]:.1f}) mm")
+                    f"{home_pt[1]:.1f}) mm (working mode {home_mode})")
     notes.extend(drawing.warnings)
     job = Job(
-        file=file, mode=mode, assembly=assembly, tolerance_mm=tol, flatten_tol_mm=tol_f,
+        file=file, mode=str(path_mode[0]), assembly=assembly, tolerance_mm=tol,
+        flatten_tol_mm=tol_f,
         placement=pl, drawing=mdraw, steps_per_rev=mot.steps_per_rev, home_rad=mot.home_rad,
         points_mm=pts_all, angles_rad=th_all, steps=st, draw=seg_draw, power=power,
         path=seg_path, source=seg_source, source_line=seg_line, duration_us=pln.duration_us,
@@ -510,10 +878,22 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
         seg_rev=ch.rev[chord_rows], seg_sa=iv.sa[src_rows], seg_sb=iv.sb[src_rows],
         seg_ca=ch.pts[a[chord_rows]], seg_cb=ch.pts[a[chord_rows] + 1],
         ideal_max_dev_mm=float(iv.dev_mm.max()) if iv.dev_mm.size else 0.0,
+        path_modes=tuple(path_mode.tolist()), home_mode=home_mode,
+        mode_changes=tuple(mode_changes),
     )
     if opts.validate:
         job = validate(job, profile, opts.validation_samples)
     return job
+
+
+def _densify_joint(q: FloatArray, step_rad: float) -> FloatArray:
+    """The firmware's joint-space polyline through targets q (N, 2), sampled at most
+    `step_rad` apart (every target included)."""
+    d = np.diff(q, axis=0)
+    n = np.maximum(1, np.ceil(np.abs(d).max(axis=1) / step_rad)).astype(np.int64)
+    rep = np.repeat(np.arange(d.shape[0]), n)
+    s = (np.arange(rep.shape[0]) - np.repeat(np.cumsum(n) - n, n)) / n[rep]
+    return np.concatenate((q[rep] + s[:, None] * d[rep], q[-1:]))
 
 
 def deviations(job: Job, profile: Profile, samples: int = 4,
@@ -641,8 +1021,18 @@ def compile_drawing(drawing: Drawing, profile: Profile, opts: CompileOptions) ->
             failures.append((m, e))
     if not results:
         lines = "\n".join(f"  mode {m}: {e}" for m, e in failures)
-        raise JobError("no working mode clears every check (--mode auto):\n" + lines,
-                       Where(file=drawing.file), "no_mode")
+        try:
+            job = _compile_with_mode_changes(drawing, profile, opts)
+        except JobError as e:
+            raise JobError("no working mode clears every check (--mode auto):\n" + lines
+                           + f"\n  with pen-up working-mode changes: {e}",
+                           Where(file=drawing.file), "no_mode") from None
+        used = ", ".join(dict.fromkeys(job.path_modes))
+        notes = [f"--mode auto: no single working mode clears every check, so the paths are "
+                 f"drawn in modes {used} with {len(job.mode_changes)} pen-up working-mode "
+                 "change(s) (thesis Sec. 7.2)"]
+        notes += [f"  single mode {m}: {e.detail.split(';')[0]}" for m, e in failures]
+        return replace(job, notes=notes + job.notes)
     best = max(results, key=lambda j: float(np.min(j.min_margin_rad)))
     why = (f"--mode auto chose {best.mode}: it clears every check with the largest smallest "
            f"singularity margin ({math.degrees(float(np.min(best.min_margin_rad))):.1f}°)")
@@ -652,6 +1042,22 @@ def compile_drawing(drawing: Drawing, profile: Profile, opts: CompileOptions) ->
     others += [f"{m}: {e.detail.split(';')[0]}" for m, e in failures]
     notes = [why] + ([f"  other modes — {o}" for o in others]) + best.notes
     return replace(best, notes=notes)
+
+
+def _compile_with_mode_changes(drawing: Drawing, profile: Profile,
+                               opts: CompileOptions) -> Job:
+    """`--mode auto`'s second try: working modes per path with pen-up changes. With
+    `--origin` the placement does not depend on the mode; otherwise the placements of the
+    modes are tried in `AUTO_ORDER` (centred in, or fitted to, that mode's safe rectangle)
+    and the first that can be planned wins. Raises the first mode's `JobError` if none can."""
+    placements = AUTO_ORDER[:1] if opts.origin_mm is not None else AUTO_ORDER
+    errors: list[JobError] = []
+    for m in placements:
+        try:
+            return _compile_mode(drawing, profile, opts, m, plan_modes=True)
+        except JobError as e:
+            errors.append(e)
+    raise errors[0]
 
 
 def compile_job(path: str | Path, profile: Profile, opts: CompileOptions | None = None) -> Job:

@@ -5,7 +5,10 @@ the singularity-safe region of the job's working mode and assembly (shaded), the
 circles (type-1 singularity loci) and the type-2 singularity curves, the requested path
 (black), the executed path computed from the *quantised* steps through forward kinematics
 including the joint-space interpolation (red), pen-up travel (grey, dashed), and the linkage
-drawn at a few poses (home, first, middle and last target).
+drawn at a few poses (home, first, middle and last target). A job that changes working mode
+(`--mode auto`, thesis Sec. 7.2) shows the safe region of every mode it draws in and marks
+each change: the pen-up move (orange, dash-dot), where the pen lifts (▲, numbered "n: from →
+to") and lands (▼), and where an arm passes its type-1 singularity (✕).
 """
 
 from __future__ import annotations
@@ -34,6 +37,9 @@ from kinematics import analysis
 from kinematics.fivebar import FiveBar
 
 FloatArray = NDArray[np.float64]
+#: (fill, edge) colours of the safe regions of the working modes a job draws in.
+_REGION_COLOURS = (("#d9f2d9", "#5aa05a"), ("#dde8fb", "#4a78c2"), ("#fbe3d0", "#c27a3a"),
+                   ("#eadcf5", "#8a5cb0"))
 
 
 def _nan_join(pts: FloatArray, starts: NDArray[np.int64], ends: NDArray[np.int64]) -> FloatArray:
@@ -89,18 +95,22 @@ def draw_preview(job: Job, profile: Profile, out: str | Path, samples: int = 4,
     hi = pts.max(axis=0)
     pad = 0.08 * float(max(hi - lo))
     x0, x1, y0, y1 = lo[0] - pad, hi[0] + pad, lo[1] - pad, hi[1] + pad
-    # Safe region of this mode/assembly.
+    # Safe region of each working mode the job draws in (and the machine's assembly).
     res = max((x1 - x0), (y1 - y0)) / 300.0
     xs = np.arange(x0, x1 + res, res)
     ys = np.arange(y0, y1 + res, res)
-    mask = analysis.safe_mask(fb, job.mode, xs, ys, kin.min_type1_margin_rad,
-                              kin.min_type2_margin_rad, profile.motors.limits_rad,
-                              assembly="+" if job.assembly > 0 else "-")
-    ax.contourf(xs, ys, mask.astype(float), levels=[0.5, 1.5], colors=["#d9f2d9"], zorder=0)
-    ax.contour(xs, ys, mask.astype(float), levels=[0.5], colors=["#5aa05a"], linewidths=0.8,
-               zorder=1)
-    handles: list[Line2D | Patch] = [Patch(facecolor="#d9f2d9", edgecolor="#5aa05a",
-                                           label=f"safe region, mode {job.mode}")]
+    used = list(dict.fromkeys(job.path_modes or (job.mode,)))
+    handles: list[Line2D | Patch] = []
+    for k, m in enumerate(used):
+        mask = analysis.safe_mask(fb, m, xs, ys, kin.min_type1_margin_rad,
+                                  kin.min_type2_margin_rad, profile.motors.limits_rad,
+                                  assembly="+" if job.assembly > 0 else "-")
+        fill, edge = _REGION_COLOURS[k % len(_REGION_COLOURS)]
+        ax.contourf(xs, ys, mask.astype(float), levels=[0.5, 1.5], colors=[fill], zorder=0,
+                    alpha=1.0 if len(used) == 1 else 0.55)
+        ax.contour(xs, ys, mask.astype(float), levels=[0.5], colors=[edge], linewidths=0.8,
+                   zorder=1)
+        handles.append(Patch(facecolor=fill, edgecolor=edge, label=f"safe region, mode {m}"))
     # Type-1 loci: reach circles about the motors.
     for (lo_r, hi_r), cx in zip(fb.reach, (0.0, fb.w), strict=True):
         for r in (lo_r, hi_r):
@@ -112,17 +122,17 @@ def draw_preview(job: Job, profile: Profile, out: str | Path, samples: int = 4,
     drew_t2 = False
     if traces is not None:
         for tr in traces(fb):
-            for line in tr.polylines(job.mode):
+            for line in [ln for m in used for ln in tr.polylines(m)]:
                 ax.plot(line[:, 0], line[:, 1], "-", color="#d62728", lw=1.0, alpha=0.7,
                         zorder=1)
                 drew_t2 = True
     else:  # the zero level of the type-2 margin over the grid
         gx, gy = np.meshgrid(xs, ys)
         g = np.stack((gx.ravel(), gy.ravel()), axis=1)
-        inv = fb.inverse_batch(g, job.mode)
-        m = fb.singularity_margins(inv.angles, g)[:, 2]
-        m[~inv.valid] = np.nan
-        ax.contour(xs, ys, m.reshape(gx.shape), levels=[0.0], colors=["#d62728"],
+        inv = fb.inverse_batch(g, used[0])
+        marg = fb.singularity_margins(inv.angles, g)[:, 2]
+        marg[~inv.valid] = np.nan
+        ax.contour(xs, ys, marg.reshape(gx.shape), levels=[0.0], colors=["#d62728"],
                    linewidths=1.0)
         drew_t2 = True
     if drew_t2:
@@ -150,6 +160,27 @@ def draw_preview(job: Job, profile: Profile, out: str | Path, samples: int = 4,
     trv = _nan_join(ex_pts, t0 * per, t1 * per)
     ax.plot(trv[:, 0], trv[:, 1], "--", color="#7f7f7f", lw=0.7, zorder=2)
     handles.append(Line2D([], [], ls="--", color="#7f7f7f", label="pen-up travel"))
+    # Working-mode changes: the executed pen-up move, where the pen lifts and lands, and
+    # where an arm passes its type-1 singularity.
+    for n, mc in enumerate(job.mode_changes, start=1):
+        seg = fk[mc.first_seg:mc.end_seg].reshape(-1, 2)
+        ax.plot(seg[:, 0], seg[:, 1], "-.", color="#ff7f0e", lw=1.3, zorder=4)
+        ax.plot(*mc.lift_mm, marker="^", color="#ff7f0e", ms=9, mec="black", zorder=7)
+        ax.plot(*mc.land_mm, marker="v", color="#ff7f0e", ms=9, mec="black", zorder=7)
+        for _, _, cx, cy in mc.crossings:
+            ax.plot(cx, cy, marker="X", color="#ff7f0e", ms=9, mec="black", zorder=7)
+        ax.annotate(f"{n}: {mc.from_mode} → {mc.to_mode}", mc.lift_mm,
+                    textcoords="offset points", xytext=(6, 6), fontsize=9, color="#a34a00",
+                    fontweight="bold", zorder=8)
+    if job.mode_changes:
+        handles += [Line2D([], [], ls="-.", color="#ff7f0e", lw=1.3,
+                           label="working-mode change (pen up)"),
+                    Line2D([], [], ls="", marker="^", color="#ff7f0e", mec="black",
+                           label="mode change: pen lifts (n: from → to)"),
+                    Line2D([], [], ls="", marker="v", color="#ff7f0e", mec="black",
+                           label="mode change: pen lands"),
+                    Line2D([], [], ls="", marker="X", color="#ff7f0e", mec="black",
+                           label="arm passes its type-1 singularity")]
     # Linkage at a few poses.
     for k, i in enumerate(sel):
         _linkage(ax, fb, th[i], pose_pts[k], None, 0.9 if k == 0 else 0.45)
@@ -164,7 +195,7 @@ def draw_preview(job: Job, profile: Profile, out: str | Path, samples: int = 4,
     ax.grid(True, lw=0.3, alpha=0.5)
     ax.set_xlabel("x, mm (machine frame, motor M1 at the origin)")
     ax.set_ylabel("y, mm")
-    ax.set_title(f"{Path(job.file).name}: mode {job.mode}, {job.n_paths} paths, "
+    ax.set_title(f"{Path(job.file).name}: mode {_mode_sequence(job)}, {job.n_paths} paths, "
                  f"{job.n_segments} segments, ≈ {_fmt_time(job.total_time_s)}\n"
                  f"max deviation {job.max_dev_mm:.4f} mm (tolerance {job.tolerance_mm:g} mm "
                  f"+ step quantum {job.step_quantum_mm:.4f} mm)", fontsize=10)
@@ -183,6 +214,20 @@ def draw_preview(job: Job, profile: Profile, out: str | Path, samples: int = 4,
         if os.path.exists(tmp):
             os.unlink(tmp)
     return out
+
+
+def _mode_sequence(job: Job) -> str:
+    """"+-" for a one-mode job; "++ (#0–#1) → +- (#2–#3)" for the paths' working modes."""
+    modes = job.path_modes or (job.mode,)
+    if len(set(modes)) == 1:
+        return modes[0]
+    runs: list[tuple[str, int, int]] = []
+    for i, m in enumerate(modes):
+        if runs and runs[-1][0] == m:
+            runs[-1] = (m, runs[-1][1], i)
+        else:
+            runs.append((m, i, i))
+    return " → ".join(f"{m} (#{a})" if a == b else f"{m} (#{a}–#{b})" for m, a, b in runs)
 
 
 def _fmt_time(t: float) -> str:
@@ -208,7 +253,9 @@ def report_lines(job: Job, nbar: NbarOpinion | None = None, laser: bool = False)
         job.paths.max_dev_mm).any() else -1
     lines = [
         f"file          {job.file}",
-        f"working mode  {job.mode} (assembly {'+' if job.assembly > 0 else '-'})",
+        f"working mode  {_mode_sequence(job)} (assembly {'+' if job.assembly > 0 else '-'}"
+        + (f"; {len(job.mode_changes)} pen-up working-mode change(s), listed below; the "
+           f"homed pose is in {job.home_mode})" if job.mode_changes else ")"),
         f"placement     {pl.how}: scale {pl.scale:.4g}, rotation {pl.rotate_deg:g}°, "
         f"{w:.1f} × {h:.1f} mm at ({bx[0]:.1f}, {bx[1]:.1f})–({bx[2]:.1f}, {bx[3]:.1f}) mm",
         ("tool          laser: S up to "
@@ -238,5 +285,7 @@ def report_lines(job: Job, nbar: NbarOpinion | None = None, laser: bool = False)
     lines.append(f"margins       smallest type 1: {deg(min(mm[0], mm[1])):.1f}° "
                  f"(arm 1 {deg(mm[0]):.1f}°, arm 2 {deg(mm[1]):.1f}°), type 2: "
                  f"{deg(mm[2]):.1f}°")
+    lines.extend(f"mode change {k:<2d}{mc.describe(job.n_paths)}"
+                 for k, mc in enumerate(job.mode_changes, start=1))
     lines.extend(f"note          {n}" for n in job.notes)
     return lines
