@@ -1,13 +1,16 @@
-"""Simulation (Algorithm 1): perturb the inputs, solve by Newton–Raphson from the previous state.
+"""Simulation (Algorithm 1): perturb the inputs, solve by Newton–Raphson from the previous states.
 
 On top of the paper's loop:
-- predictor: the Newton start is extrapolated from the last (up to four) states along the input
-  path (Lagrange in the input value), or from the tangent q' = −J⁺ ∂Φ/∂u when there is no
-  history; from the previous state alone Newton would need several more iterations;
+- predictor: the Newton start is extrapolated along the input path from the last states (up to
+  seven equally spaced ones, else up to four with bounded Lagrange weights), or from the tangent
+  q' = −J⁺ ∂Φ/∂u when there is no history; from the previous state alone Newton would need
+  several more iterations. In sweeps, up to BLOCK equal steps are predicted and corrected
+  together (one batched Newton step), each state passing the tests of a single step;
 - branch-flip guard: a step is accepted only if Newton's correction from the predictor is at
-  most half the predicted motion (continuity). A jump to the other assembly is a correction of
-  the order of the distance between the branches that does not shrink with the step, so the
-  step is halved until the correction is small, or the step falls below the resolution;
+  most half the predicted motion, and the predicted motion at most MAX_SPEEDUP times the last
+  step's (continuity). A jump to the other assembly is a correction of the order of the
+  distance between the branches that does not shrink with the step, so the step is halved until
+  the correction is small, or the step falls below the resolution;
 - motion limit: when even the smallest step (2^-max_halvings of an input step) fails, the input
   value reached and the one that failed are reported with the reason (singular Jacobian or no
   convergence); `sweep(..., reverse_at_limit=True)` then runs the input back to trace a rocker's
@@ -192,13 +195,13 @@ class _Tracker:
         self.hs = sysm.hs
         self.hs_t = np.ascontiguousarray(sysm.hs.T)
         self.xs = np.ones((BLOCK, sysm.size))  # work rows for blocks (last column stays 1)
-        self.bsize = BLOCK  # block size of `run_fast`, and single steps to take before the next
-        self.cool = 0  # block after one that accepted too few states
+        self.bsize = BLOCK  # block size of `run_fast`
+        self.cool = 0  # single steps to take before the next block (after a poor block)
         self.m = sysm.m
         self.nact = sysm.n_act
         self.tol2 = self.tol * self.tol
         self.bound = 0.5 * sysm.curvature
-        self.quarter = 0.5 * self.tol  # margin for the rounding of the linear solve
+        self.accept = 0.5 * self.tol  # remainder bound accepted (margin: solve's rounding)
         self._push(self.q, self._param(self.u))
 
     def set_line(self, base: FloatArray, inc: FloatArray) -> None:
@@ -387,7 +390,7 @@ class _Tracker:
             return 0
         x, n, nd, nact, hsm, m = self.x, self.n, self.nd, self.nact, self.hs, self.m
         ring, slot, run = self.ring, self.slot, self.run
-        bound, quarter, floor2 = self.bound, self.quarter, self.floor2
+        bound, accept, floor2 = self.bound, self.accept, self.floor2
         cont2, speed2 = CONTINUITY * CONTINUITY, MAX_SPEEDUP * MAX_SPEEDUP
         last_m2 = self.last_m2 if self.last_h == 1.0 else 0.0
         s = hs_[-1]
@@ -419,7 +422,7 @@ class _Tracker:
                 prev = np.empty(b)
                 prev[0] = last_m2
                 prev[1:] = m2s[:-1]
-                good = ((bound * c2s <= quarter) & (c2s <= cont2 * m2s + floor2)
+                good = ((bound * c2s <= accept) & (c2s <= cont2 * m2s + floor2)
                         & ((prev <= 0.0) | (m2s <= speed2 * prev + floor2)))
                 a = b if good.all() else int(np.argmin(good))
                 if a == b:
@@ -459,7 +462,7 @@ class _Tracker:
                 break
             q_new = q_pred - step
             its = 1
-            if not bound * c2 <= quarter:  # not converged yet: carry on with Newton
+            if not bound * c2 <= accept:  # not converged yet: carry on with Newton
                 more = newton(self.sys, x, q_new, self.tol, self.max_iter - 1)
                 if not more.converged:
                     break

@@ -213,7 +213,7 @@ def newton(system: QuadraticSystem, x: FloatArray, q0: FloatArray, tol: float,
     tol2 = tol * tol
     lsq = m > n
     bound = 0.5 * system.curvature
-    quarter = 0.5 * tol
+    accept = 0.5 * tol
     q = q0
     prev = math.inf
     it = 0
@@ -239,6 +239,6 @@ def newton(system: QuadraticSystem, x: FloatArray, q0: FloatArray, tol: float,
                 return NewtonResult(q, it, math.sqrt(r2), False, d2)
             q = q - step
             it += 1
-            if not lsq and bound * d2 <= quarter:
+            if not lsq and bound * d2 <= accept:
                 x[:n] = q
                 return NewtonResult(q, it, bound * d2, True, d2)
