@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -160,6 +160,21 @@ _BLOCKS = [_block_weights(p) for p in range(HISTORY)]
 _ARANGE = np.arange(BLOCK + 1)
 
 
+class _Snapshot(NamedTuple):
+    """A tracker's state and predictor history (`_Tracker.snapshot`)."""
+
+    u: FloatArray
+    q: FloatArray
+    ring: FloatArray
+    slot: int
+    hist_s: list[float]
+    run: int
+    last_m2: float
+    last_h: float
+    arc: float
+    direction: FloatArray
+
+
 class _Tracker:
     """Follows one branch of the solution set as the inputs change."""
 
@@ -254,6 +269,21 @@ class _Tracker:
             del hs[0]
         if self.run > len(hs):
             self.run = len(hs)
+
+    def snapshot(self) -> _Snapshot:
+        """The state and its history, to return to (see `restore`)."""
+        return _Snapshot(self.u, self.q, self.ring.copy(), self.slot, list(self.hist_s),
+                         self.run, self.last_m2, self.last_h, self.arc, self.direction)
+
+    def restore(self, snap: _Snapshot) -> None:
+        """Return to a `snapshot`: used to turn back at a limit from the last grid point
+        instead of from the extreme, where the steps would have to grow again from tiny."""
+        self.u, self.q, self.slot, self.run = snap.u, snap.q, snap.slot, snap.run
+        self.ring[:] = snap.ring
+        self.hist_s = list(snap.hist_s)
+        self.last_m2, self.last_h, self.arc = snap.last_m2, snap.last_h, snap.arc
+        self.direction = snap.direction
+        self.tangent_cache = None
 
     def _reset_history(self, direction: FloatArray) -> None:
         self.direction = direction
@@ -700,16 +730,24 @@ def sweep(mech: Mechanism, steps: int | None = None, step: ArrayLike | None = No
             taken += 1
             g = offset + index + direction
             target = grid[g]
+            before = tr.snapshot() if rev and reversed_at is None else None
             st, it, sb, why, failed, res = tr.advance(target, (xd_tab[g], s_tab[g]))
             if _record(tr, st, it, sb, why, failed, res, target, us, qs, iters, subs, status,
                        limits):
                 break
             if st == Status.LIMIT:
-                if not rev or reversed_at is not None:
+                if before is None:
                     break
+                # Turn back: the next row is the grid point before the limit again. Its state
+                # is known; resume from it (not from the extreme, where the steps would have
+                # to grow again from the smallest) and run the inputs the other way.
                 reversed_at = len(us) - 1
-                # Back from the extreme: the grid point before the limit is the next target.
-                index += direction
+                tr.restore(before)
+                us.append(tr.u)
+                qs.append(tr.q)
+                iters.append(0)
+                subs.append(0)
+                status.append(Status.OK)
                 direction = -direction
                 continue
             index += direction
