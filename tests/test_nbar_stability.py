@@ -188,3 +188,15 @@ def test_rounded_data_of_an_overconstrained_linkage_is_reported_inconsistent() -
     sim2 = simulate(mech, mech.input0[0] + np.radians([0.0, 1.0, 2.0]))
     assert sim2.status_names == ["ok", "inconsistent", "unreached"]
     assert sim2.limits[0].kind == "inconsistent" and sim2.limits[0].row == 1
+
+
+def test_sweep_with_large_steps_stays_on_the_branch() -> None:
+    """A sweep of Stephenson-II in 84° steps (the fast sweep path): every row on the branch
+    of the independent continuation, the large steps subdivided where needed."""
+    mech = parse_mechanism((MECH / "stephenson2.toml").read_text())
+    sim = sweep(mech, steps=5, step=math.radians(84.0))
+    assert sim.completed
+    ref = stephenson_reference(sim.inputs[1:, 0])
+    states = sim.coords.reshape(len(sim.status), -1)[:, mech.system.unknown_flat]
+    assert np.abs(states[1:] - ref).max() < 1e-8
+    assert (sim.status[1:] == Status.SUBDIVIDED).any()
