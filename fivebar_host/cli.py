@@ -224,32 +224,260 @@ def convert(drawing: Path, output: Path, relative: bool, laser: bool,
                f"≈ {job.total_time_s:.1f} s, max deviation {job.max_dev_mm:.4f} mm")
 
 
+port_option = click.option(
+    "--port", default=None, metavar="PORT",
+    help="Serial port or URL: /dev/ttyUSB0, COM3, fivebar-mock://, fivebar-sim:// (emulator).")
+yes_option = click.option(
+    "--yes", "-y", is_flag=True,
+    help="Answer yes to 'are the arms at the home pose?' (no endstops) without asking.")
+
+
+def handle_link_errors(fn: F) -> F:
+    """Machine-side failures (link, firmware, faults): one message, exit status 3."""
+
+    @wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        from fivebar_host.link import LinkError
+
+        try:
+            return fn(*args, **kwargs)
+        except LinkError as e:
+            _fail(str(e), code=3)
+        return None
+
+    return wrapper  # type: ignore[return-value]
+
+
+def _confirm(yes: bool) -> Callable[[str], bool]:
+    """A yes/no question for the sender: --yes answers it; otherwise ask on the terminal."""
+
+    def ask(question: str) -> bool:
+        if yes:
+            click.echo(f"{question} yes (--yes)")
+            return True
+        if not sys.stdin.isatty():
+            click.echo(f"{question} (no terminal to ask: pass --yes)", err=True)
+            return False
+        return click.confirm(question, default=False)
+
+    return ask
+
+
+def _open_link(port: str, prof: Profile) -> Any:
+    from fivebar_host.link import Link
+
+    return Link.open(port, baud=prof.serial.baud,
+                     banner_timeout_s=prof.serial.banner_timeout_s,
+                     reply_timeout_s=prof.serial.reply_timeout_s)
+
+
 @main.command("plot")
 @click.argument("drawing", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--dry-run", is_flag=True,
               help="Run everything except the serial link: preview picture and report.")
 @click.option("--preview", "preview_path", type=click.Path(dir_okay=False, path_type=Path),
               default=Path("preview.png"), show_default=True, help="Dry-run picture (PNG).")
+@port_option
+@click.option("--resume", is_flag=True,
+              help="Continue an interrupted plot from its resume file (same drawing and options).")
+@yes_option
 @laser_option
 @job_options
+@handle_link_errors
 @handle_job_errors
-def plot(drawing: Path, dry_run: bool, preview_path: Path, laser: bool,
-         config_path: Path | None, mode: str | None, tolerance: float | None,
-         origin_text: str | None, scale: float | None, rotate_deg: float, fit: bool,
-         layers: tuple[str, ...], keep_order: bool) -> None:
-    """Compile and check DRAWING, then plot it (--dry-run: preview and report only)."""
-    if not dry_run:
-        _fail("plotting on a machine needs the serial link, which is not available in this "
-              "version yet; use --dry-run for the preview and report")
+def plot(drawing: Path, dry_run: bool, preview_path: Path, port: str | None, resume: bool,
+         yes: bool, laser: bool, config_path: Path | None, mode: str | None,
+         tolerance: float | None, origin_text: str | None, scale: float | None,
+         rotate_deg: float, fit: bool, layers: tuple[str, ...], keep_order: bool) -> None:
+    """Compile and check DRAWING, then plot it on the machine at --port (or --dry-run).
+
+    Everything is checked before anything moves. Ctrl-C holds the machine at once (laser
+    off) and asks whether to resume or abort; a fault or an abort leaves a resume file, and
+    the same command with --resume continues exactly where the machine stopped.
+    """
+    if not dry_run and port is None:
+        _fail("give --port PORT to plot on a machine (e.g. /dev/ttyUSB0 or fivebar-sim:// "
+              "for the emulator), or --dry-run for the preview and report")
     from fivebar_host.job import nbar_opinion
     from fivebar_host.preview import draw_preview, report_lines
 
     prof, job = compile_from_cli(drawing, config_path, mode, tolerance, origin_text, scale,
                                  rotate_deg, fit, layers, keep_order)
-    for line in report_lines(job, nbar_opinion(job, prof), laser=laser):
-        click.echo(line)
-    draw_preview(job, prof, preview_path)
-    click.echo(f"preview       {preview_path}")
+    if dry_run:
+        for line in report_lines(job, nbar_opinion(job, prof), laser=laser):
+            click.echo(line)
+        draw_preview(job, prof, preview_path)
+        click.echo(f"preview       {preview_path}")
+        return
+    assert port is not None
+    _stream_plot(drawing, port, prof, job, laser=laser, resume=resume, yes=yes,
+                 preview_path=preview_path)
+
+
+def _stream_plot(drawing: Path, port: str, prof: Profile, job: Any, *, laser: bool,
+                 resume: bool, yes: bool, preview_path: Path) -> None:
+    """Stream a compiled job with a progress bar, Ctrl-C hold/resume/abort, final report."""
+    import signal
+
+    from fivebar_host.sender import Progress, run_job
+
+    click.echo(f"job: {job.n_segments} segments, {job.n_paths} paths, mode {job.mode}, "
+               f"≈ {job.total_time_s:.1f} s, max deviation {job.max_dev_mm:.4f} mm")
+    if not laser:
+        click.echo("laser/pen power output stays at 0 (pen plot: M3/M5 lift the pen); "
+                   "pass --laser to burn")
+    interrupted = {"flag": False}
+
+    def on_sigint(signum: int, frame: Any) -> None:
+        interrupted["flag"] = True
+
+    def on_interrupt() -> bool:
+        interrupted["flag"] = False
+        click.echo("\nheld: motion stopped, laser off.", err=True)
+        choice = click.prompt("resume or abort?", type=click.Choice(["resume", "abort"]),
+                              default="abort", err=True) if sys.stdin.isatty() else "abort"
+        return bool(choice == "resume")
+
+    link = _open_link(port, prof)
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    try:
+        with click.progressbar(length=job.n_segments, label="plotting",
+                               show_eta=False, show_percent=True,
+                               item_show_func=lambda s: s) as bar:
+            state = {"done": 0}
+
+            def on_progress(p: Progress) -> None:
+                if p.segments_done > state["done"]:
+                    bar.update(p.segments_done - state["done"],
+                               f"segment {p.segments_done}/{p.segments_total}, "
+                               f"{p.elapsed_s:.0f} s elapsed, ≈ {p.remaining_s:.0f} s left")
+                    state["done"] = p.segments_done
+
+            report = run_job(link, job, prof, drawing=drawing, laser=laser,
+                             confirm=_confirm(yes), resume=resume, on_progress=on_progress,
+                             should_stop=lambda: interrupted["flag"],
+                             on_interrupt=on_interrupt)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        link.close()
+    click.echo(f"done: {report.segments} segments in {report.elapsed_s:.1f} s "
+               f"(planned {job.total_time_s:.1f} s), {report.bytes_sent} bytes sent, "
+               f"{report.resends} resends; machine at A = {report.final.a}, "
+               f"B = {report.final.b}")
+    trace = getattr(link.port, "trace_path", None)
+    if trace is not None and Path(trace).exists():
+        _write_executed(job, prof, Path(trace), preview_path, report.start_segment)
+
+
+def _write_executed(job: Any, prof: Profile, trace: Path, preview_path: Path,
+                    first_segment: int) -> None:
+    """After an emulator run: the executed path from the recorded pulses, next to the
+    preview (CSV of pen points and their deviation), and its largest deviation."""
+    from fivebar_host.devices.simtrace import read_trace
+    from fivebar_host.executed import executed_path, merge_axes
+    from fivebar_host.job import write_atomic
+
+    tr = read_trace(trace)
+    t, track = merge_axes(tr.positions("A"), tr.positions("B"))
+    ex = executed_path(job, prof, t / tr.freq, track, first_segment)
+    out = preview_path.with_name(preview_path.stem + ".executed.csv")
+    rows = ["t_s,a_steps,b_steps,x_mm,y_mm,segment,deviation_mm"]
+    rows += [f"{ti:.6f},{a},{b},{x:.4f},{y:.4f},{sg},{'' if d != d else f'{d:.5f}'}"
+             for ti, (a, b), (x, y), sg, d in zip(t / tr.freq, track.tolist(),
+                                                  ex.points.tolist(), ex.segment.tolist(),
+                                                  ex.deviation_mm.tolist(), strict=True)]
+    write_atomic(out, "\n".join(rows) + "\n")
+    click.echo(f"executed path (from the emulator's step pulses): {out}; max deviation "
+               f"{ex.max_deviation_mm:.4f} mm (bound {job.tolerance_mm:g} + step quantum "
+               f"{job.step_quantum_mm:.4f} mm)")
+
+
+@main.command("home")
+@port_option
+@yes_option
+@config_option
+@handle_link_errors
+@handle_errors
+def home_cmd(port: str | None, yes: bool, config_path: Path | None) -> None:
+    """Give the firmware a known position: $H with endstops, else confirm the home pose."""
+    from fivebar_host.sender import home
+
+    if port is None:
+        _fail("give --port PORT")
+    prof = _profile(config_path)
+    link = _open_link(str(port), prof)
+    try:
+        st = home(link, prof, _confirm(yes))
+    finally:
+        link.close()
+    click.echo(f"homed: A = {st.a}, B = {st.b} steps")
+
+
+@main.command("jog")
+@port_option
+@click.option("--motor", type=click.Choice(["A", "B"]), default=None,
+              help="Move one motor (with --steps).")
+@click.option("--steps", type=int, default=0, help="Steps for --motor (signed).")
+@click.option("--dx", type=float, default=0.0, help="Move the pen by this much in x, mm.")
+@click.option("--dy", type=float, default=0.0, help="Move the pen by this much in y, mm.")
+@yes_option
+@config_option
+@handle_link_errors
+@handle_errors
+def jog(port: str | None, motor: str | None, steps: int, dx: float, dy: float, yes: bool,
+        config_path: Path | None) -> None:
+    """Move one motor by --steps, or the pen by --dx/--dy mm (checked, laser off)."""
+    from fivebar_host.sender import ensure_known_pose, jog_lines
+
+    if port is None:
+        _fail("give --port PORT")
+    if (motor is None) == (dx == 0.0 and dy == 0.0):
+        _fail("give either --motor with --steps, or --dx/--dy")
+    prof = _profile(config_path)
+    kin = prof.kinematics
+    mode = kin.working_mode if kin.working_mode != "auto" else "+-"
+    link = _open_link(str(port), prof)
+    try:
+        st = ensure_known_pose(link, prof, _confirm(yes))
+        lines = jog_lines(prof, 1 if kin.assembly == "+" else -1, mode, (st.a, st.b),
+                          motor=motor, steps=steps,
+                          dxy_mm=None if motor else (dx, dy))
+        link.stream(lines)
+        st = link.wait_idle(60.0)
+    finally:
+        link.close()
+    click.echo(f"at A = {st.a}, B = {st.b} steps")
+
+
+@main.command("frame")
+@click.argument("drawing", type=click.Path(dir_okay=False, path_type=Path))
+@port_option
+@yes_option
+@job_options
+@handle_link_errors
+@handle_job_errors
+def frame(drawing: Path, port: str | None, yes: bool, config_path: Path | None,
+          mode: str | None, tolerance: float | None, origin_text: str | None,
+          scale: float | None, rotate_deg: float, fit: bool, layers: tuple[str, ...],
+          keep_order: bool) -> None:
+    """Trace the outline (bounding box) of DRAWING's job with the laser off, then go home."""
+    from fivebar_host.sender import ensure_known_pose, frame_program
+
+    if port is None:
+        _fail("give --port PORT")
+    prof, job = compile_from_cli(drawing, config_path, mode, tolerance, origin_text, scale,
+                                 rotate_deg, fit, layers, keep_order)
+    link = _open_link(str(port), prof)
+    try:
+        st = ensure_known_pose(link, prof, _confirm(yes))
+        prog = frame_program(job, prof, (st.a, st.b))
+        link.stream(prog.bodies)
+        st = link.wait_idle(120.0)
+    finally:
+        link.close()
+    x0, y0, x1, y1 = job.placement.machine_bbox
+    click.echo(f"framed ({x0:.1f}, {y0:.1f})–({x1:.1f}, {y1:.1f}) mm; back at A = {st.a}, "
+               f"B = {st.b}")
 
 
 # --------------------------------------------------------------------- workspace and design

@@ -273,7 +273,8 @@ class Link:
 
     def wait_idle(self, timeout_s: float, on_status: Callable[[StatusReport], None] | None = None,
                   last_line: int | None = None) -> StatusReport:
-        """Poll until the machine is Idle with an empty queue (and `last_line` executed)."""
+        """Poll until the machine is Idle with an empty queue (and `last_line` accepted, so
+        every line up to it has run: nothing is left to execute)."""
         deadline = time.monotonic() + timeout_s
         while True:
             st = self.status()
@@ -285,7 +286,7 @@ class Link:
                                      f"{info.description if info else 'unknown alarm'}",
                                      -1, st.detail, st)
             if st.state == "Idle" and st.queued == 0 and (
-                    last_line is None or st.done_line >= last_line):
+                    last_line is None or st.accepted_line >= last_line):
                 return st
             if time.monotonic() > deadline:
                 raise LinkFaultError("timeout", f"{self.url}: machine still {st.state} after "

@@ -198,22 +198,58 @@ def travel_lines(profile: Profile, job_assembly: int, start: ArrayLike,
     return [protocol.g1(a, b, p, 0) for a, b, p in pieces]
 
 
+def job_bodies(job: Job, profile: Profile, laser: bool, first: int,
+               first_line: str | None = None) -> tuple[list[str], list[int]]:
+    """Firmware lines for segments `first`… of `job` and the segment of each (−1: none).
+
+    Laser job (`laser`): `M3 S0` once, then drawing segments carry the profile's power.
+    Pen job: S0 everywhere, pen down (`M3 S0`) before and pen up (`M5`) after each run of
+    drawing segments. `first_line` replaces the first segment's G1 (a partial segment).
+    The same encoding as `fivebar convert` (job.encode_lines)."""
+    n = job.n_segments
+    power = job.power if laser else np.zeros_like(job.power)
+    draw = job.draw.tolist()
+    bodies: list[str] = []
+    seg: list[int] = []
+    if laser:
+        bodies.append(f"{profile.laser.on_command} S0")
+        seg.append(-1)
+    a = job.steps[1:, 0].tolist()
+    b = job.steps[1:, 1].tolist()
+    dur = job.duration_us.tolist()
+    pw = power.tolist()
+    for k in range(first, n):
+        if not laser and draw[k] and (k == first or not draw[k - 1]):
+            bodies.append("M3 S0")
+            seg.append(-1)
+        line = first_line if (k == first and first_line is not None) else protocol.g1(
+            a[k], b[k], dur[k], pw[k])
+        bodies.append(line)
+        seg.append(k)
+        if not laser and draw[k] and (k == n - 1 or not draw[k + 1]):
+            bodies.append("M5")
+            seg.append(-1)
+    if not bodies or bodies[-1] != "M5":
+        bodies.append("M5")
+        seg.append(-1)
+    return bodies, seg
+
+
 def build_program(job: Job, profile: Profile, laser: bool, start_segment: int,
-                  position: Sequence[int]) -> Program:
+                  position: ArrayLike) -> Program:
     """The lines that run segments `start_segment`… of `job` from firmware steps `position`.
 
-    Starts with absolute mode and the laser mode at zero power. If `position` lies inside
-    segment `start_segment` (on its joint-space line, within one step), the first move
-    finishes that segment; otherwise a checked laser-off travel reaches its start. Power is
-    sent only with `laser` (the CLI's explicit `--laser` opt-in); without it every S is 0.
+    If `position` lies inside segment `start_segment` (on its joint-space line, within one
+    step) the first move finishes that segment with the remaining share of its duration;
+    otherwise a checked laser-off travel reaches its start first. Power is sent only with
+    `laser` (the CLI's explicit `--laser` opt-in).
     """
-    bodies = ["G90", f"{profile.laser.on_command} S0"]
+    bodies = ["G90", "M5"]
     seg: list[int] = [-1, -1]
     k = start_segment
     steps = job.steps
     pos = np.asarray(position, dtype=np.int64)
-    power = job.power if laser else np.zeros_like(job.power)
-    first_move = k
+    partial: str | None = None
     if k < job.n_segments and not np.array_equal(pos, steps[k]):
         s0, s1 = steps[k].astype(np.float64), steps[k + 1].astype(np.float64)
         d = s1 - s0
@@ -222,24 +258,15 @@ def build_program(job: Job, profile: Profile, laser: bool, start_segment: int,
         on_line = 0.0 < t < 1.0 and bool(np.all(np.abs(s0 + t * d - pos) <= 1.0 + 1e-9))
         if on_line:
             rest = max(protocol.P_MIN_US, round(float(job.duration_us[k]) * (1.0 - t)))
-            bodies.append(protocol.g1(int(steps[k + 1, 0]), int(steps[k + 1, 1]), rest,
-                                      int(power[k])))
-            seg.append(k)
-            first_move = k + 1
+            pw = int(job.power[k]) if laser else 0
+            partial = protocol.g1(int(steps[k + 1, 0]), int(steps[k + 1, 1]), rest, pw)
         else:
             back = travel_lines(profile, job.assembly, pos, steps[k],
                                 f"travel back to segment {k + 1}")
             bodies += back
             seg += [-1] * len(back)
-    idx = np.arange(first_move, job.n_segments)
-    a = steps[idx + 1, 0]
-    b = steps[idx + 1, 1]
-    for i, ai, bi in zip(idx.tolist(), a.tolist(), b.tolist(), strict=True):
-        bodies.append(protocol.g1(ai, bi, int(job.duration_us[i]), int(power[i])))
-        seg.append(i)
-    bodies.append("M5")
-    seg.append(-1)
-    return Program(bodies, np.asarray(seg, dtype=np.int64))
+    more, mseg = job_bodies(job, profile, laser, k, partial)
+    return Program(bodies + more, np.asarray(seg + mseg, dtype=np.int64))
 
 
 # ------------------------------------------------------------------ start pose
