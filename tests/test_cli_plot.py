@@ -74,9 +74,9 @@ def test_plot_mode_auto_says_which(tmp_path: Path) -> None:
     assert not (tmp_path / "q.png").exists()
 
 
-def test_plot_without_dry_run_says_link_missing() -> None:
+def test_plot_without_port_or_dry_run_says_what_to_give() -> None:
     code, text = run("plot", str(EXAMPLES / "simple.svg"))
-    assert code != 0 and "serial link" in text and "--dry-run" in text
+    assert code != 0 and "--port" in text and "--dry-run" in text
 
 
 @pytest.mark.parametrize(("content", "suffix", "message"), [
