@@ -3,11 +3,15 @@
 `compile_job(path, profile, options)` runs the whole pipeline:
 
     read (SVG / G-code) → place (layout) → flatten curves (tol_f = tol/2) → order and join
-    paths → inverse kinematics + checks on every vertex → refine chords in joint space
-    (interpolation budget tol_i, `toolpath.segment`) → pen-up travel (checked joint-space
-    moves, Cartesian fallback) → absolute steps (quantised once) → plan durations →
-    validate: forward kinematics of the *quantised* steps, including the joint-space
-    interpolation between them, against the requested curves.
+    paths → [--mode auto when no single mode clears every check: working mode per path,
+    `_plan_modes`] → inverse kinematics + checks on every vertex → refine chords in joint
+    space (interpolation budget tol_i, `toolpath.segment`) → pen-up travel (checked
+    joint-space moves, Cartesian fallback; planned pen-up moves for working-mode changes) →
+    absolute steps (quantised once) → plan durations (`planner`: speed-up and slow-down cut
+    into pieces on the same joint-space lines, the firmware's rate staircase within the joint
+    acceleration and junction-jump limits at every boundary) → validate: forward kinematics
+    of the *quantised* steps, including the joint-space interpolation between them, against
+    the requested curves.
 
 Tolerance budget (one `tol`, default from the profile): a curve is flattened so every chord is
 within tol_f = tol/2 of it; each chord is refined so the joint-interpolated pen path stays
@@ -71,6 +75,16 @@ BoolArray = NDArray[np.bool_]
 AUTO_ORDER = ("+-", "-+", "++", "--")
 #: Joint-space step cap per segment (rad): keeps the planner's rate staircase fine.
 MAX_STEP_RAD = 0.05
+#: Timing (see `fivebar_host.planner`): the continuous profile plans with this share of the
+#: joint acceleration limit and of the junction jump for direction changes; the rest (and a
+#: corner cap from the remaining acceleration) absorbs the staircase the firmware runs.
+PLAN_ACCEL_SHARE = 0.75
+PLAN_JUMP_SHARE = 0.5
+#: Speed-up and slow-down parts are cut into pieces whose planned speed changes by at most
+#: this share of the junction jump from one piece to the next, and of at least this many
+#: steps (rounding a shorter piece to whole steps would shake its rate too much).
+PLAN_PIECE_JUMP_SHARE = 0.6
+PLAN_MIN_PIECE_STEPS = 3
 #: Interpolation tolerance for the Cartesian fallback of pen-up travel, mm.
 TRAVEL_TOL_MM = 1.0
 #: Largest spacing (mm) of the pen points at which `--mode auto` tests the working modes when
@@ -783,11 +797,50 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
     pfeed = ch.feed[np.minimum(seg_path, npath - 1)]
     feed = np.where(seg_draw, np.where(np.isnan(pfeed), motion.draw_feed_mm_s, pfeed),
                     motion.travel_feed_mm_s)
-    dq = np.diff(steps.step_angles(st, mot.home_rad, mot.steps_per_rev), axis=0)
     stop = np.zeros(seg_draw.shape[0], dtype=bool)
     stop[:-1] = (seg_draw[1:] != seg_draw[:-1]) | (power[1:] != power[:-1])
-    pln = planner.plan(dq, length, feed, motion.max_joint_rad_s, motion.max_joint_rad_s2,
-                       stop_after=stop)
+    # 1. A continuous speed profile (junction passes) with part of the limits; 2. its
+    # speed-up and slow-down parts cut into short pieces (new targets on the same joint-space
+    # lines, so the path does not change); 3. the profile again on the pieces; 4. every
+    # boundary of the staircase the firmware runs (constant rate per G1) made exact.
+    a_c = PLAN_ACCEL_SHARE * motion.max_joint_rad_s2
+    j_lim = planner.JUNCTION_JUMP_RAD_S
+    prof_kw = {"junction_jump_rad_s": PLAN_JUMP_SHARE * j_lim,
+               "min_duration_s": protocol.P_MIN_US * 1e-6,
+               "corner_accel_rad_s2": (1.0 - PLAN_ACCEL_SHARE) * motion.max_joint_rad_s2}
+    dq = np.diff(steps.step_angles(st, mot.home_rad, mot.steps_per_rev), axis=0)
+    pln = planner.plan(dq, length, feed, motion.max_joint_rad_s, a_c, stop_after=stop,
+                       **prof_kw)
+    counts, f1 = planner.ramp_fractions(pln, np.abs(dq).max(axis=1), a_c,
+                                        PLAN_PIECE_JUMP_SHARE * j_lim / a_c,
+                                        PLAN_MIN_PIECE_STEPS * mot.rad_per_step)
+    seg_of = np.repeat(np.arange(counts.shape[0]), counts)
+    inner = np.concatenate((seg_of[1:] == seg_of[:-1], [False]))  # not a segment's last piece
+    # new targets on the ideal joint-space line of their segment, rounded once
+    k_in = seg_of[inner]
+    th_in = th_all[k_in] + f1[inner, None] * (th_all[k_in + 1] - th_all[k_in])
+    order_t = np.argsort(np.concatenate((np.arange(th_all.shape[0]) * 1.0,
+                                         k_in + f1[inner])), kind="stable")
+    th_all = np.concatenate((th_all, th_in))[order_t]
+    pts_all = np.concatenate((pts_all, checker.forward(th_in)[0]))[order_t]
+    st = steps.absolute_steps(th_all, mot.home_rad, mot.steps_per_rev)
+    keep = np.concatenate(([True], (np.diff(st, axis=0) != 0).any(axis=1)))
+    st, th_all, pts_all = st[keep], th_all[keep], pts_all[keep]
+    seg_of, f1 = seg_of[keep[1:]], f1[keep[1:]]
+    f1[np.concatenate((seg_of[1:] != seg_of[:-1], [True]))] = 1.0
+    f0 = np.where(np.concatenate(([True], seg_of[1:] != seg_of[:-1])), 0.0,
+                  np.concatenate(([0.0], f1[:-1])))
+    seg_draw, seg_path, seg_source = seg_draw[seg_of], seg_path[seg_of], seg_source[seg_of]
+    seg_line, power, feed = seg_line[seg_of], power[seg_of], feed[seg_of]
+    stop = stop[seg_of] & np.concatenate((seg_of[1:] != seg_of[:-1], [True]))
+    perm_kept = perm_kept[seg_of]
+    length = np.where(seg_draw, length[seg_of] * (f1 - f0),
+                      np.hypot(*np.diff(pts_all, axis=0).T))
+    dq = np.diff(steps.step_angles(st, mot.home_rad, mot.steps_per_rev), axis=0)
+    pln = planner.plan(dq, length, feed, motion.max_joint_rad_s, a_c, stop_after=stop,
+                       **prof_kw)
+    duration_us = planner.enforce_staircase(dq, pln.duration_us, stop,
+                                            motion.max_joint_rad_s2, j_lim)
 
     # ------------------------------------------------------------ per-path bookkeeping
     draw_idx = np.flatnonzero(seg_draw)
@@ -802,6 +855,8 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
     # Requested geometry per draw segment (for validation and previews).
     src_rows = perm_kept[seg_draw]  # rows into the draw-interval arrays
     chord_rows = dc[src_rows]
+    sa_d, sb_d = iv.sa[src_rows], iv.sb[src_rows]  # a piece's part of its interval
+    sa_d, sb_d = sa_d + f0[seg_draw] * (sb_d - sa_d), sa_d + f1[seg_draw] * (sb_d - sa_d)
     # Smallest margins over targets and samples; the moves from/to home and the working-mode
     # changes may pass a type-1 singularity on purpose (pen up, changing working mode), so
     # their type-1 columns and targets are left out.
@@ -849,7 +904,7 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
             land_mm=(float(pts_all[s1, 0]), float(pts_all[s1, 1])),
             crossings=_type1_crossings(fb, dense, fk.points),
             min_type2_rad=float(marg.min()),
-            duration_s=float(pln.duration_us[s0:s1].sum()) * 1e-6))
+            duration_s=float(duration_us[s0:s1].sum()) * 1e-6))
     if mode_changes:
         seq = [str(path_mode[0])]
         for m in path_mode[1:].tolist():
@@ -867,7 +922,7 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
         flatten_tol_mm=tol_f,
         placement=pl, drawing=mdraw, steps_per_rev=mot.steps_per_rev, home_rad=mot.home_rad,
         points_mm=pts_all, angles_rad=th_all, steps=st, draw=seg_draw, power=power,
-        path=seg_path, source=seg_source, source_line=seg_line, duration_us=pln.duration_us,
+        path=seg_path, source=seg_source, source_line=seg_line, duration_us=duration_us,
         length_mm=length,
         paths=PathStats(ch.path_source, ch.path_reversed, first_seg, end_seg,
                         np.full(npath, np.nan), np.full(npath, np.nan)),
@@ -875,7 +930,7 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
         travel_before_mm=ch.travel_before, travel_after_mm=ch.travel_after, joined=ch.joined,
         notes=notes,
         seg_prim=ch.prim[chord_rows], seg_tlo=ch.tlo[chord_rows], seg_thi=ch.thi[chord_rows],
-        seg_rev=ch.rev[chord_rows], seg_sa=iv.sa[src_rows], seg_sb=iv.sb[src_rows],
+        seg_rev=ch.rev[chord_rows], seg_sa=sa_d, seg_sb=sb_d,
         seg_ca=ch.pts[a[chord_rows]], seg_cb=ch.pts[a[chord_rows] + 1],
         ideal_max_dev_mm=float(iv.dev_mm.max()) if iv.dev_mm.size else 0.0,
         path_modes=tuple(path_mode.tolist()), home_mode=home_mode,

@@ -1,5 +1,6 @@
 """Planner: closed-form forward/backward passes against a plain loop, analytic rest-to-rest
-times, and the limits it promises (joint speed, pen feed, acceleration between junctions)."""
+times, and the limits it promises (joint speed, pen feed, acceleration between junctions);
+the staircase the firmware runs (constant rate per segment) checked by a plain loop."""
 
 from __future__ import annotations
 
@@ -10,7 +11,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fivebar_host.planner import check_plan, plan
+from fivebar_host.planner import (
+    check_plan,
+    enforce_staircase,
+    plan,
+    ramp_fractions,
+    staircase_ratios,
+)
 
 
 def test_triangle_and_trapezoid_rest_to_rest() -> None:
@@ -86,3 +93,71 @@ def test_closed_form_passes_match_loop(n: int, seed: int) -> None:
     assert np.all(np.abs(p.v_exit**2 - p.v_entry**2) <= 2 * a * dist * (1 + 1e-9) + 1e-12)
     js, ps = check_plan(p, d, length, feed, vmax)
     assert js <= 1.0 + 1e-9 and ps <= 1.0 + 1e-9
+
+
+# ----------------------------------------------------------------------------- the staircase
+def _staircase_reference(dth: np.ndarray, us: np.ndarray, stop: np.ndarray, alpha: float,
+                         jump: float) -> tuple[float, float]:
+    """Worst jump and average-acceleration ratios by a plain loop over the boundaries."""
+    t = us * 1e-6
+    w = dth / t[:, None]
+    worst_j = worst_a = 0.0
+    k = len(t)
+    for i in range(k):
+        first = i == 0 or stop[i - 1]
+        last = i == k - 1 or stop[i]
+        for side in (first, last):
+            if side:  # from or to standstill
+                m = float(np.abs(w[i]).max())
+                worst_j = max(worst_j, m / jump)
+                worst_a = max(worst_a, m / (alpha * t[i] / 2))
+        if i > 0:
+            m = float(np.abs(w[i] - w[i - 1]).max())
+            worst_j = max(worst_j, m / jump)
+            worst_a = max(worst_a, m / (alpha * (t[i] + t[i - 1]) / 2))
+    return worst_j, worst_a
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(min_value=1, max_value=80), st.integers(min_value=0, max_value=2**31))
+def test_enforce_staircase_meets_both_limits_and_only_slows(n: int, seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    d = rng.normal(0, 0.02, (n, 2))
+    d[rng.random(n) < 0.2] *= 0.05  # some tiny segments
+    stop = rng.random(n) < 0.15
+    us = rng.integers(100, 20_000, n)
+    out = enforce_staircase(d, us, stop, 60.0, 0.5)
+    assert (out >= us).all() and out.dtype == np.int64
+    wj, wa = _staircase_reference(d, out, stop, 60.0, 0.5)
+    assert wj <= 1.0 + 1e-9 and wa <= 1.0 + 1e-9
+    jr, ar = staircase_ratios(d, out, stop, 60.0, 0.5)
+    assert jr.max() == pytest.approx(wj) and ar.max() == pytest.approx(wa)
+
+
+def test_ramp_fractions_cut_ramps_into_short_pieces() -> None:
+    a, vmax = 45.0, 6.0
+    d = np.array([[2.0, -1.0]])  # one long move from rest to rest, with a cruise
+    p = plan(d, np.array([10.0]), np.array([1e9]), vmax, a)
+    piece = 0.005
+    counts, f = ramp_fractions(p, np.array([2.0]), a, piece)
+    assert counts.sum() == f.size and f[-1] == 1.0 and np.all(np.diff(f) > 0)
+    # time of each piece under the trapezoid: ramps cut into ≤ piece, one cruise piece
+    x = np.concatenate(([0.0], f * 2.0))
+    v0, vp, dist = 0.0, p.v_peak[0], 2.0
+    da = vp * vp / (2 * a)
+
+    def time_at(s: float) -> float:
+        if s <= da:
+            return math.sqrt(2 * s / a)
+        if s <= dist - da:
+            return vp / a + (s - da) / vp
+        return 2 * vp / a + (dist - 2 * da) / vp - math.sqrt(2 * (dist - s) / a)
+
+    dt = np.diff([time_at(s) for s in x])
+    assert (dt <= piece + 1e-9).sum() == dt.size - 1  # all but the cruise piece
+    assert dt.max() == pytest.approx((dist - 2 * da) / vp, rel=1e-6)
+    assert v0 == 0.0
+    # a piece never shorter than asked
+    assert vp == pytest.approx(vmax) and counts[0] == 2 * math.ceil(vmax / a / piece) + 1
+    counts, f = ramp_fractions(p, np.array([2.0]), a, piece, min_piece_rad=0.01)
+    assert np.diff(np.concatenate(([0.0], f * 2.0))).min() >= 0.01 - 1e-12
