@@ -220,7 +220,11 @@ def convert(drawing: Path, output: Path, relative: bool, laser: bool,
     write_atomic(output, "\n".join(lines) + "\n")
     tool = (f"laser (power up to S{int(job.power.max(initial=0))})" if laser
             else "pen (S0, no laser power)")
-    click.echo(f"wrote {output}: {job.n_segments} segments, mode {job.mode}, {tool}, "
+    from fivebar_host.job import mode_sequence
+
+    changes = f" ({len(job.mode_changes)} pen-up mode changes)" if job.mode_changes else ""
+    click.echo(f"wrote {output}: {job.n_segments} segments, mode {mode_sequence(job)}{changes}, "
+               f"{tool}, "
                f"≈ {job.total_time_s:.1f} s, max deviation {job.max_dev_mm:.4f} mm")
 
 

@@ -1134,6 +1134,15 @@ def _comment(text: str) -> str:
     return line[:MAX_LINE_BYTES]
 
 
+def mode_sequence(job: Job, arrow: str = " → ") -> str:
+    """The working modes a job draws in, in order: "+-", or "++ → +-" with mode changes."""
+    seq: list[str] = []
+    for m in job.path_modes or (job.mode,):
+        if not seq or seq[-1] != m:
+            seq.append(m)
+    return arrow.join(seq)
+
+
 def encode_lines(job: Job, profile: Profile, relative: bool = False,
                  laser: bool = False) -> list[str]:
     """Firmware-ready lines for a job (docs/protocol.md; each G1 body from
@@ -1160,8 +1169,11 @@ def encode_lines(job: Job, profile: Profile, relative: bool = False,
     h = job.home_rad
     head = [
         _comment(f"fivebar job from {Path(job.file).name}"),
-        _comment(f"working mode {job.mode}, assembly {'+' if job.assembly > 0 else '-'}, "
-                 f"{job.n_segments} segments, {job.n_paths} paths, "
+        _comment(f"working mode {mode_sequence(job, ' -> ')}, assembly "
+                 f"{'+' if job.assembly > 0 else '-'}"
+                 + (f", {len(job.mode_changes)} pen-up mode changes" if job.mode_changes
+                    else "")),
+        _comment(f"{job.n_segments} segments, {job.n_paths} paths, "
                  f"estimated {job.total_time_s:.1f} s"),
         _comment(f"tolerance {job.tolerance_mm:g} mm, max deviation {job.max_dev_mm:.4f} mm"),
         _comment(f"steps count from the homed pose ({math.degrees(h[0]):g}, "

@@ -277,3 +277,18 @@ def test_break_paths_keeps_geometry_and_parameters() -> None:
     # provenance: each new path comes from an old one, in order
     assert set(new.path_source.tolist()) == set(ch.path_source.tolist())
     assert np.all(np.diff(new.path_of_chord) >= 0)
+
+
+def test_convert_names_the_modes_and_writes_firmware_lines(tmp_path: Path) -> None:
+    out = tmp_path / "job.gcode"
+    res = CliRunner().invoke(main, ["convert", str(EXAMPLE), "--origin", "0,0", "--mode",
+                                    "auto", "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    job = compile_job(EXAMPLE, PROF, AUTO)
+    seq = " → ".join(m for i, m in enumerate(job.path_modes)
+                     if i == 0 or job.path_modes[i - 1] != m)
+    assert f"mode {seq} ({len(job.mode_changes)} pen-up mode changes)" in res.output
+    lines = out.read_text().splitlines()
+    assert all(len(ln) <= 80 and ln.isascii() for ln in lines)
+    assert any(ln.startswith("; working mode ") and "->" in ln for ln in lines)
+    assert sum(ln.startswith("G1 ") for ln in lines) == job.n_segments
