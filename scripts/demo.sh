@@ -9,3 +9,6 @@ fivebar fk 139.866 40.134
 # The job pipeline on a bundled drawing: compile, check, time and validate, no hardware.
 fivebar plot examples/fivebar_text.svg --dry-run --preview preview.png
 fivebar convert examples/simple.svg -o "${TMPDIR:-/tmp}/simple.job.gcode"
+# A drawing no single working mode can draw: --mode auto plans pen-up mode changes.
+fivebar plot examples/mode_change.gcode --origin 0,0 --mode auto --dry-run \
+  --preview "${TMPDIR:-/tmp}/mode_change.png"
