@@ -247,3 +247,24 @@ def test_nbar_second_opinion_agrees() -> None:
     assert op.max_dev_mm == pytest.approx(job.max_dev_mm, abs=1e-8)
     part = nbar_opinion(job, PROF, max_poses=300)
     assert part is not None and part.poses == 300 and "first 300" in part.describe()
+
+
+def test_fit_uses_the_machines_assembly() -> None:
+    """Mode "++" has a larger safe rectangle below the motors (assembly "-") than above
+    them; the default machine is built in "+", so --fit must use the "+" one."""
+    from kinematics.analysis import find_page_rectangle
+
+    k = PROF.kinematics
+    job = compile_job(EXAMPLES / "simple.svg", PROF, CompileOptions(mode="++", fit=True))
+    x0, y0, x1, y1 = job.placement.drawing_bbox
+    aspect = (x1 - x0) / (y1 - y0)
+    args = (PROF.geometry, "++", k.min_type1_margin_rad, k.min_type2_margin_rad,
+            PROF.motors.limits_rad, aspect)
+    plus = find_page_rectangle(*args, assembly="+").rect
+    minus = find_page_rectangle(*args, assembly="-").rect
+    assert minus.area > plus.area  # the other assembly would have offered more room
+    area = job.placement.area
+    assert area is not None
+    assert (area.x0, area.y0, area.width, area.height) == pytest.approx(
+        (plus.x0, plus.y0, plus.width, plus.height))
+    assert job.assembly == 1 and job.max_dev_mm <= job.tolerance_mm + job.step_quantum_mm
