@@ -430,7 +430,10 @@ def home_cmd(port: str | None, yes: bool, config_path: Path | None) -> None:
 @handle_errors
 def jog(port: str | None, motor: str | None, steps: int, dx: float, dy: float, yes: bool,
         config_path: Path | None) -> None:
-    """Move one motor by --steps, or the pen by --dx/--dy mm (checked, laser off)."""
+    """Move one motor by --steps, or the pen by --dx/--dy mm (laser off).
+
+    A pen move needs a known position (homed) and is checked; a motor move before homing
+    (to bring the arms to the home pose) is not checked, and says so."""
     from fivebar_host.sender import ensure_known_pose, jog_lines
 
     if port is None:
@@ -442,10 +445,16 @@ def jog(port: str | None, motor: str | None, steps: int, dx: float, dy: float, y
     mode = kin.working_mode if kin.working_mode != "auto" else "+-"
     link = _open_link(str(port), prof)
     try:
-        st = ensure_known_pose(link, prof, _confirm(yes))
+        st = link.status()
+        checked = st.homed or motor is None
+        if checked:
+            st = ensure_known_pose(link, prof, _confirm(yes))
+        else:
+            click.echo("position unknown (not homed): the motor move is not checked against "
+                       "limits or singularities", err=True)
         lines = jog_lines(prof, 1 if kin.assembly == "+" else -1, mode, (st.a, st.b),
-                          motor=motor, steps=steps,
-                          dxy_mm=None if motor else (dx, dy))
+                          motor=motor, steps=steps, dxy_mm=None if motor else (dx, dy),
+                          checked=checked)
         link.stream(lines)
         st = link.wait_idle(60.0)
     finally:

@@ -101,7 +101,7 @@ class Link:
     """A protocol session on one open port (anything with pyserial's Serial interface)."""
 
     def __init__(self, port: Any, *, url: str = "", reply_timeout_s: float = 10.0,
-                 poll_interval_s: float = 0.1) -> None:
+                 poll_interval_s: float = 0.05) -> None:
         self.port = port
         self.url = url or str(getattr(port, "port", "?"))
         self.reply_timeout_s = reply_timeout_s
@@ -271,6 +271,28 @@ class Link:
         raise LinkFaultError("timeout", f"{self.url}: no banner within {timeout_s:g} s after reset",
                         -1)
 
+    def hardware_reset(self, timeout_s: float = 3.0) -> bool:
+        """Pulse DTR — an Arduino's auto-reset line — to reboot a controller that no longer
+        answers (its laser output goes off with the reboot). True if a banner followed."""
+        try:
+            self.port.dtr = False
+            time.sleep(0.05)
+            self.port.dtr = True
+        except (serial.SerialException, OSError, ValueError):
+            return False
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            try:
+                msgs = self._messages(0.05)
+            except LinkError:
+                continue
+            for msg in msgs:
+                if isinstance(msg, Banner):
+                    self.banner = msg
+                    self._pending.clear()
+                    return True
+        return False
+
     def wait_idle(self, timeout_s: float, on_status: Callable[[StatusReport], None] | None = None,
                   last_line: int | None = None) -> StatusReport:
         """Poll until the machine is Idle with an empty queue (and `last_line` accepted, so
@@ -330,7 +352,7 @@ class Link:
         t0 = time.monotonic()
         last_reply = t0  # an ok / error arrived
         last_activity = t0  # any line arrived
-        last_poll = t0
+        last_poll = t0 - self.poll_interval_s  # ask for a status report at once
         status_at = 0.0
         bytes0 = self.bytes_sent
 
@@ -344,94 +366,99 @@ class Link:
             self.next_line = first + acked
             return LinkFaultError(kind, f"{self.url}: {msg}", acked, code, self.last_status)
 
-        while acked < total:
-            if should_stop is not None and should_stop():
-                self._write(protocol.RT_HOLD)
-                if on_interrupt is None or not on_interrupt():
-                    raise fault("interrupt", f"interrupted by the user at job line "
-                                f"{acked + 1} of {total}")
-                self._write(protocol.RT_RESUME)
-                last_reply = last_activity = time.monotonic()
-            # Send what fits (nothing while a rewind waits for the lines in flight).
-            while (rewind_to is None and nxt < total
-                   and (not inflight or inflight_bytes + len(encoded[nxt]) <= budget)):
-                self._write(encoded[nxt])
-                inflight.append((nxt, len(encoded[nxt]), time.monotonic()))
-                inflight_bytes += len(encoded[nxt])
-                nxt += 1
-                sent_max = max(sent_max, nxt)
-            now = time.monotonic()
-            if now - last_poll >= self.poll_interval_s:
-                self._write(protocol.RT_STATUS)
-                last_poll = now
-            msgs = list(self._pending) + self._messages(0.01)
-            self._pending.clear()
-            for msg in msgs:
-                last_activity = time.monotonic()
-                if isinstance(msg, StatusReport):
-                    self.last_status = msg
-                    status_at = last_activity
-                    if msg.state == "Alarm":
-                        raise fault("alarm", f"alarm {msg.detail} while streaming", msg.detail)
-                    progress()
+        try:
+            while acked < total:
+                if should_stop is not None and should_stop():
+                    self._write(protocol.RT_HOLD)
+                    if on_interrupt is None or not on_interrupt():
+                        raise fault("interrupt", f"interrupted by the user at job line "
+                                    f"{acked + 1} of {total}")
+                    self._write(protocol.RT_RESUME)
+                    last_reply = last_activity = time.monotonic()
+                # Send what fits (nothing while a rewind waits for the lines in flight).
+                while (rewind_to is None and nxt < total
+                       and (not inflight or inflight_bytes + len(encoded[nxt]) <= budget)):
+                    self._write(encoded[nxt])
+                    inflight.append((nxt, len(encoded[nxt]), time.monotonic()))
+                    inflight_bytes += len(encoded[nxt])
+                    nxt += 1
+                    sent_max = max(sent_max, nxt)
+                now = time.monotonic()
+                if now - last_poll >= self.poll_interval_s:
+                    self._write(protocol.RT_STATUS)
+                    last_poll = now
+                msgs = list(self._pending) + self._messages(0.01)
+                self._pending.clear()
+                for msg in msgs:
+                    last_activity = time.monotonic()
+                    if isinstance(msg, StatusReport):
+                        self.last_status = msg
+                        status_at = last_activity
+                        if msg.state == "Alarm":
+                            raise fault("alarm", f"alarm {msg.detail} while streaming", msg.detail)
+                        progress()
+                        continue
+                    if isinstance(msg, Banner):
+                        self.banner = msg
+                        raise fault("reset", "the firmware restarted (banner received) while "
+                                    "streaming: its position and queue are lost")
+                    if isinstance(msg, AlarmPush):
+                        info = protocol.CODES.get(msg.code)
+                        raise fault("alarm", f"ALARM:{msg.code} "
+                                    f"({info.description if info else 'unknown alarm'})", msg.code)
+                    if isinstance(msg, SettingLine):
+                        continue
+                    last_reply = last_activity
+                    if not inflight:
+                        raise fault("error", f"unexpected reply {msg} with no line in flight")
+                    idx, nbytes, _ = inflight.popleft()
+                    inflight_bytes -= nbytes
+                    if isinstance(msg, Ok):
+                        if idx == acked:
+                            acked += 1
+                        progress()
+                    elif isinstance(msg, ErrorReply) and msg.resend is not None:
+                        want = msg.resend - first
+                        if not 0 <= want <= total:
+                            raise fault("error", f"firmware asks to resend line {msg.resend}, "
+                                        f"outside this job ({first}..{first + total - 1})")
+                        rewind_to = want if rewind_to is None else min(rewind_to, want)
+                    else:
+                        assert isinstance(msg, ErrorReply)
+                        info = protocol.CODES.get(msg.code)
+                        why = info.description if info else "unknown error code"
+                        raise fault("error", f"job line {idx + 1} ({bodies[idx]!r}) refused: "
+                                    f"error:{msg.code} {why}", msg.code)
+                if rewind_to is not None and not inflight:
+                    acked = nxt = rewind_to
+                    resends += 1
+                    rewind_to = None
                     continue
-                if isinstance(msg, Banner):
-                    self.banner = msg
-                    raise fault("reset", "the firmware restarted (banner received) while "
-                                "streaming: its position and queue are lost")
-                if isinstance(msg, AlarmPush):
-                    info = protocol.CODES.get(msg.code)
-                    raise fault("alarm", f"ALARM:{msg.code} "
-                                f"({info.description if info else 'unknown alarm'})", msg.code)
-                if isinstance(msg, SettingLine):
+                now = time.monotonic()
+                st = self.last_status
+                if (inflight and st is not None and now - last_reply > 0.3
+                        and status_at > inflight[0][2] + 0.2
+                        and st.queued < self.banner.queue - 1
+                        and st.accepted_line < first + inflight[0][0]):
+                    # The firmware is free and has had time, yet never accepted the oldest line
+                    # in flight: its newline was lost (two lines merged into one rejected line).
+                    # Resume from the last line it accepted.
+                    acked = nxt = max(0, st.accepted_line + 1 - first)
+                    inflight.clear()
+                    inflight_bytes = 0
+                    rewind_to = None
+                    resends += 1
+                    last_reply = now
                     continue
-                last_reply = last_activity
-                if not inflight:
-                    raise fault("error", f"unexpected reply {msg} with no line in flight")
-                idx, nbytes, _ = inflight.popleft()
-                inflight_bytes -= nbytes
-                if isinstance(msg, Ok):
-                    if idx == acked:
-                        acked += 1
-                    progress()
-                elif isinstance(msg, ErrorReply) and msg.resend is not None:
-                    want = msg.resend - first
-                    if not 0 <= want <= total:
-                        raise fault("error", f"firmware asks to resend line {msg.resend}, "
-                                    f"outside this job ({first}..{first + total - 1})")
-                    rewind_to = want if rewind_to is None else min(rewind_to, want)
-                else:
-                    assert isinstance(msg, ErrorReply)
-                    info = protocol.CODES.get(msg.code)
-                    why = info.description if info else "unknown error code"
-                    raise fault("error", f"job line {idx + 1} ({bodies[idx]!r}) refused: "
-                                f"error:{msg.code} {why}", msg.code)
-            if rewind_to is not None and not inflight:
-                acked = nxt = rewind_to
-                resends += 1
-                rewind_to = None
-                continue
-            now = time.monotonic()
-            st = self.last_status
-            if (inflight and st is not None and now - last_reply > 0.3
-                    and status_at > inflight[0][2] + 0.2
-                    and st.queued < self.banner.queue - 1
-                    and st.accepted_line < first + inflight[0][0]):
-                # The firmware is free and has had time, yet never accepted the oldest line
-                # in flight: its newline was lost (two lines merged into one rejected line).
-                # Resume from the last line it accepted.
-                acked = nxt = max(0, st.accepted_line + 1 - first)
-                inflight.clear()
-                inflight_bytes = 0
-                rewind_to = None
-                resends += 1
-                last_reply = now
-                continue
-            if now - last_activity > timeout:
-                what = (f"job line {inflight[0][0] + 1} ({bodies[inflight[0][0]]!r})"
-                        if inflight else "a status report")
-                raise fault("timeout", f"the device went silent: no reply for {timeout:g} s "
-                            f"to {what}")
+                if now - last_activity > timeout:
+                    what = (f"job line {inflight[0][0] + 1} ({bodies[inflight[0][0]]!r})"
+                            if inflight else "a status report")
+                    raise fault("timeout", f"the device went silent: no reply for {timeout:g} s "
+                                f"to {what}")
+        except LinkFaultError as e:
+            if e.acked >= 0:
+                raise
+            raise fault(e.kind, e.message.removeprefix(f"{self.url}: ")) from e
         self.next_line = first + total
         elapsed = time.monotonic() - t0
         final = self.last_status or self.status()

@@ -300,7 +300,7 @@ def home(link: Link, profile: Profile, confirm: Callable[[str], bool]) -> Status
         raise SendError("position unknown: place the arms at the home pose and confirm, or "
                         "run `fivebar home`")
     link.command("G92 A0 B0")
-    return link.status()
+    return link.wait_idle(10.0)  # G92 is queued: its ok comes before it takes effect
 
 
 def _code_text(code: int | None) -> str:
@@ -351,15 +351,19 @@ def run_job(link: Link, job: Job, profile: Profile, *, drawing: str | Path, lase
                             "options changed); run the same command as before with --resume")
         start = rp.next_segment
         st = link.status()
+        if st.state in ("Alarm", "Hold"):
+            raise SendError(f"{link.url}: the machine is in {st.state} "
+                            f"({_code_text(st.detail)}); clear it before resuming")
         if not st.homed:
-            if rp.position is None:
-                home(link, profile, confirm)
-            elif confirm(f"The firmware restarted. Are the arms still where the job stopped "
-                         f"(A = {rp.position[0]}, B = {rp.position[1]} steps)?"):
+            # The firmware restarted since the fault (opening the port resets an Arduino):
+            # its count is 0, the arms are where they stopped, if that is known.
+            if rp.position is not None and confirm(
+                    f"Are the arms still where the job stopped (A = {rp.position[0]}, "
+                    f"B = {rp.position[1]} steps)?"):
                 link.command(f"G92 A{rp.position[0]} B{rp.position[1]}")
             else:
                 home(link, profile, confirm)
-        st = ensure_known_pose(link, profile, confirm)
+            st = link.wait_idle(10.0)  # G92 is queued: its ok comes before it takes effect
     else:
         st = ensure_known_pose(link, profile, confirm)
     prog = build_program(job, profile, laser, start, (st.a, st.b))
@@ -395,27 +399,32 @@ def _after_fault(link: Link, job: Job, prog: Program, fault: LinkFaultError, fir
                  start: int, rpath: Path, fp: str) -> SendError:
     """Stop the machine safely, record where it stopped, and describe it."""
     st: StatusReport | None = None
-    gone = fault.kind in ("disconnect",)
-    if not gone:
+    rebooted = False
+    if fault.kind != "disconnect":
         try:
             link.realtime(protocol.RT_HOLD)
             st = _wait_stopped(link)
             link.reset()
         except LinkError:
             st = None
-    known = st is not None and fault.kind not in ("reset",)
+            # No answer: reboot the controller through DTR so its laser output goes off.
+            rebooted = link.hardware_reset()
+    known = st is not None and fault.kind != "reset"
     ref = st if st is not None else fault.status
-    done_line = ref.done_line if ref is not None else 0
-    nxt = prog.finished_segments(first_line, done_line, start) if fault.kind != "reset" else (
-        prog.finished_segments(first_line, fault.status.done_line, start)
-        if fault.status is not None else start)
+    if fault.kind == "reset":
+        ref = fault.status
+    nxt = prog.finished_segments(first_line, ref.done_line, start) if ref is not None else start
     position = (st.a, st.b) if known and st is not None else None
     rp = ResumePoint(str(job.file), fp, nxt, position, f"{fault.kind}: {fault}", job.n_segments)
     rp.save(rpath)
     where = (f"stopped at A = {position[0]}, B = {position[1]} steps" if position
              else "position unknown (home the machine before resuming)")
-    laser = ("laser off (held and reset)" if st is not None else
-             "laser: the firmware switches it off after its silence timeout")
+    if st is not None:
+        laser = "laser off (held and reset)"
+    elif rebooted:
+        laser = "the controller did not answer and was rebooted through DTR: laser off"
+    else:
+        laser = "laser: the firmware switches it off after its silence timeout"
     return SendError(f"{fault}\n{where}; last segment executed: {nxt} of {job.n_segments}; "
                      f"{laser}.\nresume file: {rpath} — continue with the same command and "
                      "--resume")
@@ -483,13 +492,23 @@ def frame_program(job: Job, profile: Profile, position: Sequence[int],
 
 def jog_lines(profile: Profile, assembly: int, mode: str, position: Sequence[int], *,
               motor: str | None = None, steps: int = 0,
-              dxy_mm: tuple[float, float] | None = None) -> list[str]:
-    """Checked, ramped lines that move one motor by `steps` or the pen by `dxy_mm`."""
+              dxy_mm: tuple[float, float] | None = None, checked: bool = True) -> list[str]:
+    """Ramped lines that move one motor by `steps` or the pen by `dxy_mm`.
+
+    `checked=False` is for a motor jog while the position is unknown (setting the arms up
+    before homing): the move is not checked against limits or singularities, since nothing
+    is known to check against; a pen jog always needs a known position."""
     pos = np.asarray(position, dtype=np.int64)
     if motor is not None:
         target = pos.copy()
         target["AB".index(motor)] += steps
         what = f"jog motor {motor} by {steps} steps"
+        if not checked:
+            mo = profile.motors
+            pieces = _ramped_move(pos, target, mo.rad_per_step,
+                                  SAFE_SHARE * profile.motion.max_joint_rad_s,
+                                  SAFE_SHARE * profile.motion.max_joint_rad_s2)
+            return ["G90", *(protocol.g1(a, b, p, 0) for a, b, p in pieces)]
     else:
         assert dxy_mm is not None
         fb = profile.geometry
