@@ -1,0 +1,99 @@
+"""End to end on the real firmware in simavr: SVG → host → firmware → recorded step pulses →
+forward kinematics → deviation from the SVG path; the laser pin only while drawing; an abort
+mid-job and an exact resume, counted on the recorded pulses."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fivebar_host.config import load_profile
+from fivebar_host.devices.sim import toolchain_missing
+from fivebar_host.devices.simtrace import Trace, read_trace
+from fivebar_host.executed import executed_path, merge_axes
+from fivebar_host.job import CompileOptions, Job, compile_job
+from fivebar_host.link import Link
+from fivebar_host.sender import Progress, SendError, resume_path, run_job
+
+pytestmark = pytest.mark.skipif(toolchain_missing() is not None,
+                                reason=f"emulator unavailable: {toolchain_missing()}")
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+
+
+def _laser_steps(tr: Trace) -> np.ndarray:
+    """|steps| per motor taken while the laser pin was on."""
+    iv = tr.laser_intervals()
+    out = np.zeros(2, dtype=np.int64)
+    for i, axis in enumerate("AB"):
+        for st in tr.steps(axis):
+            if any(s <= st.cycle < e for s, e in iv):
+                out[i] += 1
+    return out
+
+
+def _planned_draw_steps(job: Job) -> np.ndarray:
+    return np.asarray(np.abs(np.diff(job.steps, axis=0))[job.draw].sum(axis=0))
+
+
+def test_svg_to_pulses_within_tolerance_and_laser_only_while_drawing(tmp_path: Path) -> None:
+    drawing = tmp_path / "text.svg"
+    shutil.copy(EXAMPLES / "fivebar_text.svg", drawing)
+    prof = load_profile()
+    job = compile_job(drawing, prof, CompileOptions())
+    trace = tmp_path / "pins.trace"
+    link = Link.open(f"fivebar-sim://?trace={trace}")
+    try:
+        rep = run_job(link, job, prof, drawing=drawing, laser=True, confirm=lambda q: True)
+    finally:
+        link.close()
+    assert rep.final.a == 0 and rep.final.b == 0
+    tr = read_trace(trace)
+    t, track = merge_axes(tr.positions("A"), tr.positions("B"))
+    ex = executed_path(job, prof, t, track)
+    assert ex.segments_completed == job.n_segments  # every segment reached its target
+    bound = job.tolerance_mm + job.step_quantum_mm
+    assert ex.max_deviation_mm <= bound, (ex.max_deviation_mm, bound)
+    # The laser pin is on exactly while drawing: each step event is on iff its segment draws.
+    iv = tr.laser_intervals()
+    on = np.array([any(s <= c < e for s, e in iv) for c in t.astype(np.int64)])
+    drawing_event = job.draw[ex.segment]
+    assert np.array_equal(on, drawing_event)
+    assert np.array_equal(_laser_steps(tr), _planned_draw_steps(job))
+
+
+def test_abort_mid_job_then_resume_draws_each_step_once(tmp_path: Path) -> None:
+    drawing = tmp_path / "simple.svg"
+    shutil.copy(EXAMPLES / "simple.svg", drawing)
+    prof = load_profile()
+    job = compile_job(drawing, prof, CompileOptions())
+    trace = tmp_path / "pins.trace"
+    link = Link.open(f"fivebar-sim://?trace={trace}&realtime=1")
+    stop = {"now": False}
+
+    def on_progress(p: Progress) -> None:
+        if p.segments_done >= job.n_segments // 3:
+            stop["now"] = True
+
+    try:
+        with pytest.raises(SendError) as ei:
+            run_job(link, job, prof, drawing=drawing, laser=True, confirm=lambda q: True,
+                    on_progress=on_progress, should_stop=lambda: stop["now"],
+                    on_interrupt=lambda: False)
+        msg = str(ei.value)
+        assert "interrupted by the user" in msg and "stopped at A = " in msg
+        assert resume_path(drawing).exists()
+        st = link.status()
+        assert st.laser == 0 and st.state == "Idle"
+        run_job(link, job, prof, drawing=drawing, laser=True, confirm=lambda q: True,
+                resume=True)
+        assert not resume_path(drawing).exists()
+    finally:
+        link.close()
+    tr = read_trace(trace)
+    assert np.array_equal(_laser_steps(tr), _planned_draw_steps(job))
+    a = tr.positions("A")
+    b = tr.positions("B")
+    assert (a[-1][1], b[-1][1]) == (0, 0)  # back at the homed pose
