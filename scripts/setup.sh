@@ -4,7 +4,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-APT_PKGS=(gcc-avr avr-libc binutils-avr simavr libsimavr-dev libelf-dev make gcc pkg-config)
+APT_PKGS=(gcc-avr avr-libc binutils-avr simavr libsimavr-dev libelf-dev arduino-core-avr make gcc pkg-config)
 missing=()
 for p in "${APT_PKGS[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

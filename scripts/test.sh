@@ -4,6 +4,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 PY=${PYTHON:-python3}
+echo "== firmware"; make -s -C firmware all sim
 echo "== ruff";   "$PY" -m ruff check .
 echo "== mypy";   "$PY" -m mypy
 echo "== pytest"; "$PY" -m pytest "$@"
