@@ -1,0 +1,87 @@
+"""How well the host uses the 115200-baud line to the firmware (emulated in real time).
+
+Two jobs on `fivebar-sim://?realtime=1` (simavr throttled to wall-clock speed, so the UART's
+baud rate binds as on hardware):
+1. link-bound: segments shorter than the line can carry — bytes/s sent over the line's
+   capacity (target ≥ 90 %);
+2. just below capacity (~85 % of the line): does the firmware queue ever run empty mid-path
+   (status `U:` counter; target: never).
+Capacity is quoted two ways: nominal 8N1 (11 520 B/s) and simavr's UART model, which counts
+11 bits per byte (1496 cycles at 16 MHz = 10 695 B/s), the real bound in the emulator.
+
+Run: python benchmarks/link.py [--segments 600] [--repeat 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+from fivebar_host import protocol
+from fivebar_host.devices.sim import toolchain_missing
+from fivebar_host.link import Link
+
+NOMINAL_BPS = 115200 / 10
+SIMAVR_BPS = 16_000_000 / 1496
+
+
+def job(n: int, p_us: int) -> list[str]:
+    """A zig-zag of n segments of 3 steps each, P µs long, laser off (S0)."""
+    out = ["G90"]
+    a = 0
+    for k in range(n):
+        a += 3 if (k // 50) % 2 == 0 else -3
+        out.append(protocol.g1(a, -a, p_us, 0))
+    return out
+
+
+def run(bodies: list[str]) -> tuple[float, int, int, float]:
+    """Stream on a fresh emulator; (bytes/s, bytes, mid-path underruns, seconds)."""
+    link = Link.open("fivebar-sim://?realtime=1")
+    try:
+        link.command("G92 A0 B0")
+        u0 = link.wait_idle(10.0).underruns
+        t0 = time.monotonic()
+        res = link.stream(bodies)
+        t1 = time.monotonic()
+        final = link.wait_idle(60.0)
+    finally:
+        link.close()
+    mid = final.underruns - u0 - 1  # the queue empties once at the end of the job
+    return res.bytes_sent / (t1 - t0), res.bytes_sent, mid, t1 - t0
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--segments", type=int, default=600)
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args()
+    why = toolchain_missing()
+    if why:
+        raise SystemExit(f"emulator unavailable: {why}")
+    n = args.segments
+    line_len = len(protocol.encode_line(job(2, 1000)[1], 12345))
+    # Segment duration that needs 85 % of the emulated line: bytes per second needed =
+    # line_len / P.
+    p_85 = round(line_len / (0.85 * SIMAVR_BPS) * 1e6)
+    print(f"link benchmark: {n} segments per job, ~{line_len} bytes per line, "
+          f"median of {args.repeat} runs, emulator in real time")
+    rows = []
+    for name, p_us in (("link-bound (P = 500 µs)", 500), (f"85 % of line (P = {p_85} µs)",
+                                                         p_85)):
+        runs = [run(job(n, p_us)) for _ in range(args.repeat)]
+        bps = statistics.median(r[0] for r in runs)
+        mid = max(r[2] for r in runs)
+        secs = statistics.median(r[3] for r in runs)
+        rows.append((name, bps, mid, secs))
+    print(f"{'job':32s} {'B/s':>8s} {'% nominal':>10s} {'% simavr':>9s} {'underruns':>10s} "
+          f"{'s':>6s}")
+    for name, bps, mid, secs in rows:
+        print(f"{name:32s} {bps:8.0f} {100 * bps / NOMINAL_BPS:9.1f}% "
+              f"{100 * bps / SIMAVR_BPS:8.1f}% {mid:10d} {secs:6.2f}")
+    print("targets: link-bound ≥ 90 % of the line; no mid-path underrun below capacity")
+
+
+if __name__ == "__main__":
+    main()
