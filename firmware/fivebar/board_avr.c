@@ -53,6 +53,9 @@ void board_init(void)
 	REG_PORT(PIN_LASER_PORT) &= (uint8_t)~(1u << PIN_LASER_BIT);
 	REG_DDR(PIN_LASER_PORT) |= (uint8_t)(1u << PIN_LASER_BIT);
 	REG_DDR(PIN_ENDSTOP_PORT) &= (uint8_t)~ENDSTOP_PINS;
+#ifdef FB_DEBUG_ISR_PIN
+	DDRB |= (uint8_t)(1u << 5);
+#endif
 	if (CFG_ENDSTOP_ACTIVE_LOW)
 		REG_PORT(PIN_ENDSTOP_PORT) |= ENDSTOP_PINS;
 
@@ -125,8 +128,22 @@ void board_tx(uint8_t c)
 
 /* ---- step timer -------------------------------------------------------------- */
 
+/*
+ * simavr 1.6 arms a compare at OCR1A < ~5 only if it handles the timer
+ * overflow within that many cycles, and otherwise misses it by a whole
+ * period (65536 cycles).  A match up to 7 cycles late costs nothing on
+ * hardware, and the schedule itself keeps the exact time.
+ */
+static inline uint16_t ocr_value(uint16_t t)
+{
+	return t >= 8u ? t : 8u;
+}
+
 ISR(TIMER1_COMPA_vect)
 {
+#ifdef FB_DEBUG_ISR_PIN
+	PORTB |= (uint8_t)(1u << 5);
+#endif
 	uint16_t t = OCR1A;
 	for (;;) {
 		uint16_t t0 = TCNT1;
@@ -136,16 +153,19 @@ ISR(TIMER1_COMPA_vect)
 		FB_STEP_PORT &= (uint8_t)~FB_STEP_PINS;
 		if (!d) {
 			TIMSK1 &= (uint8_t)~(1u << OCIE1A);
-			return;
+			break;
 		}
 		t = (uint16_t)(t + d);
 		if ((int16_t)(t - TCNT1) > NEAR_CYCLES) {
-			OCR1A = t;
-			return;
+			OCR1A = ocr_value(t);
+			break;
 		}
 		while ((int16_t)(TCNT1 - t) < 0)
 			;
 	}
+#ifdef FB_DEBUG_ISR_PIN
+	PORTB &= (uint8_t)~(1u << 5);
+#endif
 }
 
 void board_idle(void)
@@ -156,7 +176,7 @@ void board_timer_start(uint16_t delay_cycles)
 {
 	uint8_t s = board_irq_save();
 	paused = 0;
-	OCR1A = (uint16_t)(TCNT1 + delay_cycles);
+	OCR1A = ocr_value((uint16_t)(TCNT1 + delay_cycles));
 	TIFR1 = (uint8_t)(1u << OCF1A);
 	TIMSK1 |= (uint8_t)(1u << OCIE1A);
 	board_irq_restore(s);
@@ -190,7 +210,7 @@ void board_timer_resume(void)
 	uint8_t s = board_irq_save();
 	if (paused) {
 		paused = 0;
-		OCR1A = (uint16_t)(TCNT1 + paused_rem + 64u);
+		OCR1A = ocr_value((uint16_t)(TCNT1 + paused_rem + 64u));
 		TIFR1 = (uint8_t)(1u << OCF1A);
 		TIMSK1 |= (uint8_t)(1u << OCIE1A);
 	}

@@ -285,8 +285,8 @@ uint16_t mo_event(void)
 	}
 	t -= s_now;
 	if (t > MO_MAX_DELAY) {
-		/* a plain wait: the timer counts 16 bits */
-		t = MO_MAX_DELAY / 2u;
+		/* a plain wait; what is left stays above MO_MAX_DELAY - MO_WAIT */
+		t = MO_WAIT;
 		m = 0;
 	}
 	s_now += t;

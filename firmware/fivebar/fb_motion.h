@@ -69,8 +69,12 @@ uint8_t mo_prepare_cycles(fb_block_t *b, int32_t da, int32_t db, uint32_t cycles
 /* Start executing the queue (no-op while running). */
 void mo_start(void);
 /* The step interrupt's body: handle the due event, return cycles until the
- * next one (1..MO_MAX_DELAY), or 0 once stopped (queue empty, alarm). */
-#define MO_MAX_DELAY 0xc000u
+ * next one (1..MO_MAX_DELAY), or 0 once stopped (queue empty, alarm).
+ * Longer gaps are split into waits of MO_WAIT cycles.  MO_MAX_DELAY stays
+ * well below 32768 because the board compares 16-bit timer values as
+ * signed differences. */
+#define MO_MAX_DELAY 0x6000u
+#define MO_WAIT 0x4000u
 uint16_t mo_event(void);
 /* Stop at once: no further steps, laser off, the current block is dropped. */
 void mo_stop(void);

@@ -13,6 +13,8 @@
  *     -R          throttle to real time
  *     -a STEPS    endstop A is pressed while motor A's position <= STEPS
  *     -b STEPS    endstop B likewise (positions counted from the trace)
+ *     -D FILE     debug log of Timer1: "<cycle> r|w <OCR1A> <TCNT1>" for every
+ *                 read (the step interrupt's entry) and write of OCR1A
  *
  * stdout carries exactly one line, "PTY /dev/pts/N"; simavr's own logging
  * and the final statistics go to stderr.  SIGTERM or SIGINT stops cleanly
@@ -76,6 +78,39 @@ static int have_endstop[2];
 static long endstop_at[2];
 static int endstop_pressed[2] = { -1, -1 };
 static avr_irq_t *endstop_irq[2];
+
+/* Timer1 debug log (-D) */
+static FILE *dbg;
+static avr_io_write_t ocr_write_orig;
+static void *ocr_write_param;
+#define REG_TCNT1L 0x84
+#define REG_OCR1AL 0x88
+
+static unsigned tcnt1_now(void)
+{
+	uint8_t lo = avr->io[AVR_DATA_TO_IO(REG_TCNT1L)].r.c(
+		avr, REG_TCNT1L, avr->io[AVR_DATA_TO_IO(REG_TCNT1L)].r.param);
+	return lo | (unsigned)avr->data[REG_TCNT1L + 1] << 8;
+}
+
+static unsigned ocr1a(void)
+{
+	return avr->data[REG_OCR1AL] | (unsigned)avr->data[REG_OCR1AL + 1] << 8;
+}
+
+static uint8_t ocr_read_hook(avr_t *a, avr_io_addr_t addr, void *param)
+{
+	(void)param;
+	fprintf(dbg, "%llu r %u %u\n", (unsigned long long)a->cycle, ocr1a(), tcnt1_now());
+	return a->data[addr];
+}
+
+static void ocr_write_hook(avr_t *a, avr_io_addr_t addr, uint8_t v, void *param)
+{
+	(void)param;
+	ocr_write_orig(a, addr, v, ocr_write_param);
+	fprintf(dbg, "%llu w %u %u\n", (unsigned long long)a->cycle, ocr1a(), tcnt1_now());
+}
 
 static void on_signal(int sig)
 {
@@ -248,13 +283,13 @@ static avr_irq_t *pin_irq(char port, int bit)
 static void usage(void)
 {
 	fprintf(stderr, "usage: fbsim [-m mcu] [-f hz] [-t trace] [-w] [-g ms] [-c cycles] [-R] "
-			"[-a steps] [-b steps] firmware.elf\n");
+			"[-a steps] [-b steps] [-D debug] firmware.elf\n");
 	exit(2);
 }
 
 int main(int argc, char **argv)
 {
-	const char *mcu = "atmega328p", *trace_path = NULL;
+	const char *mcu = "atmega328p", *trace_path = NULL, *debug_path = NULL;
 	unsigned long freq = FB_F_CPU;
 	unsigned long long max_cycles = 0;
 	int wait_client = 0, grace_ms = 50, opt;
@@ -263,7 +298,7 @@ int main(int argc, char **argv)
 	if (getppid() == 1)
 		return 1;
 
-	while ((opt = getopt(argc, argv, "m:f:t:wg:c:Ra:b:")) != -1) {
+	while ((opt = getopt(argc, argv, "m:f:t:wg:c:Ra:b:D:")) != -1) {
 		switch (opt) {
 		case 'm': mcu = optarg; break;
 		case 'f': freq = strtoul(optarg, NULL, 10); break;
@@ -274,6 +309,7 @@ int main(int argc, char **argv)
 		case 'R': realtime = 1; break;
 		case 'a': have_endstop[0] = 1; endstop_at[0] = strtol(optarg, NULL, 10); break;
 		case 'b': have_endstop[1] = 1; endstop_at[1] = strtol(optarg, NULL, 10); break;
+		case 'D': debug_path = optarg; break;
 		default: usage();
 		}
 	}
@@ -338,6 +374,20 @@ int main(int argc, char **argv)
 	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_DIR_PORT), PIN_DIR_B_BIT), dir_hook, (void *)1);
 	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_ENABLE_PORT), PIN_ENABLE_BIT), named_hook, "enable");
 	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_LASER_PORT), PIN_LASER_BIT), named_hook, "laser");
+	/* D13 (PB5, the Uno's LED): free for firmware debug markers */
+	avr_irq_register_notify(pin_irq('B', 5), named_hook, "d13");
+	if (debug_path) {
+		dbg = fopen(debug_path, "w");
+		if (!dbg) {
+			fprintf(stderr, "fbsim: cannot write %s: %s\n", debug_path, strerror(errno));
+			return 1;
+		}
+		setvbuf(dbg, NULL, _IOFBF, 1 << 20);
+		ocr_write_orig = avr->io[AVR_DATA_TO_IO(REG_OCR1AL)].w.c;
+		ocr_write_param = avr->io[AVR_DATA_TO_IO(REG_OCR1AL)].w.param;
+		avr->io[AVR_DATA_TO_IO(REG_OCR1AL)].w.c = ocr_write_hook;
+		avr->io[AVR_DATA_TO_IO(REG_OCR1AL)].r.c = ocr_read_hook;
+	}
 	endstop_irq[0] = pin_irq(PORT_CHAR(PIN_ENDSTOP_PORT), PIN_ENDSTOP_A_BIT);
 	endstop_irq[1] = pin_irq(PORT_CHAR(PIN_ENDSTOP_PORT), PIN_ENDSTOP_B_BIT);
 	/* drive both switches to "released" (or to their simulated state) */
@@ -387,6 +437,8 @@ int main(int argc, char **argv)
 	pump_io();
 	if (trace)
 		fclose(trace);
+	if (dbg)
+		fclose(dbg);
 	double wall = wall_seconds();
 	fprintf(stderr, "fbsim: %llu cycles in %.3f s = %.1f MHz emulated, %llu bytes in, %llu out%s\n",
 		(unsigned long long)avr->cycle, wall, wall > 0 ? (double)avr->cycle / wall / 1e6 : 0.0,

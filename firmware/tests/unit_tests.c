@@ -276,6 +276,28 @@ static void test_dda_exact(void)
 	}
 }
 
+/* Every delay handed to the board fits its signed 16-bit comparisons. */
+static void test_delays_bounded(void)
+{
+	static const seg_t job[] = { { 3, 1, 3000000, 0 }, { 0, 0, 70000, 0 }, { 1, 0, 2049, 0 } };
+	fake_reset();
+	mo_init();
+	queue_segments(job, 3, 400);
+	mo_start();
+	uint16_t max_delay = 0;
+	while (fake_timer_on) {
+		fake_now += fake_timer_delay;
+		uint16_t d = mo_event();
+		if (!d)
+			break;
+		if (d > max_delay)
+			max_delay = d;
+		fake_timer_delay = d;
+	}
+	CHECK(max_delay <= MO_MAX_DELAY && MO_MAX_DELAY < 32768u - 1024u, "delay %u", max_delay);
+	CHECK(mo_done_line() == 3, "job finished");
+}
+
 static void test_too_fast(void)
 {
 	fb_block_t b;
@@ -500,6 +522,7 @@ int main(void)
 	test_parse_table();
 	test_framing();
 	test_dda_exact();
+	test_delays_bounded();
 	test_too_fast();
 	test_hold_resume();
 	test_homing_block();

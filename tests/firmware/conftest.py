@@ -28,12 +28,18 @@ def build() -> sim.BuildPaths:
 
 @pytest.fixture
 def start_device(build: sim.BuildPaths, tmp_path: Path) -> Iterator[Callable[..., SimDevice]]:
-    """Factory: start the firmware (optionally with simulated endstops)."""
+    """Factory: start the firmware (optionally with simulated endstops).
+
+    ``realtime=True`` throttles emulation to wall-clock speed, so a test that
+    streams a job is not at the mercy of how fast Python runs on a busy machine.
+    """
     started: list[SimDevice] = []
 
-    def start(endstop_a: int | None = None, endstop_b: int | None = None) -> SimDevice:
+    def start(
+        endstop_a: int | None = None, endstop_b: int | None = None, realtime: bool = False
+    ) -> SimDevice:
         trace = tmp_path / f"fw{len(started)}.trace"
-        dev = sim.start_device(build, trace, endstop_a, endstop_b)
+        dev = sim.start_device(build, trace, endstop_a, endstop_b, realtime=realtime)
         started.append(dev)
         return dev
 

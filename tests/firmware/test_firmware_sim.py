@@ -132,7 +132,8 @@ def test_boot_banner_and_info(device: Device) -> None:
     assert device.session.read_reply() == Ok()
 
 
-def test_streamed_job_executes_exactly(device: Device) -> None:
+def test_streamed_job_executes_exactly(start_device: Callable[..., Device]) -> None:
+    device = start_device(realtime=True)
     session = device.session
     segs = job_segments()
     lines = ["G91", "M3 S0"] + [protocol.g1(s.a, s.b, s.p_us, s.s) for s in segs] + ["G90"]
@@ -359,3 +360,18 @@ def test_g92_and_motor_enable_are_queued_in_order(device: Device) -> None:
     last_disable = [c for c, level in trace.pin("enable") if level == 1][-1]
     a_steps = [s.cycle for s in trace.steps("A")]
     assert a_steps[109] < last_disable < a_steps[110], "M18 took effect after the queued moves"
+
+
+def test_slow_segments_keep_their_timing(device: Device) -> None:
+    """Step intervals far beyond the 16-bit timer: waits are chained exactly."""
+    segs = [
+        Seg(3, 1, 300_000, 0),
+        Seg(-2, 5, 170_000, 0),
+        Seg(0, 0, 40_000, 0),
+        Seg(1, 1, 5_000, 0),
+    ]
+    lines = ["G91"] + [protocol.g1(s.a, s.b, s.p_us, s.s) for s in segs]
+    assert device.session.stream(lines) == [Ok()] * len(lines)
+    device.session.wait_idle()
+    worst, _ = check_job(device.finish(), segs)
+    assert worst <= 400, f"a step {worst} cycles off its time"
