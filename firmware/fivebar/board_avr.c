@@ -38,6 +38,7 @@
 static volatile uint8_t tx_buf[CFG_TX_SIZE];
 static volatile uint8_t tx_head, tx_tail;
 static volatile uint32_t ms_ticks;
+static uint16_t sched;  /* exact timer value of the pending step event */
 static uint16_t paused_rem;
 static uint8_t paused;
 
@@ -53,9 +54,6 @@ void board_init(void)
 	REG_PORT(PIN_LASER_PORT) &= (uint8_t)~(1u << PIN_LASER_BIT);
 	REG_DDR(PIN_LASER_PORT) |= (uint8_t)(1u << PIN_LASER_BIT);
 	REG_DDR(PIN_ENDSTOP_PORT) &= (uint8_t)~ENDSTOP_PINS;
-#ifdef FB_DEBUG_ISR_PIN
-	DDRB |= (uint8_t)(1u << 5);
-#endif
 	if (CFG_ENDSTOP_ACTIVE_LOW)
 		REG_PORT(PIN_ENDSTOP_PORT) |= ENDSTOP_PINS;
 
@@ -132,7 +130,7 @@ void board_tx(uint8_t c)
  * simavr 1.6 arms a compare at OCR1A < ~5 only if it handles the timer
  * overflow within that many cycles, and otherwise misses it by a whole
  * period (65536 cycles).  A match up to 7 cycles late costs nothing on
- * hardware, and the schedule itself keeps the exact time.
+ * hardware, and the schedule keeps the exact time in `sched`.
  */
 static inline uint16_t ocr_value(uint16_t t)
 {
@@ -141,10 +139,7 @@ static inline uint16_t ocr_value(uint16_t t)
 
 ISR(TIMER1_COMPA_vect)
 {
-#ifdef FB_DEBUG_ISR_PIN
-	PORTB |= (uint8_t)(1u << 5);
-#endif
-	uint16_t t = OCR1A;
+	uint16_t t = sched;
 	for (;;) {
 		uint16_t t0 = TCNT1;
 		uint16_t d = mo_event();
@@ -157,15 +152,13 @@ ISR(TIMER1_COMPA_vect)
 		}
 		t = (uint16_t)(t + d);
 		if ((int16_t)(t - TCNT1) > NEAR_CYCLES) {
+			sched = t;
 			OCR1A = ocr_value(t);
 			break;
 		}
 		while ((int16_t)(TCNT1 - t) < 0)
 			;
 	}
-#ifdef FB_DEBUG_ISR_PIN
-	PORTB &= (uint8_t)~(1u << 5);
-#endif
 }
 
 void board_idle(void)
@@ -176,7 +169,8 @@ void board_timer_start(uint16_t delay_cycles)
 {
 	uint8_t s = board_irq_save();
 	paused = 0;
-	OCR1A = ocr_value((uint16_t)(TCNT1 + delay_cycles));
+	sched = (uint16_t)(TCNT1 + delay_cycles);
+	OCR1A = ocr_value(sched);
 	TIFR1 = (uint8_t)(1u << OCF1A);
 	TIMSK1 |= (uint8_t)(1u << OCIE1A);
 	board_irq_restore(s);
@@ -196,9 +190,9 @@ void board_timer_pause(void)
 	uint8_t s = board_irq_save();
 	if (!paused && (TIMSK1 & (1u << OCIE1A))) {
 		TIMSK1 &= (uint8_t)~(1u << OCIE1A);
-		uint16_t rem = (uint16_t)(OCR1A - TCNT1);
-		if (TIFR1 & (1u << OCF1A))
-			rem = 0;
+		uint16_t rem = (uint16_t)(sched - TCNT1);
+		if ((TIFR1 & (1u << OCF1A)) || (int16_t)rem < 0)
+			rem = 0;  /* due now (or matched already) */
 		paused_rem = rem;
 		paused = 1;
 	}
@@ -210,7 +204,8 @@ void board_timer_resume(void)
 	uint8_t s = board_irq_save();
 	if (paused) {
 		paused = 0;
-		OCR1A = ocr_value((uint16_t)(TCNT1 + paused_rem + 64u));
+		sched = (uint16_t)(TCNT1 + paused_rem + 64u);
+		OCR1A = ocr_value(sched);
 		TIFR1 = (uint8_t)(1u << OCF1A);
 		TIMSK1 |= (uint8_t)(1u << OCIE1A);
 	}

@@ -374,8 +374,6 @@ int main(int argc, char **argv)
 	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_DIR_PORT), PIN_DIR_B_BIT), dir_hook, (void *)1);
 	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_ENABLE_PORT), PIN_ENABLE_BIT), named_hook, "enable");
 	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_LASER_PORT), PIN_LASER_BIT), named_hook, "laser");
-	/* D13 (PB5, the Uno's LED): free for firmware debug markers */
-	avr_irq_register_notify(pin_irq('B', 5), named_hook, "d13");
 	if (debug_path) {
 		dbg = fopen(debug_path, "w");
 		if (!dbg) {
