@@ -1,0 +1,73 @@
+"""Fixtures of the protocol contract suite: one device interface over two implementations.
+
+Every test of test_contract.py runs twice: against the Python mock
+(``fivebar-mock://``, fivebar_host/devices/mock.py) and against the real firmware running
+in simavr (fivebar_host/devices/sim.py).  A test sees a ``Device``: the open port, a
+``FirmwareSession`` on it, and ``executed()`` — what the motors and the laser really did,
+from the mock's ledger or from the emulator's recorded pin trace.  The sim
+parametrization skips, naming the reason, only when the AVR toolchain or simavr is
+missing (CI installs them); a failing build is an error.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+import serial
+from contract_devices import MOCK_SPEED, Device
+
+from fivebar_host.devices import sim, urls
+from fivebar_host.devices.mock import MockSerial
+
+
+@pytest.fixture(scope="session")
+def sim_build() -> sim.BuildPaths:
+    """Firmware and harness, built once per session; skip only without the toolchain."""
+    reason = sim.toolchain_missing()
+    if reason is not None:
+        pytest.skip(f"emulator unavailable: {reason}")
+    return sim.ensure_built()
+
+
+@pytest.fixture(params=["mock", pytest.param("sim", marks=pytest.mark.sim)])
+def device_kind(request: pytest.FixtureRequest) -> str:
+    """Which implementation the test runs against."""
+    return str(request.param)
+
+
+@pytest.fixture
+def open_device(
+    device_kind: str, request: pytest.FixtureRequest, tmp_path: Path
+) -> Iterator[Callable[..., Device]]:
+    """Factory: boot a device, optionally with endstops at physical positions (A, B)."""
+    started: list[Device] = []
+
+    def start(endstops: tuple[int | None, int | None] = (None, None)) -> Device:
+        if device_kind == "sim":
+            build: sim.BuildPaths = request.getfixturevalue("sim_build")
+            simdev = sim.start_device(build, tmp_path / f"pins{len(started)}.trace",
+                                      endstops[0], endstops[1])
+            dev = Device("sim", simdev.port, simdev)
+        else:
+            urls.register()
+            es = ",".join("" if e is None else str(e) for e in endstops)
+            url = f"fivebar-mock://?speed={MOCK_SPEED}"
+            if endstops != (None, None):
+                url += f"&endstops={es}"
+            port = serial.serial_for_url(url, timeout=0.5)
+            assert isinstance(port, MockSerial)
+            dev = Device("mock", port)
+        started.append(dev)
+        return dev
+
+    yield start
+    for dev in started:
+        dev.close()
+
+
+@pytest.fixture
+def device(open_device: Callable[..., Device]) -> Device:
+    """A booted device without endstops."""
+    return open_device()

@@ -1,0 +1,72 @@
+"""The device interface of the contract suite: a booted mock or emulated firmware.
+
+Kept out of conftest.py so test modules can import ``Device`` for their type hints.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+from typing import Any
+
+from fivebar_host.devices.sim import FirmwareSession, SimDevice
+from fivebar_host.protocol import Banner
+
+#: Motion speed of the mock: about as much faster than real time as the unthrottled emulator.
+MOCK_SPEED = 10
+
+
+@dataclass(frozen=True)
+class Executed:
+    """What the device physically did, from step pulses and the laser output."""
+
+    steps: tuple[int, int]  # step pulses issued per motor (either direction)
+    net: tuple[int, int]  # signed sum of the steps per motor
+    laser_on_s: float  # time the laser output was on, in device seconds
+    laser_periods: int  # separate laser-on periods
+
+
+class Device:
+    """A booted device (banner read) under test: mock or emulated firmware."""
+
+    def __init__(self, kind: str, port: Any, sim_device: SimDevice | None = None) -> None:
+        self.kind = kind
+        self.port = port
+        self.session = sim_device.session if sim_device else FirmwareSession(port, timeout=10.0)
+        self._sim = sim_device
+        if sim_device is None:
+            self.session.wait_banner()
+        assert self.session.banner is not None
+        self.banner: Banner = self.session.banner
+
+    def executed(self) -> Executed:
+        """Stop the device and return what it executed (call once, at the end of a test)."""
+        if self._sim is not None:
+            trace = self._sim.finish()
+            steps = tuple(trace.steps(axis) for axis in ("A", "B"))
+            intervals = trace.laser_intervals()
+            return Executed(
+                (len(steps[0]), len(steps[1])),
+                (sum(s.direction for s in steps[0]), sum(s.direction for s in steps[1])),
+                sum(e - s for s, e in intervals) / trace.freq,
+                len(intervals),
+            )
+        ledger = self.port.ledger
+        self.port.close()
+        laser_log = self.port.machine.laser_log
+        periods = sum(1 for (_, p0), (_, p1) in itertools.pairwise(laser_log)
+                      if p0 == 0 and p1 > 0)
+        return Executed(
+            (sum(abs(e.steps[0]) for e in ledger), sum(abs(e.steps[1]) for e in ledger)),
+            (sum(e.steps[0] for e in ledger), sum(e.steps[1] for e in ledger)),
+            sum(e.duration_us * e.fraction for e in ledger if e.kind == "G1" and e.power)
+            / 1e6,
+            periods,
+        )
+
+    def close(self) -> None:
+        """Release the port / stop the emulator (idempotent)."""
+        if self._sim is not None:
+            self._sim.close()
+        else:
+            self.port.close()
