@@ -226,6 +226,21 @@ def test_line_noise_is_absorbed_by_checksums_and_resend(fault: str) -> None:
     assert sum(e.steps[1] for e in g1) == moves[-1][1]
 
 
+def test_seed_makes_the_faults_reproducible() -> None:
+    def run(seed: int) -> list[Message]:
+        port = open_mock(f"corrupt=0.05&drop=0.05&seed={seed}&speed=0")
+        port.write(b"".join(protocol.encode_line(f"G1 A{i} P1000", i + 1) for i in range(8)))
+        time.sleep(0.03)
+        got = messages(port)
+        port.close()
+        return got
+
+    first = run(1)
+    assert any(m != Ok() for m in first)
+    assert run(1) == first
+    assert run(2) != first
+
+
 def test_drop_everything_keeps_real_time_bytes() -> None:
     port = open_mock("drop=1")
     port.write(b"G1 A10 P1000\nG90\n")
