@@ -196,6 +196,131 @@ def handle_job_errors(fn: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
+# --------------------------------------------------------------------- issue 9: --server
+def server_option(fn: F) -> F:
+    """Add `--server URL` and `--token` to `plot`: the drawing goes to a running `fivebar
+    serve`, which compiles, checks, queues and runs it; the command follows it with the same
+    progress bar. The plot function itself is untouched: without --server the wrapper calls
+    it unchanged; with it, `_plot_via_server` gets the same option values."""
+
+    @wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        server = kwargs.pop("server", None)
+        token = kwargs.pop("token", None)
+        if server is None:
+            return fn(*args, **kwargs)
+        return _plot_via_server(server, token, kwargs)
+
+    wrapper = click.option(
+        "--token", default=None, metavar="TOKEN", envvar="FIVEBAR_TOKEN",
+        help="The daemon's token (needed when it listens on a non-loopback address). "
+        "Default: $FIVEBAR_TOKEN, else the local daemon's token file.")(wrapper)
+    wrapper = click.option(
+        "--server", default=None, metavar="URL",
+        help="Send the drawing to a running `fivebar serve` at URL (http://HOST:PORT) and "
+        "follow it there, instead of opening --port.")(wrapper)
+    return wrapper  # type: ignore[return-value]
+
+
+def _plot_via_server(server: str, token: str | None, kw: dict[str, Any]) -> None:
+    """`plot --server`: submit, then follow the job's progress until it is over.
+
+    Ctrl-C pauses the job on the daemon (held, laser off) and asks to resume or abort (no
+    terminal: abort cancels it). A question of the daemon (are the arms at the home pose?)
+    is asked here; --yes answers it in advance."""
+    import signal
+
+    from fivebar_host.server.client import (
+        ServerClient,
+        ServerError,
+        default_token,
+        follow,
+        plot_options,
+    )
+
+    given = [flag for flag, key in (("--port", "port"), ("--dry-run", "dry_run"),
+                                    ("--resume", "resume"), ("--config", "config_path"))
+             if kw.get(key)]
+    if given:
+        _fail(f"--server hands the drawing to the daemon, which has its own port and profile "
+              f"(fivebar serve --port/--config) and resumes its own jobs; drop "
+              f"{', '.join(given)}")
+    drawing = Path(kw["drawing"])
+    try:
+        data = drawing.read_bytes()
+    except OSError as e:
+        _fail(f"{drawing}: {e.strerror or e}")
+        return
+    yes = bool(kw.get("yes", False))
+    try:
+        client = ServerClient(server, token or default_token())
+        job = client.submit(data, drawing.name, plot_options(
+            laser=bool(kw.get("laser", False)), mode=kw.get("mode"),
+            tolerance=kw.get("tolerance"), origin=_xy(kw.get("origin_text")),
+            scale=kw.get("scale"), rotate_deg=float(kw.get("rotate_deg", 0.0)),
+            fit=bool(kw.get("fit", False)), layers=tuple(kw.get("layers", ())),
+            keep_order=bool(kw.get("keep_order", False)), confirm=yes))
+    except ServerError as e:
+        _fail(str(e), code=2 if e.status in (400, 413, 415, 422) else 3)
+        return
+    jid = int(job["id"])
+    click.echo(f"job {jid} queued on {client.base}: {job['segments_total']} segments, mode "
+               f"{job['mode']}, ≈ {job['estimated_s']:.1f} s"
+               + (f", max deviation {job['max_dev_mm']:.4f} mm" if job["max_dev_mm"] else ""))
+    interrupted = {"flag": False}
+
+    def on_sigint(signum: int, frame: Any) -> None:
+        interrupted["flag"] = True
+
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    try:
+        with click.progressbar(length=int(job["segments_total"]), label="plotting",
+                               show_eta=False, show_percent=True,
+                               item_show_func=lambda s: s) as bar:
+            state = {"done": 0}
+
+            def on_update(j: dict[str, Any]) -> None:
+                done = int(j["segments_done"])
+                if done > state["done"] or j["state"] != "running":
+                    bar.update(max(0, done - state["done"]),
+                               f"segment {done}/{j['segments_total']}, "
+                               f"{j['elapsed_s']:.0f} s elapsed, "
+                               f"≈ {j['remaining_s'] or 0:.0f} s left"
+                               + ("" if j["state"] == "running" else f" ({j['state']})"))
+                    state["done"] = max(state["done"], done)
+
+            while True:
+                job = follow(client, jid, on_update, should_stop=lambda: interrupted["flag"])
+                if interrupted["flag"]:
+                    interrupted["flag"] = False
+                    if job["state"] in ("queued", "running"):
+                        job = client.pause(jid) if job["state"] == "running" else job
+                        click.echo("\npaused on the daemon: held, laser off.", err=True)
+                    choice = click.prompt("resume or abort?",
+                                          type=click.Choice(["resume", "abort"]),
+                                          default="abort", err=True) \
+                        if sys.stdin.isatty() else "abort"
+                    if choice == "abort":
+                        client.cancel(jid)
+                    elif client.job(jid)["state"] in ("paused", "held"):
+                        client.resume(jid)
+                    continue
+                if job["state"] == "held" and job.get("question"):
+                    q = str(job["question"])
+                    if sys.stdin.isatty() and click.confirm(f"\n{q}", default=False, err=True):
+                        client.resume(jid, confirm=True)
+                        continue
+                break
+    except ServerError as e:
+        _fail(str(e), code=3)
+        return
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if job["state"] != "done":
+        _fail(f"job {jid} {job['state']}: {job['message']}", code=3)
+    click.echo(str(job["message"]))
+
+
 @main.command("convert")
 @click.argument("drawing", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
@@ -281,6 +406,7 @@ def _open_link(port: str, prof: Profile) -> Any:
               help="Run everything except the serial link: preview picture and report.")
 @click.option("--preview", "preview_path", type=click.Path(dir_okay=False, path_type=Path),
               default=Path("preview.png"), show_default=True, help="Dry-run picture (PNG).")
+@server_option
 @port_option
 @click.option("--resume", is_flag=True,
               help="Continue an interrupted plot from its resume file (same drawing and options).")
@@ -666,3 +792,49 @@ def linkage_simulate(file: Path, steps: int | None, output: Path | None,
         click.echo(f"wrote {plot_simulation(sim, plot_path)}")
     if any(lim.kind == "inconsistent" for lim in sim.limits):
         sys.exit(1)
+
+
+# --------------------------------------------------------------------- issue 9: the daemon
+@main.command("serve")
+@click.option("--port", "port_url", required=True, metavar="PORT",
+              help="The machine's serial port or URL (as for plot --port).")
+@config_option
+@click.option("--listen", default="127.0.0.1:8765", show_default=True, metavar="HOST:PORT",
+              help="Address of the HTTP API. Any non-loopback address requires the token on "
+              "every request.")
+@click.option("--state-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Database and token (default: $STATE_DIRECTORY, else "
+              "~/.local/state/fivebar).")
+@click.option("--require-token", is_flag=True,
+              help="Require the token on loopback too (a computer shared by several users).")
+@click.option("--max-upload-mb", type=click.FloatRange(min=0.001, max=1024.0), default=8.0,
+              show_default=True, help="Largest accepted drawing upload.")
+@click.option("--auto-resume", is_flag=True,
+              help="On start, continue held jobs that have a resume point (after a stop, a "
+              "crash or a fault) without waiting for a resume request.")
+@click.option("--banner-timeout", type=click.FloatRange(min=0.1, max=60.0), default=None,
+              help="Seconds to wait for the firmware's banner (default: the profile's).")
+@click.option("--access-log", is_flag=True, help="Log every HTTP request.")
+@click.option("--ready-file", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              hidden=True)
+def serve(port_url: str, config_path: Path | None, listen: str, state_dir: Path | None,
+          require_token: bool, max_upload_mb: float, auto_resume: bool,
+          banner_timeout: float | None, access_log: bool, ready_file: Path | None) -> None:
+    """Run the plotter daemon in the foreground: own the machine's port, queue and run jobs,
+    serve the HTTP + JSON API (docs/serve.md). Logs go to stderr; SIGTERM stops the running
+    job at a segment boundary with the laser off, then exits."""
+    from fivebar_host.server.daemon import ServeConfig, ServeError, run_foreground
+    from fivebar_host.server.security import SecurityError
+    from fivebar_host.server.store import StoreError
+
+    cfg = ServeConfig(port_url=port_url, profile_path=config_path, listen=listen,
+                      state_dir=state_dir, require_token=require_token,
+                      max_upload_bytes=int(max_upload_mb * 1024 * 1024),
+                      auto_resume=auto_resume, banner_timeout_s=banner_timeout,
+                      ready_file=ready_file, access_log=access_log)
+    try:
+        code = run_foreground(cfg)
+    except (ServeError, SecurityError, StoreError, ConfigError) as e:
+        _fail(str(e))
+        return
+    sys.exit(code)

@@ -1,0 +1,24 @@
+"""`fivebar serve`: the host daemon that owns the serial port and runs a queue of jobs.
+
+A plotter hangs off a small computer that stays on; the daemon keeps the port open (so the
+Arduino is not reset for every job), compiles and checks each submitted drawing before it is
+queued, streams the jobs one after another through `sender.run_job`, and lets the CLI
+(`fivebar plot DRAWING --server URL`) and other programs submit and follow them over a small
+HTTP + JSON API (docs/serve.md).
+
+Modules:
+
+- `store`: the SQLite database — the queue, each job's upload, options, progress and resume
+  point, and what the daemon knows about the machine's pose.
+- `security`: the token file, the loopback rule, request size limits, Host/Origin checks.
+- `jobs`: submitted options and uploads → a compiled, checked `Job` (private temp dir).
+- `worker`: the thread that owns the `Link` and runs the queue (pause, resume, cancel,
+  SIGTERM stop at a segment boundary, recovery after a crash).
+- `app`: the FastAPI application (routes, JSON models, the OpenAPI description).
+- `daemon`: wiring and lifecycle (uvicorn in a thread, signals, logging).
+- `client`: the stdlib HTTP client used by `fivebar plot --server`.
+- `ptydevice`: a `fivebar-mock://` machine served on a pseudo-terminal, a stand-in controller
+  that outlives the daemon (for trying the daemon without hardware, and for crash tests).
+"""
+
+from __future__ import annotations

@@ -1,0 +1,380 @@
+"""The daemon's HTTP + JSON API (FastAPI): routes, response models, error format.
+
+FastAPI derives the OpenAPI description (`GET /openapi.json`) from the route signatures and
+the models below; docs/serve.md explains the API in prose. Every error answers with
+`{"error": <stable key>, "message": <what and why>}` (plus details for refused drawings),
+whatever produced it: a refused drawing, a bad option, an unknown job, a state conflict, a
+missing token or an oversized body (the last two come from `security.Guard`).
+
+Handlers never touch the serial port: they read the database and the worker's snapshot, and
+hand pause/resume/cancel/home to the machine thread.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Annotated, Any, Literal
+
+from fastapi import FastAPI, Query, Request
+from fastapi.concurrency import run_in_threadpool
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse, Response
+from pydantic import BaseModel, Field
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from fivebar_host import __version__
+from fivebar_host.config import Profile
+from fivebar_host.server import store as st_
+from fivebar_host.server.jobs import (
+    CompiledCache,
+    JobOptions,
+    SubmitError,
+    compile_upload,
+    parse_origin,
+)
+from fivebar_host.server.store import JobRecord, JobStore
+from fivebar_host.server.worker import ActionError, JobStateError, Worker
+
+#: Content types a web page can send without a CORS preflight; uploads must not use them.
+SIMPLE_CONTENT_TYPES = frozenset({"application/x-www-form-urlencoded", "multipart/form-data",
+                                  "text/plain"})
+
+
+class ApiError(Exception):
+    """An error answer: HTTP status, stable key, message, optional details."""
+
+    def __init__(self, status: int, error: str, message: str,
+                 detail: dict[str, Any] | None = None) -> None:
+        super().__init__(message)
+        self.status = status
+        self.error = error
+        self.message = message
+        self.detail = detail or {}
+
+
+# ---------------------------------------------------------------------------- models
+class ErrorOut(BaseModel):
+    """Every error response."""
+
+    error: str = Field(description="Stable key: input_error, job_error, bad_option, "
+                       "not_found, conflict, unauthorized, too_large, ...")
+    message: str = Field(description="What went wrong, where, and what to do.")
+    reason: str | None = Field(None, description="job_error only: reach, joint_limit, "
+                               "type1_margin, type2_margin, mode_change, does_not_fit, ...")
+    where: dict[str, Any] | None = Field(None, description="job_error only: path and point.")
+
+
+class OptionsOut(BaseModel):
+    """The plot options a job was submitted with."""
+
+    laser: bool
+    mode: str | None
+    tolerance_mm: float | None
+    origin_mm: list[float] | None
+    scale: float | None
+    rotate_deg: float
+    fit: bool
+    layers: list[str]
+    keep_order: bool
+    confirm: bool
+
+
+class ResumeOut(BaseModel):
+    """Where an interrupted job continues."""
+
+    next_segment: int = Field(description="First job segment not known to be finished.")
+    position: list[int] | None = Field(description="Firmware steps [A, B] where the machine "
+                                       "stopped; null when unknown (home before resuming).")
+    reason: str
+
+
+class JobOut(BaseModel):
+    """A job in the queue or in the history."""
+
+    id: int
+    name: str
+    state: Literal["queued", "running", "paused", "held", "done", "failed", "cancelled"]
+    message: str = Field(description="What happened last (fault, interruption, result).")
+    question: str | None = Field(description="held: what the daemon needs a person to "
+                                 "confirm (resume with confirm=true once it is so).")
+    submitted_at: float = Field(description="Unix time.")
+    started_at: float | None
+    finished_at: float | None
+    options: OptionsOut
+    mode: str = Field(description="Working mode the job was compiled in.")
+    max_dev_mm: float | None = Field(description="Largest deviation from the drawing, mm.")
+    segments_total: int
+    segments_done: int
+    progress: float = Field(description="segments_done / segments_total.")
+    estimated_s: float = Field(description="Planned duration of the whole job, s.")
+    remaining_s: float | None = Field(description="Planned time left, s.")
+    elapsed_s: float = Field(description="Time spent running (all runs of it), s.")
+    underruns: int | None = Field(description="done: times the firmware queue ran empty "
+                                  "mid-job (0 is the goal); null if unknown.")
+    resume: ResumeOut | None
+
+
+class MachineOut(BaseModel):
+    """The machine as last reported (no request reaches the serial port)."""
+
+    connected: bool
+    port: str
+    error: str | None
+    firmware: dict[str, Any] | None = Field(description="version, protocol, rx_bytes, "
+                                            "queue_blocks, line_bytes from the banner.")
+    state: str | None = Field(description="Idle, Run, Hold, Home or Alarm.")
+    detail: int | None = Field(description="Hold reason or alarm code.")
+    position: dict[str, int] | None = Field(description="Firmware steps {a, b}.")
+    laser: int | None = Field(description="Laser output now (0 = off).")
+    queued_blocks: int | None = Field(description="Blocks waiting in the firmware queue.")
+    done_line: int | None
+    accepted_line: int | None
+    underruns: int | None = Field(description="Times the queue ran empty since reset (U:).")
+    pose_known: bool = Field(description="The daemon trusts the firmware's position.")
+    status_age_s: float | None = Field(description="Age of the last status report, s.")
+
+
+class StatusOut(BaseModel):
+    """Daemon, machine and queue at a glance."""
+
+    version: str
+    uptime_s: float
+    stopping: bool
+    machine: MachineOut
+    jobs: dict[str, int] = Field(description="Number of jobs per state.")
+    current_job: int | None
+    blocked_by: int | None = Field(description="A paused or held job that keeps the queue "
+                                   "from moving (resume or cancel it).")
+
+
+# ---------------------------------------------------------------------------- helpers
+def job_out(rec: JobRecord, worker: Worker) -> JobOut:
+    """The API view of a job, with live progress for the running one."""
+    done, remaining, elapsed = rec.segments_done, rec.remaining_s, rec.run_s
+    live = worker.live
+    if live is not None and live.job_id == rec.id:
+        done, remaining, elapsed = live.segments_done, live.remaining_s, live.elapsed_s
+    if rec.state == st_.QUEUED and rec.resume is None:
+        remaining = rec.estimated_s
+    o = JobOptions.from_json(rec.options).to_json()
+    return JobOut(
+        id=rec.id, name=rec.name, state=rec.state,  # type: ignore[arg-type]
+        message=rec.message, question=rec.question, submitted_at=rec.submitted_at,
+        started_at=rec.started_at, finished_at=rec.finished_at, options=OptionsOut(**o),
+        mode=rec.mode, max_dev_mm=rec.max_dev_mm, segments_total=rec.segments_total,
+        segments_done=done,
+        progress=round(done / rec.segments_total, 6) if rec.segments_total else 1.0,
+        estimated_s=rec.estimated_s, remaining_s=remaining, elapsed_s=round(elapsed, 3),
+        underruns=rec.underruns,
+        resume=None if rec.resume is None else ResumeOut(
+            next_segment=rec.resume.next_segment,
+            position=list(rec.resume.position) if rec.resume.position else None,
+            reason=rec.resume.reason))
+
+
+def _error_response(status: int, error: str, message: str,
+                    detail: dict[str, Any] | None = None,
+                    headers: dict[str, str] | None = None) -> JSONResponse:
+    body: dict[str, Any] = {"error": error, "message": message}
+    body.update(detail or {})
+    return JSONResponse(body, status_code=status, headers=headers)
+
+
+_ERRORS: dict[int | str, dict[str, Any]] = {
+    404: {"model": ErrorOut, "description": "No such job."},
+    409: {"model": ErrorOut, "description": "The job's state does not allow this."},
+}
+
+
+def create_app(*, store: JobStore, worker: Worker, cache: CompiledCache, profile: Profile,
+               stopping: threading.Event, compile_slots: int = 2) -> FastAPI:
+    """The FastAPI application over a store and a running worker."""
+    started = time.monotonic()
+    slots = threading.BoundedSemaphore(compile_slots)
+    app = FastAPI(
+        title="fivebar daemon", version=__version__,
+        description="Queue, run and follow plot jobs on a five-bar plotter or laser "
+        "(docs/serve.md). Uploads are the drawing's bytes as the request body "
+        "(Content-Type image/svg+xml or text/x-gcode) with the plot options as query "
+        "parameters. With a token configured, every request needs "
+        "'Authorization: Bearer <token>'.",
+        docs_url=None, redoc_url=None)
+
+    @app.exception_handler(ApiError)
+    async def api_error(request: Request, exc: ApiError) -> JSONResponse:
+        return _error_response(exc.status, exc.error, exc.message, exc.detail)
+
+    @app.exception_handler(RequestValidationError)
+    async def validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:
+        parts = []
+        for err in exc.errors():
+            loc = ".".join(str(x) for x in err.get("loc", ()) if x not in ("query", "path"))
+            parts.append(f"{loc}: {err.get('msg', 'invalid')}")
+        return _error_response(422, "bad_option", "; ".join(parts) or "invalid request")
+
+    @app.exception_handler(StarletteHTTPException)
+    async def http_error(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        key = {404: "not_found", 405: "method_not_allowed"}.get(exc.status_code, "http_error")
+        return _error_response(exc.status_code, key, str(exc.detail),
+                               headers=getattr(exc, "headers", None))
+
+    def get_rec(job_id: int) -> JobRecord:
+        rec = store.get(job_id)
+        if rec is None:
+            raise ApiError(404, "not_found", f"no job {job_id}")
+        return rec
+
+    @app.get("/api/status", response_model=StatusOut, tags=["machine"])
+    def status() -> StatusOut:
+        """Daemon, machine (last status report) and queue counts."""
+        blk = store.blocking()
+        return StatusOut(
+            version=__version__, uptime_s=round(time.monotonic() - started, 3),
+            stopping=stopping.is_set(), machine=MachineOut(**worker.machine()),
+            jobs=store.counts(), current_job=worker.current,
+            blocked_by=blk.id if blk is not None and blk.id != worker.current else None)
+
+    @app.get("/api/jobs", response_model=list[JobOut], tags=["jobs"])
+    def list_jobs(state: Annotated[list[str] | None, Query(
+                      description="Only these states (repeatable).")] = None,
+                  limit: int = Query(200, ge=1, le=1000)) -> list[JobOut]:
+        """Jobs, oldest first (the most recent `limit`)."""
+        state = state or []
+        bad = [s for s in state if s not in st_.STATES]
+        if bad:
+            raise ApiError(422, "bad_option", f"unknown state(s) {bad}; states are "
+                           f"{', '.join(st_.STATES)}")
+        return [job_out(r, worker) for r in store.list(tuple(state) or None, limit)]
+
+    @app.post(
+        "/api/jobs", response_model=JobOut, status_code=201, tags=["jobs"],
+        responses={413: {"model": ErrorOut, "description": "Upload over the size limit."},
+                   415: {"model": ErrorOut, "description": "Wrong Content-Type."},
+                   422: {"model": ErrorOut, "description": "The drawing cannot be read or "
+                         "the job cannot run (the CLI's message); nothing was queued."},
+                   400: {"model": ErrorOut, "description": "Empty upload or bad name."},
+                   503: {"model": ErrorOut, "description": "The daemon is stopping."}},
+        openapi_extra={"requestBody": {"required": True, "description": "The drawing's bytes.",
+                                       "content": {
+                                           "image/svg+xml": {"schema": {"type": "string"}},
+                                           "text/x-gcode": {"schema": {"type": "string"}},
+                                           "application/octet-stream": {
+                                               "schema": {"type": "string",
+                                                          "format": "binary"}}}}})
+    async def submit(
+        request: Request,
+        name: str = Query(..., description="File name of the drawing (a label; its suffix "
+                          "tells SVG from G-code). No directories."),
+        laser: bool = Query(False, description="Laser job: drawing segments carry the "
+                            "profile's power (the CLI's --laser opt-in). Without it S0."),
+        mode: Literal["++", "+-", "-+", "--", "auto"] | None = Query(
+            None, description="Working mode (default: the profile's)."),
+        tolerance: float | None = Query(None, ge=1e-4, le=10.0,
+                                        description="Largest path deviation, mm."),
+        origin: str | None = Query(None, description="X,Y: the drawing's origin in machine "
+                                   "mm (default: centred in the largest safe rectangle)."),
+        scale: float | None = Query(None, description="Scale factor."),
+        rotate: float = Query(0.0, description="Rotation, degrees counter-clockwise."),
+        fit: bool = Query(False, description="Scale to fill the largest safe rectangle."),
+        layer: Annotated[list[str] | None, Query(
+            description="Only these SVG layers (repeatable).")] = None,
+        keep_order: bool = Query(False, description="Draw paths in file order."),
+        confirm: bool = Query(False, description="Answer yes if the daemon must ask whether "
+                              "the arms are at the home pose (first job after power-up)."),
+    ) -> JobOut:
+        """Compile and check a drawing, then queue it; a job that cannot run is refused."""
+        if stopping.is_set():
+            raise ApiError(503, "stopping", "the daemon is stopping; submit again after it "
+                           "restarts")
+        ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
+        if ctype in SIMPLE_CONTENT_TYPES or not ctype:
+            raise ApiError(415, "bad_content_type", f"send the drawing's bytes as the body "
+                           f"with Content-Type image/svg+xml, text/x-gcode or "
+                           f"application/octet-stream (got {ctype or 'none'!r})")
+        body = await request.body()
+        try:
+            opts = JobOptions(laser=laser, mode=mode, tolerance_mm=tolerance,
+                              origin_mm=parse_origin(origin), scale=scale, rotate_deg=rotate,
+                              fit=fit, layers=tuple(layer or ()), keep_order=keep_order,
+                              confirm=confirm)
+
+            def work() -> Any:
+                with slots:
+                    return compile_upload(body, name, opts, profile)
+
+            compiled = await run_in_threadpool(work)
+        except SubmitError as e:
+            raise ApiError(e.status, e.code, str(e), e.detail) from e
+        job = compiled.job
+        rec = store.add_job(name=name, options=opts.to_json(), upload=body,
+                            upload_sha256=compiled.upload_sha256,
+                            fingerprint=compiled.fingerprint, mode=job.mode,
+                            max_dev_mm=None if job.max_dev_mm != job.max_dev_mm
+                            else float(job.max_dev_mm),
+                            segments_total=job.n_segments, estimated_s=job.total_time_s)
+        cache.put(rec.id, job)
+        worker.notify()
+        return job_out(rec, worker)
+
+    @app.get("/api/jobs/{job_id}", response_model=JobOut, tags=["jobs"], responses=_ERRORS)
+    def get_job(job_id: int) -> JobOut:
+        """One job, with live progress while it runs."""
+        return job_out(get_rec(job_id), worker)
+
+    def act(job_id: int, fn: Any) -> JobOut:
+        get_rec(job_id)
+        try:
+            fn()
+        except JobStateError as e:
+            raise ApiError(409, "conflict", str(e)) from e
+        except KeyError:
+            raise ApiError(404, "not_found", f"no job {job_id}") from None
+        return job_out(get_rec(job_id), worker)
+
+    @app.post("/api/jobs/{job_id}/pause", response_model=JobOut, status_code=202,
+              tags=["jobs"], responses=_ERRORS)
+    def pause(job_id: int) -> JobOut:
+        """Hold the running job at once (laser off); it stays on the machine, paused."""
+        return act(job_id, lambda: worker.pause(job_id))
+
+    @app.post("/api/jobs/{job_id}/resume", response_model=JobOut, status_code=202,
+              tags=["jobs"], responses=_ERRORS)
+    def resume(job_id: int, confirm: bool = Query(
+            False, description="Answer yes to the job's question (held jobs).")) -> JobOut:
+        """Continue a paused job, or a held one from its resume point."""
+        return act(job_id, lambda: worker.resume(job_id, confirm))
+
+    @app.post("/api/jobs/{job_id}/cancel", response_model=JobOut, status_code=202,
+              tags=["jobs"], responses=_ERRORS)
+    def cancel(job_id: int) -> JobOut:
+        """Cancel a job: a running one stops at once (laser off, firmware queue cleared)."""
+        return act(job_id, lambda: worker.cancel(job_id))
+
+    @app.delete("/api/jobs/{job_id}", status_code=204, tags=["jobs"], responses=_ERRORS)
+    def delete(job_id: int) -> Response:
+        """Forget a finished job (done, failed or cancelled)."""
+        rec = get_rec(job_id)
+        if not store.delete(job_id):
+            raise ApiError(409, "conflict", f"job {job_id} is {rec.state}; only finished "
+                           "jobs can be deleted (cancel it first)")
+        return Response(status_code=204)
+
+    @app.post("/api/machine/home", response_model=MachineOut, tags=["machine"],
+              responses={409: {"model": ErrorOut, "description": "A job runs, or the arms' "
+                               "position must be confirmed."}})
+    def home(at_home: bool = Query(False, description="Without endstops: the person "
+                                   "confirms the arms are at the profile's home pose.")
+             ) -> MachineOut:
+        """Home: `$H` with endstops, else set the position to the home pose (G92 A0 B0)."""
+        try:
+            worker.home(at_home)
+        except ActionError as e:
+            raise ApiError(409, "conflict", str(e)) from e
+        except TimeoutError as e:
+            raise ApiError(504, "timeout", "homing did not finish in time") from e
+        except Exception as e:  # a link fault: the message says what happened
+            raise ApiError(502, "machine_error", str(e)) from e
+        return MachineOut(**worker.machine())
+
+    return app

@@ -1,0 +1,205 @@
+"""Submitted drawings → compiled, checked jobs: options, names, parsing in memory.
+
+A submission is the drawing's bytes plus the plot options of `fivebar plot` (mode, tolerance,
+origin, scale, rotation, fit, layers, keep-order, laser). It is parsed in memory (the SVG and
+G-code readers take bytes) and compiled with the daemon's profile exactly as the CLI would,
+so a job that cannot run is refused with the CLI's message and never queued. The client's
+file name is only a label (and, by its suffix, the format): it must be a bare file name —
+no directory parts — and never touches the file system.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import re
+import threading
+from collections import OrderedDict
+from dataclasses import asdict, dataclass
+from typing import Any
+
+from fivebar_host.config import ConfigError, Profile
+from fivebar_host.errors import InputError, JobError
+from fivebar_host.job import GCODE_SUFFIXES, CompileOptions, Job, compile_drawing
+from fivebar_host.sender import fingerprint
+from fivebar_host.toolpath.gcode import read_gcode
+from fivebar_host.toolpath.svg import read_svg
+from kinematics.fivebar import KinematicsError
+
+#: What a file name may look like: printable, no separators, at most 128 characters.
+_NAME = re.compile(r"^[^/\\\x00-\x1f]{1,128}$")
+SVG_SUFFIXES = frozenset({".svg"})
+
+
+class SubmitError(ValueError):
+    """A submission refused before it was queued: `code` (stable key) and the message."""
+
+    def __init__(self, code: str, message: str, status: int = 422,
+                 detail: dict[str, Any] | None = None) -> None:
+        super().__init__(message)
+        self.code = code
+        self.status = status
+        self.detail = detail or {}
+
+
+@dataclass(frozen=True)
+class JobOptions:
+    """The plot options of a submission (None: the daemon profile's value)."""
+
+    laser: bool = False
+    mode: str | None = None
+    tolerance_mm: float | None = None
+    origin_mm: tuple[float, float] | None = None
+    scale: float | None = None
+    rotate_deg: float = 0.0
+    fit: bool = False
+    layers: tuple[str, ...] = ()
+    keep_order: bool = False
+    #: Answer yes to the daemon's question "are the arms at the home pose?" (or "still where
+    #: the job stopped?") when the daemon cannot know it itself (first job after power-up).
+    confirm: bool = False
+
+    def compile_options(self) -> CompileOptions:
+        """The compiler's options (everything but laser and confirm)."""
+        return CompileOptions(mode=self.mode, tolerance_mm=self.tolerance_mm,
+                              origin_mm=self.origin_mm, scale=self.scale,
+                              rotate_deg=self.rotate_deg, fit=self.fit, layers=self.layers,
+                              keep_order=self.keep_order)
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-friendly dict (stored with the job)."""
+        d = asdict(self)
+        d["layers"] = list(self.layers)
+        d["origin_mm"] = list(self.origin_mm) if self.origin_mm is not None else None
+        return d
+
+    @staticmethod
+    def from_json(d: dict[str, Any]) -> JobOptions:
+        """Inverse of `to_json`."""
+        o = d.get("origin_mm")
+        return JobOptions(
+            laser=bool(d.get("laser", False)), mode=d.get("mode"),
+            tolerance_mm=d.get("tolerance_mm"),
+            origin_mm=None if o is None else (float(o[0]), float(o[1])),
+            scale=d.get("scale"), rotate_deg=float(d.get("rotate_deg", 0.0)),
+            fit=bool(d.get("fit", False)), layers=tuple(d.get("layers", ())),
+            keep_order=bool(d.get("keep_order", False)), confirm=bool(d.get("confirm", False)))
+
+
+def check_options(opts: JobOptions) -> None:
+    """Refuse option values the CLI would refuse (same ranges as `fivebar plot`)."""
+    if opts.mode is not None and opts.mode not in ("++", "+-", "-+", "--", "auto"):
+        raise SubmitError("bad_option", f"mode must be one of ++, +-, -+, --, auto; got "
+                          f"{opts.mode!r}")
+    if opts.tolerance_mm is not None and not 1e-4 <= opts.tolerance_mm <= 10.0:
+        raise SubmitError("bad_option", f"tolerance must be within 0.0001..10 mm; got "
+                          f"{opts.tolerance_mm!r}")
+    for name, v in (("scale", opts.scale), ("rotate", opts.rotate_deg)):
+        if v is not None and not math.isfinite(v):
+            raise SubmitError("bad_option", f"{name} must be finite; got {v!r}")
+    if opts.origin_mm is not None and not all(math.isfinite(v) for v in opts.origin_mm):
+        raise SubmitError("bad_option", f"origin must be finite; got {opts.origin_mm!r}")
+    if len(opts.layers) > 64 or any(len(s) > 200 for s in opts.layers):
+        raise SubmitError("bad_option", "at most 64 layers of at most 200 characters each")
+
+
+def parse_origin(text: str | None) -> tuple[float, float] | None:
+    """"X,Y" in mm (as the CLI's --origin), or None."""
+    if text is None or text == "":
+        return None
+    parts = text.replace(" ", "").split(",")
+    try:
+        x, y = (float(v) for v in parts)
+    except ValueError:
+        raise SubmitError("bad_option", f"origin must look like X,Y in mm (e.g. 10,95); got "
+                          f"{text!r}") from None
+    return x, y
+
+
+def check_name(name: str) -> str:
+    """A client's file name, refused when it is a path or not printable."""
+    if not _NAME.match(name) or name in (".", ".."):
+        raise SubmitError("bad_name", f"name must be a plain file name (no directories, "
+                          f"printable, at most 128 characters); got {name!r}", status=400)
+    return name
+
+
+def _suffix(name: str) -> str:
+    dot = name.rfind(".")
+    return name[dot:].lower() if dot > 0 else ""
+
+
+def read_upload(data: bytes, name: str, layers: tuple[str, ...]) -> Any:
+    """Parse an uploaded drawing in memory, by suffix or else by content (like the CLI)."""
+    if not data.strip():
+        raise SubmitError("empty_upload", f"{name}: the upload is empty", status=400)
+    suffix = _suffix(name)
+    if suffix in SVG_SUFFIXES:
+        return read_svg(data, layers or None, file=name)
+    if suffix in GCODE_SUFFIXES or not data.lstrip()[:512].startswith(
+            (b"<?xml", b"<svg", b"<!--", b"<!DOCTYPE")):
+        if layers:
+            raise InputError("--layer applies to SVG files only", name)
+        return read_gcode(data, file=name)
+    return read_svg(data, layers or None, file=name)
+
+
+@dataclass(frozen=True)
+class Compiled:
+    """A checked job and what identifies it."""
+
+    job: Job
+    fingerprint: str
+    upload_sha256: str
+
+
+def compile_upload(data: bytes, name: str, opts: JobOptions, profile: Profile) -> Compiled:
+    """Parse and compile a submission; `SubmitError` with the CLI's message if it cannot run."""
+    check_name(name)
+    check_options(opts)
+    try:
+        drawing = read_upload(data, name, opts.layers)
+        job = compile_drawing(drawing, profile, opts.compile_options())
+    except SubmitError:
+        raise
+    except InputError as e:
+        raise SubmitError("input_error", str(e)) from e
+    except JobError as e:
+        detail: dict[str, Any] = {"reason": e.reason}
+        if e.where is not None:
+            w = e.where
+            detail["where"] = {"path_index": w.path_index, "path_id": w.path_id,
+                               "source_line": w.source_line,
+                               "drawing_xy": list(w.drawing_xy) if w.drawing_xy else None,
+                               "machine_xy": list(w.machine_xy) if w.machine_xy else None}
+        raise SubmitError("job_error", str(e), detail=detail) from e
+    except (ConfigError, KinematicsError, ValueError) as e:
+        raise SubmitError("invalid", str(e)) from e
+    return Compiled(job, fingerprint(job), hashlib.sha256(data).hexdigest())
+
+
+class CompiledCache:
+    """The last few compiled jobs by id, so a job is not compiled twice in one daemon run."""
+
+    def __init__(self, size: int = 8) -> None:
+        self.size = size
+        self._items: OrderedDict[int, Job] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def put(self, job_id: int, job: Job) -> None:
+        """Remember a compiled job (the oldest is forgotten beyond `size`)."""
+        with self._lock:
+            self._items[job_id] = job
+            self._items.move_to_end(job_id)
+            while len(self._items) > self.size:
+                self._items.popitem(last=False)
+
+    def get(self, job_id: int) -> Job | None:
+        """A remembered job, or None."""
+        with self._lock:
+            return self._items.get(job_id)
+
+    def drop(self, job_id: int) -> None:
+        """Forget a job (it is over)."""
+        with self._lock:
+            self._items.pop(job_id, None)
