@@ -15,11 +15,9 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
-import serial
-from contract_devices import MOCK_SPEED, Device
+from contract_devices import Device, Endstops, open_mock, open_sim
 
-from fivebar_host.devices import sim, urls
-from fivebar_host.devices.mock import MockSerial
+from fivebar_host.devices import sim
 
 
 @pytest.fixture(scope="session")
@@ -44,21 +42,12 @@ def open_device(
     """Factory: boot a device, optionally with endstops at physical positions (A, B)."""
     started: list[Device] = []
 
-    def start(endstops: tuple[int | None, int | None] = (None, None)) -> Device:
+    def start(endstops: Endstops = (None, None)) -> Device:
         if device_kind == "sim":
             build: sim.BuildPaths = request.getfixturevalue("sim_build")
-            simdev = sim.start_device(build, tmp_path / f"pins{len(started)}.trace",
-                                      endstops[0], endstops[1])
-            dev = Device("sim", simdev.port, simdev)
+            dev = open_sim(build, tmp_path / f"pins{len(started)}.trace", endstops)
         else:
-            urls.register()
-            es = ",".join("" if e is None else str(e) for e in endstops)
-            url = f"fivebar-mock://?speed={MOCK_SPEED}"
-            if endstops != (None, None):
-                url += f"&endstops={es}"
-            port = serial.serial_for_url(url, timeout=0.5)
-            assert isinstance(port, MockSerial)
-            dev = Device("mock", port)
+            dev = open_mock(endstops)
         started.append(dev)
         return dev
 

@@ -7,10 +7,17 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
+import serial
+
+from fivebar_host.devices import sim, urls
+from fivebar_host.devices.mock import MockSerial
 from fivebar_host.devices.sim import FirmwareSession, SimDevice
 from fivebar_host.protocol import Banner
+
+Endstops = tuple[int | None, int | None]
 
 #: Motion speed of the mock: about as much faster than real time as the unthrottled emulator.
 MOCK_SPEED = 10
@@ -70,3 +77,20 @@ class Device:
             self._sim.close()
         else:
             self.port.close()
+
+
+def open_mock(endstops: Endstops = (None, None)) -> Device:
+    """Boot ``fivebar-mock://`` (through pyserial's URL lookup) and read its banner."""
+    urls.register()
+    url = f"fivebar-mock://?speed={MOCK_SPEED}"
+    if endstops != (None, None):
+        url += "&endstops=" + ",".join("" if e is None else str(e) for e in endstops)
+    port = serial.serial_for_url(url, timeout=0.5)
+    assert isinstance(port, MockSerial)
+    return Device("mock", port)
+
+
+def open_sim(build: sim.BuildPaths, trace: Path, endstops: Endstops = (None, None)) -> Device:
+    """Boot the firmware in simavr, recording its pins to ``trace``, and read its banner."""
+    simdev = sim.start_device(build, trace, endstops[0], endstops[1])
+    return Device("sim", simdev.port, simdev)
