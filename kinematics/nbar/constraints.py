@@ -210,9 +210,10 @@ def homogeneous(coords: FloatArray, is_line: NDArray[np.bool_], planar: bool) ->
     """
     if planar:
         return coords
-    extra = np.where(is_line, 0.0, 1.0)
-    shape = (*coords.shape[:-1], 1)
-    return np.concatenate((coords, np.broadcast_to(extra[:, None], shape)), axis=-1)
+    out = np.empty((*coords.shape[:-1], 4))
+    out[..., :3] = coords
+    out[..., 3] = np.where(is_line, 0.0, 1.0)
+    return out
 
 
 @dataclass(frozen=True, eq=False)

@@ -216,7 +216,7 @@ class _Tracker:
         self.nact = sysm.n_act
         self.tol2 = self.tol * self.tol
         self.bound = 0.5 * sysm.curvature
-        self.accept = 0.5 * self.tol  # remainder bound accepted (margin: solve's rounding)
+        self.accept = 0.99 * self.tol  # remainder bound accepted (margin: solve's rounding)
         self._push(self.q, self._param(self.u))
 
     def set_line(self, base: FloatArray, inc: FloatArray) -> None:
@@ -315,9 +315,14 @@ class _Tracker:
         try:
             if self.lsq:
                 sens = -np.linalg.lstsq(jac, dphi, rcond=None)[0]
+            elif dphi.shape[1] == 1:
+                with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+                    sens = -solve(jac, dphi[:, 0])[:, None]
             else:
                 sens = -np.linalg.solve(jac, dphi)
         except np.linalg.LinAlgError:
+            return np.zeros((n, dphi.shape[1])), math.inf
+        if not np.all(np.isfinite(sens)):
             return np.zeros((n, dphi.shape[1])), math.inf
         return (np.asarray(sens, dtype=np.float64),
                 float(np.linalg.norm(jac @ sens + dphi)) / scale)
@@ -492,13 +497,17 @@ class _Tracker:
                 break
             q_new = q_pred - step
             its = 1
-            if not bound * c2 <= accept:  # not converged yet: carry on with Newton
-                more = newton(self.sys, x, q_new, self.tol, self.max_iter - 1)
-                if not more.converged:
-                    break
-                q_new, its = more.q, 1 + more.iterations
-                dc = q_new - q_pred
-                c2 = float(dc @ dc)
+            if not bound * c2 <= accept:  # the bound is not enough: look at the residual
+                x[:n] = q_new
+                g2 = (hsm @ x).reshape(m, -1)
+                phi2 = 0.5 * (g2 @ x)
+                if not float(phi2 @ phi2) <= self.tol2:  # not converged: carry on with Newton
+                    more = newton(self.sys, x, q_new, self.tol, self.max_iter - 1)
+                    if not more.converged:
+                        break
+                    q_new, its = more.q, 1 + more.iterations
+                    dc = q_new - q_pred
+                    c2 = float(dc @ dc)
             dm = pred[1]
             m2 = float(dm @ dm)
             if c2 > cont2 * m2 + floor2 or (last_m2 > 0.0 and m2 > speed2 * last_m2 + floor2):

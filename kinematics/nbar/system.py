@@ -199,7 +199,7 @@ def newton(system: QuadraticSystem, x: FloatArray, q0: FloatArray, tol: float,
     """Algorithm 1, lines 4–12: Newton–Raphson (Eq. 24) from q0, the driven part of x set.
 
     Converged when ‖Φ‖₂ ≤ tol (which bounds every scaled residual). For a square system the
-    residual after a step Δ is ½Δᵀ∇²Φ_rΔ row by row, so a step with ½·curvature·‖Δ‖² ≤ tol/2
+    residual after a step Δ is ½Δᵀ∇²Φ_rΔ row by row, so a step with ½·curvature·‖Δ‖² < tol
     is accepted without evaluating Φ again (the caller verifies stored states with the exact
     equations). With more rows than unknowns each step is the least-squares (Gauss–Newton) step
     from the normal equations JᵀJΔ = JᵀΦ. `monotone` gives up as soon as an iteration fails to
@@ -213,7 +213,7 @@ def newton(system: QuadraticSystem, x: FloatArray, q0: FloatArray, tol: float,
     tol2 = tol * tol
     lsq = m > n
     bound = 0.5 * system.curvature
-    accept = 0.5 * tol
+    accept = 0.99 * tol
     q = q0
     prev = math.inf
     it = 0
