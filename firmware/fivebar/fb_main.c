@@ -383,6 +383,11 @@ static uint8_t exec_home(void)
 	homing = 1;
 	f_home_abort = 0;
 	mo_reset_home_hits();
+	/* the position is unknown until homed: count the seek from 0, which
+	 * also keeps repeated failed homings from running the counter away */
+	int32_t zero[2] = { 0, 0 };
+	mo_set_pos(zero);
+	sync_plan();
 	uint32_t interval = interval_for(settings[SET_HOMING_RATE]);
 	uint32_t chunk_max = 0x7fffffffUL / interval;
 	uint8_t seek_neg = seek_neg_mask();

@@ -19,6 +19,7 @@
 
 #include "fake_board.h"
 #include "fb_main.h"
+#include "fb_motion.h"
 #include "fb_proto.h"
 #include "status.h"
 
@@ -52,8 +53,12 @@ static void parse_pieces(const uint8_t *data, size_t size)
 
 static void run_firmware(const uint8_t *data, size_t size)
 {
+	/* each input starts from a powered-up board: the position is kept
+	 * across resets by design, so clear it here to keep inputs independent */
+	static const int32_t origin[2] = { 0, 0 };
 	fake_reset();
 	fake_budget = 200000;
+	mo_set_pos(origin);
 	fb_setup();
 	for (size_t i = 0; i < size; i++) {
 		fb_rx_isr(data[i]);

@@ -507,6 +507,18 @@ static void test_app(void)
 	send("\x18");
 	poll_out(5);
 
+	/* homing counts its seek from 0, whatever the position was */
+	int32_t far[2] = { -99000000, 99000000 };
+	mo_set_pos(far);
+	fake_endstops = 0;
+	expect("$7=1\n$12=1000\n$8=40000\n$H\n", "ok\r\nok\r\nok\r\nALARM:31\r\nerror:31\r\n");
+	int32_t pos[2];
+	mo_get_pos(pos);
+	CHECK(pos[0] == -1000 && pos[1] == -1000, "failed seek from 0: %d %d", pos[0], pos[1]);
+	expect("$X\n$7=0\n", "ok\r\nok\r\n");
+	send("\x18");
+	poll_out(5);
+
 	/* receive overflow: more than rx bytes without a newline being read */
 	for (int i = 0; i < CFG_RX_SIZE + 10; i++)
 		fb_rx_isr('G');
