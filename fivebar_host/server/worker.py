@@ -112,6 +112,57 @@ class JournalLink(Link):
             self.streaming = False
 
 
+class ProgressWriter(threading.Thread):
+    """Writes running jobs' progress to the database off the streaming thread.
+
+    A commit is quick, but now and then SQLite checkpoints its journal with an fsync, which
+    on an SD card can take longer than the firmware queue lasts; the stream must never wait
+    for that. `put` only records the latest values; this thread commits them every 0.5 s.
+    `flush` (from the machine thread, at the end of a run) waits for a write in progress and
+    commits what is left, so nothing older lands after a job's final record."""
+
+    def __init__(self, store: JobStore, period_s: float = 0.5) -> None:
+        super().__init__(name="fivebar-progress", daemon=True)
+        self.store = store
+        self.period_s = period_s
+        self._pending: dict[int, dict[str, Any]] = {}
+        self._cv = threading.Condition()
+        self._write = threading.Lock()
+        self._halt = False
+
+    def put(self, job_id: int, **fields: Any) -> None:
+        """Remember the latest progress of a job (written within `period_s`)."""
+        with self._cv:
+            self._pending.setdefault(job_id, {}).update(fields)
+
+    def flush(self) -> None:
+        """Commit what is pending now (after any write already under way)."""
+        with self._write:
+            with self._cv:
+                items, self._pending = self._pending, {}
+            for job_id, fields in items.items():
+                try:
+                    self.store.update(job_id, **fields)
+                except Exception:  # pragma: no cover - store closed at shutdown
+                    log.exception("could not record the progress of job %d", job_id)
+
+    def stop(self) -> None:
+        """Write what is pending and end the thread."""
+        with self._cv:
+            self._halt = True
+            self._cv.notify_all()
+        self.join(5.0)
+
+    def run(self) -> None:
+        while True:
+            with self._cv:
+                self._cv.wait(self.period_s)
+                stop = self._halt
+            self.flush()
+            if stop:
+                return
+
+
 @dataclass(frozen=True)
 class WorkerConfig:
     """What the worker needs to reach and drive the machine."""
@@ -162,6 +213,7 @@ class Worker(threading.Thread):
         self.finished = threading.Event()
         self._question: str | None = None
         self._recovered = False
+        self.progress = ProgressWriter(store)
 
     # ================================================================== requests (any thread)
     def notify(self) -> None:
@@ -277,12 +329,14 @@ class Worker(threading.Thread):
     # ================================================================== the thread
     def run(self) -> None:
         """Connect, recover, then run jobs and actions until told to stop."""
+        self.progress.start()
         try:
             self._loop()
         except Exception:  # pragma: no cover - last resort: log, stop the machine
             log.exception("machine thread failed")
             self._emergency_stop()
         finally:
+            self.progress.stop()
             self._save_machine()
             if self.link is not None:
                 self.link.close()
@@ -491,9 +545,9 @@ class Worker(threading.Thread):
             st = link.last_status
             if st is not None and not u0 and prog_box and st.done_line >= prog_box[0][1]:
                 u0.append(st.underruns)
-            if now - progress_saved[0] > 0.5:
+            if now - progress_saved[0] > 0.25:
                 progress_saved[0] = now
-                self.store.update(rec.id, segments_done=p.segments_done,
+                self.progress.put(rec.id, segments_done=p.segments_done,
                                   remaining_s=p.remaining_s, run_s=base_run + (now - t0))
             if not link.streaming:
                 # All lines are sent; run_job waits for the machine to finish them. A
@@ -519,14 +573,17 @@ class Worker(threading.Thread):
                              resume=resume, on_progress=on_progress,
                              should_stop=self._should_stop, on_interrupt=self._on_interrupt)
         except SendError as e:
+            self.progress.flush()  # before the final record, never after it
             self._after_error(link, rec, job, e, rpath, t0, base_run)
             return
         except LinkError as e:
+            self.progress.flush()
             self._after_error(link, rec, job, SendError(str(e)), rpath, t0, base_run)
             self._disconnected(str(e))
             return
         finally:
             link.on_stream_start = None
+            self.progress.flush()
             with self._cv:
                 self.current = None
                 self._request = None
