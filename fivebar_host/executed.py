@@ -15,9 +15,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fivebar_host.config import Profile
-from fivebar_host.job import Job
+from fivebar_host.job import Job, distance_to_request
 from fivebar_host.steps import step_angles
-from fivebar_host.toolpath.geometry import nearest_distance
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -99,29 +98,13 @@ def executed_path(job: Job, profile: Profile, time: FloatArray, track: IntArray,
 
 
 def _distance_to_request(job: Job, e: FloatArray, pos: IntArray, seg: IntArray) -> FloatArray:
-    """Distance of pen points `e` on draw segments `seg` to the requested curves.
-
-    The curve parameter guess comes from the progress along the segment's dominant axis,
-    mapped like the job's own validation (seg_sa…seg_sb of primitive seg_prim)."""
-    draw_rank = np.cumsum(job.draw) - 1  # index of a draw segment among draw segments
-    r = draw_rank[seg]
+    """Distance of pen points `e` on draw segments `seg` to the requested curves, with the
+    progress along the segment's dominant axis as the curve-parameter guess."""
+    rank = (np.cumsum(job.draw) - 1)[seg]  # index among the draw segments
     s0 = job.steps[seg].astype(np.float64)
     d = job.steps[seg + 1].astype(np.float64) - s0
     ax = np.argmax(np.abs(d), axis=1)
     rows = np.arange(seg.size)
     dd = d[rows, ax]
     s = np.where(dd != 0, (pos[rows, ax] - s0[rows, ax]) / np.where(dd != 0, dd, 1.0), 0.0)
-    s = np.clip(s, 0.0, 1.0)
-    sig = job.seg_sa[r] + s * (job.seg_sb[r] - job.seg_sa[r])
-    span = job.seg_thi[r] - job.seg_tlo[r]
-    tg = np.where(job.seg_rev[r], job.seg_thi[r] - sig * span, job.seg_tlo[r] + sig * span)
-    prim = job.seg_prim[r]
-    dist = np.empty(seg.size)
-    real = prim >= 0
-    if real.any():
-        dist[real] = nearest_distance(job.drawing.kind[prim[real]],
-                                      job.drawing.params[prim[real]], e[real], tg[real])
-    if (~real).any():
-        ca, cb = job.seg_ca[r[~real]], job.seg_cb[r[~real]]
-        dist[~real] = np.minimum(np.hypot(*(e[~real] - ca).T), np.hypot(*(e[~real] - cb).T))
-    return dist
+    return distance_to_request(job, e, rank, np.clip(s, 0.0, 1.0))

@@ -975,23 +975,31 @@ def _deviation_of(job: Job, e: FloatArray, valid: BoolArray, di: IntArray,
                   samples: int) -> tuple[FloatArray, IntArray]:
     """Distances of pen points e ((len(di)·(samples+1), 2), samples s = 0, 1/S, …, 1 of each
     draw segment di) to the requested curves; invalid rows count as infinitely far."""
-    s = np.arange(samples + 1) / samples
-    seg = np.repeat(np.arange(di.shape[0]), samples + 1)
-    sig = job.seg_sa[seg] + np.tile(s, di.shape[0]) * (job.seg_sb - job.seg_sa)[seg]
+    s = np.tile(np.arange(samples + 1) / samples, di.shape[0])
+    rank = np.repeat(np.arange(di.shape[0]), samples + 1)
+    dist = distance_to_request(job, e, rank, s)
+    dist[~valid] = np.inf
+    return dist, di[rank]
+
+
+def distance_to_request(job: Job, e: FloatArray, rank: IntArray, s: FloatArray) -> FloatArray:
+    """Distance of pen points `e` to the requested curve of draw segment number `rank`
+    (counted among draw segments), at fraction `s` ∈ [0, 1] along it as the parameter guess
+    for Newton's method on the primitive (a join bridge: distance to its nearer end)."""
+    sig = job.seg_sa[rank] + s * (job.seg_sb - job.seg_sa)[rank]
     span = job.seg_thi - job.seg_tlo
-    tg = np.where(job.seg_rev[seg], job.seg_thi[seg] - sig * span[seg],
-                  job.seg_tlo[seg] + sig * span[seg])
-    prim = job.seg_prim[seg]
+    tg = np.where(job.seg_rev[rank], job.seg_thi[rank] - sig * span[rank],
+                  job.seg_tlo[rank] + sig * span[rank])
+    prim = job.seg_prim[rank]
     dist = np.empty(e.shape[0])
     real = prim >= 0
     if real.any():
         dist[real] = nearest_distance(job.drawing.kind[prim[real]],
                                       job.drawing.params[prim[real]], e[real], tg[real])
     if (~real).any():
-        ca, cb = job.seg_ca[seg[~real]], job.seg_cb[seg[~real]]
+        ca, cb = job.seg_ca[rank[~real]], job.seg_cb[rank[~real]]
         dist[~real] = np.minimum(np.hypot(*(e[~real] - ca).T), np.hypot(*(e[~real] - cb).T))
-    dist[~valid] = np.inf
-    return dist, di[seg]
+    return dist
 
 
 #: Most poses the n-bar second opinion follows (continuation is ~25 µs per pose).
