@@ -97,3 +97,37 @@ def test_abort_mid_job_then_resume_draws_each_step_once(tmp_path: Path) -> None:
     a = tr.positions("A")
     b = tr.positions("B")
     assert (a[-1][1], b[-1][1]) == (0, 0)  # back at the homed pose
+
+
+def test_error_reply_mid_job_then_exact_resume(tmp_path: Path) -> None:
+    """A refused line mid-job (soft limit, error:11) on the real firmware: the machine holds
+    with the laser off, the host names the fault and position, and the resume draws each
+    remaining step once."""
+    drawing = tmp_path / "simple.svg"
+    shutil.copy(EXAMPLES / "simple.svg", drawing)
+    prof = load_profile()
+    job = compile_job(drawing, prof, CompileOptions())
+    a = job.steps[:, 0]
+    # A soft limit on motor A that the first third of the job respects and a later target
+    # crosses: the firmware refuses that line.
+    third = job.n_segments // 3
+    limit = int(a[: third + 1].max())
+    assert (a[third:] > limit).any()
+    trace = tmp_path / "pins.trace"
+    link = Link.open(f"fivebar-sim://?trace={trace}")
+    try:
+        link.command(f"$2={limit}")
+        with pytest.raises(SendError) as ei:
+            run_job(link, job, prof, drawing=drawing, laser=True, confirm=lambda q: True)
+        msg = str(ei.value)
+        assert "error:11" in msg and "stopped at A = " in msg and "laser off" in msg
+        st = link.status()
+        assert st.laser == 0
+        link.command("$2=100000")
+        run_job(link, job, prof, drawing=drawing, laser=True, confirm=lambda q: True,
+                resume=True)
+    finally:
+        link.close()
+    tr = read_trace(trace)
+    assert np.array_equal(_laser_steps(tr), _planned_draw_steps(job))
+    assert (tr.positions("A")[-1][1], tr.positions("B")[-1][1]) == (0, 0)
