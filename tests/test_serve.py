@@ -322,3 +322,20 @@ def test_plot_server_follows_with_a_progress_bar(start_daemon: Callable[..., Dae
     r = CliRunner().invoke(main, ["plot", str(SQUARE), "--server", d.url, "--port", "x"])
     assert r.exit_code == 2 and "drop --port" in r.output
     assert len(ServerClient(d.url).jobs()) == 1
+
+
+def test_missing_port_is_reported_and_jobs_wait(start_daemon: Callable[..., Daemon],
+                                                tmp_path: Path) -> None:
+    d = start_daemon(str(tmp_path / "no-such-tty"))
+    c = ServerClient(d.url)
+    m = wait_for(lambda: (x := c.status()["machine"])["error"] != "not connected yet" and x,
+                 what="connection attempt")
+    assert not m["connected"] and "no-such-tty" in m["error"]
+    j = c.submit(SQUARE.read_bytes(), "sq.gcode", plot_options(confirm=True))
+    time.sleep(0.3)
+    assert c.job(j["id"])["state"] == "queued"
+    c.cancel(j["id"])
+    assert c.job(j["id"])["state"] == "cancelled"
+    with pytest.raises(ServerError) as e:
+        c.cancel(j["id"])
+    assert e.value.status == 409 and "already cancelled" in str(e.value)

@@ -41,6 +41,10 @@ SIMPLE_CONTENT_TYPES = frozenset({"application/x-www-form-urlencoded", "multipar
                                   "text/plain"})
 
 
+#: How long a built status answer is reused, s.
+STATUS_CACHE_S = 0.05
+
+
 class ApiError(Exception):
     """An error answer: HTTP status, stable key, message, optional details."""
 
@@ -225,15 +229,24 @@ def create_app(*, store: JobStore, worker: Worker, cache: CompiledCache, profile
             raise ApiError(404, "not_found", f"no job {job_id}")
         return rec
 
+    status_cache: dict[str, Any] = {"at": -1.0, "body": b""}
+
     @app.get("/api/status", response_model=StatusOut, tags=["machine"])
-    def status() -> StatusOut:
-        """Daemon, machine (last status report) and queue counts."""
-        blk = store.blocking()
-        return StatusOut(
-            version=__version__, uptime_s=round(time.monotonic() - started, 3),
-            stopping=stopping.is_set(), machine=MachineOut(**worker.machine()),
-            jobs=store.counts(), current_job=worker.current,
-            blocked_by=blk.id if blk is not None and blk.id != worker.current else None)
+    async def status() -> Response:
+        """Daemon, machine (last status report) and queue counts (at most 50 ms old)."""
+        # Built at most 20 times a second and answered from the event loop: clients that
+        # poll hard cost the machine thread (which must keep the serial link busy) little.
+        now = time.monotonic()
+        if now - status_cache["at"] > STATUS_CACHE_S:
+            blk = store.blocking()
+            out = StatusOut(
+                version=__version__, uptime_s=round(now - started, 3),
+                stopping=stopping.is_set(), machine=MachineOut(**worker.machine()),
+                jobs=store.counts(), current_job=worker.current,
+                blocked_by=blk.id if blk is not None and blk.id != worker.current else None)
+            status_cache["body"] = out.model_dump_json().encode()
+            status_cache["at"] = now
+        return Response(status_cache["body"], media_type="application/json")
 
     @app.get("/api/jobs", response_model=list[JobOut], tags=["jobs"])
     def list_jobs(state: Annotated[list[str] | None, Query(

@@ -369,7 +369,14 @@ class Worker(threading.Thread):
                         except Exception as e:  # handed to the requester
                             fut.set_exception(e)
                     continue
-                rec = None if self.store.blocking() is not None else self.store.next_queued()
+                # Claim the next job under the lock, so a cancel of it either comes first (it
+                # is no longer queued) or finds it running (and stops it).
+                with self._cv:
+                    rec = (None if self.store.blocking() is not None
+                           else self.store.next_queued())
+                    if rec is not None:
+                        self.current = rec.id
+                        self._request = None
                 if rec is not None:
                     self._run(link, rec)
                     continue
@@ -491,6 +498,8 @@ class Worker(threading.Thread):
         except SubmitError as e:
             log.error("job %d: %s", rec.id, e)
             self.store.set_state(rec.id, st_.FAILED, message=str(e))
+            with self._cv:
+                self.current = None
             return
         opts = JobOptions.from_json(rec.options)
         prof = self.cfg.profile
@@ -505,7 +514,6 @@ class Worker(threading.Thread):
             rpath.unlink(missing_ok=True)
         with self._cv:
             self.current = rec.id
-            self._request = None
             self._question = None
             user_confirm = self._confirm_once.pop(rec.id, False)
         self.live = Live(rec.id, start, job.n_segments, 0.0,
@@ -606,7 +614,7 @@ class Worker(threading.Thread):
         """Record where a job stopped and put it in the state its cause calls for."""
         cause = e.__cause__
         kind = cause.kind if isinstance(cause, LinkFaultError) else None
-        req = self._stop_kind() if kind == "interrupt" else None
+        req = self._stop_kind()
         rp: ResumePoint | None = None
         if rpath.exists():
             try:
