@@ -230,6 +230,30 @@ static void trace_event(const char *name, uint32_t value)
 		fprintf(trace, "%llu %s %u\n", (unsigned long long)avr->cycle, name, value & 1u);
 }
 
+/*
+ * Drive switch i to a level.  simavr re-applies the pull-up of an input pin
+ * (PORT bit set) on every write to its PORT or DDR register, which would undo
+ * a pressed (low) switch at the firmware's next laser or enable pin write.
+ * An "external" pull of the port overrides that: it holds the level we give,
+ * so it is updated together with the pin.
+ */
+static uint8_t external_mask, external_value;
+
+static void drive_endstop(int i, int level)
+{
+	uint8_t bit = (uint8_t)(1u << (i ? PIN_ENDSTOP_B_BIT : PIN_ENDSTOP_A_BIT));
+	external_mask |= bit;
+	if (level)
+		external_value |= bit;
+	else
+		external_value &= (uint8_t)~bit;
+	avr_ioport_external_t ext = {
+		.name = PORT_CHAR(PIN_ENDSTOP_PORT), .mask = external_mask, .value = external_value,
+	};
+	avr_ioctl(avr, AVR_IOCTL_IOPORT_SET_EXTERNAL(PORT_CHAR(PIN_ENDSTOP_PORT)), &ext);
+	avr_raise_irq(endstop_irq[i], (uint32_t)level);
+}
+
 static void update_endstop(int i)
 {
 	if (!have_endstop[i])
@@ -238,8 +262,7 @@ static void update_endstop(int i)
 	if (pressed == endstop_pressed[i])
 		return;
 	endstop_pressed[i] = pressed;
-	int level = CFG_ENDSTOP_ACTIVE_LOW ? !pressed : pressed;
-	avr_raise_irq(endstop_irq[i], (uint32_t)level);
+	drive_endstop(i, CFG_ENDSTOP_ACTIVE_LOW ? !pressed : pressed);
 	trace_event(i ? "esB" : "esA", (uint32_t)pressed);
 }
 
@@ -393,7 +416,7 @@ int main(int argc, char **argv)
 		if (have_endstop[i])
 			update_endstop(i);
 		else
-			avr_raise_irq(endstop_irq[i], CFG_ENDSTOP_ACTIVE_LOW ? 1u : 0u);
+			drive_endstop(i, CFG_ENDSTOP_ACTIVE_LOW ? 1 : 0);
 	}
 
 	int slave_fd;

@@ -587,14 +587,9 @@ def test_endstop_outside_homing_raises_alarm_30(open_device: Callable[..., Devic
     assert done.steps == (200, 0) and done.laser_periods == 2  # M3 is modal
 
 
-def test_stepping_into_a_pressed_switch_alarms_at_once(open_device: Callable[..., Device],
-                                                       request: pytest.FixtureRequest) -> None:
+def test_stepping_into_a_pressed_switch_alarms_at_once(open_device: Callable[..., Device]
+                                                       ) -> None:
     dev = open_device(endstops=(0, None))  # pressed from power-on
-    if dev.kind == "sim":
-        request.applymarker(pytest.mark.xfail(
-            reason="harness: fbsim drives the switch pin only on a change, and simavr "
-                   "re-applies the pull-up on every PORTB write (laser, enable), so a switch "
-                   "held pressed reads released", strict=True))
     s = dev.session
     assert s.send("$7=1") == Ok()
     assert s.send("G1 A20 P100000") == Ok()  # away: allowed
