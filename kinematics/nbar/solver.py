@@ -5,16 +5,20 @@ On top of the paper's loop:
   seven equally spaced ones, else up to four with bounded Lagrange weights), or from the tangent
   q' = −J⁺ ∂Φ/∂u when there is no history; from the previous state alone Newton would need
   several more iterations. In sweeps, up to BLOCK equal steps are predicted and corrected
-  together (one batched Newton step), each state passing the tests of a single step;
+  together (one batched Newton step, a second one for the states the first did not certify),
+  each state passing the tests of a single step;
 - branch-flip guard: a step is accepted only if Newton's correction from the predictor is at
   most half the predicted motion, and the predicted motion at most MAX_SPEEDUP times the last
   step's (continuity). A jump to the other assembly is a correction of the order of the
   distance between the branches that does not shrink with the step, so the step is halved until
   the correction is small, or the step falls below the resolution;
-- motion limit: when even the smallest step (2^-max_halvings of an input step) fails, the input
-  value reached and the one that failed are reported with the reason (singular Jacobian or no
-  convergence); `sweep(..., reverse_at_limit=True)` then runs the input back to trace a rocker's
-  whole range;
+- motion limit: when a step fails, a fold (turning point) of the solution curve within it is
+  looked for directly (`_Tracker.fold_limit`: Newton on Φ = 0, J·v = 0); if there is one on the
+  branch being followed, the state just before it and the input just past it are reported, less
+  than 2^-max_halvings of the step apart. Otherwise the step is halved, and when even the
+  smallest step (2^-max_halvings of an input step) fails, the input value reached and the one
+  that failed are reported with the reason (singular Jacobian or no convergence);
+  `sweep(..., reverse_at_limit=True)` then runs the input back to trace a rocker's whole range;
 - least squares: with more equations than unknowns the steps are Gauss–Newton steps; redundant
   equations that disagree on every motion (rounded data of an over-constrained linkage) are
   reported as `INCONSISTENT`, not as a limit.
@@ -34,7 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from kinematics.nbar.constraints import FloatArray
 from kinematics.nbar.model import Mechanism, Settings
-from kinematics.nbar.system import newton, solve
+from kinematics.nbar.system import CONTRACTION, newton, solve
 
 #: Newton may correct the predictor by at most this fraction of the predicted motion.
 CONTINUITY = 0.5
@@ -113,6 +117,14 @@ class Simulation:
         return [Status(int(s)).name.lower() for s in self.status]
 
 
+#: Newton iterations allowed for locating a fold (`_Tracker.fold_limit`), and its
+#: convergence test: squared step ≤ FOLD_STEP2·(1 + ‖q‖²).
+FOLD_ITERATIONS = 12
+FOLD_STEP2 = 1e-26
+#: Why the motion stops at a located fold.
+FOLD_REASON = "no solution past the turning point"
+
+
 #: Most states the predictor extrapolates through (order HISTORY − 1 on equal steps).
 HISTORY = 7
 #: The predicted motion may exceed the previous step's by at most this factor (per unit step).
@@ -158,6 +170,7 @@ def _block_weights(newest: int) -> FloatArray:
 
 _BLOCKS = [_block_weights(p) for p in range(HISTORY)]
 _ARANGE = np.arange(BLOCK + 1)
+_ONES = np.ones(BLOCK, dtype=np.int64)
 
 
 class _Snapshot(NamedTuple):
@@ -209,6 +222,7 @@ class _Tracker:
         sysm = self.sys
         self.hs = sysm.hs
         self.hs_t = np.ascontiguousarray(sysm.hs.T)
+        self.h3 = sysm.hs.reshape(sysm.m, sysm.size, sysm.size)
         self.xs = np.ones((BLOCK, sysm.size))  # work rows for blocks (last column stays 1)
         self.bsize = BLOCK  # block size of `run_fast`
         self.cool = 0  # single steps to take before the next block (after a poor block)
@@ -451,13 +465,35 @@ class _Tracker:
                 if nact:
                     xb[:, n + nd: -1] = s_tab[rows]
                 gb = (xb @ self.hs_t).reshape(b, m, -1)
-                steps = solve(gb[:, :, :n], 0.5 * (gb @ xb[:, :, None])[:, :, 0])
+                phis = 0.5 * (gb @ xb[:, :, None])[:, :, 0]
+                steps = solve(gb[:, :, :n], phis)
                 c2s = np.einsum("ij,ij->i", steps, steps)
                 m2s = np.einsum("ij,ij->i", dms, dms)
                 prev = np.empty(b)
                 prev[0] = last_m2
                 prev[1:] = m2s[:-1]
-                good = ((bound * c2s <= accept) & (c2s <= cont2 * m2s + floor2)
+                conv = bound * c2s <= accept
+                qs_b = preds - steps
+                its_b = _ONES[:b]
+                if not conv.all():
+                    # A second Newton step for the states the first did not certify (as in
+                    # `newton`: the residual must have dropped 100-fold, ‖Φ‖² ≤ tol² or the
+                    # remainder bound of the second step certifies convergence).
+                    xb[:, :n] = qs_b
+                    gb = (xb @ self.hs_t).reshape(b, m, -1)
+                    phi1 = 0.5 * (gb @ xb[:, :, None])[:, :, 0]
+                    r1 = np.einsum("ij,ij->i", phi1, phi1)
+                    r0 = np.einsum("ij,ij->i", phis, phis)
+                    steps2 = solve(gb[:, :, :n], phi1)
+                    d2 = np.einsum("ij,ij->i", steps2, steps2)
+                    done1 = conv | (r1 <= self.tol2)
+                    two = ~done1 & (r1 <= CONTRACTION * r0) & (bound * d2 <= accept)
+                    conv = done1 | two
+                    qs_b = np.where(two[:, None], qs_b - steps2, qs_b)
+                    its_b = np.where(two, 2, 1)
+                    dc = qs_b - preds
+                    c2s = np.einsum("ij,ij->i", dc, dc)
+                good = (conv & (c2s <= cont2 * m2s + floor2)
                         & ((prev <= 0.0) | (m2s <= speed2 * prev + floor2)))
                 a = b if good.all() else int(np.argmin(good))
                 if a == b:
@@ -467,7 +503,7 @@ class _Tracker:
                 else:
                     bsize, cool = BLOCK, BLOCK
                 if a:
-                    qs_b = preds[:a] - steps[:a]
+                    qs_b = qs_b[:a]
                     keep = min(a, HISTORY)
                     slots = (slot + _ARANGE[a - keep + 1: a + 1]) % HISTORY
                     ring[slots] = qs_b[a - keep:]
@@ -479,7 +515,7 @@ class _Tracker:
                     q = qs_b[a - 1]
                     out_u.extend(grid[rows[:a]])
                     out_q.extend(qs_b)
-                    out_it.extend([1] * a)
+                    out_it.extend(its_b[:a].tolist())
                     taken += a
                     continue
             g_i = index + direction * (taken + 1)
@@ -545,6 +581,10 @@ class _Tracker:
         ok, iters, res, why = self.attempt(target, pre)
         if ok:
             return Status.OK, iters, 1, "", target, res
+        fold = self.fold_limit(target)
+        if fold is not None:
+            its, failed, res = fold
+            return Status.LIMIT, iters + its, 1, FOLD_REASON, failed, res
         start = self.u
         delta = target - start
         done = 0.0
@@ -570,6 +610,126 @@ class _Tracker:
             frac *= 0.5
             if frac < self.min_frac:
                 return Status.LIMIT, iters, subs, why, u_try, res
+
+    def fold_limit(self, target: FloatArray) -> tuple[int, FloatArray, float] | None:
+        """Locate a motion limit (fold, turning point) between the current state and `target`
+        directly instead of by repeated halving of the step.
+
+        On the input line u(t) = u0 + t·(target − u0) the fold (q*, t*) solves the augmented
+        system Φ(q, u(t)) = 0, J(q, u(t))·v = 0, c·v = 1 (Newton with its exact Jacobian: Φ is
+        quadratic in x and J·v linear in it), from the current state and the null vector of J
+        there. Near a non-degenerate fold the branch is q ≈ q* + αv with α² = −2(w·Φ_t)(t − t*)
+        / (w·vᵀ∇²Φv) (w: left null vector), so the branch the tracker is on is the one whose α has
+        the sign of v·(q0 − q*), and the model must reproduce q0 (same continuity test as a
+        step). The state at t_r = t* − ¼·2^−max_halvings is then solved by Newton from that
+        model point and must stay within CONTINUITY·|α| of it; the tracker moves there, and the
+        input at t* + ¼·2^−max_halvings is reported as failed (no real solution on this branch
+        beyond the fold). The bracket is tighter than the halving search's (< 2^−max_halvings
+        of a step). Returns (Newton iterations, failed input, residual bound) or None when no
+        such fold is found (fold outside (0, 1], degenerate, not converged, other branch): the
+        caller then subdivides as usual.
+        """
+        if self.lsq or not self.n or (self.line is None and not self.single):
+            return None
+        n, nd, m = self.n, self.nd, self.m
+        basis = self.mech.basis
+        start = self.u
+        d = target - start
+        h3 = self.h3
+        x = self.sys.new_x()
+        q0 = self.q
+        q = q0.copy()
+        t = 0.0
+        x[:n] = q
+        self._set_inputs(start, None)
+        x[n:-1] = self.x[n:-1]
+        g = (self.hs @ x).reshape(m, -1)
+        try:
+            v = np.linalg.svd(g[:, :n])[2][-1].copy()
+        except np.linalg.LinAlgError:
+            return None
+        c = v.copy()
+        a_mat = np.zeros((2 * n + 1, 2 * n + 1))
+        a_mat[2 * n, n + 1:] = c
+        rhs = np.empty(2 * n + 1)
+        its = 0
+        converged = False
+        while its < FOLD_ITERATIONS:
+            its += 1
+            u = start + t * d
+            x[:n] = q
+            x[n: n + nd] = basis.driven(u)
+            x[n + nd: -1] = basis.actuators(u)
+            g = (self.hs @ x).reshape(m, -1)
+            dxd, dsq = basis.derivatives(u)
+            xdot = np.concatenate((dxd @ d, dsq @ d))
+            hv = np.einsum("i,rij->rj", v, h3[:, :n, :])  # row r: vᵀ (H_r + H_rᵀ)[:n, :]
+            jac = g[:, :n]
+            a_mat[:n, :n] = jac
+            a_mat[:n, n] = g[:, n:-1] @ xdot
+            a_mat[:n, n + 1:] = 0.0
+            a_mat[n:2 * n, :n] = hv[:, :n]
+            a_mat[n:2 * n, n] = hv[:, n:-1] @ xdot
+            a_mat[n:2 * n, n + 1:] = jac
+            rhs[:n] = 0.5 * (g @ x)
+            rhs[n:2 * n] = jac @ v
+            rhs[2 * n] = c @ v - 1.0
+            step = solve(a_mat, rhs)
+            if not np.all(np.isfinite(step)):
+                return None
+            q = q - step[:n]
+            t -= float(step[n])
+            v = v - step[n + 1:]
+            if not abs(t) < 4.0:
+                return None
+            if float(step[: n + 1] @ step[: n + 1]) <= FOLD_STEP2 * (1.0 + float(q @ q)):
+                converged = True
+                break
+        if not converged or not 0.0 < t <= 1.0:
+            return None
+        # The branch through the fold: q ≈ q* + αv, α² = k·(t* − t).
+        u_star = start + t * d
+        x[:n] = q
+        x[n: n + nd] = basis.driven(u_star)
+        x[n + nd: -1] = basis.actuators(u_star)
+        g = (self.hs @ x).reshape(m, -1)
+        if float(np.linalg.norm(0.5 * (g @ x))) > self.tol:
+            return None
+        dxd, dsq = basis.derivatives(u_star)
+        phi_t = g[:, n:-1] @ np.concatenate((dxd @ d, dsq @ d))
+        try:
+            uu, _, vt = np.linalg.svd(g[:, :n])
+        except np.linalg.LinAlgError:
+            return None
+        w, vn = uu[:, -1], vt[-1]
+        curv = float(w @ (np.einsum("i,rij,j->r", vn, h3[:, :n, :n], vn)))
+        k = 2.0 * float(w @ phi_t) / curv if curv != 0.0 else -1.0
+        if not k > 0.0:  # degenerate, or the input turns the other way at this fold
+            return None
+        off = q0 - q
+        sign = 1.0 if float(off @ vn) >= 0.0 else -1.0
+        model0 = sign * math.sqrt(k * t) * vn
+        e0 = off - model0
+        if float(e0 @ e0) > CONTINUITY * CONTINUITY * float(off @ off) + self.floor2:
+            return None
+        quarter = 0.25 * self.min_frac
+        t_r = t - quarter
+        u_r = start + t_r * d
+        alpha = sign * math.sqrt(k * quarter)
+        q_start = q + alpha * vn
+        self._set_inputs(u_r, None)
+        res = newton(self.sys, self.x, q_start, self.tol, self.max_iter)
+        if not res.converged:
+            return None
+        dc = res.q - q_start
+        if float(dc @ dc) > CONTINUITY * CONTINUITY * alpha * alpha + self.floor2:
+            return None
+        self.u = u_r
+        self.q = res.q
+        self.tangent_cache = None
+        self.last_m2 = 0.0
+        self._push(res.q, self._param(u_r))
+        return its + res.iterations, start + (t + quarter) * d, res.residual
 
     def explain(self, why: str, residual: float) -> tuple[Literal["limit", "inconsistent"], str]:
         """Classify a failure at the smallest step: locked redundant equations, or a limit."""
