@@ -99,3 +99,27 @@ def test_parse_every_message_kind() -> None:
 def test_parse_refuses_malformed(line: str) -> None:
     with pytest.raises(ProtocolError):
         protocol.parse_message(line)
+
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _section(text: str, heading: str) -> str:
+    start = text.index(heading)
+    end = text.find("\n#", start + len(heading))
+    return text[start:end if end >= 0 else None]
+
+
+def test_doc_order_of_line_checks_matches_firmware_and_mock() -> None:
+    """docs/protocol.md 5.2 lists the line checks in the order fb_main.c and the mock
+    apply them: a receive overflow (error:18) is reported before "too long" (error:2)."""
+    doc = _section((ROOT / "docs" / "protocol.md").read_text(), "### 5.2")
+    steps = re.findall(r"^\d+\. (.*)$", doc, flags=re.M)
+    first_codes = [m.group(1) for s in steps if (m := re.search(r"`error:(\d+)", s))]
+    assert first_codes[:2] == ["18", "2"], steps[:2]
+    fw = (ROOT / "firmware" / "fivebar" / "fb_main.c").read_text()
+    handle = fw[fw.index("static void handle_line"):]
+    assert handle.index("FB_ERR_RX_OVERFLOW") < handle.index("FB_ERR_LINE_TOO_LONG")
+    mock = (ROOT / "fivebar_host" / "devices" / "mock.py").read_text()
+    handle = mock[mock.index("def _handle_line"):]
+    assert handle.index("E_RX_OVERFLOW") < handle.index("E_LINE_TOO_LONG")
