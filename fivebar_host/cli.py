@@ -305,11 +305,22 @@ def _plot_via_server(server: str, token: str | None, kw: dict[str, Any]) -> None
                     elif client.job(jid)["state"] in ("paused", "held"):
                         client.resume(jid)
                     continue
-                if job["state"] == "held" and job.get("question"):
-                    q = str(job["question"])
-                    if sys.stdin.isatty() and click.confirm(f"\n{q}", default=False, err=True):
-                        client.resume(jid, confirm=True)
-                        continue
+                if job["state"] == "held" and sys.stdin.isatty():
+                    if job.get("question"):
+                        if click.confirm(f"\n{job['question']}", default=False, err=True):
+                            client.resume(jid, confirm=True)
+                            continue
+                    else:
+                        click.echo(f"\nheld: {job['message']}", err=True)
+                        choice = click.prompt("resume, abort or leave it held?",
+                                              type=click.Choice(["resume", "abort", "leave"]),
+                                              default="leave", err=True)
+                        if choice == "resume":
+                            client.resume(jid)
+                            continue
+                        if choice == "abort":
+                            client.cancel(jid)
+                            continue
                 break
     except ServerError as e:
         _fail(str(e), code=3)

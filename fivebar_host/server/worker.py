@@ -623,7 +623,11 @@ class Worker(threading.Thread):
                 rp = None
         run_s = base_run + (time.monotonic() - t0)
         if rp is not None and kind is not None:
-            self.store.set_resume(rec.id, ResumeRecord(rp.next_segment, rp.position, rp.reason))
+            reason = {"terminate": "the daemon was told to stop; the machine ran out of "
+                      "queued lines and stopped at a segment boundary",
+                      "pause": "paused", "cancel": "cancelled"}.get(
+                          req or "", rp.reason) if kind == "interrupt" else rp.reason
+            self.store.set_resume(rec.id, ResumeRecord(rp.next_segment, rp.position, reason))
             if kind != "disconnect":
                 # run_job reset the firmware (queue cleared, counter back to 0): the line
                 # numbers of this stream mean nothing any more; the resume point is exact.
