@@ -22,6 +22,7 @@ from fivebar_host.devices import mock
 from fivebar_host.job import CompileOptions, compile_job
 from fivebar_host.server.client import ServerClient, ServerError, follow, plot_options
 from fivebar_host.server.daemon import Daemon, ServeConfig
+from fivebar_host.server.security import SecurityError
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 SQUARE = EXAMPLES / "square.gcode"
@@ -245,6 +246,7 @@ def test_non_loopback_listener_requires_the_token(start_daemon: Callable[..., Da
     local = f"http://127.0.0.1:{port}"
     assert d.token_path is not None and d.token is not None
     assert (d.token_path.stat().st_mode & 0o777) == 0o600
+    assert ((d.state_dir / "fivebar.db").stat().st_mode & 0o777) == 0o600
     for path in ("/api/status", "/api/jobs", "/openapi.json"):
         status, body = raw(local, "GET", path)
         assert status == 401 and body["error"] == "unauthorized", path
@@ -261,6 +263,11 @@ def test_non_loopback_listener_requires_the_token(start_daemon: Callable[..., Da
                       state_dir=d.state_dir, require_token=True)
     assert d2.token == token
     assert raw(d2.url, "GET", "/api/status")[0] == 401
+    d2.stop(hurry=True)
+    # a token file others can read protects nothing: refused, naming the fix
+    d.token_path.chmod(0o644)
+    with pytest.raises(SecurityError, match="chmod 600"):
+        start_daemon("fivebar-mock://?speed=10&machine=tok3", state_dir=d.state_dir)
 
 
 def test_loopback_listener_refuses_foreign_hosts_and_origins(

@@ -22,6 +22,7 @@ writes, and SQLite's own locking would add nothing but "database is locked" retr
 from __future__ import annotations
 
 import json
+import os
 import sqlite3
 import threading
 import time
@@ -163,9 +164,12 @@ class JobStore:
     def __init__(self, path: Path) -> None:
         self.path = path
         try:
+            # Uploads are the user's drawings: the file (and SQLite's -wal/-shm files, which
+            # take its mode) is private to the daemon's user.
+            os.close(os.open(path, os.O_WRONLY | os.O_CREAT, 0o600))
             self._db = sqlite3.connect(str(path), check_same_thread=False,
                                        isolation_level=None, timeout=5.0)
-        except sqlite3.Error as e:
+        except (OSError, sqlite3.Error) as e:
             raise StoreError(f"{path}: cannot open the database: {e}") from e
         self._db.row_factory = sqlite3.Row
         self._lock = threading.RLock()

@@ -297,6 +297,8 @@ class Worker(threading.Thread):
             self._set_pose(True, st)
             return st
 
+        if self.link is None:
+            raise ActionError(f"the machine is not connected ({self.error})")
         result: StatusReport = self.run_action(act, timeout_s)
         return result
 
