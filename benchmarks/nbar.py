@@ -10,7 +10,8 @@ the loosest setting at which its states still meet the solver's 1e-10 residual o
 example (the "max res" column shows it; 1e-8 does not on Watt-I); tighter settings only make
 it slower. The baseline starts each step from the previous state (Algorithm 1); a second
 column starts it from the same cubic extrapolation the solver uses. When a sweep meets motion
-limits, its time includes locating them (to 2^-24 of a step), which the baseline does not do.
+limits, its time includes locating them (fold solve, bracket < 2^-24 of a step), which the
+baseline does not do; the baseline is given the same inputs, up to the limits reached.
 Targets (issue 3): ≤ 5 ms per 180 steps, ≥ 5× the baseline. The machine's load average is
 printed first: on a shared machine the wall times scale with it.
 

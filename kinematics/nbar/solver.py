@@ -171,6 +171,9 @@ def _block_weights(newest: int) -> FloatArray:
 _BLOCKS = [_block_weights(p) for p in range(HISTORY)]
 _ARANGE = np.arange(BLOCK + 1)
 _ONES = np.ones(BLOCK, dtype=np.int64)
+#: A block takes its second batched Newton step only when the first leaves one of its first
+#: SECOND_PASS states uncertified (otherwise the states before the first uncertified one are kept).
+SECOND_PASS = 8
 
 
 class _Snapshot(NamedTuple):
@@ -475,7 +478,7 @@ class _Tracker:
                 conv = bound * c2s <= accept
                 qs_b = preds - steps
                 its_b = _ONES[:b]
-                if not conv.all():
+                if not conv[:SECOND_PASS].all():
                     # A second Newton step for the states the first did not certify (as in
                     # `newton`: the residual must have dropped 100-fold, ‖Φ‖² ≤ tol² or the
                     # remainder bound of the second step certifies convergence).
