@@ -292,9 +292,48 @@ void fb_rx_isr(uint8_t c)
 
 #define ST_WAIT 0xffu   /* queue full: try again later */
 
+/*
+ * A Ctrl-X is acted on in the receive interrupt, and its mo_stop() frees the
+ * slot of the block it drops.  The line waiting for a slot was received before
+ * the Ctrl-X, so it must be discarded by do_reset() without a reply, never
+ * queued into that slot.  The main loop notices f_reset only at the top of
+ * fb_poll(), so every step that would act on a freed slot checks f_reset with
+ * interrupts off, in the same critical section as what it acts on.
+ */
+static uint8_t slot_free(void)
+{
+	uint8_t sreg = board_irq_save();
+	uint8_t ok = !f_reset && mo_queue_free();
+	board_irq_restore(sreg);
+	return ok;
+}
+
+/* Queue the block prepared in mo_slot(); 0 (nothing queued) once a Ctrl-X came. */
+static uint8_t commit_block(void)
+{
+	uint8_t sreg = board_irq_save();
+	uint8_t ok = !f_reset;
+	if (ok) {
+		if (!mo_running() && mo_queue_count() == 0)
+			first_queued_ms = board_ms();
+		mo_push();
+	}
+	board_irq_restore(sreg);
+	return ok;
+}
+
+/* mo_start() unless *cancel (f_reset, f_home_abort) was set by an interrupt. */
+static void start_unless(volatile uint8_t *cancel)
+{
+	uint8_t sreg = board_irq_save();
+	if (!*cancel)
+		mo_start();
+	board_irq_restore(sreg);
+}
+
 static uint8_t queue_sync_block(uint8_t type, int32_t a, int32_t b)
 {
-	if (!mo_queue_free())
+	if (!slot_free())
 		return ST_WAIT;
 	fb_block_t *blk = mo_slot();
 	memset(blk, 0, sizeof(*blk));
@@ -302,15 +341,12 @@ static uint8_t queue_sync_block(uint8_t type, int32_t a, int32_t b)
 	blk->q[0] = (uint32_t)a;
 	blk->q[1] = (uint32_t)b;
 	blk->line = lines.last;
-	if (!mo_running() && mo_queue_count() == 0)
-		first_queued_ms = board_ms();
-	mo_push();
-	return FB_OK;
+	return commit_block() ? FB_OK : ST_WAIT;
 }
 
 static uint8_t exec_g1(const fb_cmd_t *c)
 {
-	if (!mo_queue_free())
+	if (!slot_free())
 		return ST_WAIT;
 	int32_t t[2] = { plan[0], plan[1] };
 	if (c->has & W_A)
@@ -330,13 +366,12 @@ static uint8_t exec_g1(const fb_cmd_t *c)
 	uint8_t st = mo_prepare(blk, t[0] - plan[0], t[1] - plan[1], (uint32_t)c->p, min_interval);
 	if (st != FB_OK)
 		return st;
-	if (c->has & W_S)
-		laser_s = (uint8_t)c->s;
-	blk->power = laser_on ? laser_s : 0;
+	uint8_t s = (c->has & W_S) ? (uint8_t)c->s : laser_s;
+	blk->power = laser_on ? s : 0;
 	blk->line = lines.last;
-	if (!mo_running() && mo_queue_count() == 0)
-		first_queued_ms = board_ms();
-	mo_push();
+	if (!commit_block())
+		return ST_WAIT;
+	laser_s = s;
 	plan[0] = t[0];
 	plan[1] = t[1];
 	return FB_OK;
@@ -368,7 +403,7 @@ static uint8_t home_move(uint8_t type, uint8_t axes, uint8_t neg, uint32_t steps
 	blk->power = 0;
 	blk->line = lines.last;
 	mo_push();
-	mo_start();
+	start_unless(&f_home_abort);
 	return home_wait();
 }
 
@@ -569,7 +604,8 @@ static void handle_line(void)
 /* Move received bytes into the line buffer; handle at most one line. */
 static void assemble(void)
 {
-	while (rx_tail != rx_head) {
+	/* after a Ctrl-X, the lines received before it are do_reset()'s to discard */
+	while (!f_reset && rx_tail != rx_head) {
 		uint8_t t = rx_tail;
 		uint8_t c = rx_buf[t & RX_MASK];
 		rx_tail = (uint8_t)(t + 1u);
@@ -614,7 +650,7 @@ static void maybe_start(void)
 		return;
 	if (n >= CFG_START_BLOCKS || !mo_queue_free() ||
 	    board_ms() - first_queued_ms >= CFG_START_DELAY_MS)
-		mo_start();
+		start_unless(&f_reset);
 }
 
 void fb_setup(void)

@@ -16,6 +16,9 @@ size_t fake_nsteps;
 char fake_tx[65536];
 size_t fake_tx_len;
 uint64_t fake_budget = UINT64_MAX;
+void (*fake_irq_hook)(void);
+int fake_irq_countdown;
+static uint8_t irq_on = 1;
 static char tx_copy[65536];
 
 void fake_reset(void)
@@ -32,6 +35,9 @@ void fake_reset(void)
 	fake_nsteps = 0;
 	fake_tx_len = 0;
 	fake_budget = UINT64_MAX;
+	fake_irq_hook = 0;
+	fake_irq_countdown = 0;
+	irq_on = 1;
 }
 
 void board_init(void) {}
@@ -119,5 +125,25 @@ void board_set_dirs(uint8_t neg_mask) { fake_dirs = neg_mask; }
 void board_enable_motors(uint8_t on) { fake_enabled = on; }
 void board_laser(uint8_t power) { fake_laser = power; }
 uint8_t board_endstops(void) { return fake_endstops; }
-uint8_t board_irq_save(void) { return 0; }
-void board_irq_restore(uint8_t state) { (void)state; }
+uint8_t board_irq_save(void)
+{
+	uint8_t was = irq_on;
+	irq_on = 0;
+	return was;
+}
+
+void board_irq_restore(uint8_t state)
+{
+	irq_on = state;
+	if (!state || !fake_irq_hook)
+		return;
+	if (fake_irq_countdown > 0) {
+		fake_irq_countdown--;
+		return;
+	}
+	void (*hook)(void) = fake_irq_hook;
+	fake_irq_hook = 0;
+	irq_on = 0;
+	hook();
+	irq_on = 1;
+}

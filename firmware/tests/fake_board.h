@@ -34,6 +34,13 @@ extern size_t fake_tx_len;
  * once spent, the timer stops and a busy-wait of the core gets mo_stop(). */
 extern uint64_t fake_budget;
 
+/* An interrupt that fires when the core re-enables interrupts
+ * (board_irq_restore back to "on"): after fake_irq_countdown more such points
+ * (0 = the next one), fake_irq_hook runs once, with interrupts off, as an ISR
+ * would.  Lets a test deliver a byte at every point of a main-loop pass. */
+extern void (*fake_irq_hook)(void);
+extern int fake_irq_countdown;
+
 void fake_reset(void);
 /* Run the step timer until it stops or max_cycles pass; returns events run. */
 size_t fake_run(uint64_t max_cycles);

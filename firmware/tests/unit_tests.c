@@ -528,6 +528,71 @@ static void test_app(void)
 	expect("$I\n", "fivebar " FB_VERSION " proto:1 rx:128 queue:16 line:80\r\nok\r\n");
 }
 
+#define BANNER "fivebar " FB_VERSION " proto:1 rx:128 queue:16 line:80\r\n"
+
+static int count_of(const char *hay, const char *needle)
+{
+	int n = 0;
+	for (const char *p = strstr(hay, needle); p; p = strstr(p + 1, needle))
+		n++;
+	return n;
+}
+
+static void ctrl_x_isr(void) { fb_rx_isr(0x18); }
+
+/*
+ * Ctrl-X while a line waits for a queue slot (contract test
+ * test_reset_discards_a_line_waiting_for_a_slot), delivered at every point of a
+ * main-loop pass where interrupts are enabled again.  Its mo_stop() frees a
+ * slot: the waiting line must not take it and get an "ok" before the banner,
+ * and the queue must not start again (the laser would flash).
+ */
+static void test_reset_while_a_line_waits(void)
+{
+	int32_t zero[2] = { 0, 0 };
+	int fired = 1, k;
+	for (k = 0; fired && k < 100; k++) {
+		fb_rx_isr(0x18); /* power-on state of the receive ring */
+		fb_poll();
+		fake_reset();
+		mo_set_pos(zero);
+		fb_setup();
+		send("M3 S255\n");
+		for (int i = 0; i < 3; i++)
+			fb_poll();
+		for (int i = 0; i < CFG_QUEUE_SIZE; i++) {
+			send("G1 P1000000 S255\n");
+			for (int j = 0; j < 3; j++)
+				fb_poll();
+		}
+		fake_run(1000); /* the first dwell is under way, laser on */
+		send("G1 P1000 S255\n");
+		for (int j = 0; j < 3; j++)
+			fb_poll();
+		const char *out = fake_take_tx();
+		CHECK(count_of(out, "ok\r\n") == 1 + CFG_QUEUE_SIZE && fake_laser == 255 &&
+		      mo_queue_free() == 0, "k=%d: queue full, laser on, a line waiting: '%s'", k, out);
+		fake_irq_hook = ctrl_x_isr;
+		fake_irq_countdown = k;
+		fb_poll();
+		fired = fake_irq_hook == 0;
+		fake_irq_hook = 0;
+		if (!fired)
+			fb_rx_isr(0x18); /* after the pass: the plain case */
+		out = fake_take_tx();
+		CHECK(out[0] == 0, "k=%d: a reply before the banner: '%s'", k, out);
+		CHECK(!fake_timer_on && fake_laser == 0 && !mo_running(),
+		      "k=%d: the queue started again after the Ctrl-X (laser %u)", k, fake_laser);
+		for (int j = 0; j < 3; j++)
+			fb_poll();
+		out = fake_take_tx();
+		CHECK(strcmp(out, BANNER) == 0, "k=%d: only the banner after the reset: '%s'", k, out);
+		CHECK(mo_queue_count() == 0 && !mo_running() && fake_laser == 0, "k=%d: queue cleared", k);
+		expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,0|L:0|U:0>\r\n");
+	}
+	CHECK(k >= 2, "the Ctrl-X was delivered inside the pass (%d points)", k - 1);
+}
+
 int main(void)
 {
 	test_crc();
@@ -540,6 +605,7 @@ int main(void)
 	test_homing_block();
 	test_endstop_alarm();
 	test_app();
+	test_reset_while_a_line_waits();
 	printf("%d checks, %d failed\n", checks, failures);
 	return failures ? 1 : 0;
 }
