@@ -61,7 +61,7 @@ class Device:
 class DaemonProc:
     """`fivebar serve` as a subprocess on 127.0.0.1 (port chosen by the OS)."""
 
-    def __init__(self, tmp: Path, port: Path, name: str) -> None:
+    def __init__(self, tmp: Path, port: Path | str, name: str) -> None:
         self.ready = tmp / f"{name}.ready"
         self.log_path = tmp / f"{name}.log"
         self.log = self.log_path.open("w")
@@ -174,3 +174,38 @@ def test_sigterm_stops_at_a_segment_boundary_and_resumes(tmp_path: Path,
     assert led["steps_abs"] == steps_plan.tolist(), (led, steps_plan)
     assert led["partial_blocks"] == 0 and led["laser_now"] == 0
     assert led["boots"] == 1
+
+
+def test_sigkill_with_a_reset_controller_asks_for_home(tmp_path: Path) -> None:
+    """The mock inside the daemon dies with it: the restarted daemon meets a freshly booted
+    controller (line counter 0, position unknown), as after an Arduino's reset on open."""
+    job, _ = plan()
+    d = DaemonProc(tmp_path, "fivebar-mock://?speed=2", "first")
+    j = d.client.submit(SQUARE.read_bytes(), "square.gcode", plot_options(confirm=True))
+    seen = wait_segments(d.client, j["id"], 40)
+    os.kill(d.proc.pid, signal.SIGKILL)
+    d.proc.wait(10)
+    d.log.close()
+    d2 = DaemonProc(tmp_path, "fivebar-mock://?speed=2", "second")
+    try:
+        deadline = time.monotonic() + 30
+        while (held := d2.client.job(j["id"]))["state"] == "running":
+            assert time.monotonic() < deadline, d2.log_text()
+            time.sleep(0.05)
+        assert held["state"] == "held", held
+        rp = held["resume"]
+        # conservative: the last segment the daemon saw finish, position unknown
+        assert rp["position"] is None and 0 < rp["next_segment"] <= seen["segments_done"] + 20
+        assert "home the machine" in held["message"]
+        assert d2.client.status()["machine"]["pose_known"] is False
+        # resuming without homing first asks (nothing moves); home, then it finishes
+        d2.client.resume(j["id"])
+        again = follow(d2.client, j["id"], lambda x: None, max_s=30)
+        assert again["state"] == "held" and "home pose" in (again["question"] or "")
+        d2.client.home(at_home=True)
+        d2.client.resume(j["id"])
+        done = follow(d2.client, j["id"], lambda x: None, max_s=60)
+        assert done["state"] == "done", (done, d2.log_text())
+        assert done["segments_done"] == job.n_segments
+    finally:
+        d2.stop(signal.SIGTERM)

@@ -808,9 +808,14 @@ class Worker(threading.Thread):
                 stream.first_line + stream.lines - 1):
             # The controller was not reset: it kept the lines it had and its line counter.
             st = self._settle(link)
-            prog = build_program(job, self.cfg.profile, opts.laser, stream.start_segment,
-                                 stream.start_position)
-            if len(prog.bodies) == stream.lines and st.state != "Alarm":
+            try:
+                prog: Program | None = build_program(
+                    job, self.cfg.profile, opts.laser, stream.start_segment,
+                    stream.start_position)
+            except SendError as e:  # the profile's limits changed: no exact mapping
+                log.warning("job %d: cannot rebuild its program (%s)", rec.id, e)
+                prog = None
+            if prog is not None and len(prog.bodies) == stream.lines and st.state != "Alarm":
                 if st.state == "Hold" or st.queued:
                     link.reset()  # clears what is queued; position kept, laser off
                 nxt = prog.finished_segments(stream.first_line, st.done_line,
