@@ -135,6 +135,8 @@ static void status_report(void)
 	put_u32(mo_laser());
 	put_P(FB_PSTR("|U:"));
 	put_u32(mo_underruns());
+	put_P(FB_PSTR("|H:"));
+	board_tx(mo_homed() ? '1' : '0');
 	board_tx('>');
 	put_eol();
 }
@@ -422,6 +424,7 @@ static uint8_t exec_home(void)
 	 * also keeps repeated failed homings from running the counter away */
 	int32_t zero[2] = { 0, 0 };
 	mo_set_pos(zero);
+	mo_set_homed(0);
 	sync_plan();
 	uint32_t interval = interval_for(settings[SET_HOMING_RATE]);
 	uint32_t chunk_max = 0x7fffffffUL / interval;
@@ -451,6 +454,7 @@ static uint8_t exec_home(void)
 	}
 	int32_t home[2] = { settings[SET_HOME_A], settings[SET_HOME_B] };
 	mo_set_pos(home);
+	mo_set_homed(1);
 	sync_plan();
 	alarm = 0;
 	return FB_OK;
@@ -659,6 +663,7 @@ void fb_setup(void)
 	settings_defaults();
 	settings_apply();
 	alarm = 0;
+	mo_set_homed(0); /* power-on: the position is unknown */
 	do_reset();
 }
 

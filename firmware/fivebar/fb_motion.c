@@ -26,7 +26,7 @@ static fb_block_t *volatile cur; /* executing block (still in the queue), or 0 *
 static uint32_t s_now;           /* cycle of the pending event within cur */
 static uint8_t s_due;            /* motors stepping at that event */
 static uint8_t s_home_axes, s_es_enabled, s_seek_neg;
-static volatile uint8_t s_running, s_alarm, s_home_hits, s_laser;
+static volatile uint8_t s_running, s_alarm, s_home_hits, s_laser, s_homed;
 static volatile int32_t s_pos[2];
 static volatile uint32_t s_done_line, s_underruns;
 
@@ -186,6 +186,7 @@ FB_ALWAYS_INLINE fb_block_t *boundary(void)
 		case BLK_SETPOS:
 			s_pos[0] = (int32_t)b->q[0];
 			s_pos[1] = (int32_t)b->q[1];
+			s_homed = 1;
 			s_done_line = b->line;
 			continue;
 		case BLK_ENABLE:
@@ -329,6 +330,8 @@ uint32_t mo_underruns(void)
 }
 
 uint8_t mo_laser(void) { return s_laser; }
+uint8_t mo_homed(void) { return s_homed; }
+void mo_set_homed(uint8_t on) { s_homed = on; }
 
 void mo_set_endstops(uint8_t on, uint8_t seek_neg)
 {

@@ -89,6 +89,11 @@ void mo_set_pos(const int32_t pos[2]);
 uint32_t mo_done_line(void);
 uint32_t mo_underruns(void);
 uint8_t mo_laser(void);
+/* The position was set since power-on: a G92 block executed (set here, in the
+ * step interrupt) or a homing completed (fb_main).  mo_init() keeps it, as a
+ * Ctrl-X keeps the position. */
+uint8_t mo_homed(void);
+void mo_set_homed(uint8_t on);
 /* Endstop supervision outside homing (the $7 setting): a motor stepping
  * towards its switch (negative where seek_neg has its bit) while the switch
  * is pressed raises FB_ALARM_ENDSTOP; stepping away is allowed. */

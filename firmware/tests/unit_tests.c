@@ -425,13 +425,13 @@ static void test_app(void)
 	fb_setup();
 	expect("", "fivebar " FB_VERSION " proto:1 rx:128 queue:16 line:80\r\n");
 	expect("$I\n", "fivebar " FB_VERSION " proto:1 rx:128 queue:16 line:80\r\nok\r\n");
-	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,1|L:0|U:0>\r\n");
+	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,1|L:0|U:0|H:0>\r\n");
 	expect("G1 A10 B-4 P1000\n", "ok\r\n");
 	tick(100);
-	expect("?", "<Idle|A:10,B:-4|Q:0|Ln:2,2|L:0|U:1>\r\n");
+	expect("?", "<Idle|A:10,B:-4|Q:0|Ln:2,2|L:0|U:1|H:0>\r\n");
 	expect("G91\nG1 A5 P1000\nG90\n", "ok\r\nok\r\nok\r\n");
 	tick(100);
-	expect("?", "<Idle|A:15,B:-4|Q:0|Ln:4,5|L:0|U:2>\r\n");
+	expect("?", "<Idle|A:15,B:-4|Q:0|Ln:4,5|L:0|U:2|H:0>\r\n");
 	expect("G1 A200000 P100000\n", "error:11\r\n");
 	expect("G1 A10 P100\n", "error:12\r\n");
 	memset(buf, 'A', 100);
@@ -449,13 +449,13 @@ static void test_app(void)
 	strcat(buf, "\n");
 	expect(buf, "ok\r\n");
 	tick(100);
-	expect("?", "<Idle|A:0,B:0|Q:0|Ln:1,1|L:0|U:3>\r\n");
+	expect("?", "<Idle|A:0,B:0|Q:0|Ln:1,1|L:0|U:3|H:0>\r\n");
 
 	/* hold before the job starts, then resume */
 	expect("!", "");
 	expect("M3 S77\nG1 A100 P100000\n", "ok\r\nok\r\n");
 	tick(100);
-	expect("?", "<Hold:0|A:0,B:0|Q:1|Ln:1,3|L:0|U:3>\r\n");
+	expect("?", "<Hold:0|A:0,B:0|Q:1|Ln:1,3|L:0|U:3|H:0>\r\n");
 	CHECK(fake_nsteps == 0 || fake_laser == 0, "nothing runs while held");
 	fake_nsteps = 0;
 	fb_rx_isr('~');
@@ -464,9 +464,9 @@ static void test_app(void)
 	CHECK(fake_laser == 77, "laser on during the segment");
 	fb_rx_isr('!');
 	CHECK(fake_laser == 0, "hold turns the laser off at once");
-	expect("?", "<Hold:0|A:50,B:0|Q:0|Ln:1,3|L:0|U:3>\r\n");
+	expect("?", "<Hold:0|A:50,B:0|Q:0|Ln:1,3|L:0|U:3|H:0>\r\n");
 	expect("~", "");
-	expect("?", "<Idle|A:100,B:0|Q:0|Ln:3,3|L:0|U:4>\r\n");
+	expect("?", "<Idle|A:100,B:0|Q:0|Ln:3,3|L:0|U:4|H:0>\r\n");
 
 	/* an error while a job runs holds it */
 	expect("G1 A0 P100000\n", "ok\r\n");
@@ -475,13 +475,13 @@ static void test_app(void)
 	fake_run(16u * 10000u);
 	expect("G7\n", "error:4\r\n");
 	CHECK(fake_laser == 0, "laser off after an error");
-	expect("?", "<Hold:2|A:90,B:0|Q:0|Ln:3,5|L:0|U:4>\r\n");
+	expect("?", "<Hold:2|A:90,B:0|Q:0|Ln:3,5|L:0|U:4|H:0>\r\n");
 
 	/* reset: banner, queue dropped, position kept */
 	send("\x18");
 	CHECK(fake_laser == 0 && !fake_timer_on, "reset stops at once");
 	expect("", "fivebar " FB_VERSION " proto:1 rx:128 queue:16 line:80\r\n");
-	expect("?", "<Idle|A:90,B:0|Q:0|Ln:0,0|L:0|U:0>\r\n");
+	expect("?", "<Idle|A:90,B:0|Q:0|Ln:0,0|L:0|U:0|H:0>\r\n");
 
 	/* the laser watchdog */
 	expect("M3 S255\nG1 A0 P10000000\n", "ok\r\nok\r\n");
@@ -492,7 +492,7 @@ static void test_app(void)
 	fake_ms += DEF_LASER_TIMEOUT + 1;
 	fb_poll();
 	CHECK(fake_laser == 0, "laser off after host silence");
-	expect("?", "<Hold:1|A:90,B:0|Q:0|Ln:0,2|L:0|U:0>\r\n");
+	expect("?", "<Hold:1|A:90,B:0|Q:0|Ln:0,2|L:0|U:0|H:0>\r\n");
 	send("\x18");
 	expect("", "fivebar " FB_VERSION " proto:1 rx:128 queue:16 line:80\r\n");
 
@@ -588,9 +588,53 @@ static void test_reset_while_a_line_waits(void)
 		out = fake_take_tx();
 		CHECK(strcmp(out, BANNER) == 0, "k=%d: only the banner after the reset: '%s'", k, out);
 		CHECK(mo_queue_count() == 0 && !mo_running() && fake_laser == 0, "k=%d: queue cleared", k);
-		expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,0|L:0|U:0>\r\n");
+		expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,0|L:0|U:0|H:0>\r\n");
 	}
 	CHECK(k >= 2, "the Ctrl-X was delivered inside the pass (%d points)", k - 1);
+}
+
+static int has(const char *hay, const char *needle) { return strstr(hay, needle) != 0; }
+
+/* H: in status reports: the position was set (G92 executed, $H completed) since power-on. */
+static void test_homed_flag(void)
+{
+	int32_t zero[2] = { 0, 0 };
+	fb_rx_isr(0x18);
+	fb_poll();
+	fake_reset();
+	mo_set_pos(zero);
+	fb_setup();
+	fake_take_tx();
+	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,0|L:0|U:0|H:0>\r\n");
+	expect("G92 A5 B-5\n", "ok\r\n");
+	expect("?", "<Run|A:0,B:0|Q:1|Ln:0,1|L:0|U:0|H:0>\r\n"); /* queued, not executed */
+	send("\x18");
+	expect("", BANNER);
+	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,0|L:0|U:0|H:0>\r\n"); /* discarded: never set */
+	expect("G92 A5 B-5\n", "ok\r\n");
+	tick(100);
+	expect("?", "<Idle|A:5,B:-5|Q:0|Ln:1,1|L:0|U:1|H:1>\r\n");
+	send("\x18");
+	expect("", BANNER);
+	expect("?", "<Idle|A:5,B:-5|Q:0|Ln:0,0|L:0|U:0|H:1>\r\n"); /* Ctrl-X keeps it */
+	/* a homing restarts the count at 0: unknown until it completes */
+	fake_endstops = 0;
+	expect("$7=1\n$12=10\n$8=40000\n$H\n", "ok\r\nok\r\nok\r\nALARM:31\r\nerror:31\r\n");
+	send("?");
+	const char *out = poll_out(5);
+	CHECK(has(out, "<Alarm:31|A:-10,B:-10|") && has(out, "|H:0>"), "failed $H: '%s'", out);
+	expect("$X\n$7=0\nG92 A1\n", "ok\r\nok\r\nok\r\n");
+	tick(100);
+	send("?");
+	out = poll_out(5);
+	CHECK(has(out, "<Idle|A:1,B:-10|") && has(out, "|H:1>"), "G92 after $X: '%s'", out);
+	/* power-on (DTR reset); the Ctrl-X only empties the fake's receive ring */
+	fb_rx_isr(0x18);
+	fb_poll();
+	fake_reset();
+	fb_setup();
+	fake_take_tx();
+	expect("?", "<Idle|A:1,B:-10|Q:0|Ln:0,0|L:0|U:0|H:0>\r\n");
 }
 
 int main(void)
@@ -606,6 +650,7 @@ int main(void)
 	test_endstop_alarm();
 	test_app();
 	test_reset_while_a_line_waits();
+	test_homed_flag();
 	printf("%d checks, %d failed\n", checks, failures);
 	return failures ? 1 : 0;
 }
