@@ -193,7 +193,7 @@ class StatusReport:
     accepted_line: int  # line number of the last line accepted
     laser: int  # laser power output now
     underruns: int  # motion stops because the queue ran empty, since reset
-    homed: bool = False  # position set by G92 or $H since boot or reset (field H:1)
+    homed: bool = False  # H:1: position set by an executed G92 or a completed $H since power-on
 
 
 @dataclass(frozen=True)
@@ -227,7 +227,7 @@ Message = Ok | ErrorReply | StatusReport | Banner | AlarmPush | SettingLine
 _ERROR = re.compile(r"error:(\d+)(?: resend:(\d+))?")
 _STATUS = re.compile(
     r"<(Idle|Run|Hold|Home|Alarm)(?::(\d+))?\|A:(-?\d+),B:(-?\d+)\|Q:(\d+)"
-    r"\|Ln:(\d+),(\d+)\|L:(\d+)\|U:(\d+)(?:\|H:([01]))?>"
+    r"\|Ln:(\d+),(\d+)\|L:(\d+)\|U:(\d+)\|H:([01])>"
 )
 _BANNER = re.compile(r"fivebar (\S+) proto:(\d+) rx:(\d+) queue:(\d+) line:(\d+)")
 _ALARM = re.compile(r"ALARM:(\d+)")

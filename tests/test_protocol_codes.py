@@ -73,11 +73,11 @@ def test_parse_every_message_kind() -> None:
     assert protocol.parse_message("error:8 resend:12") == ErrorReply(8, 12)
     alarm_error = protocol.parse_message("error:30")
     assert isinstance(alarm_error, ErrorReply) and alarm_error.info.alarm
-    assert protocol.parse_message("<Hold:1|A:-5,B:7|Q:3|Ln:10,12|L:0|U:2>") == StatusReport(
-        "Hold", 1, -5, 7, 3, 10, 12, 0, 2
+    assert protocol.parse_message("<Hold:1|A:-5,B:7|Q:3|Ln:10,12|L:0|U:2|H:0>") == StatusReport(
+        "Hold", 1, -5, 7, 3, 10, 12, 0, 2, homed=False
     )
-    run = protocol.parse_message("<Run|A:0,B:0|Q:0|Ln:0,0|L:255|U:0>")
-    assert isinstance(run, StatusReport) and run.state == "Run"
+    run = protocol.parse_message("<Run|A:0,B:0|Q:0|Ln:0,0|L:255|U:0|H:1>")
+    assert isinstance(run, StatusReport) and run.state == "Run" and run.homed
     assert protocol.parse_message("fivebar 1.0.0 proto:1 rx:128 queue:16 line:80") == Banner(
         "1.0.0", 1, 128, 16, 80
     )
@@ -91,7 +91,9 @@ def test_parse_every_message_kind() -> None:
         "okay",
         "error:8",
         "error:4 resend:3",
-        "<Idle:1|A:0,B:0|Q:0|Ln:0,0|L:0|U:0>",
+        "<Idle:1|A:0,B:0|Q:0|Ln:0,0|L:0|U:0|H:0>",
+        "<Idle|A:0,B:0|Q:0|Ln:0,0|L:0|U:0>",  # H: is mandatory
+        "<Idle|A:0,B:0|Q:0|Ln:0,0|L:0|U:0|H:2>",
         "<Hold|A:0>",
         "",
     ],

@@ -585,6 +585,7 @@ class MockFirmware:
         self.boot = m.boots
         self.settings = list(DEFAULT_SETTINGS)
         self.pos = [0, 0]
+        self.homed = False  # position set by an executed G92 or a completed $H; Ctrl-X keeps it
         self.alarm = 0
         self.stalled = False
         self.laser = 0
@@ -662,7 +663,7 @@ class MockFirmware:
             state = "Idle"
         a, b = self.position()
         return (f"<{state}|A:{a},B:{b}|Q:{len(self.queue)}|Ln:{self.done_line},{self.last}"
-                f"|L:{self.laser}|U:{self.underruns}>")
+                f"|L:{self.laser}|U:{self.underruns}|H:{int(self.homed)}>")
 
     def _finish(self, st: int) -> None:
         """Reply to a line: ``ok`` or ``error:<code>`` (errors hold a running job)."""
@@ -806,6 +807,7 @@ class MockFirmware:
             if blk.kind == "G92":
                 self._record_instant("G92", blk.line, blk.delta)
                 self.pos = list(blk.delta)
+                self.homed = True
                 self.done_line = blk.line
                 continue
             if blk.kind in ("M17", "M18"):
@@ -1142,6 +1144,10 @@ class MockFirmware:
             return E_BUSY
         if not self.motors_on:
             return E_MOTORS_OFF
+        # the position is unknown until homed: the seek counts from 0 (fb_main.c exec_home)
+        self.pos = [0, 0]
+        self.plan = [0, 0]
+        self.homed = False
         self.homing = _Homing(self)
         self.homing.seek()
         return self.homing.result()
@@ -1212,6 +1218,7 @@ class _Homing:
         fw._record_instant("home-set", fw.last, home)
         fw.pos = list(home)
         fw.plan = list(home)
+        fw.homed = True
         fw.alarm = 0
         self._end(OK)
 

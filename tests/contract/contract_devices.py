@@ -6,6 +6,7 @@ Kept out of conftest.py so test modules can import ``Device`` for their type hin
 from __future__ import annotations
 
 import itertools
+import uuid
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -80,12 +81,23 @@ class Device:
 
 
 def open_mock(endstops: Endstops = (None, None)) -> Device:
-    """Boot ``fivebar-mock://`` (through pyserial's URL lookup) and read its banner."""
+    """Boot ``fivebar-mock://`` (through pyserial's URL lookup) and read its banner.
+
+    Each device is its own named machine, so ``reopen_mock`` can power it up again.
+    """
     urls.register()
-    url = f"fivebar-mock://?speed={MOCK_SPEED}"
+    url = f"fivebar-mock://?speed={MOCK_SPEED}&machine=contract-{uuid.uuid4().hex}"
     if endstops != (None, None):
         url += "&endstops=" + ",".join("" if e is None else str(e) for e in endstops)
     port = serial.serial_for_url(url, timeout=0.5)
+    assert isinstance(port, MockSerial)
+    return Device("mock", port)
+
+
+def reopen_mock(dev: Device) -> Device:
+    """Open a closed mock's port again: the same machine, its firmware powered up anew
+    (what a DTR reset does to an Uno)."""
+    port = serial.serial_for_url(dev.port.port, timeout=0.5)
     assert isinstance(port, MockSerial)
     return Device("mock", port)
 

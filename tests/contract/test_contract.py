@@ -13,7 +13,7 @@ import time
 from collections.abc import Callable
 
 import pytest
-from contract_devices import Device
+from contract_devices import Device, reopen_mock
 
 from fivebar_host import protocol
 from fivebar_host.protocol import (
@@ -354,6 +354,33 @@ def test_status_report_fields(device: Device) -> None:
     assert device.executed().steps == (50, 30)
 
 
+def test_homed_flag_is_set_by_an_executed_g92_and_kept_by_ctrl_x(
+        open_device: Callable[..., Device]) -> None:
+    dev = open_device()
+    s = dev.session
+    assert s.status().homed is False  # power-on: the position is unknown
+    s.realtime(protocol.RT_HOLD)  # keeps the G92 in the queue
+    assert s.send("G92 A100 B-50") == Ok()
+    time.sleep(0.05)
+    r = s.status()
+    assert (r.state, r.queued, r.a, r.homed) == ("Hold", 1, 0, False)  # queued, not executed
+    s.realtime(protocol.RT_RESUME)
+    r = idle(dev)
+    assert (r.a, r.b, r.homed) == (100, -50, True)
+    s.realtime(protocol.RT_RESET)
+    s.wait_banner()
+    r = s.status()
+    assert (r.a, r.b, r.homed) == (100, -50, True)  # Ctrl-X keeps the position and H
+    assert dev.executed().steps == (0, 0)
+    # power-on again (DTR reset): the mock's machine reopened, the emulator started anew
+    again = reopen_mock(dev) if dev.kind == "mock" else open_device()
+    try:
+        r = again.session.status()
+        assert (r.state, r.a, r.b, r.homed) == ("Idle", 0, 0, False)
+    finally:
+        again.close()
+
+
 def test_streamed_job_with_character_counting_is_exact(device: Device) -> None:
     segments = [(((i * 37) % 61) - 30, ((i * 53) % 41) - 20, 4000 + 100 * (i % 7), 255 * (i % 2))
                 for i in range(100)]
@@ -513,9 +540,10 @@ def test_homing_finds_the_switches(open_device: Callable[..., Device]) -> None:
     s = dev.session
     for line in ("$7=1", "$8=4000", "$9=50", "$10=1000", "$11=-7"):
         assert s.send(line) == Ok()
+    assert s.status().homed is False
     assert s.send("$H") == Ok()
     r = s.status()
-    assert (r.state, r.a, r.b) == ("Idle", 1000, -7)
+    assert (r.state, r.a, r.b, r.homed) == ("Idle", 1000, -7, True)
     assert s.send("G1 A1010 P10000") == Ok()
     r = idle(dev)
     assert r.a == 1010
@@ -526,12 +554,14 @@ def test_homing_finds_the_switches(open_device: Callable[..., Device]) -> None:
 
 def test_homing_failure_raises_an_alarm_that_locks(device: Device) -> None:
     s = device.session
-    for line in ("$7=1", "$8=40000", "$12=100"):
+    for line in ("$7=1", "$8=40000", "$12=100", "G92 A500 B500"):
         assert s.send(line) == Ok()
+    assert idle(device).homed
     got = replies_to(device, b"$H\n", 1)
     assert got == [AlarmPush(31), ErrorReply(31)]
     r = s.status()
-    assert (r.state, r.detail, r.a, r.b) == ("Alarm", 31, -100, -100)
+    # the seek counts from 0: the position (and H) are unknown after a failed homing
+    assert (r.state, r.detail, r.a, r.b, r.homed) == ("Alarm", 31, -100, -100, False)
     for line in ("G1 A0 P100000", "G90", "M3 S1", "G92 A0", "M17"):
         assert s.send(line) == ErrorReply(14), line
     for line in ("", "$I", "M110", "$0=20000"):
