@@ -239,6 +239,7 @@ static void do_reset(void)
 	line_over = 0;
 	pending = 0;
 	lines.last = 0;
+	lines.numbered = 0;
 	absolute = 1;
 	laser_on = 0;
 	laser_s = 0;

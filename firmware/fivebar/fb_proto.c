@@ -274,13 +274,19 @@ uint8_t fb_parse_line(fb_lines_t *lines, const char *line, uint8_t len, fb_cmd_t
 	uint8_t st = parse_body(line, i, end, cmd);
 	if (st == FB_OK && cmd->kind == CMD_M110) {
 		lines->last = cmd->has_n ? cmd->n : 0;
+		lines->numbered = cmd->has_n;
 		return FB_OK;
 	}
 	if (cmd->has_n) {
 		if (cmd->n != lines->last + 1u)
 			return FB_ERR_LINE_NUMBER;
 		lines->last = cmd->n;
+		lines->numbered = 1;
 	} else {
+		/* strict framing: a numbered host's line that lost its N and its
+		 * checksum must not run as an unnumbered one */
+		if (lines->numbered)
+			return FB_ERR_NO_CHECKSUM;
 		lines->last++;
 	}
 	return st;

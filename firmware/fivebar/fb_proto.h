@@ -47,6 +47,9 @@ typedef struct {
 /* Line-number state shared by consecutive lines. */
 typedef struct {
 	uint32_t last;      /* number of the last accepted line */
+	uint8_t numbered;   /* strict framing: a numbered line was accepted since
+			     * the last reset or unnumbered M110, so every line
+			     * must be numbered (else FB_ERR_NO_CHECKSUM) */
 } fb_lines_t;
 
 /* CRC-8, polynomial 0x07, init 0, no reflection, no final xor (CRC-8/SMBUS). */
@@ -58,6 +61,12 @@ uint8_t fb_crc8(const char *s, uint8_t len);
  * FB_ERR_NO_CHECKSUM the line was not accepted and the host must resend from
  * lines->last + 1.  Every other outcome accepts the line and advances
  * lines->last (to N, or by one when the line has no N).
+ *
+ * Strict framing: once a numbered line is accepted (lines->numbered), a line
+ * without N is refused with FB_ERR_NO_CHECKSUM, so a numbered line that lost
+ * both its "N<n> " and its "*<crc>" to line noise is never executed.  Only an
+ * unnumbered M110 (which sets last to 0 and ends strict framing) is accepted
+ * then; a numbered M110 keeps it.
  */
 uint8_t fb_parse_line(fb_lines_t *lines, const char *line, uint8_t len, fb_cmd_t *cmd);
 

@@ -21,7 +21,7 @@
 #define FB_ERR_OUT_OF_RANGE      7  /* value outside its documented range */
 #define FB_ERR_CHECKSUM          8  /* checksum mismatch or malformed: resend */
 #define FB_ERR_LINE_NUMBER       9  /* N is not the expected line number: resend */
-#define FB_ERR_NO_CHECKSUM       10 /* line number without checksum: resend */
+#define FB_ERR_NO_CHECKSUM       10 /* line number without checksum, or no number after numbered lines: resend */
 #define FB_ERR_SOFT_LIMIT        11 /* target outside the soft limits */
 #define FB_ERR_TOO_FAST          12 /* segment needs a step rate above $0 */
 #define FB_ERR_BUSY              13 /* command needs an idle machine */

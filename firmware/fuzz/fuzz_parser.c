@@ -3,8 +3,9 @@
  * state machine.
  *
  * 1. Every '\n'-separated piece of the input goes through fb_parse_line with
- *    a persistent line counter; the result must be a defined status, and a
- *    resend status must leave the counter unchanged.
+ *    a persistent line counter; the result must be a defined status, a
+ *    resend status must leave the counter unchanged, and once a numbered line
+ *    was accepted no unnumbered line but M110 may be (strict framing).
  * 2. The same bytes are fed to the whole firmware (fb_rx_isr / fb_poll) on
  *    the fake board, with simulated time advancing, so real-time bytes,
  *    execution and replies are exercised as well.
@@ -38,12 +39,16 @@ static void parse_pieces(const uint8_t *data, size_t size)
 		char *copy = malloc(len ? len : 1);
 		memcpy(copy, data + start, len);
 		fb_cmd_t cmd;
-		uint32_t before = lines.last;
+		fb_lines_t before = lines;
 		uint8_t st = fb_parse_line(&lines, copy, (uint8_t)len, &cmd);
 		free(copy);
 		if (st > FB_ERR_RX_OVERFLOW)
 			abort();
-		if (fb_is_resend(st) && lines.last != before)
+		if (fb_is_resend(st) && (lines.last != before.last || lines.numbered != before.numbered))
+			abort();
+		/* strict framing: after a numbered line, an unnumbered line other
+		 * than M110 is never accepted (the counter does not move) */
+		if (before.numbered && !cmd.has_n && cmd.kind != CMD_M110 && lines.last != before.last)
 			abort();
 		if (st == FB_OK && cmd.kind > CMD_SET)
 			abort();

@@ -20,6 +20,8 @@
 
 static int failures, checks;
 
+#define BANNER "fivebar " FB_VERSION " proto:1 rx:128 queue:16 line:80\r\n"
+
 #define CHECK(cond, ...) do { checks++; if (!(cond)) { failures++; \
 	printf("FAIL %s:%d: ", __FILE__, __LINE__); printf(__VA_ARGS__); printf("\n"); } } while (0)
 
@@ -138,12 +140,27 @@ static void test_framing(void)
 	CHECK(parse(&ln, "N2 G90", &c) == FB_ERR_NO_CHECKSUM && ln.last == 1, "N needs a checksum");
 	framed(buf, sizeof buf, "N2 G1 A5 P100");
 	CHECK(parse(&ln, buf, &c) == FB_OK && ln.last == 2 && c.a == 5, "N2 accepted");
-	CHECK(parse(&ln, "G91", &c) == FB_OK && ln.last == 3, "unnumbered line counts");
-	framed(buf, sizeof buf, "N4 G5");
-	CHECK(parse(&ln, buf, &c) == FB_ERR_UNKNOWN_COMMAND && ln.last == 4,
+	/* strict framing: after a numbered line, every line needs its number */
+	CHECK(parse(&ln, "G1 A5 P100", &c) == FB_ERR_NO_CHECKSUM && ln.last == 2 && ln.numbered,
+	      "a line that lost its N and checksum is refused, not executed");
+	framed(buf, sizeof buf, "G91");
+	CHECK(parse(&ln, buf, &c) == FB_ERR_NO_CHECKSUM && ln.last == 2, "checksum without N refused");
+	CHECK(parse(&ln, "", &c) == FB_ERR_NO_CHECKSUM && ln.last == 2, "empty line refused");
+	CHECK(parse(&ln, "G5", &c) == FB_ERR_NO_CHECKSUM && ln.last == 2,
+	      "refused before its parse error");
+	CHECK(parse(&ln, "M110 A1", &c) == FB_ERR_NO_CHECKSUM && ln.last == 2, "a bad M110 too");
+	framed(buf, sizeof buf, "N3 G5");
+	CHECK(parse(&ln, buf, &c) == FB_ERR_UNKNOWN_COMMAND && ln.last == 3,
 	      "a well-framed bad command is accepted, then refused");
 	framed(buf, sizeof buf, "N100 M110");
-	CHECK(parse(&ln, buf, &c) == FB_OK && ln.last == 100, "M110 sets the line number");
+	CHECK(parse(&ln, buf, &c) == FB_OK && ln.last == 100 && ln.numbered,
+	      "M110 sets the line number; numbered, it keeps strict framing");
+	CHECK(parse(&ln, "G90", &c) == FB_ERR_NO_CHECKSUM && ln.last == 100, "still strict");
+	CHECK(parse(&ln, "M110", &c) == FB_OK && ln.last == 0 && !ln.numbered,
+	      "M110 without N resets and ends strict framing");
+	CHECK(parse(&ln, "G91", &c) == FB_OK && ln.last == 1, "unnumbered line counts");
+	framed(buf, sizeof buf, "G90");
+	CHECK(parse(&ln, buf, &c) == FB_OK && ln.last == 2, "checksum without N");
 	CHECK(parse(&ln, "M110", &c) == FB_OK && ln.last == 0, "M110 without N resets");
 	framed(buf, sizeof buf, "G90");
 	CHECK(parse(&ln, buf, &c) == FB_OK && ln.last == 1, "checksum without N");
@@ -450,6 +467,10 @@ static void test_app(void)
 	expect(buf, "ok\r\n");
 	tick(100);
 	expect("?", "<Idle|A:0,B:0|Q:0|Ln:1,1|L:0|U:3|H:0>\r\n");
+	/* strict framing until an unnumbered M110 (or a reset) */
+	expect("G1 A5 P1000\n$I\n", "error:10 resend:2\r\nerror:10 resend:2\r\n");
+	expect("M110\nG90\n", "ok\r\nok\r\n");
+	expect("?", "<Idle|A:0,B:0|Q:0|Ln:1,1|L:0|U:3|H:0>\r\n");
 
 	/* hold before the job starts, then resume */
 	expect("!", "");
@@ -527,8 +548,6 @@ static void test_app(void)
 	CHECK(strncmp(poll_out(50), "error:18", 8) == 0, "overflow reported");
 	expect("$I\n", "fivebar " FB_VERSION " proto:1 rx:128 queue:16 line:80\r\nok\r\n");
 }
-
-#define BANNER "fivebar " FB_VERSION " proto:1 rx:128 queue:16 line:80\r\n"
 
 static int count_of(const char *hay, const char *needle)
 {
@@ -637,6 +656,31 @@ static void test_homed_flag(void)
 	expect("?", "<Idle|A:1,B:-10|Q:0|Ln:0,0|L:0|U:0|H:0>\r\n");
 }
 
+/* Strict framing in the firmware: refused lines are not executed; a Ctrl-X ends it. */
+static void test_strict_framing(void)
+{
+	char buf[64];
+	int32_t zero[2] = { 0, 0 };
+	fb_rx_isr(0x18);
+	fb_poll();
+	fake_reset();
+	mo_set_pos(zero);
+	fb_setup();
+	fake_take_tx();
+	expect("$I\n", BANNER "ok\r\n"); /* a host that never numbers lines */
+	framed(buf, sizeof buf, "N2 G90");
+	strcat(buf, "\n");
+	expect(buf, "ok\r\n");
+	expect("G1 A50 P100000\n", "error:10 resend:3\r\n");
+	tick(100);
+	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,2|L:0|U:0|H:0>\r\n");
+	CHECK(fake_nsteps == 0, "the refused line did not move");
+	send("\x18");
+	expect("", BANNER);
+	expect("$I\n", BANNER "ok\r\n"); /* a reset ends strict framing */
+	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,1|L:0|U:0|H:0>\r\n");
+}
+
 int main(void)
 {
 	test_crc();
@@ -651,6 +695,7 @@ int main(void)
 	test_app();
 	test_reset_while_a_line_waits();
 	test_homed_flag();
+	test_strict_framing();
 	printf("%d checks, %d failed\n", checks, failures);
 	return failures ? 1 : 0;
 }

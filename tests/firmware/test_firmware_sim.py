@@ -201,6 +201,7 @@ def assert_no_motion_and_alive(device: Device) -> None:
     """After refused input: no queued motion, and the firmware still answers."""
     report = device.session.status()
     assert (report.state, report.a, report.b, report.queued) == ("Idle", 0, 0, 0)
+    assert device.session.send("M110") == Ok()  # accepted in any mode; ends numbered mode
     assert device.session.send("$I") == Ok()
     trace = device.finish()
     assert trace.steps("A") == [] and trace.steps("B") == []
