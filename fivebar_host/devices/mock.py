@@ -4,10 +4,10 @@ The mock implements docs/protocol.md the way the firmware (firmware/fivebar/fb_m
 fb_proto.c, fb_motion.c) does, so host code and tests can run without hardware and without
 the AVR toolchain: the boot banner on open (as the Uno's DTR reset sends it), a receive
 buffer of the banner's size whose excess bytes are lost (``error:18``), line framing with
-line numbers, CRC-8 and resend requests, every command and setting, soft limits, homing
-and the endstop alarm against simulated switches, the segment queue with its start rule
-and its blocking (its slots hold the waiting blocks and the one executing; a line that
-needs a slot waits, unanswered, until one frees), exact DDA step timing, hold / resume /
+line numbers, CRC-8, strict framing and resend requests, every command and setting, soft
+limits, homing and the endstop alarm against simulated switches, the segment queue with its
+start rule and its blocking (its slots hold the waiting blocks and the one executing; a line
+that needs a slot waits, unanswered, until one frees), exact DDA step timing, hold / resume /
 reset, the laser safety rules, and status reports in the firmware's format.  The contract suite
 (tests/contract/) runs the same tests against this mock and the real firmware in simavr.
 
@@ -414,14 +414,20 @@ class Parsed:
     last: int  # the line counter afterwards
     accepted: bool  # False for error 8, 9, 10 and a malformed N: the counter is unchanged
     command: Command
+    numbered: bool = False  # strict framing afterwards (fb_lines_t.numbered)
 
 
-def parse_line(last: int, line: bytes) -> Parsed:
+def parse_line(last: int, line: bytes, numbered: bool = False) -> Parsed:
     """Frame and parse one received line (without its newline) as the firmware does.
 
     On ``error:8/9/10`` and a malformed ``N`` the line is not accepted and ``last`` is
     unchanged; every other outcome accepts it: ``last`` becomes N (M110: its N or 0), or
     last+1 for a line without N, and a parse error is replied after that.
+
+    ``numbered`` is the strict-framing state: once a numbered line was accepted, a line
+    without N is refused with ``error:10`` (not accepted, not executed) until an
+    unnumbered ``M110`` (which ends it) or a reset.  ``Parsed.numbered`` is the state after
+    the line.
     """
     cmd = Command()
     end = len(line)
@@ -434,25 +440,27 @@ def parse_line(last: int, line: bytes) -> Parsed:
             i += 1
             digits += 1
         if not digits or digits > 3 or want > 255 or _skip_ws(line, i, len(line)) < len(line):
-            return Parsed(E_CHECKSUM, last, False, cmd)
+            return Parsed(E_CHECKSUM, last, False, cmd, numbered)
         if crc8(line[:end]) != want:
-            return Parsed(E_CHECKSUM, last, False, cmd)
+            return Parsed(E_CHECKSUM, last, False, cmd, numbered)
     i = _skip_ws(line, 0, end)
     if i < end and _upper(line[i]) == ord("N"):
         if star < 0:
-            return Parsed(E_NO_CHECKSUM, last, False, cmd)
+            return Parsed(E_NO_CHECKSUM, last, False, cmd, numbered)
         st, n, i = _parse_uint(line, i + 1, end, 0xFFFFFFFF)
         if st != OK:
-            return Parsed(E_BAD_NUMBER, last, False, cmd)
+            return Parsed(E_BAD_NUMBER, last, False, cmd, numbered)
         cmd.n = n
     st = _parse_body(line, i, end, cmd)
     if st == OK and cmd.kind == "M110":
-        return Parsed(OK, cmd.n if cmd.n is not None else 0, True, cmd)
+        return Parsed(OK, cmd.n if cmd.n is not None else 0, True, cmd, cmd.n is not None)
     if cmd.n is not None:
         if cmd.n != (last + 1) & 0xFFFFFFFF:
-            return Parsed(E_LINE_NUMBER, last, False, cmd)
-        return Parsed(st, cmd.n, True, cmd)
-    return Parsed(st, (last + 1) & 0xFFFFFFFF, True, cmd)
+            return Parsed(E_LINE_NUMBER, last, False, cmd, numbered)
+        return Parsed(st, cmd.n, True, cmd, True)
+    if numbered:  # strict framing: a numbered host's line that lost its N and checksum
+        return Parsed(E_NO_CHECKSUM, last, False, cmd, numbered)
+    return Parsed(st, (last + 1) & 0xFFFFFFFF, True, cmd, False)
 
 
 # --------------------------------------------------------------------------- motion
@@ -612,6 +620,7 @@ class MockFirmware:
         self.done_line = 0
         self.underruns = 0
         self.last = 0
+        self.numbered = False  # strict framing (fb_lines_t.numbered)
         self.absolute = True
         self.laser_on = False
         self.laser_s = 0
@@ -991,14 +1000,14 @@ class MockFirmware:
         elif over:
             self._finish(E_LINE_TOO_LONG)
         else:
-            before = self.last
-            parsed = parse_line(self.last, data)
-            self.last = parsed.last
+            before = self.last, self.numbered
+            parsed = parse_line(self.last, data, self.numbered)
+            self.last, self.numbered = parsed.last, parsed.numbered
             st = parsed.status
             if self.opt.error_on == k and st == OK:
                 st = self.opt.error_code  # the injected refusal
                 if st in RESEND_CODES:
-                    self.last = before
+                    self.last, self.numbered = before
             if st != OK:
                 self._finish(st)
             else:

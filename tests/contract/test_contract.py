@@ -62,6 +62,7 @@ def assert_nothing_executed(dev: Device) -> None:
     report = dev.session.status()
     assert (report.state, report.a, report.b, report.queued, report.laser) == (
         "Idle", 0, 0, 0, 0)
+    assert dev.session.send("M110") == Ok()  # accepted in any mode; ends numbered mode
     assert dev.session.send("$I") == Ok()
     done = dev.executed()
     assert done.steps == (0, 0), f"{dev.kind}: motors stepped after refused input"
@@ -153,8 +154,8 @@ def test_line_counter_rules(device: Device) -> None:
     s = device.session
     assert s.send("G90") == Ok()  # implicit 1
     assert s.send("G5") == ErrorReply(4)  # refused but accepted: implicit 2
-    assert s.send("G90", line_number=3) == Ok()
-    assert s.send_raw(protocol.encode_line("G90", checksum=True)) == Ok()  # implicit 4
+    assert s.send_raw(protocol.encode_line("G90", checksum=True)) == Ok()  # implicit 3
+    assert s.send("G90", line_number=4) == Ok()
     assert s.status().accepted_line == 4
     assert s.send("M110", line_number=100) == Ok()
     assert s.status().accepted_line == 100
@@ -162,6 +163,34 @@ def test_line_counter_rules(device: Device) -> None:
     assert s.send("M110") == Ok()  # without N: counter to 0
     assert s.send("G90", line_number=1) == Ok()
     assert_nothing_executed(device)
+
+
+def test_after_a_numbered_line_every_line_must_be_numbered(device: Device) -> None:
+    # Strict framing (docs/protocol.md 5.2): a numbered line that lost both its "N<n> " and
+    # its "*<crc>" to line noise must not run as an unnumbered line.
+    s = device.session
+    got = replies_to(device, b"$I\n", 1)  # a host that does not number lines yet
+    assert got == [device.banner, Ok()]
+    assert s.send("G91", line_number=2) == Ok()
+    for line in (b"G1 A50 P10000\n", protocol.encode_line("G1 A50 P10000", checksum=True),
+                 b"\n", b"$I\n", b"G5\n", b"M110 A1\n"):
+        assert s.send_raw(line) == ErrorReply(10, resend=3), line  # refused, not executed
+    r = s.status()
+    assert (r.state, r.a, r.accepted_line) == ("Idle", 0, 2)
+    assert s.send("G1 A7 P10000", line_number=3) == Ok()
+    assert idle(device).a == 7
+    assert s.send("M110", line_number=10) == Ok()  # a numbered M110 keeps numbered mode
+    assert s.send("G90") == ErrorReply(10, resend=11)
+    assert s.send("M110") == Ok()  # a plain M110 ends it
+    assert s.send("G90") == Ok()
+    assert s.send("G91", line_number=2) == Ok()
+    assert s.send("G90") == ErrorReply(10, resend=3)
+    s.realtime(protocol.RT_RESET)  # so does a reset
+    s.wait_banner()
+    assert s.send("G90") == Ok()
+    r = idle(device)
+    assert (r.a, r.b, r.accepted_line) == (7, 0, 1)
+    assert device.executed().steps == (7, 0)
 
 
 def test_realtime_bytes_inside_a_line_are_not_part_of_it(device: Device) -> None:

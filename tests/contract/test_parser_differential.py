@@ -5,7 +5,9 @@ framed and parsed as usual, but nothing moves and nothing is queued, so the repl
 not depend on timing and the two transcripts must be equal line for line.  The lines
 come from a seeded generator: commands, words and numbers of every shape, line numbers
 and checksums (right, wrong, malformed), comments, whitespace, case, overlong lines and
-random byte edits.  ``$H`` and ``$X`` are left out (they would end the alarm).
+random byte edits.  ``$H`` and ``$X`` are left out (they would end the alarm).  A plain
+``M110`` now and then ends numbered mode (strict framing), so unnumbered lines keep being
+parsed, not only refused with ``error:10``.
 """
 
 from __future__ import annotations
@@ -106,7 +108,12 @@ def transcript(dev: Device, lines: list[bytes]) -> list[list[Message]]:
 def test_the_mock_answers_every_line_like_the_firmware(sim_build: sim.BuildPaths,
                                                       tmp_path: Path) -> None:
     rng = random.Random(20261121)
-    lines = [random_line(rng) for _ in range(600)]
+    gaps = random.Random(5)
+    lines = []
+    for _ in range(600):
+        if gaps.random() < 0.3:
+            lines.append(b"M110")
+        lines.append(random_line(rng))
     mock_dev = open_mock()
     sim_dev = open_sim(sim_build, tmp_path / "pins.trace")
     try:
