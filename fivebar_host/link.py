@@ -137,11 +137,14 @@ class Link:
         """Wait for the boot banner (opening a port resets an Arduino through DTR).
 
         If nothing arrives within a third of the timeout the device may have been running
-        already (no reset on open): ask with `$I`. Checks the protocol version, then reads
-        the firmware's line counter from a status report.
+        already (no reset on open): ask with `$I`. A device left in numbered mode by an
+        earlier session refuses that unnumbered line with `error:10 resend:<n>`
+        (docs/protocol.md 5.2); then ask again as line n. Checks the protocol version, then
+        reads the firmware's line counter from a status report.
         """
         deadline = time.monotonic() + timeout_s
         asked = False
+        asked_numbered = False
         seen: list[str] = []
         while time.monotonic() < deadline:
             if not asked and time.monotonic() > deadline - 2 * timeout_s / 3:
@@ -156,6 +159,10 @@ class Link:
                     continue
                 if isinstance(msg, Banner):
                     self.banner = msg
+                elif (asked and not asked_numbered and isinstance(msg, ErrorReply)
+                      and msg.code == 10 and msg.resend is not None):
+                    self._write(protocol.encode_line("$I", line_number=msg.resend))
+                    asked_numbered = True
             if self.banner is not None:
                 break
         if self.banner is None:
