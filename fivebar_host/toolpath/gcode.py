@@ -23,7 +23,14 @@ import re
 from pathlib import Path
 
 from fivebar_host.errors import InputError
-from fivebar_host.toolpath.geometry import ARC, LINE, MAX_COORD_MM, Drawing, DrawingBuilder
+from fivebar_host.toolpath.geometry import (
+    ARC,
+    LINE,
+    MAX_COORD_MM,
+    Drawing,
+    DrawingBuilder,
+    read_source,
+)
 
 _WORD = re.compile(r"([A-Za-z])\s*([+-]?(?:\d+\.?\d*|\.\d+))")
 _PAREN = re.compile(r"\([^)]*\)")
@@ -53,14 +60,7 @@ def _strip(raw: str, file: str, ln: int) -> str:
 
 def read_gcode(source: str | Path | bytes, file: str | None = None) -> Drawing:
     """Read a G-code file (path or bytes) into a `Drawing` in mm (frame as written, y up)."""
-    if isinstance(source, bytes):
-        data, name = source, file or "<gcode>"
-    else:
-        name = file or str(source)
-        try:
-            data = Path(source).read_bytes()
-        except OSError as e:
-            raise InputError(f"cannot read file: {e.strerror or e}", name) from e
+    data, name = read_source(source, file, "<gcode>")
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as e:

@@ -21,9 +21,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
+
+from fivebar_host.errors import InputError
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -415,3 +418,14 @@ def nearest_distance(kind: NDArray[np.int8], params: FloatArray, q: FloatArray,
             best = np.minimum(best, np.hypot(*(evaluate(k, p, t) - qq).T))
         out[cur] = best
     return out
+
+
+def read_source(source: str | Path | bytes, file: str | None, default: str) -> tuple[bytes, str]:
+    """The bytes of a drawing given as a path or as bytes, and the name errors should use."""
+    if isinstance(source, bytes):
+        return source, file or default
+    name = file or str(source)
+    try:
+        return Path(source).read_bytes(), name
+    except OSError as e:
+        raise InputError(f"cannot read file: {e.strerror or e}", name) from e

@@ -41,6 +41,7 @@ from fivebar_host.toolpath.geometry import (
     MAX_COORD_MM,
     Drawing,
     DrawingBuilder,
+    read_source,
 )
 
 SVG_NS = "http://www.w3.org/2000/svg"
@@ -510,14 +511,7 @@ def read_svg(source: str | Path | bytes, layers: Sequence[str] | None = None,
 
     `layers`: Inkscape layer labels or ids to draw (None: everything visible).
     """
-    if isinstance(source, bytes):
-        data, name = source, file or "<svg>"
-    else:
-        name = file or str(source)
-        try:
-            data = Path(source).read_bytes()
-        except OSError as e:
-            raise InputError(f"cannot read file: {e.strerror or e}", name) from e
+    data, name = read_source(source, file, "<svg>")
     root = _parse_xml(data, name)
     if root.tag != "svg":
         raise InputError(f"root element is <{root.tag}>, not <svg>", name, root.line)
