@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fivebar_host.config import load_profile
+from fivebar_host.config import Profile, load_profile
 from fivebar_host.devices.sim import toolchain_missing
 from fivebar_host.devices.simtrace import Trace, read_trace
 from fivebar_host.executed import executed_path, merge_axes
@@ -34,15 +34,21 @@ def _laser_steps(tr: Trace) -> np.ndarray:
     return out
 
 
+def _compiled_copy(tmp_path: Path, example: str) -> tuple[Path, Profile, Job]:
+    """A private copy of a bundled drawing (its resume file lands beside it), compiled with
+    the default profile."""
+    drawing = tmp_path / example
+    shutil.copy(EXAMPLES / example, drawing)
+    prof = load_profile()
+    return drawing, prof, compile_job(drawing, prof, CompileOptions())
+
+
 def _planned_draw_steps(job: Job) -> np.ndarray:
     return np.asarray(np.abs(np.diff(job.steps, axis=0))[job.draw].sum(axis=0))
 
 
 def test_svg_to_pulses_within_tolerance_and_laser_only_while_drawing(tmp_path: Path) -> None:
-    drawing = tmp_path / "text.svg"
-    shutil.copy(EXAMPLES / "fivebar_text.svg", drawing)
-    prof = load_profile()
-    job = compile_job(drawing, prof, CompileOptions())
+    drawing, prof, job = _compiled_copy(tmp_path, "fivebar_text.svg")
     trace = tmp_path / "pins.trace"
     link = Link.open(f"fivebar-sim://?trace={trace}")
     try:
@@ -65,10 +71,7 @@ def test_svg_to_pulses_within_tolerance_and_laser_only_while_drawing(tmp_path: P
 
 
 def test_abort_mid_job_then_resume_draws_each_step_once(tmp_path: Path) -> None:
-    drawing = tmp_path / "simple.svg"
-    shutil.copy(EXAMPLES / "simple.svg", drawing)
-    prof = load_profile()
-    job = compile_job(drawing, prof, CompileOptions())
+    drawing, prof, job = _compiled_copy(tmp_path, "simple.svg")
     trace = tmp_path / "pins.trace"
     link = Link.open(f"fivebar-sim://?trace={trace}&realtime=1")
     stop = {"now": False}
@@ -103,10 +106,7 @@ def test_error_reply_mid_job_then_exact_resume(tmp_path: Path) -> None:
     """A refused line mid-job (soft limit, error:11) on the real firmware: the machine holds
     with the laser off, the host names the fault and position, and the resume draws each
     remaining step once."""
-    drawing = tmp_path / "simple.svg"
-    shutil.copy(EXAMPLES / "simple.svg", drawing)
-    prof = load_profile()
-    job = compile_job(drawing, prof, CompileOptions())
+    drawing, prof, job = _compiled_copy(tmp_path, "simple.svg")
     a = job.steps[:, 0]
     # A soft limit on motor A that the first third of the job respects and a later target
     # crosses: the firmware refuses that line.
