@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from kinematics.nbar import Mechanism, Simulation, Status, parse_mechanism, sweep
+from kinematics.nbar import Mechanism, Simulation, Status, parse_mechanism, simulate, sweep
 
 MECH = Path(__file__).resolve().parent.parent / "configs" / "mechanisms"
 ALL = sorted(p.stem for p in MECH.glob("*.toml"))
@@ -145,6 +145,21 @@ def test_watt1_has_a_limited_input_range_traced_both_ways() -> None:
     assert math.degrees(hi) == pytest.approx(97.06, abs=0.05)
     assert math.degrees(lo) == pytest.approx(-43.37, abs=0.05)
     assert len(sim.status) < 180
+
+
+def test_watt1_return_after_the_limit_matches_solving_every_row() -> None:
+    """Back from the first limit the sweep replays the states it solved on the way out and
+    then continues past the start: every row after the reversal equals an independent
+    `simulate` over the same inputs (each row solved by Newton from its neighbour)."""
+    sim = run("spherical_watt1")
+    mech = sim.mechanism
+    r0 = sim.reversed_at
+    assert r0 is not None
+    back = np.arange(r0 + 1, len(sim.status) - 1)  # after the turn, before the second limit
+    assert np.any(sim.inputs[back, 0] < sim.inputs[0, 0])  # it went past the start
+    ref = simulate(mech, sim.inputs[back, 0])
+    assert ref.completed
+    assert np.abs(ref.coords - sim.coords[back]).max() < 1e-9 * mech.size
 
 
 def test_rounded_spherical_tables_are_projected_and_reported() -> None:

@@ -36,8 +36,12 @@ EQUATIONS: dict[str, str] = {
 
 
 def _dot(u: FloatArray, v: FloatArray) -> FloatArray:
-    """Row-wise dot product over the last axis."""
-    return np.asarray(np.einsum("...i,...i->...", u, v), dtype=np.float64)
+    """Row-wise dot product over the last axis (2 or 3 wide here: summed component by
+    component, several times faster than einsum or a reduction on such short rows)."""
+    out = u[..., 0] * v[..., 0]
+    for i in range(1, u.shape[-1]):
+        out = out + u[..., i] * v[..., i]
+    return np.asarray(out, dtype=np.float64)
 
 
 def rr_value(a: FloatArray, b: FloatArray, r: FloatArray | float) -> FloatArray:

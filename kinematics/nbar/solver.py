@@ -38,7 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from kinematics.nbar.constraints import FloatArray
 from kinematics.nbar.model import Mechanism, Settings
-from kinematics.nbar.system import CONTRACTION, newton, solve
+from kinematics.nbar.system import CONTRACTION, newton_raw, solve
 
 #: Newton may correct the predictor by at most this fraction of the predicted motion.
 CONTINUITY = 0.5
@@ -220,6 +220,7 @@ class _Tracker:
         self.arc = 0.0  # several inputs: arc length of the input path to the current state
         self.line: FloatArray | None = None  # sweeps: parameter = step index along `line`
         self.tangent_cache: FloatArray | None = None
+        self.h3v: FloatArray | None = None  # `fold_limit`'s layout of the Hessians, built once
         self.s_new = self.h_new = 0.0  # path parameter and length of the step being tried
         self.e_new = self.direction
         sysm = self.sys
@@ -300,6 +301,22 @@ class _Tracker:
         self.hist_s = list(snap.hist_s)
         self.last_m2, self.last_h, self.arc = snap.last_m2, snap.last_h, snap.arc
         self.direction = snap.direction
+        self.tangent_cache = None
+
+    def replay(self, us: FloatArray, qs: list[FloatArray]) -> None:
+        """Move to the last of `qs` (states at inputs `us`, in the order passed, one grid step
+        apart along the sweep line), known without solving, with them as the predictor's
+        history."""
+        self.hist_s = []
+        self.run = 0
+        for u, q in zip(us, qs, strict=True):
+            self._push(q, self._param(u))
+        self.u, self.q = us[-1], qs[-1]
+        if len(qs) >= 2:
+            d = qs[-1] - qs[-2]
+            self.last_m2, self.last_h = float(d @ d), 1.0
+        else:
+            self.last_m2 = 0.0
         self.tangent_cache = None
 
     def _reset_history(self, direction: FloatArray) -> None:
@@ -397,7 +414,7 @@ class _Tracker:
         """
         q_pred = self.predict(u_new)
         self._set_inputs(u_new, pre)
-        res = newton(self.sys, self.x, q_pred, self.tol, self.max_iter)
+        res = newton_raw(self.sys, self.x, q_pred, self.tol, self.max_iter)
         if not res.converged:
             return False, res.iterations, res.residual, (
                 "no convergence" if math.isfinite(res.residual) else "diverged")
@@ -537,13 +554,10 @@ class _Tracker:
             q_new = q_pred - step
             its = 1
             if not bound * c2 <= accept:  # the bound is not enough: look at the residual
-                x[:n] = q_new
-                g2 = (hsm @ x).reshape(m, -1)
-                phi2 = 0.5 * (g2 @ x)
-                if not float(phi2 @ phi2) <= self.tol2:  # not converged: carry on with Newton
-                    more = newton(self.sys, x, q_new, self.tol, self.max_iter - 1)
-                    if not more.converged:
-                        break
+                more = newton_raw(self.sys, x, q_new, self.tol, self.max_iter - 1)
+                if not more.converged:
+                    break
+                if more.iterations:  # not converged yet at q_new: Newton carried on
                     q_new, its = more.q, 1 + more.iterations
                     dc = q_new - q_pred
                     c2 = float(dc @ dc)
@@ -647,10 +661,21 @@ class _Tracker:
         self._set_inputs(start, None)
         x[n:-1] = self.x[n:-1]
         g = (self.hs @ x).reshape(m, -1)
-        try:
-            v = np.linalg.svd(g[:, :n])[2][-1].copy()
-        except np.linalg.LinAlgError:
-            return None
+        # Start from the last step's direction: approaching a fold, q' = −J⁻¹Φ_u turns into
+        # the null vector of J (its smallest singular direction dominates). Without two
+        # states to take it from, from the SVD of J.
+        v = self.ring[self.slot] - self.ring[(self.slot - 1) % HISTORY]
+        nv = math.sqrt(float(v @ v)) if len(self.hist_s) >= 2 else 0.0
+        if nv > 0.0:
+            v = v / nv
+        else:
+            try:
+                v = np.linalg.svd(g[:, :n])[2][-1].copy()
+            except np.linalg.LinAlgError:
+                return None
+        if self.h3v is None:  # rows i, columns (r, j): (H_r + H_rᵀ)[i, j] on the unknowns i
+            self.h3v = np.ascontiguousarray(h3[:, :n, :].transpose(1, 0, 2).reshape(n, -1))
+        h3v = self.h3v
         c = v.copy()
         a_mat = np.zeros((2 * n + 1, 2 * n + 1))
         a_mat[2 * n, n + 1:] = c
@@ -666,7 +691,7 @@ class _Tracker:
             g = (self.hs @ x).reshape(m, -1)
             dxd, dsq = basis.derivatives(u)
             xdot = np.concatenate((dxd @ d, dsq @ d))
-            hv = np.einsum("i,rij->rj", v, h3[:, :n, :])  # row r: vᵀ (H_r + H_rᵀ)[:n, :]
+            hv = (v @ h3v).reshape(m, -1)  # row r: vᵀ (H_r + H_rᵀ)[:n, :]
             jac = g[:, :n]
             a_mat[:n, :n] = jac
             a_mat[:n, n] = g[:, n:-1] @ xdot
@@ -678,7 +703,7 @@ class _Tracker:
             rhs[n:2 * n] = jac @ v
             rhs[2 * n] = c @ v - 1.0
             step = solve(a_mat, rhs)
-            if not np.all(np.isfinite(step)):
+            if not math.isfinite(float(step @ step)):
                 return None
             q = q - step[:n]
             t -= float(step[n])
@@ -700,13 +725,18 @@ class _Tracker:
             return None
         dxd, dsq = basis.derivatives(u_star)
         phi_t = g[:, n:-1] @ np.concatenate((dxd @ d, dsq @ d))
-        try:
-            uu, _, vt = np.linalg.svd(g[:, :n])
-        except np.linalg.LinAlgError:
-            return None
-        w, vn = uu[:, -1], vt[-1]
-        curv = float(w @ (np.einsum("i,rij,j->r", vn, h3[:, :n, :n], vn)))
-        k = 2.0 * float(w @ phi_t) / curv if curv != 0.0 else -1.0
+        # Left null vector w of J from the bordered system [Jᵀ v; Φ_tᵀ 0][w; s] = [0; 1]:
+        # J v = 0 makes s = 0, so Jᵀw = 0 with w·Φ_t = 1 (non-singular at a simple fold).
+        vn = v / math.sqrt(float(v @ v))
+        border = np.zeros((n + 1, n + 1))
+        border[:n, :n] = g[:, :n].T
+        border[:n, n] = vn
+        border[n, :n] = phi_t
+        e_last = np.zeros(n + 1)
+        e_last[n] = 1.0
+        w = solve(border, e_last)[:n]
+        curv = float(w @ ((vn @ h3v).reshape(m, -1)[:, :n] @ vn))  # w·vᵀ∇²Φv
+        k = 2.0 / curv if curv != 0.0 and math.isfinite(curv) else -1.0
         if not k > 0.0:  # degenerate, or the input turns the other way at this fold
             return None
         off = q0 - q
@@ -721,7 +751,7 @@ class _Tracker:
         alpha = sign * math.sqrt(k * quarter)
         q_start = q + alpha * vn
         self._set_inputs(u_r, None)
-        res = newton(self.sys, self.x, q_start, self.tol, self.max_iter)
+        res = newton_raw(self.sys, self.x, q_start, self.tol, self.max_iter)
         if not res.converged:
             return None
         dc = res.q - q_start
@@ -811,7 +841,17 @@ def simulate(mech: Mechanism, inputs: ArrayLike, *, tolerance: float | None = No
     limits: list[LimitReport] = []
     locked = _locked(tr)
     same = np.all(u_all == np.vstack((tr.u, u_all[:-1])), axis=1)  # input unchanged
-    for k in range(n_rows):
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        _follow(tr, u_all, xd_tab, s_tab, same, locked, q, out_u, iters, subs, status, limits)
+    return _finish(mech, out_u, q, iters, subs, status, limits, None)
+
+
+def _follow(tr: _Tracker, u_all: FloatArray, xd_tab: FloatArray, s_tab: FloatArray,
+            same: NDArray[np.bool_], locked: str | None, q: FloatArray, out_u: FloatArray,
+            iters: list[int], subs: list[int], status: list[Status],
+            limits: list[LimitReport]) -> None:
+    """`simulate`'s loop: advance through every row, filling the output lists in place."""
+    for k in range(u_all.shape[0]):
         if same[k] and (k == 0 or status[k - 1] <= Status.SUBDIVIDED):
             st, it, sb, why, failed, res = Status.OK, 0, 0, "", tr.u, 0.0
         elif locked is not None:
@@ -835,7 +875,6 @@ def simulate(mech: Mechanism, inputs: ArrayLike, *, tolerance: float | None = No
             break
         status[k] = st
         q[k] = tr.q
-    return _finish(mech, out_u, q, iters, subs, status, limits, None)
 
 
 def _locked(tr: _Tracker) -> str | None:
@@ -891,6 +930,21 @@ def sweep(mech: Mechanism, steps: int | None = None, step: ArrayLike | None = No
     taken = 0
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         while taken < n_steps:
+            if reversed_at is not None and 0 < index < reversed_at:
+                # Back over the grid points solved on the way out: the same branch, the same
+                # inputs, so the same states; replay them rather than solve them again.
+                k = min(index, n_steps - taken)
+                rows = range(index - 1, index - 1 - k, -1)
+                us.extend(us[r] for r in rows)
+                qs.extend(qs[r] for r in rows)
+                iters.extend([0] * k)
+                subs.extend([0] * k)
+                status.extend([Status.OK] * k)
+                index -= k
+                taken += k
+                tr.replay(grid[offset + index + np.arange(min(k, HISTORY) - 1, -1, -1)],
+                          [qs[-j] for j in range(min(k, HISTORY), 0, -1)])
+                continue
             k = tr.run_fast(offset + index, direction, n_steps - taken, grid, xd_tab, s_tab,
                             us, qs, iters)
             if k:

@@ -196,6 +196,13 @@ class NewtonResult(NamedTuple):
 
 def newton(system: QuadraticSystem, x: FloatArray, q0: FloatArray, tol: float,
            max_iter: int, monotone: bool = True) -> NewtonResult:
+    """`newton_raw` with the floating-point warnings of a singular step silenced."""
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        return newton_raw(system, x, q0, tol, max_iter, monotone)
+
+
+def newton_raw(system: QuadraticSystem, x: FloatArray, q0: FloatArray, tol: float,
+               max_iter: int, monotone: bool = True) -> NewtonResult:
     """Algorithm 1, lines 4–12: Newton–Raphson (Eq. 24) from q0, the driven part of x set.
 
     Converged when ‖Φ‖₂ ≤ tol (which bounds every scaled residual). For a square system the
@@ -205,7 +212,9 @@ def newton(system: QuadraticSystem, x: FloatArray, q0: FloatArray, tol: float,
     from the normal equations JᵀJΔ = JᵀΦ. `monotone` gives up as soon as an iteration fails to
     cut ‖Φ‖ tenfold: from a good predictor Newton converges quadratically, so slower progress
     means the step was too large (or past a limit) and the caller should subdivide. x is
-    overwritten.
+    overwritten. A singular Jacobian gives a non-finite step (reported as not converged) and
+    raises numpy's floating-point flags: the caller runs this under `np.errstate` (once per
+    sweep rather than once per step, which would cost a third of a step).
     """
     n = system.n_u
     m = system.m
@@ -218,27 +227,26 @@ def newton(system: QuadraticSystem, x: FloatArray, q0: FloatArray, tol: float,
     prev = math.inf
     it = 0
     d2 = 0.0
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        while True:
+    while True:
+        x[:n] = q
+        g = (hs @ x).reshape(m, -1)
+        phi = 0.5 * (g @ x)
+        r2 = float(phi @ phi)
+        if r2 <= tol2:
+            return NewtonResult(q, it, math.sqrt(r2), True, d2)
+        if it >= max_iter or not r2 < math.inf or (monotone and r2 > CONTRACTION * prev):
+            return NewtonResult(q, it, math.sqrt(r2), False, d2)
+        prev = r2
+        jac = g[:, :n]
+        try:
+            step = solve(jac.T @ jac, jac.T @ phi) if lsq else solve(jac, phi)
+        except np.linalg.LinAlgError:
+            return NewtonResult(q, it, math.sqrt(r2), False, d2)
+        d2 = float(step @ step)
+        if not d2 < math.inf:  # singular Jacobian
+            return NewtonResult(q, it, math.sqrt(r2), False, d2)
+        q = q - step
+        it += 1
+        if not lsq and bound * d2 <= accept:
             x[:n] = q
-            g = (hs @ x).reshape(m, -1)
-            phi = 0.5 * (g @ x)
-            r2 = float(phi @ phi)
-            if r2 <= tol2:
-                return NewtonResult(q, it, math.sqrt(r2), True, d2)
-            if it >= max_iter or not r2 < math.inf or (monotone and r2 > CONTRACTION * prev):
-                return NewtonResult(q, it, math.sqrt(r2), False, d2)
-            prev = r2
-            jac = g[:, :n]
-            try:
-                step = solve(jac.T @ jac, jac.T @ phi) if lsq else solve(jac, phi)
-            except np.linalg.LinAlgError:
-                return NewtonResult(q, it, math.sqrt(r2), False, d2)
-            d2 = float(step @ step)
-            if not d2 < math.inf:  # singular Jacobian
-                return NewtonResult(q, it, math.sqrt(r2), False, d2)
-            q = q - step
-            it += 1
-            if not lsq and bound * d2 <= accept:
-                x[:n] = q
-                return NewtonResult(q, it, bound * d2, True, d2)
+            return NewtonResult(q, it, bound * d2, True, d2)
