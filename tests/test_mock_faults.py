@@ -265,22 +265,70 @@ def test_disconnect_after_n_lines() -> None:
     port.close()
 
 
-def test_reset_after_n_lines_reboots_mid_job() -> None:
-    port = open_mock("reset_after=4&speed=10")
-    for line in ("$0=1234", "M3 S255", "G1 A1000 P1000000"):
-        assert reply(port, line) == Ok()
-    time.sleep(0.05)  # the move runs (0.1 s at speed 10)
-    port.write(b"G1 A2000 P1000000\nG90\n")  # line 4, then the reboot; G90 is lost
+def _reset_mid_segment(fault: str) -> tuple[MockSerial, StatusReport]:
+    """Numbered lines 1-6 (a G92, one short and one long segment with the laser on), the
+    fault firing after line 6 while line 5 runs; returns the port and the status after it."""
+    port = open_mock(f"{fault}=6&speed=10")
+    for n, line in enumerate(("$0=1234", "M3 S255", "G92 A10 B-5", "G1 A110 P100000",
+                              "G1 A1110 B95 P1000000"), start=1):
+        assert reply(port, protocol.encode_line(line, n)) == Ok()
+    time.sleep(0.05)  # line 5 runs (0.1 s at speed 10)
+    # line 6, then the reset; line 7 is lost with the rest of the write
+    port.write(protocol.encode_line("G1 A2110 P1000000", 6) + protocol.encode_line("G90", 7))
     assert messages(port) == [Ok(), Banner("1.0.0", 1, 128, 16, 80)]
     assert messages(port, 0.03) == []
-    st = status(port)
-    assert (st.state, st.a, st.queued, st.done_line, st.accepted_line, st.laser) == (
-        "Idle", 0, 0, 0, 0, 0)
-    assert reply(port, "$$") == Ok()
-    (entry,) = [e for e in port.ledger if e.kind == "G1"]
-    assert entry.stopped == "reboot" and 0 < entry.fraction < 1
-    assert entry.end[0] == port.firmware.physical()[0] > 0  # type: ignore[union-attr]
+    entries = [e for e in port.ledger if e.kind == "G1"]
+    assert [e.line for e in entries] == [4, 5]
+    assert entries[1].stopped == ("reboot" if fault == "reset_after" else "power-cut")
+    assert 0 < entries[1].fraction < 1
     assert port.machine.laser == 0
+    return port, status(port)
+
+
+def _after_boot_as_at_power_on(port: MockSerial, st: StatusReport) -> None:
+    """Everything but position, H and Ln done restarts as at power-on."""
+    assert (st.state, st.queued, st.accepted_line, st.laser, st.underruns) == (
+        "Idle", 0, 0, 0, 0)
+    port.write(protocol.encode_line("$$"))
+    assert port.readline().decode().rstrip() == "$0=20000"  # settings at their boot values
+    assert reply(port, b"") == Ok()  # the rest of the listing, then its ok
+    assert reply(port, "G1 P10000") == Ok()  # unnumbered: numbered mode ended
+    time.sleep(0.05)
+    assert port.ledger[-1].power == 0  # M5 again: the laser stays off
+
+
+def test_reset_after_n_lines_keeps_position_h_and_done() -> None:
+    """A reset with the RAM powered keeps A, B, H and Ln done (docs/protocol.md 7)."""
+    port, st = _reset_mid_segment("reset_after")
+    part = port.ledger[-1]
+    assert (st.a, st.b) == part.end and 110 < st.a < 1110  # exact, part-way along line 5
+    assert (st.done_line, st.homed) == (4, True)  # the line before the interrupted one
+    _after_boot_as_at_power_on(port, st)
+
+
+def test_power_cut_after_n_lines_loses_everything() -> None:
+    port, st = _reset_mid_segment("power_cut_after")
+    physical = port.firmware.physical()  # type: ignore[union-attr]
+    assert physical == tuple(port.machine.phys) and 100 < physical[0] < 1100
+    assert (st.a, st.b, st.done_line, st.homed) == (0, 0, 0, False)
+    _after_boot_as_at_power_on(port, st)
+
+
+def test_dtr_reset_keeps_position_h_and_done_while_ctrl_x_zeroes_ln() -> None:
+    port = open_mock("speed=0")
+    for n, line in enumerate(("G92 A7 B8", "G1 A20 B-3 P10000", "G90"), start=1):
+        assert reply(port, protocol.encode_line(line, n)) == Ok()
+    time.sleep(0.03)
+    assert status(port).done_line == 2
+    port.dtr = False
+    port.dtr = True
+    assert messages(port) == [Banner("1.0.0", 1, 128, 16, 80)]
+    st = status(port)
+    assert (st.a, st.b, st.homed, st.done_line, st.accepted_line) == (20, -3, True, 2, 0)
+    port.write(b"\x18")
+    assert messages(port) == [Banner("1.0.0", 1, 128, 16, 80)]
+    st = status(port)
+    assert (st.a, st.b, st.homed, st.done_line, st.accepted_line) == (20, -3, True, 0, 0)
 
 
 def test_error_on_line_k_refuses_it_like_the_firmware() -> None:
@@ -308,7 +356,8 @@ def test_error_on_with_a_resend_code() -> None:
 
 
 def test_stall_after_n_lines_freezes_everything_until_dtr_reset() -> None:
-    port = open_mock("stall_after=3&speed=1")
+    port = open_mock("stall_after=4&speed=1")
+    assert reply(port, "G92 A5") == Ok()
     assert reply(port, "M3 S200") == Ok()
     assert reply(port, "G1 A1000 P1000000") == Ok()
     time.sleep(0.05)  # the move runs
@@ -323,6 +372,9 @@ def test_stall_after_n_lines_freezes_everything_until_dtr_reset() -> None:
     port.dtr = True  # the Uno's auto-reset
     assert port.readline() == (BANNER + "\r\n").encode()
     assert port.machine.laser == 0 and port.ledger[-1].stopped == "reboot"
+    # the .noinit record survived the hang: where the motors froze, H, the G92's line done
+    st = status(port)
+    assert (st.a, st.b, st.homed, st.done_line) == (*frozen.end, True, 1)
     assert reply(port, "G90") == Ok()
 
 
@@ -379,8 +431,9 @@ def test_named_machine_survives_reopen_and_is_busy_while_open() -> None:
     with pytest.raises(serial.SerialException, match="busy"):
         serial.serial_for_url("fivebar-mock://?machine=m1")
     port.close()
-    again = open_mock("machine=m1&speed=0&endstops=-50,-10")  # a DTR reset: position 0
-    assert status(again).a == 0
+    again = open_mock("machine=m1&speed=0&endstops=-50,-10")  # a DTR reset: position kept
+    st = status(again)
+    assert (st.a, st.homed, st.done_line) == (-30, False, 1)
     for line in ("$7=1", "$9=5", "$12=1000"):
         assert reply(again, line) == Ok()
     assert reply(again, "$H") == Ok()  # the switch is 20 steps away now, not 50
@@ -388,6 +441,32 @@ def test_named_machine_survives_reopen_and_is_busy_while_open() -> None:
     assert kinds == [(1, "G1", (-30, 0)), (2, "home-seek", (-20, -10)),
                      (2, "home-pulloff", (5, 5)), (2, "home-set", (0, 0))]
     assert mock.machine("m1").phys == [-45, -5]
+    again.close()
+
+
+def test_power_cut_of_a_named_machine_between_opens_and_while_open() -> None:
+    mock.machine("never-opened").power_cut()  # nothing to cut yet
+    port = open_mock("machine=pc&speed=0")
+    assert reply(port, "G92 A100 B100") == Ok()
+    assert reply(port, "G1 A130 P10000") == Ok()
+    time.sleep(0.03)
+    port.close()
+    mock.machine("pc").power_cut()
+    again = open_mock("machine=pc&speed=0")  # powered up: nothing kept
+    st = status(again)
+    assert (st.a, st.b, st.homed, st.done_line) == (0, 0, False, 0)
+    assert mock.machine("pc").phys == [30, 0]  # the motors stayed where they were
+    assert reply(again, "G92 A5 B6") == Ok()
+    assert reply(again, "M3 S90") == Ok()
+    assert reply(again, "G1 A1005 P1000000") == Ok()  # 100 s at speed 0: at once
+    assert reply(again, "G1 A2005 P100000000") == Ok()
+    time.sleep(0.05)
+    mock.machine("pc").power_cut()  # while open: it boots again at once, as at power-on
+    assert messages(again) == [Banner("1.0.0", 1, 128, 16, 80)]
+    st = status(again)
+    assert (st.a, st.b, st.homed, st.done_line, st.laser) == (0, 0, False, 0, 0)
+    assert mock.machine("pc").laser == 0
+    assert [e.boot for e in mock.machine("pc").ledger if e.kind == "G1"] == [1, 2, 2]
     again.close()
 
 

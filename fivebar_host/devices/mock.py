@@ -33,16 +33,22 @@ firmware does at 115200 baud.
 - ``seed=N`` (0): seed of the drop/corrupt random generator (reproducible faults).
 - ``disconnect_after=N``: once the N-th line has been handled the link breaks: every read,
   write and ``in_waiting`` raises ``serial.SerialException``.  The device keeps running.
-- ``reset_after=N``: once the N-th line has been handled the device reboots (power-on
-  reset): motion stops, laser off, queue and line counter cleared, position 0, settings
-  back to defaults, the banner is sent; the rest of that ``write`` is lost.
+- ``reset_after=N``: once the N-th line has been handled the device resets with its RAM
+  powered (a watchdog or brown-out reset, docs/protocol.md section 7 "kept across a reset"):
+  motion stops where it is, laser off, queue, line counter, modal state and settings restart
+  as at power-on, the banner is sent; the position, ``H`` and ``Ln`` done are kept.  The rest
+  of that ``write`` is lost.
+- ``power_cut_after=N``: once the N-th line has been handled the controller loses power
+  and boots again: as ``reset_after``, but nothing is kept (position 0, ``H:0``, ``Ln:0,0``);
+  the motors stay where they physically are.
 - ``error_on=K`` / ``error_code=C`` (11): the K-th line, if it would be accepted, is
   answered ``error:C`` instead of being executed, exactly as the firmware answers a refused
   line with that code (the counter advances, a running job holds with ``Hold:2``; codes
   8/9/10 refuse the line with a resend request instead).
 - ``stall_after=N``: once the N-th line has been handled the device hangs: no reply, no
   status, no motion; bytes are swallowed; output pins (laser) keep their state.  A DTR
-  reset (reopening with the same ``machine``) revives it.
+  reset (reopening with the same ``machine``) revives it, keeping the position, ``H`` and
+  ``Ln`` done it had when it hung.
 - ``endstops=A,B``: switch A (B) is pressed while motor A's (B's) physical position is at
   most A (B) steps — the simavr harness's ``-a``/``-b`` semantics; either may be empty.
 - ``rx=N`` (128), ``queue=N`` (16), ``line=N`` (80): buffer sizes, reported in the banner.
@@ -50,12 +56,19 @@ firmware does at 115200 baud.
   tests).
 - ``machine=NAME``: ports opened with the same name drive one physical machine: its
   physical position, ledger and laser log survive a close/reopen, and opening the port is
-  a DTR reset of the firmware still running on it (its motion stops where it is).  A
+  a DTR reset of the firmware still running on it (its motion stops where it is; position,
+  ``H`` and ``Ln`` done are kept).  The first open powers the controller up;
+  ``machine(NAME).power_cut()`` cuts its power, so the next boot is a power-on again.  A
   second open while the first port is open fails as a busy port.
 
 Lines are counted for the fault options as the device takes them from its receive buffer
 (every ``\\n``, refused and empty lines included), from 1 after the port was opened; each
 fault fires once per port.
+
+**Resets.**  A DTR edge, a reopen of a named machine, ``reset_after`` and a revived stall are
+resets with the RAM powered: the firmware's ``.noinit`` record brings back the position,
+``H`` and ``Ln`` done; everything else restarts as at power-on.  Only the first open of a
+machine, ``power_cut_after`` and ``Machine.power_cut`` are power-ons.
 
 **What was executed** is recorded per block in ``port.ledger`` (line number, start/end
 position, steps issued, laser power, fraction completed, why it stopped early), and the
@@ -156,6 +169,7 @@ class MockOptions:
     error_on: int | None = None
     error_code: int = E_SOFT_LIMIT
     stall_after: int | None = None
+    power_cut_after: int | None = None
     endstops: tuple[int | None, int | None] = (None, None)
     rx: int = 128
     queue: int = 16
@@ -186,8 +200,8 @@ def _float_option(key: str, value: str, lo: float, hi: float) -> float:
 
 
 _KNOWN = ("speed", "drop", "corrupt", "seed", "disconnect_after", "reset_after", "error_on",
-          "error_code", "stall_after", "endstops", "rx", "queue", "line", "version", "proto",
-          "machine")
+          "error_code", "stall_after", "power_cut_after", "endstops", "rx", "queue", "line",
+          "version", "proto", "machine")
 
 
 def parse_mock_url(url: str) -> MockOptions:
@@ -218,7 +232,7 @@ def parse_mock_url(url: str) -> MockOptions:
             opts[key] = _int_option(key, value, -(2**63), 2**63)
         elif key in ("disconnect_after", "stall_after"):
             opts[key] = _int_option(key, value, 0, 2**32)
-        elif key in ("reset_after", "error_on"):
+        elif key in ("reset_after", "power_cut_after", "error_on"):
             opts[key] = _int_option(key, value, 1, 2**32)
         elif key == "error_code":
             code = _int_option(key, value, 1, 255)
@@ -504,8 +518,9 @@ class LedgerEntry:
     ``start``/``end`` are positions in the firmware's coordinates (G92 and homing move
     them without steps), ``steps`` the signed steps issued per motor.  ``fraction`` is the
     share of the block's time executed (1.0 = completed); ``stopped`` says why it ended
-    early ("reset", "alarm", "homing-abort", "reboot") and is None for a completed or a
-    still running block.  ``boot`` counts firmware boots of the machine (1 = first).
+    early ("reset" for Ctrl-X, "alarm", "homing-abort", "reboot" for a reset that keeps the
+    position, "power-cut") and is None for a completed or a still running block.
+    ``boot`` counts firmware boots of the machine (1 = first).
     """
 
     boot: int
@@ -526,6 +541,16 @@ class LedgerEntry:
         return self.fraction >= 1.0
 
 
+@dataclass(frozen=True)
+class KeptRecord:
+    """The firmware's ``.noinit`` RAM record: what a reset that leaves the RAM powered keeps
+    (docs/protocol.md section 7, "kept across a reset")."""
+
+    position: tuple[int, int]  # A, B in firmware steps
+    homed: bool  # H
+    done_line: int  # Ln done: the last line executed to its end
+
+
 @dataclass
 class Machine:
     """The physical machine under a mock: motor positions, what was executed, the laser."""
@@ -542,6 +567,15 @@ class Machine:
     def laser(self) -> int:
         """The laser output now (0 = off)."""
         return self.laser_log[-1][1] if self.laser_log else 0
+
+    def power_cut(self) -> None:
+        """Cut the controller's power: motion stops where it is, laser off, its RAM is lost.
+
+        With a port open the controller boots again at once as at power-on (banner,
+        position 0, ``H:0``, ``Ln:0,0``); otherwise the next open powers it up.  The motors
+        stay where they physically are.  Nothing happens before the first open."""
+        if self.port is not None:
+            self.port.power_cut()
 
 
 _MACHINES: dict[str, Machine] = {}
@@ -572,7 +606,8 @@ class MockFirmware:
     to a time, ``out`` collects what it sends.  ``MockSerial`` wraps it as a pyserial port.
     """
 
-    def __init__(self, options: MockOptions, machine: Machine, now: float) -> None:
+    def __init__(self, options: MockOptions, machine: Machine, now: float,
+                 kept: KeptRecord | None = None) -> None:
         self.opt = options
         self.machine = machine
         self.out = bytearray()
@@ -582,18 +617,21 @@ class MockFirmware:
         self.disconnected = False
         self.rebooted = False  # set by a reboot; MockSerial drops the rest of the write
         self._faults_fired: set[str] = set()
-        self._boot(now)
+        self._boot(now, kept)
 
     # ----------------------------------------------------------------- boot and reset
 
-    def _boot(self, now: float) -> None:
-        """Power-on: settings to defaults, position 0, no alarm, banner (fb_setup)."""
+    def _boot(self, now: float, kept: KeptRecord | None) -> None:
+        """Boot (fb_setup): settings to defaults, no alarm, banner.  Position, ``H`` and
+        ``Ln`` done come from ``kept`` (a reset that left the RAM powered), else they start
+        at 0 (power-on)."""
         m = self.machine
         m.boots += 1
         self.boot = m.boots
         self.settings = list(DEFAULT_SETTINGS)
-        self.pos = [0, 0]
-        self.homed = False  # position set by an executed G92 or a completed $H; Ctrl-X keeps it
+        self.pos = list(kept.position) if kept is not None else [0, 0]
+        # position set by an executed G92 or a completed $H; kept by Ctrl-X and by a reset
+        self.homed = kept.homed if kept is not None else False
         self.alarm = 0
         self.stalled = False
         self.laser = 0
@@ -606,6 +644,8 @@ class MockFirmware:
         self.homing: _Homing | None = None
         self.queue: deque[_Block] = deque()
         self._reset_state()
+        if kept is not None:
+            self.done_line = kept.done_line
 
     def _reset_state(self) -> None:
         """What Ctrl-X resets (fb_main.c do_reset), then the banner."""
@@ -636,21 +676,32 @@ class MockFirmware:
         o = self.opt
         return f"fivebar {o.version} proto:{o.proto} rx:{o.rx} queue:{o.queue} line:{o.line}"
 
-    def reboot(self, now: float) -> None:
-        """A power-on / DTR / brown-out reset at ``now``: motion stops where it is."""
-        self.advance(now)
-        self._reboot_now("reboot")
+    def reboot(self, now: float, keep: bool = True) -> None:
+        """A reset at ``now``: motion stops where it is, then the firmware boots again.
 
-    def _reboot_now(self, why: str) -> None:
+        ``keep``: the RAM stayed powered (DTR, reset button, watchdog, brown-out), so the
+        ``.noinit`` record brings back position, ``H`` and ``Ln`` done; else a power-on."""
+        self.advance(now)
+        self._reboot_now("reboot" if keep else "power-cut", keep)
+
+    def _reboot_now(self, why: str, keep: bool) -> None:
         self._stop(why)
+        kept = self.kept_record() if keep else None
         self.rebooted = True
-        self._boot(self.t)
+        self._boot(self.t, kept)
 
-    def power_off(self, now: float) -> None:
-        """The firmware stops for good (its machine gets a new one): motion, laser off."""
+    def kept_record(self) -> KeptRecord:
+        """The ``.noinit`` record as it stands now (the firmware keeps it up to date)."""
+        a, b = self.position()
+        return KeptRecord((a, b), self.homed, self.done_line)
+
+    def power_off(self, now: float, why: str = "reboot") -> KeptRecord:
+        """The firmware stops for good (a new one boots on its machine): motion stops where
+        it is, laser off.  Returns its ``.noinit`` record, for a reset that keeps the RAM."""
         self.advance(now)
-        self._stop("reboot")
+        self._stop(why)
         self.stalled = True  # nothing of it runs any more
+        return self.kept_record()
 
     # ----------------------------------------------------------------- output
 
@@ -1021,7 +1072,10 @@ class MockFirmware:
             self.disconnected = True
         if o.reset_after == k and "reset_after" not in self._faults_fired:
             self._faults_fired.add("reset_after")
-            self._reboot_now("reboot")
+            self._reboot_now("reboot", keep=True)
+        if o.power_cut_after == k and "power_cut_after" not in self._faults_fired:
+            self._faults_fired.add("power_cut_after")
+            self._reboot_now("power-cut", keep=False)
         if (o.stall_after is not None and k >= o.stall_after
                 and "stall_after" not in self._faults_fired):
             self._faults_fired.add("stall_after")
@@ -1297,11 +1351,13 @@ class MockSerial(serial.SerialBase):
                 raise serial.SerialException(
                     f"could not open port {self._port}: [Errno 16] Device or resource busy "
                     f"(machine {name!r} is open)")
-            if m.firmware is not None:
-                m.firmware.power_off(now)  # opening resets the Uno through DTR
+            # Opening resets the Uno through DTR: its RAM stays powered, so the new boot finds
+            # the .noinit record of the firmware that ran until now.  A machine without one
+            # (first open, or after a power cut) is powered up.
+            kept = m.firmware.power_off(now) if m.firmware is not None else None
             self.machine = m
             self._rng = random.Random(self.options.seed)
-            self.firmware = MockFirmware(self.options, m, now)
+            self.firmware = MockFirmware(self.options, m, now, kept)
             m.firmware = self.firmware
             m.port = self
             self.firmware.check_startup_faults()
@@ -1330,6 +1386,20 @@ class MockSerial(serial.SerialBase):
                 fw.stalled = False
                 self._cond.notify_all()
         self._dtr_last = self._dtr_state
+
+    def power_cut(self) -> None:
+        """``Machine.power_cut`` on this port's firmware (see there)."""
+        with self._cond:
+            fw = self.firmware
+            if fw is None:
+                return
+            if self.is_open:
+                fw.reboot(self._clock(), keep=False)
+                fw.rebooted = False
+            else:
+                fw.power_off(self._clock(), "power-cut")
+                self.machine.firmware = None
+            self._cond.notify_all()
 
     def _update_rts_state(self) -> None:
         """RTS is not connected."""
