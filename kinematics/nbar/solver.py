@@ -791,7 +791,7 @@ def _finish(mech: Mechanism, inputs: FloatArray, q: FloatArray, iters: list[int]
             subs: list[int], status: list[Status], limits: list[LimitReport],
             reversed_at: int | None) -> Simulation:
     """Assemble the result and verify every solved row with the exact equations."""
-    st = np.array([int(s) for s in status], dtype=np.int8)
+    st = np.fromiter(status, dtype=np.int8, count=len(status))
     ok = st <= Status.LIMIT
     coords = np.full((len(status), *mech.coords0.shape), np.nan)
     resid = np.full(len(status), np.nan)
