@@ -52,8 +52,10 @@ class FirmwareMismatchError(LinkError):
 class LinkFaultError(LinkError):
     """A fault while streaming: an error reply, a timeout, a disconnect, a reset or an alarm.
 
-    `acked` is the index of the first job line not yet answered `ok`; `status` is the last
-    status report received (None after a disconnect or reset makes it meaningless).
+    `acked` is the index of the first job line not yet answered `ok`; `sent` the number of
+    job lines written at least once (the device may have accepted, and run, any of them);
+    both are −1 for a fault outside a stream. `status` is the last status report received
+    before the fault.
     """
 
     kind: str  # "error", "timeout", "disconnect", "reset", "alarm", "interrupt"
@@ -61,6 +63,7 @@ class LinkFaultError(LinkError):
     acked: int
     code: int | None = None
     status: StatusReport | None = None
+    sent: int = -1
 
     def __str__(self) -> str:
         return self.message
@@ -280,7 +283,10 @@ class Link:
 
     def hardware_reset(self, timeout_s: float = 3.0) -> bool:
         """Pulse DTR — an Arduino's auto-reset line — to reboot a controller that no longer
-        answers (its laser output goes off with the reboot). True if a banner followed."""
+        answers (its laser output goes off with the reboot). True if a banner followed.
+
+        The reboot restarts the line counter (the next line is 1) and keeps the RAM powered:
+        the controller keeps its position, `H` and `Ln` done (docs/protocol.md 7)."""
         try:
             self.port.dtr = False
             time.sleep(0.05)
@@ -297,6 +303,7 @@ class Link:
                 if isinstance(msg, Banner):
                     self.banner = msg
                     self._pending.clear()
+                    self.next_line = 1
                     return True
         return False
 
@@ -371,7 +378,8 @@ class Link:
 
         def fault(kind: str, msg: str, code: int | None = None) -> LinkFaultError:
             self.next_line = first + acked
-            return LinkFaultError(kind, f"{self.url}: {msg}", acked, code, self.last_status)
+            return LinkFaultError(kind, f"{self.url}: {msg}", acked, code, self.last_status,
+                                  sent_max)
 
         try:
             while acked < total:
@@ -408,7 +416,7 @@ class Link:
                     if isinstance(msg, Banner):
                         self.banner = msg
                         raise fault("reset", "the firmware restarted (banner received) while "
-                                    "streaming: its position and queue are lost")
+                                    "streaming: its queue is lost")
                     if isinstance(msg, AlarmPush):
                         info = protocol.CODES.get(msg.code)
                         raise fault("alarm", f"ALARM:{msg.code} "

@@ -1,11 +1,12 @@
-"""The link's handshake against the mock: a device that was not reset on open."""
+"""The link against the mock: a device that was not reset on open, a hung one rebooted."""
 
 from __future__ import annotations
 
+import pytest
 import serial
 
 from fivebar_host.devices import urls
-from fivebar_host.link import Link
+from fivebar_host.link import Link, LinkFaultError
 from fivebar_host.protocol import Banner
 
 
@@ -25,5 +26,30 @@ def test_handshake_with_a_device_left_in_numbered_mode() -> None:
         assert again.next_line == 4
         again.command("G90")
         assert again.status().accepted_line == 4
+    finally:
+        port.close()
+
+
+def test_hardware_reset_revives_a_hung_controller_and_restarts_the_numbering() -> None:
+    """DTR reboots a hung controller: a banner, laser off, the line counter back to 0 (the
+    next line is 1) and the position, H and Ln done kept (docs/protocol.md 7)."""
+    urls.register()
+    port = serial.serial_for_url("fivebar-mock://?speed=0&stall_after=3", timeout=0.02)
+    try:
+        link = Link(port, url="hung", reply_timeout_s=0.3)
+        link.handshake(1.5)
+        link.command("G92 A5 B6")
+        link.command("G1 A25 B-4 P10000")
+        link.wait_idle(1.0)
+        link.command("G90")  # answered, then the controller hangs
+        with pytest.raises(LinkFaultError, match="no status report"):
+            link.status()
+        assert link.next_line == 4
+        assert link.hardware_reset()
+        assert link.next_line == 1
+        st = link.status()
+        assert (st.a, st.b, st.homed, st.done_line, st.accepted_line) == (25, -4, True, 2, 0)
+        link.command("G90")
+        assert link.status().accepted_line == 1
     finally:
         port.close()
