@@ -497,7 +497,7 @@ def _stream_plot(drawing: Path, port: str, prof: Profile, job: Any, *, laser: bo
             report = run_job(link, job, prof, drawing=drawing, laser=laser,
                              confirm=_confirm(yes), resume=resume, on_progress=on_progress,
                              should_stop=lambda: interrupted["flag"],
-                             on_interrupt=on_interrupt)
+                             on_interrupt=on_interrupt, on_note=click.echo)
     finally:
         signal.signal(signal.SIGINT, previous)
         link.close()

@@ -19,8 +19,17 @@ from click.testing import CliRunner
 from fivebar_host.cli import main
 from fivebar_host.config import load_profile
 from fivebar_host.devices import mock
-from fivebar_host.job import CompileOptions, compile_job
-from fivebar_host.sender import ResumePoint, resume_path
+from fivebar_host.job import CompileOptions, Job, compile_job
+from fivebar_host.link import Link
+from fivebar_host.protocol import StatusReport
+from fivebar_host.sender import (
+    Program,
+    ResumePoint,
+    SendError,
+    build_program,
+    kept_resume_segment,
+    resume_path,
+)
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
@@ -62,6 +71,21 @@ def planned_draw_steps(path: Path) -> np.ndarray:
     return np.asarray(d.sum(axis=0))
 
 
+def planned_steps(path: Path) -> np.ndarray:
+    """Sum of |steps| per motor over all the job's segments, travel included."""
+    job = compile_job(path, load_profile(), CompileOptions(validate=False))
+    return np.asarray(np.abs(np.diff(job.steps, axis=0)).sum(axis=0))
+
+
+def all_steps(m: mock.Machine) -> np.ndarray:
+    """Sum of |steps| per motor the machine issued, laser on or off."""
+    tot = np.zeros(2, dtype=np.int64)
+    for e in m.ledger:
+        if e.kind == "G1":
+            tot += np.abs(np.asarray(e.steps))
+    return tot
+
+
 def drawn_steps(m: mock.Machine) -> np.ndarray:
     """Sum of |steps| per motor the machine issued with the laser on."""
     tot = np.zeros(2, dtype=np.int64)
@@ -71,8 +95,8 @@ def drawn_steps(m: mock.Machine) -> np.ndarray:
     return tot
 
 
-def url(name: str, extra: str = "") -> str:
-    return f"fivebar-mock://?machine={name}&speed=20" + (f"&{extra}" if extra else "")
+def url(name: str, extra: str = "", speed: float = 20) -> str:
+    return f"fivebar-mock://?machine={name}&speed={speed:g}" + (f"&{extra}" if extra else "")
 
 
 def test_plot_completes_and_draws_exactly_the_plan(drawing: Path) -> None:
@@ -84,6 +108,13 @@ def test_plot_completes_and_draws_exactly_the_plan(drawing: Path) -> None:
     assert m.laser == 0
     assert np.array_equal(drawn_steps(m), planned_draw_steps(drawing))
     assert not resume_path(drawing).exists()
+    # Reopening resets the controller, which keeps its position: no question this time.
+    code, out = run("plot", str(drawing), "--port", url("ok"), "--laser")
+    assert code == 0, out
+    assert "home pose" not in out
+    m.power_cut()  # a power-on forgets it: asked again (no terminal: refused)
+    code, out = run("plot", str(drawing), "--port", url("ok"), "--laser")
+    assert code == 3 and "position unknown" in out
 
 
 def test_pen_plot_never_powers_the_output(drawing: Path) -> None:
@@ -105,72 +136,123 @@ def test_lost_and_corrupted_bytes_are_absorbed_by_resends(drawing: Path) -> None
     assert m.phys == [0, 0]
 
 
-@pytest.mark.parametrize(("fault", "word"), [
-    ("error_on=60", "refused: error:11"),
-    ("stall_after=150", "went silent"),
-])
-def test_fault_then_resume_completes_exactly(drawing: Path, profile_path: Path, fault: str,
-                                             word: str) -> None:
-    code, out = run("plot", str(drawing), "--port", url("f", fault), "--laser", "--yes",
-                    "--config", str(profile_path))
-    assert code == 3, out
-    assert word in out
-    assert "resume file" in out
-    m = mock.machine("f")
-    assert m.laser == 0
-    rp = ResumePoint.load(resume_path(drawing))
-    if rp.position is not None:
-        assert f"A = {rp.position[0]}, B = {rp.position[1]}" in out
-    else:  # the device hung: position unknown; the arms are put home by hand
-        assert "position unknown" in out
-    assert 0 < rp.next_segment < rp.segments
-    if rp.position is None:
-        m.phys = [0, 0]
-    code, out = run("plot", str(drawing), "--port", url("f"), "--laser", "--yes", "--resume",
-                    "--config", str(profile_path))
-    assert code == 0, out
-    assert m.phys == [0, 0]
-    assert m.laser == 0
-    drawn = drawn_steps(m)
-    plan = planned_draw_steps(drawing)
-    if rp.position is not None:
-        assert np.array_equal(drawn, plan)  # nothing lost, nothing doubled
-    else:
-        assert np.all(drawn >= plan)  # nothing lost
-    assert not resume_path(drawing).exists()
-
-
-def test_disconnect_mid_job_reports_and_resumes(drawing: Path) -> None:
-    code, out = run("plot", str(drawing), "--port", url("d", "disconnect_after=70"),
-                    "--laser", "--yes")
-    assert code == 3, out
-    assert "device gone" in out and "resume file" in out
-    rp = ResumePoint.load(resume_path(drawing))
-    assert rp.position is None and rp.next_segment > 0
-    m = mock.machine("d")
-    # The cut-off firmware runs out its queue; the user waits for the arms to stop.
+def wait_stopped(m: mock.Machine) -> None:
+    """Wait until a controller cut off from its host has run out its queue."""
     deadline = time.monotonic() + 10.0
     while m.port is not None and m.port.snapshot().state == "Run":
         assert time.monotonic() < deadline
         time.sleep(0.02)
-    assert m.laser == 0  # the queue ran empty: laser off without the host
-    m.phys = [0, 0]  # the user puts the arms at the home pose
-    code, out = run("plot", str(drawing), "--port", url("d"), "--laser", "--yes", "--resume")
+
+
+def resume_and_check(drawing: Path, m: mock.Machine, name: str, profile: Path | None = None
+                     ) -> str:
+    """`plot --resume` to its end: exit 0, machine home, laser off, resume file gone."""
+    extra = ["--config", str(profile)] if profile is not None else []
+    code, out = run("plot", str(drawing), "--port", url(name), "--laser", "--yes", "--resume",
+                    *extra)
     assert code == 0, out
-    assert np.all(drawn_steps(m) >= planned_draw_steps(drawing))
     assert m.phys == [0, 0] and m.laser == 0
+    assert not resume_path(drawing).exists()
+    return out
 
 
-def test_reset_mid_job_says_position_unknown(drawing: Path) -> None:
-    code, out = run("plot", str(drawing), "--port", url("r", "reset_after=90"), "--laser",
+@pytest.mark.parametrize(("fault", "word"), [
+    ("error_on=60", "refused: error:11"),
+    ("stall_after=150", "went silent"),
+    ("reset_after=90", "the firmware restarted"),
+])
+def test_fault_then_resume_completes_exactly(drawing: Path, profile_path: Path, fault: str,
+                                             word: str) -> None:
+    """The position is read after the fault: at once when the controller answers, from the
+    record it kept across its restart after a reset or a stall (rebooted through DTR)."""
+    code, out = run("plot", str(drawing), "--port", url("f", fault), "--laser", "--yes",
+                    "--config", str(profile_path))
+    assert code == 3, out
+    assert word in out and "resume file" in out
+    m = mock.machine("f")
+    assert m.laser == 0
+    rp = ResumePoint.load(resume_path(drawing))
+    assert rp.position is not None and not rp.has_stream
+    assert f"stopped at A = {rp.position[0]}, B = {rp.position[1]} steps" in out
+    if fault.startswith(("stall", "reset")):
+        assert "kept its position and its last executed line" in out
+    if fault.startswith("stall"):
+        assert "rebooted through DTR: laser off" in out
+    assert 0 < rp.next_segment < rp.segments
+    resume_and_check(drawing, m, "f", profile_path)
+    assert np.array_equal(drawn_steps(m), planned_draw_steps(drawing))  # nothing lost/doubled
+    assert np.array_equal(all_steps(m), planned_steps(drawing))  # no travel back either
+
+
+@pytest.mark.parametrize("wait", [True, False])
+def test_disconnect_then_resume_reads_the_kept_record(drawing: Path, wait: bool) -> None:
+    """The link breaks: the position is not known yet. Reopening the port resets the
+    controller, which keeps its position and last executed line; --resume maps them back to
+    the exact segment — after the queue ran out, or mid-segment when the reopen cut it."""
+    # At real speed the queue still runs when the resume reopens the port at once.
+    code, out = run("plot", str(drawing), "--port",
+                    url("d", "disconnect_after=70", speed=20 if wait else 1), "--laser",
                     "--yes")
     assert code == 3, out
-    assert "restarted" in out and "position unknown" in out
-    m = mock.machine("r")
-    assert m.laser == 0
-    m.phys = [0, 0]
-    code, out = run("plot", str(drawing), "--port", url("r"), "--laser", "--yes", "--resume")
-    assert code == 0, out
+    assert "device gone" in out and "resume file" in out
+    assert "position not known yet" in out and "--resume reads them from it" in out
+    rp = ResumePoint.load(resume_path(drawing))
+    assert rp.position is None and rp.has_stream and rp.next_segment > 0
+    assert rp.sent_segment is not None and rp.sent_segment > rp.next_segment
+    m = mock.machine("d")
+    if wait:  # the cut-off firmware runs out its queue
+        wait_stopped(m)
+        assert m.laser == 0  # the queue ran empty: laser off without the host
+    out = resume_and_check(drawing, m, "d")
+    assert "resume point read from the controller" in out
+    assert np.array_equal(drawn_steps(m), planned_draw_steps(drawing))
+    if not wait:
+        cut = [e for e in m.ledger if e.stopped == "reboot"]
+        assert len(cut) == 1 and cut[0].kind == "G1" and 0 < cut[0].fraction < 1
+    assert np.array_equal(all_steps(m), planned_steps(drawing))  # no travel back either
+
+
+@pytest.mark.parametrize("fault", ["power_cut_after=90", "disconnect_after=70"])
+def test_power_lost_falls_back_to_the_last_confirmed_segment(drawing: Path,
+                                                             fault: str) -> None:
+    """A controller that lost power (H:0) kept nothing: home, resume after the last
+    segment a status report confirmed, and say how many may be drawn twice."""
+    code, out = run("plot", str(drawing), "--port", url("p", fault), "--laser", "--yes")
+    assert code == 3, out
+    m = mock.machine("p")
+    if fault.startswith("power_cut"):
+        assert "the firmware restarted" in out and "position unknown" in out
+        assert "H:0" in out and "may be drawn twice" in out
+        assert m.laser == 0
+    else:
+        wait_stopped(m)
+        m.power_cut()  # between the fault and the resume
+    rp = ResumePoint.load(resume_path(drawing))
+    assert rp.position is None and rp.sent_segment is not None
+    m.phys = [0, 0]  # the user puts the arms at the home pose
+    out = resume_and_check(drawing, m, "p")
+    n = rp.sent_segment - rp.next_segment
+    assert f"up to {n} segments after it may be drawn twice" in out and n > 0
+    assert "lost its position" in out
+    assert np.all(drawn_steps(m) >= planned_draw_steps(drawing))  # nothing lost
+
+
+def test_kept_record_of_another_stream_falls_back(drawing: Path) -> None:
+    """Between the fault and the resume, another session moved the arms: the controller's
+    record is not the interrupted stream's, so the resume starts from the last confirmed
+    segment, from the position the controller knows, and says so."""
+    code, _ = run("plot", str(drawing), "--port", url("k", "disconnect_after=70"), "--laser",
+                  "--yes")
+    assert code == 3
+    m = mock.machine("k")
+    wait_stopped(m)
+    with Link.open(url("k")) as link:
+        link.command("G91")
+        link.command("G1 A-30 B20 P300000")
+        link.wait_idle(10.0)
+    out = resume_and_check(drawing, m, "k")
+    assert "does not belong to the interrupted job" in out
+    assert "may be drawn twice" in out
     assert np.all(drawn_steps(m) >= planned_draw_steps(drawing))
 
 
@@ -233,3 +315,67 @@ def test_frame_jog_home(drawing: Path) -> None:
     code, out = run("jog", "--port", url("h"), "--yes", "--dx", "500")
     assert code == 3 and "out of reach" in out
     assert m.phys == [200, 0]  # refused: nothing moved
+
+
+# ------------------------------------------------------------------ resume points, kept records
+
+
+def test_old_resume_files_read_without_stream_info(tmp_path: Path) -> None:
+    old = tmp_path / "old.json"
+    old.write_text('{"drawing": "d.svg", "fingerprint": "f", "next_segment": 3, '
+                   '"position": null, "reason": "disconnect", "segments": 9}')
+    rp = ResumePoint.load(old)
+    assert (rp.next_segment, rp.position, rp.has_stream, rp.sent_segment) == (3, None, False,
+                                                                              None)
+    full = ResumePoint("d.svg", "f", 3, None, "r", 9, 5, 40, 0, (1, -2), True, 7)
+    full.save(tmp_path / "new.json")
+    assert ResumePoint.load(tmp_path / "new.json") == full and full.has_stream
+    bad = tmp_path / "bad.json"
+    bad.write_text(old.read_text().replace('"segments": 9', '"segments": 9, "laser": "yes"'))
+    with pytest.raises(SendError, match=r"bad\.json: unreadable resume file: laser"):
+        ResumePoint.load(bad)
+
+
+def _stream() -> tuple[Job, Program, int]:
+    job = compile_job(EXAMPLES / "simple.svg", load_profile(), CompileOptions(validate=False))
+    return job, build_program(job, load_profile(), True, 0, job.steps[0]), 7
+
+
+def _status(done: int, a: int, b: int, homed: bool = True) -> StatusReport:
+    return StatusReport("Idle", None, a, b, 0, done, 0, 0, 0, homed)
+
+
+def test_kept_record_maps_onto_the_stream_exactly() -> None:
+    job, prog, first = _stream()
+    k = 40
+    line = first + int(np.flatnonzero(prog.segment == k)[0])  # the line of segment k
+    s0, s1 = job.steps[k + 1], job.steps[k + 2]
+    mid = (s0 + (s1 - s0) // 2).tolist()  # segment k + 1 cut half-way
+    start = job.steps[0]
+    assert kept_resume_segment(prog, first, 0, start, _status(line, *mid), 30) == (k + 1, "")
+    assert kept_resume_segment(prog, first, 0, start, _status(line, *s0.tolist()), 30) == (
+        k + 1, "")
+    assert kept_resume_segment(prog, first, 0, start, _status(first - 1, *start.tolist()),
+                               0) == (0, "")
+    off = [mid[0] + 5, mid[1]]
+    assert "not on the stream's path" in kept_resume_segment(
+        prog, first, 0, start, _status(line, *off), 30)[1]
+    assert "H:0" in kept_resume_segment(prog, first, 0, start,
+                                        _status(line, *mid, homed=False), 30)[1]
+    assert "fewer than the 50" in kept_resume_segment(prog, first, 0, start,
+                                                      _status(line, *mid), 50)[1]
+    assert "not one of the stream's lines" in kept_resume_segment(
+        prog, first, 0, start, _status(first + len(prog.bodies), *mid), 0)[1]
+
+
+def test_a_segment_whose_steps_are_all_issued_is_not_drawn_again() -> None:
+    """Cut after its last step but before its time was over, a segment is finished by a
+    minimal laser-off line at its end, not redrawn after a travel back."""
+    job, _, _ = _stream()
+    k = 40
+    prog = build_program(job, load_profile(), True, k, job.steps[k + 1])
+    first_g1 = next(b for b in prog.bodies if b.startswith("G1"))
+    a, b = job.steps[k + 1].tolist()
+    assert first_g1 == f"G1 A{a} B{b} P100 S0"
+    assert prog.segment[prog.bodies.index(first_g1)] == k
+    assert sum(1 for x in prog.bodies if x.startswith("G1")) == job.n_segments - k
