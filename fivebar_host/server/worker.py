@@ -60,6 +60,7 @@ from fivebar_host.sender import (
     SendError,
     build_program,
     home,
+    kept_resume_segment,
     resume_path,
     run_job,
     travel_lines,
@@ -417,11 +418,12 @@ class Worker(threading.Thread):
                  "%s at A = %d, B = %d", cfg.port_url, link.banner.version, link.banner.proto,
                  link.banner.rx, link.banner.queue, st.state, st.a, st.b)
         # The pose the daemon recorded still holds if this is the same firmware session: its
-        # line counter only grows until a reset or reboot (which also zero it).
+        # line counter only grows until a reset or reboot (which also zero it). H:1 says the
+        # firmware itself knows its position (kept across a reset; lost at power-on).
         facts = self.store.machine()
         rec_line = int(facts.get("accepted_line", 0) or 0)
-        self.pose_known = bool(facts.get("pose_known")) and rec_line > 0 and (
-            st.accepted_line >= rec_line) and st.state != "Alarm"
+        same_session = bool(facts.get("pose_known")) and 0 < rec_line <= st.accepted_line
+        self.pose_known = (st.homed or same_session) and st.state != "Alarm"
         log.info("machine pose %s", "known (same controller session as before)"
                  if self.pose_known else "unknown until homed or confirmed")
         return True
@@ -581,7 +583,8 @@ class Worker(threading.Thread):
             report = run_job(link, job, prof, drawing=base, laser=opts.laser,
                              confirm=lambda q: self._answer(link, q, job_confirm, user_confirm),
                              resume=resume, on_progress=on_progress,
-                             should_stop=self._should_stop, on_interrupt=self._on_interrupt)
+                             should_stop=self._should_stop, on_interrupt=self._on_interrupt,
+                             on_note=lambda text: log.warning("job %d: %s", rec.id, text))
         except SendError as e:
             self.progress.flush()  # before the final record, never after it
             self._after_error(link, rec, job, e, rpath, t0, base_run)
@@ -804,10 +807,12 @@ class Worker(threading.Thread):
         stream = rec.stream
         st = link.status()
         exact: ResumeRecord | None = None
-        if stream is not None and stream.first_line <= st.accepted_line <= (
-                stream.first_line + stream.lines - 1):
+        not_reset = stream is not None and (
+            stream.first_line <= st.accepted_line <= stream.first_line + stream.lines - 1)
+        if not_reset:
             # The controller was not reset: it kept the lines it had and its line counter.
             st = self._settle(link)
+        if stream is not None and (not_reset or st.homed):
             try:
                 prog: Program | None = build_program(
                     job, self.cfg.profile, opts.laser, stream.start_segment,
@@ -816,14 +821,31 @@ class Worker(threading.Thread):
                 log.warning("job %d: cannot rebuild its program (%s)", rec.id, e)
                 prog = None
             if prog is not None and len(prog.bodies) == stream.lines and st.state != "Alarm":
-                if st.state == "Hold" or st.queued:
-                    link.reset()  # clears what is queued; position kept, laser off
-                nxt = prog.finished_segments(stream.first_line, st.done_line,
-                                             stream.start_segment)
-                exact = ResumeRecord(nxt, (st.a, st.b),
-                                     "the daemon lost the machine mid-job; the controller "
-                                     f"kept its count (last line executed {st.done_line})")
-                self._set_pose(True, link.last_status)
+                if not_reset:
+                    if st.state == "Hold" or st.queued:
+                        link.reset()  # clears what is queued; position kept, laser off
+                    nxt: int | None = prog.finished_segments(stream.first_line, st.done_line,
+                                                             stream.start_segment)
+                    why = "the controller kept its count"
+                elif st.state == "Idle" and not st.queued:
+                    # Reset since (opening the port resets an Arduino): it kept its position,
+                    # H and the last line it executed (docs/protocol.md 7).
+                    floor = (rec.resume.next_segment if rec.resume is not None
+                             else rec.segments_done)
+                    nxt, why = kept_resume_segment(prog, stream.first_line,
+                                                   stream.start_segment,
+                                                   stream.start_position, st, floor)
+                    if nxt is None:
+                        log.warning("job %d: the controller's kept record is not its stream's "
+                                    "(%s)", rec.id, why)
+                    why = "the controller kept its position and count across its reset"
+                else:
+                    nxt = None
+                if nxt is not None:
+                    exact = ResumeRecord(nxt, (st.a, st.b),
+                                         f"the daemon lost the machine mid-job; {why} (last "
+                                         f"line executed {st.done_line})")
+                    self._set_pose(True, link.last_status)
         if exact is not None:
             resume = exact
         elif rec.resume is not None:
