@@ -20,6 +20,34 @@
 
 void board_init(void);
 
+/*
+ * RAM kept across a reset (docs/protocol.md section 7, "kept across a
+ * reset").  The board places it where the C start-up code does not clear it
+ * (.noinit on the AVR), so a reset that leaves the RAM powered finds it as it
+ * was; fb_motion.c owns its content:
+ *   position = base + off: a step changes off by one (a one-byte store), and
+ *              off is folded into base before it leaves -127..127;
+ *   check    = FB_KEEP_MAGIC + base[0] + base[1] + done + homed: what the
+ *              random RAM of a power-on almost never satisfies;
+ *   busy     = set around every update (a step included), so a reset that
+ *              strikes in the middle of one finds the record invalid.
+ */
+typedef struct {
+	int32_t base[2];
+	uint32_t done;    /* Ln done */
+	uint32_t check;
+	uint8_t homed;    /* H */
+	int8_t off[2];
+	uint8_t busy;
+} fb_keep_t;
+
+extern volatile fb_keep_t board_keep;
+
+/* 1 when the hardware says this boot is a power-on (the ATmega328P's PORF
+ * reset flag; a bootloader that clears the flags leaves the decision to the
+ * check word).  Clears the reset flags. */
+uint8_t board_power_on(void);
+
 /* Serial: queue one byte for transmission (blocks while the TX ring is full). */
 void board_tx(uint8_t c);
 /* Milliseconds since boot (free running). */

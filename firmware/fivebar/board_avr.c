@@ -35,6 +35,10 @@
 #error "CFG_TX_SIZE must be a power of two up to 128"
 #endif
 
+/* Not cleared by the C start-up code: a reset that leaves the RAM powered
+ * finds it as the firmware left it (board.h). */
+volatile fb_keep_t board_keep __attribute__((section(".noinit")));
+
 static volatile uint8_t tx_buf[CFG_TX_SIZE];
 static volatile uint8_t tx_head, tx_tail;
 static volatile uint32_t ms_ticks;
@@ -49,7 +53,9 @@ void board_init(void)
 	REG_DDR(PIN_STEP_PORT) |= FB_STEP_PINS;
 	REG_PORT(PIN_DIR_PORT) &= (uint8_t)~FB_DIR_PINS;
 	REG_DDR(PIN_DIR_PORT) |= FB_DIR_PINS;
-	REG_PORT(PIN_ENABLE_PORT) |= (uint8_t)(1u << PIN_ENABLE_BIT);   /* disabled */
+	/* enabled (low) from the start: the drivers keep holding the motors
+	 * where a reset found them, which the kept position counts on */
+	REG_PORT(PIN_ENABLE_PORT) &= (uint8_t)~(1u << PIN_ENABLE_BIT);
 	REG_DDR(PIN_ENABLE_PORT) |= (uint8_t)(1u << PIN_ENABLE_BIT);
 	REG_PORT(PIN_LASER_PORT) &= (uint8_t)~(1u << PIN_LASER_BIT);
 	REG_DDR(PIN_LASER_PORT) |= (uint8_t)(1u << PIN_LASER_BIT);
@@ -81,6 +87,13 @@ void board_init(void)
 	TCCR2A = (uint8_t)((1u << WGM21) | (1u << WGM20));
 	TCCR2B = (uint8_t)(1u << CS21);
 	sei();
+}
+
+uint8_t board_power_on(void)
+{
+	uint8_t flags = MCUSR;
+	MCUSR = 0;
+	return (flags & (1u << PORF)) != 0;
 }
 
 ISR(TIMER0_COMPA_vect)

@@ -422,10 +422,11 @@ static uint8_t exec_home(void)
 	f_home_abort = 0;
 	mo_reset_home_hits();
 	/* the position is unknown until homed: count the seek from 0, which
-	 * also keeps repeated failed homings from running the counter away */
+	 * also keeps repeated failed homings from running the counter away.  H
+	 * goes first, so a reset in between never keeps H:1 with position 0. */
 	int32_t zero[2] = { 0, 0 };
-	mo_set_pos(zero);
 	mo_set_homed(0);
+	mo_set_pos(zero);
 	sync_plan();
 	uint32_t interval = interval_for(settings[SET_HOMING_RATE]);
 	uint32_t chunk_max = 0x7fffffffUL / interval;
@@ -664,14 +665,18 @@ void fb_setup(void)
 	settings_defaults();
 	settings_apply();
 	alarm = 0;
-	mo_set_homed(0); /* power-on: the position is unknown */
+	/* position, H and Ln done survive a reset that leaves the RAM powered;
+	 * after a power-on they start at 0 (the position is unknown) */
+	mo_boot(board_power_on());
 	do_reset();
 }
 
 void fb_poll(void)
 {
-	if (f_reset)
+	if (f_reset) {
+		mo_clear_done();
 		do_reset();
+	}
 	uint8_t a = mo_alarm();
 	if (a) {
 		mo_clear_alarm();

@@ -6,6 +6,12 @@
  * from the segment start; the board's timer turns the returned deltas into
  * compare-match times on a free-running counter, so ISR latency never
  * accumulates into the schedule.
+ *
+ * The position, H and Ln done live in board_keep, the record a reset that
+ * leaves the RAM powered keeps (see board.h).  Every update of it is bracketed
+ * by busy = 1 ... busy = 0; a step sets busy before its pins rise and clears
+ * it once off is stored, so a valid record never claims a step that was not
+ * issued, nor misses one that was.
  */
 #include <string.h>
 #include "fb_motion.h"
@@ -26,9 +32,60 @@ static fb_block_t *volatile cur; /* executing block (still in the queue), or 0 *
 static uint32_t s_now;           /* cycle of the pending event within cur */
 static uint8_t s_due;            /* motors stepping at that event */
 static uint8_t s_home_axes, s_es_enabled, s_seek_neg;
-static volatile uint8_t s_running, s_alarm, s_home_hits, s_laser, s_homed;
-static volatile int32_t s_pos[2];
-static volatile uint32_t s_done_line, s_underruns;
+static volatile uint8_t s_running, s_alarm, s_home_hits, s_laser;
+static volatile uint32_t s_underruns;
+
+#define K board_keep
+#define FB_KEEP_MAGIC 0xFB5AFE17UL
+/* off is folded into base when a step takes it to +-OFF_FOLD */
+#define OFF_FOLD 127
+
+static uint32_t keep_sum(void)
+{
+	return FB_KEEP_MAGIC + (uint32_t)K.base[0] + (uint32_t)K.base[1] + K.done + K.homed;
+}
+
+/* Rewrite the whole record; interrupts off (or in the step interrupt). */
+static void keep_write(int32_t a, int32_t b, uint32_t done, uint8_t homed)
+{
+	K.busy = 1;
+	K.base[0] = a;
+	K.base[1] = b;
+	K.off[0] = 0;
+	K.off[1] = 0;
+	K.done = done;
+	K.homed = homed;
+	K.check = keep_sum();
+	K.busy = 0;
+}
+
+/* Ln done := line (the step interrupt, or interrupts off). */
+FB_ALWAYS_INLINE void keep_done(uint32_t line)
+{
+	K.busy = 1;
+	K.check += line - K.done;
+	K.done = line;
+	K.busy = 0;
+}
+
+/* The position as the record holds it; interrupts off. */
+static int32_t keep_pos(uint8_t i)
+{
+	return K.base[i] + K.off[i];
+}
+
+uint8_t mo_boot(uint8_t power_on)
+{
+	uint8_t sreg = board_irq_save();
+	uint8_t kept = !power_on && K.busy == 0 && K.homed <= 1 && K.check == keep_sum();
+	for (uint8_t i = 0; kept && i < 2; i++)
+		if (keep_pos(i) > CFG_POS_LIMIT || keep_pos(i) < -CFG_POS_LIMIT)
+			kept = 0;
+	if (!kept)
+		keep_write(0, 0, 0, 0);
+	board_irq_restore(sreg);
+	return kept;
+}
 
 void mo_init(void)
 {
@@ -39,7 +96,6 @@ void mo_init(void)
 	s_due = 0;
 	s_running = 0;
 	s_laser = 0;
-	s_done_line = 0;
 	s_underruns = 0;
 	board_laser(0);
 }
@@ -169,7 +225,7 @@ FB_ALWAYS_INLINE fb_block_t *boundary(void)
 {
 	uint8_t t = q_tail;
 	if (cur) {
-		s_done_line = cur->line;
+		keep_done(cur->line);
 		t = (uint8_t)(t + 1u);
 		cur = 0;
 	}
@@ -184,15 +240,12 @@ FB_ALWAYS_INLINE fb_block_t *boundary(void)
 		fb_block_t *b = &queue[t & QMASK];
 		switch (b->type) {
 		case BLK_SETPOS:
-			s_pos[0] = (int32_t)b->q[0];
-			s_pos[1] = (int32_t)b->q[1];
-			s_homed = 1;
-			s_done_line = b->line;
+			keep_write((int32_t)b->q[0], (int32_t)b->q[1], b->line, 1);
 			continue;
 		case BLK_ENABLE:
 		case BLK_DISABLE:
 			board_enable_motors(b->type == BLK_ENABLE);
-			s_done_line = b->line;
+			keep_done(b->line);
 			continue;
 		default:
 			break;
@@ -236,15 +289,28 @@ FB_ALWAYS_INLINE uint8_t check_endstops(fb_block_t *b, uint8_t due)
 }
 
 /*
- * One step of motor i.  No step counter is needed: after the last step
- * (k = n) the next time, floor((2n+1)C/2n), is >= C, past the segment end.
+ * Count the step of motor i in the kept record (busy is set): off moves by
+ * one; at +-OFF_FOLD it goes into base, and into the check with it.
+ */
+FB_ALWAYS_INLINE void count_step(const fb_block_t *b, uint8_t i)
+{
+	int8_t o = K.off[i];
+	o = (int8_t)((b->dirs & (1u << i)) ? o - 1 : o + 1);
+	if (o == OFF_FOLD || o == -OFF_FOLD) {
+		K.base[i] += o;
+		K.check += (uint32_t)(int32_t)o;
+		o = 0;
+	}
+	K.off[i] = o;
+}
+
+/*
+ * Schedule the next step of motor i.  No step counter is needed: after the
+ * last step (k = n) the next time, floor((2n+1)C/2n), is >= C, past the
+ * segment end.
  */
 FB_ALWAYS_INLINE void step_axis(fb_block_t *b, uint8_t i)
 {
-	if (b->dirs & (1u << i))
-		s_pos[i]--;
-	else
-		s_pos[i]++;
 	uint32_t e = b->err[i] + b->r2[i];
 	uint32_t t = b->next[i] + b->q[i];
 	if (e >= b->den[i]) {
@@ -260,7 +326,15 @@ uint16_t mo_event(void)
 	fb_block_t *b = cur;
 	uint8_t due = s_due;
 	if (due) {
+		/* a reset from here until busy = 0 finds the record invalid: a
+		 * boot cannot know whether the drivers saw the step */
+		K.busy = 1;
 		board_steps_high(due);
+		if (due & 1u)
+			count_step(b, 0);
+		if (due & 2u)
+			count_step(b, 1);
+		K.busy = 0;
 		if (due & 1u)
 			step_axis(b, 0);
 		if (due & 2u)
@@ -300,25 +374,31 @@ uint8_t mo_running(void) { return s_running; }
 void mo_get_pos(int32_t pos[2])
 {
 	uint8_t sreg = board_irq_save();
-	pos[0] = s_pos[0];
-	pos[1] = s_pos[1];
+	pos[0] = keep_pos(0);
+	pos[1] = keep_pos(1);
 	board_irq_restore(sreg);
 }
 
 void mo_set_pos(const int32_t pos[2])
 {
 	uint8_t sreg = board_irq_save();
-	s_pos[0] = pos[0];
-	s_pos[1] = pos[1];
+	keep_write(pos[0], pos[1], K.done, K.homed);
 	board_irq_restore(sreg);
 }
 
 uint32_t mo_done_line(void)
 {
 	uint8_t sreg = board_irq_save();
-	uint32_t v = s_done_line;
+	uint32_t v = K.done;
 	board_irq_restore(sreg);
 	return v;
+}
+
+void mo_clear_done(void)
+{
+	uint8_t sreg = board_irq_save();
+	keep_done(0);
+	board_irq_restore(sreg);
 }
 
 uint32_t mo_underruns(void)
@@ -330,8 +410,17 @@ uint32_t mo_underruns(void)
 }
 
 uint8_t mo_laser(void) { return s_laser; }
-uint8_t mo_homed(void) { return s_homed; }
-void mo_set_homed(uint8_t on) { s_homed = on; }
+uint8_t mo_homed(void) { return K.homed; }
+
+void mo_set_homed(uint8_t on)
+{
+	uint8_t sreg = board_irq_save();
+	K.busy = 1;
+	K.check += (uint32_t)on - K.homed;
+	K.homed = on;
+	K.busy = 0;
+	board_irq_restore(sreg);
+}
 
 void mo_set_endstops(uint8_t on, uint8_t seek_neg)
 {

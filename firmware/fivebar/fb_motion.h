@@ -43,8 +43,14 @@ typedef struct {
 
 #define MO_NEVER 0xffffffffUL
 
-/* Reset the queue and the generator (the motors keep their position). */
+/* Reset the queue and the generator (the motors keep their position, H and
+ * Ln done). */
 void mo_init(void);
+/* At boot, before mo_init: take position, H and Ln done from the record a
+ * reset that leaves the RAM powered keeps (board_keep) if it is valid and
+ * power_on is 0; else start from A:0,B:0, H:0, Ln done 0.  Returns 1 when
+ * the record was kept. */
+uint8_t mo_boot(uint8_t power_on);
 
 /* Queue: the main loop fills mo_slot() and then calls mo_push().  The count
  * includes the block executing now; mo_queue_waiting() does not. */
@@ -87,11 +93,13 @@ void mo_get_pos(int32_t pos[2]);
 /* Only while stopped. */
 void mo_set_pos(const int32_t pos[2]);
 uint32_t mo_done_line(void);
+/* Ln done := 0 (Ctrl-X). */
+void mo_clear_done(void);
 uint32_t mo_underruns(void);
 uint8_t mo_laser(void);
 /* The position was set since power-on: a G92 block executed (set here, in the
  * step interrupt) or a homing completed (fb_main).  mo_init() keeps it, as a
- * Ctrl-X keeps the position. */
+ * Ctrl-X keeps the position, and so does a reset that keeps the record. */
 uint8_t mo_homed(void);
 void mo_set_homed(uint8_t on);
 /* Endstop supervision outside homing (the $7 setting): a motor stepping

@@ -18,6 +18,9 @@ size_t fake_tx_len;
 uint64_t fake_budget = UINT64_MAX;
 void (*fake_irq_hook)(void);
 int fake_irq_countdown;
+void (*fake_step_hook)(void);
+uint8_t fake_power_on;
+volatile fb_keep_t board_keep;
 static uint8_t irq_on = 1;
 static char tx_copy[65536];
 
@@ -37,10 +40,19 @@ void fake_reset(void)
 	fake_budget = UINT64_MAX;
 	fake_irq_hook = 0;
 	fake_irq_countdown = 0;
+	fake_step_hook = 0;
 	irq_on = 1;
+	fake_power_on = 1;
 }
 
 void board_init(void) {}
+
+uint8_t board_power_on(void)
+{
+	uint8_t was = fake_power_on;
+	fake_power_on = 0;
+	return was;
+}
 
 void board_tx(uint8_t c)
 {
@@ -119,6 +131,8 @@ void board_steps_high(uint8_t mask)
 		fake_steps[fake_nsteps].laser = fake_laser;
 		fake_nsteps++;
 	}
+	if (fake_step_hook)
+		fake_step_hook();
 }
 
 void board_set_dirs(uint8_t neg_mask) { fake_dirs = neg_mask; }

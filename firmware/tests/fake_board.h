@@ -40,6 +40,14 @@ extern uint64_t fake_budget;
  * would.  Lets a test deliver a byte at every point of a main-loop pass. */
 extern void (*fake_irq_hook)(void);
 extern int fake_irq_countdown;
+/* Runs inside board_steps_high(), just after the step pins rose: what a reset
+ * at that instant would find. */
+extern void (*fake_step_hook)(void);
+
+/* What board_power_on() answers next (then 0): fake_reset() sets it, so
+ * fake_reset(); fb_setup(); is a power-on; clear it for a reset that keeps
+ * the RAM (board_keep, which a test may also corrupt). */
+extern uint8_t fake_power_on;
 
 void fake_reset(void);
 /* Run the step timer until it stops or max_cycles pass; returns events run. */

@@ -647,13 +647,197 @@ static void test_homed_flag(void)
 	send("?");
 	out = poll_out(5);
 	CHECK(has(out, "<Idle|A:1,B:-10|") && has(out, "|H:1>"), "G92 after $X: '%s'", out);
-	/* power-on (DTR reset); the Ctrl-X only empties the fake's receive ring */
+	/* power-on; the Ctrl-X only empties the fake's receive ring */
 	fb_rx_isr(0x18);
 	fb_poll();
 	fake_reset();
 	fb_setup();
 	fake_take_tx();
-	expect("?", "<Idle|A:1,B:-10|Q:0|Ln:0,0|L:0|U:0|H:0>\r\n");
+	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,0|L:0|U:0|H:0>\r\n");
+}
+
+/* ---- the record kept across a reset (docs/protocol.md section 7) ------------------------- */
+
+/*
+ * Boot again as after a reset: power_on 1 = a power-on, 0 = a reset that left
+ * the RAM powered (board_keep as the firmware, or the test, left it).  The
+ * Ctrl-X byte stops motion where it is and empties the fake's receive ring
+ * (the start-up code clears it on the AVR); fb_setup() handles it without the
+ * Ctrl-X's own effects.  Returns the banner check.
+ */
+static void reboot(uint8_t power_on)
+{
+	fb_rx_isr(0x18);
+	fake_reset();
+	fake_power_on = power_on;
+	fb_setup();
+	const char *out = fake_take_tx();
+	CHECK(strcmp(out, BANNER) == 0, "a boot sends the banner: '%s'", out);
+}
+
+static void run_lines(const char *lines)
+{
+	send(lines);
+	for (int i = 0; i < 20; i++)
+		fb_poll();
+	fake_take_tx();
+}
+
+/* A motor's steps recorded by the fake, signed by direction. */
+static int32_t steps_of(int axis)
+{
+	int32_t n = 0;
+	for (size_t i = 0; i < fake_nsteps; i++)
+		if (fake_steps[i].mask & (1u << axis))
+			n += ((fake_steps[i].dirs >> axis) & 1u) ? -1 : 1;
+	return n;
+}
+
+static fb_keep_t snapshot;
+static int snapped;
+
+static void snapshot_isr(void)
+{
+	snapshot = board_keep;
+	snapped = 1;
+}
+
+/* The record at the 50th step edge of a run. */
+static void snapshot_step(void)
+{
+	if (++snapped == 50)
+		snapshot = board_keep;
+}
+
+static void test_kept_record(void)
+{
+	char want[96];
+	reboot(1);
+	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,0|L:0|U:0|H:0>\r\n");
+	expect("$9=5\nG92 A100 B-50\nG1 A150 B-40 P10000\nG91\n", "ok\r\nok\r\nok\r\nok\r\n");
+	tick(100);
+	expect("?", "<Idle|A:150,B:-40|Q:0|Ln:3,4|L:0|U:1|H:1>\r\n");
+
+	/* a reset that keeps the RAM: position, H and Ln done stay; the rest boots */
+	reboot(0);
+	expect("?", "<Idle|A:150,B:-40|Q:0|Ln:3,0|L:0|U:0|H:1>\r\n");
+	send("$$\n");
+	const char *out = poll_out(5);
+	CHECK(strstr(out, "$9=100\r\n") != 0, "settings at their boot values: '%s'", out);
+	expect("G1 A-300 B-40 P100000\n", "ok\r\n"); /* G90 again: absolute, folds off below 0 */
+	tick(100);
+	expect("?", "<Idle|A:-300,B:-40|Q:0|Ln:2,2|L:0|U:1|H:1>\r\n");
+
+	/* a reset mid-segment: the motors stop part-way, exactly counted */
+	fake_nsteps = 0;
+	run_lines("M3 S255\nG1 A700 B60 P100000\nG1 A1700 B-40 P100000\n");
+	fake_ms += 100;
+	fb_poll();
+	fake_run(1600000u + 700000u); /* line 4 done, line 5 under way */
+	CHECK(fake_laser == 255 && mo_running(), "the second segment burns");
+	int32_t a = -300 + steps_of(0), b = -40 + steps_of(1);
+	CHECK(700 < a && a < 1700 && b < 60 && b > -40, "part-way: %d, %d", a, b);
+	reboot(0);
+	CHECK(fake_laser == 0 && !fake_timer_on, "a boot stops motion, laser off");
+	snprintf(want, sizeof want, "<Idle|A:%d,B:%d|Q:0|Ln:4,0|L:0|U:0|H:1>\r\n", a, b);
+	expect("?", want);
+	CHECK(steps_of(0) == 0 && steps_of(1) == 0, "no step after the reset");
+
+	/* Ctrl-X after it: Ln done to 0, position and H kept */
+	send("\x18");
+	expect("", BANNER);
+	snprintf(want, sizeof want, "<Idle|A:%d,B:%d|Q:0|Ln:0,0|L:0|U:0|H:1>\r\n", a, b);
+	expect("?", want);
+
+	/* the record is used only when it is whole: not at the instant a step's
+	 * pins rose (the drivers saw the step, the count may not have it yet) */
+	static const char power_on[] = "<Idle|A:0,B:0|Q:0|Ln:0,0|L:0|U:0|H:0>\r\n";
+	run_lines("G1 A-100 P100000\n");
+	fake_ms += 100;
+	fb_poll();
+	snapped = 0;
+	fake_step_hook = snapshot_step;
+	fake_run(800000);
+	fake_step_hook = 0;
+	CHECK(snapped >= 50, "the steps were seen: %d", snapped);
+	board_keep = snapshot;
+	reboot(0);
+	expect("?", power_on);
+	run_lines("G92 A7 B8\n");
+	tick(100);
+	reboot(0);
+	expect("?", "<Idle|A:7,B:8|Q:0|Ln:1,0|L:0|U:0|H:1>\r\n");
+	board_keep.check ^= 0x100u;
+	reboot(0);
+	expect("?", power_on);
+	run_lines("G92 A7 B8\n");
+	tick(100);
+	board_keep.busy = 1; /* a reset while a step or an update was being recorded */
+	reboot(0);
+	expect("?", power_on);
+	run_lines("G92 A7 B8\n");
+	tick(100);
+	reboot(1); /* the hardware says power-on */
+	expect("?", power_on);
+	/* random RAM */
+	uint32_t x = 99;
+	for (int round = 0; round < 200; round++) {
+		fb_keep_t junk;
+		uint8_t *bytes = (uint8_t *)&junk;
+		for (size_t i = 0; i < sizeof junk; i++) {
+			x = x * 1103515245u + 12345u;
+			bytes[i] = (uint8_t)(x >> 16);
+		}
+		if (round % 2)
+			junk.busy = 0;
+		board_keep = junk;
+		reboot(0);
+		int32_t pos[2];
+		mo_get_pos(pos);
+		CHECK(pos[0] == 0 && pos[1] == 0 && !mo_homed() && mo_done_line() == 0,
+		      "round %d: random RAM taken for a record", round);
+	}
+}
+
+/*
+ * A reset at every point of a (failing) homing where interrupts are enabled
+ * again: the record the next boot finds has H:0, whatever position it holds.
+ * $H clears H before it zeroes the position, so no boot finds H:1 with the
+ * seek's count.
+ */
+static void test_reset_during_homing(void)
+{
+	int k, fired = 1, positions = 0;
+	int32_t last = 1000;
+	for (k = 0; fired && k < 200; k++) {
+		reboot(1);
+		expect("$7=1\n$12=10\n$8=40000\nG92 A5 B5\n", "ok\r\nok\r\nok\r\nok\r\n");
+		tick(100);
+		CHECK(mo_homed(), "k=%d: G92 set H", k);
+		send("$H\n");
+		snapped = 0;
+		fake_irq_hook = snapshot_isr;
+		fake_irq_countdown = k;
+		const char *out = poll_out(5);
+		fired = snapped;
+		fake_irq_hook = 0;
+		CHECK(strcmp(out, "ALARM:31\r\nerror:31\r\n") == 0, "k=%d: homing fails: '%s'", k, out);
+		if (!fired)
+			break;
+		board_keep = snapshot;
+		reboot(0);
+		int32_t pos[2];
+		mo_get_pos(pos);
+		/* Ln done: the G92's line, or the $H's once a homing move ended */
+		CHECK(!mo_homed() && (mo_done_line() == 4 || mo_done_line() == 5),
+		      "k=%d: H %u, Ln done %u", k, mo_homed(), mo_done_line());
+		CHECK(pos[0] == pos[1] && (pos[0] == 5 || (pos[0] <= 0 && pos[0] >= -10)),
+		      "k=%d: position %d,%d", k, pos[0], pos[1]);
+		if (pos[0] != last)
+			positions++;
+		last = pos[0];
+	}
+	CHECK(k > 3 && positions >= 3, "resets at %d points saw %d positions", k, positions);
 }
 
 /* Strict framing in the firmware: refused lines are not executed; a Ctrl-X ends it. */
@@ -696,6 +880,8 @@ int main(void)
 	test_reset_while_a_line_waits();
 	test_homed_flag();
 	test_strict_framing();
+	test_kept_record();
+	test_reset_during_homing();
 	printf("%d checks, %d failed\n", checks, failures);
 	return failures ? 1 : 0;
 }
