@@ -15,12 +15,39 @@
  *     -b STEPS    endstop B likewise (positions counted from the trace)
  *     -D FILE     debug log of Timer1: "<cycle> r|w <OCR1A> <TCNT1>" for every
  *                 read (the step interrupt's entry) and write of OCR1A
+ *     -C          control commands on stdin, one per line, each acknowledged
+ *                 on stdout with "ok <command>" once done (see below)
  *
- * stdout carries exactly one line, "PTY /dev/pts/N"; simavr's own logging
- * and the final statistics go to stderr.  SIGTERM or SIGINT stops cleanly
- * (exit 0); the harness also stops when its parent dies (PR_SET_PDEATHSIG).
- * Single-threaded: the pty is pumped from a simavr cycle timer every
- * simulated millisecond.
+ * stdout carries "PTY /dev/pts/N", then only the acknowledgements of -C;
+ * simavr's own logging and the final statistics go to stderr.  SIGTERM or
+ * SIGINT stops cleanly (exit 0), as do "quit" and the end of stdin with -C;
+ * the harness also stops when its parent dies (PR_SET_PDEATHSIG).
+ * Single-threaded: the pty and stdin are pumped from a simavr cycle timer
+ * every simulated millisecond.
+ *
+ * Control commands (-C):
+ *   reset    a reset that leaves the RAM powered (the Uno's DTR reset, a
+ *            watchdog or brown-out reset): the CPU and its I/O restart, the
+ *            SRAM is kept (simavr's avr_reset() clears it, so the harness
+ *            saves and restores it), bytes not yet received are lost; ends
+ *            a freeze
+ *   open     a client (re)opened the pty: output it has not read is dropped,
+ *            then "reset"
+ *   power    a power cut and power-on: as "reset", but the SRAM comes back
+ *            with random contents
+ *   freeze   the CPU stops (a hung controller): pins keep their levels,
+ *            bytes from the host are lost, until a reset
+ *   flush    write the trace file out
+ *   quit     stop
+ * A reset, power cut or freeze first lets the bytes the client wrote before
+ * the command reach the firmware (as on a real link, where they were on the
+ * wire before the DTR edge) and gives it 1 ms to take them; then it takes
+ * effect at the next instruction boundary where interrupts are enabled
+ * (outside interrupt handlers and critical sections), so the firmware's
+ * state is between two of its updates (after 62 ms at the latest).  On reset every
+ * traced output pin that was high is traced low (the pins float until the
+ * firmware drives them again), and what the harness set up at start is set
+ * again (INT0/INT1 polling off, UART flags, endstop levels, the I/O timer).
  */
 #define _GNU_SOURCE
 #include <errno.h>
@@ -33,6 +60,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/ioctl.h>
 #include <sys/prctl.h>
 #include <termios.h>
 #include <time.h>
@@ -78,6 +106,23 @@ static int have_endstop[2];
 static long endstop_at[2];
 static int endstop_pressed[2] = { -1, -1 };
 static avr_irq_t *endstop_irq[2];
+
+/* control (-C) */
+enum { CTL_NONE, CTL_RESET, CTL_POWER };
+static int control, ctl_out = -1;
+static char ctl_line[128];
+static size_t ctl_len;
+static int pending_reset, pending_freeze, frozen, settled;
+static avr_cycle_count_t quiet_since;
+static avr_uart_t *uart0;
+static const char *reset_name = "reset";
+static avr_cycle_count_t pending_since;
+static struct timespec frozen_at;
+
+/* last traced level of each output pin, to trace them low on a reset */
+enum { PIN_STEPA, PIN_STEPB, PIN_DIRA, PIN_DIRB, PIN_ENABLE, PIN_LASER, PIN_COUNT };
+static const char *const pin_names[PIN_COUNT] = { "stepA", "stepB", "dirA", "dirB", "enable", "laser" };
+static int pin_level[PIN_COUNT];
 
 /* Timer1 debug log (-D) */
 static FILE *dbg;
@@ -185,8 +230,13 @@ static void pump_io(void)
 		room = sizeof(buf);
 	if (room) {
 		ssize_t n = read(master_fd, buf, room);
+		if (n < 0 && errno == EIO) {
+			/* no client has the pty open: what the AVR sent is lost */
+			to_host.len = 0;
+		}
 		for (ssize_t i = 0; i < n; i++)
-			ring_put(&to_avr, buf[i]);
+			if (!frozen)
+				ring_put(&to_avr, buf[i]);
 	}
 	feed_uart();
 	while (to_host.len) {
@@ -210,10 +260,88 @@ static double wall_seconds(void)
 	return (double)(now.tv_sec - wall_start.tv_sec) + (double)(now.tv_nsec - wall_start.tv_nsec) * 1e-9;
 }
 
+static void ack(const char *cmd)
+{
+	char msg[160];
+	int n = snprintf(msg, sizeof(msg), "ok %s\n", cmd);
+	if (ctl_out >= 0 && write(ctl_out, msg, (size_t)n) != n)
+		stop_req = 1;
+}
+
+static void run_command(const char *cmd)
+{
+	if (!strcmp(cmd, "reset")) {
+		pending_reset = CTL_RESET;
+		reset_name = "reset";
+	} else if (!strcmp(cmd, "open")) {
+		to_host.len = 0;
+		pending_reset = CTL_RESET;
+		reset_name = "open";
+	} else if (!strcmp(cmd, "power")) {
+		pending_reset = CTL_POWER;
+		reset_name = "power";
+	} else if (!strcmp(cmd, "freeze")) {
+		if (frozen) {
+			ack(cmd);
+			return;
+		}
+		pending_freeze = 1;
+	} else if (!strcmp(cmd, "flush")) {
+		if (trace)
+			fflush(trace);
+		ack(cmd);
+		return;
+	} else if (!strcmp(cmd, "quit")) {
+		stop_req = 1;
+		return;
+	} else {
+		fprintf(stderr, "fbsim: unknown command '%s'\n", cmd);
+		return;
+	}
+	pending_since = quiet_since = avr->cycle;
+	settled = 0;
+}
+
+/* Nothing the client wrote is on its way to the firmware any more. */
+static int input_drained(void)
+{
+	int queued = 0;
+	if (ioctl(master_fd, FIONREAD, &queued) < 0)
+		queued = 0;
+	return to_avr.len == 0 && queued == 0 && (!uart0 || uart0->input.read == uart0->input.write);
+}
+
+/* Read the commands waiting on stdin (non-blocking); its end stops the harness. */
+static void read_control(void)
+{
+	char buf[256];
+	if (!control)
+		return;
+	ssize_t n = read(0, buf, sizeof(buf));
+	if (n == 0)
+		stop_req = 1;
+	for (ssize_t i = 0; i < n; i++) {
+		if (buf[i] == '\n') {
+			ctl_line[ctl_len] = 0;
+			run_command(ctl_line);
+			ctl_len = 0;
+		} else if (ctl_len + 1 < sizeof(ctl_line)) {
+			ctl_line[ctl_len++] = buf[i];
+		}
+	}
+}
+
 static avr_cycle_count_t pump_timer(avr_t *a, avr_cycle_count_t when, void *param)
 {
 	(void)param;
 	pump_io();
+	read_control();
+	if (pending_reset | pending_freeze) {
+		if (!input_drained())
+			quiet_since = a->cycle;
+		else if (a->cycle - quiet_since >= pump_period)
+			settled = 1;
+	}
 	if (trace)
 		fflush(trace);
 	if (realtime) {
@@ -230,6 +358,12 @@ static void trace_event(const char *name, uint32_t value)
 		fprintf(trace, "%llu %s %u\n", (unsigned long long)avr->cycle, name, value & 1u);
 }
 
+static void trace_pin(int pin, uint32_t value)
+{
+	pin_level[pin] = (int)(value & 1u);
+	trace_event(pin_names[pin], value);
+}
+
 /*
  * Drive switch i to a level.  simavr re-applies the pull-up of an input pin
  * (PORT bit set) on every write to its PORT or DDR register, which would undo
@@ -238,6 +372,7 @@ static void trace_event(const char *name, uint32_t value)
  * so it is updated together with the pin.
  */
 static uint8_t external_mask, external_value;
+static void drive_endstop(int i, int level);
 
 static void drive_endstop(int i, int level)
 {
@@ -270,7 +405,7 @@ static void step_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 {
 	(void)irq;
 	int i = (int)(intptr_t)param;
-	trace_event(i ? "stepB" : "stepA", value);
+	trace_pin(i ? PIN_STEPB : PIN_STEPA, value);
 	if (value & 1u) {
 		int positive = dir_level[i] ^ ((CFG_DIR_INVERT_MASK >> i) & 1);
 		pos[i] += positive ? 1 : -1;
@@ -283,13 +418,13 @@ static void dir_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 	(void)irq;
 	int i = (int)(intptr_t)param;
 	dir_level[i] = (int)(value & 1u);
-	trace_event(i ? "dirB" : "dirA", value);
+	trace_pin(i ? PIN_DIRB : PIN_DIRA, value);
 }
 
 static void named_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 {
 	(void)irq;
-	trace_event((const char *)param, value);
+	trace_pin((int)(intptr_t)param, value);
 }
 
 static void no_sleep(avr_t *a, avr_cycle_count_t how_long)
@@ -301,6 +436,98 @@ static void no_sleep(avr_t *a, avr_cycle_count_t how_long)
 static avr_irq_t *pin_irq(char port, int bit)
 {
 	return avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ(port), bit);
+}
+
+/* What a reset (avr_reset) undoes of the set-up: INT0/INT1 polling, UART
+ * flags, the endstop levels, the I/O timer. */
+static void setup_after_reset(void)
+{
+	/* simavr 1.6 polls low INT0/INT1 pins every cycle: those are the step
+	 * pins, and the polling costs 3-4x the emulation speed. */
+	avr_extint_set_strict_lvl_trig(avr, 0, 0);
+	avr_extint_set_strict_lvl_trig(avr, 1, 0);
+	uint32_t flags = 0;
+	avr_ioctl(avr, AVR_IOCTL_UART_GET_FLAGS('0'), &flags);
+	flags &= ~(uint32_t)(AVR_UART_FLAG_STDIO | AVR_UART_FLAG_POLL_SLEEP);
+	avr_ioctl(avr, AVR_IOCTL_UART_SET_FLAGS('0'), &flags);
+	uart_xon = 1;
+	/* drive both switches to "released" (or to their simulated state) */
+	external_mask = external_value = 0;
+	for (int i = 0; i < 2; i++) {
+		endstop_pressed[i] = -1;
+		if (have_endstop[i])
+			update_endstop(i);
+		else
+			drive_endstop(i, CFG_ENDSTOP_ACTIVE_LOW ? 1 : 0);
+	}
+	avr_cycle_timer_register(avr, pump_period, pump_timer, NULL);
+}
+
+static uint32_t rng_state = 0x2545F491u;
+
+static uint8_t random_byte(void)
+{
+	rng_state ^= rng_state << 13;
+	rng_state ^= rng_state >> 17;
+	rng_state ^= rng_state << 5;
+	return (uint8_t)rng_state;
+}
+
+/*
+ * Reset the AVR from the main loop (never from a cycle timer: avr_reset
+ * rebuilds simavr's timer table).  avr_reset() clears the whole data space;
+ * a reset with the RAM powered puts the SRAM (above the I/O registers) back,
+ * a power cut fills it with noise.
+ */
+static void apply_reset(int kind)
+{
+	static uint8_t sram[65536];
+	unsigned lo = (unsigned)avr->ioend + 1u, n = (unsigned)avr->ramend + 1u - lo;
+	memcpy(sram, avr->data + lo, n);
+	for (int pin = 0; pin < PIN_COUNT; pin++)
+		if (pin_level[pin])
+			trace_pin(pin, 0);
+	avr_reset(avr);
+	if (kind == CTL_POWER) {
+		rng_state ^= (uint32_t)avr->cycle;
+		for (unsigned i = 0; i < n; i++)
+			avr->data[lo + i] = random_byte();
+	} else {
+		memcpy(avr->data + lo, sram, n);
+	}
+	to_avr.len = 0;
+	setup_after_reset();
+	if (frozen) {
+		/* the wall-clock throttle does not catch up on the frozen time */
+		struct timespec now;
+		clock_gettime(CLOCK_MONOTONIC, &now);
+		wall_start.tv_sec += now.tv_sec - frozen_at.tv_sec;
+		wall_start.tv_nsec += now.tv_nsec - frozen_at.tv_nsec;
+		frozen = 0;
+	}
+	pending_reset = CTL_NONE;
+	pending_freeze = 0;
+	if (trace)
+		fflush(trace);
+	ack(reset_name);
+}
+
+/* A pending reset or freeze, once the firmware is between two of its state
+ * updates (interrupts enabled), or at once if it never gets there. */
+static void apply_pending(void)
+{
+	if (!frozen && !(settled && avr->sreg[S_I]) && avr->cycle - pending_since < 1000000u)
+		return;
+	if (pending_reset) {
+		apply_reset(pending_reset);
+	} else if (pending_freeze && !frozen) {
+		frozen = 1;
+		pending_freeze = 0;
+		clock_gettime(CLOCK_MONOTONIC, &frozen_at);
+		if (trace)
+			fflush(trace);
+		ack("freeze");
+	}
 }
 
 static void usage(void)
@@ -321,7 +548,7 @@ int main(int argc, char **argv)
 	if (getppid() == 1)
 		return 1;
 
-	while ((opt = getopt(argc, argv, "m:f:t:wg:c:Ra:b:D:")) != -1) {
+	while ((opt = getopt(argc, argv, "m:f:t:wg:c:Ra:b:D:C")) != -1) {
 		switch (opt) {
 		case 'm': mcu = optarg; break;
 		case 'f': freq = strtoul(optarg, NULL, 10); break;
@@ -333,6 +560,7 @@ int main(int argc, char **argv)
 		case 'a': have_endstop[0] = 1; endstop_at[0] = strtol(optarg, NULL, 10); break;
 		case 'b': have_endstop[1] = 1; endstop_at[1] = strtol(optarg, NULL, 10); break;
 		case 'D': debug_path = optarg; break;
+		case 'C': control = 1; break;
 		default: usage();
 		}
 	}
@@ -365,15 +593,8 @@ int main(int argc, char **argv)
 	avr_load_firmware(avr, &fw);
 	avr->frequency = (uint32_t)freq;
 	avr->sleep = no_sleep;
-	/* simavr 1.6 polls low INT0/INT1 pins every cycle: those are the step
-	 * pins, and the polling costs 3-4x the emulation speed. */
-	avr_extint_set_strict_lvl_trig(avr, 0, 0);
-	avr_extint_set_strict_lvl_trig(avr, 1, 0);
+	pump_period = avr->frequency / 1000;
 
-	uint32_t flags = 0;
-	avr_ioctl(avr, AVR_IOCTL_UART_GET_FLAGS('0'), &flags);
-	flags &= ~(uint32_t)(AVR_UART_FLAG_STDIO | AVR_UART_FLAG_POLL_SLEEP);
-	avr_ioctl(avr, AVR_IOCTL_UART_SET_FLAGS('0'), &flags);
 	uart_in_irq = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
 	avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT),
 				uart_out_hook, NULL);
@@ -395,8 +616,10 @@ int main(int argc, char **argv)
 	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_STEP_PORT), PIN_STEP_B_BIT), step_hook, (void *)1);
 	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_DIR_PORT), PIN_DIR_A_BIT), dir_hook, (void *)0);
 	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_DIR_PORT), PIN_DIR_B_BIT), dir_hook, (void *)1);
-	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_ENABLE_PORT), PIN_ENABLE_BIT), named_hook, "enable");
-	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_LASER_PORT), PIN_LASER_BIT), named_hook, "laser");
+	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_ENABLE_PORT), PIN_ENABLE_BIT), named_hook,
+				(void *)(intptr_t)PIN_ENABLE);
+	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_LASER_PORT), PIN_LASER_BIT), named_hook,
+				(void *)(intptr_t)PIN_LASER);
 	if (debug_path) {
 		dbg = fopen(debug_path, "w");
 		if (!dbg) {
@@ -411,13 +634,9 @@ int main(int argc, char **argv)
 	}
 	endstop_irq[0] = pin_irq(PORT_CHAR(PIN_ENDSTOP_PORT), PIN_ENDSTOP_A_BIT);
 	endstop_irq[1] = pin_irq(PORT_CHAR(PIN_ENDSTOP_PORT), PIN_ENDSTOP_B_BIT);
-	/* drive both switches to "released" (or to their simulated state) */
-	for (int i = 0; i < 2; i++) {
-		if (have_endstop[i])
-			update_endstop(i);
-		else
-			drive_endstop(i, CFG_ENDSTOP_ACTIVE_LOW ? 1 : 0);
-	}
+	for (avr_io_t *io = avr->io_port; io; io = io->next)
+		if (!strcmp(io->kind, "uart") && ((avr_uart_t *)io)->name == '0')
+			uart0 = (avr_uart_t *)io;
 
 	int slave_fd;
 	if (openpty(&master_fd, &slave_fd, NULL, NULL, NULL) != 0) {
@@ -431,29 +650,46 @@ int main(int argc, char **argv)
 	const char *name = ttyname(slave_fd);
 	printf("PTY %s\n", name ? name : "?");
 	fflush(stdout);
-	/* anything printed to stdout by the library from now on goes to stderr */
+	/* anything printed to stdout by the library from now on goes to stderr;
+	 * the acknowledgements of -C keep the real stdout */
+	if (control) {
+		ctl_out = dup(1);
+		fcntl(0, F_SETFL, fcntl(0, F_GETFL) | O_NONBLOCK);
+	}
 	dup2(2, 1);
 	close(slave_fd);
 	fcntl(master_fd, F_SETFL, fcntl(master_fd, F_GETFL) | O_NONBLOCK);
 
 	if (wait_client) {
-		while (!stop_req && !client_present())
+		while (!stop_req && !client_present()) {
+			read_control();
 			usleep(1000);
+		}
 		if (grace_ms > 0)
 			usleep((useconds_t)grace_ms * 1000u);
 	}
 
-	pump_period = avr->frequency / 1000;
-	avr_cycle_timer_register(avr, pump_period, pump_timer, NULL);
+	setup_after_reset();
 	clock_gettime(CLOCK_MONOTONIC, &wall_start);
 
 	int state = cpu_Running;
 	while (!stop_req) {
+		if (frozen) {
+			read_control();
+			pump_io();
+			if (pending_reset)
+				apply_pending();
+			else
+				usleep(1000);
+			continue;
+		}
 		state = avr_run(avr);
 		if (state == cpu_Done || state == cpu_Crashed)
 			break;
 		if (max_cycles && avr->cycle >= max_cycles)
 			break;
+		if (pending_reset | pending_freeze)
+			apply_pending();
 	}
 	pump_io();
 	if (trace)

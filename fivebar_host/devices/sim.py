@@ -2,17 +2,23 @@
 
 ``Emulator`` launches firmware/build/fbsim (the libsimavr harness) on
 firmware/build/fivebar.elf and hands back the pseudo-terminal path that a
-host opens like a serial port.  ``FirmwareSession`` is a small synchronous
-client over such a port (send a line, read its reply, poll status, stream
-with character counting) used by the firmware tests and the benchmark; it is
-the only place here that needs pyserial, and imports it lazily.
+host opens like a serial port; ``Emulator.control`` resets the AVR (with its
+RAM kept, like the Uno's DTR reset, or after a power cut), freezes it or
+flushes its pin trace through the harness's command channel.
+``FirmwareSession`` is a small synchronous client over such a port (send a
+line, read its reply, poll status, stream with character counting) used by
+the firmware tests and the benchmark; it is the only place here that needs
+pyserial, and imports it lazily.
 """
 
 from __future__ import annotations
 
+import os
+import select
 import shutil
 import signal
 import subprocess
+import threading
 import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -79,8 +85,19 @@ def ensure_built(directory: Path | None = None) -> BuildPaths:
     return BuildPaths(build / "fivebar.elf", build / "fivebar.hex", build / "fbsim", proc.stdout)
 
 
+#: The harness's control commands (firmware/sim/fbsim.c ``-C``).
+CONTROL_COMMANDS = ("reset", "open", "power", "freeze", "flush")
+
+
 class Emulator:
-    """One running harness process; use as a context manager or call start/stop."""
+    """One running harness process; use as a context manager or call start/stop.
+
+    The harness takes control commands on its stdin (``control``): ``reset`` (a reset
+    that keeps the RAM, as by the Uno's DTR line), ``open`` (a client reopened the pty:
+    its unread output is dropped, then ``reset``), ``power`` (a power cut: the RAM comes
+    back random), ``freeze`` (the CPU hangs until a reset) and ``flush`` (the trace file
+    is written out).
+    """
 
     def __init__(
         self,
@@ -96,14 +113,16 @@ class Emulator:
         self.trace = trace
         self.endstops = (endstop_a, endstop_b)
         self.realtime = realtime
-        self.proc: subprocess.Popen[str] | None = None
+        self.proc: subprocess.Popen[bytes] | None = None
         self.pty: str | None = None
         self.stats = ""
         self.returncode: int | None = None
+        self._out = b""  # harness stdout read but not yet consumed
+        self._lock = threading.Lock()
 
     def command(self) -> list[str]:
-        """The harness command line (waits for the client: ``-w``)."""
-        cmd = [str(self.harness), "-w"]
+        """The harness command line (waits for the client: ``-w``; commands on stdin: ``-C``)."""
+        cmd = [str(self.harness), "-w", "-C"]
         if self.trace is not None:
             cmd += ["-t", str(self.trace)]
         for flag, value in zip(("-a", "-b"), self.endstops, strict=True):
@@ -120,22 +139,58 @@ class Emulator:
             raise EmulatorError("emulator already started")
         self.proc = subprocess.Popen(
             self.command(),
+            stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
-            text=True,
         )
-        assert self.proc.stdout is not None
-        deadline = time.monotonic() + timeout
-        line = ""
-        while time.monotonic() < deadline:
-            line = self.proc.stdout.readline()
-            if line or self.proc.poll() is not None:
-                break
+        self._out = b""
+        line = self._read_line(timeout)
         if not line.startswith("PTY "):
             err = self.stop()
             raise EmulatorError(f"harness did not report its pty (got {line!r}); stderr: {err}")
         self.pty = line.split(maxsplit=1)[1].strip()
         return self.pty
+
+    def _read_line(self, timeout: float) -> str:
+        """The next line the harness writes on stdout ('' if none came in time)."""
+        assert self.proc is not None and self.proc.stdout is not None
+        fd = self.proc.stdout.fileno()
+        deadline = time.monotonic() + timeout
+        while b"\n" not in self._out:
+            left = deadline - time.monotonic()
+            if left <= 0 or not select.select([fd], [], [], left)[0]:
+                return ""
+            chunk = os.read(fd, 4096)
+            if not chunk:
+                return ""
+            self._out += chunk
+        line, _, self._out = self._out.partition(b"\n")
+        return line.decode("ascii", errors="replace")
+
+    def control(self, command: str, timeout: float = 10.0) -> None:
+        """Send one control command and wait until the harness has carried it out.
+
+        A reset or freeze takes effect at the next instruction boundary where the
+        firmware has interrupts enabled (firmware/sim/fbsim.c)."""
+        if command not in CONTROL_COMMANDS:
+            raise ValueError(f"unknown harness command {command!r}")
+        with self._lock:
+            proc = self.proc
+            if proc is None or proc.stdin is None or proc.poll() is not None:
+                raise EmulatorError(f"harness not running (command {command!r})")
+            try:
+                proc.stdin.write(command.encode() + b"\n")
+                proc.stdin.flush()
+            except OSError as e:
+                raise EmulatorError(f"harness gone (command {command!r}): {e}") from e
+            line = self._read_line(timeout)
+            if line != f"ok {command}":
+                raise EmulatorError(f"harness did not acknowledge {command!r} (got {line!r})")
+
+    @property
+    def running(self) -> bool:
+        """True while the harness process is alive."""
+        return self.proc is not None and self.proc.poll() is None
 
     def stop(self, timeout: float = 5.0) -> str:
         """Stop the harness (SIGTERM) and return its statistics line(s)."""
@@ -144,10 +199,11 @@ class Emulator:
         if self.proc.poll() is None:
             self.proc.send_signal(signal.SIGTERM)
         try:
-            _, err = self.proc.communicate(timeout=timeout)
+            _, raw = self.proc.communicate(timeout=timeout)
         except subprocess.TimeoutExpired:
             self.proc.kill()
-            _, err = self.proc.communicate()
+            _, raw = self.proc.communicate()
+        err = raw.decode("utf-8", errors="replace")
         self.stats = err
         self.returncode = self.proc.returncode
         self.proc = None
