@@ -4,51 +4,191 @@ Opening the port builds the firmware and the harness if needed (`make -C firmwar
 starts the harness (which holds the CPU until a client opens its pty, so the boot banner is not
 lost) and opens the pty. Closing stops the harness, which flushes its pin trace.
 
-URL options: `fivebar-sim://?trace=PATH&realtime=1&endstops=A,B`
+URL options: `fivebar-sim://?trace=PATH&realtime=1&endstops=A,B&machine=NAME&reset_after=N`
 - `trace`: where the harness records every step, direction and laser pin change (default: a
   temporary file, available as `port.trace_path` after close);
 - `realtime=1`: throttle emulation to wall-clock speed (otherwise it runs 6–8× faster);
-- `endstops=A,B`: simulated endstop switch positions in steps (enables homing tests).
+- `endstops=A,B`: simulated endstop switch positions in steps (enables homing tests); either
+  may be empty (no switch);
+- `machine=NAME`: the harness outlives the port: ports opened with the same name within this
+  Python process drive one emulated machine, and opening it again is a DTR reset of the AVR
+  (its RAM kept, docs/protocol.md section 7), as the Uno's auto-reset does.  The pin trace
+  accumulates over all opens; `machine(NAME)` gives its `trace_path`, `trace()` (flushed and
+  parsed while the harness runs) and `power_cut()`, and `forget_machines()` stops them all
+  (their trace files stay).  A second open while the first port is open fails as a busy port.
+  The machine's harness options (`trace`, `realtime`, `endstops`) are those of its first open;
+  a later open may repeat them but not change them;
+- `disconnect_after=N`: after the N-th line (the N-th `\\n` written to this port) every read and
+  write raises `serial.SerialException`; the emulated firmware runs on (it finishes its queue,
+  or holds it when its laser silence timeout strikes);
+- `reset_after=N`: after the N-th line the AVR resets with its RAM kept, as by a glitch;
+- `power_cut_after=N`: after the N-th line the AVR loses power and boots again: its RAM comes
+  back random (position, `H` and `Ln` done are lost); the motors stay where they are;
+- `stall_after=N`: after the N-th line the AVR freezes (no replies, no motion, pins unchanged)
+  until a DTR reset.
+
+For the three glitches the bytes written up to the N-th line reach the AVR first and the rest of
+that write is lost; each fault fires once per port.  A DTR edge (`port.dtr = False`, then
+`True`, as `Link.hardware_reset` does) resets the AVR with its RAM kept.  The harness applies a
+reset or freeze where the firmware has interrupts enabled (firmware/sim/fbsim.c).
+
+The harness dies with the thread that started it (`PR_SET_PDEATHSIG`): open a named machine
+for the first time from a thread that lives as long as the machine should.
 """
 
 from __future__ import annotations
 
+import atexit
 import tempfile
+import threading
 import urllib.parse
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import serial
 
 from fivebar_host.devices.sim import Emulator, EmulatorError, ensure_built
+from fivebar_host.devices.simtrace import Trace, read_trace
 
 SCHEME = "fivebar-sim"
 
+#: Options that configure the harness process (fixed by a machine's first open).
+HARNESS_OPTIONS = ("trace", "realtime", "endstops")
+#: Fault options: what happens after the N-th line, and the harness command for it.
+FAULTS = {"disconnect_after": None, "reset_after": "reset", "power_cut_after": "power",
+          "stall_after": "freeze"}
+_KNOWN = (*HARNESS_OPTIONS, "machine", *FAULTS)
 
-def parse_sim_url(url: str) -> dict[str, Any]:
+
+@dataclass
+class SimOptions:
+    """The options of a `fivebar-sim://` URL (see the module docstring)."""
+
+    trace: Path | None = None
+    realtime: bool = False
+    endstops: tuple[int | None, int | None] = (None, None)
+    machine: str | None = None
+    faults: dict[str, int] | None = None
+    given: frozenset[str] = frozenset()  # the harness options the URL names
+
+
+def parse_sim_url(url: str) -> SimOptions:
     """Options of a `fivebar-sim://` URL; unknown or malformed options raise ValueError."""
     parts = urllib.parse.urlsplit(url)
     if parts.scheme != SCHEME:
         raise ValueError(f"expected a {SCHEME}:// URL, got {url!r}")
-    opts: dict[str, Any] = {"trace": None, "realtime": False, "endstops": (None, None)}
+    opts = SimOptions(faults={})
+    given = set()
     for key, values in urllib.parse.parse_qs(parts.query, keep_blank_values=True).items():
         value = values[-1]
+        given.add(key)
         if key == "trace":
-            opts["trace"] = Path(value)
+            opts.trace = Path(value)
         elif key == "realtime":
             if value not in ("0", "1"):
                 raise ValueError(f"{url}: realtime must be 0 or 1, got {value!r}")
-            opts["realtime"] = value == "1"
+            opts.realtime = value == "1"
         elif key == "endstops":
             try:
-                a, b = (int(v) for v in value.split(","))
+                a, b = (int(v) if v else None for v in value.split(","))
             except ValueError:
-                raise ValueError(f"{url}: endstops must be two step counts 'A,B', "
-                                 f"got {value!r}") from None
-            opts["endstops"] = (a, b)
+                raise ValueError(f"{url}: endstops must be two step counts 'A,B' (either may "
+                                 f"be empty), got {value!r}") from None
+            opts.endstops = (a, b)
+        elif key == "machine":
+            if not value:
+                raise ValueError(f"{url}: machine needs a name")
+            opts.machine = value
+        elif key in FAULTS:
+            if not value.isdigit() or int(value) < 1:
+                raise ValueError(f"{url}: {key} must be a line count >= 1, got {value!r}")
+            assert opts.faults is not None
+            opts.faults[key] = int(value)
         else:
-            raise ValueError(f"{url}: unknown option {key!r} (known: trace, realtime, endstops)")
+            raise ValueError(f"{url}: unknown option {key!r} (known: {', '.join(_KNOWN)})")
+    opts.given = frozenset(given & set(HARNESS_OPTIONS))
     return opts
+
+
+class SimMachine:
+    """A named emulated machine: one harness that outlives the ports opened on it."""
+
+    def __init__(self, name: str, emulator: Emulator, trace_path: Path, options: SimOptions
+                 ) -> None:
+        self.name = name
+        self.emulator = emulator
+        self.trace_path = trace_path
+        self.options = options
+        self.port: Serial | None = None  # the port open on it now
+
+    @property
+    def running(self) -> bool:
+        """True while its harness runs."""
+        return self.emulator.running
+
+    def flush(self) -> None:
+        """Write the trace file out (nothing to do once the harness stopped)."""
+        if self.running:
+            self.emulator.control("flush")
+
+    def trace(self) -> Trace:
+        """The pin trace of every open so far (flushed first while the harness runs)."""
+        self.flush()
+        return read_trace(self.trace_path)
+
+    def power_cut(self) -> None:
+        """Cut the controller's power and power it up: its RAM comes back random, so the
+        firmware boots as at power-on (A:0,B:0, H:0, Ln:0,0); the motors stay where they are.
+        With a port open the banner follows on it."""
+        if self.running:
+            self.emulator.control("power")
+
+    def stop(self) -> str:
+        """Stop the harness and forget the machine (its trace file stays); returns the
+        harness's statistics.  A later open of the name powers a new machine up."""
+        if self.port is not None:
+            self.port.close()
+        with _MACHINES_LOCK:
+            if _MACHINES.get(self.name) is self:
+                del _MACHINES[self.name]
+        return self.emulator.stop()
+
+
+_MACHINES: dict[str, SimMachine] = {}
+_MACHINES_LOCK = threading.Lock()
+
+
+def machine(name: str) -> SimMachine:
+    """The machine of `fivebar-sim://?machine=NAME`; KeyError before its first open."""
+    with _MACHINES_LOCK:
+        if name not in _MACHINES:
+            raise KeyError(f"no emulated machine {name!r} (open {SCHEME}://?machine={name} first)")
+        return _MACHINES[name]
+
+
+def forget_machines() -> None:
+    """Stop every named machine's harness and forget them (their trace files stay)."""
+    with _MACHINES_LOCK:
+        machines = list(_MACHINES.values())
+    for m in machines:
+        m.stop()
+
+
+atexit.register(forget_machines)
+
+
+def _new_emulator(opts: SimOptions) -> tuple[Emulator, Path]:
+    """Build if needed and make (not start) a harness for ``opts``; returns it and its trace
+    path."""
+    try:
+        build = ensure_built()
+    except EmulatorError as e:
+        raise serial.SerialException(f"{SCHEME}: {e}") from e
+    trace = opts.trace or Path(tempfile.mkdtemp(prefix="fivebar-sim-")) / "pins.trace"
+    a, b = opts.endstops
+    emu = Emulator(build.elf, build.harness, trace, a, b, opts.realtime)
+    return emu, trace
 
 
 class Serial(serial.SerialBase):
@@ -57,12 +197,23 @@ class Serial(serial.SerialBase):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         self._inner: serial.Serial | None = None
         self._emu: Emulator | None = None
+        self._machine: SimMachine | None = None
+        self.options = SimOptions()
         self.trace_path: Path | None = None
         self.stats = ""
+        self._lines = 0
+        self._fired: set[str] = set()
+        self._broken = ""  # why the link is gone (disconnect_after), or ''
+        self._dtr_last = True
         super().__init__(*args, **kwargs)
 
+    @property
+    def machine(self) -> SimMachine | None:
+        """The named machine this port drives (None without ``machine=``)."""
+        return self._machine
+
     def open(self) -> None:
-        """Build if needed, start the harness and open its pty."""
+        """Start the harness (or reset the named machine's AVR) and open its pty."""
         if self._port is None:
             raise serial.SerialException("port must be configured before it can be used")
         if self._inner is not None:
@@ -71,44 +222,115 @@ class Serial(serial.SerialBase):
             opts = parse_sim_url(str(self._port))
         except ValueError as e:
             raise serial.SerialException(str(e)) from e
-        try:
-            build = ensure_built()
-        except EmulatorError as e:
-            raise serial.SerialException(f"{SCHEME}: {e}") from e
-        trace = opts["trace"]
-        if trace is None:
-            trace = Path(tempfile.mkdtemp(prefix="fivebar-sim-")) / "pins.trace"
-        self.trace_path = trace
-        a, b = opts["endstops"]
-        self._emu = Emulator(build.elf, build.harness, trace, a, b, opts["realtime"])
-        try:
-            pty = self._emu.start()
-            self._inner = serial.Serial(pty, baudrate=self._baudrate, timeout=self._timeout,
-                                        write_timeout=self._write_timeout)
-        except (EmulatorError, serial.SerialException, OSError) as e:
-            self._emu.stop()
-            self._emu = None
-            raise serial.SerialException(f"{SCHEME}: cannot start the emulator: {e}") from e
+        self.options = opts
+        self._lines, self._fired, self._broken = 0, set(), ""
+        if opts.machine is None:
+            emu, self.trace_path = _new_emulator(opts)
+            self._open_pty(emu, fresh=True)
+            self._emu = emu
+        else:
+            self._open_machine(opts, opts.machine)
+        self._dtr_last = self._dtr_state
         self.is_open = True
 
+    def _open_machine(self, opts: SimOptions, name: str) -> None:
+        """Claim the named machine (starting its harness on first use) and reset its AVR."""
+        with _MACHINES_LOCK:
+            m = _MACHINES.get(name)
+            if m is not None and m.port is not None:
+                raise serial.SerialException(
+                    f"could not open port {self._port}: [Errno 16] Device or resource busy "
+                    f"(machine {name!r} is open)")
+            if m is not None and not m.running:
+                m = None  # its harness died: power it up again
+            fresh = m is None
+            if m is None:
+                emu, trace = _new_emulator(opts)
+                m = SimMachine(name, emu, trace, opts)
+                _MACHINES[name] = m
+            else:
+                for key in opts.given:
+                    if getattr(opts, key) != getattr(m.options, key):
+                        raise serial.SerialException(
+                            f"{SCHEME}: machine {name!r} runs with {key}="
+                            f"{getattr(m.options, key)}; a reopen cannot change it")
+            m.port = self
+        self._machine = m
+        self.trace_path = m.trace_path
+        try:
+            self._open_pty(m.emulator, fresh)
+        except serial.SerialException:
+            m.port = None
+            self._machine = None
+            if fresh:
+                with _MACHINES_LOCK:
+                    _MACHINES.pop(name, None)
+            raise
+
+    def _open_pty(self, emu: Emulator, fresh: bool) -> None:
+        """Open the harness's pty; a fresh harness starts now, a running one is reset (DTR)."""
+        try:
+            pty = emu.start() if fresh else emu.pty
+            assert pty is not None
+            self._inner = serial.Serial(pty, baudrate=self._baudrate, timeout=self._timeout,
+                                        write_timeout=self._write_timeout)
+            if not fresh:
+                emu.control("open")
+        except (EmulatorError, serial.SerialException, OSError) as e:
+            if self._inner is not None:
+                self._inner.close()
+                self._inner = None
+            if fresh:
+                emu.stop()
+            raise serial.SerialException(f"{SCHEME}: cannot start the emulator: {e}") from e
+
     def close(self) -> None:
-        """Close the pty and stop the harness (idempotent)."""
+        """Close the pty; stop the harness unless it belongs to a named machine (idempotent)."""
         if self._inner is not None:
             self._inner.close()
             self._inner = None
         if self._emu is not None:
             self.stats = self._emu.stop()
             self._emu = None
+        if self._machine is not None:
+            if self._machine.port is self:
+                self._machine.port = None
+            self._machine = None
         self.is_open = False
+
+    def _emulator(self) -> Emulator:
+        emu = self._emu or (self._machine.emulator if self._machine else None)
+        if emu is None:
+            raise serial.PortNotOpenError()
+        return emu
 
     def _reconfigure_port(self, force_update: bool = False) -> None:
         if self._inner is not None:
             self._inner.timeout = self._timeout
             self._inner.write_timeout = self._write_timeout
 
+    def _update_dtr_state(self) -> None:
+        """DTR going active resets the AVR with its RAM kept, like the Uno's auto-reset."""
+        rising = self._dtr_state and not self._dtr_last
+        self._dtr_last = self._dtr_state
+        if self.is_open and rising:
+            self._port_or_fail()
+            try:
+                self._emulator().control("reset")
+            except EmulatorError as e:
+                raise serial.SerialException(f"{SCHEME}: {e}") from e
+
+    def _update_rts_state(self) -> None:
+        """RTS is not connected."""
+
+    def _update_break_state(self) -> None:
+        """A break does nothing to the device."""
+
     def _port_or_fail(self) -> serial.Serial:
         if self._inner is None:
             raise serial.PortNotOpenError()
+        if self._broken:
+            raise serial.SerialException(self._broken)
         return self._inner
 
     @property
@@ -119,8 +341,44 @@ class Serial(serial.SerialBase):
         return bytes(self._port_or_fail().read(size))
 
     def write(self, data: bytes | bytearray | memoryview) -> int:
-        n = self._port_or_fail().write(data)
-        return int(n or 0)
+        """Write to the pty, firing a fault option once its line has been written."""
+        inner = self._port_or_fail()
+        raw = bytes(data)
+        fault, cut = self._next_fault(raw)
+        if fault is None:
+            n = inner.write(raw)
+            self._lines += raw.count(b"\n")
+            return int(n or 0)
+        inner.write(raw[:cut])
+        inner.flush()
+        self._lines += raw[:cut].count(b"\n")
+        self._fired.add(fault)
+        n_option = (self.options.faults or {})[fault]
+        command = FAULTS[fault]
+        if command is None:
+            self._broken = (f"{SCHEME}: device disconnected (disconnect_after={n_option})")
+            raise serial.SerialException(self._broken)
+        try:
+            self._emulator().control(command)
+        except EmulatorError as e:
+            raise serial.SerialException(f"{SCHEME}: {e}") from e
+        return len(raw)  # the rest of the write is lost, as on the mock
+
+    def _next_fault(self, raw: bytes) -> tuple[str | None, int]:
+        """The first fault whose line ends in ``raw``, and the length up to that newline."""
+        best: tuple[str | None, int] = (None, len(raw))
+        for fault, n in (self.options.faults or {}).items():
+            k = n - self._lines  # that line's newline is the k-th in raw
+            if fault in self._fired or k < 1:
+                continue
+            cut = -1
+            for _ in range(k):
+                cut = raw.find(b"\n", cut + 1)
+                if cut < 0:
+                    break
+            if cut >= 0 and (best[0] is None or cut + 1 < best[1]):
+                best = (fault, cut + 1)
+        return best
 
     def flush(self) -> None:
         self._port_or_fail().flush()
