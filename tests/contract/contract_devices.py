@@ -13,9 +13,11 @@ from typing import Any
 
 import serial
 
-from fivebar_host.devices import sim, urls
+from fivebar_host.devices import urls
 from fivebar_host.devices.mock import MockSerial
-from fivebar_host.devices.sim import FirmwareSession, SimDevice
+from fivebar_host.devices.sim import FirmwareSession
+from fivebar_host.devices.simport import Serial as SimSerial
+from fivebar_host.devices.simtrace import read_trace
 from fivebar_host.protocol import Banner
 
 Endstops = tuple[int | None, int | None]
@@ -35,22 +37,31 @@ class Executed:
 
 
 class Device:
-    """A booted device (banner read) under test: mock or emulated firmware."""
+    """A booted device (banner read) under test: mock or emulated firmware.
 
-    def __init__(self, kind: str, port: Any, sim_device: SimDevice | None = None) -> None:
+    Both are named machines (``machine=`` of their URL), so ``port.dtr`` and
+    ``port.machine.power_cut()`` work alike on both: a reset that keeps the RAM, a power-on.
+    """
+
+    def __init__(self, kind: str, port: Any) -> None:
         self.kind = kind
         self.port = port
-        self.session = sim_device.session if sim_device else FirmwareSession(port, timeout=10.0)
-        self._sim = sim_device
-        if sim_device is None:
-            self.session.wait_banner()
+        self.session = FirmwareSession(port, timeout=10.0)
+        self.session.wait_banner()
         assert self.session.banner is not None
         self.banner: Banner = self.session.banner
 
+    def power_cut(self) -> None:
+        """Cut the controller's power and read the banner of its power-on boot."""
+        self.port.machine.power_cut()
+        self.session.wait_banner()
+
     def executed(self) -> Executed:
         """Stop the device and return what it executed (call once, at the end of a test)."""
-        if self._sim is not None:
-            trace = self._sim.finish()
+        if self.kind == "sim":
+            machine = self.port.machine
+            machine.stop()
+            trace = read_trace(machine.trace_path)
             steps = tuple(trace.steps(axis) for axis in ("A", "B"))
             intervals = trace.laser_intervals()
             return Executed(
@@ -74,35 +85,33 @@ class Device:
 
     def close(self) -> None:
         """Release the port / stop the emulator (idempotent)."""
-        if self._sim is not None:
-            self._sim.close()
-        else:
-            self.port.close()
+        machine = self.port.machine if self.kind == "sim" else None
+        self.port.close()
+        if machine is not None:
+            machine.stop()
+
+
+def _endstops_option(endstops: Endstops) -> str:
+    if endstops == (None, None):
+        return ""
+    return "&endstops=" + ",".join("" if e is None else str(e) for e in endstops)
 
 
 def open_mock(endstops: Endstops = (None, None)) -> Device:
-    """Boot ``fivebar-mock://`` (through pyserial's URL lookup) and read its banner.
-
-    Each device is its own named machine, so ``reopen_mock`` can power it up again.
-    """
+    """Boot ``fivebar-mock://`` (through pyserial's URL lookup) as its own named machine and
+    read its banner."""
     urls.register()
     url = f"fivebar-mock://?speed={MOCK_SPEED}&machine=contract-{uuid.uuid4().hex}"
-    if endstops != (None, None):
-        url += "&endstops=" + ",".join("" if e is None else str(e) for e in endstops)
-    port = serial.serial_for_url(url, timeout=0.5)
+    port = serial.serial_for_url(url + _endstops_option(endstops), timeout=0.5)
     assert isinstance(port, MockSerial)
     return Device("mock", port)
 
 
-def reopen_mock(dev: Device) -> Device:
-    """Open a closed mock's port again: the same machine, its firmware powered up anew
-    (what a DTR reset does to an Uno)."""
-    port = serial.serial_for_url(dev.port.port, timeout=0.5)
-    assert isinstance(port, MockSerial)
-    return Device("mock", port)
-
-
-def open_sim(build: sim.BuildPaths, trace: Path, endstops: Endstops = (None, None)) -> Device:
-    """Boot the firmware in simavr, recording its pins to ``trace``, and read its banner."""
-    simdev = sim.start_device(build, trace, endstops[0], endstops[1])
-    return Device("sim", simdev.port, simdev)
+def open_sim(trace: Path, endstops: Endstops = (None, None)) -> Device:
+    """Boot the firmware in simavr as a named machine of ``fivebar-sim://``, recording its pins
+    to ``trace``, and read its banner."""
+    urls.register()
+    url = f"fivebar-sim://?machine=contract-{uuid.uuid4().hex}&trace={trace}"
+    port = serial.serial_for_url(url + _endstops_option(endstops), timeout=0.5)
+    assert isinstance(port, SimSerial)
+    return Device("sim", port)

@@ -19,7 +19,6 @@ import pytest
 from contract_devices import Device, open_mock, open_sim
 
 from fivebar_host import protocol
-from fivebar_host.devices import sim
 from fivebar_host.protocol import AlarmPush, ErrorReply, Message, Ok
 
 pytestmark = pytest.mark.sim
@@ -105,8 +104,8 @@ def transcript(dev: Device, lines: list[bytes]) -> list[list[Message]]:
     return out
 
 
-def test_the_mock_answers_every_line_like_the_firmware(sim_build: sim.BuildPaths,
-                                                      tmp_path: Path) -> None:
+@pytest.mark.usefixtures("sim_build")  # built once; skips without the toolchain
+def test_the_mock_answers_every_line_like_the_firmware(tmp_path: Path) -> None:
     rng = random.Random(20261121)
     gaps = random.Random(5)
     lines = []
@@ -115,7 +114,7 @@ def test_the_mock_answers_every_line_like_the_firmware(sim_build: sim.BuildPaths
             lines.append(b"M110")
         lines.append(random_line(rng))
     mock_dev = open_mock()
-    sim_dev = open_sim(sim_build, tmp_path / "pins.trace")
+    sim_dev = open_sim(tmp_path / "pins.trace")
     try:
         want = transcript(sim_dev, lines)
         got = transcript(mock_dev, lines)
