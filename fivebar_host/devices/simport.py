@@ -6,7 +6,8 @@ lost) and opens the pty. Closing stops the harness, which flushes its pin trace.
 
 URL options: `fivebar-sim://?trace=PATH&realtime=1&endstops=A,B&machine=NAME&reset_after=N`
 - `trace`: where the harness records every step, direction and laser pin change (default: a
-  temporary file, available as `port.trace_path` after close);
+  temporary file, available as `port.trace_path` after close; None for a named machine,
+  whose trace spans every open: `machine(NAME).trace_path`);
 - `realtime=1`: throttle emulation to wall-clock speed (otherwise it runs 6–8× faster);
 - `endstops=A,B`: simulated endstop switch positions in steps (enables homing tests); either
   may be empty (no switch);
@@ -256,7 +257,7 @@ class Serial(serial.SerialBase):
                             f"{getattr(m.options, key)}; a reopen cannot change it")
             m.port = self
         self._machine = m
-        self.trace_path = m.trace_path
+        self.trace_path = None  # the machine's trace is not this port's alone
         try:
             self._open_pty(m.emulator, fresh)
         except serial.SerialException:
