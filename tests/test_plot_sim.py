@@ -4,51 +4,24 @@ mid-job and an exact resume, counted on the recorded pulses."""
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
+from sim_plot import compiled_copy, laser_steps, planned_draw_steps
 
-from fivebar_host.config import Profile, load_profile
 from fivebar_host.devices.sim import toolchain_missing
-from fivebar_host.devices.simtrace import Trace, read_trace
+from fivebar_host.devices.simtrace import read_trace
 from fivebar_host.executed import executed_path, merge_axes
-from fivebar_host.job import CompileOptions, Job, compile_job
 from fivebar_host.link import Link
 from fivebar_host.sender import Progress, SendError, resume_path, run_job
 
 pytestmark = pytest.mark.skipif(toolchain_missing() is not None,
                                 reason=f"emulator unavailable: {toolchain_missing()}")
-EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
-
-
-def _laser_steps(tr: Trace) -> np.ndarray:
-    """|steps| per motor taken while the laser pin was on."""
-    iv = tr.laser_intervals()
-    out = np.zeros(2, dtype=np.int64)
-    for i, axis in enumerate("AB"):
-        for st in tr.steps(axis):
-            if any(s <= st.cycle < e for s, e in iv):
-                out[i] += 1
-    return out
-
-
-def _compiled_copy(tmp_path: Path, example: str) -> tuple[Path, Profile, Job]:
-    """A private copy of a bundled drawing (its resume file lands beside it), compiled with
-    the default profile."""
-    drawing = tmp_path / example
-    shutil.copy(EXAMPLES / example, drawing)
-    prof = load_profile()
-    return drawing, prof, compile_job(drawing, prof, CompileOptions())
-
-
-def _planned_draw_steps(job: Job) -> np.ndarray:
-    return np.asarray(np.abs(np.diff(job.steps, axis=0))[job.draw].sum(axis=0))
 
 
 def test_svg_to_pulses_within_tolerance_and_laser_only_while_drawing(tmp_path: Path) -> None:
-    drawing, prof, job = _compiled_copy(tmp_path, "fivebar_text.svg")
+    drawing, prof, job = compiled_copy(tmp_path, "fivebar_text.svg")
     trace = tmp_path / "pins.trace"
     link = Link.open(f"fivebar-sim://?trace={trace}")
     try:
@@ -67,11 +40,11 @@ def test_svg_to_pulses_within_tolerance_and_laser_only_while_drawing(tmp_path: P
     on = np.array([any(s <= c < e for s, e in iv) for c in t.astype(np.int64)])
     drawing_event = job.draw[ex.segment]
     assert np.array_equal(on, drawing_event)
-    assert np.array_equal(_laser_steps(tr), _planned_draw_steps(job))
+    assert np.array_equal(laser_steps(tr), planned_draw_steps(job))
 
 
 def test_abort_mid_job_then_resume_draws_each_step_once(tmp_path: Path) -> None:
-    drawing, prof, job = _compiled_copy(tmp_path, "simple.svg")
+    drawing, prof, job = compiled_copy(tmp_path, "simple.svg")
     trace = tmp_path / "pins.trace"
     link = Link.open(f"fivebar-sim://?trace={trace}&realtime=1")
     stop = {"now": False}
@@ -96,7 +69,7 @@ def test_abort_mid_job_then_resume_draws_each_step_once(tmp_path: Path) -> None:
     finally:
         link.close()
     tr = read_trace(trace)
-    assert np.array_equal(_laser_steps(tr), _planned_draw_steps(job))
+    assert np.array_equal(laser_steps(tr), planned_draw_steps(job))
     a = tr.positions("A")
     b = tr.positions("B")
     assert (a[-1][1], b[-1][1]) == (0, 0)  # back at the homed pose
@@ -106,7 +79,7 @@ def test_error_reply_mid_job_then_exact_resume(tmp_path: Path) -> None:
     """A refused line mid-job (soft limit, error:11) on the real firmware: the machine holds
     with the laser off, the host names the fault and position, and the resume draws each
     remaining step once."""
-    drawing, prof, job = _compiled_copy(tmp_path, "simple.svg")
+    drawing, prof, job = compiled_copy(tmp_path, "simple.svg")
     a = job.steps[:, 0]
     # A soft limit on motor A that the first third of the job respects and a later target
     # crosses: the firmware refuses that line.
@@ -129,5 +102,5 @@ def test_error_reply_mid_job_then_exact_resume(tmp_path: Path) -> None:
     finally:
         link.close()
     tr = read_trace(trace)
-    assert np.array_equal(_laser_steps(tr), _planned_draw_steps(job))
+    assert np.array_equal(laser_steps(tr), planned_draw_steps(job))
     assert (tr.positions("A")[-1][1], tr.positions("B")[-1][1]) == (0, 0)

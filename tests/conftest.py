@@ -1,0 +1,18 @@
+"""Fixtures shared by the test modules of tests/."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+
+@pytest.fixture
+def quick_profile(tmp_path: Path) -> Path:
+    """The default profile with 1 s reply and banner timeouts, so a silent device is found
+    quickly."""
+    text = (Path(__file__).resolve().parent.parent / "configs" / "default.toml").read_text()
+    p = tmp_path / "quick.toml"
+    p.write_text(text.replace("reply_timeout_s = 10.0", "reply_timeout_s = 1.0")
+                 .replace("banner_timeout_s = 5.0", "banner_timeout_s = 1.0"))
+    return p

@@ -1,0 +1,102 @@
+"""Faults mid-job on the real firmware in simavr, one per injected fault: `fivebar plot`
+stops with exit code 3, names the fault and the position, the laser pin ends off, and
+`--resume` completes the job so that the step pulses on the pins over both runs equal the
+plan (nothing lost, nothing doubled).
+
+The emulated machine (`fivebar-sim://?machine=NAME`) outlives the port: its pin trace spans
+both runs, and opening the port again is the Uno's DTR reset, which keeps the firmware's
+position, H and Ln done (docs/protocol.md section 7).  The same faults on the mock are in
+test_plot_mock.py."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from sim_plot import all_steps, compiled_copy, laser_steps, planned_draw_steps, planned_steps
+
+from fivebar_host.cli import main
+from fivebar_host.devices import simport
+from fivebar_host.devices.sim import toolchain_missing
+from fivebar_host.devices.simtrace import Trace, read_trace
+from fivebar_host.sender import ResumePoint, resume_path
+
+pytestmark = [
+    pytest.mark.sim,
+    pytest.mark.skipif(toolchain_missing() is not None,
+                       reason=f"emulator unavailable: {toolchain_missing()}"),
+]
+
+
+@pytest.fixture(autouse=True)
+def _clean_machines() -> Iterator[None]:
+    simport.forget_machines()
+    yield
+    simport.forget_machines()
+
+
+def run(*args: str) -> tuple[int, str]:
+    res = CliRunner().invoke(main, list(args), catch_exceptions=False)
+    return res.exit_code, res.output
+
+
+def laser_on_at_end(tr: Trace) -> bool:
+    """The level the laser pin was last set to."""
+    changes = tr.pin("laser")
+    return bool(changes and changes[-1][1])
+
+
+def settled_trace(machine: simport.SimMachine, timeout: float = 10.0) -> Trace:
+    """The trace once the firmware, cut off from its host, stopped moving (its queue ran
+    out, or its laser silence timeout held it)."""
+    deadline = time.monotonic() + timeout
+    last = machine.trace()
+    while True:
+        time.sleep(0.1)
+        tr = machine.trace()
+        if tr.last_cycle() == last.last_cycle():
+            return tr
+        assert time.monotonic() < deadline, "the cut-off firmware never stopped"
+        last = tr
+
+
+@pytest.mark.parametrize(("fault", "says"), [
+    ("disconnect_after=80", ("device gone", "position not known yet")),
+    ("reset_after=90", ("the firmware restarted", "stopped at A = ")),
+    ("stall_after=100", ("went silent", "stopped at A = ")),
+])
+def test_fault_then_resume_draws_every_step_once(tmp_path: Path, quick_profile: Path,
+                                                 monkeypatch: pytest.MonkeyPatch, fault: str,
+                                                 says: tuple[str, str]) -> None:
+    monkeypatch.chdir(tmp_path)  # whatever the command writes beside its working directory
+    drawing, _, job = compiled_copy(tmp_path, "simple.svg")
+    name = fault.split("_")[0]
+    trace = tmp_path / "pins.trace"
+    code, out = run("plot", str(drawing), "--port",
+                    f"fivebar-sim://?machine={name}&trace={trace}&{fault}", "--laser", "--yes",
+                    "--config", str(quick_profile))
+    assert code == 3, out
+    assert all(word in out for word in says), out
+    rp = ResumePoint.load(resume_path(drawing))
+    if rp.position is not None:
+        assert f"A = {rp.position[0]}, B = {rp.position[1]}" in out
+    assert 0 < rp.next_segment < rp.segments
+    machine = simport.machine(name)
+    tr = settled_trace(machine)
+    assert not laser_on_at_end(tr), "the laser pin is on after the fault"
+    assert 0 < all_steps(tr).sum() < planned_steps(job).sum()  # stopped mid-job
+
+    code, out = run("plot", str(drawing), "--port", f"fivebar-sim://?machine={name}",
+                    "--laser", "--yes", "--resume", "--config", str(quick_profile))
+    assert code == 0, out
+    assert not resume_path(drawing).exists()
+    machine.stop()  # the trace of both runs, complete
+    tr = read_trace(trace)
+    assert not laser_on_at_end(tr)
+    assert np.array_equal(laser_steps(tr), planned_draw_steps(job))  # nothing lost, no doubles
+    assert np.array_equal(all_steps(tr), planned_steps(job))  # no travel back either
+    assert (tr.positions("A")[-1][1], tr.positions("B")[-1][1]) == (0, 0)  # home again
