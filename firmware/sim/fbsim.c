@@ -41,10 +41,12 @@
  *   quit     stop
  * A reset, power cut or freeze first lets the bytes the client wrote before
  * the command reach the firmware (as on a real link, where they were on the
- * wire before the DTR edge) and gives it 1 ms to take them; then it takes
- * effect at the next instruction boundary where interrupts are enabled
- * (outside interrupt handlers and critical sections), so the firmware's
- * state is between two of its updates (after 62 ms at the latest).  On reset every
+ * wire before the DTR edge) and waits until, for 1 ms, nothing is on its way
+ * in and the firmware is not transmitting (a line cut by the reset would
+ * reach the client glued to the banner); then it takes effect at the next
+ * instruction boundary where interrupts are enabled (outside interrupt
+ * handlers and critical sections), so the firmware's state is between two of
+ * its updates.  After 62 ms it takes effect regardless.  On reset every
  * traced output pin that was high is traced low (the pins float until the
  * firmware drives them again), and what the harness set up at start is set
  * again (INT0/INT1 polling off, UART flags, endstop levels, the I/O timer).
@@ -302,13 +304,18 @@ static void run_command(const char *cmd)
 	settled = 0;
 }
 
-/* Nothing the client wrote is on its way to the firmware any more. */
-static int input_drained(void)
+/* Nothing the client wrote is on its way to the firmware any more, and the
+ * firmware is not sending (its UDRE interrupt, which feeds its TX ring to
+ * the UART, is off, and the UART has nothing left to shift out). */
+static int link_quiet(void)
 {
 	int queued = 0;
 	if (ioctl(master_fd, FIONREAD, &queued) < 0)
 		queued = 0;
-	return to_avr.len == 0 && queued == 0 && (!uart0 || uart0->input.read == uart0->input.write);
+	if (to_avr.len || queued)
+		return 0;
+	return !uart0 || (uart0->input.read == uart0->input.write && uart0->tx_cnt == 0 &&
+			  !avr_regbit_get(avr, uart0->udrc.enable));
 }
 
 /* Read the commands waiting on stdin (non-blocking); its end stops the harness. */
@@ -337,7 +344,7 @@ static avr_cycle_count_t pump_timer(avr_t *a, avr_cycle_count_t when, void *para
 	pump_io();
 	read_control();
 	if (pending_reset | pending_freeze) {
-		if (!input_drained())
+		if (!link_quiet())
 			quiet_since = a->cycle;
 		else if (a->cycle - quiet_since >= pump_period)
 			settled = 1;
