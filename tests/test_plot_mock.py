@@ -42,16 +42,6 @@ def _clean_machines() -> Iterator[None]:
 
 
 @pytest.fixture
-def profile_path(tmp_path: Path) -> Path:
-    """The default profile with a 1 s reply timeout, so a silent device is found quickly."""
-    text = (Path(__file__).resolve().parent.parent / "configs" / "default.toml").read_text()
-    p = tmp_path / "quick.toml"
-    p.write_text(text.replace("reply_timeout_s = 10.0", "reply_timeout_s = 1.0")
-                 .replace("banner_timeout_s = 5.0", "banner_timeout_s = 1.0"))
-    return p
-
-
-@pytest.fixture
 def drawing(tmp_path: Path) -> Path:
     """A private copy of the simple example (its resume file lands beside it)."""
     dst = tmp_path / "simple.svg"
@@ -161,12 +151,12 @@ def resume_and_check(drawing: Path, m: mock.Machine, name: str, profile: Path | 
     ("stall_after=150", "went silent"),
     ("reset_after=90", "the firmware restarted"),
 ])
-def test_fault_then_resume_completes_exactly(drawing: Path, profile_path: Path, fault: str,
+def test_fault_then_resume_completes_exactly(drawing: Path, quick_profile: Path, fault: str,
                                              word: str) -> None:
     """The position is read after the fault: at once when the controller answers, from the
     record it kept across its restart after a reset or a stall (rebooted through DTR)."""
     code, out = run("plot", str(drawing), "--port", url("f", fault), "--laser", "--yes",
-                    "--config", str(profile_path))
+                    "--config", str(quick_profile))
     assert code == 3, out
     assert word in out and "resume file" in out
     m = mock.machine("f")
@@ -179,7 +169,7 @@ def test_fault_then_resume_completes_exactly(drawing: Path, profile_path: Path, 
     if fault.startswith("stall"):
         assert "rebooted through DTR: laser off" in out
     assert 0 < rp.next_segment < rp.segments
-    resume_and_check(drawing, m, "f", profile_path)
+    resume_and_check(drawing, m, "f", quick_profile)
     assert np.array_equal(drawn_steps(m), planned_draw_steps(drawing))  # nothing lost/doubled
     assert np.array_equal(all_steps(m), planned_steps(drawing))  # no travel back either
 
@@ -281,8 +271,8 @@ def test_no_confirmation_without_terminal(drawing: Path) -> None:
     ("fivebar-mock://?proto=9", "speaks protocol 9"),
     ("fivebar-mock://?bogus=1", "bogus"),
 ])
-def test_bad_ports(drawing: Path, profile_path: Path, port: str, message: str) -> None:
-    code, out = run("plot", str(drawing), "--port", port, "--yes", "--config", str(profile_path))
+def test_bad_ports(drawing: Path, quick_profile: Path, port: str, message: str) -> None:
+    code, out = run("plot", str(drawing), "--port", port, "--yes", "--config", str(quick_profile))
     assert code == 3, out
     assert message in out
 
