@@ -18,9 +18,14 @@ if [ ${#missing[@]} -gt 0 ]; then
 fi
 
 PY=${PYTHON:-python3}
-if ! "$PY" -c 'import fivebar_host, kinematics, pytest, hypothesis, scipy, ruff, mypy' 2>/dev/null \
+# Where the installed package lives, asked from outside the checkout (here the current
+# directory would shadow a missing or stale install): it must be this checkout.
+here=$(pwd -P)
+installed=$(cd / && "$PY" -c 'import os, fivebar_host, kinematics, pytest, hypothesis, scipy, ruff, mypy
+print(os.path.dirname(os.path.dirname(os.path.realpath(fivebar_host.__file__))))' 2>/dev/null || true)
+if [ "$installed" != "$here" ] || ! command -v fivebar >/dev/null \
    || [ pyproject.toml -nt .setup-stamp ]; then
   echo "setup: installing the fivebar Python package with test extras"
-  "$PY" -m pip install --quiet --disable-pip-version-check -e '.[test]'
+  "$PY" -m pip install --quiet --disable-pip-version-check --root-user-action=ignore -e '.[test]'
   touch .setup-stamp
 fi
