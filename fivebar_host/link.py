@@ -2,7 +2,7 @@
 
 The only module of the host program that uses pyserial (besides the URL handlers in
 `fivebar_host.devices`, which *are* pyserial ports). Every line goes out numbered and with a
-CRC-8 (docs/protocol.md), so a corrupted or lost line is resent and no line runs twice.
+CRC-16 (docs/protocol.md), so a corrupted or lost line is resent and no line runs twice.
 
 Flow control is GRBL's character counting: the bytes of lines sent but not yet answered never
 exceed the receive buffer the banner reports. Send-and-wait (one line in flight) is the
@@ -32,9 +32,6 @@ from fivebar_host.protocol import (
     StatusReport,
 )
 
-#: Protocol versions of the firmware this host speaks.
-SUPPORTED_PROTOCOLS = frozenset({1})
-
 
 class LinkError(RuntimeError):
     """The link failed; the message says where (port, line) and why."""
@@ -45,7 +42,11 @@ class NoBannerError(LinkError):
 
 
 class FirmwareMismatchError(LinkError):
-    """The device speaks a protocol version this host does not know."""
+    """The device speaks another protocol version than this host (protocol.PROTOCOL_VERSION).
+
+    Versions are not mixed: version 2 changed the line checksum, so a version 1 firmware
+    would refuse every numbered line of this host with ``error:8``.
+    """
 
 
 @dataclass
@@ -173,11 +174,11 @@ class Link:
             raise NoBannerError(
                 f"{self.url}: no fivebar firmware banner within {timeout_s:g} s{got}. "
                 "Is this the fivebar firmware, at the profile's baud rate?")
-        if self.banner.proto not in SUPPORTED_PROTOCOLS:
+        if self.banner.proto != protocol.PROTOCOL_VERSION:
             raise FirmwareMismatchError(
                 f"{self.url}: firmware {self.banner.version} speaks protocol "
-                f"{self.banner.proto}; this host speaks "
-                f"{', '.join(map(str, sorted(SUPPORTED_PROTOCOLS)))}. Update one of them.")
+                f"{self.banner.proto}; this host needs protocol {protocol.PROTOCOL_VERSION}. "
+                "Update the one that is behind (docs/protocol.md).")
         time.sleep(0.05)
         self._drain_input()
         st = self.status()

@@ -2,7 +2,7 @@
 
 The contract is docs/protocol.md.  This module mirrors the firmware's reply
 codes (firmware/fivebar/status.h; tests/test_protocol_codes.py keeps the two
-equal), builds command lines with optional line number and CRC-8 checksum,
+equal), builds command lines with optional line number and CRC-16 checksum,
 and parses every kind of line the firmware sends: ``ok``, ``error:<code>``
 (with ``resend:<n>`` for framing errors), status reports, the banner,
 ``ALARM:<code>`` pushes and ``$<n>=<v>`` setting lines.
@@ -16,6 +16,10 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 from typing import Final
+
+#: The protocol version this module implements: docs/protocol.md, the banner's ``proto:``.
+#: Version 2 replaced the CRC-8 line checksum with CRC-16 (docs/protocol.md 5.1 and 14).
+PROTOCOL_VERSION: Final = 2
 
 #: Real-time bytes: acted on by the firmware at once, never buffered, never
 #: answered with ``ok`` and not counted against the receive buffer.
@@ -108,16 +112,39 @@ class ProtocolError(ValueError):
     """A line does not follow docs/protocol.md (host side or firmware side)."""
 
 
-def crc8(data: bytes) -> int:
-    """CRC-8/SMBUS (poly 0x07, init 0, no reflection): the line checksum.
+def _crc16_table() -> tuple[int, ...]:
+    """The 256 register updates of CRC-16/CCITT-FALSE, one per value of the top byte.
 
-    Stronger than Marlin's XOR: it catches every 1- and 2-bit error in a line.
+    Entry i is the register after shifting i, placed in the top byte, through the
+    polynomial 0x1021 bit by bit, MSB first (the firmware's loop, fb_proto.c), so the
+    register can then advance a whole byte per lookup: the usual table-driven form of a
+    non-reflected CRC.
     """
-    crc = 0
-    for byte in data:
-        crc ^= byte
+    table = []
+    for i in range(256):
+        crc = i << 8
         for _ in range(8):
-            crc = ((crc << 1) ^ 0x07) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
+            crc = ((crc << 1) ^ 0x1021) & 0xFFFF if crc & 0x8000 else (crc << 1) & 0xFFFF
+        table.append(crc)
+    return tuple(table)
+
+
+_CRC16_TABLE: Final = _crc16_table()
+
+
+def crc16(data: bytes) -> int:
+    """CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no final XOR): the line
+    checksum of docs/protocol.md 5.1, 0..65535.
+
+    It replaced CRC-8 in protocol 2 (docs/protocol.md 14): it catches every corruption of
+    one byte or of two adjacent bytes; a lost byte, or two corrupted bytes apart, gets
+    through only when the CRC happens to match, about once in 65536 instead of once in 256.
+    Table-driven because the host encodes every job line with it; the firmware computes the
+    same value bit by bit (fb_proto.c).
+    """
+    crc = 0xFFFF
+    for byte in data:
+        crc = ((crc << 8) & 0xFFFF) ^ _CRC16_TABLE[(crc >> 8) ^ byte]
     return crc
 
 
@@ -141,7 +168,7 @@ def encode_line(body: str, line_number: int | None = None, checksum: bool = Fals
         text = f"N{line_number} {body}"
         checksum = True
     if checksum:
-        text = f"{text}*{crc8(text.encode('ascii'))}"
+        text = f"{text}*{crc16(text.encode('ascii'))}"
     return (text + "\n").encode("ascii")
 
 

@@ -1,12 +1,14 @@
-"""The link against the mock: a device that was not reset on open, a hung one rebooted."""
+"""The link against the mock: a device that was not reset on open, a hung one rebooted,
+another protocol version."""
 
 from __future__ import annotations
 
 import pytest
 import serial
 
+from fivebar_host import protocol
 from fivebar_host.devices import urls
-from fivebar_host.link import Link, LinkFaultError
+from fivebar_host.link import FirmwareMismatchError, Link, LinkFaultError
 from fivebar_host.protocol import Banner
 
 
@@ -53,3 +55,12 @@ def test_hardware_reset_revives_a_hung_controller_and_restarts_the_numbering() -
         assert link.status().accepted_line == 1
     finally:
         port.close()
+
+
+@pytest.mark.parametrize("proto", [1, 3])
+def test_the_host_accepts_only_the_protocol_it_speaks(proto: int) -> None:
+    urls.register()
+    with pytest.raises(FirmwareMismatchError) as e:
+        Link.open(f"fivebar-mock://?proto={proto}", banner_timeout_s=1.5)
+    assert (f"speaks protocol {proto}; this host needs protocol {protocol.PROTOCOL_VERSION}"
+            in str(e.value))

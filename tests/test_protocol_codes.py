@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import binascii
 import re
 from pathlib import Path
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from fivebar_host import protocol
 from fivebar_host.protocol import (
@@ -18,7 +21,8 @@ from fivebar_host.protocol import (
     StatusReport,
 )
 
-STATUS_H = Path(__file__).resolve().parents[1] / "firmware" / "fivebar" / "status.h"
+ROOT = Path(__file__).resolve().parents[1]
+STATUS_H = ROOT / "firmware" / "fivebar" / "status.h"
 DEFINE = re.compile(r"#define FB_(ERR|ALARM)_(\w+)\s+(\d+)\s*/\*\s*(.*?)\s*\*/")
 
 
@@ -37,8 +41,25 @@ def test_code_table_matches_status_h() -> None:
     assert fw == protocol.CODES
 
 
-def test_crc8_check_value() -> None:
-    assert protocol.crc8(b"123456789") == 0xF4
+def test_crc16_check_value() -> None:
+    """CRC-16/CCITT-FALSE's catalogue check value, and the empty input (the init value)."""
+    assert protocol.crc16(b"123456789") == 0x29B1
+    assert protocol.crc16(b"") == 0xFFFF
+
+
+@pytest.mark.parametrize("data", [
+    b"A", b"G90", b"N1 G90", b"N201 G1 A-706 B-507 P16795 S255",
+    b"N201 G1 A-76 B-07 P16795 S255", b"\x00", b"\xff" * 80, bytes(range(256)),
+])
+def test_crc16_matches_an_independent_implementation(data: bytes) -> None:
+    """binascii.crc_hqx started at 0xFFFF is CRC-16/CCITT-FALSE, implemented in C apart
+    from ours: the reference, never the implementation."""
+    assert protocol.crc16(data) == binascii.crc_hqx(data, 0xFFFF)
+
+
+@given(st.binary(max_size=300))
+def test_crc16_matches_the_reference_on_any_bytes(data: bytes) -> None:
+    assert protocol.crc16(data) == binascii.crc_hqx(data, 0xFFFF)
 
 
 def test_encode_line_with_number_and_checksum() -> None:
@@ -46,9 +67,9 @@ def test_encode_line_with_number_and_checksum() -> None:
     text = line.decode()
     assert text.startswith("N7 G1 A10 P1000*") and text.endswith("\n")
     body, crc = text[:-1].rsplit("*", 1)
-    assert int(crc) == protocol.crc8(body.encode())
+    assert int(crc) == binascii.crc_hqx(body.encode(), 0xFFFF)
     assert protocol.encode_line("G90") == b"G90\n"
-    assert protocol.encode_line("G90", checksum=True) == f"G90*{protocol.crc8(b'G90')}\n".encode()
+    assert protocol.encode_line("G90", checksum=True) == b"G90*56831\n"
 
 
 @pytest.mark.parametrize("body", ["G1 A1 P100 ?", "M3!", "G1*", "G1 ; x", "G1\x01"])
@@ -78,8 +99,8 @@ def test_parse_every_message_kind() -> None:
     )
     run = protocol.parse_message("<Run|A:0,B:0|Q:0|Ln:0,0|L:255|U:0|H:1>")
     assert isinstance(run, StatusReport) and run.state == "Run" and run.homed
-    assert protocol.parse_message("fivebar 1.0.0 proto:1 rx:128 queue:16 line:80") == Banner(
-        "1.0.0", 1, 128, 16, 80
+    assert protocol.parse_message("fivebar 1.0.0 proto:2 rx:128 queue:16 line:80") == Banner(
+        "1.0.0", 2, 128, 16, 80
     )
     assert protocol.parse_message("ALARM:31") == AlarmPush(31)
     assert protocol.parse_message("$12=-40") == SettingLine(12, -40)
@@ -102,8 +123,6 @@ def test_parse_refuses_malformed(line: str) -> None:
     with pytest.raises(ProtocolError):
         protocol.parse_message(line)
 
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def _section(text: str, heading: str) -> str:

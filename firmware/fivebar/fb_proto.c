@@ -1,7 +1,7 @@
 /*
  * fb_proto.c - line framing and command parsing (pure, portable C).
  *
- * A line is: [N<n>] <command> [words] [;comment] [*<crc8>]
+ * A line is: [N<n>] <command> [words] [;comment] [*<crc16>]
  * The checksum covers every byte before the last '*'.  Numbers are decimal
  * integers; there are no floats anywhere in the firmware.
  */
@@ -10,13 +10,25 @@
 #include "config.h"
 #include "status.h"
 
-uint8_t fb_crc8(const char *s, uint8_t len)
+/*
+ * CRC-16/CCITT-FALSE (width 16, poly 0x1021, init 0xFFFF, refin/refout false,
+ * xorout 0, check 0x29B1: CRC-16/IBM-3740 in Greg Cook's "Catalogue of
+ * parametrised CRC algorithms").  Bit by bit, MSB first: the byte goes into
+ * the top of the register and each of its bits shifts out through the
+ * polynomial, the loop avr-libc documents for _crc_xmodem_update (which
+ * starts from 0 instead).  Of the forms measured in the whole sketch with
+ * avr-gcc -Os this is the smallest: +24 bytes of flash over protocol 1's
+ * CRC-8 (the 5-digit checksum parse included), against +54 for the byte-wise
+ * shift/xor form and +108 for a 16-entry table in flash; no RAM for any.
+ */
+uint16_t fb_crc16(const char *s, uint8_t len)
 {
-	uint8_t crc = 0;
+	uint16_t crc = 0xFFFFu;
 	for (uint8_t i = 0; i < len; i++) {
-		crc ^= (uint8_t)s[i];
+		crc ^= (uint16_t)((uint16_t)(uint8_t)s[i] << 8);
 		for (uint8_t b = 0; b < 8; b++)
-			crc = (uint8_t)((crc & 0x80u) ? (uint8_t)(crc << 1) ^ 0x07u : (uint8_t)(crc << 1));
+			crc = (crc & 0x8000u) ? (uint16_t)((uint16_t)(crc << 1) ^ 0x1021u)
+					      : (uint16_t)(crc << 1);
 	}
 	return crc;
 }
@@ -246,15 +258,15 @@ uint8_t fb_parse_line(fb_lines_t *lines, const char *line, uint8_t len, fb_cmd_t
 	}
 	if (has_star) {
 		uint8_t i = (uint8_t)(end + 1), digits = 0;
-		uint16_t want = 0;
-		while (i < len && is_digit(line[i]) && digits < 4) {
-			want = (uint16_t)(want * 10u + (uint16_t)(line[i] - '0'));
+		uint32_t want = 0;
+		while (i < len && is_digit(line[i]) && digits < 6) {
+			want = want * 10u + (uint32_t)(line[i] - '0');
 			i++;
 			digits++;
 		}
-		if (!digits || digits > 3 || want > 255u || skip_ws(line, i, len) < len)
+		if (!digits || digits > 5 || want > 0xFFFFu || skip_ws(line, i, len) < len)
 			return FB_ERR_CHECKSUM;
-		if (fb_crc8(line, end) != (uint8_t)want)
+		if (fb_crc16(line, end) != (uint16_t)want)
 			return FB_ERR_CHECKSUM;
 	}
 

@@ -52,8 +52,9 @@ typedef struct {
 			     * must be numbered (else FB_ERR_NO_CHECKSUM) */
 } fb_lines_t;
 
-/* CRC-8, polynomial 0x07, init 0, no reflection, no final xor (CRC-8/SMBUS). */
-uint8_t fb_crc8(const char *s, uint8_t len);
+/* CRC-16/CCITT-FALSE: polynomial 0x1021, init 0xFFFF, no reflection, no
+ * final xor; "123456789" gives 0x29B1.  The line checksum of protocol 2. */
+uint16_t fb_crc16(const char *s, uint8_t len);
 
 /*
  * Frame and parse one received line (without its newline; at most 255 bytes).

@@ -20,7 +20,7 @@
 
 static int failures, checks;
 
-#define BANNER "fivebar " FB_VERSION " proto:1 rx:128 queue:16 line:80\r\n"
+#define BANNER "fivebar " FB_VERSION " proto:2 rx:128 queue:16 line:80\r\n"
 
 #define CHECK(cond, ...) do { checks++; if (!(cond)) { failures++; \
 	printf("FAIL %s:%d: ", __FILE__, __LINE__); printf(__VA_ARGS__); printf("\n"); } } while (0)
@@ -34,14 +34,20 @@ static uint8_t parse(fb_lines_t *ln, const char *s, fb_cmd_t *c)
 
 static void framed(char *out, size_t size, const char *body)
 {
-	uint8_t crc = fb_crc8(body, (uint8_t)strlen(body));
+	uint16_t crc = fb_crc16(body, (uint8_t)strlen(body));
 	snprintf(out, size, "%s*%u", body, crc);
 }
 
+/* Expected values from Python's binascii.crc_hqx(data, 0xFFFF), an independent
+ * CRC-16/CCITT-FALSE. */
 static void test_crc(void)
 {
-	CHECK(fb_crc8("123456789", 9) == 0xF4, "CRC-8/SMBUS check value");
-	CHECK(fb_crc8("", 0) == 0, "empty crc");
+	CHECK(fb_crc16("123456789", 9) == 0x29B1, "CRC-16/CCITT-FALSE check value");
+	CHECK(fb_crc16("", 0) == 0xFFFF, "empty crc is the initial value");
+	CHECK(fb_crc16("A", 1) == 47381, "one byte");
+	CHECK(fb_crc16("N201 G1 A-706 B-507 P16795 S255", 31) == 49724, "a G1 line");
+	/* the line that lost two bytes and kept its CRC-8 (32) under protocol 1 */
+	CHECK(fb_crc16("N201 G1 A-76 B-07 P16795 S255", 29) == 45618, "that line, two bytes lost");
 }
 
 static void test_parse_table(void)
@@ -164,14 +170,17 @@ static void test_framing(void)
 	CHECK(parse(&ln, "M110", &c) == FB_OK && ln.last == 0, "M110 without N resets");
 	framed(buf, sizeof buf, "G90");
 	CHECK(parse(&ln, buf, &c) == FB_OK && ln.last == 1, "checksum without N");
-	CHECK(parse(&ln, "G90*999", &c) == FB_ERR_CHECKSUM, "checksum > 255");
+	CHECK(parse(&ln, "G90*65536", &c) == FB_ERR_CHECKSUM, "checksum > 65535");
 	CHECK(parse(&ln, "G90*", &c) == FB_ERR_CHECKSUM, "empty checksum");
 	CHECK(parse(&ln, "G90*12x", &c) == FB_ERR_CHECKSUM, "malformed checksum");
-	CHECK(parse(&ln, "G90*0012", &c) == FB_ERR_CHECKSUM, "four checksum digits");
-	framed(buf, sizeof buf, "N2 G90 ; note");
-	CHECK(parse(&ln, buf, &c) == FB_OK && ln.last == 2, "comment inside the checksum");
+	CHECK(parse(&ln, "G90*056831", &c) == FB_ERR_CHECKSUM, "six checksum digits");
+	CHECK(parse(&ln, "G90*56830", &c) == FB_ERR_CHECKSUM && ln.last == 1, "mismatch");
+	CHECK(parse(&ln, "G90*56831 \t", &c) == FB_OK && ln.last == 2,
+	      "five digits (CRC of G90), then spaces and tabs");
+	framed(buf, sizeof buf, "N3 G90 ; note");
+	CHECK(parse(&ln, buf, &c) == FB_OK && ln.last == 3, "comment inside the checksum");
 	framed(buf, sizeof buf, "Nx G90");
-	CHECK(parse(&ln, buf, &c) == FB_ERR_BAD_NUMBER && ln.last == 2, "malformed N");
+	CHECK(parse(&ln, buf, &c) == FB_ERR_BAD_NUMBER && ln.last == 3, "malformed N");
 	CHECK(fb_is_resend(FB_ERR_CHECKSUM) && fb_is_resend(FB_ERR_LINE_NUMBER) &&
 	      fb_is_resend(FB_ERR_NO_CHECKSUM) && !fb_is_resend(FB_ERR_BAD_WORD), "resend codes");
 }
@@ -440,8 +449,8 @@ static void test_app(void)
 	fake_reset();
 	mo_set_pos(zero);
 	fb_setup();
-	expect("", "fivebar " FB_VERSION " proto:1 rx:128 queue:16 line:80\r\n");
-	expect("$I\n", "fivebar " FB_VERSION " proto:1 rx:128 queue:16 line:80\r\nok\r\n");
+	expect("", "fivebar " FB_VERSION " proto:2 rx:128 queue:16 line:80\r\n");
+	expect("$I\n", "fivebar " FB_VERSION " proto:2 rx:128 queue:16 line:80\r\nok\r\n");
 	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,1|L:0|U:0|H:0>\r\n");
 	expect("G1 A10 B-4 P1000\n", "ok\r\n");
 	tick(100);
@@ -501,7 +510,7 @@ static void test_app(void)
 	/* reset: banner, queue dropped, position kept */
 	send("\x18");
 	CHECK(fake_laser == 0 && !fake_timer_on, "reset stops at once");
-	expect("", "fivebar " FB_VERSION " proto:1 rx:128 queue:16 line:80\r\n");
+	expect("", "fivebar " FB_VERSION " proto:2 rx:128 queue:16 line:80\r\n");
 	expect("?", "<Idle|A:90,B:0|Q:0|Ln:0,0|L:0|U:0|H:0>\r\n");
 
 	/* the laser watchdog */
@@ -515,14 +524,14 @@ static void test_app(void)
 	CHECK(fake_laser == 0, "laser off after host silence");
 	expect("?", "<Hold:1|A:90,B:0|Q:0|Ln:0,2|L:0|U:0|H:0>\r\n");
 	send("\x18");
-	expect("", "fivebar " FB_VERSION " proto:1 rx:128 queue:16 line:80\r\n");
+	expect("", "fivebar " FB_VERSION " proto:2 rx:128 queue:16 line:80\r\n");
 
 	/* settings */
 	expect("$0=50000\n", "error:7\r\n");
 	expect("$77=1\n", "error:17\r\n");
 	expect("$5=0\nG1 A200000 P10000000\n", "ok\r\nok\r\n");
 	send("\x18");
-	expect("", "fivebar " FB_VERSION " proto:1 rx:128 queue:16 line:80\r\n");
+	expect("", "fivebar " FB_VERSION " proto:2 rx:128 queue:16 line:80\r\n");
 	expect("$5=1\n$H\n", "ok\r\nerror:16\r\n");
 	expect("M18\nG1 A0 P1000\n", "ok\r\nerror:15\r\n");
 	send("\x18");
@@ -546,7 +555,7 @@ static void test_app(void)
 	CHECK(poll_out(5)[0] == 0, "no reply before the newline");
 	send("\n");
 	CHECK(strncmp(poll_out(50), "error:18", 8) == 0, "overflow reported");
-	expect("$I\n", "fivebar " FB_VERSION " proto:1 rx:128 queue:16 line:80\r\nok\r\n");
+	expect("$I\n", "fivebar " FB_VERSION " proto:2 rx:128 queue:16 line:80\r\nok\r\n");
 }
 
 static int count_of(const char *hay, const char *needle)

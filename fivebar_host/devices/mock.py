@@ -4,7 +4,7 @@ The mock implements docs/protocol.md the way the firmware (firmware/fivebar/fb_m
 fb_proto.c, fb_motion.c) does, so host code and tests can run without hardware and without
 the AVR toolchain: the boot banner on open (as the Uno's DTR reset sends it), a receive
 buffer of the banner's size whose excess bytes are lost (``error:18``), line framing with
-line numbers, CRC-8, strict framing and resend requests, every command and setting, soft
+line numbers, CRC-16, strict framing and resend requests, every command and setting, soft
 limits, homing and the endstop alarm against simulated switches, the segment queue with its
 start rule and its blocking (its slots hold the waiting blocks and the one executing; a line
 that needs a slot waits, unanswered, until one frees), exact DDA step timing, hold / resume /
@@ -52,7 +52,7 @@ firmware does at 115200 baud.
 - ``endstops=A,B``: switch A (B) is pressed while motor A's (B's) physical position is at
   most A (B) steps — the simavr harness's ``-a``/``-b`` semantics; either may be empty.
 - ``rx=N`` (128), ``queue=N`` (16), ``line=N`` (80): buffer sizes, reported in the banner.
-- ``version=S`` (1.0.0), ``proto=N`` (1): what the banner claims (for "unknown firmware"
+- ``version=S`` (1.0.0), ``proto=N`` (2): what the banner claims (for "unknown firmware"
   tests).
 - ``machine=NAME``: ports opened with the same name drive one physical machine: its
   physical position, ledger and laser log survive a close/reopen, and opening the port is
@@ -98,7 +98,7 @@ from typing import Any, ClassVar, Final
 import serial
 
 from fivebar_host import protocol
-from fivebar_host.protocol import EOL, POS_LIMIT, RESEND_CODES, SETTINGS, StatusReport, crc8
+from fivebar_host.protocol import EOL, POS_LIMIT, RESEND_CODES, SETTINGS, StatusReport, crc16
 
 SCHEME: Final = "fivebar-mock"
 
@@ -175,7 +175,7 @@ class MockOptions:
     queue: int = 16
     line: int = 80
     version: str = "1.0.0"
-    proto: int = 1
+    proto: int = protocol.PROTOCOL_VERSION
     machine: str | None = None
 
 
@@ -449,13 +449,14 @@ def parse_line(last: int, line: bytes, numbered: bool = False) -> Parsed:
     if star >= 0:
         end = star
         i, digits, want = star + 1, 0, 0
-        while i < len(line) and _is_digit(line[i]) and digits < 4:
+        while i < len(line) and _is_digit(line[i]) and digits < 6:
             want = want * 10 + line[i] - 0x30
             i += 1
             digits += 1
-        if not digits or digits > 3 or want > 255 or _skip_ws(line, i, len(line)) < len(line):
+        if (not digits or digits > 5 or want > 0xFFFF
+                or _skip_ws(line, i, len(line)) < len(line)):
             return Parsed(E_CHECKSUM, last, False, cmd, numbered)
-        if crc8(line[:end]) != want:
+        if crc16(line[:end]) != want:
             return Parsed(E_CHECKSUM, last, False, cmd, numbered)
     i = _skip_ws(line, 0, end)
     if i < end and _upper(line[i]) == ord("N"):

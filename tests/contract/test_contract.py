@@ -74,7 +74,8 @@ def assert_nothing_executed(dev: Device) -> None:
 
 def test_banner_and_info(device: Device) -> None:
     b = device.banner
-    assert (b.version, b.proto, b.rx, b.queue, b.line_max) == ("1.0.0", 1, 128, 16, 80)
+    assert (b.version, b.proto, b.rx, b.queue, b.line_max) == (
+        "1.0.0", protocol.PROTOCOL_VERSION, 128, 16, 80)
     device.port.write(b"$I\n")
     assert device.session.read_message() == b
     assert device.session.read_reply() == Ok()
@@ -137,14 +138,15 @@ def test_framing_errors_ask_for_resend(device: Device) -> None:
     s = device.session
     good = protocol.encode_line("G1 A10 P10000", line_number=1)
     assert s.send_raw(good.replace(b"A10", b"A90")) == ErrorReply(8, resend=1)  # CRC mismatch
-    assert s.send_raw(b"G90*300\n") == ErrorReply(8, resend=1)  # checksum > 255
+    assert s.send_raw(b"G90*65536\n") == ErrorReply(8, resend=1)  # checksum > 65535
+    assert s.send_raw(b"G90*056831\n") == ErrorReply(8, resend=1)  # six digits (CRC of G90)
     assert s.send_raw(b"G90*12x\n") == ErrorReply(8, resend=1)  # junk after the checksum
     assert s.send_raw(b"G90*\n") == ErrorReply(8, resend=1)  # no digits
     assert s.send_raw(b"N1 G90\n") == ErrorReply(10, resend=1)  # number without checksum
     assert s.send("G90", line_number=2) == ErrorReply(9, resend=1)  # gap
     assert s.send("G90", line_number=1) == Ok()
     assert s.send("G90", line_number=1) == ErrorReply(9, resend=2)  # repeat
-    assert s.send_raw(b"N2# G90*" + str(protocol.crc8(b"N2# G90")).encode() + b"\n") == (
+    assert s.send_raw(b"N2# G90*" + str(protocol.crc16(b"N2# G90")).encode() + b"\n") == (
         ErrorReply(3))  # malformed N: refused, not accepted
     assert s.status().accepted_line == 1
     assert_nothing_executed(device)
