@@ -156,7 +156,7 @@ class Link:
                 asked = True
             for raw in self._read_raw_lines(0.05):
                 try:
-                    msg = protocol.parse_message(raw)
+                    msg = self._parse(raw)
                 except ProtocolError:
                     if raw.strip():
                         seen.append(raw.strip())
@@ -230,6 +230,23 @@ class Link:
         self._buf = b""
         self._pending.clear()
 
+    @staticmethod
+    def _parse(raw: str) -> Message:
+        """Decode one line from the firmware; a line that ends with a banner is that banner.
+
+        A reset while the firmware was transmitting (DTR, the reset button, a watchdog)
+        cuts the line on the wire, and the restarted firmware's banner arrives glued to
+        the cut piece, e.g. ``ofivebar 1.0.0 proto:2 ...``: that is a restart, not a
+        garbled reply.  ProtocolError for anything else that is not a message.
+        """
+        try:
+            return protocol.parse_message(raw)
+        except ProtocolError:
+            banner = protocol.trailing_banner(raw)
+            if banner is None:
+                raise
+            return banner
+
     def _messages(self, timeout_s: float) -> list[Message]:
         """Decode the lines that arrive within `timeout_s`; garbage lines are errors."""
         msgs = []
@@ -237,7 +254,7 @@ class Link:
             if not raw.strip():
                 continue
             try:
-                msgs.append(protocol.parse_message(raw))
+                msgs.append(self._parse(raw))
             except ProtocolError as e:
                 raise LinkError(f"{self.url}: {e}") from e
         return msgs

@@ -258,6 +258,7 @@ _STATUS = re.compile(
     r"\|Ln:(\d+),(\d+)\|L:(\d+)\|U:(\d+)\|H:([01])>"
 )
 _BANNER = re.compile(r"fivebar (\S+) proto:(\d+) rx:(\d+) queue:(\d+) line:(\d+)")
+_BANNER_AT_END = re.compile(_BANNER.pattern + r"\Z")
 _ALARM = re.compile(r"ALARM:(\d+)")
 _SETTING = re.compile(r"\$(\d+)=(-?\d+)")
 
@@ -302,6 +303,20 @@ def parse_message(line: str) -> Message:
     if m := _SETTING.fullmatch(text):
         return SettingLine(int(m.group(1)), int(m.group(2)))
     raise ProtocolError(f"unrecognised line from the firmware: {text!r}")
+
+
+def trailing_banner(line: str) -> Banner | None:
+    """The banner a line from the firmware ends with, or None.
+
+    A reset while the firmware is transmitting cuts the line on the wire, and the banner
+    the restarted firmware sends is appended to the cut piece: ``okfivebar 1.0.0 proto:2
+    ...`` arrives as one line.  Its end is the restart; the piece before it is lost.
+    """
+    m = _BANNER_AT_END.search(line.rstrip("\r\n"))
+    if m is None:
+        return None
+    return Banner(m.group(1), int(m.group(2)), int(m.group(3)), int(m.group(4)),
+                  int(m.group(5)))
 
 
 def is_reply(message: Message) -> bool:

@@ -1,5 +1,5 @@
 """The link against the mock: a device that was not reset on open, a hung one rebooted,
-another protocol version."""
+another protocol version, a reset that cuts the line being transmitted."""
 
 from __future__ import annotations
 
@@ -7,9 +7,11 @@ import pytest
 import serial
 
 from fivebar_host import protocol
-from fivebar_host.devices import urls
+from fivebar_host.devices import mock, urls
 from fivebar_host.link import FirmwareMismatchError, Link, LinkFaultError
 from fivebar_host.protocol import Banner
+
+BANNER = Banner("1.0.0", protocol.PROTOCOL_VERSION, 128, 16, 80)
 
 
 def test_handshake_with_a_device_left_in_numbered_mode() -> None:
@@ -64,3 +66,73 @@ def test_the_host_accepts_only_the_protocol_it_speaks(proto: int) -> None:
         Link.open(f"fivebar-mock://?proto={proto}", banner_timeout_s=1.5)
     assert (f"speaks protocol {proto}; this host needs protocol {protocol.PROTOCOL_VERSION}"
             in str(e.value))
+
+
+class ResetCutsTransmission(mock.MockSerial):
+    """A mock whose resets strike while it transmits, as a real UART can be cut.
+
+    The mock puts whole lines out at once; here, once, the line sent just before a reset's
+    banner loses everything after its first byte, newline included, so the banner arrives
+    glued to it (``ok`` + banner → ``ofivebar 1.0.0 proto:2 ...``).
+    """
+
+    cut: bytes | None = None  # the glued line as it was sent, once cut
+
+    def _cut(self) -> None:
+        fw = self.firmware
+        if self.cut is not None or fw is None:
+            return
+        at = fw.out.rfind(b"fivebar ")
+        if at < 2 or fw.out[at - 2:at] != b"\r\n":
+            return
+        start = fw.out.rfind(b"\n", 0, at - 2) + 1
+        if start < at - 2:
+            del fw.out[start + 1:at]
+            self.cut = bytes(fw.out[start:fw.out.index(b"\n", start) + 1])
+
+    def write(self, data: bytes | bytearray | memoryview) -> int:
+        n = super().write(data)
+        self._cut()
+        return n
+
+    def _update_dtr_state(self) -> None:
+        super()._update_dtr_state()
+        self._cut()
+
+
+def test_a_banner_glued_to_a_cut_reply_is_a_restart_while_streaming() -> None:
+    """reset_after=3: line 3's ``ok`` is being sent when the controller resets."""
+    port = ResetCutsTransmission("fivebar-mock://?speed=0&reset_after=3", timeout=0.02)
+    try:
+        link = Link(port, url="cut")
+        link.handshake(3.0)
+        with pytest.raises(LinkFaultError) as e:
+            link.stream([f"G1 A{10 * i} P10000" for i in range(1, 9)])
+        assert port.cut is not None and port.cut.startswith(b"ofivebar 1.0.0 proto:")
+        assert e.value.kind == "reset", e.value
+        assert e.value.acked == 2  # line 3's ok was cut away
+        assert link.banner == BANNER
+    finally:
+        port.close()
+
+
+def test_a_banner_glued_to_a_cut_status_report_answers_a_reset() -> None:
+    """Ctrl-X and DTR, each while a status report is still on its way."""
+    port = ResetCutsTransmission("fivebar-mock://?speed=0", timeout=0.02)
+    try:
+        link = Link(port, url="cut")
+        link.handshake(3.0)
+        link.command("G92 A5 B6")
+        link.wait_idle(1.0)
+        port.write(protocol.RT_STATUS)
+        assert link.reset() == BANNER
+        assert port.cut is not None and port.cut.startswith(b"<fivebar 1.0.0 proto:")
+        port.cut = None
+        port.write(protocol.RT_STATUS)
+        assert link.hardware_reset()
+        assert port.cut is not None and port.cut.startswith(b"<fivebar 1.0.0 proto:")
+        assert link.next_line == 1
+        st = link.status()
+        assert (st.a, st.b, st.homed, st.accepted_line) == (5, 6, True, 0)
+    finally:
+        port.close()

@@ -106,10 +106,27 @@ def test_parse_every_message_kind() -> None:
     assert protocol.parse_message("$12=-40") == SettingLine(12, -40)
 
 
+@pytest.mark.parametrize(("line", "banner"), [
+    ("ofivebar 1.0.0 proto:2 rx:128 queue:16 line:80", Banner("1.0.0", 2, 128, 16, 80)),
+    ("<Run|A:12fivebar 1.0.0 proto:2 rx:128 queue:16 line:80\r\n",
+     Banner("1.0.0", 2, 128, 16, 80)),
+    ("fivebar 1.0.0 proto:2 rx:12fivebar 2.0 proto:3 rx:64 queue:8 line:40",
+     Banner("2.0", 3, 64, 8, 40)),
+    ("fivebar 1.0.0 proto:2 rx:128 queue:16 line:80", Banner("1.0.0", 2, 128, 16, 80)),
+    ("ofivebar 1.0.0 proto:2 rx:128 queue:16 line:80x", None),
+    ("fivebar 1.0.0 proto:2 rx:128 queue:16", None),
+    ("okay", None),
+])
+def test_trailing_banner(line: str, banner: Banner | None) -> None:
+    """A reset that cuts a line on the wire glues the banner to the cut piece."""
+    assert protocol.trailing_banner(line) == banner
+
+
 @pytest.mark.parametrize(
     "line",
     [
         "okay",
+        "ofivebar 1.0.0 proto:2 rx:128 queue:16 line:80",  # the link's business, not the codec's
         "error:8",
         "error:4 resend:3",
         "<Idle:1|A:0,B:0|Q:0|Ln:0,0|L:0|U:0|H:0>",
