@@ -8,6 +8,10 @@ and checksums (right, wrong, malformed), comments, whitespace, case, overlong li
 random byte edits.  ``$H`` and ``$X`` are left out (they would end the alarm).  A plain
 ``M110`` now and then ends numbered mode (strict framing), so unnumbered lines keep being
 parsed, not only refused with ``error:10``.
+
+The line noise of test_line_checksum.py (one or two bytes of a numbered G1 line dropped or
+replaced) goes through both devices too: the firmware must refuse every noisy line the mock
+refuses, and accept the ones CRC-16 cannot catch exactly as the mock does.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ from pathlib import Path
 
 import pytest
 from contract_devices import Device, open_mock, open_sim
+from line_noise import KNOWN_MISSES, noisy_case
 
 from fivebar_host import protocol
 from fivebar_host.protocol import AlarmPush, ErrorReply, Message, Ok
@@ -128,3 +133,31 @@ def test_the_mock_answers_every_line_like_the_firmware(tmp_path: Path) -> None:
     for line, w, g in zip(lines, want, got, strict=True):
         assert g == w, f"line {line!r}: firmware {w}, mock {g}"
 
+
+@pytest.mark.usefixtures("sim_build")
+def test_noisy_numbered_lines_are_refused_by_the_firmware_as_by_the_mock(tmp_path: Path) -> None:
+    """Each case: ``N<n-1> M110`` (the device now expects line n), the noisy line, then the
+    valid line as a probe: it is answered ``error:14`` (accepted, refused by the alarm) when
+    the noisy line was refused, ``error:9`` when the noisy line took its number."""
+    rng = random.Random(20260301)
+    cases = [(201, b"N201 G1 A-706 B-507 P16795 S255*49724",
+              b"N201 G1 A-76 B-07 P16795 S255*49724")]
+    cases += [noisy_case(rng.randint) for _ in range(300)]
+    lines = []
+    for n, line, noisy in [*cases, *KNOWN_MISSES]:
+        lines += [protocol.encode_line("M110", n - 1)[:-1], noisy, line]
+    mock_dev = open_mock()
+    sim_dev = open_sim(tmp_path / "pins.trace")
+    try:
+        want = transcript(sim_dev, lines)
+        got = transcript(mock_dev, lines)
+    finally:
+        mock_dev.close()
+        sim_dev.close()
+    for line, w, g in zip(lines, want, got, strict=True):
+        assert g == w, f"line {line!r}: firmware {w}, mock {g}"
+    probes = [t[-1] for t in want[2::3]]
+    refused, missed = probes[:len(cases)], probes[len(cases):]
+    accepted = [c[2] for c, probe in zip(cases, refused, strict=True) if probe != ErrorReply(14)]
+    assert accepted == []
+    assert missed == [ErrorReply(9, resend=n + 1) for n, _, _ in KNOWN_MISSES]
