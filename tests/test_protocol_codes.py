@@ -62,6 +62,14 @@ def test_crc16_matches_the_reference_on_any_bytes(data: bytes) -> None:
     assert protocol.crc16(data) == binascii.crc_hqx(data, 0xFFFF)
 
 
+def test_protocol_version_is_the_firmware_s_and_the_document_s() -> None:
+    config = (ROOT / "firmware" / "fivebar" / "config.h").read_text()
+    m = re.search(r"#define FB_PROTOCOL\s+(\d+)", config)
+    assert m is not None and int(m[1]) == protocol.PROTOCOL_VERSION
+    title = (ROOT / "docs" / "protocol.md").read_text().splitlines()[0]
+    assert title.endswith(f"(version {protocol.PROTOCOL_VERSION})"), title
+
+
 def test_encode_line_with_number_and_checksum() -> None:
     line = protocol.encode_line("G1 A10 P1000", line_number=7)
     text = line.decode()
