@@ -100,3 +100,23 @@ def test_fault_then_resume_draws_every_step_once(tmp_path: Path, quick_profile: 
     assert np.array_equal(laser_steps(tr), planned_draw_steps(job))  # nothing lost, no doubles
     assert np.array_equal(all_steps(tr), planned_steps(job))  # no travel back either
     assert (tr.positions("A")[-1][1], tr.positions("B")[-1][1]) == (0, 0)  # home again
+
+
+def test_line_noise_is_absorbed_by_resends(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+                                           ) -> None:
+    """Bytes lost and corrupted on the way to the real firmware: every damaged line is refused
+    and sent again, so the job completes in one run and the laser-on pulses equal the plan."""
+    monkeypatch.chdir(tmp_path)
+    drawing, _, job = compiled_copy(tmp_path, "simple.svg")
+    trace = tmp_path / "pins.trace"
+    code, out = run("plot", str(drawing), "--port",
+                    f"fivebar-sim://?machine=noisy&trace={trace}&drop=0.002&corrupt=0.002&seed=7",
+                    "--laser", "--yes")
+    assert code == 0, out
+    resends = int(out.split(" resends")[0].rsplit(",", 1)[1])
+    assert resends > 0, out  # the noise did damage lines
+    simport.machine("noisy").stop()
+    tr = read_trace(trace)
+    assert not laser_on_at_end(tr)
+    assert np.array_equal(laser_steps(tr), planned_draw_steps(job))
+    assert np.array_equal(all_steps(tr), planned_steps(job))

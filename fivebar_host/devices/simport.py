@@ -26,7 +26,11 @@ URL options: `fivebar-sim://?trace=PATH&realtime=1&endstops=A,B&machine=NAME&res
 - `power_cut_after=N`: after the N-th line the AVR loses power and boots again: its RAM comes
   back random (position, `H` and `Ln` done are lost); the motors stay where they are;
 - `stall_after=N`: after the N-th line the AVR freezes (no replies, no motion, pins unchanged)
-  until a DTR reset.
+  until a DTR reset;
+- `drop=P`, `corrupt=P`, `seed=N`: line noise, as on the mock: each host→device byte other than
+  a real-time byte is lost with probability P, or replaced by another printable byte that is
+  not a real-time byte (seeded generator, default seed 0); line counting for the options
+  above counts the newlines the host wrote.
 
 For the three glitches the bytes written up to the N-th line reach the AVR first and the rest of
 that write is lost; each fault fires once per port.  A DTR edge (`port.dtr = False`, then
@@ -40,6 +44,7 @@ for the first time from a thread that lives as long as the machine should.
 from __future__ import annotations
 
 import atexit
+import random
 import tempfile
 import threading
 import urllib.parse
@@ -59,7 +64,12 @@ HARNESS_OPTIONS = ("trace", "realtime", "endstops")
 #: Fault options: what happens after the N-th line, and the harness command for it.
 FAULTS = {"disconnect_after": None, "reset_after": "reset", "power_cut_after": "power",
           "stall_after": "freeze"}
-_KNOWN = (*HARNESS_OPTIONS, "machine", *FAULTS)
+#: Line noise options (per-byte probabilities) and the seed of their generator.
+NOISE = ("drop", "corrupt")
+_KNOWN = (*HARNESS_OPTIONS, "machine", *FAULTS, *NOISE, "seed")
+#: Real-time bytes pass untouched; a corruption never produces one (docs/protocol.md 2).
+_REALTIME = frozenset(b"?!~\x18")
+_CORRUPT_BYTES = bytes(c for c in range(0x20, 0x7F) if c not in _REALTIME)
 
 
 @dataclass
@@ -71,6 +81,9 @@ class SimOptions:
     endstops: tuple[int | None, int | None] = (None, None)
     machine: str | None = None
     faults: dict[str, int] | None = None
+    drop: float = 0.0
+    corrupt: float = 0.0
+    seed: int = 0
     given: frozenset[str] = frozenset()  # the harness options the URL names
 
 
@@ -106,6 +119,18 @@ def parse_sim_url(url: str) -> SimOptions:
                 raise ValueError(f"{url}: {key} must be a line count >= 1, got {value!r}")
             assert opts.faults is not None
             opts.faults[key] = int(value)
+        elif key in NOISE:
+            try:
+                prob = float(value)
+            except ValueError:
+                prob = -1.0
+            if not 0.0 <= prob < 1.0:
+                raise ValueError(f"{url}: {key} must be a probability in [0, 1), got {value!r}")
+            setattr(opts, key, prob)
+        elif key == "seed":
+            if not value.isdigit():
+                raise ValueError(f"{url}: seed must be a whole number >= 0, got {value!r}")
+            opts.seed = int(value)
         else:
             raise ValueError(f"{url}: unknown option {key!r} (known: {', '.join(_KNOWN)})")
     opts.given = frozenset(given & set(HARNESS_OPTIONS))
@@ -200,6 +225,7 @@ class Serial(serial.SerialBase):
         self._emu: Emulator | None = None
         self._machine: SimMachine | None = None
         self.options = SimOptions()
+        self._rng = random.Random(0)  # line noise (`drop`, `corrupt`), seeded on open
         self.trace_path: Path | None = None
         self.stats = ""
         self._lines = 0
@@ -225,6 +251,7 @@ class Serial(serial.SerialBase):
             raise serial.SerialException(str(e)) from e
         self.options = opts
         self._lines, self._fired, self._broken = 0, set(), ""
+        self._rng = random.Random(opts.seed)
         if opts.machine is None:
             emu, self.trace_path = _new_emulator(opts)
             self._open_pty(emu, fresh=True)
@@ -347,10 +374,10 @@ class Serial(serial.SerialBase):
         raw = bytes(data)
         fault, cut = self._next_fault(raw)
         if fault is None:
-            n = inner.write(raw)
+            inner.write(self._noisy(raw))
             self._lines += raw.count(b"\n")
-            return int(n or 0)
-        inner.write(raw[:cut])
+            return len(raw)
+        inner.write(self._noisy(raw[:cut]))
         inner.flush()
         self._lines += raw[:cut].count(b"\n")
         self._fired.add(fault)
@@ -364,6 +391,22 @@ class Serial(serial.SerialBase):
         except EmulatorError as e:
             raise serial.SerialException(f"{SCHEME}: {e}") from e
         return len(raw)  # the rest of the write is lost, as on the mock
+
+    def _noisy(self, raw: bytes) -> bytes:
+        """`raw` after the URL's line noise (`drop`, `corrupt`); real-time bytes pass."""
+        drop, corrupt = self.options.drop, self.options.corrupt
+        if not drop and not corrupt:
+            return raw
+        rng = self._rng
+        out = bytearray()
+        for c in raw:
+            if c not in _REALTIME:
+                if drop and rng.random() < drop:
+                    continue
+                if corrupt and rng.random() < corrupt:
+                    c = rng.choice([b for b in _CORRUPT_BYTES if b != c])
+            out.append(c)
+        return bytes(out)
 
     def _next_fault(self, raw: bytes) -> tuple[str | None, int]:
         """The first fault whose line ends in ``raw``, and the length up to that newline."""

@@ -115,3 +115,16 @@ def test_url_options_are_checked() -> None:
                 "fivebar-sim://?endstops=1"):
         with pytest.raises(serial.SerialException):
             serial.serial_for_url(bad)
+
+
+def test_url_options_are_parsed_and_bad_ones_named() -> None:
+    opts = simport.parse_sim_url("fivebar-sim://?machine=m&drop=0.01&corrupt=0.002&seed=5"
+                                 "&reset_after=3")
+    assert (opts.machine, opts.drop, opts.corrupt, opts.seed) == ("m", 0.01, 0.002, 5)
+    assert opts.faults == {"reset_after": 3}
+    for url, word in [("fivebar-sim://?drop=1.5", "drop"), ("fivebar-sim://?corrupt=x", "corrupt"),
+                      ("fivebar-sim://?seed=-1", "seed"), ("fivebar-sim://?stall_after=0",
+                                                          "stall_after"),
+                      ("fivebar-sim://?speed=2", "unknown option 'speed'")]:
+        with pytest.raises(ValueError, match=word):
+            simport.parse_sim_url(url)
