@@ -162,3 +162,20 @@ def test_input_derivatives_match_finite_differences() -> None:
             np.testing.assert_allclose(dxd[:, j], fd, rtol=1e-7, atol=1e-9)
             fds = (mech.basis.actuators(u + e) - mech.basis.actuators(u - e)) / (2 * h)
             np.testing.assert_allclose(ds[:, j], fds, rtol=1e-7, atol=1e-9)
+
+
+def test_motion_along_a_direction_is_the_position_and_its_rate() -> None:
+    """`along(u, d)` (the fold solve's one-pass evaluation) equals `driven`/`actuators` at u
+    and the central difference of both along d."""
+    for name in ("stephenson2", "spherical_watt1", "fivebar_robot", "five_ss"):
+        basis = parse_mechanism((MECH / f"{name}.toml").read_text()).basis
+        u = np.array([m.value0 for m in basis.motions]) + 0.37
+        d = np.linspace(0.5, -0.8, len(basis.motions))
+        xd, s, rate = basis.along(u, d)
+        np.testing.assert_allclose(xd, basis.driven(u), rtol=0, atol=1e-15)
+        np.testing.assert_allclose(s, basis.actuators(u), rtol=0, atol=1e-15)
+        h = 1e-6
+        up, dn = u + h * d, u - h * d
+        fd = (np.concatenate((basis.driven(up), basis.actuators(up)))
+              - np.concatenate((basis.driven(dn), basis.actuators(dn)))) / (2 * h)
+        np.testing.assert_allclose(rate, fd, rtol=1e-7, atol=1e-9)

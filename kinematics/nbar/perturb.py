@@ -123,6 +123,31 @@ class InputBasis:
                 s[mo.column] = float(ui) ** 2
         return s
 
+    def along(self, u: FloatArray, d: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """(x_d, S, d/dt [x_d, S]) at input values u moving as u + t·d: `driven`, `actuators`
+        and `derivatives`·d in one pass (the fold solve needs all three every iteration)."""
+        f = np.zeros(self.n_f)
+        fdot = np.zeros(self.n_f)
+        s = np.empty(self.n_act)
+        sdot = np.empty(self.n_act)
+        for mo, ui, di in zip(self.motions, u.tolist(), d.tolist(), strict=True):
+            dl = ui - mo.value0
+            if mo.kind == "actuator":
+                s[mo.column] = ui * ui
+                sdot[mo.column] = 2.0 * ui * di
+            elif mo.kind == "translate-plane":
+                f[mo.column] = dl
+                fdot[mo.column] = di
+            else:
+                sh, sn, cs = math.sin(0.5 * dl), math.sin(dl), math.cos(dl)
+                f[mo.column] = -2.0 * sh * sh
+                f[mo.column + 1] = sn
+                fdot[mo.column] = -sn * di
+                fdot[mo.column + 1] = cs * di
+        b = self.basis
+        return (np.asarray(self.x0 + b @ f, dtype=np.float64), s,
+                np.concatenate((b @ fdot, sdot)))
+
     def derivatives(self, u: FloatArray) -> tuple[FloatArray, FloatArray]:
         """(∂x_d/∂u (n_d, n_in), ∂S/∂u (n_act, n_in)) at input values u."""
         n_in = len(self.motions)

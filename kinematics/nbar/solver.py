@@ -312,6 +312,7 @@ class _Tracker:
         for u, q in zip(us, qs, strict=True):
             self._push(q, self._param(u))
         self.u, self.q = us[-1], qs[-1]
+        self.bsize, self.cool = BLOCK, 0  # fresh history: blocks may start at once
         if len(qs) >= 2:
             d = qs[-1] - qs[-2]
             self.last_m2, self.last_h = float(d @ d), 1.0
@@ -686,11 +687,10 @@ class _Tracker:
             its += 1
             u = start + t * d
             x[:n] = q
-            x[n: n + nd] = basis.driven(u)
-            x[n + nd: -1] = basis.actuators(u)
+            xd, sq, xdot = basis.along(u, d)
+            x[n: n + nd] = xd
+            x[n + nd: -1] = sq
             g = (self.hs @ x).reshape(m, -1)
-            dxd, dsq = basis.derivatives(u)
-            xdot = np.concatenate((dxd @ d, dsq @ d))
             hv = (v @ h3v).reshape(m, -1)  # row r: vᵀ (H_r + H_rᵀ)[:n, :]
             jac = g[:, :n]
             a_mat[:n, :n] = jac
@@ -718,13 +718,14 @@ class _Tracker:
         # The branch through the fold: q ≈ q* + αv, α² = k·(t* − t).
         u_star = start + t * d
         x[:n] = q
-        x[n: n + nd] = basis.driven(u_star)
-        x[n + nd: -1] = basis.actuators(u_star)
+        xd, sq, xdot = basis.along(u_star, d)
+        x[n: n + nd] = xd
+        x[n + nd: -1] = sq
         g = (self.hs @ x).reshape(m, -1)
-        if float(np.linalg.norm(0.5 * (g @ x))) > self.tol:
+        r = 0.5 * (g @ x)
+        if float(r @ r) > self.tol2:
             return None
-        dxd, dsq = basis.derivatives(u_star)
-        phi_t = g[:, n:-1] @ np.concatenate((dxd @ d, dsq @ d))
+        phi_t = g[:, n:-1] @ xdot
         # Left null vector w of J from the bordered system [Jᵀ v; Φ_tᵀ 0][w; s] = [0; 1]:
         # J v = 0 makes s = 0, so Jᵀw = 0 with w·Φ_t = 1 (non-singular at a simple fold).
         vn = v / math.sqrt(float(v @ v))
