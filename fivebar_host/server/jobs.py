@@ -15,7 +15,7 @@ import math
 import re
 import threading
 from collections import OrderedDict
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 from fivebar_host.config import ConfigError, Profile
@@ -42,33 +42,27 @@ class SubmitError(ValueError):
         self.detail = detail or {}
 
 
+#: CompileOptions fields a submission cannot set: the daemon always validates its jobs.
+_FIXED = frozenset({"validate", "validation_samples"})
+
+
 @dataclass(frozen=True)
-class JobOptions:
-    """The plot options of a submission (None: the daemon profile's value)."""
+class JobOptions(CompileOptions):
+    """The plot options of a submission: the compiler's (None: the daemon profile's value),
+    plus the laser opt-in and the answer to the daemon's pose question."""
 
     laser: bool = False
-    mode: str | None = None
-    tolerance_mm: float | None = None
-    origin_mm: tuple[float, float] | None = None
-    scale: float | None = None
-    rotate_deg: float = 0.0
-    fit: bool = False
-    layers: tuple[str, ...] = ()
-    keep_order: bool = False
     #: Answer yes to the daemon's question "are the arms at the home pose?" (or "still where
     #: the job stopped?") when the daemon cannot know it itself (first job after power-up).
     confirm: bool = False
 
     def compile_options(self) -> CompileOptions:
         """The compiler's options (everything but laser and confirm)."""
-        return CompileOptions(mode=self.mode, tolerance_mm=self.tolerance_mm,
-                              origin_mm=self.origin_mm, scale=self.scale,
-                              rotate_deg=self.rotate_deg, fit=self.fit, layers=self.layers,
-                              keep_order=self.keep_order)
+        return CompileOptions(**{f.name: getattr(self, f.name) for f in fields(CompileOptions)})
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-friendly dict (stored with the job)."""
-        d = asdict(self)
+        d = {k: v for k, v in asdict(self).items() if k not in _FIXED}
         d["layers"] = list(self.layers)
         d["origin_mm"] = list(self.origin_mm) if self.origin_mm is not None else None
         return d
