@@ -2,7 +2,8 @@
 
 The only module of the host program that uses pyserial (besides the URL handlers in
 `fivebar_host.devices`, which *are* pyserial ports). Every line goes out numbered and with a
-CRC-16 (docs/protocol.md), so a corrupted or lost line is resent and no line runs twice.
+checksum field, its body's CRC-16 and length (docs/protocol.md 5.1), so a corrupted line, a
+line that lost or gained bytes, or a lost line is resent and no line runs twice.
 
 Flow control is GRBL's character counting: the bytes of lines sent but not yet answered never
 exceed the receive buffer the banner reports. Send-and-wait (one line in flight) is the

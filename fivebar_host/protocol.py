@@ -2,10 +2,10 @@
 
 The contract is docs/protocol.md.  This module mirrors the firmware's reply
 codes (firmware/fivebar/status.h; tests/test_protocol_codes.py keeps the two
-equal), builds command lines with optional line number and CRC-16 checksum,
-and parses every kind of line the firmware sends: ``ok``, ``error:<code>``
-(with ``resend:<n>`` for framing errors), status reports, the banner,
-``ALARM:<code>`` pushes and ``$<n>=<v>`` setting lines.
+equal), builds command lines with optional line number and checksum field
+(CRC-16 and length), and parses every kind of line the firmware sends: ``ok``,
+``error:<code>`` (with ``resend:<n>`` for framing errors), status reports, the
+banner, ``ALARM:<code>`` pushes and ``$<n>=<v>`` setting lines.
 
 It is pure so the link, the mock device and the tests share one
 implementation of the format.
@@ -18,8 +18,13 @@ from dataclasses import dataclass
 from typing import Final
 
 #: The protocol version this module implements: docs/protocol.md, the banner's ``proto:``.
-#: Version 2 replaced the CRC-8 line checksum with CRC-16 (docs/protocol.md 5.1 and 14).
+#: Version 2 replaced the CRC-8 line checksum with a CRC-16 and the body's length
+#: (docs/protocol.md 5.1 and 14).
 PROTOCOL_VERSION: Final = 2
+
+#: The longest body a checksummed line can have: the length in its checksum field has at
+#: most 2 digits (the banner's ``line`` limit, 80 bytes for the whole line, is lower).
+CHECKSUM_BODY_MAX: Final = 99
 
 #: Real-time bytes: acted on by the firmware at once, never buffered, never
 #: answered with ``ok`` and not counted against the receive buffer.
@@ -62,7 +67,7 @@ CODES: Final[dict[int, Code]] = _codes(
     Code(5, "BAD_WORD", "word not allowed for the command, or repeated"),
     Code(6, "MISSING_WORD", "a required word is missing"),
     Code(7, "OUT_OF_RANGE", "value outside its documented range"),
-    Code(8, "CHECKSUM", "checksum mismatch or malformed: resend"),
+    Code(8, "CHECKSUM", "checksum field malformed, or its CRC or length wrong: resend"),
     Code(9, "LINE_NUMBER", "N is not the expected line number: resend"),
     Code(10, "NO_CHECKSUM",
          "line number without checksum, or no number after numbered lines: resend"),
@@ -137,15 +142,30 @@ def crc16(data: bytes) -> int:
     checksum of docs/protocol.md 5.1, 0..65535.
 
     It replaced CRC-8 in protocol 2 (docs/protocol.md 14): it catches every corruption of
-    one byte or of two adjacent bytes; a lost byte, or two corrupted bytes apart, gets
-    through only when the CRC happens to match, about once in 65536 instead of once in 256.
-    Table-driven because the host encodes every job line with it; the firmware computes the
-    same value bit by bit (fb_proto.c).
+    one byte or of two adjacent bytes; two corrupted bytes apart get through only when the
+    CRC happens to match, about once in 65536 instead of once in 256.  A lost or added
+    byte is caught by the body's length, which the checksum field carries too
+    (checksum_field).  Table-driven because the host encodes every job line with it; the
+    firmware computes the same value bit by bit (fb_proto.c).
     """
     crc = 0xFFFF
     for byte in data:
         crc = ((crc << 8) & 0xFFFF) ^ _CRC16_TABLE[(crc >> 8) ^ byte]
     return crc
+
+
+def checksum_field(body: bytes) -> bytes:
+    """The checksum field that ends a line with this body: ``*<crc16>/<len>``
+    (docs/protocol.md 5.1), both numbers decimal without leading zeros.
+
+    The length makes every byte lost from or added to the body a mismatch, which the CRC
+    alone would miss about once in 65536.  Raises ProtocolError for a body longer than
+    CHECKSUM_BODY_MAX bytes, whose length would not fit the field's two digits.
+    """
+    if len(body) > CHECKSUM_BODY_MAX:
+        raise ProtocolError(f"line body of {len(body)} bytes: a checksummed body has at most "
+                            f"{CHECKSUM_BODY_MAX}")
+    return b"*%d/%d" % (crc16(body), len(body))
 
 
 _FORBIDDEN = re.compile(r"[^\x20-\x7e\t]|[*?!~;]")
@@ -154,10 +174,11 @@ _FORBIDDEN = re.compile(r"[^\x20-\x7e\t]|[*?!~;]")
 def encode_line(body: str, line_number: int | None = None, checksum: bool = False) -> bytes:
     """Encode one command line, ready to write, ending in ``\\n``.
 
-    With ``line_number`` the line becomes ``N<n> <body>*<crc>`` (a number
-    always carries a checksum); with only ``checksum`` it is ``<body>*<crc>``.
-    Raises ProtocolError for bodies the firmware would misread (real-time
-    bytes, ``*``, ``;``, control characters).
+    With ``line_number`` the line becomes ``N<n> <body>*<crc>/<len>`` (a number
+    always carries a checksum field, checksum_field); with only ``checksum`` it is
+    ``<body>*<crc>/<len>``.  Raises ProtocolError for bodies the firmware would misread
+    (real-time bytes, ``*``, ``;``, control characters) and for a checksummed body too long
+    for its field.
     """
     if _FORBIDDEN.search(body):
         raise ProtocolError(f"line body {body!r} holds a reserved or non-printable character")
@@ -167,9 +188,10 @@ def encode_line(body: str, line_number: int | None = None, checksum: bool = Fals
             raise ProtocolError(f"line number {line_number} outside 0..4294967295")
         text = f"N{line_number} {body}"
         checksum = True
+    raw = text.encode("ascii")
     if checksum:
-        text = f"{text}*{crc16(text.encode('ascii'))}"
-    return (text + "\n").encode("ascii")
+        raw += checksum_field(raw)
+    return raw + b"\n"
 
 
 def g1(a: int | None, b: int | None, p_us: int, s: int | None = None) -> str:

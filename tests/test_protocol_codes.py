@@ -74,10 +74,13 @@ def test_encode_line_with_number_and_checksum() -> None:
     line = protocol.encode_line("G1 A10 P1000", line_number=7)
     text = line.decode()
     assert text.startswith("N7 G1 A10 P1000*") and text.endswith("\n")
-    body, crc = text[:-1].rsplit("*", 1)
+    body, field = text[:-1].rsplit("*", 1)
+    crc, length = field.split("/")
     assert int(crc) == binascii.crc_hqx(body.encode(), 0xFFFF)
+    assert int(length) == len(body) == len("N7 G1 A10 P1000")
     assert protocol.encode_line("G90") == b"G90\n"
-    assert protocol.encode_line("G90", checksum=True) == b"G90*56831\n"
+    assert protocol.encode_line("G90", checksum=True) == b"G90*56831/3\n"
+    assert protocol.checksum_field(b"") == b"*65535/0"
 
 
 @pytest.mark.parametrize("body", ["G1 A1 P100 ?", "M3!", "G1*", "G1 ; x", "G1\x01"])

@@ -595,7 +595,11 @@ static void handle_line(void)
 		return;
 	}
 	if (over) {
-		finish(FB_ERR_LINE_TOO_LONG);
+		/* In numbered mode the host never sends such a line: it is line noise,
+		 * most often two lines merged by a lost newline, and its checksum
+		 * field was cut off, so it is refused with a resend like any line
+		 * whose field does not check (docs/protocol.md 5.2, step 2). */
+		finish(lines.numbered ? FB_ERR_CHECKSUM : FB_ERR_LINE_TOO_LONG);
 		return;
 	}
 	uint8_t st = fb_parse_line(&lines, line, len, &cmd);

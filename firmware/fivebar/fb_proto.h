@@ -58,6 +58,9 @@ uint16_t fb_crc16(const char *s, uint8_t len);
 
 /*
  * Frame and parse one received line (without its newline; at most 255 bytes).
+ * A '*' starts the checksum field "<crc16>/<len>" (docs/protocol.md 5.1): the
+ * CRC-16 and the length of every byte before the last '*'; a malformed or
+ * wrong field is FB_ERR_CHECKSUM.
  * Returns FB_OK or an FB_ERR_* code; on FB_ERR_CHECKSUM, FB_ERR_LINE_NUMBER and
  * FB_ERR_NO_CHECKSUM the line was not accepted and the host must resend from
  * lines->last + 1.  Every other outcome accepts the line and advances
@@ -65,9 +68,9 @@ uint16_t fb_crc16(const char *s, uint8_t len);
  *
  * Strict framing: once a numbered line is accepted (lines->numbered), a line
  * without N is refused with FB_ERR_NO_CHECKSUM, so a numbered line that lost
- * both its "N<n> " and its "*<crc>" to line noise is never executed.  Only an
- * unnumbered M110 (which sets last to 0 and ends strict framing) is accepted
- * then; a numbered M110 keeps it.
+ * both its "N<n> " and its "*<crc>/<len>" to line noise is never executed.
+ * Only an unnumbered M110 (which sets last to 0 and ends strict framing) is
+ * accepted then; a numbered M110 keeps it.
  */
 uint8_t fb_parse_line(fb_lines_t *lines, const char *line, uint8_t len, fb_cmd_t *cmd);
 

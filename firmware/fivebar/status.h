@@ -19,7 +19,7 @@
 #define FB_ERR_BAD_WORD          5  /* word not allowed for the command, or repeated */
 #define FB_ERR_MISSING_WORD      6  /* a required word is missing */
 #define FB_ERR_OUT_OF_RANGE      7  /* value outside its documented range */
-#define FB_ERR_CHECKSUM          8  /* checksum mismatch or malformed: resend */
+#define FB_ERR_CHECKSUM          8  /* checksum field malformed, or its CRC or length wrong: resend */
 #define FB_ERR_LINE_NUMBER       9  /* N is not the expected line number: resend */
 #define FB_ERR_NO_CHECKSUM       10 /* line number without checksum, or no number after numbered lines: resend */
 #define FB_ERR_SOFT_LIMIT        11 /* target outside the soft limits */

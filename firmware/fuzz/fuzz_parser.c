@@ -4,8 +4,11 @@
  *
  * 1. Every '\n'-separated piece of the input goes through fb_parse_line with
  *    a persistent line counter; the result must be a defined status, a
- *    resend status must leave the counter unchanged, and once a numbered line
- *    was accepted no unnumbered line but M110 may be (strict framing).
+ *    resend status must leave the counter unchanged, once a numbered line
+ *    was accepted no unnumbered line but M110 may be (strict framing), and a
+ *    line with a '*' that is not refused with a resend ends in exactly the
+ *    field the host would write for its body, "*<crc16>/<len>" (then only
+ *    spaces or tabs): one spelling per body, nothing else passes.
  * 2. The same bytes are fed to the whole firmware (fb_rx_isr / fb_poll) on
  *    the fake board, with simulated time advancing, so real-time bytes,
  *    execution and replies are exercised as well.
@@ -15,6 +18,7 @@
  */
 #include <stddef.h>
 #include <stdint.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -25,6 +29,27 @@
 #include "status.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
+
+/* Whether a line that has a '*' ends in the host's checksum field for the
+ * bytes before its last '*', and only spaces or tabs after it. */
+static int has_host_field(const char *line, size_t len)
+{
+	size_t star = len;
+	for (size_t k = 0; k < len; k++)
+		if (line[k] == '*')
+			star = k;
+	if (star == len)
+		return 1;
+	char want[16];
+	int n = snprintf(want, sizeof want, "*%u/%u",
+			 (unsigned)fb_crc16(line, (uint8_t)star), (unsigned)star);
+	if (n < 0 || len - star < (size_t)n || memcmp(line + star, want, (size_t)n) != 0)
+		return 0;
+	for (size_t k = star + (size_t)n; k < len; k++)
+		if (line[k] != ' ' && line[k] != '\t')
+			return 0;
+	return 1;
+}
 
 static void parse_pieces(const uint8_t *data, size_t size)
 {
@@ -41,6 +66,7 @@ static void parse_pieces(const uint8_t *data, size_t size)
 		fb_cmd_t cmd;
 		fb_lines_t before = lines;
 		uint8_t st = fb_parse_line(&lines, copy, (uint8_t)len, &cmd);
+		int field_ok = has_host_field(copy, len);
 		free(copy);
 		if (st > FB_ERR_RX_OVERFLOW)
 			abort();
@@ -51,6 +77,8 @@ static void parse_pieces(const uint8_t *data, size_t size)
 		if (before.numbered && !cmd.has_n && cmd.kind != CMD_M110 && lines.last != before.last)
 			abort();
 		if (st == FB_OK && cmd.kind > CMD_SET)
+			abort();
+		if (!fb_is_resend(st) && !field_ok)
 			abort();
 		start = i + 1;
 	}

@@ -32,10 +32,11 @@ static uint8_t parse(fb_lines_t *ln, const char *s, fb_cmd_t *c)
 	return fb_parse_line(ln, s, (uint8_t)strlen(s), c);
 }
 
+/* body with its checksum field "*<crc16>/<len>", as the host sends it */
 static void framed(char *out, size_t size, const char *body)
 {
-	uint16_t crc = fb_crc16(body, (uint8_t)strlen(body));
-	snprintf(out, size, "%s*%u", body, crc);
+	uint8_t len = (uint8_t)strlen(body);
+	snprintf(out, size, "%s*%u/%u", body, fb_crc16(body, len), len);
 }
 
 /* Expected values from Python's binascii.crc_hqx(data, 0xFFFF), an independent
@@ -170,19 +171,158 @@ static void test_framing(void)
 	CHECK(parse(&ln, "M110", &c) == FB_OK && ln.last == 0, "M110 without N resets");
 	framed(buf, sizeof buf, "G90");
 	CHECK(parse(&ln, buf, &c) == FB_OK && ln.last == 1, "checksum without N");
-	CHECK(parse(&ln, "G90*65536", &c) == FB_ERR_CHECKSUM, "checksum > 65535");
-	CHECK(parse(&ln, "G90*", &c) == FB_ERR_CHECKSUM, "empty checksum");
-	CHECK(parse(&ln, "G90*12x", &c) == FB_ERR_CHECKSUM, "malformed checksum");
-	CHECK(parse(&ln, "G90*056831", &c) == FB_ERR_CHECKSUM, "six checksum digits");
-	CHECK(parse(&ln, "G90*56830", &c) == FB_ERR_CHECKSUM && ln.last == 1, "mismatch");
-	CHECK(parse(&ln, "G90*56831 \t", &c) == FB_OK && ln.last == 2,
-	      "five digits (CRC of G90), then spaces and tabs");
-	framed(buf, sizeof buf, "N3 G90 ; note");
-	CHECK(parse(&ln, buf, &c) == FB_OK && ln.last == 3, "comment inside the checksum");
+	/* the checksum field of G90: CRC-16 56831, 3 bytes */
+	static const char *const bad_fields[] = {
+		"G90*", "G90*/3", "G90*56831", "G90*56831/", "G90*56831/3x", "G90*12x/3",
+		"G90*65536/3", "G90*123456/3", "G90*056831/3", "G90*56831/03", "G90*56831/4",
+		"G90*56831/2", "G90*56830/3", "G90*56831 /3", "G90*56831/ 3", "G90*56831//3",
+		"G90*56831/3/3", "G90*56831/3*", "G90*+56831/3", "G90*56831/+3", "G90*56831/-3",
+		"G90**56831/3", "G90*56831/3 x", "G90*56831/100",
+	};
+	for (size_t k = 0; k < sizeof bad_fields / sizeof bad_fields[0]; k++)
+		CHECK(parse(&ln, bad_fields[k], &c) == FB_ERR_CHECKSUM && ln.last == 1,
+		      "bad checksum field %s", bad_fields[k]);
+	CHECK(parse(&ln, "G90*56831/3 \t", &c) == FB_OK && ln.last == 2,
+	      "five CRC digits, the length, then spaces and tabs");
+	CHECK(parse(&ln, "*65535/0", &c) == FB_OK && ln.last == 3 && c.kind == CMD_NONE,
+	      "an empty body: length 0");
+	CHECK(parse(&ln, "G1 A5 P100 ; a*b*33201/16", &c) == FB_OK && ln.last == 4 && c.a == 5,
+	      "the field follows the last '*'; a '*' in a comment is part of the body");
+	framed(buf, sizeof buf, "N5 G90 ; note");
+	CHECK(parse(&ln, buf, &c) == FB_OK && ln.last == 5, "comment inside the checksum");
 	framed(buf, sizeof buf, "Nx G90");
-	CHECK(parse(&ln, buf, &c) == FB_ERR_BAD_NUMBER && ln.last == 3, "malformed N");
+	CHECK(parse(&ln, buf, &c) == FB_ERR_BAD_NUMBER && ln.last == 5, "malformed N");
 	CHECK(fb_is_resend(FB_ERR_CHECKSUM) && fb_is_resend(FB_ERR_LINE_NUMBER) &&
 	      fb_is_resend(FB_ERR_NO_CHECKSUM) && !fb_is_resend(FB_ERR_BAD_WORD), "resend codes");
+}
+
+/*
+ * Line noise on valid numbered lines (docs/protocol.md 5.1 and 14).  Every
+ * drop of one byte or of two, every insertion of one byte or of two and every
+ * replacement of one byte or of two adjacent bytes is refused with a resend,
+ * the line counter unchanged; the one edit accepted is spaces or tabs added
+ * at the end, which the format allows after the length.  For drops and
+ * insertions the guarantee comes from the length in the checksum field, not
+ * from the CRC: one in the body changes its length, one in the field changes
+ * a number or breaks it.  Replacements in the body are the CRC's: a burst of
+ * at most 16 bits.
+ */
+static const char *const noise_lines[] = {
+	/* three drops the CRC-16 alone let through (tests/line_noise.py) */
+	"N65726 G1 A-6020 B-15004 P74824 S132",
+	"N27559 G1 A8140 B-8138 P98890 S165",
+	"N19311 G1 A-11807 B2341 P15132 S193",
+	"N9 G90",                                        /* a one-digit length */
+	"N1 G1 P100",                                    /* length 10: "1" and "0" */
+	"N4294967295 G1 A-100000000 B-100000000 P100000000 S255", /* the longest G1 */
+};
+
+/* A byte noise may put into a line: any but the newline, which ends it, and
+ * the bytes the receiver drops from a line ('\r' and the real-time bytes). */
+static uint8_t noise_byte(int b)
+{
+	return b != '\n' && b != '\r' && b != '?' && b != '!' && b != '~' && b != 0x18;
+}
+
+/* Parse s as the line expected after line n-1 in numbered mode: 1 when it is
+ * refused with a resend and the counter stays, 2 when it is accepted as line n
+ * without error, 0 otherwise. */
+static int noisy_outcome(uint32_t n, const char *s, size_t len)
+{
+	fb_lines_t ln = { n - 1u, 1 };
+	fb_cmd_t c;
+	uint8_t st = fb_parse_line(&ln, s, (uint8_t)len, &c);
+	if (fb_is_resend(st))
+		return ln.last == n - 1u ? 1 : 0;
+	return st == FB_OK && ln.last == n ? 2 : 0;
+}
+
+static void test_line_noise(void)
+{
+	/* Bytes that two insertions or two adjacent replacements are drawn from:
+	 * any other byte in the checksum field breaks its form; in the body any
+	 * byte inserted changes the length, and any two replaced are within the
+	 * CRC's burst guarantee.  These are the ones that could make a field look
+	 * right. */
+	static const char pair_bytes[] = "0123456789*/ \t-A";
+	const size_t npair = sizeof pair_bytes - 1;
+	for (size_t k = 0; k < sizeof noise_lines / sizeof noise_lines[0]; k++) {
+		char valid[128], noisy[130];
+		framed(valid, sizeof valid, noise_lines[k]);
+		const size_t len = strlen(valid);
+		const uint32_t n = (uint32_t)strtoul(noise_lines[k] + 1, NULL, 10);
+		int bad = 0;
+		CHECK(noisy_outcome(n, valid, len) == 2, "%s accepted", valid);
+		/* drops: one byte, and every pair of bytes */
+		for (size_t i = 0; i < len; i++) {
+			memcpy(noisy, valid, i);
+			memcpy(noisy + i, valid + i + 1, len - i - 1);
+			bad += noisy_outcome(n, noisy, len - 1) != 1;
+			for (size_t j = i + 1; j < len; j++) {
+				memcpy(noisy, valid, i);
+				memcpy(noisy + i, valid + i + 1, j - i - 1);
+				memcpy(noisy + j - 1, valid + j + 1, len - j - 1);
+				bad += noisy_outcome(n, noisy, len - 2) != 1;
+			}
+		}
+		CHECK(bad == 0, "%s: %d drops of 1 or 2 bytes not refused", valid, bad);
+		/* one byte inserted, one byte replaced: every byte, every place */
+		bad = 0;
+		for (size_t i = 0; i <= len; i++) {
+			for (int b = 0; b < 256; b++) {
+				if (!noise_byte(b))
+					continue;
+				memcpy(noisy, valid, i);
+				noisy[i] = (char)b;
+				memcpy(noisy + i + 1, valid + i, len - i);
+				int blank_end = i == len && (b == ' ' || b == '\t');
+				bad += noisy_outcome(n, noisy, len + 1) != (blank_end ? 2 : 1);
+				if (i < len && b != (uint8_t)valid[i]) {
+					memcpy(noisy, valid, len);
+					noisy[i] = (char)b;
+					bad += noisy_outcome(n, noisy, len) != 1;
+				}
+			}
+		}
+		CHECK(bad == 0, "%s: %d single insertions or replacements not refused", valid, bad);
+		/* two bytes inserted, at any two places (the second after the first) */
+		bad = 0;
+		for (size_t i = 0; i <= len; i++) {
+			for (size_t j = i + 1; j <= len + 1; j++) {
+				for (size_t x = 0; x < npair; x++) {
+					for (size_t y = 0; y < npair; y++) {
+						char once[129];
+						memcpy(once, valid, i);
+						once[i] = pair_bytes[x];
+						memcpy(once + i + 1, valid + i, len - i);
+						memcpy(noisy, once, j);
+						noisy[j] = pair_bytes[y];
+						memcpy(noisy + j + 1, once + j, len + 1 - j);
+						int blank_end = i == len && j == len + 1 &&
+							(pair_bytes[x] == ' ' || pair_bytes[x] == '\t') &&
+							(pair_bytes[y] == ' ' || pair_bytes[y] == '\t');
+						bad += noisy_outcome(n, noisy, len + 2) != (blank_end ? 2 : 1);
+					}
+				}
+			}
+		}
+		CHECK(bad == 0, "%s: %d insertions of 2 bytes not refused", valid, bad);
+		/* two adjacent bytes replaced */
+		bad = 0;
+		for (size_t i = 0; i + 1 < len; i++) {
+			for (size_t x = 0; x < npair; x++) {
+				for (size_t y = 0; y < npair; y++) {
+					if (pair_bytes[x] == valid[i] || pair_bytes[y] == valid[i + 1])
+						continue;
+					memcpy(noisy, valid, len);
+					noisy[i] = pair_bytes[x];
+					noisy[i + 1] = pair_bytes[y];
+					bad += noisy_outcome(n, noisy, len) != 1;
+				}
+			}
+		}
+		CHECK(bad == 0, "%s: %d replacements of 2 adjacent bytes not refused", valid, bad);
+	}
 }
 
 /* ---- step generator -------------------------------------------------------------- */
@@ -475,6 +615,14 @@ static void test_app(void)
 	strcat(buf, "\n");
 	expect(buf, "ok\r\n");
 	tick(100);
+	expect("?", "<Idle|A:0,B:0|Q:0|Ln:1,1|L:0|U:3|H:0>\r\n");
+	/* numbered mode: a line too long for the buffer (two lines merged by a
+	 * lost newline) is refused with a resend, as a checksum error */
+	framed(buf, sizeof buf, "N2 G1 A-100000000 B-100000000 P100000000 S255");
+	framed(buf + strlen(buf), sizeof buf - strlen(buf), "N3 G1 A5 B5 P1000 S9");
+	strcat(buf, "\n");
+	CHECK(strlen(buf) > CFG_LINE_MAX + 1, "merged lines too long");
+	expect(buf, "error:8 resend:2\r\n");
 	expect("?", "<Idle|A:0,B:0|Q:0|Ln:1,1|L:0|U:3|H:0>\r\n");
 	/* strict framing until an unnumbered M110 (or a reset) */
 	expect("G1 A5 P1000\n$I\n", "error:10 resend:2\r\nerror:10 resend:2\r\n");
@@ -879,6 +1027,7 @@ int main(void)
 	test_crc();
 	test_parse_table();
 	test_framing();
+	test_line_noise();
 	test_dda_exact();
 	test_delays_bounded();
 	test_too_fast();

@@ -4,12 +4,13 @@ The mock implements docs/protocol.md the way the firmware (firmware/fivebar/fb_m
 fb_proto.c, fb_motion.c) does, so host code and tests can run without hardware and without
 the AVR toolchain: the boot banner on open (as the Uno's DTR reset sends it), a receive
 buffer of the banner's size whose excess bytes are lost (``error:18``), line framing with
-line numbers, CRC-16, strict framing and resend requests, every command and setting, soft
-limits, homing and the endstop alarm against simulated switches, the segment queue with its
-start rule and its blocking (its slots hold the waiting blocks and the one executing; a line
-that needs a slot waits, unanswered, until one frees), exact DDA step timing, hold / resume /
-reset, the laser safety rules, and status reports in the firmware's format.  The contract suite
-(tests/contract/) runs the same tests against this mock and the real firmware in simavr.
+line numbers, the checksum field (CRC-16 and length), strict framing and resend requests,
+every command and setting, soft limits, homing and the endstop alarm against simulated
+switches, the segment queue with its start rule and its blocking (its slots hold the
+waiting blocks and the one executing; a line that needs a slot waits, unanswered, until one
+frees), exact DDA step timing, hold / resume / reset, the laser safety rules, and status
+reports in the firmware's format.  The contract suite (tests/contract/) runs the same tests
+against this mock and the real firmware in simavr.
 
 **Time.**  The simulation is lazy and single-threaded: every call (``read``, ``write``,
 ``in_waiting``, ``ledger`` ...) first advances the device from the last call to the current
@@ -431,6 +432,32 @@ class Parsed:
     numbered: bool = False  # strict framing afterwards (fb_lines_t.numbered)
 
 
+def _checksum_field_ok(line: bytes, end: int) -> bool:
+    """Whether the checksum field after the last ``*`` (at ``end``) is right (fb_proto.c
+    field_ok): ``<crc16>/<len>`` then only spaces or tabs, both decimal without a leading
+    zero, the CRC-16 (0..65535) that of the body ``line[:end]`` and the length (0..99)
+    ``end``, the body's — the length catches every byte the body lost or gained."""
+    nums: list[int] = []
+    i = end + 1
+    for k in range(2):
+        start, v = i, 0
+        while i < len(line) and _is_digit(line[i]):
+            v = v * 10 + line[i] - 0x30
+            if v > 0xFFFF:
+                return False
+            i += 1
+        if i == start or (line[start] == 0x30 and i > start + 1):
+            return False
+        nums.append(v)
+        if k == 0:
+            if i >= len(line) or line[i] != ord("/"):
+                return False
+            i += 1
+    crc, body_len = nums
+    return (body_len <= 99 and body_len == end and _skip_ws(line, i, len(line)) == len(line)
+            and crc16(line[:end]) == crc)
+
+
 def parse_line(last: int, line: bytes, numbered: bool = False) -> Parsed:
     """Frame and parse one received line (without its newline) as the firmware does.
 
@@ -448,15 +475,7 @@ def parse_line(last: int, line: bytes, numbered: bool = False) -> Parsed:
     star = line.rfind(b"*")
     if star >= 0:
         end = star
-        i, digits, want = star + 1, 0, 0
-        while i < len(line) and _is_digit(line[i]) and digits < 6:
-            want = want * 10 + line[i] - 0x30
-            i += 1
-            digits += 1
-        if (not digits or digits > 5 or want > 0xFFFF
-                or _skip_ws(line, i, len(line)) < len(line)):
-            return Parsed(E_CHECKSUM, last, False, cmd, numbered)
-        if crc16(line[:end]) != want:
+        if not _checksum_field_ok(line, end):
             return Parsed(E_CHECKSUM, last, False, cmd, numbered)
     i = _skip_ws(line, 0, end)
     if i < end and _upper(line[i]) == ord("N"):
@@ -1049,8 +1068,8 @@ class MockFirmware:
         if self.rx_overflow:
             self.rx_overflow = False
             self._finish(E_RX_OVERFLOW)
-        elif over:
-            self._finish(E_LINE_TOO_LONG)
+        elif over:  # numbered mode: line noise (merged lines), refused with a resend
+            self._finish(E_CHECKSUM if self.numbered else E_LINE_TOO_LONG)
         else:
             before = self.last, self.numbered
             parsed = parse_line(self.last, data, self.numbered)
