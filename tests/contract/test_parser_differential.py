@@ -116,6 +116,18 @@ def transcript(dev: Device, lines: list[bytes]) -> list[list[Message]]:
     return out
 
 
+def both_transcripts(lines: list[bytes], tmp_path: Path
+                     ) -> tuple[list[list[Message]], list[list[Message]]]:
+    """The firmware's (in simavr) and the mock's transcripts of the same lines."""
+    mock_dev = open_mock()
+    sim_dev = open_sim(tmp_path / "pins.trace")
+    try:
+        return transcript(sim_dev, lines), transcript(mock_dev, lines)
+    finally:
+        mock_dev.close()
+        sim_dev.close()
+
+
 @pytest.mark.usefixtures("sim_build")  # built once; skips without the toolchain
 def test_the_mock_answers_every_line_like_the_firmware(tmp_path: Path) -> None:
     rng = random.Random(20261121)
@@ -125,14 +137,7 @@ def test_the_mock_answers_every_line_like_the_firmware(tmp_path: Path) -> None:
         if gaps.random() < 0.3:
             lines.append(b"M110")
         lines.append(random_line(rng))
-    mock_dev = open_mock()
-    sim_dev = open_sim(tmp_path / "pins.trace")
-    try:
-        want = transcript(sim_dev, lines)
-        got = transcript(mock_dev, lines)
-    finally:
-        mock_dev.close()
-        sim_dev.close()
+    want, got = both_transcripts(lines, tmp_path)
     codes = {m.code for t in want for m in t if isinstance(m, ErrorReply)}
     assert codes >= {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 14, 17}, "the generator missed a code"
     assert sum(t[-1] == Ok() for t in want) >= 10, "too few lines accepted to be useful"
@@ -152,14 +157,7 @@ def test_noisy_numbered_lines_are_refused_by_the_firmware_as_by_the_mock(tmp_pat
     lines = []
     for n, line, noisy in cases:
         lines += [protocol.encode_line("M110", n - 1)[:-1], noisy, line]
-    mock_dev = open_mock()
-    sim_dev = open_sim(tmp_path / "pins.trace")
-    try:
-        want = transcript(sim_dev, lines)
-        got = transcript(mock_dev, lines)
-    finally:
-        mock_dev.close()
-        sim_dev.close()
+    want, got = both_transcripts(lines, tmp_path)
     for line, w, g in zip(lines, want, got, strict=True):
         assert g == w, f"line {line!r}: firmware {w}, mock {g}"
     for (n, line, noisy), to_noisy, to_probe in zip(cases, want[1::3], want[2::3], strict=True):
