@@ -716,6 +716,17 @@ static int count_of(const char *hay, const char *needle)
 
 static void ctrl_x_isr(void) { fb_rx_isr(0x18); }
 
+/* A fresh device at position 0: the Ctrl-X empties the fake's receive ring, then a boot. */
+static void boot_at_zero(void)
+{
+	int32_t zero[2] = { 0, 0 };
+	fb_rx_isr(0x18);
+	fb_poll();
+	fake_reset();
+	mo_set_pos(zero);
+	fb_setup();
+}
+
 /*
  * Ctrl-X while a line waits for a queue slot (contract test
  * test_reset_discards_a_line_waiting_for_a_slot), delivered at every point of a
@@ -725,14 +736,9 @@ static void ctrl_x_isr(void) { fb_rx_isr(0x18); }
  */
 static void test_reset_while_a_line_waits(void)
 {
-	int32_t zero[2] = { 0, 0 };
 	int fired = 1, k;
 	for (k = 0; fired && k < 100; k++) {
-		fb_rx_isr(0x18); /* power-on state of the receive ring */
-		fb_poll();
-		fake_reset();
-		mo_set_pos(zero);
-		fb_setup();
+		boot_at_zero();
 		send("M3 S255\n");
 		for (int i = 0; i < 3; i++)
 			fb_poll();
@@ -774,12 +780,7 @@ static int has(const char *hay, const char *needle) { return strstr(hay, needle)
 /* H: in status reports: the position was set (G92 executed, $H completed) since power-on. */
 static void test_homed_flag(void)
 {
-	int32_t zero[2] = { 0, 0 };
-	fb_rx_isr(0x18);
-	fb_poll();
-	fake_reset();
-	mo_set_pos(zero);
-	fb_setup();
+	boot_at_zero();
 	fake_take_tx();
 	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,0|L:0|U:0|H:0>\r\n");
 	expect("G92 A5 B-5\n", "ok\r\n");
@@ -1001,12 +1002,7 @@ static void test_reset_during_homing(void)
 static void test_strict_framing(void)
 {
 	char buf[64];
-	int32_t zero[2] = { 0, 0 };
-	fb_rx_isr(0x18);
-	fb_poll();
-	fake_reset();
-	mo_set_pos(zero);
-	fb_setup();
+	boot_at_zero();
 	fake_take_tx();
 	expect("$I\n", BANNER "ok\r\n"); /* a host that never numbers lines */
 	framed(buf, sizeof buf, "N2 G90");
