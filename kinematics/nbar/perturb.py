@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Literal
 
 import numpy as np
@@ -123,30 +124,44 @@ class InputBasis:
                 s[mo.column] = float(ui) ** 2
         return s
 
-    def along(self, u: FloatArray, d: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """(x_d, S, d/dt [x_d, S]) at input values u moving as u + t·d: `driven`, `actuators`
-        and `derivatives`·d in one pass (the fold solve needs all three every iteration)."""
-        f = np.zeros(self.n_f)
-        fdot = np.zeros(self.n_f)
-        s = np.empty(self.n_act)
-        sdot = np.empty(self.n_act)
+    @cached_property
+    def _along_map(self) -> tuple[FloatArray, FloatArray]:
+        """(c0, M) with [x_d, S, ẋ_d, Ṡ] = c0 + M·[f, ḟ, S, Ṡ]: `along` in one product."""
+        nd, nf, na = self.x0.size, self.n_f, self.n_act
+        mat = np.zeros((2 * (nd + na), 2 * (nf + na)))
+        mat[:nd, :nf] = self.basis
+        mat[nd: nd + na, 2 * nf: 2 * nf + na] = np.eye(na)
+        mat[nd + na: 2 * nd + na, nf: 2 * nf] = self.basis
+        mat[2 * nd + na:, 2 * nf + na:] = np.eye(na)
+        c0 = np.zeros(2 * (nd + na))
+        c0[:nd] = self.x0
+        return c0, mat
+
+    def along(self, u: FloatArray, d: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """([x_d, S], d/dt [x_d, S]) at input values u moving as u + t·d: `driven`,
+        `actuators` and `derivatives`·d in one product (the fold solve needs all of them
+        every iteration)."""
+        nf, na = self.n_f, self.n_act
+        e = [0.0] * (2 * (nf + na))
         for mo, ui, di in zip(self.motions, u.tolist(), d.tolist(), strict=True):
-            dl = ui - mo.value0
             if mo.kind == "actuator":
-                s[mo.column] = ui * ui
-                sdot[mo.column] = 2.0 * ui * di
-            elif mo.kind == "translate-plane":
-                f[mo.column] = dl
-                fdot[mo.column] = di
+                e[2 * nf + mo.column] = ui * ui
+                e[2 * nf + na + mo.column] = 2.0 * ui * di
+                continue
+            dl = ui - mo.value0
+            if mo.kind == "translate-plane":
+                e[mo.column] = dl
+                e[nf + mo.column] = di
             else:
                 sh, sn, cs = math.sin(0.5 * dl), math.sin(dl), math.cos(dl)
-                f[mo.column] = -2.0 * sh * sh
-                f[mo.column + 1] = sn
-                fdot[mo.column] = -sn * di
-                fdot[mo.column + 1] = cs * di
-        b = self.basis
-        return (np.asarray(self.x0 + b @ f, dtype=np.float64), s,
-                np.concatenate((b @ fdot, sdot)))
+                e[mo.column] = -2.0 * sh * sh
+                e[mo.column + 1] = sn
+                e[nf + mo.column] = -sn * di
+                e[nf + mo.column + 1] = cs * di
+        c0, mat = self._along_map
+        out = c0 + mat @ np.array(e)
+        k = out.size // 2
+        return out[:k], out[k:]
 
     def derivatives(self, u: FloatArray) -> tuple[FloatArray, FloatArray]:
         """(∂x_d/∂u (n_d, n_in), ∂S/∂u (n_act, n_in)) at input values u."""

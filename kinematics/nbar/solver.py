@@ -121,8 +121,10 @@ class Simulation:
 #: convergence test: squared step ≤ FOLD_STEP2·(1 + ‖q‖²).
 FOLD_ITERATIONS = 12
 FOLD_STEP2 = 1e-26
-#: Why the motion stops at a located fold.
+#: Why the motion stops at a located fold, and the reason reported for it.
 FOLD_REASON = "no solution past the turning point"
+FOLD_MESSAGE = (f"the constraint Jacobian is singular at the turning point (J·v = 0 there): "
+                f"a dead centre, {FOLD_REASON} on this branch")
 
 
 #: Most states the predictor extrapolates through (order HISTORY − 1 on equal steps).
@@ -220,15 +222,14 @@ class _Tracker:
         self.arc = 0.0  # several inputs: arc length of the input path to the current state
         self.line: FloatArray | None = None  # sweeps: parameter = step index along `line`
         self.tangent_cache: FloatArray | None = None
-        self.h3v: FloatArray | None = None  # `fold_limit`'s layout of the Hessians, built once
         self.s_new = self.h_new = 0.0  # path parameter and length of the step being tried
         self.e_new = self.direction
         sysm = self.sys
         self.hs = sysm.hs
         self.hs_t = np.ascontiguousarray(sysm.hs.T)
-        self.h3 = sysm.hs.reshape(sysm.m, sysm.size, sysm.size)
         self.xs = np.ones((BLOCK, sysm.size))  # work rows for blocks (last column stays 1)
         self.bsize = BLOCK  # block size of `run_fast`
+        self.stuck = 0  # `run_fast`: iterations of the refused step that stopped it (0: none)
         self.cool = 0  # single steps to take before the next block (after a poor block)
         self.m = sysm.m
         self.nact = sysm.n_act
@@ -453,9 +454,12 @@ class _Tracker:
         steps are known, up to BLOCK steps are predicted and corrected together. Stops at the
         first step that needs anything else (subdivision, a limit), leaving the state at the
         last accepted one, and returns the number of steps taken; `grid`, `xd_tab` and `s_tab`
-        are the sweep's grid tables, `index` the current row in them."""
+        are the sweep's grid tables, `index` the current row in them. When a single step to the
+        next row was tried and refused (as `attempt` would refuse it: same predictor, same
+        Newton iterates, same tests), `stuck` holds its Newton iterations, else 0."""
         hs_ = self.hist_s
         h = float(direction)
+        self.stuck = 0
         if self.lsq or self.run < 2 or abs(hs_[-1] - hs_[-2] - h) > 1e-9:
             return 0
         x, n, nd, nact, hsm, m = self.x, self.n, self.nd, self.nact, self.hs, self.m
@@ -551,12 +555,14 @@ class _Tracker:
             step = solve(gm[:, :n], 0.5 * (gm @ x))
             c2 = float(step @ step)
             if not c2 < math.inf:  # singular Jacobian
+                self.stuck = 1
                 break
             q_new = q_pred - step
             its = 1
             if not bound * c2 <= accept:  # the bound is not enough: look at the residual
                 more = newton_raw(self.sys, x, q_new, self.tol, self.max_iter - 1)
                 if not more.converged:
+                    self.stuck = 1 + more.iterations
                     break
                 if more.iterations:  # not converged yet at q_new: Newton carried on
                     q_new, its = more.q, 1 + more.iterations
@@ -565,6 +571,7 @@ class _Tracker:
             dm = pred[1]
             m2 = float(dm @ dm)
             if c2 > cont2 * m2 + floor2 or (last_m2 > 0.0 and m2 > speed2 * last_m2 + floor2):
+                self.stuck = its
                 break
             q = q_new
             slot = (slot + 1) % HISTORY
@@ -590,15 +597,19 @@ class _Tracker:
             self.tangent_cache = None
         return taken
 
-    def advance(self, target: FloatArray, pre: tuple[FloatArray, FloatArray] | None = None
-                ) -> tuple[Status, int, int, str, FloatArray, float]:
-        """Move the inputs to `target`, subdividing the step as needed.
+    def advance(self, target: FloatArray, pre: tuple[FloatArray, FloatArray] | None = None,
+                refused: int = 0) -> tuple[Status, int, int, str, FloatArray, float]:
+        """Move the inputs to `target`, subdividing the step as needed. `refused` > 0 says the
+        whole step was already tried and refused after that many iterations (`run_fast`).
 
         Returns (status, iterations, accepted sub-steps, reason, failed input, residual).
         """
-        ok, iters, res, why = self.attempt(target, pre)
-        if ok:
-            return Status.OK, iters, 1, "", target, res
+        if refused:
+            iters = refused
+        else:
+            ok, iters, res, why = self.attempt(target, pre)
+            if ok:
+                return Status.OK, iters, 1, "", target, res
         fold = self.fold_limit(target)
         if fold is not None:
             its, failed, res = fold
@@ -649,19 +660,13 @@ class _Tracker:
         """
         if self.lsq or not self.n or (self.line is None and not self.single):
             return None
-        n, nd, m = self.n, self.nd, self.m
+        n, m = self.n, self.m
         basis = self.mech.basis
         start = self.u
         d = target - start
-        h3 = self.h3
-        x = self.sys.new_x()
         q0 = self.q
         q = q0.copy()
         t = 0.0
-        x[:n] = q
-        self._set_inputs(start, None)
-        x[n:-1] = self.x[n:-1]
-        g = (self.hs @ x).reshape(m, -1)
         # Start from the last step's direction: approaching a fold, q' = −J⁻¹Φ_u turns into
         # the null vector of J (its smallest singular direction dominates). Without two
         # states to take it from, from the SVD of J.
@@ -671,64 +676,65 @@ class _Tracker:
             v = v / nv
         else:
             try:
-                v = np.linalg.svd(g[:, :n])[2][-1].copy()
+                v = np.linalg.svd(self.current_g()[:, :n])[2][-1].copy()
             except np.linalg.LinAlgError:
                 return None
-        if self.h3v is None:  # rows i, columns (r, j): (H_r + H_rᵀ)[i, j] on the unknowns i
-            self.h3v = np.ascontiguousarray(h3[:, :n, :].transpose(1, 0, 2).reshape(n, -1))
-        h3v = self.h3v
         c = v.copy()
         a_mat = np.zeros((2 * n + 1, 2 * n + 1))
         a_mat[2 * n, n + 1:] = c
         rhs = np.empty(2 * n + 1)
+        # [J | Φ_t] and [vᵀ∇²Φ | (vᵀ∇²Φ)_t] in one product: columns x[:n] and x[n:-1]·ẋ.
+        cols = np.zeros((self.sys.size - 1, n + 1))
+        cols[:n, :n] = np.eye(n)
+        xv = np.zeros((2, self.sys.size))
+        xv[0, -1] = 1.0
+        size2 = 1.0 + float(q0 @ q0)
         its = 0
         converged = False
+        last2 = 0.0  # ‖δ‖² of the previous iteration (none yet)
         while its < FOLD_ITERATIONS:
             its += 1
-            u = start + t * d
-            x[:n] = q
-            xd, sq, xdot = basis.along(u, d)
-            x[n: n + nd] = xd
-            x[n + nd: -1] = sq
-            g = (self.hs @ x).reshape(m, -1)
-            hv = (v @ h3v).reshape(m, -1)  # row r: vᵀ (H_r + H_rᵀ)[:n, :]
-            jac = g[:, :n]
-            a_mat[:n, :n] = jac
-            a_mat[:n, n] = g[:, n:-1] @ xdot
-            a_mat[:n, n + 1:] = 0.0
-            a_mat[n:2 * n, :n] = hv[:, :n]
-            a_mat[n:2 * n, n] = hv[:, n:-1] @ xdot
+            xs, xdot = basis.along(start + t * d, d)
+            xv[0, :n] = q
+            xv[0, n:-1] = xs
+            xv[1, :n] = v
+            cols[n:, n] = xdot
+            gh = (xv @ self.hs_t).reshape(2, m, -1)  # G and hv: row r of hv is vᵀ(H_r + H_rᵀ)
+            jac = gh[0, :, :n]
+            a_mat[:2 * n, : n + 1] = (gh[:, :, :-1] @ cols).reshape(2 * n, n + 1)
             a_mat[n:2 * n, n + 1:] = jac
-            rhs[:n] = 0.5 * (g @ x)
+            rhs[:n] = 0.5 * (gh[0] @ xv[0])
             rhs[n:2 * n] = jac @ v
             rhs[2 * n] = c @ v - 1.0
             step = solve(a_mat, rhs)
-            if not math.isfinite(float(step @ step)):
-                return None
             q = q - step[:n]
             t -= float(step[n])
             v = v - step[n + 1:]
-            if not abs(t) < 4.0:
+            s2 = float(step[: n + 1] @ step[: n + 1])
+            if not abs(t) < 4.0 or not s2 < math.inf:
                 return None
-            if float(step[: n + 1] @ step[: n + 1]) <= FOLD_STEP2 * (1.0 + float(q @ q)):
+            # Converged when the step is negligible, or when Newton's quadratic rate
+            # (‖δ_k+1‖ ≈ C‖δ_k‖²) makes the next one so: ‖δ_k+1‖² ≈ s2³/last2².
+            if s2 <= FOLD_STEP2 * size2 or s2 * s2 * s2 <= FOLD_STEP2 * size2 * last2 * last2:
                 converged = True
                 break
+            last2 = s2
         if not converged or not 0.0 < t <= 1.0:
             return None
         # The branch through the fold: q ≈ q* + αv, α² = k·(t* − t).
-        u_star = start + t * d
-        x[:n] = q
-        xd, sq, xdot = basis.along(u_star, d)
-        x[n: n + nd] = xd
-        x[n + nd: -1] = sq
-        g = (self.hs @ x).reshape(m, -1)
-        r = 0.5 * (g @ x)
+        xs, xdot = basis.along(start + t * d, d)
+        xv[0, :n] = q
+        xv[0, n:-1] = xs
+        vn = v / math.sqrt(float(v @ v))
+        xv[1, :n] = vn
+        gh = (xv @ self.hs_t).reshape(2, m, -1)
+        g = gh[0]
+        r = 0.5 * (g @ xv[0])
         if float(r @ r) > self.tol2:
             return None
         phi_t = g[:, n:-1] @ xdot
         # Left null vector w of J from the bordered system [Jᵀ v; Φ_tᵀ 0][w; s] = [0; 1]:
         # J v = 0 makes s = 0, so Jᵀw = 0 with w·Φ_t = 1 (non-singular at a simple fold).
-        vn = v / math.sqrt(float(v @ v))
         border = np.zeros((n + 1, n + 1))
         border[:n, :n] = g[:, :n].T
         border[:n, n] = vn
@@ -736,7 +742,7 @@ class _Tracker:
         e_last = np.zeros(n + 1)
         e_last[n] = 1.0
         w = solve(border, e_last)[:n]
-        curv = float(w @ ((vn @ h3v).reshape(m, -1)[:, :n] @ vn))  # w·vᵀ∇²Φv
+        curv = float(w @ (gh[1, :, :n] @ vn))  # w·vᵀ∇²Φv
         k = 2.0 / curv if curv != 0.0 and math.isfinite(curv) else -1.0
         if not k > 0.0:  # degenerate, or the input turns the other way at this fold
             return None
@@ -767,6 +773,8 @@ class _Tracker:
 
     def explain(self, why: str, residual: float) -> tuple[Literal["limit", "inconsistent"], str]:
         """Classify a failure at the smallest step: locked redundant equations, or a limit."""
+        if why == FOLD_REASON:  # located by `fold_limit`: J·v = 0 there by construction
+            return "limit", FOLD_MESSAGE
         if self.lsq:
             lock = self.tangent()[1]
             if lock > LOCK_TOLERANCE:
@@ -953,12 +961,13 @@ def sweep(mech: Mechanism, steps: int | None = None, step: ArrayLike | None = No
                 taken += k
                 subs.extend([1] * k)
                 status.extend([Status.OK] * k)
-                continue
+                if not tr.stuck:
+                    continue
             taken += 1
             g = offset + index + direction
             target = grid[g]
             before = tr.snapshot() if rev and reversed_at is None else None
-            st, it, sb, why, failed, res = tr.advance(target, (xd_tab[g], s_tab[g]))
+            st, it, sb, why, failed, res = tr.advance(target, (xd_tab[g], s_tab[g]), tr.stuck)
             if _record(tr, st, it, sb, why, failed, res, target, us, qs, iters, subs, status,
                        limits):
                 break
