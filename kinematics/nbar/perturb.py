@@ -112,6 +112,14 @@ class InputBasis:
         cols = [j for j, mo in enumerate(self.motions) if mo.kind == "actuator"]
         return np.asarray(uu[:, cols] ** 2, dtype=np.float64)
 
+    def entries_batch(self, u: FloatArray) -> FloatArray:
+        """x's input-driven entries [x_d, S] (S, n_d + n_act) for input rows (S, n_in)."""
+        return np.concatenate((self.driven_batch(u), self.actuators_batch(u)), axis=1)
+
+    def entries(self, u: FloatArray) -> FloatArray:
+        """x's input-driven entries [x_d, S] at input values u."""
+        return np.concatenate((self.driven(u), self.actuators(u)))
+
     def driven(self, u: FloatArray) -> FloatArray:
         """Driven coordinates x_d at input values u."""
         return np.asarray(self.x0 + self.basis @ self.coefficients(u), dtype=np.float64)

@@ -171,8 +171,15 @@ def _block_weights(newest: int) -> FloatArray:
 
 
 _BLOCKS = [_block_weights(p) for p in range(HISTORY)]
-_ARANGE = np.arange(BLOCK + 1)
-_ONES = np.ones(BLOCK, dtype=np.int64)
+#: _RING_SLOTS[slot][a]: ring slots of the last min(a, HISTORY) of a new states after `slot`.
+_RING_SLOTS = [[np.arange(slot + 1 + a - min(a, HISTORY), slot + 1 + a) % HISTORY
+                for a in range(BLOCK + 1)] for slot in range(HISTORY)]
+
+
+def _rows(first: int, count: int, direction: int) -> slice:
+    """Table rows first, first + direction, … (count of them) as a slice."""
+    stop = first + direction * count
+    return slice(first, stop if stop >= 0 else None, direction)
 #: A block takes its second batched Newton step only when the first leaves one of its first
 #: SECOND_PASS states uncertified (otherwise the states before the first uncertified one are kept).
 SECOND_PASS = 8
@@ -248,19 +255,10 @@ class _Tracker:
         self._push(self.q, self._param(self.u))
 
     # -- state helpers
-    def _set_inputs(self, u: FloatArray, pre: tuple[FloatArray, FloatArray] | None) -> None:
-        """Put the driven coordinates and actuator entries for u into x (Eqs. 10–22)."""
-        b = self.mech.basis
-        n, nd = self.n, self.nd
-        if pre is not None:
-            xd, sq = pre
-        else:
-            xd = b.x0 + b.basis @ b.coefficients(u) if nd else b.x0
-            sq = b.actuators(u)
-        if nd:
-            self.x[n: n + nd] = xd
-        if b.n_act:
-            self.x[n + nd: -1] = sq
+    def _set_inputs(self, u: FloatArray, pre: FloatArray | None) -> None:
+        """Put the driven coordinates and actuator entries for u into x (Eqs. 10–22); `pre`
+        is them precomputed (`InputBasis.entries`)."""
+        self.x[self.n: -1] = self.mech.basis.entries(u) if pre is None else pre
 
     def _param(self, u: FloatArray) -> float:
         """Path parameter of input u reached from the current state: the step index along a
@@ -304,7 +302,7 @@ class _Tracker:
         self.direction = snap.direction
         self.tangent_cache = None
 
-    def replay(self, us: FloatArray, qs: list[FloatArray]) -> None:
+    def replay(self, us: FloatArray, qs: FloatArray) -> None:
         """Move to the last of `qs` (states at inputs `us`, in the order passed, one grid step
         apart along the sweep line), known without solving, with them as the predictor's
         history."""
@@ -408,7 +406,7 @@ class _Tracker:
             self.tangent_cache = self.tangent()[0]
         return np.asarray(self.q + self.tangent_cache @ (u_new - self.u), dtype=np.float64)
 
-    def attempt(self, u_new: FloatArray, pre: tuple[FloatArray, FloatArray] | None = None
+    def attempt(self, u_new: FloatArray, pre: FloatArray | None = None
                 ) -> tuple[bool, int, float, str]:
         """Try one step to u_new from the current state; on success the state moves.
 
@@ -445,24 +443,26 @@ class _Tracker:
         return True, res.iterations, res.residual, ""
 
     def run_fast(self, index: int, direction: int, count: int, grid: FloatArray,
-                 xd_tab: FloatArray, s_tab: FloatArray, out_u: list[FloatArray],
-                 out_q: list[FloatArray], out_it: list[int]) -> int:
+                 xtab: FloatArray, out_q: FloatArray, out_it: NDArray[np.int64], pos: int
+                 ) -> int:
         """Take up to `count` sweep steps in the common case, in a tight loop: the history ends
         in equal steps of this sweep (binomial extrapolation), the system is square, Newton
         converges (a single step accepted by the quadratic remainder bound, or more from there)
         and the result passes the same two continuity tests as `attempt`. Once HISTORY equal
         steps are known, up to BLOCK steps are predicted and corrected together. Stops at the
         first step that needs anything else (subdivision, a limit), leaving the state at the
-        last accepted one, and returns the number of steps taken; `grid`, `xd_tab` and `s_tab`
-        are the sweep's grid tables, `index` the current row in them. When a single step to the
-        next row was tried and refused (as `attempt` would refuse it: same predictor, same
-        Newton iterates, same tests), `stuck` holds its Newton iterations, else 0."""
+        last accepted one, and returns the number of steps taken: their states go to
+        out_q[pos:], their iterations to out_it[pos:]. `grid` holds the sweep's input rows and
+        `xtab` x's driven entries for them, `index` is the current row, `direction` ±1. When a
+        single step to the next row was tried and refused (as `attempt` would refuse it: same
+        predictor, same Newton iterates, same tests), `stuck` holds its Newton iterations,
+        else 0."""
         hs_ = self.hist_s
         h = float(direction)
         self.stuck = 0
         if self.lsq or self.run < 2 or abs(hs_[-1] - hs_[-2] - h) > 1e-9:
             return 0
-        x, n, nd, nact, hsm, m = self.x, self.n, self.nd, self.nact, self.hs, self.m
+        x, n, hsm, hs_t, m = self.x, self.n, self.hs, self.hs_t, self.m
         ring, slot, run = self.ring, self.slot, self.run
         bound, accept, floor2 = self.bound, self.accept, self.floor2
         cont2, speed2 = CONTINUITY * CONTINUITY, MAX_SPEEDUP * MAX_SPEEDUP
@@ -480,77 +480,62 @@ class _Tracker:
                 # A block costs about as much as four single steps whatever its size: after
                 # one that accepts fewer than MIN_BLOCK states, take BLOCK single steps first.
                 b = min(bsize, count - taken)
-                rows = index + direction * (taken + 1 + _ARANGE[:b])
                 pw = _BLOCKS[slot] @ ring
-                preds, dms = pw[:b], pw[BLOCK: BLOCK + b]
+                preds = pw[:b]
                 xb = xs[:b]
                 xb[:, :n] = preds
-                if nd:
-                    xb[:, n: n + nd] = xd_tab[rows]
-                if nact:
-                    xb[:, n + nd: -1] = s_tab[rows]
-                gb = (xb @ self.hs_t).reshape(b, m, -1)
+                xb[:, n:-1] = xtab[_rows(index + direction * (taken + 1), b, direction)]
+                gb = (xb @ hs_t).reshape(b, m, -1)
                 phis = 0.5 * (gb @ xb[:, :, None])[:, :, 0]
                 steps = solve(gb[:, :, :n], phis)
                 c2s = np.einsum("ij,ij->i", steps, steps)
-                m2s = np.einsum("ij,ij->i", dms, dms)
-                prev = np.empty(b)
-                prev[0] = last_m2
-                prev[1:] = m2s[:-1]
                 conv = bound * c2s <= accept
                 qs_b = preds - steps
-                its_b = _ONES[:b]
+                its = 1
                 if not conv[:SECOND_PASS].all():
-                    # A second Newton step for the states the first did not certify (as in
-                    # `newton`: the residual must have dropped 100-fold, ‖Φ‖² ≤ tol² or the
-                    # remainder bound of the second step certifies convergence).
+                    # A second Newton step for all of them; a state the first did not certify
+                    # is converged when, as in `newton`, the residual dropped 100-fold and the
+                    # remainder bound of the second step certifies it.
                     xb[:, :n] = qs_b
-                    gb = (xb @ self.hs_t).reshape(b, m, -1)
+                    gb = (xb @ hs_t).reshape(b, m, -1)
                     phi1 = 0.5 * (gb @ xb[:, :, None])[:, :, 0]
-                    r1 = np.einsum("ij,ij->i", phi1, phi1)
-                    r0 = np.einsum("ij,ij->i", phis, phis)
                     steps2 = solve(gb[:, :, :n], phi1)
-                    d2 = np.einsum("ij,ij->i", steps2, steps2)
-                    done1 = conv | (r1 <= self.tol2)
-                    two = ~done1 & (r1 <= CONTRACTION * r0) & (bound * d2 <= accept)
-                    conv = done1 | two
-                    qs_b = np.where(two[:, None], qs_b - steps2, qs_b)
-                    its_b = np.where(two, 2, 1)
+                    conv |= ((np.einsum("ij,ij->i", phi1, phi1)
+                              <= CONTRACTION * np.einsum("ij,ij->i", phis, phis))
+                             & (bound * np.einsum("ij,ij->i", steps2, steps2) <= accept))
+                    qs_b = qs_b - steps2
+                    its = 2
                     dc = qs_b - preds
                     c2s = np.einsum("ij,ij->i", dc, dc)
-                good = (conv & (c2s <= cont2 * m2s + floor2)
-                        & ((prev <= 0.0) | (m2s <= speed2 * prev + floor2)))
-                a = b if good.all() else int(np.argmin(good))
-                if a == b:
+                m2s = np.einsum("ij,ij->i", pw[BLOCK: BLOCK + b], pw[BLOCK: BLOCK + b])
+                prev = np.concatenate(((last_m2 if last_m2 > 0.0 else math.inf,), m2s[:-1]))
+                good = conv & (c2s <= cont2 * m2s + floor2) & (m2s <= speed2 * prev + floor2)
+                a = int(good.argmin())
+                if good[a]:
+                    a = b
                     bsize = BLOCK
                 elif a >= MIN_BLOCK:
                     bsize = a
                 else:
                     bsize, cool = BLOCK, BLOCK
                 if a:
-                    qs_b = qs_b[:a]
                     keep = min(a, HISTORY)
-                    slots = (slot + _ARANGE[a - keep + 1: a + 1]) % HISTORY
-                    ring[slots] = qs_b[a - keep:]
-                    slot = int(slots[-1])
-                    hs_.extend(s + h * (j + 1) for j in range(a))
+                    ring[_RING_SLOTS[slot][a]] = qs_b[a - keep:a]
+                    slot = (slot + a) % HISTORY
+                    hs_.extend([s + h * (j + 1) for j in range(a - keep, a)])
                     s += h * a
                     del hs_[:-HISTORY]
                     last_m2 = float(m2s[a - 1])
                     q = qs_b[a - 1]
-                    out_u.extend(grid[rows[:a]])
-                    out_q.extend(qs_b)
-                    out_it.extend(its_b[:a].tolist())
+                    out_q[pos + taken: pos + taken + a] = qs_b[:a]
+                    out_it[pos + taken: pos + taken + a] = its
                     taken += a
                     continue
             g_i = index + direction * (taken + 1)
             pred = _UNIFORM[run, slot] @ ring  # (prediction, predicted motion)
             q_pred = pred[0]
             x[:n] = q_pred
-            if nd:
-                x[n: n + nd] = xd_tab[g_i]
-            if nact:
-                x[n + nd: -1] = s_tab[g_i]
+            x[n:-1] = xtab[g_i]
             gm = (hsm @ x).reshape(m, -1)
             step = solve(gm[:, :n], 0.5 * (gm @ x))
             c2 = float(step @ step)
@@ -583,9 +568,8 @@ class _Tracker:
             if run < HISTORY:
                 run += 1
             last_m2 = m2
-            out_u.append(grid[g_i])
-            out_q.append(q)
-            out_it.append(its)
+            out_q[pos + taken] = q
+            out_it[pos + taken] = its
             taken += 1
             if cool:
                 cool -= 1
@@ -597,7 +581,7 @@ class _Tracker:
             self.tangent_cache = None
         return taken
 
-    def advance(self, target: FloatArray, pre: tuple[FloatArray, FloatArray] | None = None,
+    def advance(self, target: FloatArray, pre: FloatArray | None = None,
                 refused: int = 0) -> tuple[Status, int, int, str, FloatArray, float]:
         """Move the inputs to `target`, subdividing the step as needed. `refused` > 0 says the
         whole step was already tried and refused after that many iterations (`run_fast`).
@@ -796,14 +780,13 @@ def _lock_reason(lock: float) -> str:
             "over-constrained linkage does not close exactly (e.g. rounded coordinates)")
 
 
-def _finish(mech: Mechanism, inputs: FloatArray, q: FloatArray, iters: list[int],
-            subs: list[int], status: list[Status], limits: list[LimitReport],
+def _finish(mech: Mechanism, inputs: FloatArray, q: FloatArray, iters: NDArray[np.int64],
+            subs: NDArray[np.int64], status: NDArray[np.int8], limits: list[LimitReport],
             reversed_at: int | None) -> Simulation:
     """Assemble the result and verify every solved row with the exact equations."""
-    st = np.fromiter(status, dtype=np.int8, count=len(status))
-    ok = st <= Status.LIMIT
-    coords = np.full((len(status), *mech.coords0.shape), np.nan)
-    resid = np.full(len(status), np.nan)
+    ok = status <= Status.LIMIT
+    coords = np.full((status.size, *mech.coords0.shape), np.nan)
+    resid = np.full(status.size, np.nan)
     if ok.any():
         c = mech.coords_batch(q[ok], inputs[ok])
         coords[ok] = c
@@ -811,8 +794,8 @@ def _finish(mech: Mechanism, inputs: FloatArray, q: FloatArray, iters: list[int]
             resid[ok] = np.max(np.abs(mech.residuals(c, inputs[ok])), axis=1)
         else:
             resid[ok] = 0.0
-    return Simulation(mech, inputs, coords, resid, np.array(iters, dtype=np.int64),
-                      np.array(subs, dtype=np.int64), st, tuple(limits), reversed_at)
+    return Simulation(mech, inputs, coords, resid, iters, subs, status, tuple(limits),
+                      reversed_at)
 
 
 def _settings(mech: Mechanism, tolerance: float | None, max_halvings: int | None) -> Settings:
@@ -840,8 +823,7 @@ def simulate(mech: Mechanism, inputs: ArrayLike, *, tolerance: float | None = No
         raise ValueError("inputs must be finite")
     tr = _Tracker(mech, _settings(mech, tolerance, max_halvings))
     n_rows = u_all.shape[0]
-    xd_tab = mech.basis.driven_batch(u_all)
-    s_tab = mech.basis.actuators_batch(u_all)
+    xtab = mech.basis.entries_batch(u_all)
     q = np.full((n_rows, mech.system.n_u), np.nan)
     out_u = u_all.copy()
     iters = [0] * n_rows
@@ -851,11 +833,13 @@ def simulate(mech: Mechanism, inputs: ArrayLike, *, tolerance: float | None = No
     locked = _locked(tr)
     same = np.all(u_all == np.vstack((tr.u, u_all[:-1])), axis=1)  # input unchanged
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        _follow(tr, u_all, xd_tab, s_tab, same, locked, q, out_u, iters, subs, status, limits)
-    return _finish(mech, out_u, q, iters, subs, status, limits, None)
+        _follow(tr, u_all, xtab, same, locked, q, out_u, iters, subs, status, limits)
+    return _finish(mech, out_u, q, np.array(iters, dtype=np.int64),
+                   np.array(subs, dtype=np.int64),
+                   np.fromiter(status, dtype=np.int8, count=len(status)), limits, None)
 
 
-def _follow(tr: _Tracker, u_all: FloatArray, xd_tab: FloatArray, s_tab: FloatArray,
+def _follow(tr: _Tracker, u_all: FloatArray, xtab: FloatArray,
             same: NDArray[np.bool_], locked: str | None, q: FloatArray, out_u: FloatArray,
             iters: list[int], subs: list[int], status: list[Status],
             limits: list[LimitReport]) -> None:
@@ -869,7 +853,7 @@ def _follow(tr: _Tracker, u_all: FloatArray, xd_tab: FloatArray, s_tab: FloatArr
                                       u_all[k].copy(), locked, math.nan))
             break
         else:
-            st, it, sb, why, failed, res = tr.advance(u_all[k], (xd_tab[k], s_tab[k]))
+            st, it, sb, why, failed, res = tr.advance(u_all[k], xtab[k])
         iters[k], subs[k] = it, sb
         if st == Status.LIMIT:
             kind, reason = tr.explain(why, res)
@@ -912,27 +896,27 @@ def sweep(mech: Mechanism, steps: int | None = None, step: ArrayLike | None = No
     tr = _Tracker(mech, _settings(mech, tolerance, max_halvings))
     base = tr.u.copy()
     tr.set_line(base, inc)
-    # Driven coordinates of every grid point the sweep can visit, in one batch.
+    # Driven entries of x for every grid point the sweep can visit, in one batch.
     offset = n_steps + 1
     grid = base + np.arange(-offset, offset + 1)[:, None] * inc
-    xd_tab = mech.basis.driven_batch(grid)
-    s_tab = mech.basis.actuators_batch(grid)
-    us: list[FloatArray] = [tr.u.copy()]
-    qs: list[FloatArray] = [tr.q.copy()]
-    iters = [0]
-    subs = [0]
-    status = [Status.OK]
-    limits: list[LimitReport] = []
+    xtab = mech.basis.entries_batch(grid)
+    # Rows: the start, one per step, and at most one more when the sweep turns back.
+    cap = n_steps + 3
+    out = _Rows(np.empty((cap, inc.size)), np.full((cap, tr.n), np.nan),
+                np.zeros(cap, dtype=np.int64), np.zeros(cap, dtype=np.int64),
+                np.full(cap, Status.UNREACHED, dtype=np.int8), [])
+    out.u[0] = tr.u
+    out.q[0] = tr.q
+    out.status[0] = Status.OK
+    pos = 1
     reversed_at: int | None = None
     locked = _locked(tr)
     if locked is not None:
-        limits.append(LimitReport("inconsistent", 1, tr.u.copy(), tr.u + inc, tr.u + inc,
-                                  locked, math.nan))
-        us.append(tr.u + inc)
-        qs.append(np.full_like(tr.q, np.nan))
-        iters.append(0)
-        subs.append(0)
-        status.append(Status.INCONSISTENT)
+        out.limits.append(LimitReport("inconsistent", 1, tr.u.copy(), tr.u + inc, tr.u + inc,
+                                      locked, math.nan))
+        out.u[1] = tr.u + inc
+        out.status[1] = Status.INCONSISTENT
+        pos = 2
         n_steps = 0
     index = 0
     direction = 1
@@ -941,35 +925,37 @@ def sweep(mech: Mechanism, steps: int | None = None, step: ArrayLike | None = No
         while taken < n_steps:
             if reversed_at is not None and 0 < index < reversed_at:
                 # Back over the grid points solved on the way out: the same branch, the same
-                # inputs, so the same states; replay them rather than solve them again.
+                # inputs, so the same states; replay them rather than solve them again (row r
+                # of the way out holds grid point r).
                 k = min(index, n_steps - taken)
-                rows = range(index - 1, index - 1 - k, -1)
-                us.extend(us[r] for r in rows)
-                qs.extend(qs[r] for r in rows)
-                iters.extend([0] * k)
-                subs.extend([0] * k)
-                status.extend([Status.OK] * k)
+                out.u[pos: pos + k] = out.u[index - k: index][::-1]
+                out.q[pos: pos + k] = out.q[index - k: index][::-1]
+                out.status[pos: pos + k] = Status.OK
+                pos += k
                 index -= k
                 taken += k
-                tr.replay(grid[offset + index + np.arange(min(k, HISTORY) - 1, -1, -1)],
-                          [qs[-j] for j in range(min(k, HISTORY), 0, -1)])
+                j = min(k, HISTORY)
+                tr.replay(grid[offset + index + np.arange(j - 1, -1, -1)], out.q[pos - j: pos])
                 continue
-            k = tr.run_fast(offset + index, direction, n_steps - taken, grid, xd_tab, s_tab,
-                            us, qs, iters)
+            k = tr.run_fast(offset + index, direction, n_steps - taken, grid, xtab, out.q,
+                            out.iterations, pos)
             if k:
+                out.u[pos: pos + k] = grid[_rows(offset + index + direction, k, direction)]
+                out.substeps[pos: pos + k] = 1
+                out.status[pos: pos + k] = Status.OK
+                pos += k
                 index += direction * k
                 taken += k
-                subs.extend([1] * k)
-                status.extend([Status.OK] * k)
                 if not tr.stuck:
                     continue
             taken += 1
             g = offset + index + direction
             target = grid[g]
             before = tr.snapshot() if rev and reversed_at is None else None
-            st, it, sb, why, failed, res = tr.advance(target, (xd_tab[g], s_tab[g]), tr.stuck)
-            if _record(tr, st, it, sb, why, failed, res, target, us, qs, iters, subs, status,
-                       limits):
+            st, it, sb, why, failed, res = tr.advance(target, xtab[g], tr.stuck)
+            stop = _record(tr, st, it, sb, why, failed, res, target, out, pos)
+            pos += 1
+            if stop:
                 break
             if st == Status.LIMIT:
                 if before is None:
@@ -977,39 +963,48 @@ def sweep(mech: Mechanism, steps: int | None = None, step: ArrayLike | None = No
                 # Turn back: the next row is the grid point before the limit again. Its state
                 # is known; resume from it (not from the extreme, where the steps would have
                 # to grow again from the smallest) and run the inputs the other way.
-                reversed_at = len(us) - 1
+                reversed_at = pos - 1
                 tr.restore(before)
-                us.append(tr.u)
-                qs.append(tr.q)
-                iters.append(0)
-                subs.append(0)
-                status.append(Status.OK)
+                out.u[pos] = tr.u
+                out.q[pos] = tr.q
+                out.status[pos] = Status.OK
+                pos += 1
                 direction = -direction
                 continue
             index += direction
-    return _finish(mech, np.array(us), np.array(qs), iters, subs, status, limits, reversed_at)
+    return _finish(mech, out.u[:pos], out.q[:pos], out.iterations[:pos], out.substeps[:pos],
+                   out.status[:pos], out.limits, reversed_at)
+
+
+class _Rows(NamedTuple):
+    """A sweep's output rows, preallocated: inputs, unknowns (NaN where none), Newton
+    iterations, accepted sub-steps, status, and the limits met."""
+
+    u: FloatArray
+    q: FloatArray
+    iterations: NDArray[np.int64]
+    substeps: NDArray[np.int64]
+    status: NDArray[np.int8]
+    limits: list[LimitReport]
 
 
 def _record(tr: _Tracker, st: Status, it: int, sb: int, why: str, failed: FloatArray,
-            res: float, target: FloatArray, us: list[FloatArray], qs: list[FloatArray],
-            iters: list[int], subs: list[int], status: list[Status],
-            limits: list[LimitReport]) -> bool:
-    """Append one sweep row; at a failure classify it. True when the sweep must stop."""
-    iters.append(it)
-    subs.append(sb)
+            res: float, target: FloatArray, out: _Rows, pos: int) -> bool:
+    """Fill sweep row `pos`; at a failure classify it. True when the sweep must stop."""
+    out.iterations[pos] = it
+    out.substeps[pos] = sb
     if st != Status.LIMIT:
-        us.append(target)
-        qs.append(tr.q)
-        status.append(st)
+        out.u[pos] = target
+        out.q[pos] = tr.q
+        out.status[pos] = st
         return False
     kind, reason = tr.explain(why, res)
-    limits.append(LimitReport(kind, len(us), tr.u.copy(), failed.copy(), target.copy(),
-                              reason, res))
-    us.append(tr.u.copy())
+    out.limits.append(LimitReport(kind, pos, tr.u.copy(), failed.copy(), target.copy(),
+                                  reason, res))
+    out.u[pos] = tr.u
     if kind == "inconsistent":
-        qs.append(np.full_like(tr.q, np.nan))
-        status.append(Status.INCONSISTENT)
+        out.status[pos] = Status.INCONSISTENT
         return True
-    qs.append(tr.q)
-    status.append(Status.LIMIT)
+    out.q[pos] = tr.q
+    out.status[pos] = Status.LIMIT
     return False
