@@ -4,6 +4,8 @@ Every exact equation (Eqs. 1–9 and the sine form of the planar PP link) is che
 partial derivatives, homogenising factors included, at random points and non-unit lines; the
 compiled quadratic-form system used by the Newton loop is checked against finite differences
 of itself everywhere and against the exact equations on the normalisation manifold (Eq. 8).
+The batched exact residuals (`exact_residuals`, `Mechanism.residuals`) are checked against the
+per-constraint functions applied row by row.
 """
 
 from __future__ import annotations
@@ -237,3 +239,118 @@ def test_newton_linear_solve_matches_numpy_and_flags_singular_matrices() -> None
         except np.linalg.LinAlgError:
             return
     assert not np.all(np.isfinite(out))
+
+
+# ------------------------------------------------- batched exact residuals, row by row
+def _homogeneous_row(x: np.ndarray, line: bool, planar: bool) -> np.ndarray:
+    """One stored primitive as the equations take it, written out independently of
+    `cst.homogeneous`: planar ones are homogeneous already; on the sphere and in space a point
+    gets w = 1 and a plane through the centre L4 = 0."""
+    return x.copy() if planar else np.append(x, 0.0 if line else 1.0)
+
+
+def _per_row(coords: np.ndarray, is_line: np.ndarray, planar: bool,
+             cons: tuple[cst.Constraint, ...], lengths: np.ndarray | None) -> np.ndarray:
+    """Scaled residuals (m,) of one state, one `cst` call per row (rr, rp, pp, ...)."""
+    h = [_homogeneous_row(coords[j], bool(is_line[j]), planar) for j in range(len(coords))]
+    out = []
+    n_act = 0
+    for c in cons:
+        a, b = h[c.prims[0]], h[c.prims[-1]]
+        if c.kind == "RR":
+            v = cst.rr(a, b, c.value)[0]
+        elif c.kind == "ACT":
+            v = cst.rr(a, b, c.value if lengths is None else lengths[n_act])[0]
+            n_act += 1
+        elif c.kind == "RP":
+            v = cst.rp(a, b, c.value)[0]
+        elif c.kind == "PP":
+            v = cst.pp(a, b, c.value)[0]
+        elif c.kind == "PPsin":
+            v = cst.pp_sin(a, b, c.value)[0]
+        elif c.kind == "NORM":
+            v = cst.norm(a)[0]
+        else:
+            v = cst.sphere(a)[0]
+        out.append(float(v) * c.scale)
+    return np.array(out)
+
+
+def _check_batched(coords: np.ndarray, is_line: np.ndarray, planar: bool,
+                   cons: tuple[cst.Constraint, ...], lengths: np.ndarray | None,
+                   batched: np.ndarray) -> None:
+    expect = np.array([_per_row(x, is_line, planar, cons, None if lengths is None else ln)
+                       for x, ln in zip(coords, lengths if lengths is not None
+                                        else [None] * len(coords), strict=True)])
+    assert batched.shape == expect.shape
+    np.testing.assert_allclose(batched, expect, rtol=0.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("path", CONFIGS, ids=lambda p: p.stem)
+def test_batched_exact_residuals_match_the_per_row_equations(path: Path) -> None:
+    """`Mechanism.residuals` (component-major, all rows of a kind at once, ACT rows with the
+    RR rows) equals the per-constraint functions applied row by row, at states on the
+    constraint manifold and perturbed off it (residuals far from 0), and in the plane with
+    points and lines rescaled by non-unit homogenising factors."""
+    rng = np.random.default_rng(31415)
+    mech = _load(path)
+    cons = mech.constraints
+    s = 6
+    u = mech.input0 + np.linspace(0.0, 2.0, s)[:, None] * mech.step
+    on = mech.coords_batch(np.broadcast_to(mech.q0, (s, mech.q0.size)), u)
+    off = on + rng.normal(scale=0.05 * mech.size, size=on.shape)
+    if not mech.planar:
+        off[:, mech.is_line] /= np.linalg.norm(off[:, mech.is_line], axis=-1)[..., None]
+    states = [on, off]
+    if mech.planar:
+        w = rng.uniform(0.4, 2.5, size=on.shape[:2])[..., None]
+        states += [on * w, off * w]   # same points / lines, other homogeneous factors
+    lengths = mech.actuator_lengths(u)
+    for coords in states:
+        batched = mech.residuals(coords, u)
+        _check_batched(coords, mech.is_line, mech.planar, cons, lengths, batched)
+        single = mech.residuals(coords[2], u[2])
+        np.testing.assert_array_equal(single, batched[2])
+        # the constraint tuple (not the cached row groups) and the ACT rows' initial lengths
+        plain = cst.exact_residuals(coords, mech.is_line, mech.planar, cons)
+        _check_batched(coords, mech.is_line, mech.planar, cons, None, plain)
+    assert np.max(np.abs(mech.residuals(off, u))) > 1e-4
+
+
+@pytest.mark.parametrize("planar", [True, False])
+def test_batched_exact_residuals_every_kind_interleaved(planar: bool) -> None:
+    """Every kind (PP and PPsin included, which no mechanism file has) in shuffled row order,
+    at random points with free weights and non-unit lines, batched and single."""
+    rng = np.random.default_rng(27)
+    n, s = 9, 7
+    is_line = np.array([False] * 5 + [True] * 4)
+    coords = rng.normal(size=(s, n, 3))
+    if planar:
+        coords[:, ~is_line, 2] = rng.uniform(0.4, 2.5, size=(s, 5))
+    else:
+        coords[:, ~is_line] *= 0.7
+    pts, lines = range(5), range(5, 9)
+    rows: list[tuple[cst.ConstraintKind, tuple[int, ...]]] = [
+        ("RR", (0, 1)), ("RR", (2, 3)), ("ACT", (1, 4)), ("RP", (0, 5)), ("RP", (3, 6)),
+        ("PP", (5, 6)), ("PP", (7, 8)), ("NORM", (5,)), ("NORM", (8,)), ("RR", (4, 0)),
+        ("ACT", (2, 0)), ("RP", (4, 8))]
+    if planar:
+        rows += [("PPsin", (5, 7)), ("PPsin", (6, 8))]
+    else:
+        rows += [("SPHERE", (1,)), ("SPHERE", (3,))]
+    order = rng.permutation(len(rows))
+    cons = tuple(cst.Constraint(rows[i][0], rows[i][1], float(rng.uniform(-0.9, 0.9))
+                                if rows[i][0] in ("PP", "PPsin", "RP")
+                                else float(rng.uniform(0.3, 2.0)), f"r{i}",
+                                float(rng.uniform(0.2, 3.0)))
+                 for i in order)
+    assert {c.prims[0] for c in cons if c.kind in ("RR", "ACT")} <= set(pts)
+    assert {c.prims[-1] for c in cons if c.kind in ("RP", "NORM")} <= set(lines)
+    lengths = rng.uniform(0.5, 2.0, size=(s, 2))
+    batched = cst.exact_residuals(coords, is_line, planar, cons, lengths)
+    _check_batched(coords, is_line, planar, cons, lengths, batched)
+    grp = cst.group_rows(cons)
+    np.testing.assert_array_equal(
+        cst.exact_residuals(coords[4], is_line, planar, grp, lengths[4]), batched[4])
+    _check_batched(coords, is_line, planar, cons, None,
+                   cst.exact_residuals(coords, is_line, planar, grp))

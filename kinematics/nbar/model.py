@@ -181,8 +181,13 @@ class Mechanism:
     def actuator_lengths(self, u: FloatArray) -> FloatArray:
         """Actuator lengths (S, n_act) for input values u (S, n_in), in ACT-row order."""
         uu = np.atleast_2d(u)
-        cols = [j for j, i in enumerate(self.inputs) if i.kind == "actuator"]
-        return np.asarray(uu[:, cols], dtype=np.float64)
+        return np.asarray(uu[:, self._actuator_cols], dtype=np.float64)
+
+    @cached_property
+    def _actuator_cols(self) -> NDArray[np.intp]:
+        """Input columns of the actuators (found once: `residuals` runs once per sweep)."""
+        return np.array([j for j, i in enumerate(self.inputs) if i.kind == "actuator"],
+                        dtype=np.intp)
 
     @cached_property
     def _groups(self) -> cst.RowGroups:
@@ -194,8 +199,8 @@ class Mechanism:
 
     def residuals(self, coords: FloatArray, u: FloatArray) -> FloatArray:
         """Scaled residuals (S, m) of the paper's exact equations at full coordinates."""
-        return cst.exact_residuals(coords, self._is_line, self.planar, self._groups,
-                                   self.actuator_lengths(u))
+        lengths = self.actuator_lengths(u) if self._actuator_cols.size else None
+        return cst.exact_residuals(coords, self._is_line, self.planar, self._groups, lengths)
 
     def positions(self, coords: FloatArray, name: str) -> FloatArray:
         """Affine position(s) (..., dim) of point joint `name`, or the stored line/plane."""
