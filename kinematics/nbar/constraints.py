@@ -252,14 +252,10 @@ class _Block:
 
 @dataclass(frozen=True, eq=False)
 class RowGroups:
-    """Rows of one constraint tuple grouped by kind, for vectorised exact evaluation.
+    """Rows of one constraint tuple grouped into blocks for vectorised exact evaluation:
+    `blocks` and `take` are the plan of `exact_residuals`, built once per mechanism so that a
+    call does no index work."""
 
-    `groups` lists (kind, rows, first primitive, second primitive, metric) per kind; `blocks`
-    and `take` are the plan of `exact_residuals`, built once per mechanism so that a call does
-    no index work.
-    """
-
-    groups: tuple[tuple[str, IntArray, IntArray, IntArray, FloatArray], ...]
     scale: FloatArray
     m: int
     blocks: tuple[_Block, ...] = ()
@@ -285,18 +281,10 @@ def _table_width(planar: bool) -> tuple[int, int]:
 
 
 def group_rows(constraints: tuple[Constraint, ...]) -> RowGroups:
-    """Index arrays (rows, first primitive, second primitive) and metrics per kind, and the
-    blocks `exact_residuals` evaluates them in."""
+    """The blocks `exact_residuals` evaluates the rows in: index arrays (rows, first
+    primitive, second primitive) and metrics per kind."""
     kinds = [c.kind for c in constraints]
-    out = []
-    for kind in sorted(set(kinds)):
-        rows = np.array([r for r, k in enumerate(kinds) if k == kind], dtype=np.intp)
-        first = np.array([constraints[r].prims[0] for r in rows], dtype=np.intp)
-        second = np.array([constraints[r].prims[-1] for r in rows], dtype=np.intp)
-        val = np.array([constraints[r].value for r in rows], dtype=np.float64)
-        out.append((kind, rows, first, second, val))
     scale = np.array([c.scale for c in constraints], dtype=np.float64)
-
     blocks: list[_Block] = []
     for name in _BLOCK_ORDER:
         rows_b = [r for r, k in enumerate(kinds) if k == name]
@@ -313,7 +301,7 @@ def group_rows(constraints: tuple[Constraint, ...]) -> RowGroups:
                if rows_b == list(range(rows_b[0], rows_b[-1] + 1)) else None)
         blocks.append(_Block(name, ends, first, second, ix, run, ix.size, val,
                              np.square(val), scale[ix][:, None], len(act)))
-    return RowGroups(tuple(out), scale, len(constraints), tuple(blocks))
+    return RowGroups(scale, len(constraints), tuple(blocks))
 
 
 def _joint_table(xs: FloatArray, is_line: NDArray[np.bool_], planar: bool) -> FloatArray:
