@@ -171,6 +171,35 @@ class InputBasis:
         k = out.size // 2
         return out[:k], out[k:]
 
+    def taylor(self, u: FloatArray, d: FloatArray, order: int) -> FloatArray:
+        """Taylor coefficients (order + 1, n_d + n_act) of [x_d, S] along u + t·d in t:
+        row k is (1/k!) dᵏ/dtᵏ at t = 0 (the k-th derivative of cos θ is cos(θ + kπ/2))."""
+        nf, na = self.n_f, self.n_act
+        f = np.zeros((order + 1, nf))
+        s = np.zeros((order + 1, na))
+        for mo, ui, di in zip(self.motions, u.tolist(), d.tolist(), strict=True):
+            if mo.kind == "actuator":  # S = (u + t·d)²
+                s[0, mo.column] = ui * ui
+                s[1, mo.column] = 2.0 * ui * di
+                s[2, mo.column] = di * di
+                continue
+            dl = ui - mo.value0
+            if mo.kind == "translate-plane":
+                f[0, mo.column] = dl
+                f[1, mo.column] = di
+                continue
+            fac = 1.0
+            for k in range(order + 1):
+                fac = fac * di / k if k else 1.0
+                f[k, mo.column] = fac * math.cos(dl + 0.5 * k * math.pi)
+                f[k, mo.column + 1] = fac * math.sin(dl + 0.5 * k * math.pi)
+            f[0, mo.column] -= 1.0
+        out = np.empty((order + 1, self.x0.size + na))
+        np.matmul(f, self.basis.T, out=out[:, : self.x0.size])
+        out[0, : self.x0.size] += self.x0
+        out[:, self.x0.size:] = s
+        return out
+
     def derivatives(self, u: FloatArray) -> tuple[FloatArray, FloatArray]:
         """(∂x_d/∂u (n_d, n_in), ∂S/∂u (n_act, n_in)) at input values u."""
         n_in = len(self.motions)

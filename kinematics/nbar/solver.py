@@ -5,8 +5,10 @@ On top of the paper's loop:
   seven equally spaced ones, else up to four with bounded Lagrange weights), or from the tangent
   q' = −J⁺ ∂Φ/∂u when there is no history; from the previous state alone Newton would need
   several more iterations. In sweeps, up to BLOCK equal steps are predicted and corrected
-  together (one batched Newton step, a second one for the states the first did not certify),
-  each state passing the tests of a single step;
+  together (one batched Newton step, a second one when the first did not certify the first
+  SECOND_PASS states), each state passing the tests of a single step. A sweep's first block,
+  with no history yet, is predicted by the Taylor series of the branch (`_Tracker.taylor`:
+  Φ is quadratic, so its coefficients follow from one Jacobian, order by order);
 - branch-flip guard: a step is accepted only if Newton's correction from the predictor is at
   most half the predicted motion, and the predicted motion at most MAX_SPEEDUP times the last
   step's (continuity). A jump to the other assembly is a correction of the order of the
@@ -171,6 +173,12 @@ def _block_weights(newest: int) -> FloatArray:
 
 
 _BLOCKS = [_block_weights(p) for p in range(HISTORY)]
+#: Order of the Taylor series of the branch that predicts a block (`_Tracker.taylor`).
+TAYLOR = 8
+#: A block reaches as far as the Taylor series' last term stays below TAYLOR_TOL of its first.
+TAYLOR_TOL = 1e-4
+#: _POWERS[j, k] = j^k: the Taylor series at the grid steps j = 0 … BLOCK ahead.
+_POWERS = np.arange(BLOCK + 1, dtype=np.float64)[:, None] ** np.arange(TAYLOR + 1)
 #: _RING_SLOTS[slot][a]: ring slots of the last min(a, HISTORY) of a new states after `slot`.
 _RING_SLOTS = [[np.arange(slot + 1 + a - min(a, HISTORY), slot + 1 + a) % HISTORY
                 for a in range(BLOCK + 1)] for slot in range(HISTORY)]
@@ -180,6 +188,8 @@ def _rows(first: int, count: int, direction: int) -> slice:
     """Table rows first, first + direction, … (count of them) as a slice."""
     stop = first + direction * count
     return slice(first, stop if stop >= 0 else None, direction)
+
+
 #: A block takes its second batched Newton step only when the first leaves one of its first
 #: SECOND_PASS states uncertified (otherwise the states before the first uncertified one are kept).
 SECOND_PASS = 8
@@ -235,6 +245,11 @@ class _Tracker:
         self.hs = sysm.hs
         self.hs_t = np.ascontiguousarray(sysm.hs.T)
         self.xs = np.ones((BLOCK, sysm.size))  # work rows for blocks (last column stays 1)
+        self.tx = np.zeros((TAYLOR + 1, sysm.size))  # `taylor`'s work rows
+        self.tx[0, -1] = 1.0
+        self.thx = np.empty((sysm.m, TAYLOR - 1, sysm.size))
+        self.hs_half = 0.5 * sysm.hs
+        self.inc = np.zeros_like(self.u)  # sweeps: the input step
         self.bsize = BLOCK  # block size of `run_fast`
         self.stuck = 0  # `run_fast`: iterations of the refused step that stopped it (0: none)
         self.cool = 0  # single steps to take before the next block (after a poor block)
@@ -249,7 +264,8 @@ class _Tracker:
         """Sweep mode: the inputs move along u = base + s·inc, and s is the parameter the
         predictor extrapolates in (the step index), whatever the number of inputs."""
         self.origin = np.asarray(base, dtype=np.float64).copy()
-        self.line = np.asarray(inc, dtype=np.float64) / float(inc @ inc)
+        self.inc = np.asarray(inc, dtype=np.float64).copy()
+        self.line = self.inc / float(inc @ inc)
         self.hist_s = []
         self.run = 0
         self._push(self.q, self._param(self.u))
@@ -442,14 +458,43 @@ class _Tracker:
         self._push(res.q, s_new)
         return True, res.iterations, res.residual, ""
 
+    def taylor(self, q: FloatArray, u: FloatArray, d: FloatArray) -> FloatArray:
+        """(TAYLOR + 1, n) Taylor coefficients in t of the branch through the solved state q at
+        input u as the inputs move along u + t·d.
+
+        Φ is quadratic, Φ_r = ½ xᵀ∇²Φ_r x, so with x(t) = Σ_k x_k tᵏ the coefficient of tᵏ in
+        Φ_r(x(t)) = 0 is x_0ᵀ∇²Φ_r x_k + ½ Σ_{0<i<k} x_iᵀ∇²Φ_r x_(k−i) = 0: with G = ∇²Φ x_0,
+        J q_k = −G_e e_k − ½ Σ_{0<i<k} x_iᵀ∇²Φ_r x_(k−i), where e_k are the known Taylor
+        coefficients of the input-driven entries (`InputBasis.taylor`). One Jacobian for every
+        order; the series converges up to the nearest singular point of the branch (a fold),
+        so far from one it predicts a whole block of steps to near rounding.
+        """
+        n, m = self.n, self.m
+        x = self.tx
+        x[0, :n] = q
+        x[:, n:-1] = self.mech.basis.taylor(u, d, TAYLOR)
+        hx = self.thx  # hx[:, i − 1] = ½∇²Φ x_i as (m, N) rows, for i = 1 … TAYLOR − 1
+        g0 = (self.hs @ x[0]).reshape(m, -1)
+        neg_jac = -g0[:, :n]
+        ge = g0[:, n:-1] @ x[1:, n:-1].T  # column k − 1: G_e e_k
+        for k in range(1, TAYLOR + 1):
+            rhs = ge[:, k - 1]
+            if k > 1:
+                rhs = rhs + hx[:, : k - 1].reshape(m, -1) @ x[k - 1: 0: -1].ravel()
+            x[k, :n] = solve(neg_jac, rhs)
+            if k < TAYLOR:
+                hx[:, k - 1] = (self.hs_half @ x[k]).reshape(m, -1)
+        return x[:, :n]
+
     def run_fast(self, index: int, direction: int, count: int, grid: FloatArray,
                  xtab: FloatArray, out_q: FloatArray, out_it: NDArray[np.int64], pos: int
                  ) -> int:
         """Take up to `count` sweep steps in the common case, in a tight loop: the history ends
         in equal steps of this sweep (binomial extrapolation), the system is square, Newton
         converges (a single step accepted by the quadratic remainder bound, or more from there)
-        and the result passes the same two continuity tests as `attempt`. Once HISTORY equal
-        steps are known, up to BLOCK steps are predicted and corrected together. Stops at the
+        and the result passes the same two continuity tests as `attempt`. Up to BLOCK steps are
+        predicted and corrected together: extrapolated from the last HISTORY equal steps, or,
+        with fewer, from the branch's Taylor series (as far as it is trusted). Stops at the
         first step that needs anything else (subdivision, a limit), leaving the state at the
         last accepted one, and returns the number of steps taken: their states go to
         out_q[pos:], their iterations to out_it[pos:]. `grid` holds the sweep's input rows and
@@ -460,10 +505,13 @@ class _Tracker:
         hs_ = self.hist_s
         h = float(direction)
         self.stuck = 0
-        if self.lsq or self.run < 2 or abs(hs_[-1] - hs_[-2] - h) > 1e-9:
+        if self.lsq:
             return 0
         x, n, hsm, hs_t, m = self.x, self.n, self.hs, self.hs_t, self.m
         ring, slot, run = self.ring, self.slot, self.run
+        if run >= 2 and abs(hs_[-1] - hs_[-2] - h) > 1e-9:
+            run = 1  # the history does not end in equal steps of this sweep: start afresh
+        d = h * self.inc
         bound, accept, floor2 = self.bound, self.accept, self.floor2
         cont2, speed2 = CONTINUITY * CONTINUITY, MAX_SPEEDUP * MAX_SPEEDUP
         last_m2 = self.last_m2 if self.last_h == 1.0 else 0.0
@@ -473,15 +521,36 @@ class _Tracker:
         xs = self.xs
         bsize, cool = self.bsize, self.cool
         while taken < count:
-            if run == HISTORY and cool == 0 and count - taken >= MIN_BLOCK:
+            if cool == 0 and count - taken >= MIN_BLOCK:
                 # Several steps at once: predict b states from the ring, one Newton step for
                 # all of them (one product evaluates every Φ and J, one call solves all the
                 # systems), the same tests per state; accept those before the first failure.
                 # A block costs about as much as four single steps whatever its size: after
                 # one that accepts fewer than MIN_BLOCK states, take BLOCK single steps first.
-                b = min(bsize, count - taken)
-                pw = _BLOCKS[slot] @ ring
-                preds = pw[:b]
+                if run == HISTORY:
+                    b = min(bsize, count - taken)
+                    pw = _BLOCKS[slot] @ ring
+                    preds, dms = pw[:b], pw[BLOCK: BLOCK + b]
+                else:
+                    # Too few equal steps to extrapolate from: predict from the Taylor series
+                    # of the branch, as far as its last term stays below TAYLOR_TOL of its
+                    # first (the truncation error is of that order while it converges).
+                    coef = self.taylor(q, grid[index + direction * taken], d)
+                    first2, last2 = float(coef[1] @ coef[1]), float(coef[-1] @ coef[-1])
+                    if not (first2 > 0.0 and last2 < math.inf):  # no motion, or singular
+                        reach = 0
+                    elif last2 > 0.0:  # ‖c_K‖ jᴷ ≤ TAYLOR_TOL·‖c_1‖ j
+                        reach = int((TAYLOR_TOL * TAYLOR_TOL * first2 / last2)
+                                    ** (0.5 / (TAYLOR - 1)))
+                    else:
+                        reach = BLOCK
+                    b = min(BLOCK, count - taken, reach)
+                    if not b >= MIN_BLOCK:
+                        cool = BLOCK
+                        continue
+                    pw = _POWERS[: b + 1] @ coef
+                    preds = pw[1:]
+                    dms = preds - pw[:-1]
                 xb = xs[:b]
                 xb[:, :n] = preds
                 xb[:, n:-1] = xtab[_rows(index + direction * (taken + 1), b, direction)]
@@ -507,7 +576,7 @@ class _Tracker:
                     its = 2
                     dc = qs_b - preds
                     c2s = np.einsum("ij,ij->i", dc, dc)
-                m2s = np.einsum("ij,ij->i", pw[BLOCK: BLOCK + b], pw[BLOCK: BLOCK + b])
+                m2s = np.einsum("ij,ij->i", dms, dms)
                 prev = np.concatenate(((last_m2 if last_m2 > 0.0 else math.inf,), m2s[:-1]))
                 good = conv & (c2s <= cont2 * m2s + floor2) & (m2s <= speed2 * prev + floor2)
                 a = int(good.argmin())
@@ -522,6 +591,7 @@ class _Tracker:
                     keep = min(a, HISTORY)
                     ring[_RING_SLOTS[slot][a]] = qs_b[a - keep:a]
                     slot = (slot + a) % HISTORY
+                    run = min(run + a, HISTORY)
                     hs_.extend([s + h * (j + 1) for j in range(a - keep, a)])
                     s += h * a
                     del hs_[:-HISTORY]
@@ -531,6 +601,8 @@ class _Tracker:
                     out_it[pos + taken: pos + taken + a] = its
                     taken += a
                     continue
+            if run < 2:  # no history to extrapolate from: `attempt` takes this step
+                break
             g_i = index + direction * (taken + 1)
             pred = _UNIFORM[run, slot] @ ring  # (prediction, predicted motion)
             q_pred = pred[0]
