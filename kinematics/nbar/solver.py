@@ -512,7 +512,7 @@ class _Tracker:
         if run >= 2 and abs(hs_[-1] - hs_[-2] - h) > 1e-9:
             run = 1  # the history does not end in equal steps of this sweep: start afresh
         d = h * self.inc
-        bound, accept, floor2 = self.bound, self.accept, self.floor2
+        bound, accept, floor2, tol2 = self.bound, self.accept, self.floor2, self.tol2
         cont2, speed2 = CONTINUITY * CONTINUITY, MAX_SPEEDUP * MAX_SPEEDUP
         last_m2 = self.last_m2 if self.last_h == 1.0 else 0.0
         s = hs_[-1]
@@ -562,20 +562,24 @@ class _Tracker:
                 qs_b = preds - steps
                 its = 1
                 if not conv[:SECOND_PASS].all():
-                    # A second Newton step for all of them; a state the first did not certify
-                    # is converged when, as in `newton`, the residual dropped 100-fold and the
-                    # remainder bound of the second step certifies it.
+                    # The residuals themselves (the bound is pessimistic, by about tenfold);
+                    # if they do not certify the first SECOND_PASS states either, a second
+                    # Newton step for all of them: a state is then converged when, as in
+                    # `newton`, its residual dropped 100-fold and the remainder bound of the
+                    # second step certifies it.
                     xb[:, :n] = qs_b
                     gb = (xb @ hs_t).reshape(b, m, -1)
                     phi1 = 0.5 * (gb @ xb[:, :, None])[:, :, 0]
-                    steps2 = solve(gb[:, :, :n], phi1)
-                    conv |= ((np.einsum("ij,ij->i", phi1, phi1)
-                              <= CONTRACTION * np.einsum("ij,ij->i", phis, phis))
-                             & (bound * np.einsum("ij,ij->i", steps2, steps2) <= accept))
-                    qs_b = qs_b - steps2
-                    its = 2
-                    dc = qs_b - preds
-                    c2s = np.einsum("ij,ij->i", dc, dc)
+                    r1 = np.einsum("ij,ij->i", phi1, phi1)
+                    conv |= r1 <= tol2
+                    if not conv[:SECOND_PASS].all():
+                        steps2 = solve(gb[:, :, :n], phi1)
+                        conv |= ((r1 <= CONTRACTION * np.einsum("ij,ij->i", phis, phis))
+                                 & (bound * np.einsum("ij,ij->i", steps2, steps2) <= accept))
+                        qs_b = qs_b - steps2
+                        its = 2
+                        dc = qs_b - preds
+                        c2s = np.einsum("ij,ij->i", dc, dc)
                 m2s = np.einsum("ij,ij->i", dms, dms)
                 prev = np.concatenate(((last_m2 if last_m2 > 0.0 else math.inf,), m2s[:-1]))
                 good = conv & (c2s <= cont2 * m2s + floor2) & (m2s <= speed2 * prev + floor2)
@@ -856,14 +860,16 @@ def _finish(mech: Mechanism, inputs: FloatArray, q: FloatArray, iters: NDArray[n
             subs: NDArray[np.int64], status: NDArray[np.int8], limits: list[LimitReport],
             reversed_at: int | None) -> Simulation:
     """Assemble the result and verify every solved row with the exact equations."""
-    ok = status <= Status.LIMIT
+    ok = status <= int(Status.LIMIT)
+    every = bool(ok.all())
     coords = np.full((status.size, *mech.coords0.shape), np.nan)
     resid = np.full(status.size, np.nan)
-    if ok.any():
-        c = mech.coords_batch(q[ok], inputs[ok])
+    if every or ok.any():
+        q_ok, u_ok = (q, inputs) if every else (q[ok], inputs[ok])
+        c = mech.coords_batch(q_ok, u_ok)
         coords[ok] = c
         if mech.constraints:
-            resid[ok] = np.max(np.abs(mech.residuals(c, inputs[ok])), axis=1)
+            resid[ok] = np.max(np.abs(mech.residuals(c, u_ok)), axis=1)
         else:
             resid[ok] = 0.0
     return Simulation(mech, inputs, coords, resid, iters, subs, status, tuple(limits),
