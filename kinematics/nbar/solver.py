@@ -243,12 +243,12 @@ class _Tracker:
         self.e_new = self.direction
         sysm = self.sys
         self.hs = sysm.hs
-        self.hs_t = np.ascontiguousarray(sysm.hs.T)
+        self.hs_t = sysm.hs_t
         self.xs = np.ones((BLOCK, sysm.size))  # work rows for blocks (last column stays 1)
         self.tx = np.zeros((TAYLOR + 1, sysm.size))  # `taylor`'s work rows
         self.tx[0, -1] = 1.0
         self.thx = np.empty((sysm.m, TAYLOR - 1, sysm.size))
-        self.hs_half = 0.5 * sysm.hs
+        self.hs_half = sysm.hs_half
         self.inc = np.zeros_like(self.u)  # sweeps: the input step
         self.bsize = BLOCK  # block size of `run_fast`
         self.stuck = 0  # `run_fast`: iterations of the refused step that stopped it (0: none)
@@ -817,7 +817,7 @@ class _Tracker:
         u_r = start + t_r * d
         alpha = sign * math.sqrt(k * quarter)
         q_start = q + alpha * vn
-        self._set_inputs(u_r, None)
+        self.x[n:-1] = basis.along(u_r, d)[0]
         res = newton_raw(self.sys, self.x, q_start, self.tol, self.max_iter)
         if not res.converged:
             return None

@@ -17,6 +17,7 @@ import importlib
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 from typing import NamedTuple, cast
 
 import numpy as np
@@ -77,6 +78,16 @@ class QuadraticSystem:
     def size(self) -> int:
         """Length N of x."""
         return self.n_u + self.n_d + self.n_act + 1
+
+    @cached_property
+    def hs_t(self) -> FloatArray:
+        """hsᵀ, contiguous: rows of states times it give G for a whole batch in one product."""
+        return np.ascontiguousarray(self.hs.T)
+
+    @cached_property
+    def hs_half(self) -> FloatArray:
+        """½ hs: row block r is ∇²Φ_r / 2 (Taylor coefficients of the branch)."""
+        return np.asarray(0.5 * self.hs, dtype=np.float64)
 
     def new_x(self) -> FloatArray:
         """A work vector x with its constant entry set."""
