@@ -122,7 +122,11 @@ class Simulation:
 #: Newton iterations allowed for locating a fold (`_Tracker.fold_limit`), and its
 #: convergence test: squared step ≤ FOLD_STEP2·(1 + ‖q‖²).
 FOLD_ITERATIONS = 12
-FOLD_STEP2 = 1e-26
+FOLD_STEP2 = 1e-20
+#: Near a fold the branch moves as √(t* − t), so ‖Δq‖² per step grows like 1/(t* − t): when
+#: it grew FOLD_AHEAD-fold in the last step, the fold is likely within the next one, and the
+#: sweep looks for it before trying that step (saving the Newton iterations that would fail).
+FOLD_AHEAD = 1.75
 #: Why the motion stops at a located fold, and the reason reported for it.
 FOLD_REASON = "no solution past the turning point"
 FOLD_MESSAGE = (f"the constraint Jacobian is singular at the turning point (J·v = 0 there): "
@@ -252,6 +256,7 @@ class _Tracker:
         self.inc = np.zeros_like(self.u)  # sweeps: the input step
         self.bsize = BLOCK  # block size of `run_fast`
         self.stuck = 0  # `run_fast`: iterations of the refused step that stopped it (0: none)
+        self.fold_ahead = False  # `run_fast` stopped because a fold is likely in the next step
         self.cool = 0  # single steps to take before the next block (after a poor block)
         self.m = sysm.m
         self.nact = sysm.n_act
@@ -505,6 +510,7 @@ class _Tracker:
         hs_ = self.hist_s
         h = float(direction)
         self.stuck = 0
+        self.fold_ahead = False
         if self.lsq:
             return 0
         x, n, hsm, hs_t, m = self.x, self.n, self.hs, self.hs_t, self.m
@@ -607,6 +613,12 @@ class _Tracker:
                     continue
             if run < 2:  # no history to extrapolate from: `attempt` takes this step
                 break
+            if run >= 3:
+                d1 = ring[slot] - ring[(slot - 1) % HISTORY]
+                d0 = ring[(slot - 1) % HISTORY] - ring[(slot - 2) % HISTORY]
+                if float(d1 @ d1) >= FOLD_AHEAD * float(d0 @ d0):
+                    self.fold_ahead = True  # `advance` looks for the fold first
+                    break
             g_i = index + direction * (taken + 1)
             pred = _UNIFORM[run, slot] @ ring  # (prediction, predicted motion)
             q_pred = pred[0]
@@ -658,19 +670,25 @@ class _Tracker:
         return taken
 
     def advance(self, target: FloatArray, pre: FloatArray | None = None,
-                refused: int = 0) -> tuple[Status, int, int, str, FloatArray, float]:
+                refused: int = 0, fold_first: bool = False
+                ) -> tuple[Status, int, int, str, FloatArray, float]:
         """Move the inputs to `target`, subdividing the step as needed. `refused` > 0 says the
-        whole step was already tried and refused after that many iterations (`run_fast`).
+        whole step was already tried and refused after that many iterations (`run_fast`);
+        `fold_first` looks for a fold in the step before trying it.
 
         Returns (status, iterations, accepted sub-steps, reason, failed input, residual).
         """
+        fold = self.fold_limit(target) if fold_first else None
+        if fold is not None:
+            its, failed, res = fold
+            return Status.LIMIT, its, 1, FOLD_REASON, failed, res
         if refused:
             iters = refused
         else:
             ok, iters, res, why = self.attempt(target, pre)
             if ok:
                 return Status.OK, iters, 1, "", target, res
-        fold = self.fold_limit(target)
+        fold = None if fold_first else self.fold_limit(target)
         if fold is not None:
             its, failed, res = fold
             return Status.LIMIT, iters + its, 1, FOLD_REASON, failed, res
@@ -1024,13 +1042,14 @@ def sweep(mech: Mechanism, steps: int | None = None, step: ArrayLike | None = No
                 pos += k
                 index += direction * k
                 taken += k
-                if not tr.stuck:
+                if not (tr.stuck or tr.fold_ahead):
                     continue
             taken += 1
             g = offset + index + direction
             target = grid[g]
             before = tr.snapshot() if rev and reversed_at is None else None
-            st, it, sb, why, failed, res = tr.advance(target, xtab[g], tr.stuck)
+            st, it, sb, why, failed, res = tr.advance(target, xtab[g], tr.stuck,
+                                                      tr.fold_ahead)
             stop = _record(tr, st, it, sb, why, failed, res, target, out, pos)
             pos += 1
             if stop:
