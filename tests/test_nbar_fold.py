@@ -85,3 +85,22 @@ def test_fold_bracket_follows_max_halvings(halvings: int) -> None:
     step = float(abs(mech.step[0]))
     for lim in sim.limits:
         assert abs(float(lim.failed[0] - lim.reached[0])) <= 2.0 ** -halvings * step
+
+
+@pytest.mark.parametrize(("refused", "fold_first"), [(0, True), (2, False), (2, True)])
+def test_step_without_a_fold_is_taken_whatever_the_hint(refused: int, fold_first: bool) -> None:
+    """`advance` told that a fold is likely (`fold_first`) or that the whole step was refused
+    (`refused`) on a step with no fold in it: it still reaches the target, on the branch that
+    `simulate` follows (the look-ahead and the skipped attempt only change the order of work)."""
+    from kinematics.nbar.solver import Status, _Tracker
+
+    mech = parse_mechanism((MECH / "fourbar_crank_rocker.toml").read_text())
+    tr = _Tracker(mech, mech.settings)  # at the initial configuration
+    target = mech.input0 + 0.05
+    ref = simulate(mech, target[None, :], tolerance=1e-13)
+    with np.errstate(all="ignore"):
+        st, _, subs, _, _, _ = tr.advance(target, None, refused, fold_first)
+    assert st == (Status.SUBDIVIDED if refused else Status.OK)
+    assert subs >= 1 and np.array_equal(tr.u, target)
+    np.testing.assert_allclose(tr.q, ref.coords[0].ravel()[mech.system.unknown_flat],
+                               rtol=0, atol=1e-9)
