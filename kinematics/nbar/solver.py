@@ -15,7 +15,9 @@ On top of the paper's loop:
   distance between the branches that does not shrink with the step, so the step is halved until
   the correction is small, or the step falls below the resolution;
 - motion limit: when a step fails, a fold (turning point) of the solution curve within it is
-  looked for directly (`_Tracker.fold_limit`: Newton on Φ = 0, J·v = 0); if there is one on the
+  looked for directly (`_Tracker.fold_limit`: Newton on Φ = 0, J·v = 0; in sweeps already
+  before the step when the last step's motion grew FOLD_AHEAD-fold, as it does next to a
+  fold); if there is one on the
   branch being followed, the state just before it and the input just past it are reported, less
   than 2^-max_halvings of the step apart. Otherwise the step is halved, and when even the
   smallest step (2^-max_halvings of an input step) fails, the input value reached and the one
@@ -494,10 +496,11 @@ class _Tracker:
     def run_fast(self, index: int, direction: int, count: int, grid: FloatArray,
                  xtab: FloatArray, out_q: FloatArray, out_it: NDArray[np.int64], pos: int
                  ) -> int:
-        """Take up to `count` sweep steps in the common case, in a tight loop: the history ends
-        in equal steps of this sweep (binomial extrapolation), the system is square, Newton
-        converges (a single step accepted by the quadratic remainder bound, or more from there)
-        and the result passes the same two continuity tests as `attempt`. Up to BLOCK steps are
+        """Take up to `count` sweep steps in the common case, in a tight loop: the system is
+        square, Newton converges from the predictor (a single step accepted by the quadratic
+        remainder bound or by the residual, or more from there) and the result passes the same
+        two continuity tests as `attempt`. Single steps extrapolate the equal steps of this
+        sweep at the end of the history (binomial weights). Up to BLOCK steps are
         predicted and corrected together: extrapolated from the last HISTORY equal steps, or,
         with fewer, from the branch's Taylor series (as far as it is trusted). Stops at the
         first step that needs anything else (subdivision, a limit), leaving the state at the
@@ -506,7 +509,7 @@ class _Tracker:
         `xtab` x's driven entries for them, `index` is the current row, `direction` ±1. When a
         single step to the next row was tried and refused (as `attempt` would refuse it: same
         predictor, same Newton iterates, same tests), `stuck` holds its Newton iterations,
-        else 0."""
+        else 0; `fold_ahead` says it stopped before a step that likely holds a fold."""
         hs_ = self.hist_s
         h = float(direction)
         self.stuck = 0
