@@ -413,11 +413,10 @@ def _timed_build(fn: Callable[[], Any]) -> tuple[Any, float]:
     return obj, time.perf_counter() - t0
 
 
-def build_methods(sc: Scene, cfg: Config) -> list[Method]:
-    """The closed form, bare formulas and every approximation of kinematics.approx."""
+def _closed_form(sc: Scene) -> tuple[Callable[[FloatArray], tuple[FloatArray, BoolArray]],
+                                      Callable[[FloatArray], tuple[FloatArray, BoolArray]]]:
+    """The scene's closed-form inverse and forward kinematics as (values, valid mask) maps."""
     fb, mode, asm = sc.fb, sc.mode, sc.assembly
-    s1, s2 = _signs(mode)
-    sign = sc.sign
 
     def closed_inv(p: FloatArray) -> tuple[FloatArray, BoolArray]:
         r = fb.inverse_batch(p, mode)
@@ -426,6 +425,17 @@ def build_methods(sc: Scene, cfg: Config) -> list[Method]:
     def closed_fwd(t: FloatArray) -> tuple[FloatArray, BoolArray]:
         r = fb.forward_batch(t, asm)
         return r.points, r.valid
+
+    return closed_inv, closed_fwd
+
+
+def build_methods(sc: Scene, cfg: Config) -> list[Method]:
+    """The closed form, bare formulas and every approximation of kinematics.approx."""
+    fb, mode, asm = sc.fb, sc.mode, sc.assembly
+    s1, s2 = _signs(mode)
+    sign = sc.sign
+
+    closed_inv, closed_fwd = _closed_form(sc)
 
     def bare_inv(p: FloatArray) -> tuple[FloatArray, BoolArray]:
         return bare_inverse(fb, p, s1, s2), np.ones(p.shape[0], dtype=bool)
@@ -971,13 +981,7 @@ def map_methods(sc: Scene, cfg: Config
     lut_fg = approx.forward_table(fb, asm, sc.joint_box, n, "linear", max_error=cap,
                                   min_margins=margins)
 
-    def closed_inv(p: FloatArray) -> tuple[FloatArray, BoolArray]:
-        r = fb.inverse_batch(p, mode)
-        return r.angles, r.valid
-
-    def closed_fwd(t: FloatArray) -> tuple[FloatArray, BoolArray]:
-        r = fb.forward_batch(t, asm)
-        return r.points, r.valid
+    closed_inv, closed_fwd = _closed_form(sc)
 
     guard = "guarded"
     return {
