@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from fivebar_host.errors import FivebarError
 from kinematics.fivebar import WORKING_MODES, FiveBar
 
 #: Assembly modes: "+" iff the pen lies left of the directed line R1→R2 (elbow to elbow).
@@ -22,7 +23,7 @@ ASSEMBLY_MODES = ("+", "-")
 DEFAULT_PROFILE = Path(__file__).resolve().parent.parent / "configs" / "default.toml"
 
 
-class ConfigError(ValueError):
+class ConfigError(FivebarError, ValueError):
     """A profile that cannot be used; the message names the file and the key."""
 
 

@@ -6,14 +6,37 @@ G-code word, NaN or enormous coordinates, nothing to draw). `JobError` is raised
 compiling a job (a point out of reach, beyond a joint limit, too close to a singularity, a
 working-mode change, a drawing that does not fit). Both are `ValueError`s so callers that only
 know "bad input" can catch them together.
+
+Every error a user can see derives from `FivebarError` (defined on the lowest floor,
+`kinematics.errors`, and exported here): the CLI catches that root and the OS errors it
+names, nothing else.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+from kinematics.errors import FivebarError
 
-class InputError(ValueError):
+__all__ = ["FivebarError", "InputError", "JobError", "OptionError", "UsageError", "Where"]
+
+
+class OptionError(FivebarError, ValueError):
+    """A job option with a value outside its definition (`fivebar_host.options`), or an
+    option that does not exist; `option` is its name as the user wrote it."""
+
+    def __init__(self, option: str, why: str) -> None:
+        super().__init__(f"{option}: {why}")
+        self.option = option
+        self.why = why
+
+
+class UsageError(FivebarError, ValueError):
+    """Options that contradict each other or make no sense for this input (`--fit` with
+    `--scale`, `--layer` on a G-code file); the message names them."""
+
+
+class InputError(FivebarError, ValueError):
     """A drawing that cannot be read; the message names the file and the line/element."""
 
     def __init__(self, message: str, file: str | None = None, line: int | None = None) -> None:
@@ -66,7 +89,7 @@ class Where:
         return ", ".join(parts)
 
 
-class JobError(ValueError):
+class JobError(FivebarError, ValueError):
     """A drawing that the machine cannot execute as asked; nothing has moved.
 
     Carries `where` (a `Where`) and `reason` (a short stable key such as "reach",

@@ -22,6 +22,7 @@ from typing import Any
 import serial
 
 from fivebar_host import protocol
+from fivebar_host.errors import FivebarError
 from fivebar_host.protocol import (
     AlarmPush,
     Banner,
@@ -34,8 +35,10 @@ from fivebar_host.protocol import (
 )
 
 
-class LinkError(RuntimeError):
+class LinkError(FivebarError, RuntimeError):
     """The link failed; the message says where (port, line) and why."""
+
+    exit_code = 3
 
 
 class NoBannerError(LinkError):

@@ -17,6 +17,8 @@ import re
 from dataclasses import dataclass
 from typing import Final
 
+from fivebar_host.errors import FivebarError
+
 #: The protocol version this module implements: docs/protocol.md, the banner's ``proto:``.
 #: Version 2 replaced the CRC-8 line checksum with a CRC-16 and the body's length
 #: (docs/protocol.md 5.1 and 14).
@@ -113,7 +115,7 @@ SETTINGS: Final[dict[int, tuple[str, int, int]]] = {
 }
 
 
-class ProtocolError(ValueError):
+class ProtocolError(FivebarError, ValueError):
     """A line does not follow docs/protocol.md (host side or firmware side)."""
 
 

@@ -24,6 +24,8 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from kinematics.errors import FivebarError
+
 FloatArray = NDArray[np.float64]
 ModeStr = Literal["++", "+-", "-+", "--"]
 WORKING_MODES: tuple[ModeStr, ...] = ("++", "+-", "-+", "--")
@@ -48,7 +50,7 @@ class Reason(IntEnum):
     ELBOWS_COINCIDENT = 10  # forward: R1 = R2 with b1 = b2, P free on a circle (Mode 1b I)
 
 
-class KinematicsError(ValueError):
+class KinematicsError(FivebarError, ValueError):
     """A pose that has no unique answer; carries where (point/angles) and why (reason)."""
 
     def __init__(self, message: str, reason: Reason, where: tuple[float, float],

@@ -366,3 +366,27 @@ def test_missing_port_is_reported_and_jobs_wait(start_daemon: Callable[..., Daem
     with pytest.raises(ServerError) as e:
         c.cancel(j["id"])
     assert e.value.status == 409 and "already cancelled" in str(e.value)
+
+
+def test_unknown_options_are_refused_and_options_are_declared_once(
+        start_daemon: Callable[..., Daemon]) -> None:
+    """An unknown query parameter is an error on every route (`scael=2` is never queued
+    with the scale left out), and the OpenAPI parameters are the option definitions."""
+    from fivebar_host.options import BY_NAME, JOB_OPTIONS
+
+    d = start_daemon("fivebar-mock://?speed=10&machine=opts")
+    status, body = raw(d.url, "POST", "/api/jobs?name=x.svg&scael=2", SIMPLE.read_bytes(),
+                       {"Content-Type": "image/svg+xml"})
+    assert status == 422 and body["error"] == "bad_option", body
+    assert "scael" in body["message"] and "did you mean 'scale'" in body["message"]
+    status, body = raw(d.url, "GET", "/api/jobs?limt=3")
+    assert status == 422 and body["error"] == "bad_option" and "limt" in body["message"]
+    status, body = raw(d.url, "GET", "/api/jobs")
+    assert status == 200 and body == []
+    status, spec = raw(d.url, "GET", "/openapi.json")
+    params = {p["name"]: p for p in spec["paths"]["/api/jobs"]["post"]["parameters"]}
+    for opt in JOB_OPTIONS:
+        assert params[opt.query]["description"] == opt.describe()
+    tol = params["tolerance"]["schema"]
+    assert (tol["minimum"], tol["maximum"]) == (BY_NAME["tolerance_mm"].lo,
+                                                BY_NAME["tolerance_mm"].hi)

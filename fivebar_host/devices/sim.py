@@ -28,13 +28,14 @@ from typing import Any, Protocol
 
 from fivebar_host import protocol
 from fivebar_host.devices.simtrace import Trace, read_trace
+from fivebar_host.errors import FivebarError
 from fivebar_host.protocol import Banner, ErrorReply, Message, Ok, StatusReport
 
 #: What CI installs; named in every "toolchain missing" message.
 APT_PACKAGES = "gcc-avr avr-libc simavr libsimavr-dev libelf-dev"
 
 
-class EmulatorError(RuntimeError):
+class EmulatorError(FivebarError, RuntimeError):
     """The firmware or harness could not be built, started or talked to."""
 
 

@@ -15,12 +15,14 @@ import bisect
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from fivebar_host.errors import FivebarError
+
 AXES = ("A", "B")
 #: Timer2 PWM period of the laser output in CPU cycles (F_CPU / 8 / 256).
 LASER_PWM_PERIOD = 2048
 
 
-class TraceError(ValueError):
+class TraceError(FivebarError, ValueError):
     """The trace file is malformed."""
 
 

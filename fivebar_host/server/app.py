@@ -14,9 +14,10 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import dataclass
 from typing import Annotated, Any, Literal
 
-from fastapi import FastAPI, Query, Request
+from fastapi import Depends, FastAPI, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, Response
@@ -25,14 +26,10 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from fivebar_host import __version__
 from fivebar_host.config import Profile
+from fivebar_host.errors import OptionError
+from fivebar_host.options import JOB_OPTIONS, parse_query, unknown_option
 from fivebar_host.server import store as st_
-from fivebar_host.server.jobs import (
-    CompiledCache,
-    JobOptions,
-    SubmitError,
-    compile_upload,
-    parse_origin,
-)
+from fivebar_host.server.jobs import CompiledCache, JobOptions, SubmitError, compile_upload
 from fivebar_host.server.store import JobRecord, JobStore
 from fivebar_host.server.worker import ActionError, JobStateError, Worker
 
@@ -191,11 +188,51 @@ _ERRORS: dict[int | str, dict[str, Any]] = {
 }
 
 
+@dataclass(frozen=True)
+class _Ctx:
+    """What the route handlers share."""
+
+    store: JobStore
+    worker: Worker
+    cache: CompiledCache
+    profile: Profile
+    stopping: threading.Event
+    slots: threading.BoundedSemaphore
+    started: float
+
+    def get_rec(self, job_id: int) -> JobRecord:
+        """A job, or the 404 answer."""
+        rec = self.store.get(job_id)
+        if rec is None:
+            raise ApiError(404, "not_found", f"no job {job_id}")
+        return rec
+
+
+def _known_query(request: Request) -> set[str]:
+    """The query parameters the matched route declares (its signature and its OpenAPI
+    extra parameters, which is where the job options are declared)."""
+    route = request.scope.get("route")
+    dependant = getattr(route, "dependant", None)
+    names = {p.alias for p in getattr(dependant, "query_params", ())}
+    extra = getattr(route, "openapi_extra", None) or {}
+    names |= {p["name"] for p in extra.get("parameters", ())}
+    return names
+
+
+async def reject_unknown_query(request: Request) -> None:
+    """Every route: a query parameter it does not know is an error (`scael=2` must not be
+    queued with the scale left at its default)."""
+    if getattr(request.scope.get("route"), "dependant", None) is None:
+        return  # no route matched: the 404 answer follows
+    known = _known_query(request)
+    for key in request.query_params:
+        if key not in known:
+            raise unknown_option(key, known)
+
+
 def create_app(*, store: JobStore, worker: Worker, cache: CompiledCache, profile: Profile,
                stopping: threading.Event, compile_slots: int = 2) -> FastAPI:
     """The FastAPI application over a store and a running worker."""
-    started = time.monotonic()
-    slots = threading.BoundedSemaphore(compile_slots)
     app = FastAPI(
         title="fivebar daemon", version=__version__,
         description="Queue, run and follow plot jobs on a five-bar plotter or laser "
@@ -203,11 +240,27 @@ def create_app(*, store: JobStore, worker: Worker, cache: CompiledCache, profile
         "(Content-Type image/svg+xml or text/x-gcode) with the plot options as query "
         "parameters. With a token configured, every request needs "
         "'Authorization: Bearer <token>'.",
-        docs_url=None, redoc_url=None)
+        docs_url=None, redoc_url=None, dependencies=[Depends(reject_unknown_query)])
+    ctx = _Ctx(store, worker, cache, profile, stopping,
+               threading.BoundedSemaphore(compile_slots), time.monotonic())
+    _error_handlers(app)
+    _status_routes(app, ctx)
+    _job_routes(app, ctx)
+    _submit_route(app, ctx)
+    _machine_routes(app, ctx)
+    return app
+
+
+def _error_handlers(app: FastAPI) -> None:
+    """Every error answers in the documented JSON format."""
 
     @app.exception_handler(ApiError)
     async def api_error(request: Request, exc: ApiError) -> JSONResponse:
         return _error_response(exc.status, exc.error, exc.message, exc.detail)
+
+    @app.exception_handler(OptionError)
+    async def option_error(request: Request, exc: OptionError) -> JSONResponse:
+        return _error_response(422, "bad_option", str(exc))
 
     @app.exception_handler(RequestValidationError)
     async def validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:
@@ -223,12 +276,8 @@ def create_app(*, store: JobStore, worker: Worker, cache: CompiledCache, profile
         return _error_response(exc.status_code, key, str(exc.detail),
                                headers=getattr(exc, "headers", None))
 
-    def get_rec(job_id: int) -> JobRecord:
-        rec = store.get(job_id)
-        if rec is None:
-            raise ApiError(404, "not_found", f"no job {job_id}")
-        return rec
 
+def _status_routes(app: FastAPI, ctx: _Ctx) -> None:
     status_cache: dict[str, Any] = {"at": -1.0, "body": b""}
 
     @app.get("/api/status", response_model=StatusOut, tags=["machine"])
@@ -238,15 +287,85 @@ def create_app(*, store: JobStore, worker: Worker, cache: CompiledCache, profile
         # poll hard cost the machine thread (which must keep the serial link busy) little.
         now = time.monotonic()
         if now - status_cache["at"] > STATUS_CACHE_S:
-            blk = store.blocking()
+            blk = ctx.store.blocking()
             out = StatusOut(
-                version=__version__, uptime_s=round(now - started, 3),
-                stopping=stopping.is_set(), machine=MachineOut(**worker.machine()),
-                jobs=store.counts(), current_job=worker.current,
-                blocked_by=blk.id if blk is not None and blk.id != worker.current else None)
+                version=__version__, uptime_s=round(now - ctx.started, 3),
+                stopping=ctx.stopping.is_set(), machine=MachineOut(**ctx.worker.machine()),
+                jobs=ctx.store.counts(), current_job=ctx.worker.current,
+                blocked_by=blk.id if blk is not None and blk.id != ctx.worker.current
+                else None)
             status_cache["body"] = out.model_dump_json().encode()
             status_cache["at"] = now
         return Response(status_cache["body"], media_type="application/json")
+
+
+_SUBMIT_RESPONSES: dict[int | str, dict[str, Any]] = {
+    413: {"model": ErrorOut, "description": "Upload over the size limit."},
+    415: {"model": ErrorOut, "description": "Wrong Content-Type."},
+    422: {"model": ErrorOut, "description": "The drawing cannot be read, an option is out "
+          "of range or unknown, or the job cannot run (the CLI's message); nothing was "
+          "queued."},
+    400: {"model": ErrorOut, "description": "Empty upload or bad name."},
+    503: {"model": ErrorOut, "description": "The daemon is stopping."}}
+#: The request body and the job options (generated from their one definition).
+_SUBMIT_EXTRA: dict[str, Any] = {
+    "requestBody": {"required": True, "description": "The drawing's bytes.", "content": {
+        "image/svg+xml": {"schema": {"type": "string"}},
+        "text/x-gcode": {"schema": {"type": "string"}},
+        "application/octet-stream": {"schema": {"type": "string", "format": "binary"}}}},
+    "parameters": [o.openapi() for o in JOB_OPTIONS]}
+
+
+def _submit_route(app: FastAPI, ctx: _Ctx) -> None:
+    @app.post("/api/jobs", response_model=JobOut, status_code=201, tags=["jobs"],
+              responses=_SUBMIT_RESPONSES, openapi_extra=_SUBMIT_EXTRA)
+    async def submit(
+        request: Request,
+        name: str = Query(..., description="File name of the drawing (a label; its suffix "
+                          "tells SVG from G-code). No directories."),
+    ) -> JobOut:
+        """Compile and check a drawing, then queue it; a job that cannot run is refused.
+
+        The job options are the query parameters declared in `fivebar_host.options` (the
+        same definitions as `fivebar plot`'s options); an unknown one is refused."""
+        if ctx.stopping.is_set():
+            raise ApiError(503, "stopping", "the daemon is stopping; submit again after it "
+                           "restarts")
+        ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
+        if ctype in SIMPLE_CONTENT_TYPES or not ctype:
+            raise ApiError(415, "bad_content_type", f"send the drawing's bytes as the body "
+                           f"with Content-Type image/svg+xml, text/x-gcode or "
+                           f"application/octet-stream (got {ctype or 'none'!r})")
+        opts = JobOptions(**parse_query(request.query_params.multi_items(), extra=("name",)))
+        body = await request.body()
+
+        def work() -> Any:
+            with ctx.slots:
+                return compile_upload(body, name, opts, ctx.profile)
+
+        try:
+            compiled = await run_in_threadpool(work)
+        except SubmitError as e:
+            raise ApiError(e.status, e.code, str(e), e.detail) from e
+        return _queue(ctx, name, opts, body, compiled)
+
+
+def _queue(ctx: _Ctx, name: str, opts: JobOptions, body: bytes, compiled: Any) -> JobOut:
+    """Store a compiled submission and wake the machine thread."""
+    job = compiled.job
+    rec = ctx.store.add_job(name=name, options=opts.to_json(), upload=body,
+                            upload_sha256=compiled.upload_sha256,
+                            fingerprint=compiled.fingerprint, mode=job.mode,
+                            max_dev_mm=None if job.max_dev_mm != job.max_dev_mm
+                            else float(job.max_dev_mm),
+                            segments_total=job.n_segments, estimated_s=job.total_time_s)
+    ctx.cache.put(rec.id, job)
+    ctx.worker.notify()
+    return job_out(rec, ctx.worker)
+
+
+def _job_routes(app: FastAPI, ctx: _Ctx) -> None:
+    store, worker = ctx.store, ctx.worker
 
     @app.get("/api/jobs", response_model=list[JobOut], tags=["jobs"])
     def list_jobs(state: Annotated[list[str] | None, Query(
@@ -260,90 +379,20 @@ def create_app(*, store: JobStore, worker: Worker, cache: CompiledCache, profile
                            f"{', '.join(st_.STATES)}")
         return [job_out(r, worker) for r in store.list(tuple(state) or None, limit)]
 
-    @app.post(
-        "/api/jobs", response_model=JobOut, status_code=201, tags=["jobs"],
-        responses={413: {"model": ErrorOut, "description": "Upload over the size limit."},
-                   415: {"model": ErrorOut, "description": "Wrong Content-Type."},
-                   422: {"model": ErrorOut, "description": "The drawing cannot be read or "
-                         "the job cannot run (the CLI's message); nothing was queued."},
-                   400: {"model": ErrorOut, "description": "Empty upload or bad name."},
-                   503: {"model": ErrorOut, "description": "The daemon is stopping."}},
-        openapi_extra={"requestBody": {"required": True, "description": "The drawing's bytes.",
-                                       "content": {
-                                           "image/svg+xml": {"schema": {"type": "string"}},
-                                           "text/x-gcode": {"schema": {"type": "string"}},
-                                           "application/octet-stream": {
-                                               "schema": {"type": "string",
-                                                          "format": "binary"}}}}})
-    async def submit(
-        request: Request,
-        name: str = Query(..., description="File name of the drawing (a label; its suffix "
-                          "tells SVG from G-code). No directories."),
-        laser: bool = Query(False, description="Laser job: drawing segments carry the "
-                            "profile's power (the CLI's --laser opt-in). Without it S0."),
-        mode: Literal["++", "+-", "-+", "--", "auto"] | None = Query(
-            None, description="Working mode (default: the profile's)."),
-        tolerance: float | None = Query(None, ge=1e-4, le=10.0,
-                                        description="Largest path deviation, mm."),
-        origin: str | None = Query(None, description="X,Y: the drawing's origin in machine "
-                                   "mm (default: centred in the largest safe rectangle)."),
-        scale: float | None = Query(None, description="Scale factor."),
-        rotate: float = Query(0.0, description="Rotation, degrees counter-clockwise."),
-        fit: bool = Query(False, description="Scale to fill the largest safe rectangle."),
-        layer: Annotated[list[str] | None, Query(
-            description="Only these SVG layers (repeatable).")] = None,
-        keep_order: bool = Query(False, description="Draw paths in file order."),
-        confirm: bool = Query(False, description="Answer yes if the daemon must ask whether "
-                              "the arms are at the home pose (first job after power-up)."),
-    ) -> JobOut:
-        """Compile and check a drawing, then queue it; a job that cannot run is refused."""
-        if stopping.is_set():
-            raise ApiError(503, "stopping", "the daemon is stopping; submit again after it "
-                           "restarts")
-        ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
-        if ctype in SIMPLE_CONTENT_TYPES or not ctype:
-            raise ApiError(415, "bad_content_type", f"send the drawing's bytes as the body "
-                           f"with Content-Type image/svg+xml, text/x-gcode or "
-                           f"application/octet-stream (got {ctype or 'none'!r})")
-        body = await request.body()
-        try:
-            opts = JobOptions(laser=laser, mode=mode, tolerance_mm=tolerance,
-                              origin_mm=parse_origin(origin), scale=scale, rotate_deg=rotate,
-                              fit=fit, layers=tuple(layer or ()), keep_order=keep_order,
-                              confirm=confirm)
-
-            def work() -> Any:
-                with slots:
-                    return compile_upload(body, name, opts, profile)
-
-            compiled = await run_in_threadpool(work)
-        except SubmitError as e:
-            raise ApiError(e.status, e.code, str(e), e.detail) from e
-        job = compiled.job
-        rec = store.add_job(name=name, options=opts.to_json(), upload=body,
-                            upload_sha256=compiled.upload_sha256,
-                            fingerprint=compiled.fingerprint, mode=job.mode,
-                            max_dev_mm=None if job.max_dev_mm != job.max_dev_mm
-                            else float(job.max_dev_mm),
-                            segments_total=job.n_segments, estimated_s=job.total_time_s)
-        cache.put(rec.id, job)
-        worker.notify()
-        return job_out(rec, worker)
-
     @app.get("/api/jobs/{job_id}", response_model=JobOut, tags=["jobs"], responses=_ERRORS)
     def get_job(job_id: int) -> JobOut:
         """One job, with live progress while it runs."""
-        return job_out(get_rec(job_id), worker)
+        return job_out(ctx.get_rec(job_id), worker)
 
     def act(job_id: int, fn: Any) -> JobOut:
-        get_rec(job_id)
+        ctx.get_rec(job_id)
         try:
             fn()
         except JobStateError as e:
             raise ApiError(409, "conflict", str(e)) from e
         except KeyError:
             raise ApiError(404, "not_found", f"no job {job_id}") from None
-        return job_out(get_rec(job_id), worker)
+        return job_out(ctx.get_rec(job_id), worker)
 
     @app.post("/api/jobs/{job_id}/pause", response_model=JobOut, status_code=202,
               tags=["jobs"], responses=_ERRORS)
@@ -367,11 +416,15 @@ def create_app(*, store: JobStore, worker: Worker, cache: CompiledCache, profile
     @app.delete("/api/jobs/{job_id}", status_code=204, tags=["jobs"], responses=_ERRORS)
     def delete(job_id: int) -> Response:
         """Forget a finished job (done, failed or cancelled)."""
-        rec = get_rec(job_id)
+        rec = ctx.get_rec(job_id)
         if not store.delete(job_id):
             raise ApiError(409, "conflict", f"job {job_id} is {rec.state}; only finished "
                            "jobs can be deleted (cancel it first)")
         return Response(status_code=204)
+
+
+def _machine_routes(app: FastAPI, ctx: _Ctx) -> None:
+    worker = ctx.worker
 
     @app.post("/api/machine/home", response_model=MachineOut, tags=["machine"],
               responses={409: {"model": ErrorOut, "description": "A job runs, or the arms' "
@@ -389,5 +442,3 @@ def create_app(*, store: JobStore, worker: Worker, cache: CompiledCache, profile
         except Exception as e:  # a link fault: the message says what happened
             raise ApiError(502, "machine_error", str(e)) from e
         return MachineOut(**worker.machine())
-
-    return app

@@ -17,11 +17,14 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from fivebar_host.errors import FivebarError
+from fivebar_host.options import to_query
+
 #: Job states after which nothing more happens without a person.
 END_STATES = frozenset({"done", "failed", "cancelled", "held"})
 
 
-class ServerError(RuntimeError):
+class ServerError(FivebarError, RuntimeError):
     """An error answer of the daemon (or no answer): HTTP status, key and message."""
 
     def __init__(self, message: str, status: int = 0, error: str = "unreachable",
@@ -144,16 +147,12 @@ class ServerClient:
         return out
 
 
-def plot_options(*, laser: bool = False, mode: str | None = None,
-                 tolerance: float | None = None, origin: tuple[float, float] | None = None,
-                 scale: float | None = None, rotate_deg: float = 0.0, fit: bool = False,
-                 layers: tuple[str, ...] = (), keep_order: bool = False,
-                 confirm: bool = False) -> dict[str, Any]:
-    """The query parameters of a submission from `fivebar plot` option values."""
-    return {"laser": laser, "mode": mode, "tolerance": tolerance,
-            "origin": None if origin is None else f"{origin[0]!r},{origin[1]!r}",
-            "scale": scale, "rotate": rotate_deg, "fit": fit, "layer": list(layers),
-            "keep_order": keep_order, "confirm": confirm}
+def plot_options(**values: Any) -> dict[str, Any]:
+    """The query parameters of a submission from job option values keyed by their field
+    names (`laser=True`, `tolerance_mm=0.1`, `origin_mm=(10, 95)`, …), generated from their
+    one definition in `fivebar_host.options`; an unknown name or a value out of range is an
+    OptionError before anything is sent."""
+    return dict(to_query(values))
 
 
 def follow(client: ServerClient, job_id: int, on_update: Callable[[dict[str, Any]], None],

@@ -23,6 +23,7 @@ from types import FrameType
 import uvicorn
 
 from fivebar_host.config import Profile, load_profile
+from fivebar_host.errors import FivebarError
 from fivebar_host.server.app import create_app
 from fivebar_host.server.jobs import CompiledCache
 from fivebar_host.server.security import (
@@ -41,7 +42,7 @@ DEFAULT_LISTEN = "127.0.0.1:8765"
 DEFAULT_MAX_UPLOAD = 8 * 1024 * 1024
 
 
-class ServeError(RuntimeError):
+class ServeError(FivebarError, RuntimeError):
     """The daemon cannot start: bad listen address, state directory, port in use ..."""
 
 

@@ -11,7 +11,6 @@ no directory parts — and never touches the file system.
 from __future__ import annotations
 
 import hashlib
-import math
 import re
 import threading
 from collections import OrderedDict
@@ -19,8 +18,9 @@ from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 from fivebar_host.config import ConfigError, Profile
-from fivebar_host.errors import InputError, JobError
+from fivebar_host.errors import FivebarError, InputError, JobError
 from fivebar_host.job import GCODE_SUFFIXES, CompileOptions, Job, compile_drawing
+from fivebar_host.options import check_values
 from fivebar_host.sender import fingerprint
 from fivebar_host.toolpath.gcode import read_gcode
 from fivebar_host.toolpath.svg import read_svg
@@ -31,7 +31,7 @@ _NAME = re.compile(r"^[^/\\\x00-\x1f]{1,128}$")
 SVG_SUFFIXES = frozenset({".svg"})
 
 
-class SubmitError(ValueError):
+class SubmitError(FivebarError, ValueError):
     """A submission refused before it was queued: `code` (stable key) and the message."""
 
     def __init__(self, code: str, message: str, status: int = 422,
@@ -68,46 +68,17 @@ class JobOptions(CompileOptions):
         return d
 
     @staticmethod
+    def from_values(values: dict[str, Any]) -> JobOptions:
+        """From option values keyed by field name (`fivebar_host.options`), checked against
+        their definitions; unknown names are an OptionError."""
+        return JobOptions(**check_values(values))
+
+    @staticmethod
     def from_json(d: dict[str, Any]) -> JobOptions:
-        """Inverse of `to_json`."""
-        o = d.get("origin_mm")
-        return JobOptions(
-            laser=bool(d.get("laser", False)), mode=d.get("mode"),
-            tolerance_mm=d.get("tolerance_mm"),
-            origin_mm=None if o is None else (float(o[0]), float(o[1])),
-            scale=d.get("scale"), rotate_deg=float(d.get("rotate_deg", 0.0)),
-            fit=bool(d.get("fit", False)), layers=tuple(d.get("layers", ())),
-            keep_order=bool(d.get("keep_order", False)), confirm=bool(d.get("confirm", False)))
-
-
-def check_options(opts: JobOptions) -> None:
-    """Refuse option values the CLI would refuse (same ranges as `fivebar plot`)."""
-    if opts.mode is not None and opts.mode not in ("++", "+-", "-+", "--", "auto"):
-        raise SubmitError("bad_option", f"mode must be one of ++, +-, -+, --, auto; got "
-                          f"{opts.mode!r}")
-    if opts.tolerance_mm is not None and not 1e-4 <= opts.tolerance_mm <= 10.0:
-        raise SubmitError("bad_option", f"tolerance must be within 0.0001..10 mm; got "
-                          f"{opts.tolerance_mm!r}")
-    for name, v in (("scale", opts.scale), ("rotate", opts.rotate_deg)):
-        if v is not None and not math.isfinite(v):
-            raise SubmitError("bad_option", f"{name} must be finite; got {v!r}")
-    if opts.origin_mm is not None and not all(math.isfinite(v) for v in opts.origin_mm):
-        raise SubmitError("bad_option", f"origin must be finite; got {opts.origin_mm!r}")
-    if len(opts.layers) > 64 or any(len(s) > 200 for s in opts.layers):
-        raise SubmitError("bad_option", "at most 64 layers of at most 200 characters each")
-
-
-def parse_origin(text: str | None) -> tuple[float, float] | None:
-    """"X,Y" in mm (as the CLI's --origin), or None."""
-    if text is None or text == "":
-        return None
-    parts = text.replace(" ", "").split(",")
-    try:
-        x, y = (float(v) for v in parts)
-    except ValueError:
-        raise SubmitError("bad_option", f"origin must look like X,Y in mm (e.g. 10,95); got "
-                          f"{text!r}") from None
-    return x, y
+        """Inverse of `to_json` (a stored job)."""
+        return JobOptions.from_values(
+            {**d, "layers": tuple(d.get("layers", ())),
+             "origin_mm": None if d.get("origin_mm") is None else tuple(d["origin_mm"])})
 
 
 def check_name(name: str) -> str:
@@ -150,7 +121,6 @@ class Compiled:
 def compile_upload(data: bytes, name: str, opts: JobOptions, profile: Profile) -> Compiled:
     """Parse and compile a submission; `SubmitError` with the CLI's message if it cannot run."""
     check_name(name)
-    check_options(opts)
     try:
         drawing = read_upload(data, name, opts.layers)
         job = compile_drawing(drawing, profile, opts.compile_options())

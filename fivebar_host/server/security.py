@@ -30,6 +30,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from fivebar_host.errors import FivebarError
+
 log = logging.getLogger("fivebar.serve")
 
 Scope = MutableMapping[str, Any]
@@ -43,7 +45,7 @@ TOKEN_FILE = "token"
 SMALL_BODY_LIMIT = 64 * 1024
 
 
-class SecurityError(RuntimeError):
+class SecurityError(FivebarError, RuntimeError):
     """The token file is unusable (wrong permissions, unreadable, empty)."""
 
 

@@ -32,6 +32,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from fivebar_host.errors import FivebarError
+
 #: Job states. `held` jobs wait for a person (a fault, an interrupted job, or a question such
 #: as "are the arms at the home pose?"); they block the queue until resumed or cancelled.
 QUEUED, RUNNING, PAUSED, HELD, DONE, FAILED, CANCELLED = (
@@ -79,7 +81,7 @@ CREATE TABLE IF NOT EXISTS machine (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 """
 
 
-class StoreError(RuntimeError):
+class StoreError(FivebarError, RuntimeError):
     """The database cannot be opened or is of an unknown (newer) schema."""
 
 

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from fivebar_host.errors import JobError, Where
+from fivebar_host.errors import JobError, UsageError, Where
 from fivebar_host.toolpath.geometry import Drawing, bbox
 from kinematics.analysis import NoSafeRegionError, PageFit, Rect, find_page_rectangle
 from kinematics.fivebar import FiveBar
@@ -76,13 +76,13 @@ def place(drawing: Drawing, fb: FiveBar, mode: str, min_type1_rad: float,
     """Place `drawing` on the machine in working mode `mode` and assembly mode `assembly`
     (the machine's; None: either) (see module doc)."""
     if scale is not None and not (math.isfinite(scale) and scale > 0):
-        raise ValueError(f"--scale must be a positive number; got {scale!r}")
+        raise UsageError(f"--scale must be a positive number; got {scale!r}")
     if not math.isfinite(rotate_deg):
-        raise ValueError(f"--rotate must be a finite angle in degrees; got {rotate_deg!r}")
+        raise UsageError(f"--rotate must be a finite angle in degrees; got {rotate_deg!r}")
     if fit and scale is not None:
-        raise ValueError("--fit and --scale cannot be used together (--fit chooses the scale)")
+        raise UsageError("--fit and --scale cannot be used together (--fit chooses the scale)")
     if fit and origin_mm is not None:
-        raise ValueError("--fit and --origin cannot be used together (--fit centres the "
+        raise UsageError("--fit and --origin cannot be used together (--fit centres the "
                          "drawing in the safe area)")
     phi = math.radians(rotate_deg)
     rot = np.array([[math.cos(phi), -math.sin(phi)], [math.sin(phi), math.cos(phi)]])

@@ -1,0 +1,169 @@
+"""What every `fivebar` command shares: the group, error handling, and the options.
+
+The job options (tolerance, placement, working mode, laser …) are not declared here: they are
+generated from their single definitions in `fivebar_host.options`, which the daemon's API and
+its HTTP client use too. Commands receive them under their field names (`tolerance_mm`,
+`origin_mm`, …) and hand them to `compile_from_cli` unchanged.
+
+Errors: every error a user can see derives from `FivebarError`; `handle_errors` turns it into
+one line on stderr and its exit status (2 bad input, 3 machine-side), and names the file of an
+OS error. Nothing else is caught, so a bug still shows its traceback.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Callable
+from functools import wraps
+from pathlib import Path
+from typing import Any, TypeVar
+
+import click
+
+from fivebar_host import __version__
+from fivebar_host.config import Profile, load_profile
+from fivebar_host.errors import FivebarError, OptionError
+from fivebar_host.options import JOB_OPTIONS, Option, compile_values
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="fivebar")
+def main() -> None:
+    """Drive a five-bar-linkage pen plotter or laser engraver from SVG or G-code."""
+
+
+def fail(message: str, code: int = 2) -> None:
+    """Print an error in one line on stderr and exit non-zero."""
+    click.echo(f"error: {message}", err=True)
+    sys.exit(code)
+
+
+def handle_errors(fn: F) -> F:
+    """Turn fivebar's errors (and the OS errors of files the user named) into one message
+    and the error's exit status."""
+
+    @wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return fn(*args, **kwargs)
+        except FivebarError as e:
+            fail(str(e), code=e.exit_code)
+        except OSError as e:
+            fail(f"{getattr(e, 'filename', '') or ''}: {e.strerror or e}".lstrip(": "))
+        return None
+
+    return wrapper  # type: ignore[return-value]
+
+
+def load(config_path: Path | None) -> Profile:
+    """The machine profile (the bundled default without --config)."""
+    return load_profile(config_path)
+
+
+config_option = click.option(
+    "--config", "config_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+    help="Machine profile (TOML). Default: the bundled configs/default.toml.")
+port_option = click.option(
+    "--port", default=None, metavar="PORT",
+    help="Serial port or URL: /dev/ttyUSB0, COM3, fivebar-mock://, fivebar-sim:// (emulator).")
+yes_option = click.option(
+    "--yes", "-y", is_flag=True,
+    help="Answer yes to 'are the arms at the home pose?' (no endstops) without asking.")
+
+
+# ------------------------------------------------------------------ job options, generated
+class OptionType(click.ParamType):
+    """A click type that parses a value with its `Option` definition (same rules, same
+    message as the daemon's API)."""
+
+    def __init__(self, opt: Option) -> None:
+        self.opt = opt
+        self.name = opt.kind
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> Any:
+        if not isinstance(value, str):
+            return value
+        try:
+            return self.opt.parse(value)
+        except OptionError as e:
+            self.fail(e.why, param, ctx)
+
+
+def click_option(opt: Option) -> Callable[[F], F]:
+    """The click option generated from one job option definition."""
+    if opt.kind == "bool":
+        return click.option(opt.flag, opt.name, is_flag=True, help=opt.describe())
+    return click.option(opt.flag, opt.name, type=OptionType(opt), default=opt.default,
+                        multiple=opt.repeat, metavar=opt.metavar or None,
+                        help=opt.describe())
+
+
+def job_options(*, laser: bool = True) -> Callable[[F], F]:
+    """The profile option and the job options of `fivebar_host.options` (without --laser
+    for commands that never burn, such as frame)."""
+
+    def deco(fn: F) -> F:
+        for opt in reversed(JOB_OPTIONS):
+            if opt.cli and (laser or opt.name != "laser"):
+                fn = click_option(opt)(fn)
+        return config_option(fn)
+
+    return deco
+
+
+def compile_from_cli(drawing: Path, config_path: Path | None,
+                     values: dict[str, Any]) -> tuple[Profile, Any]:
+    """Compile and check a drawing with the job option values a command received:
+    (profile, Job). Raises the pipeline's errors."""
+    from fivebar_host.job import CompileOptions, compile_job
+
+    prof = load(config_path)
+    return prof, compile_job(drawing, prof, CompileOptions(**compile_values(values)))
+
+
+def pop_job_values(kwargs: dict[str, Any]) -> dict[str, Any]:
+    """Take the job option values out of a command's keyword arguments."""
+    return {o.name: kwargs.pop(o.name) for o in JOB_OPTIONS if o.name in kwargs}
+
+
+# ------------------------------------------------------------------ machine commands
+def confirm_with(yes: bool) -> Callable[[str], bool]:
+    """A yes/no question for the sender: --yes answers it; otherwise ask on the terminal."""
+
+    def ask(question: str) -> bool:
+        if yes:
+            click.echo(f"{question} yes (--yes)")
+            return True
+        if not sys.stdin.isatty():
+            click.echo(f"{question} (no terminal to ask: pass --yes)", err=True)
+            return False
+        return click.confirm(question, default=False)
+
+    return ask
+
+
+def open_link(port: str | None, prof: Profile) -> Any:
+    """Open the machine at --port (required for machine commands)."""
+    from fivebar_host.link import Link
+
+    if port is None:
+        fail("give --port PORT")
+    return Link.open(str(port), baud=prof.serial.baud,
+                     banner_timeout_s=prof.serial.banner_timeout_s,
+                     reply_timeout_s=prof.serial.reply_timeout_s)
+
+
+def page_size(text: str) -> tuple[float, float]:
+    """Parse a page size "WxH" in mm (also "W×H"), e.g. "200x150"."""
+    parts = text.lower().replace("×", "x").split("x")
+    try:
+        w, h = (float(v) for v in parts)
+    except ValueError:
+        raise click.BadParameter(f"page size must look like 200x150 (mm); got {text!r}") from None
+    if not (math.isfinite(w) and math.isfinite(h) and w > 0 and h > 0):
+        raise click.BadParameter(f"page size must be positive; got {text!r}")
+    return w, h

@@ -1,0 +1,177 @@
+"""`fivebar convert` and `fivebar plot`: a drawing to firmware lines, or onto the machine.
+
+Both take the job options generated from `fivebar_host.options`; `plot --server` hands the
+same values to a running daemon (`fivebar_host.cli.remote`).
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+from pathlib import Path
+from typing import Any
+
+import click
+
+from fivebar_host.cli.common import (
+    compile_from_cli,
+    confirm_with,
+    fail,
+    handle_errors,
+    job_options,
+    main,
+    open_link,
+    port_option,
+    yes_option,
+)
+from fivebar_host.cli.remote import server_option
+from fivebar_host.config import Profile
+
+
+@main.command("convert")
+@click.argument("drawing", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
+              required=True, help="Where to write the firmware lines.")
+@click.option("--relative", is_flag=True,
+              help="Relative step moves (G91) instead of absolute targets (G90).")
+@job_options()
+@handle_errors
+def convert(drawing: Path, output: Path, relative: bool, config_path: Path | None,
+            **job_values: Any) -> None:
+    """Compile DRAWING (SVG or G-code) into firmware-ready step lines (G1 A B P S).
+
+    Without --laser the job is a pen plot: S0 on every line."""
+    from fivebar_host.job import encode_lines, mode_sequence, write_atomic
+
+    laser = bool(job_values["laser"])
+    prof, job = compile_from_cli(drawing, config_path, job_values)
+    lines = encode_lines(job, prof, relative=relative, laser=laser)
+    write_atomic(output, "\n".join(lines) + "\n")
+    tool = (f"laser (power up to S{int(job.power.max(initial=0))})" if laser
+            else "pen (S0, no laser power)")
+    changes = f" ({len(job.mode_changes)} pen-up mode changes)" if job.mode_changes else ""
+    click.echo(f"wrote {output}: {job.n_segments} segments, mode {mode_sequence(job)}{changes}, "
+               f"{tool}, "
+               f"≈ {job.total_time_s:.1f} s, max deviation {job.max_dev_mm:.4f} mm")
+
+
+@main.command("plot")
+@click.argument("drawing", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--dry-run", is_flag=True,
+              help="Run everything except the serial link: preview picture and report.")
+@click.option("--preview", "preview_path", type=click.Path(dir_okay=False, path_type=Path),
+              default=Path("preview.png"), show_default=True, help="Dry-run picture (PNG).")
+@server_option
+@port_option
+@click.option("--resume", is_flag=True,
+              help="Continue an interrupted plot from its resume file (same drawing and options).")
+@yes_option
+@job_options()
+@handle_errors
+def plot(drawing: Path, dry_run: bool, preview_path: Path, port: str | None, resume: bool,
+         yes: bool, config_path: Path | None, **job_values: Any) -> None:
+    """Compile and check DRAWING, then plot it on the machine at --port (or --dry-run).
+
+    Everything is checked before anything moves. Ctrl-C holds the machine at once (laser
+    off) and asks whether to resume or abort; a fault or an abort leaves a resume file, and
+    the same command with --resume continues exactly where the machine stopped.
+    """
+    if not dry_run and port is None:
+        fail("give --port PORT to plot on a machine (e.g. /dev/ttyUSB0 or fivebar-sim:// "
+             "for the emulator), or --dry-run for the preview and report")
+    from fivebar_host.job import nbar_opinion
+    from fivebar_host.preview import draw_preview, report_lines
+
+    laser = bool(job_values["laser"])
+    prof, job = compile_from_cli(drawing, config_path, job_values)
+    if dry_run:
+        for line in report_lines(job, nbar_opinion(job, prof), laser=laser):
+            click.echo(line)
+        draw_preview(job, prof, preview_path)
+        click.echo(f"preview       {preview_path}")
+        return
+    assert port is not None
+    _stream_plot(drawing, port, prof, job, laser=laser, resume=resume, yes=yes,
+                 preview_path=preview_path)
+
+
+def _ask_resume() -> bool:
+    """After Ctrl-C: resume or abort (abort without a terminal)."""
+    click.echo("\nheld: motion stopped, laser off.", err=True)
+    choice = click.prompt("resume or abort?", type=click.Choice(["resume", "abort"]),
+                          default="abort", err=True) if sys.stdin.isatty() else "abort"
+    return bool(choice == "resume")
+
+
+def _stream_plot(drawing: Path, port: str, prof: Profile, job: Any, *, laser: bool,
+                 resume: bool, yes: bool, preview_path: Path) -> None:
+    """Stream a compiled job with a progress bar, Ctrl-C hold/resume/abort, final report."""
+    from fivebar_host.sender import Progress, run_job
+
+    click.echo(f"job: {job.n_segments} segments, {job.n_paths} paths, mode {job.mode}, "
+               f"≈ {job.total_time_s:.1f} s, max deviation {job.max_dev_mm:.4f} mm")
+    if not laser:
+        click.echo("laser/pen power output stays at 0 (pen plot: M3/M5 lift the pen); "
+                   "pass --laser to burn")
+    interrupted = {"flag": False}
+
+    def on_sigint(signum: int, frame: Any) -> None:
+        interrupted["flag"] = True
+
+    def on_interrupt() -> bool:
+        interrupted["flag"] = False
+        return _ask_resume()
+
+    link = open_link(port, prof)
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    try:
+        with click.progressbar(length=job.n_segments, label="plotting",
+                               show_eta=False, show_percent=True,
+                               item_show_func=lambda s: s) as bar:
+            state = {"done": 0}
+
+            def on_progress(p: Progress) -> None:
+                if p.segments_done > state["done"]:
+                    bar.update(p.segments_done - state["done"],
+                               f"segment {p.segments_done}/{p.segments_total}, "
+                               f"{p.elapsed_s:.0f} s elapsed, ≈ {p.remaining_s:.0f} s left")
+                    state["done"] = p.segments_done
+
+            report = run_job(link, job, prof, drawing=drawing, laser=laser,
+                             confirm=confirm_with(yes), resume=resume,
+                             on_progress=on_progress,
+                             should_stop=lambda: interrupted["flag"],
+                             on_interrupt=on_interrupt, on_note=click.echo)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        link.close()
+    click.echo(f"done: {report.segments} segments in {report.elapsed_s:.1f} s "
+               f"(planned {job.total_time_s:.1f} s), {report.bytes_sent} bytes sent, "
+               f"{report.resends} resends; machine at A = {report.final.a}, "
+               f"B = {report.final.b}")
+    trace = getattr(link.port, "trace_path", None)
+    if trace is not None and Path(trace).exists():
+        _write_executed(job, prof, Path(trace), preview_path, report.start_segment)
+
+
+def _write_executed(job: Any, prof: Profile, trace: Path, preview_path: Path,
+                    first_segment: int) -> None:
+    """After an emulator run: the executed path from the recorded pulses, next to the
+    preview (CSV of pen points and their deviation), and its largest deviation."""
+    from fivebar_host.devices.simtrace import read_trace
+    from fivebar_host.executed import executed_path, merge_axes
+    from fivebar_host.job import write_atomic
+
+    tr = read_trace(trace)
+    t, track = merge_axes(tr.positions("A"), tr.positions("B"))
+    ex = executed_path(job, prof, t / tr.freq, track, first_segment)
+    out = preview_path.with_name(preview_path.stem + ".executed.csv")
+    rows = ["t_s,a_steps,b_steps,x_mm,y_mm,segment,deviation_mm"]
+    rows += [f"{ti:.6f},{a},{b},{x:.4f},{y:.4f},{sg},{'' if d != d else f'{d:.5f}'}"
+             for ti, (a, b), (x, y), sg, d in zip(t / tr.freq, track.tolist(),
+                                                  ex.points.tolist(), ex.segment.tolist(),
+                                                  ex.deviation_mm.tolist(), strict=True)]
+    write_atomic(out, "\n".join(rows) + "\n")
+    click.echo(f"executed path (from the emulator's step pulses): {out}; max deviation "
+               f"{ex.max_deviation_mm:.4f} mm (bound {job.tolerance_mm:g} + step quantum "
+               f"{job.step_quantum_mm:.4f} mm)")

@@ -1,0 +1,174 @@
+"""`fivebar plot --server URL`: hand the drawing to a running `fivebar serve` and follow it.
+
+The plot command itself is untouched: without --server the wrapper calls it unchanged; with
+it, the same job option values go to the daemon as query parameters (generated from their one
+definition in `fivebar_host.options`), and this module follows the job with the same progress
+bar. Ctrl-C pauses the job on the daemon (held, laser off) and asks to resume or abort (no
+terminal: abort cancels it); a question of the daemon (are the arms at the home pose?) is asked
+here, and --yes answers it in advance.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+from collections.abc import Callable
+from functools import wraps
+from pathlib import Path
+from typing import Any, TypeVar
+
+import click
+
+from fivebar_host.cli.common import fail
+from fivebar_host.options import JOB_OPTIONS
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def server_option(fn: F) -> F:
+    """Add `--server URL` and `--token` to `plot`."""
+
+    @wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        server = kwargs.pop("server", None)
+        token = kwargs.pop("token", None)
+        if server is None:
+            return fn(*args, **kwargs)
+        return plot_via_server(server, token, kwargs)
+
+    wrapper = click.option(
+        "--token", default=None, metavar="TOKEN", envvar="FIVEBAR_TOKEN",
+        help="The daemon's token (needed when it listens on a non-loopback address). "
+        "Default: $FIVEBAR_TOKEN, else the local daemon's token file.")(wrapper)
+    wrapper = click.option(
+        "--server", default=None, metavar="URL",
+        help="Send the drawing to a running `fivebar serve` at URL (http://HOST:PORT) and "
+        "follow it there, instead of opening --port.")(wrapper)
+    return wrapper  # type: ignore[return-value]
+
+
+def _submit(client: Any, kw: dict[str, Any]) -> dict[str, Any]:
+    """Send the drawing with the plot's job option values; the queued job."""
+    from fivebar_host.server.client import plot_options
+
+    given = [flag for flag, key in (("--port", "port"), ("--dry-run", "dry_run"),
+                                    ("--resume", "resume"), ("--config", "config_path"))
+             if kw.get(key)]
+    if given:
+        fail(f"--server hands the drawing to the daemon, which has its own port and profile "
+             f"(fivebar serve --port/--config) and resumes its own jobs; drop "
+             f"{', '.join(given)}")
+    drawing = Path(kw["drawing"])
+    try:
+        data = drawing.read_bytes()
+    except OSError as e:
+        fail(f"{drawing}: {e.strerror or e}")
+    values = {o.name: kw[o.name] for o in JOB_OPTIONS if o.name in kw}
+    job: dict[str, Any] = client.submit(data, drawing.name, plot_options(
+        **values, confirm=bool(kw.get("yes", False))))
+    return job
+
+
+def plot_via_server(server: str, token: str | None, kw: dict[str, Any]) -> None:
+    """Submit, then follow the job's progress until it is over."""
+    from fivebar_host.server.client import ServerClient, ServerError, default_token
+
+    try:
+        client = ServerClient(server, token or default_token())
+        job = _submit(client, kw)
+    except ServerError as e:
+        fail(str(e), code=2 if e.status in (400, 413, 415, 422) else 3)
+        return
+    click.echo(f"job {job['id']} queued on {client.base}: {job['segments_total']} segments, "
+               f"mode {job['mode']}, ≈ {job['estimated_s']:.1f} s"
+               + (f", max deviation {job['max_dev_mm']:.4f} mm" if job["max_dev_mm"] else ""))
+    try:
+        job = _follow_with_bar(client, job)
+    except ServerError as e:
+        fail(str(e), code=3)
+        return
+    if job["state"] != "done":
+        fail(f"job {job['id']} {job['state']}: {job['message']}", code=3)
+    click.echo(str(job["message"]))
+
+
+def _follow_with_bar(client: Any, job: dict[str, Any]) -> dict[str, Any]:
+    """Follow a job with a progress bar until it is over or a person must act; Ctrl-C
+    pauses it on the daemon and asks."""
+    from fivebar_host.server.client import follow
+
+    jid = int(job["id"])
+    interrupted = {"flag": False}
+
+    def on_sigint(signum: int, frame: Any) -> None:
+        interrupted["flag"] = True
+
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    try:
+        with click.progressbar(length=int(job["segments_total"]), label="plotting",
+                               show_eta=False, show_percent=True,
+                               item_show_func=lambda s: s) as bar:
+            on_update = _bar_updater(bar)
+            while True:
+                job = follow(client, jid, on_update, should_stop=lambda: interrupted["flag"])
+                if interrupted["flag"]:
+                    interrupted["flag"] = False
+                    _after_ctrl_c(client, job)
+                    continue
+                if job["state"] == "held" and sys.stdin.isatty() and _ask_held(client, job):
+                    continue
+                return job
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _bar_updater(bar: Any) -> Callable[[dict[str, Any]], None]:
+    """A `follow` callback that advances the progress bar."""
+    state = {"done": 0}
+
+    def on_update(j: dict[str, Any]) -> None:
+        done = int(j["segments_done"])
+        if done > state["done"] or j["state"] != "running":
+            bar.update(max(0, done - state["done"]),
+                       f"segment {done}/{j['segments_total']}, "
+                       f"{j['elapsed_s']:.0f} s elapsed, "
+                       f"≈ {j['remaining_s'] or 0:.0f} s left"
+                       + ("" if j["state"] == "running" else f" ({j['state']})"))
+            state["done"] = max(state["done"], done)
+
+    return on_update
+
+
+def _after_ctrl_c(client: Any, job: dict[str, Any]) -> None:
+    """Ctrl-C: pause the running job on the daemon, then resume or abort it."""
+    jid = int(job["id"])
+    if job["state"] in ("queued", "running"):
+        job = client.pause(jid) if job["state"] == "running" else job
+        click.echo("\npaused on the daemon: held, laser off.", err=True)
+    choice = click.prompt("resume or abort?", type=click.Choice(["resume", "abort"]),
+                          default="abort", err=True) if sys.stdin.isatty() else "abort"
+    if choice == "abort":
+        client.cancel(jid)
+    elif client.job(jid)["state"] in ("paused", "held"):
+        client.resume(jid)
+
+
+def _ask_held(client: Any, job: dict[str, Any]) -> bool:
+    """A held job on a terminal: answer its question or choose; True to keep following."""
+    jid = int(job["id"])
+    if job.get("question"):
+        if click.confirm(f"\n{job['question']}", default=False, err=True):
+            client.resume(jid, confirm=True)
+            return True
+        return False
+    click.echo(f"\nheld: {job['message']}", err=True)
+    choice = click.prompt("resume, abort or leave it held?",
+                          type=click.Choice(["resume", "abort", "leave"]),
+                          default="leave", err=True)
+    if choice == "resume":
+        client.resume(jid)
+        return True
+    if choice == "abort":
+        client.cancel(jid)
+        return True
+    return False

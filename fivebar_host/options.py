@@ -1,0 +1,282 @@
+"""Every job option declared once: name, type, unit, range, default and help.
+
+A job option (tolerance, placement, working mode, laser …) is one `Option` in `JOB_OPTIONS`.
+From that one definition come:
+
+- the click options of `fivebar plot` / `convert` / `frame` (`fivebar_host.cli.common`),
+- the daemon's query parameters: their OpenAPI description, their parsing and validation,
+  and the refusal of an unknown parameter (`fivebar_host.server.app`),
+- the HTTP client's query string (`fivebar_host.server.client.plot_options`).
+
+Values are parsed from text once, here, at the edge (the CLI and the query string both hand
+over text) into the units the pipeline uses: millimetres, degrees for the user-facing
+rotation, plain numbers. The parsed values are keyed by the field names of
+`CompileOptions` / `JobOptions` (`tolerance_mm`, `origin_mm`, …), so building the compiler's
+options is `CompileOptions(**values)` with no renaming on the way.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any, NoReturn
+
+from fivebar_host.errors import OptionError
+
+#: Text forms of a boolean in a query string (as FastAPI/pydantic read them).
+_TRUE = frozenset({"true", "1", "yes", "on"})
+_FALSE = frozenset({"false", "0", "no", "off"})
+#: Most layers a job may select, and the longest layer name.
+MAX_LAYERS = 64
+MAX_LAYER_CHARS = 200
+
+
+@dataclass(frozen=True)
+class Option:
+    """One job option.
+
+    `name` is the field of `CompileOptions`/`JobOptions` it sets; `flag` the command line's
+    spelling; `query` the daemon's query parameter. `kind` is one of "float", "bool",
+    "choice", "xy" (two numbers "X,Y") and "text". `repeat` options take several values (a
+    tuple). `cli=False` options exist only on the API (the CLI asks on the terminal
+    instead)."""
+
+    name: str
+    flag: str
+    query: str
+    kind: str
+    help: str
+    unit: str = ""
+    default: Any = None
+    lo: float | None = None
+    hi: float | None = None
+    lo_open: bool = False
+    choices: tuple[str, ...] = ()
+    repeat: bool = False
+    metavar: str = ""
+    cli: bool = True
+
+    # ------------------------------------------------------------------ parsing
+    def parse(self, text: str) -> Any:
+        """One value from its text form (command line or query string); OptionError names
+        the option and says what it must look like."""
+        text = text.strip()
+        if self.kind == "bool":
+            low = text.lower()
+            if low in _TRUE or low in _FALSE:
+                return low in _TRUE
+            return self._fail(f"must be true or false; got {text!r}")
+        if self.kind == "choice":
+            if text not in self.choices:
+                return self._fail(f"must be one of {', '.join(self.choices)}; got {text!r}")
+            return text
+        if self.kind == "float":
+            try:
+                v = float(text)
+            except ValueError:
+                return self._fail(f"must be a number{self._unit_text()}; got {text!r}")
+            return self.check(v)
+        if self.kind == "xy":
+            parts = text.replace(" ", "").split(",")
+            try:
+                x, y = (float(p) for p in parts)
+            except ValueError:
+                return self._fail(f"must look like X,Y in mm (e.g. 10,95); got {text!r}")
+            return self.check((x, y))
+        return self.check(text)
+
+    def check(self, value: Any) -> Any:
+        """Validate an already typed value (range, finiteness, length); returns it."""
+        if value is None:
+            return None
+        if self.kind == "float":
+            v = float(value)
+            if not math.isfinite(v):
+                self._fail(f"must be finite; got {value!r}")
+            self._check_range(v)
+            return v
+        if self.kind == "xy":
+            x, y = (float(c) for c in value)
+            if not (math.isfinite(x) and math.isfinite(y)):
+                self._fail(f"must be finite; got {value!r}")
+            return (x, y)
+        if self.kind == "text" and len(str(value)) > MAX_LAYER_CHARS:
+            self._fail(f"must be at most {MAX_LAYER_CHARS} characters")
+        if self.kind == "choice" and value not in self.choices:
+            self._fail(f"must be one of {', '.join(self.choices)}; got {value!r}")
+        if self.kind == "bool":
+            return bool(value)
+        return value
+
+    def _check_range(self, v: float) -> None:
+        low_bad = self.lo is not None and (v <= self.lo if self.lo_open else v < self.lo)
+        if low_bad or (self.hi is not None and v > self.hi):
+            self._fail(f"must be within {self.range_text()}; got {v!r}")
+
+    def _fail(self, why: str) -> NoReturn:
+        raise OptionError(self.query, why)
+
+    # ------------------------------------------------------------------ text forms
+    def _unit_text(self) -> str:
+        return f" ({self.unit})" if self.unit else ""
+
+    def range_text(self) -> str:
+        """The allowed range, e.g. "0.0001..10 mm" or "> 0"."""
+        if self.lo is None and self.hi is None:
+            return ""
+        if self.hi is None:
+            return f"{'>' if self.lo_open else '>='} {self.lo:g}"
+        unit = f" {self.unit}" if self.unit else ""
+        return f"{self.lo:g}..{self.hi:g}{unit}"
+
+    def describe(self) -> str:
+        """The help text with unit and range (click's help, the OpenAPI description)."""
+        rng = self.range_text()
+        return self.help + (f" Range: {rng}." if rng else "")
+
+    def to_text(self, value: Any) -> str | list[str] | None:
+        """The query-string form of a value (None: leave the parameter out)."""
+        if value is None or (self.repeat and not value):
+            return None
+        if self.repeat:
+            return [str(v) for v in value]
+        if self.kind == "bool":
+            return "true" if value else "false"
+        if self.kind == "xy":
+            return f"{float(value[0])!r},{float(value[1])!r}"
+        return str(value)
+
+    def openapi(self) -> dict[str, Any]:
+        """The OpenAPI 3 parameter object of this option (query, optional)."""
+        schemas: dict[str, dict[str, Any]] = {
+            "bool": {"type": "boolean"}, "float": {"type": "number"},
+            "choice": {"type": "string", "enum": list(self.choices)},
+            "xy": {"type": "string", "pattern": r"^[^,]+,[^,]+$"}, "text": {"type": "string"}}
+        schema = schemas[self.kind]
+        if self.kind == "float":
+            if self.lo is not None:
+                schema["exclusiveMinimum" if self.lo_open else "minimum"] = self.lo
+            if self.hi is not None:
+                schema["maximum"] = self.hi
+        if self.repeat:
+            schema = {"type": "array", "items": schema, "maxItems": MAX_LAYERS}
+        elif self.default is not None:
+            schema["default"] = self.default
+        return {"name": self.query, "in": "query", "required": False,
+                "description": self.describe(), "schema": schema}
+
+
+WORKING_MODE_CHOICES = ("++", "+-", "-+", "--", "auto")
+
+#: The job options, in the order the CLI's help lists them.
+JOB_OPTIONS: tuple[Option, ...] = (
+    Option("mode", "--mode", "mode", "choice", choices=WORKING_MODE_CHOICES,
+           help="Working mode; auto tries all four and picks one that clears every check "
+           "(default: the profile's)."),
+    Option("tolerance_mm", "--tolerance", "tolerance", "float", unit="mm", lo=1e-4, hi=10.0,
+           help="Largest deviation of the drawn path, mm (default: the profile's)."),
+    Option("origin_mm", "--origin", "origin", "xy", unit="mm", metavar="X,Y",
+           help="Put the drawing's origin (SVG: page bottom-left) at machine X,Y mm "
+           "(default: centred in the largest safe rectangle)."),
+    Option("scale", "--scale", "scale", "float", lo=0.0, lo_open=True,
+           help="Scale factor (default 1)."),
+    Option("rotate_deg", "--rotate", "rotate", "float", unit="degrees", default=0.0,
+           help="Rotate the drawing, degrees counter-clockwise."),
+    Option("fit", "--fit", "fit", "bool", default=False,
+           help="Scale the drawing to fill the largest singularity-safe rectangle of the "
+           "working mode."),
+    Option("layers", "--layer", "layer", "text", repeat=True, default=(), metavar="NAME",
+           help="Only this Inkscape layer (label or id); repeatable."),
+    Option("keep_order", "--keep-order", "keep_order", "bool", default=False,
+           help="Draw paths in file order (no reordering to cut travel)."),
+    Option("laser", "--laser", "laser", "bool", default=False,
+           help="Laser job: drawing segments carry the profile's power (S > 0). Without it "
+           "every line says S0 (pen plotter: pen down/up = M3/M5 around drawing strokes)."),
+    Option("confirm", "--yes", "confirm", "bool", default=False, cli=False,
+           help="Answer yes if the daemon must ask whether the arms are at the home pose "
+           "(first job after power-up)."),
+)
+BY_NAME: dict[str, Option] = {o.name: o for o in JOB_OPTIONS}
+BY_QUERY: dict[str, Option] = {o.query: o for o in JOB_OPTIONS}
+#: The options that shape the compiled job (everything but laser and confirm).
+COMPILE_NAMES: tuple[str, ...] = tuple(o.name for o in JOB_OPTIONS
+                                       if o.name not in ("laser", "confirm"))
+
+
+def defaults() -> dict[str, Any]:
+    """Every option at its default, keyed by field name."""
+    return {o.name: o.default for o in JOB_OPTIONS}
+
+
+def unknown_option(key: str, known: Iterable[str]) -> OptionError:
+    """The error for an option nobody declared, with the closest known name."""
+    names = sorted(known)
+    close = difflib.get_close_matches(key, names, n=1)
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    return OptionError(key, f"unknown option{hint}; known: {', '.join(names)}")
+
+
+def parse_query(pairs: Iterable[tuple[str, str]],
+                extra: Iterable[str] = ()) -> dict[str, Any]:
+    """Job option values from query-string pairs, keyed by field name, defaults filled in.
+
+    Keys in `extra` (the endpoint's own parameters, such as the file name) are skipped; any
+    other unknown key is an OptionError (a misspelt option is never silently ignored), and
+    so is a second value for an option that takes one."""
+    skip = frozenset(extra)
+    values = defaults()
+    seen: set[str] = set()
+    for key, text in pairs:
+        if key in skip:
+            continue
+        opt = BY_QUERY.get(key)
+        if opt is None:
+            raise unknown_option(key, [*BY_QUERY, *skip])
+        if opt.repeat:
+            items = (*values[opt.name], opt.parse(text))
+            if len(items) > MAX_LAYERS:
+                opt._fail(f"at most {MAX_LAYERS} values")
+            values[opt.name] = items
+            continue
+        if key in seen:
+            opt._fail("given more than once")
+        seen.add(key)
+        values[opt.name] = opt.parse(text)
+    return values
+
+
+def check_values(values: Mapping[str, Any]) -> dict[str, Any]:
+    """Typed option values (e.g. from Python callers) checked against their definitions;
+    unknown names are an OptionError. Missing ones take their defaults."""
+    out = defaults()
+    for name, value in values.items():
+        opt = BY_NAME.get(name)
+        if opt is None:
+            raise unknown_option(name, BY_NAME)
+        if opt.repeat:
+            items = tuple(opt.check(v) for v in (value or ()))
+            if len(items) > MAX_LAYERS:
+                opt._fail(f"at most {MAX_LAYERS} values")
+            out[name] = items
+        else:
+            out[name] = opt.check(value)
+    return out
+
+
+def to_query(values: Mapping[str, Any]) -> dict[str, str | list[str]]:
+    """The query parameters for option values keyed by field name (the HTTP client's side
+    of `parse_query`)."""
+    checked = check_values(values)
+    out: dict[str, str | list[str]] = {}
+    for name, value in checked.items():
+        text = BY_NAME[name].to_text(value)
+        if text is not None:
+            out[BY_NAME[name].query] = text
+    return out
+
+
+def compile_values(values: Mapping[str, Any]) -> dict[str, Any]:
+    """The subset of option values that shapes the compiled job (`CompileOptions(**…)`)."""
+    return {k: values[k] for k in COMPILE_NAMES if k in values}
