@@ -169,6 +169,6 @@ def test_doc_order_of_line_checks_matches_firmware_and_mock() -> None:
     fw = (ROOT / "firmware" / "fivebar" / "fb_main.c").read_text()
     handle = fw[fw.index("static void handle_line"):]
     assert handle.index("FB_ERR_RX_OVERFLOW") < handle.index("FB_ERR_LINE_TOO_LONG")
-    mock = (ROOT / "fivebar_host" / "devices" / "mock.py").read_text()
+    mock = (ROOT / "fivebar_host" / "devices" / "mock" / "firmware.py").read_text()
     handle = mock[mock.index("def _handle_line"):]
     assert handle.index("E_RX_OVERFLOW") < handle.index("E_LINE_TOO_LONG")

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 import re
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from fivebar_host.errors import InputError
@@ -34,14 +35,56 @@ from fivebar_host.toolpath.geometry import (
 
 _WORD = re.compile(r"([A-Za-z])\s*([+-]?(?:\d+\.?\d*|\.\d+))")
 _PAREN = re.compile(r"\([^)]*\)")
+_LASER_ON = re.compile(r"(?<![A-Za-z])[Mm]\s*0*[34](?![\d.])")
 
 #: G codes that are accepted; values are what they select.
 _G_OK = {0.0, 1.0, 2.0, 3.0, 17.0, 20.0, 21.0, 90.0, 91.0, 90.1, 91.1, 92.0, 94.0, 54.0}
 _M_OK = {2.0, 3.0, 4.0, 5.0, 30.0}
+_MOTIONS = (0.0, 1.0, 2.0, 3.0)
+#: Words that carry a value for this line (coordinates, arc centre or radius, feed, power).
+_VALUE_WORDS = ("X", "Y", "I", "J", "R", "F", "S")
+#: Axis words of other machines: refused with a hint.
+_OTHER_AXES = ("Z", "A", "B", "C", "U", "V", "W")
 
 #: An arc's end must lie on its circle to within this (absolute mm, or relative to r).
 ARC_END_TOL_MM = 0.005
 ARC_END_TOL_REL = 1e-3
+
+
+@dataclass
+class _Words:
+    """The words of one line, sorted by kind: value words, G codes and M codes in order."""
+
+    axes: dict[str, float] = field(default_factory=dict)
+    gs: list[float] = field(default_factory=list)
+    ms: list[float] = field(default_factory=list)
+
+    def has(self, *letters: str) -> bool:
+        """Whether any of ``letters`` is among the value words."""
+        return any(letter in self.axes for letter in letters)
+
+
+@dataclass
+class _Reader:
+    """The reader's state while it goes through a file: the modal state of the G-code
+    interpreter (units, distance modes, motion mode, laser, feed, position, G92 offset), the
+    stroke being drawn and the drawing being built."""
+
+    builder: DrawingBuilder
+    name: str
+    has_laser: bool  # any M3/M4 in the file: only moves with the laser on draw
+    unit: float = 1.0  # mm per file unit
+    absolute: bool = True
+    arc_abs: bool = False
+    motion: float = -1.0  # no motion mode until the first G0-G3
+    laser_on: bool = False
+    power_s: float = 0.0
+    feed_mm_s: float = math.nan
+    pos: tuple[float, float] = (0.0, 0.0)  # current position, mm, in the drawing frame
+    offset: tuple[float, float] = (0.0, 0.0)  # G92: drawing = file coordinate (mm) + offset
+    stroke_open: bool = False
+    stroke_key: tuple[float, float] | None = None
+    max_s: float = 0.0
 
 
 def _strip(raw: str, file: str, ln: int) -> str:
@@ -66,157 +109,203 @@ def read_gcode(source: str | Path | bytes, file: str | None = None) -> Drawing:
     except UnicodeDecodeError as e:
         raise InputError(f"not a text file (byte {e.start} is not UTF-8)", name) from e
     lines = text.splitlines()
-    has_laser = any(re.search(r"(?<![A-Za-z])[Mm]\s*0*[34](?![\d.])", _strip_soft(s))
-                    for s in lines)
-    b = DrawingBuilder(name)
-
-    unit = 1.0  # mm per file unit
-    absolute = True
-    arc_abs = False
-    motion = -1.0  # no motion mode until the first G0-G3
-    laser_on = False
-    power_s = 0.0
-    feed_mm_s = math.nan
-    pos = (0.0, 0.0)  # current position, mm, in the drawing frame
-    offset = (0.0, 0.0)  # G92: drawing = file coordinate (mm) + offset
-    stroke_open = False
-    stroke_key: tuple[float, float] | None = None
-    max_s = 0.0
-
+    has_laser = any(_LASER_ON.search(_strip_soft(s)) for s in lines)
+    rd = _Reader(DrawingBuilder(name), name, has_laser)
     for ln, raw in enumerate(lines, start=1):
-        s = _strip(raw, name, ln)
-        if not s or s == "%":
-            continue
-        words: list[tuple[str, float, str]] = []
-        pos_in = 0
-        for m in _WORD.finditer(s):
-            gap = s[pos_in:m.start()]
-            if gap.strip():
-                raise InputError(f"cannot read {gap.strip()!r}", name, ln)
-            letter = m.group(1).upper()
-            value = float(m.group(2))
-            words.append((letter, value, m.group(0).replace(" ", "")))
-            pos_in = m.end()
-        rest = s[pos_in:]
-        if rest.strip():
-            raise InputError(f"cannot read {rest.strip()!r}", name, ln)
-        axes: dict[str, float] = {}
-        gs: list[float] = []
-        ms: list[float] = []
-        for letter, value, tok in words:
-            if not math.isfinite(value):
-                raise InputError(f"{tok}: not a finite number", name, ln)
-            if letter == "N":
-                continue
-            if letter == "G":
-                if round(value, 1) not in _G_OK:
-                    raise InputError(f"unsupported G-code word {tok} (supported: G0 G1 G2 G3 "
-                                     "G17 G20 G21 G54 G90 G91 G90.1 G91.1 G92 G94)", name, ln)
-                gs.append(round(value, 1))
-            elif letter == "M":
-                if value not in _M_OK:
-                    raise InputError(f"unsupported M-code word {tok} (supported: M2 M3 M4 M5 "
-                                     "M30)", name, ln)
-                ms.append(value)
-            elif letter in ("X", "Y", "I", "J", "R", "F", "S"):
-                if letter in axes:
-                    raise InputError(f"word {letter} appears twice", name, ln)
-                axes[letter] = value
-            elif letter in ("Z", "A", "B", "C", "U", "V", "W"):
-                raise InputError(f"unsupported axis word {tok}: this machine draws in X and Y "
-                                 "only (the pen or laser follows M3/M5)", name, ln)
-            else:
-                raise InputError(f"unsupported word {tok}", name, ln)
-
-        end_program = False
-        for g in gs:
-            if g == 20.0:
-                unit = 25.4
-            elif g == 21.0:
-                unit = 1.0
-            elif g == 90.0:
-                absolute = True
-            elif g == 91.0:
-                absolute = False
-            elif g == 90.1:
-                arc_abs = True
-            elif g == 91.1:
-                arc_abs = False
-        if "F" in axes:
-            if axes["F"] <= 0:
-                raise InputError(f"feed F{axes['F']:g} must be positive", name, ln)
-            feed_mm_s = axes["F"] * unit / 60.0
-        if "S" in axes:
-            if axes["S"] < 0:
-                raise InputError(f"power S{axes['S']:g} must not be negative", name, ln)
-            power_s = axes["S"]
-            max_s = max(max_s, power_s)
-        for mcode in ms:
-            if mcode in (3.0, 4.0):
-                laser_on = True
-            elif mcode == 5.0:
-                laser_on = False
-            else:
-                end_program = True
-
-        if 92.0 in gs:
-            if not ({"X", "Y"} & axes.keys()):
-                raise InputError("G92 needs X and/or Y", name, ln)
-            # G92 X.. Y..: the current point now has these file coordinates.
-            fx = axes.get("X", (pos[0] - offset[0]) / unit) * unit
-            fy = axes.get("Y", (pos[1] - offset[1]) / unit) * unit
-            offset = (pos[0] - fx, pos[1] - fy)
-            if {"I", "J", "R"} & axes.keys():
-                raise InputError("G92 with I, J or R", name, ln)
-            if any(g in (0.0, 1.0, 2.0, 3.0) for g in gs):
-                raise InputError("G92 and a motion command on the same line", name, ln)
-            continue
-        motions = [g for g in gs if g in (0.0, 1.0, 2.0, 3.0)]
-        if len(motions) > 1:
-            raise InputError("more than one motion command on one line", name, ln)
-        if motions:
-            motion = motions[0]
-        if not ({"X", "Y", "I", "J", "R"} & axes.keys()):
-            if end_program:
-                break
-            continue
-        if motion < 0:
-            raise InputError("coordinates before any G0/G1/G2/G3", name, ln)
-
-        x = _target(axes, "X", pos[0], offset[0], unit, absolute)
-        y = _target(axes, "Y", pos[1], offset[1], unit, absolute)
-        if max(abs(x), abs(y)) > MAX_COORD_MM:
-            raise InputError(f"coordinate ({x:g}, {y:g}) mm is larger than {MAX_COORD_MM:g} "
-                             "mm", name, ln)
-        cutting = motion != 0.0 and (laser_on and power_s > 0 if has_laser else True)
-        if motion in (0.0, 1.0) and {"I", "J", "R"} & axes.keys():
-            raise InputError(f"I, J or R on a G{int(motion)} move", name, ln)
-        if cutting:
-            key = (power_s, feed_mm_s)
-            if not stroke_open or key != stroke_key:
-                src = b.add_source(None, ln, "gcode")
-                b.begin_stroke(src, power=power_s, feed_mm_s=feed_mm_s)
-                stroke_open = True
-                stroke_key = key
-            if motion == 1.0:
-                if (x, y) != pos:
-                    b.add(LINE, (pos[0], pos[1], x, y), ln)
-            else:
-                prim = _arc(pos, (x, y), axes, unit, arc_abs, offset, motion == 2.0, name, ln)
-                b.add(ARC, prim, ln)
-        else:
-            stroke_open = False
-        pos = (x, y)
-        if end_program:
+        if _read_line(rd, raw, ln):
             break
+    return _finish(rd)
 
-    drawing = b.build()
+
+def _read_line(rd: _Reader, raw: str, ln: int) -> bool:
+    """Interpret one line; True at the end of the program (M2/M30: later lines are ignored)."""
+    s = _strip(raw, rd.name, ln)
+    if not s or s == "%":
+        return False
+    w = _classify(_tokens(s, rd.name, ln), rd.name, ln)
+    end_program = _apply_modal(rd, w, ln)
+    if 92.0 in w.gs:
+        _apply_g92(rd, w, ln)
+        return False
+    _select_motion(rd, w, ln)
+    if not w.has("X", "Y", "I", "J", "R"):
+        return end_program
+    if rd.motion < 0:
+        raise InputError("coordinates before any G0/G1/G2/G3", rd.name, ln)
+    _move(rd, w, ln)
+    return end_program
+
+
+def _tokens(s: str, file: str, ln: int) -> list[tuple[str, float, str]]:
+    """The words of a stripped line as (upper-case letter, value, word as written without
+    spaces); anything between or after the words is an error."""
+    words: list[tuple[str, float, str]] = []
+    pos_in = 0
+    for m in _WORD.finditer(s):
+        gap = s[pos_in:m.start()]
+        if gap.strip():
+            raise InputError(f"cannot read {gap.strip()!r}", file, ln)
+        words.append((m.group(1).upper(), float(m.group(2)), m.group(0).replace(" ", "")))
+        pos_in = m.end()
+    rest = s[pos_in:]
+    if rest.strip():
+        raise InputError(f"cannot read {rest.strip()!r}", file, ln)
+    return words
+
+
+def _classify(words: list[tuple[str, float, str]], file: str, ln: int) -> _Words:
+    """Sort a line's words into G codes, M codes and value words, refusing what this reader
+    does not honour (in the order the words appear)."""
+    w = _Words()
+    for letter, value, tok in words:
+        if not math.isfinite(value):
+            raise InputError(f"{tok}: not a finite number", file, ln)
+        if letter == "N":
+            continue
+        if letter == "G":
+            w.gs.append(_g_code(value, tok, file, ln))
+        elif letter == "M":
+            w.ms.append(_m_code(value, tok, file, ln))
+        elif letter in _VALUE_WORDS:
+            if letter in w.axes:
+                raise InputError(f"word {letter} appears twice", file, ln)
+            w.axes[letter] = value
+        elif letter in _OTHER_AXES:
+            raise InputError(f"unsupported axis word {tok}: this machine draws in X and Y "
+                             "only (the pen or laser follows M3/M5)", file, ln)
+        else:
+            raise InputError(f"unsupported word {tok}", file, ln)
+    return w
+
+
+def _g_code(value: float, tok: str, file: str, ln: int) -> float:
+    """A supported G code's number (rounded to one decimal: G90.1), else an error."""
+    g = round(value, 1)
+    if g not in _G_OK:
+        raise InputError(f"unsupported G-code word {tok} (supported: G0 G1 G2 G3 "
+                         "G17 G20 G21 G54 G90 G91 G90.1 G91.1 G92 G94)", file, ln)
+    return g
+
+
+def _m_code(value: float, tok: str, file: str, ln: int) -> float:
+    """A supported M code's number, else an error."""
+    if value not in _M_OK:
+        raise InputError(f"unsupported M-code word {tok} (supported: M2 M3 M4 M5 "
+                         "M30)", file, ln)
+    return value
+
+
+def _apply_modal(rd: _Reader, w: _Words, ln: int) -> bool:
+    """Apply a line's modal words (G units and distance modes, F, S, M); True for M2/M30."""
+    for g in w.gs:
+        _apply_g_mode(rd, g)
+    if "F" in w.axes:
+        if w.axes["F"] <= 0:
+            raise InputError(f"feed F{w.axes['F']:g} must be positive", rd.name, ln)
+        rd.feed_mm_s = w.axes["F"] * rd.unit / 60.0
+    if "S" in w.axes:
+        if w.axes["S"] < 0:
+            raise InputError(f"power S{w.axes['S']:g} must not be negative", rd.name, ln)
+        rd.power_s = w.axes["S"]
+        rd.max_s = max(rd.max_s, rd.power_s)
+    end_program = False
+    for mcode in w.ms:
+        if mcode in (3.0, 4.0):
+            rd.laser_on = True
+        elif mcode == 5.0:
+            rd.laser_on = False
+        else:
+            end_program = True
+    return end_program
+
+
+def _apply_g_mode(rd: _Reader, g: float) -> None:
+    """G20/G21 units, G90/G91 distances, G90.1/G91.1 arc centres; other G codes: nothing."""
+    if g == 20.0:
+        rd.unit = 25.4
+    elif g == 21.0:
+        rd.unit = 1.0
+    elif g == 90.0:
+        rd.absolute = True
+    elif g == 91.0:
+        rd.absolute = False
+    elif g == 90.1:
+        rd.arc_abs = True
+    elif g == 91.1:
+        rd.arc_abs = False
+
+
+def _apply_g92(rd: _Reader, w: _Words, ln: int) -> None:
+    """G92 X.. Y..: the current point now has these file coordinates."""
+    if not w.has("X", "Y"):
+        raise InputError("G92 needs X and/or Y", rd.name, ln)
+    pos, offset, unit = rd.pos, rd.offset, rd.unit
+    fx = w.axes.get("X", (pos[0] - offset[0]) / unit) * unit
+    fy = w.axes.get("Y", (pos[1] - offset[1]) / unit) * unit
+    rd.offset = (pos[0] - fx, pos[1] - fy)
+    if w.has("I", "J", "R"):
+        raise InputError("G92 with I, J or R", rd.name, ln)
+    if any(g in _MOTIONS for g in w.gs):
+        raise InputError("G92 and a motion command on the same line", rd.name, ln)
+
+
+def _select_motion(rd: _Reader, w: _Words, ln: int) -> None:
+    """A G0-G3 word sets the motion mode (at most one per line)."""
+    motions = [g for g in w.gs if g in _MOTIONS]
+    if len(motions) > 1:
+        raise InputError("more than one motion command on one line", rd.name, ln)
+    if motions:
+        rd.motion = motions[0]
+
+
+def _move(rd: _Reader, w: _Words, ln: int) -> None:
+    """A move to the line's X/Y in the current motion mode: drawn when it cuts, else travel
+    (which ends the stroke)."""
+    x = _target(w.axes, "X", rd.pos[0], rd.offset[0], rd.unit, rd.absolute)
+    y = _target(w.axes, "Y", rd.pos[1], rd.offset[1], rd.unit, rd.absolute)
+    if max(abs(x), abs(y)) > MAX_COORD_MM:
+        raise InputError(f"coordinate ({x:g}, {y:g}) mm is larger than {MAX_COORD_MM:g} "
+                         "mm", rd.name, ln)
+    motion = rd.motion
+    cutting = motion != 0.0 and (rd.laser_on and rd.power_s > 0 if rd.has_laser else True)
+    if motion in (0.0, 1.0) and w.has("I", "J", "R"):
+        raise InputError(f"I, J or R on a G{int(motion)} move", rd.name, ln)
+    if cutting:
+        _draw(rd, w, (x, y), ln)
+    else:
+        rd.stroke_open = False
+    rd.pos = (x, y)
+
+
+def _draw(rd: _Reader, w: _Words, end: tuple[float, float], ln: int) -> None:
+    """Add a cutting G1/G2/G3 move to the drawing, starting a stroke when the power or the
+    feed changed (or none is open)."""
+    key = (rd.power_s, rd.feed_mm_s)
+    b = rd.builder
+    if not rd.stroke_open or key != rd.stroke_key:
+        src = b.add_source(None, ln, "gcode")
+        b.begin_stroke(src, power=rd.power_s, feed_mm_s=rd.feed_mm_s)
+        rd.stroke_open = True
+        rd.stroke_key = key
+    pos = rd.pos
+    if rd.motion == 1.0:
+        if end != pos:
+            b.add(LINE, (pos[0], pos[1], end[0], end[1]), ln)
+    else:
+        prim = _arc(pos, end, w.axes, rd.unit, rd.arc_abs, rd.offset, rd.motion == 2.0,
+                    rd.name, ln)
+        b.add(ARC, prim, ln)
+
+
+def _finish(rd: _Reader) -> Drawing:
+    """The drawing, with stroke powers as fractions of the file's largest S (the profile's
+    power is full scale); an error when nothing cuts."""
+    drawing = rd.builder.build()
     if drawing.kind.shape[0] == 0:
         raise InputError("no cutting moves to draw (G1/G2/G3 with the laser on, M3/M4 S>0)",
-                         name)
-    # Powers as fractions of the file's largest S (the profile's power is full scale).
-    if max_s > 0:
-        drawing.stroke_power[:] = drawing.stroke_power / max_s
+                         rd.name)
+    if rd.max_s > 0:
+        drawing.stroke_power[:] = drawing.stroke_power / rd.max_s
     else:
         drawing.stroke_power[:] = 1.0
     return drawing
@@ -240,44 +329,63 @@ def _arc(p0: tuple[float, float], p1: tuple[float, float], axes: dict[str, float
          arc_abs: bool, offset: tuple[float, float], clockwise: bool, file: str,
          ln: int) -> tuple[float, ...]:
     """G2/G3 arc from p0 to p1 (mm) as an ARC primitive (c, r·I, θ0, Δθ)."""
-    x0, y0 = p0
-    x1, y1 = p1
     if "R" in axes:
         if "I" in axes or "J" in axes:
             raise InputError("arc with both R and I/J", file, ln)
-        r = axes["R"] * unit
-        dx, dy = x1 - x0, y1 - y0
-        chord = math.hypot(dx, dy)
-        if chord == 0:
-            raise InputError("R-form arc with end = start (a full circle needs I/J)", file, ln)
-        h2 = r * r - chord * chord / 4
-        if h2 < -(ARC_END_TOL_MM**2) - 1e-12:
-            raise InputError(f"arc radius R{axes['R']:g} is smaller than half the chord "
-                             f"({chord / 2:.6g} mm)", file, ln)
-        h = math.sqrt(max(h2, 0.0))
-        # Centre left of p0→p1 for a counter-clockwise short arc; R < 0 takes the long way.
-        side = (1.0 if not clockwise else -1.0) * (1.0 if r > 0 else -1.0)
-        cx = (x0 + x1) / 2 - side * h * dy / chord
-        cy = (y0 + y1) / 2 + side * h * dx / chord
-        radius = abs(r)
+        cx, cy, radius = _r_centre(p0, p1, axes["R"], unit, clockwise, file, ln)
     else:
         if "I" not in axes and "J" not in axes:
             raise InputError("arc without I/J or R", file, ln)
-        i, j = axes.get("I", 0.0) * unit, axes.get("J", 0.0) * unit
-        if arc_abs:
-            cx, cy = i + offset[0], j + offset[1]
-        else:
-            cx, cy = x0 + i, y0 + j
-        radius = math.hypot(x0 - cx, y0 - cy)
-        r_end = math.hypot(x1 - cx, y1 - cy)
-        if radius == 0:
-            raise InputError("arc with zero radius", file, ln)
-        if abs(radius - r_end) > max(ARC_END_TOL_MM, ARC_END_TOL_REL * radius):
-            raise InputError(f"arc end is {abs(radius - r_end):.4g} mm off the circle through "
-                             f"its start (r = {radius:.6g} mm)", file, ln)
+        cx, cy, radius = _ij_centre(p0, p1, axes, unit, arc_abs, offset, file, ln)
+    x0, y0 = p0
+    x1, y1 = p1
     th0 = math.atan2(y0 - cy, x0 - cx)
     th1 = math.atan2(y1 - cy, x1 - cx)
     dth = -((th0 - th1) % (2 * math.pi)) if clockwise else (th1 - th0) % (2 * math.pi)
     if dth == 0.0 or (math.hypot(x1 - x0, y1 - y0) < 1e-12):
         dth = -2 * math.pi if clockwise else 2 * math.pi
     return (cx, cy, radius, 0.0, 0.0, radius, th0, dth)
+
+
+def _r_centre(p0: tuple[float, float], p1: tuple[float, float], r_word: float, unit: float,
+              clockwise: bool, file: str, ln: int) -> tuple[float, float, float]:
+    """Centre and radius of an R-form arc (R < 0: the long way round)."""
+    x0, y0 = p0
+    x1, y1 = p1
+    r = r_word * unit
+    dx, dy = x1 - x0, y1 - y0
+    chord = math.hypot(dx, dy)
+    if chord == 0:
+        raise InputError("R-form arc with end = start (a full circle needs I/J)", file, ln)
+    h2 = r * r - chord * chord / 4
+    if h2 < -(ARC_END_TOL_MM**2) - 1e-12:
+        raise InputError(f"arc radius R{r_word:g} is smaller than half the chord "
+                         f"({chord / 2:.6g} mm)", file, ln)
+    h = math.sqrt(max(h2, 0.0))
+    # Centre left of p0→p1 for a counter-clockwise short arc; R < 0 takes the long way.
+    side = (1.0 if not clockwise else -1.0) * (1.0 if r > 0 else -1.0)
+    cx = (x0 + x1) / 2 - side * h * dy / chord
+    cy = (y0 + y1) / 2 + side * h * dx / chord
+    return cx, cy, abs(r)
+
+
+def _ij_centre(p0: tuple[float, float], p1: tuple[float, float], axes: dict[str, float],
+               unit: float, arc_abs: bool, offset: tuple[float, float], file: str,
+               ln: int) -> tuple[float, float, float]:
+    """Centre and radius of an I/J-form arc (offsets from the start, or absolute with
+    G90.1); its end must lie on the circle through its start."""
+    x0, y0 = p0
+    x1, y1 = p1
+    i, j = axes.get("I", 0.0) * unit, axes.get("J", 0.0) * unit
+    if arc_abs:
+        cx, cy = i + offset[0], j + offset[1]
+    else:
+        cx, cy = x0 + i, y0 + j
+    radius = math.hypot(x0 - cx, y0 - cy)
+    r_end = math.hypot(x1 - cx, y1 - cy)
+    if radius == 0:
+        raise InputError("arc with zero radius", file, ln)
+    if abs(radius - r_end) > max(ARC_END_TOL_MM, ARC_END_TOL_REL * radius):
+        raise InputError(f"arc end is {abs(radius - r_end):.4g} mm off the circle through "
+                         f"its start (r = {radius:.6g} mm)", file, ln)
+    return cx, cy, radius

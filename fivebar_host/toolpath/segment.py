@@ -197,6 +197,38 @@ class Intervals:
     dev_mm: FloatArray
 
 
+@dataclass(frozen=True)
+class _Pieces:
+    """Pieces of chords still being refined: chord id, chord parameters σ_a < σ_b and the
+    joint angles at both ends."""
+
+    chord: IntArray
+    sa: FloatArray
+    sb: FloatArray
+    tha: FloatArray
+    thb: FloatArray
+
+    def select(self, mask: BoolArray) -> _Pieces:
+        """The pieces where ``mask`` is true."""
+        return _Pieces(self.chord[mask], self.sa[mask], self.sb[mask], self.tha[mask],
+                       self.thb[mask])
+
+
+@dataclass(frozen=True)
+class _Samples:
+    """One refinement round's samples (`SAMPLES` per piece) on the joint-space path: joint
+    angles (N·S, 2), pen points (N·S, 2), the pose codes (N, S) with `FK_INVALID` where the
+    forward kinematics fail, margins (N·S, 3), the deviation from the piece (N,) and the
+    chord direction pb − pa (N, 2)."""
+
+    th: FloatArray
+    g: FloatArray
+    codes: NDArray[np.int8]
+    marg: FloatArray
+    dev: FloatArray
+    d: FloatArray
+
+
 def refine(checker: PoseChecker, pa: FloatArray, pb: FloatArray, tha: FloatArray,
            thb: FloatArray, tol_mm: FloatArray, max_step_rad: float,
            check_type1: bool = True) -> Intervals:
@@ -204,100 +236,127 @@ def refine(checker: PoseChecker, pa: FloatArray, pb: FloatArray, tha: FloatArray
     joint-interpolated path stays within `SAFETY`·tol_mm[k] of each piece, the joint step is
     ≤ max_step_rad, and every sample passes the pose checks. Vectorised over all pieces; the
     only Python loop is over refinement rounds. Raises `CheckFailedError` (index = chord k)."""
-    nch = pa.shape[0]
-    chord = np.arange(nch, dtype=np.int64)
-    sa = np.zeros(nch)
-    sb = np.ones(nch)
-    # Pre-split by the joint-step cap using the end angles (uniform in σ).
-    n0 = np.maximum(1, np.ceil(np.abs(thb - tha).max(axis=1) / max_step_rad)).astype(np.int64)
-    if (n0 > 1).any():
-        chord = np.repeat(chord, n0)
-        k = np.arange(chord.shape[0]) - np.repeat(np.cumsum(n0) - n0, n0)
-        nn = n0[chord]
-        sa = k / nn
-        sb = (k + 1) / nn
-        inner = k > 0
-        pts = pa[chord[inner]] + sa[inner, None] * (pb[chord[inner]] - pa[chord[inner]])
-        th_inner = checker.inverse(pts, chord[inner])
-        tha_all = tha[chord].copy()
-        tha_all[inner] = th_inner
-        thb_all = np.empty_like(tha_all)
-        thb_all[:-1] = tha_all[1:]
-        last = np.append(chord[1:] != chord[:-1], True)
-        thb_all[last] = thb[chord[last]]
-        cur_tha, cur_thb = tha_all, thb_all
-    else:
-        cur_tha, cur_thb = tha.copy(), thb.copy()
+    cur = _presplit(checker, pa, pb, tha, thb, max_step_rad)
     done: list[tuple[IntArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray,
                      FloatArray]] = []
-    cur_c, cur_sa, cur_sb = chord, sa, sb
-    s = SAMPLES
-    ns = s.shape[0]
+    ns = SAMPLES.shape[0]
     for _ in range(MAX_ROUNDS):
-        if cur_c.shape[0] == 0:
+        if cur.chord.shape[0] == 0:
             break
-        n = cur_c.shape[0]
-        d = pb[cur_c] - pa[cur_c]
-        qa = pa[cur_c] + cur_sa[:, None] * d
-        qb = pa[cur_c] + cur_sb[:, None] * d
-        dth = cur_thb - cur_tha
-        th_s = (cur_tha[:, None, :] + s[None, :, None] * dth[:, None, :]).reshape(-1, 2)
-        g, valid = checker.forward(th_s)
-        # distance of each sample to the piece [qa, qb]
-        seg = qb - qa
-        seg_len2 = np.einsum("ij,ij->i", seg, seg)
-        rel = g.reshape(n, ns, 2) - qa[:, None, :]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            u = np.clip(np.einsum("nsj,nj->ns", rel, seg) / seg_len2[:, None], 0.0, 1.0)
-        u = np.nan_to_num(u)
-        diff = rel - u[:, :, None] * seg[:, None, :]
-        dev = np.sqrt(np.einsum("nsj,nsj->ns", diff, diff)).max(axis=1)
-        codes, marg = checker.codes(th_s, g, check_type1)
-        codes = codes.reshape(n, ns)
-        codes[~valid.reshape(n, ns)] = FK_INVALID
-        bad_pose = (codes != OK).any(axis=1)
-        dev[~valid.reshape(n, ns).all(axis=1)] = np.inf
-        split = (dev > SAFETY * tol_mm[cur_c]) | bad_pose | \
-            (np.abs(dth).max(axis=1) > max_step_rad)
+        n = cur.chord.shape[0]
+        smp = _sample(checker, pa, pb, cur, check_type1)
+        bad_pose = (smp.codes != OK).any(axis=1)
+        split = (smp.dev > SAFETY * tol_mm[cur.chord]) | bad_pose | \
+            (np.abs(cur.thb - cur.tha).max(axis=1) > max_step_rad)
         keep = ~split
         if keep.any():
-            mm = marg.reshape(n, ns, 3)[keep].min(axis=1)
-            done.append((cur_c[keep], cur_sa[keep], cur_sb[keep], cur_tha[keep],
-                         cur_thb[keep], mm, dev[keep]))
+            mm = smp.marg.reshape(n, ns, 3)[keep].min(axis=1)
+            done.append((cur.chord[keep], cur.sa[keep], cur.sb[keep], cur.tha[keep],
+                         cur.thb[keep], mm, smp.dev[keep]))
         if not split.any():
-            cur_c = cur_c[:0]
             break
-        c = cur_c[split]
-        a0, b0 = cur_sa[split], cur_sb[split]
-        ta, tb = cur_tha[split], cur_thb[split]
-        length = (b0 - a0) * np.sqrt(np.einsum("ij,ij->i", d[split], d[split]))
-        tiny = length < 1e-7
-        if tiny.any():
-            i = int(np.flatnonzero(tiny)[0])
-            row = int(np.flatnonzero(split)[i])
-            code_row = codes[row]
-            bad = int(np.flatnonzero(code_row != OK)[0]) if (code_row != OK).any() else -1
-            p = g.reshape(n, ns, 2)[row, max(bad, 1)]
-            if bad >= 0 and code_row[bad] != FK_INVALID:
-                msg = checker.explain(int(code_row[bad]), th_s.reshape(n, ns, 2)[row, bad], p,
-                                      marg.reshape(n, ns, 3)[row, bad])
-                key = REASON_KEY[int(code_row[bad])]
-            else:
-                msg = "the joint-space path between targets cannot be kept within tolerance"
-                key = "tolerance"
-            raise CheckFailedError(int(c[i]), (float(p[0]), float(p[1])), key,
-                               f"between targets: {msg}")
-        mid = 0.5 * (a0 + b0)
-        pm = pa[c] + mid[:, None] * (pb[c] - pa[c])
-        thm = checker.inverse(pm, c)
-        cur_c = np.concatenate((c, c))
-        cur_sa = np.concatenate((a0, mid))
-        cur_sb = np.concatenate((mid, b0))
-        cur_tha = np.concatenate((ta, thm))
-        cur_thb = np.concatenate((thm, tb))
+        _refuse_tiny(checker, cur, smp, split)
+        cur = _bisect(checker, pa, pb, cur.select(split))
     else:
-        raise CheckFailedError(int(cur_c[0]), (math.nan, math.nan), "tolerance",
-                           "the tolerance could not be met within the refinement limit")
+        raise CheckFailedError(int(cur.chord[0]), (math.nan, math.nan), "tolerance",
+                               "the tolerance could not be met within the refinement limit")
+    return _collect(done)
+
+
+def _presplit(checker: PoseChecker, pa: FloatArray, pb: FloatArray, tha: FloatArray,
+              thb: FloatArray, max_step_rad: float) -> _Pieces:
+    """The chords pre-split by the joint-step cap using the end angles (uniform in σ), with
+    checked angles at the new inner targets."""
+    nch = pa.shape[0]
+    chord = np.arange(nch, dtype=np.int64)
+    n0 = np.maximum(1, np.ceil(np.abs(thb - tha).max(axis=1) / max_step_rad)).astype(np.int64)
+    if not (n0 > 1).any():
+        return _Pieces(chord, np.zeros(nch), np.ones(nch), tha.copy(), thb.copy())
+    chord = np.repeat(chord, n0)
+    k = np.arange(chord.shape[0]) - np.repeat(np.cumsum(n0) - n0, n0)
+    nn = n0[chord]
+    sa = k / nn
+    sb = (k + 1) / nn
+    inner = k > 0
+    pts = pa[chord[inner]] + sa[inner, None] * (pb[chord[inner]] - pa[chord[inner]])
+    th_inner = checker.inverse(pts, chord[inner])
+    tha_all = tha[chord].copy()
+    tha_all[inner] = th_inner
+    thb_all = np.empty_like(tha_all)
+    thb_all[:-1] = tha_all[1:]
+    last = np.append(chord[1:] != chord[:-1], True)
+    thb_all[last] = thb[chord[last]]
+    return _Pieces(chord, sa, sb, tha_all, thb_all)
+
+
+def _sample(checker: PoseChecker, pa: FloatArray, pb: FloatArray, cur: _Pieces,
+            check_type1: bool) -> _Samples:
+    """Sample every piece's joint-space path: the pen's distance to the piece [qa, qb]
+    (inf where the forward kinematics fail) and the pose checks."""
+    s = SAMPLES
+    ns = s.shape[0]
+    n = cur.chord.shape[0]
+    d = pb[cur.chord] - pa[cur.chord]
+    qa = pa[cur.chord] + cur.sa[:, None] * d
+    qb = pa[cur.chord] + cur.sb[:, None] * d
+    dth = cur.thb - cur.tha
+    th_s = (cur.tha[:, None, :] + s[None, :, None] * dth[:, None, :]).reshape(-1, 2)
+    g, valid = checker.forward(th_s)
+    # distance of each sample to the piece [qa, qb]
+    seg = qb - qa
+    seg_len2 = np.einsum("ij,ij->i", seg, seg)
+    rel = g.reshape(n, ns, 2) - qa[:, None, :]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = np.clip(np.einsum("nsj,nj->ns", rel, seg) / seg_len2[:, None], 0.0, 1.0)
+    u = np.nan_to_num(u)
+    diff = rel - u[:, :, None] * seg[:, None, :]
+    dev = np.sqrt(np.einsum("nsj,nsj->ns", diff, diff)).max(axis=1)
+    codes, marg = checker.codes(th_s, g, check_type1)
+    codes = codes.reshape(n, ns)
+    codes[~valid.reshape(n, ns)] = FK_INVALID
+    dev[~valid.reshape(n, ns).all(axis=1)] = np.inf
+    return _Samples(th_s, g, codes, marg, dev, d)
+
+
+def _refuse_tiny(checker: PoseChecker, cur: _Pieces, smp: _Samples, split: BoolArray) -> None:
+    """`CheckFailedError` for the first piece to split that is already shorter than 1e-7 mm:
+    its first failing pose check, or the tolerance that cannot be kept."""
+    n, ns = smp.codes.shape
+    length = (cur.sb[split] - cur.sa[split]) * np.sqrt(
+        np.einsum("ij,ij->i", smp.d[split], smp.d[split]))
+    tiny = length < 1e-7
+    if not tiny.any():
+        return
+    i = int(np.flatnonzero(tiny)[0])
+    row = int(np.flatnonzero(split)[i])
+    code_row = smp.codes[row]
+    bad = int(np.flatnonzero(code_row != OK)[0]) if (code_row != OK).any() else -1
+    p = smp.g.reshape(n, ns, 2)[row, max(bad, 1)]
+    if bad >= 0 and code_row[bad] != FK_INVALID:
+        msg = checker.explain(int(code_row[bad]), smp.th.reshape(n, ns, 2)[row, bad], p,
+                              smp.marg.reshape(n, ns, 3)[row, bad])
+        key = REASON_KEY[int(code_row[bad])]
+    else:
+        msg = "the joint-space path between targets cannot be kept within tolerance"
+        key = "tolerance"
+    raise CheckFailedError(int(cur.chord[split][i]), (float(p[0]), float(p[1])), key,
+                           f"between targets: {msg}")
+
+
+def _bisect(checker: PoseChecker, pa: FloatArray, pb: FloatArray, sp: _Pieces) -> _Pieces:
+    """Split pieces at their chord midpoint (new targets by checked inverse kinematics)."""
+    c, a0, b0 = sp.chord, sp.sa, sp.sb
+    mid = 0.5 * (a0 + b0)
+    pm = pa[c] + mid[:, None] * (pb[c] - pa[c])
+    thm = checker.inverse(pm, c)
+    return _Pieces(np.concatenate((c, c)), np.concatenate((a0, mid)),
+                   np.concatenate((mid, b0)), np.concatenate((sp.tha, thm)),
+                   np.concatenate((thm, sp.thb)))
+
+
+def _collect(done: list[tuple[IntArray, FloatArray, FloatArray, FloatArray, FloatArray,
+                              FloatArray, FloatArray]]) -> Intervals:
+    """The kept pieces of every round, ordered by chord and σ_a."""
     if not done:
         z = np.zeros((0, 2))
         return Intervals(np.zeros(0, np.int64), np.zeros(0), np.zeros(0), z, z,

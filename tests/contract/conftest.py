@@ -1,7 +1,7 @@
 """Fixtures of the protocol contract suite: one device interface over two implementations.
 
 Every test of test_contract.py runs twice: against the Python mock
-(``fivebar-mock://``, fivebar_host/devices/mock.py) and against the real firmware running
+(``fivebar-mock://``, fivebar_host/devices/mock/) and against the real firmware running
 in simavr (fivebar_host/devices/sim.py).  A test sees a ``Device``: the open port, a
 ``FirmwareSession`` on it, and ``executed()`` — what the motors and the laser really did,
 from the mock's ledger or from the emulator's recorded pin trace.  The sim

@@ -1,0 +1,473 @@
+"""The mock firmware: bytes in, lines, commands and replies, boot, reset and faults.
+
+``MockFirmware`` is fb_main.c of the firmware in Python: the receive buffer of the banner's
+size whose excess bytes are lost (``error:18``), the real-time bytes (``?`` ``!`` ``~``
+Ctrl-X), line assembly and the checks of docs/protocol.md 5.2 in the firmware's order, the
+commands and settings, the replies and status reports, the boot banner, resets that keep the
+``.noinit`` record and power-ons that do not, and the line-counted fault options of the URL.
+The queue and motion underneath are ``MotionCore`` (motion.py), homing is ``Homing``
+(homing.py), and the grammar is ``parse_line`` (parser.py).
+
+The simulation is lazy: every call first advances the device to the caller's clock time
+(``advance``), handling each event in time order, so no background thread runs.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+from fivebar_host.devices.mock.codes import (
+    A_ENDSTOP,
+    CYCLES_PER_US,
+    DEFAULT_SETTINGS,
+    E_ALARM_LOCK,
+    E_BUSY,
+    E_CHECKSUM,
+    E_HOMING_DISABLED,
+    E_LINE_TOO_LONG,
+    E_MOTORS_OFF,
+    E_OUT_OF_RANGE,
+    E_RX_OVERFLOW,
+    E_SOFT_LIMIT,
+    E_TOO_FAST,
+    E_UNKNOWN_SETTING,
+    OK,
+    S_A_MAX,
+    S_A_MIN,
+    S_B_MAX,
+    S_B_MIN,
+    S_HOMING,
+    S_MAX_RATE,
+    S_SOFT,
+    WAIT,
+)
+from fivebar_host.devices.mock.hardware import Block, KeptRecord, Machine, step_interval
+from fivebar_host.devices.mock.homing import Homing
+from fivebar_host.devices.mock.motion import MotionCore
+from fivebar_host.devices.mock.options import MockOptions
+from fivebar_host.devices.mock.parser import Command, parse_line
+from fivebar_host.protocol import EOL, POS_LIMIT, RESEND_CODES, SETTINGS
+
+_RT_STATUS, _RT_HOLD, _RT_RESUME, _RT_RESET = (ord(b) for b in ("?", "!", "~", "\x18"))
+_NL, _CR = 0x0A, 0x0D
+
+
+class MockFirmware(MotionCore):
+    """The firmware's state machine, driven by bytes and by a clock in seconds.
+
+    Pure simulation, no I/O: ``receive`` takes host bytes, ``advance`` runs the device up
+    to a time, ``out`` collects what it sends.  ``MockSerial`` wraps it as a pyserial port.
+    """
+
+    def __init__(self, options: MockOptions, machine: Machine, now: float,
+                 kept: KeptRecord | None = None) -> None:
+        self.opt = options
+        self.machine = machine
+        self.out = bytearray()
+        self.t = now
+        self.lines_seen = 0  # lines taken from the receive buffer, for the fault options
+        self.stalled = False
+        self.disconnected = False
+        self.rebooted = False  # set by a reboot; MockSerial drops the rest of the write
+        self._faults_fired: set[str] = set()
+        self._boot(now, kept)
+
+    # ----------------------------------------------------------------- boot and reset
+
+    def _boot(self, now: float, kept: KeptRecord | None) -> None:
+        """Boot (fb_setup): settings to defaults, no alarm, banner.  Position, ``H`` and
+        ``Ln`` done come from ``kept`` (a reset that left the RAM powered), else they start
+        at 0 (power-on)."""
+        m = self.machine
+        m.boots += 1
+        self.boot = m.boots
+        self.settings = list(DEFAULT_SETTINGS)
+        self.pos = list(kept.position) if kept is not None else [0, 0]
+        # position set by an executed G92 or a completed $H; kept by Ctrl-X and by a reset
+        self.homed = kept.homed if kept is not None else False
+        self.alarm = 0
+        self.stalled = False
+        self.laser = 0
+        self._log_laser(now)
+        self.cur = None
+        self.cur_elapsed = 0.0  # firmware µs of the running block executed
+        self.cur_stop_us = 0.0  # where it ends: its duration, or its endstop alarm
+        self.cur_alarm = False  # it ends in an endstop alarm
+        self.running = False
+        self.homing = None
+        self.queue = deque()
+        self._reset_state()
+        if kept is not None:
+            self.done_line = kept.done_line
+
+    def _reset_state(self) -> None:
+        """What Ctrl-X resets (fb_main.c do_reset), then the banner."""
+        self.rx = bytearray()
+        self.rx_overflow = False
+        self.line = bytearray()
+        self.line_over = False
+        self.pending: Command | None = None
+        self.held = False
+        self.hold_reason = 0
+        self.queue.clear()
+        self.done_line = 0
+        self.underruns = 0
+        self.last = 0
+        self.numbered = False  # strict framing (fb_lines_t.numbered)
+        self.absolute = True
+        self.laser_on = False
+        self.laser_s = 0
+        self.motors_on = True  # as planned: M17/M18 queued so far
+        self.motors_enabled = True  # the enable pin: M17/M18 executed
+        self.plan = list(self.pos)
+        self.first_queued = self.t
+        self.last_rx = self.t
+        self._emit(self.banner_text())
+
+    def banner_text(self) -> str:
+        """The banner line (without its end of line)."""
+        o = self.opt
+        return f"fivebar {o.version} proto:{o.proto} rx:{o.rx} queue:{o.queue} line:{o.line}"
+
+    def reboot(self, now: float, keep: bool = True) -> None:
+        """A reset at ``now``: motion stops where it is, then the firmware boots again.
+
+        ``keep``: the RAM stayed powered (DTR, reset button, watchdog, brown-out), so the
+        ``.noinit`` record brings back position, ``H`` and ``Ln`` done; else a power-on."""
+        self.advance(now)
+        self._reboot_now("reboot" if keep else "power-cut", keep)
+
+    def _reboot_now(self, why: str, keep: bool) -> None:
+        self._stop(why)
+        kept = self.kept_record() if keep else None
+        self.rebooted = True
+        self._boot(self.t, kept)
+
+    def kept_record(self) -> KeptRecord:
+        """The ``.noinit`` record as it stands now (the firmware keeps it up to date)."""
+        a, b = self.position()
+        return KeptRecord((a, b), self.homed, self.done_line)
+
+    def power_off(self, now: float, why: str = "reboot") -> KeptRecord:
+        """The firmware stops for good (a new one boots on its machine): motion stops where
+        it is, laser off.  Returns its ``.noinit`` record, for a reset that keeps the RAM."""
+        self.advance(now)
+        self._stop(why)
+        self.stalled = True  # nothing of it runs any more
+        return self.kept_record()
+
+    # ----------------------------------------------------------------- output
+
+    def _emit(self, text: str) -> None:
+        if not self.stalled:
+            self.out += (text + EOL).encode("ascii")
+
+    def status_text(self) -> str:
+        """The status report line the firmware would send now (fb_main.c status_report)."""
+        if self.alarm:
+            state = f"Alarm:{self.alarm}"
+        elif self.homing is not None:
+            state = "Home"
+        elif self.held:
+            state = f"Hold:{self.hold_reason}"
+        elif self.running or self.queue:
+            state = "Run"
+        else:
+            state = "Idle"
+        a, b = self.position()
+        return (f"<{state}|A:{a},B:{b}|Q:{len(self.queue)}|Ln:{self.done_line},{self.last}"
+                f"|L:{self.laser}|U:{self.underruns}|H:{int(self.homed)}>")
+
+    def _finish(self, st: int) -> None:
+        """Reply to a line: ``ok`` or ``error:<code>`` (errors hold a running job)."""
+        if st == OK:
+            self._emit("ok")
+            return
+        if st in RESEND_CODES:
+            self._emit(f"error:{st} resend:{(self.last + 1) & 0xFFFFFFFF}")
+            return
+        self._error_hold()
+        self._emit(f"error:{st}")
+
+    def _raise_alarm(self, code: int) -> None:
+        self._stop("alarm")
+        self.queue.clear()
+        self.held = False
+        self.alarm = code
+        self.plan = list(self.pos)
+        self._emit(f"ALARM:{code}")
+
+    # ----------------------------------------------------------------- time
+
+    def advance(self, now: float) -> None:
+        """Run the device up to clock time ``now``, event by event."""
+        if self.stalled:
+            self.t = max(self.t, now)
+            return
+        while True:
+            ev = self.next_event()
+            if ev is None or ev[0] > now:
+                break
+            self._move_to(ev[0])
+            self._fire(ev[1])
+            self._main_loop()
+        self._move_to(now)
+
+    def _fire(self, kind: int) -> None:
+        if kind == 0:
+            assert self.cur is not None
+            self.cur_elapsed = self.cur_stop_us
+            if self.cur_alarm:
+                self._raise_alarm(A_ENDSTOP)
+            elif self.homing is not None:
+                self._retire(None)
+                self.homing.block_done()
+            else:
+                self._retire(None)
+                self.done_line = self.cur_entry.line
+                self._load_next()
+        elif kind == 1:
+            self._hold(1)
+        else:
+            self._start()
+
+    # ----------------------------------------------------------------- bytes in
+
+    def receive(self, c: int, now: float) -> None:
+        """One byte from the host at clock time ``now`` (the receive interrupt)."""
+        self.advance(now)
+        if self.stalled:
+            return
+        self.last_rx = now
+        if c == _RT_STATUS:
+            self._emit(self.status_text())
+        elif c == _RT_HOLD:
+            if self.homing is not None:
+                self.homing.abort()
+            elif not self.held and not self.alarm:
+                self._hold(0)
+        elif c == _RT_RESUME:
+            if self.held:
+                self.held = False
+                if self.cur is not None:
+                    self._set_laser(self.cur.power)
+        elif c == _RT_RESET:
+            self._stop("reset")
+            if self.homing is not None:
+                self.homing.abort()
+            self._reset_state()
+        elif len(self.rx) >= self.opt.rx:
+            self.rx_overflow = True
+        else:
+            self.rx.append(c)
+        self._main_loop()
+
+    def _main_loop(self) -> None:
+        """fb_poll until it has nothing to do: start the queue, run the pending line or
+        take the next line from the receive buffer."""
+        while not self.stalled:
+            self._maybe_start()
+            if self.pending is not None:
+                if not self._try_execute():
+                    break
+                continue
+            nl = self.rx.find(_NL)
+            if nl < 0:
+                self._assemble(len(self.rx))
+                break
+            self._assemble(nl)
+            del self.rx[:1]  # the newline
+            self._handle_line()
+            if self.rebooted or self.stalled:
+                break
+        if not self.stalled:
+            self._maybe_start()
+
+    def _assemble(self, count: int) -> None:
+        """Move ``count`` bytes from the receive buffer into the line buffer."""
+        for c in self.rx[:count]:
+            if c == _CR:
+                continue
+            if len(self.line) < self.opt.line:
+                self.line.append(c)
+            else:
+                self.line_over = True
+        del self.rx[:count]
+
+    def _handle_line(self) -> None:
+        """One complete line (fb_main.c handle_line): overflow, length, framing, command."""
+        data, over = bytes(self.line), self.line_over
+        self.line.clear()
+        self.line_over = False
+        self.lines_seen += 1
+        k = self.lines_seen
+        if self.rx_overflow:
+            self.rx_overflow = False
+            self._finish(E_RX_OVERFLOW)
+        elif over:  # numbered mode: line noise (merged lines), refused with a resend
+            self._finish(E_CHECKSUM if self.numbered else E_LINE_TOO_LONG)
+        else:
+            before = self.last, self.numbered
+            parsed = parse_line(self.last, data, self.numbered)
+            self.last, self.numbered = parsed.last, parsed.numbered
+            st = parsed.status
+            if self.opt.error_on == k and st == OK:
+                st = self.opt.error_code  # the injected refusal
+                if st in RESEND_CODES:
+                    self.last, self.numbered = before
+            if st != OK:
+                self._finish(st)
+            else:
+                self.pending = parsed.command
+                self._try_execute()
+        self._line_faults(k)
+
+    def _line_faults(self, k: int) -> None:
+        o = self.opt
+        if o.disconnect_after is not None and k >= o.disconnect_after:
+            self.disconnected = True
+        if o.reset_after == k and "reset_after" not in self._faults_fired:
+            self._faults_fired.add("reset_after")
+            self._reboot_now("reboot", keep=True)
+        if o.power_cut_after == k and "power_cut_after" not in self._faults_fired:
+            self._faults_fired.add("power_cut_after")
+            self._reboot_now("power-cut", keep=False)
+        if (o.stall_after is not None and k >= o.stall_after
+                and "stall_after" not in self._faults_fired):
+            self._faults_fired.add("stall_after")
+            self.stalled = True
+
+    def check_startup_faults(self) -> None:
+        """Faults that fire after zero lines (``stall_after=0``, ``disconnect_after=0``)."""
+        if self.opt.stall_after == 0:
+            self._faults_fired.add("stall_after")
+            self.stalled = True
+        if self.opt.disconnect_after == 0:
+            self.disconnected = True
+
+    # ----------------------------------------------------------------- commands
+
+    def _try_execute(self) -> bool:
+        """Execute the pending line; False while it has to wait (queue full, homing)."""
+        assert self.pending is not None
+        st = self._execute(self.pending)
+        if st == WAIT:
+            return False
+        self.pending = None
+        self._finish(st)
+        return True
+
+    def _execute(self, c: Command) -> int:
+        if self.homing is not None:
+            return self.homing.result()
+        if self.alarm and c.kind not in ("", "M110", "$I", "$$", "$=", "$H", "$X"):
+            return E_ALARM_LOCK
+        k = c.kind
+        if k == "G1":
+            return self._exec_g1(c)
+        if k in ("G90", "G91"):
+            self.absolute = k == "G90"
+            return OK
+        if k == "G92":
+            if self._queue_full():
+                return WAIT
+            target = (c.words.get("A", self.plan[0]), c.words.get("B", self.plan[1]))
+            self._push(Block("G92", self.last, delta=target))
+            self.plan = list(target)
+            return OK
+        if k == "M3":
+            self.laser_on = True
+            if "S" in c.words:
+                self.laser_s = c.words["S"]
+            return OK
+        if k == "M5":
+            self.laser_on = False
+            return OK
+        if k in ("M17", "M18"):
+            if self._queue_full():
+                return WAIT
+            self._push(Block(k, self.last))
+            self.motors_on = k == "M17"
+            return OK
+        if k == "$I":
+            self._emit(self.banner_text())
+            return OK
+        if k == "$$":
+            for i, v in enumerate(self.settings):
+                self._emit(f"${i}={v}")
+            return OK
+        if k == "$H":
+            return self._exec_home()
+        if k == "$X":
+            self.alarm = 0
+            self.plan = list(self.pos)
+            return OK
+        if k == "$=":
+            return self._exec_set(c)
+        return OK  # empty line, M110
+
+    def _queue_full(self) -> bool:
+        """The queue's slots hold the waiting blocks and the one executing (fb_motion.c)."""
+        return len(self.queue) + (self.cur is not None) >= self.opt.queue
+
+    def _push(self, blk: Block) -> None:
+        if not self.running and not self.queue:
+            self.first_queued = self.t
+        self.queue.append(blk)
+
+    def _exec_g1(self, c: Command) -> int:
+        if self._queue_full():
+            return WAIT
+        w = c.words
+        t = list(self.plan)
+        for i, axis in enumerate("AB"):
+            if axis in w:
+                t[i] = w[axis] if self.absolute else self.plan[i] + w[axis]
+        if any(abs(v) > POS_LIMIT for v in t):
+            return E_OUT_OF_RANGE
+        s = self.settings
+        if s[S_SOFT] and not (s[S_A_MIN] <= t[0] <= s[S_A_MAX]
+                              and s[S_B_MIN] <= t[1] <= s[S_B_MAX]):
+            return E_SOFT_LIMIT
+        if not self.motors_on and t != self.plan:
+            return E_MOTORS_OFF
+        p = w["P"]
+        cycles = p * CYCLES_PER_US
+        delta = (t[0] - self.plan[0], t[1] - self.plan[1])
+        min_interval = step_interval(s[S_MAX_RATE])
+        for d in delta:
+            if d and cycles // abs(d) < min_interval:
+                return E_TOO_FAST
+        if "S" in w:
+            self.laser_s = w["S"]
+        power = self.laser_s if self.laser_on else 0
+        self._push(Block("G1", self.last, delta, (cycles, cycles), float(p), power, p))
+        self.plan = t
+        return OK
+
+    def _exec_set(self, c: Command) -> int:
+        if c.setting not in SETTINGS:
+            return E_UNKNOWN_SETTING
+        _, lo, hi = SETTINGS[c.setting]
+        if not lo <= c.value <= hi:
+            return E_OUT_OF_RANGE
+        if self.running or self.queue or self.homing is not None:
+            return E_BUSY
+        self.settings[c.setting] = c.value
+        return OK
+
+    def _exec_home(self) -> int:
+        if not self.settings[S_HOMING]:
+            return E_HOMING_DISABLED
+        if self.running or self.queue or self.held:
+            return E_BUSY
+        if not self.motors_on:
+            return E_MOTORS_OFF
+        # the position is unknown until homed: the seek counts from 0 (fb_main.c exec_home)
+        self.pos = [0, 0]
+        self.plan = [0, 0]
+        self.homed = False
+        self.homing = Homing(self)
+        self.homing.seek()
+        return self.homing.result()
+

@@ -1,0 +1,262 @@
+"""The motion engine of the mock firmware: the segment queue executing over time.
+
+``MotionCore`` is the part of ``MockFirmware`` that fb_motion.c is in the firmware: the
+running block and its exact DDA step schedule, the position (firmware coordinates) and the
+physical motor position, the laser output, the queue's start rule and feed hold, the
+endstop alarm a block runs into, and the next event that happens without the host (block
+end, laser silence timeout, the queue's start delay).  It holds no I/O; the firmware model
+(``fivebar_host.devices.mock.firmware``) adds the bytes, lines and commands on top.
+
+Motion runs ``speed`` times faster than the firmware would (``opt.speed``; 0 = a started
+block ends at once); the protocol's own timers run in wall (clock) time.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import TYPE_CHECKING
+
+from fivebar_host.devices.mock.codes import (
+    CYCLES_PER_US,
+    S_HOMING,
+    S_HOMING_DIR,
+    S_LASER_TIMEOUT,
+    START_BLOCKS,
+    START_DELAY_S,
+)
+from fivebar_host.devices.mock.hardware import Block, LedgerEntry, Machine, step_cycle, steps_done
+from fivebar_host.devices.mock.options import MockOptions
+
+if TYPE_CHECKING:
+    from fivebar_host.devices.mock.homing import Homing
+
+
+class MotionCore:
+    """Queue, running block, position and laser of the mock firmware (see the module
+    docstring).  ``MockFirmware`` sets every attribute when it boots."""
+
+    opt: MockOptions
+    machine: Machine
+    t: float  # the clock time the device has been advanced to
+    boot: int  # firmware boots of the machine, this one included
+    settings: list[int]
+    pos: list[int]  # position of the last retired block, firmware steps
+    plan: list[int]  # position after everything queued so far
+    homed: bool
+    alarm: int
+    laser: int  # the laser output now
+    cur: Block | None  # the running block
+    cur_elapsed: float  # firmware µs of the running block executed
+    cur_stop_us: float  # where it ends: its duration, or its endstop alarm
+    cur_alarm: bool  # it ends in an endstop alarm
+    cur_entry: LedgerEntry  # its ledger entry
+    running: bool
+    homing: Homing | None
+    queue: deque[Block]
+    held: bool
+    hold_reason: int
+    done_line: int
+    underruns: int
+    motors_enabled: bool  # the enable pin: M17/M18 executed
+    first_queued: float  # when the first block of an idle queue was queued
+    last_rx: float  # when the last byte arrived (laser silence timeout)
+
+    def position(self) -> tuple[int, int]:
+        """Position now in steps (every issued step counted), firmware coordinates."""
+        if self.cur is None:
+            return self.pos[0], self.pos[1]
+        d = self._cur_steps()
+        return self.pos[0] + d[0], self.pos[1] + d[1]
+
+    def physical(self) -> tuple[int, int]:
+        """Physical motor position: steps issued since the machine was created."""
+        p = self.machine.phys
+        if self.cur is None:
+            return p[0], p[1]
+        d = self._cur_steps()
+        return p[0] + d[0], p[1] + d[1]
+
+    def _cur_steps(self) -> tuple[int, int]:
+        """Signed steps the running block has issued so far (its DDA schedule)."""
+        blk = self.cur
+        assert blk is not None
+        e = int(self.cur_elapsed * CYCLES_PER_US)
+        out = []
+        for i in range(2):
+            n = abs(blk.delta[i])
+            k = steps_done(n, blk.cycles[i], e)
+            out.append(k if blk.delta[i] >= 0 else -k)
+        return out[0], out[1]
+
+    def _set_laser(self, power: int) -> None:
+        if power != self.laser:
+            self.laser = power
+            self._log_laser(self.t)
+
+    def _log_laser(self, now: float) -> None:
+        log = self.machine.laser_log
+        if not log or log[-1][1] != self.laser:
+            log.append((now, self.laser))
+
+    def _pressed(self, axis: int, phys: int) -> bool:
+        e = self.opt.endstops[axis]
+        return e is not None and phys <= e
+
+    # ----------------------------------------------------------------- the running block
+
+    def _speed_us(self, wall_s: float) -> float:
+        """Firmware µs of motion in ``wall_s`` seconds (inf for speed 0)."""
+        return math.inf if self.opt.speed == 0 else wall_s * 1e6 * self.opt.speed
+
+    def _wall_until(self, elapsed_us: float) -> float:
+        """Clock time at which the running block reaches ``elapsed_us``."""
+        if self.opt.speed == 0:
+            return self.t
+        return self.t + max(0.0, elapsed_us - self.cur_elapsed) / (1e6 * self.opt.speed)
+
+    def _load(self, blk: Block) -> None:
+        """Start executing a motion block now (fb_motion.c load_next for a MOVE/HOME)."""
+        self.cur = blk
+        self.cur_elapsed = 0.0
+        self.cur_stop_us = blk.duration_us  # when an endstop alarm cuts it short: earlier
+        self.cur_alarm = False
+        if self.settings[S_HOMING] and blk.kind == "G1":
+            self._plan_endstop_alarm(blk)
+        self.cur_entry = LedgerEntry(self.boot, blk.kind, blk.line, (self.pos[0], self.pos[1]),
+                                     (self.pos[0], self.pos[1]), (0, 0), blk.power,
+                                     int(blk.p_us or round(blk.duration_us)), 0.0,
+                                     started_s=self.t)
+        self.machine.ledger.append(self.cur_entry)
+        self._set_laser(blk.power)
+
+    def _plan_endstop_alarm(self, blk: Block) -> None:
+        """Find the first step towards a switch that leaves it pressed (alarm 30).
+
+        With ``$7=1`` a motor stepping in its ``$13`` seek direction while its switch is
+        pressed (after the step) raises the alarm; stepping away is allowed (fb_motion.c
+        check_endstops).
+        """
+        first: int | None = None
+        for i in range(2):
+            n = abs(blk.delta[i])
+            e = self.opt.endstops[i]
+            seek = 1 if self.settings[S_HOMING_DIR] & (1 << i) else -1
+            if e is None or not n or (1 if blk.delta[i] > 0 else -1) != seek:
+                continue
+            p0 = self.machine.phys[i]
+            # the step after which the switch is pressed: p0 - k <= e seeking -, p0 + k <= e +
+            k = max(1, p0 - e) if seek < 0 else (1 if p0 + 1 <= e else None)
+            if k is not None and k <= n:
+                c = step_cycle(n, blk.cycles[i], k)
+                first = c if first is None else min(first, c)
+        if first is not None:
+            self.cur_stop_us = first / CYCLES_PER_US
+            self.cur_alarm = True
+
+    def sync_entry(self) -> None:
+        """Bring the running block's ledger entry up to date."""
+        if self.cur is None:
+            return
+        d = self._cur_steps()
+        e = self.cur_entry
+        e.steps = d
+        e.end = (e.start[0] + d[0], e.start[1] + d[1])
+        dur = self.cur.duration_us
+        e.fraction = 1.0 if dur <= 0 else min(1.0, self.cur_elapsed / dur)
+
+    def _retire(self, stopped: str | None) -> None:
+        """The running block ends (completed, or stopped early): fold it into the position."""
+        assert self.cur is not None
+        self.sync_entry()
+        d = self.cur_entry.steps
+        for i in range(2):
+            self.pos[i] += d[i]
+            self.machine.phys[i] += d[i]
+        if stopped is None:
+            self.cur_entry.fraction = 1.0
+        else:
+            self.cur_entry.stopped = stopped
+        self.cur = None
+
+    def _record_instant(self, kind: str, line: int, end: tuple[int, int]) -> None:
+        start = (self.pos[0], self.pos[1])
+        self.machine.ledger.append(LedgerEntry(self.boot, kind, line, start, end, (0, 0), 0, 0,
+                                               1.0, started_s=self.t))
+
+    def _load_next(self) -> bool:
+        """Segment boundary: run synchronous blocks, load the next segment (fb_motion.c)."""
+        while self.queue:
+            blk = self.queue.popleft()
+            if blk.kind == "G92":
+                self._record_instant("G92", blk.line, blk.delta)
+                self.pos = list(blk.delta)
+                self.homed = True
+                self.done_line = blk.line
+                continue
+            if blk.kind in ("M17", "M18"):
+                self._record_instant(blk.kind, blk.line, (self.pos[0], self.pos[1]))
+                self.motors_enabled = blk.kind == "M17"
+                self.done_line = blk.line
+                continue
+            self._load(blk)
+            return True
+        self.running = False
+        self.underruns += 1
+        self._set_laser(0)
+        return False
+
+    def _start(self) -> None:
+        if not self.running and self.queue:
+            self.running = True
+            self._load_next()
+
+    def _stop(self, why: str) -> None:
+        """Stop at once: no further step, laser off, the running block dropped (mo_stop)."""
+        if self.cur is not None:
+            self._retire(why)
+        self.running = False
+        self._set_laser(0)
+
+    def _hold(self, reason: int) -> None:
+        self.held = True
+        self.hold_reason = reason
+        self._set_laser(0)
+
+    def _error_hold(self) -> None:
+        if not self.held and (self.running or self.queue):
+            self._hold(2)
+
+
+    # ----------------------------------------------------------------- time
+
+    def next_event(self) -> tuple[float, int] | None:
+        """(time, kind) of the next thing that happens without the host: 0 = the running
+        block reaches its end (or its endstop alarm), 1 = laser silence timeout, 2 = the
+        queue's start delay runs out."""
+        events: list[tuple[float, int]] = []
+        if self.cur is not None and not self.held:
+            events.append((self._wall_until(self.cur_stop_us), 0))
+        if self.laser and not self.held:
+            events.append((self.last_rx + self.settings[S_LASER_TIMEOUT] / 1000 + 1e-6, 1))
+        if (self.queue and not self.running and not self.held and not self.alarm
+                and self.homing is None):
+            events.append((self.first_queued + START_DELAY_S, 2))
+        return min(events) if events else None
+
+    def _move_to(self, t: float) -> None:
+        """Let the running block progress up to clock time ``t``."""
+        if t <= self.t:
+            return
+        if self.cur is not None and not self.held:
+            self.cur_elapsed = min(self.cur_stop_us,
+                                   self.cur_elapsed + self._speed_us(t - self.t))
+        self.t = t
+
+    def _maybe_start(self) -> None:
+        if self.held or self.alarm or self.homing is not None or self.running or not self.queue:
+            return
+        if (len(self.queue) >= START_BLOCKS or len(self.queue) >= self.opt.queue
+                or self.t - self.first_queued >= START_DELAY_S):
+            self._start()
+

@@ -1,0 +1,260 @@
+"""The firmware's line grammar as the mock models it: framing and parsing of one line.
+
+A port of firmware/fivebar/fb_proto.c, quirks included: the mock must answer every line
+with the code the firmware gives it (the contract suite compares them byte for byte).
+``parse_line`` frames a line (checksum field ``*<crc16>/<len>``, line number ``N``, strict
+framing once numbered) and parses its command into a ``Command``; executing it is the
+firmware model's business (``fivebar_host.devices.mock.firmware``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from fivebar_host import protocol
+from fivebar_host.devices.mock.codes import (
+    E_BAD_NUMBER,
+    E_BAD_WORD,
+    E_CHECKSUM,
+    E_INVALID_CHAR,
+    E_LINE_NUMBER,
+    E_MISSING_WORD,
+    E_NO_CHECKSUM,
+    E_OUT_OF_RANGE,
+    E_UNKNOWN_COMMAND,
+    E_UNKNOWN_SETTING,
+    OK,
+    P_MAX_US,
+    P_MIN_US,
+)
+from fivebar_host.protocol import POS_LIMIT, crc16
+
+
+@dataclass
+class Command:
+    """One parsed line: command kind (``""`` for an empty line), words, line number."""
+
+    kind: str = ""  # "", G1 G90 G91 G92 M3 M5 M17 M18 M110 $I $$ $H $X $=
+    words: dict[str, int] = field(default_factory=dict)
+    n: int | None = None
+    setting: int = 0
+    value: int = 0
+
+
+def _is_ws(c: int) -> bool:
+    return c in (0x20, 0x09)
+
+
+def _is_digit(c: int) -> bool:
+    return 0x30 <= c <= 0x39
+
+
+def _upper(c: int) -> int:
+    return c - 0x20 if 0x61 <= c <= 0x7A else c
+
+
+def _is_letter(c: int) -> bool:
+    return 0x41 <= _upper(c) <= 0x5A
+
+
+def _skip_ws(s: bytes, i: int, end: int) -> int:
+    while i < end and _is_ws(s[i]):
+        i += 1
+    return i
+
+
+def _parse_uint(s: bytes, i: int, end: int, maximum: int) -> tuple[int, int, int]:
+    """(status, value, index after the number); a number must end at ws, a letter or end."""
+    v = digits = 0
+    over = False
+    while i < end and _is_digit(s[i]):
+        d = s[i] - 0x30
+        if v > (maximum - d) // 10:
+            over = True
+        else:
+            v = v * 10 + d
+        i += 1
+        digits += 1
+    if not digits or not (i >= end or _is_ws(s[i]) or _is_letter(s[i])):
+        return E_BAD_NUMBER, 0, i
+    if over:
+        return E_OUT_OF_RANGE, 0, i
+    return OK, v, i
+
+
+def _parse_int(s: bytes, i: int, end: int) -> tuple[int, int, int]:
+    neg = False
+    if i < end and s[i] in b"+-":
+        neg = s[i] == ord("-")
+        i += 1
+    st, v, i = _parse_uint(s, i, end, 2147483648 if neg else 2147483647)
+    return st, -v if neg else v, i
+
+
+_ALLOWED = {"G1": "ABPS", "G92": "AB", "M3": "S"}
+_G_CODES = {1: "G1", 90: "G90", 91: "G91", 92: "G92"}
+_M_CODES = {3: "M3", 5: "M5", 17: "M17", 18: "M18", 110: "M110"}
+
+
+def _parse_dollar(s: bytes, i: int, end: int, cmd: Command) -> int:
+    if i >= end:
+        return E_UNKNOWN_COMMAND
+    c = _upper(s[i])
+    if _is_digit(c):
+        j = i
+        while j < end and _is_digit(s[j]):
+            j += 1
+        if j >= end or s[j] != ord("="):
+            return E_MISSING_WORD if _skip_ws(s, j, end) >= end else E_BAD_NUMBER
+        n = 0
+        for k in range(i, j):
+            n = n * 10 + s[k] - 0x30
+            if n > 255:
+                return E_UNKNOWN_SETTING
+        st, v, j = _parse_int(s, j + 1, end)
+        if st != OK:
+            return st
+        if _skip_ws(s, j, end) < end:
+            return E_BAD_WORD
+        cmd.kind, cmd.setting, cmd.value = "$=", n, v
+        return OK
+    kinds = {ord("I"): "$I", ord("$"): "$$", ord("H"): "$H", ord("X"): "$X"}
+    if c not in kinds:
+        return E_UNKNOWN_COMMAND
+    cmd.kind = kinds[c]
+    return E_BAD_WORD if _skip_ws(s, i + 1, end) < end else OK
+
+
+def _check_ranges(cmd: Command) -> int:
+    w = cmd.words
+    for axis in "AB":
+        if axis in w and not -POS_LIMIT <= w[axis] <= POS_LIMIT:
+            return E_OUT_OF_RANGE
+    if "S" in w and not 0 <= w["S"] <= protocol.POWER_MAX:
+        return E_OUT_OF_RANGE
+    if "P" in w and not P_MIN_US <= w["P"] <= P_MAX_US:
+        return E_OUT_OF_RANGE
+    if cmd.kind == "G1" and "P" not in w:
+        return E_MISSING_WORD
+    if cmd.kind == "G92" and "A" not in w and "B" not in w:
+        return E_MISSING_WORD
+    return OK
+
+
+def _parse_body(s: bytes, i: int, end: int, cmd: Command) -> int:
+    for k in range(i, end):
+        if (s[k] < 0x20 or s[k] > 0x7E) and s[k] != 0x09:
+            return E_INVALID_CHAR
+    semi = s.find(b";", i, end)
+    if semi >= 0:
+        end = semi
+    i = _skip_ws(s, i, end)
+    if i >= end:
+        return OK
+    c = _upper(s[i])
+    if c == ord("$"):
+        return _parse_dollar(s, i + 1, end, cmd)
+    if c not in (ord("G"), ord("M")):
+        return E_UNKNOWN_COMMAND
+    st, code, i = _parse_uint(s, i + 1, end, 65535)
+    if st != OK:
+        return E_UNKNOWN_COMMAND if st == E_OUT_OF_RANGE else st
+    kind = (_G_CODES if c == ord("G") else _M_CODES).get(code)
+    if kind is None:
+        return E_UNKNOWN_COMMAND
+    cmd.kind = kind
+    st = _parse_words(s, i, end, cmd)
+    return st if st != OK else _check_ranges(cmd)
+
+
+def _parse_words(s: bytes, i: int, end: int, cmd: Command) -> int:
+    """The words after the command (each of A B P S at most once, as the command allows)."""
+    allowed = _ALLOWED.get(cmd.kind, "")
+    while True:
+        i = _skip_ws(s, i, end)
+        if i >= end:
+            return OK
+        w = chr(_upper(s[i]))
+        if w not in "ABPS" or w not in allowed or w in cmd.words:
+            return E_BAD_WORD
+        st, v, i = _parse_int(s, i + 1, end)
+        if st != OK:
+            return st
+        cmd.words[w] = v
+
+
+@dataclass(frozen=True)
+class Parsed:
+    """The outcome of framing and parsing one line (fb_parse_line)."""
+
+    status: int  # OK or an error code
+    last: int  # the line counter afterwards
+    accepted: bool  # False for error 8, 9, 10 and a malformed N: the counter is unchanged
+    command: Command
+    numbered: bool = False  # strict framing afterwards (fb_lines_t.numbered)
+
+
+def _checksum_field_ok(line: bytes, end: int) -> bool:
+    """Whether the checksum field after the last ``*`` (at ``end``) is right (fb_proto.c
+    field_ok): ``<crc16>/<len>`` then only spaces or tabs, both decimal without a leading
+    zero, the CRC-16 (0..65535) that of the body ``line[:end]`` and the length (0..99)
+    ``end``, the body's — the length catches every byte the body lost or gained."""
+    nums: list[int] = []
+    i = end + 1
+    for k in range(2):
+        start, v = i, 0
+        while i < len(line) and _is_digit(line[i]):
+            v = v * 10 + line[i] - 0x30
+            if v > 0xFFFF:
+                return False
+            i += 1
+        if i == start or (line[start] == 0x30 and i > start + 1):
+            return False
+        nums.append(v)
+        if k == 0:
+            if i >= len(line) or line[i] != ord("/"):
+                return False
+            i += 1
+    crc, body_len = nums
+    return (body_len <= 99 and body_len == end and _skip_ws(line, i, len(line)) == len(line)
+            and crc16(line[:end]) == crc)
+
+
+def parse_line(last: int, line: bytes, numbered: bool = False) -> Parsed:
+    """Frame and parse one received line (without its newline) as the firmware does.
+
+    On ``error:8/9/10`` and a malformed ``N`` the line is not accepted and ``last`` is
+    unchanged; every other outcome accepts it: ``last`` becomes N (M110: its N or 0), or
+    last+1 for a line without N, and a parse error is replied after that.
+
+    ``numbered`` is the strict-framing state: once a numbered line was accepted, a line
+    without N is refused with ``error:10`` (not accepted, not executed) until an
+    unnumbered ``M110`` (which ends it) or a reset.  ``Parsed.numbered`` is the state after
+    the line.
+    """
+    cmd = Command()
+    end = len(line)
+    star = line.rfind(b"*")
+    if star >= 0:
+        end = star
+        if not _checksum_field_ok(line, end):
+            return Parsed(E_CHECKSUM, last, False, cmd, numbered)
+    i = _skip_ws(line, 0, end)
+    if i < end and _upper(line[i]) == ord("N"):
+        if star < 0:
+            return Parsed(E_NO_CHECKSUM, last, False, cmd, numbered)
+        st, n, i = _parse_uint(line, i + 1, end, 0xFFFFFFFF)
+        if st != OK:
+            return Parsed(E_BAD_NUMBER, last, False, cmd, numbered)
+        cmd.n = n
+    st = _parse_body(line, i, end, cmd)
+    if st == OK and cmd.kind == "M110":
+        return Parsed(OK, cmd.n if cmd.n is not None else 0, True, cmd, cmd.n is not None)
+    if cmd.n is not None:
+        if cmd.n != (last + 1) & 0xFFFFFFFF:
+            return Parsed(E_LINE_NUMBER, last, False, cmd, numbered)
+        return Parsed(st, cmd.n, True, cmd, True)
+    if numbered:  # strict framing: a numbered host's line that lost its N and checksum
+        return Parsed(E_NO_CHECKSUM, last, False, cmd, numbered)
+    return Parsed(st, (last + 1) & 0xFFFFFFFF, True, cmd, False)
+
