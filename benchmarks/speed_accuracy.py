@@ -5,7 +5,7 @@ One run regenerates every chart in docs/img/ and docs/performance.md, all figure
 1. Five-bar kinematics — time per point against the largest pen error, for the closed form
    (kinematics.fivebar), the n-bar solver as forward kinematics (kinematics.nbar), the thesis'
    linear approximation (Sec. 5.2, Eqs. 25–26, fitted by least squares; whole page region and
-   per tile) and lookup tables (bilinear, bicubic) from kinematics.approx. Errors are measured
+   per tile) and lookup tables (bilinear, bicubic) from benchmarks.approx. Errors are measured
    in the well-conditioned interior and near each singularity type separately, against the
    same closed-form formulas evaluated in extended precision (np.longdouble, 64-bit mantissa).
 2. n-bar solver — convergence tolerance and input step against run time and constraint
@@ -55,6 +55,7 @@ from matplotlib.colors import BoundaryNorm, ListedColormap  # noqa: E402
 from matplotlib.patches import Patch, Rectangle  # noqa: E402
 from matplotlib.ticker import NullFormatter  # noqa: E402
 
+from benchmarks import approx  # noqa: E402
 from benchmarks.kinematics import bare_forward, bare_inverse, median_time  # noqa: E402
 from benchmarks.pipeline import make_svg  # noqa: E402
 from fivebar_host.config import Profile, load_profile  # noqa: E402
@@ -69,7 +70,6 @@ from fivebar_host.job import (  # noqa: E402
 )
 from fivebar_host.linkage import load_mechanism  # noqa: E402
 from fivebar_host.toolpath.geometry import evaluate, nearest_distance  # noqa: E402
-from kinematics import approx  # noqa: E402
 from kinematics.analysis import (  # noqa: E402
     PageFit,
     find_page_rectangle,
@@ -430,7 +430,7 @@ def _closed_form(sc: Scene) -> tuple[Callable[[FloatArray], tuple[FloatArray, Bo
 
 
 def build_methods(sc: Scene, cfg: Config) -> list[Method]:
-    """The closed form, bare formulas and every approximation of kinematics.approx."""
+    """The closed form, bare formulas and every approximation of benchmarks.approx."""
     fb, mode, asm = sc.fb, sc.mode, sc.assembly
     s1, s2 = _signs(mode)
     sign = sc.sign
