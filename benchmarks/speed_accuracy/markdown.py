@@ -8,6 +8,7 @@ import math
 
 
 def fmt_g(x: float, digits: int = 2) -> str:
+    """`digits` significant digits, exponent form outside [1e-3, 1e5)."""
     if x is None or (isinstance(x, float) and math.isnan(x)):
         return "—"
     if math.isinf(x):
@@ -18,6 +19,7 @@ def fmt_g(x: float, digits: int = 2) -> str:
 
 
 def fmt_bytes(n: int) -> str:
+    """B, KiB or MiB ("—" for none)."""
     if n == 0:
         return "—"
     if n < 1024:
@@ -26,4 +28,5 @@ def fmt_bytes(n: int) -> str:
 
 
 def fmt_pct(x: float) -> str:
+    """A share as a whole percentage ("—" for NaN)."""
     return "—" if math.isnan(x) else f"{100 * x:.0f} %"

@@ -136,6 +136,7 @@ def guard_of(sc: Scene) -> tuple[float, tuple[float, float]]:
 
 def wrap(f: Callable[[FloatArray], approx.Approximation]
           ) -> Callable[[FloatArray], tuple[FloatArray, BoolArray]]:
+    """An approximation's map as a (values, valid mask) map, like the closed form's."""
     def call(q: FloatArray) -> tuple[FloatArray, BoolArray]:
         r = f(q)
         return r.values, r.valid

@@ -17,13 +17,14 @@ from matplotlib.patches import Rectangle
 from benchmarks.speed_accuracy.scene import Scene
 from kinematics.analysis import type1_circles, type2_traces
 
+#: Errors are drawn at least this large on log axes (an exact 0 would vanish).
+FLOOR_MM = 1e-16
+
 
 def save(fig: Any, path: Path) -> None:
+    """Write the figure as a PNG at 100 dpi and release it."""
     fig.savefig(path, dpi=100)
     plt.close(fig)
-
-
-FLOOR_MM = 1e-16
 
 
 def overlay(ax: Any, sc: Scene) -> None:

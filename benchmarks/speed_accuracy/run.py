@@ -98,6 +98,7 @@ def run(cfg: Config, out_dir: Path, profile: Profile | None = None) -> Results:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
+    """The command line: `--quick` or the full sizes, the report and charts into `--out-dir`."""
     ap = argparse.ArgumentParser(prog="python -m benchmarks.speed_accuracy",
                                  description=DESCRIPTION)
     ap.add_argument("--out-dir", type=Path, default=ROOT / "docs",

@@ -78,6 +78,7 @@ def make_scene(profile: Profile | None = None) -> Scene:
 
 
 def signs(mode: str) -> tuple[float, float]:
+    """The elbow signs (±1, ±1) of a working mode such as "+-"."""
     return (1.0 if mode[0] == "+" else -1.0, 1.0 if mode[1] == "+" else -1.0)
 
 
@@ -97,12 +98,14 @@ def ref_forward(sc: Scene, th: FloatArray, sign: FloatArray | float) -> NDArray[
 
 
 def dist(a: NDArray[Any], b: NDArray[Any]) -> FloatArray:
+    """Row-wise distance in long double, returned as float64; inf where it is NaN."""
     d = np.asarray(a, dtype=LD) - np.asarray(b, dtype=LD)
     out = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]).astype(np.float64)
     return np.asarray(np.where(np.isnan(out), np.inf, out), dtype=np.float64)
 
 
 def wrapped(d: FloatArray) -> FloatArray:
+    """Angle differences wrapped into [−π, π)."""
     return np.asarray(np.mod(d + math.pi, 2.0 * math.pi) - math.pi, dtype=np.float64)
 
 

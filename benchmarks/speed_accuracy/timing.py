@@ -79,6 +79,7 @@ def interleaved_medians(fns: Sequence[Callable[[], object]], repeats: int
 
 
 def timed_build(fn: Callable[[], Any]) -> tuple[Any, float]:
+    """Call `fn` once: (its result, wall time in s)."""
     t0 = time.perf_counter()
     obj = fn()
     return obj, time.perf_counter() - t0
