@@ -1,4 +1,4 @@
-"""kinematics.approx against analytic cases: the thesis' linear transform (Sec. 5.2, Eqs.
+"""benchmarks.approx against analytic cases: the thesis' linear transform (Sec. 5.2, Eqs.
 25–26) and the lookup tables / tiles, each checked against a result derived by hand.
 
 - Mirror symmetry: for a machine with a1 = a2, b1 = b2 and sample points symmetric about
@@ -17,20 +17,26 @@ from __future__ import annotations
 
 import itertools
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from kinematics import approx
-from kinematics.approx import (
+ROOT = Path(__file__).resolve().parent.parent
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from benchmarks.approx import (  # noqa: E402
     fit_linear,
     forward_table,
     forward_tiles,
     inverse_table,
     inverse_tiles,
+    linear,
     to_thesis,
 )
-from kinematics.fivebar import FiveBar
+from kinematics.fivebar import FiveBar  # noqa: E402
 
 SYM = FiveBar(60.0, 90.0, 60.0, 90.0, 40.0)
 ODD = FiveBar(55.0, 95.0, 65.0, 85.0, 42.0)
@@ -97,7 +103,7 @@ def test_exact_eq25_data_is_fitted_exactly() -> None:
     g, b, a = math.radians(135.0), 7.5, np.array([25.5, 20.0])
     rot = np.array([[math.cos(g), -math.sin(g)], [math.sin(g), math.cos(g)]])
     y = (p @ rot.T + a) * b
-    m, c = approx._lsq_maps(p[None], y[None], "similarity")
+    m, c = linear._lsq_maps(p[None], y[None], "similarity")
     assert np.allclose(m[0], b * rot, atol=1e-12)
     assert np.allclose(c[0] / b, a, atol=1e-12)
 

@@ -22,8 +22,8 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from benchmarks.approx import fit_linear, forward_table, inverse_table  # noqa: E402
 from benchmarks.kinematics import bare_forward, bare_inverse  # noqa: E402
-from kinematics.approx import fit_linear, forward_table, inverse_table  # noqa: E402
 from kinematics.fivebar import FiveBar, Reason, UnreachableError  # noqa: E402
 from kinematics.nbar import (  # noqa: E402
     Status,
