@@ -377,7 +377,7 @@ def handle_link_errors(fn: F) -> F:
 
     @wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        from fivebar_host.link import LinkError
+        from fivebar_host.run.errors import LinkError
 
         try:
             return fn(*args, **kwargs)
@@ -404,7 +404,7 @@ def _confirm(yes: bool) -> Callable[[str], bool]:
 
 
 def _open_link(port: str, prof: Profile) -> Any:
-    from fivebar_host.link import Link
+    from fivebar_host.run.link import Link
 
     return Link.open(port, baud=prof.serial.baud,
                      banner_timeout_s=prof.serial.banner_timeout_s,

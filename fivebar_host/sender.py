@@ -39,8 +39,10 @@ from numpy.typing import ArrayLike, NDArray
 from fivebar_host import protocol
 from fivebar_host.config import Profile
 from fivebar_host.job import Job
-from fivebar_host.link import Link, LinkError, LinkFaultError, StreamProgress, StreamResult
 from fivebar_host.protocol import StatusReport
+from fivebar_host.run.errors import FaultKind, LinkError, LinkFaultError
+from fivebar_host.run.link import Link
+from fivebar_host.run.stream import StreamProgress, StreamResult
 from fivebar_host.steps import step_angles
 
 RESUME_SUFFIX = ".fivebar-resume.json"
@@ -619,7 +621,7 @@ def _after_fault(link: Link, job: Job, stream: _Stream, fault: LinkFaultError, r
     after: StatusReport | None = None  # after a DTR reboot
     rebooted = False
     ctrl_x = False
-    if fault.kind != "disconnect":
+    if fault.kind is not FaultKind.DISCONNECT:
         try:
             link.realtime(protocol.RT_HOLD)
             held = _wait_stopped(link)
@@ -632,12 +634,12 @@ def _after_fault(link: Link, job: Job, stream: _Stream, fault: LinkFaultError, r
                 with contextlib.suppress(LinkError):
                     after = link.status(timeout_s=2.0)
     n = job.n_segments
-    restarted = fault.kind == "reset" or rebooted
+    restarted = fault.kind is FaultKind.RESET or rebooted
     # Conservative: the last segment a status report of the stream confirmed.
     seen = fault.status if restarted or held is None else held
     nxt = stream.done_segments(seen.done_line) if seen is not None else stream.start
     position = None if restarted or held is None else (held.a, held.b)
-    kept = after if rebooted else (held if fault.kind == "reset" else None)
+    kept = after if rebooted else (held if fault.kind is FaultKind.RESET else None)
     kept_why = "the controller gave no status after restarting"
     if kept is not None:
         exact, kept_why = kept_resume_segment(stream.prog, stream.first_line, stream.start,
@@ -667,8 +669,9 @@ def _after_fault(link: Link, job: Job, stream: _Stream, fault: LinkFaultError, r
         rp = ResumePoint(str(job.file), fp, nxt, None, f"{fault.kind}: {fault}", n,
                          stream.first_line, stream.first_line + len(stream.prog.bodies) - 1,
                          stream.start, stream.start_position, stream.laser, sent_segment)
-        cause = ("the link broke while the controller was running" if fault.kind ==
-                 "disconnect" else f"the controller could not be read ({kept_why})")
+        cause = ("the link broke while the controller was running"
+                 if fault.kind is FaultKind.DISCONNECT
+                 else f"the controller could not be read ({kept_why})")
         where = (f"position not known yet: {cause}. Segments known executed: {nxt} of {n}. "
                  "The controller keeps its position and its last executed line across a reset "
                  "(opening the port resets an Arduino): --resume reads them from it and "
