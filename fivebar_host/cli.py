@@ -460,7 +460,7 @@ def _stream_plot(drawing: Path, port: str, prof: Profile, job: Any, *, laser: bo
     """Stream a compiled job with a progress bar, Ctrl-C hold/resume/abort, final report."""
     import signal
 
-    from fivebar_host.sender import Progress, run_job
+    from fivebar_host.run.sender import Progress, run_job
 
     click.echo(f"job: {job.n_segments} segments, {job.n_paths} paths, mode {job.mode}, "
                f"≈ {job.total_time_s:.1f} s, max deviation {job.max_dev_mm:.4f} mm")
@@ -541,7 +541,7 @@ def _write_executed(job: Any, prof: Profile, trace: Path, preview_path: Path,
 @handle_errors
 def home_cmd(port: str | None, yes: bool, config_path: Path | None) -> None:
     """Give the firmware a known position: $H with endstops, else confirm the home pose."""
-    from fivebar_host.sender import home
+    from fivebar_host.run.sender import home
 
     if port is None:
         _fail("give --port PORT")
@@ -571,7 +571,8 @@ def jog(port: str | None, motor: str | None, steps: int, dx: float, dy: float, y
 
     A pen move needs a known position (homed) and is checked; a motor move before homing
     (to bring the arms to the home pose) is not checked, and says so."""
-    from fivebar_host.sender import ensure_known_pose, jog_lines
+    from fivebar_host.run.program import jog_lines
+    from fivebar_host.run.sender import ensure_known_pose
 
     if port is None:
         _fail("give --port PORT")
@@ -611,7 +612,8 @@ def frame(drawing: Path, port: str | None, yes: bool, config_path: Path | None,
           scale: float | None, rotate_deg: float, fit: bool, layers: tuple[str, ...],
           keep_order: bool) -> None:
     """Trace the outline (bounding box) of DRAWING's job with the laser off, then go home."""
-    from fivebar_host.sender import ensure_known_pose, frame_program
+    from fivebar_host.run.program import frame_program
+    from fivebar_host.run.sender import ensure_known_pose
 
     if port is None:
         _fail("give --port PORT")

@@ -64,3 +64,6 @@ class LinkFaultError(LinkError):
     def __str__(self) -> str:
         return self.message
 
+
+class SendError(LinkError):
+    """A job could not be sent or finished; says what happened, where, and what to do."""

@@ -52,21 +52,12 @@ from fivebar_host import protocol
 from fivebar_host.config import Profile
 from fivebar_host.job import Job
 from fivebar_host.protocol import StatusReport
-from fivebar_host.run.errors import FaultKind, LinkError, LinkFaultError
+from fivebar_host.run.errors import FaultKind, LinkError, LinkFaultError, SendError
 from fivebar_host.run.link import Link
+from fivebar_host.run.program import Program, build_program, travel_lines
+from fivebar_host.run.resume import ResumePoint, kept_resume_segment, resume_path
+from fivebar_host.run.sender import Progress, home, run_job
 from fivebar_host.run.stream import StreamResult
-from fivebar_host.sender import (
-    Program,
-    Progress,
-    ResumePoint,
-    SendError,
-    build_program,
-    home,
-    kept_resume_segment,
-    resume_path,
-    run_job,
-    travel_lines,
-)
 from fivebar_host.server import store as st_
 from fivebar_host.server.jobs import CompiledCache, JobOptions, SubmitError, compile_upload
 from fivebar_host.server.store import JobRecord, JobStore, ResumeRecord, StreamRecord
