@@ -20,7 +20,7 @@ import time
 
 from fivebar_host import protocol
 from fivebar_host.devices.sim import toolchain_missing
-from fivebar_host.link import Link
+from fivebar_host.run.link import Link
 
 NOMINAL_BPS = 115200 / 10
 SIMAVR_BPS = 16_000_000 / 1496

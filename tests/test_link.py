@@ -8,8 +8,9 @@ import serial
 
 from fivebar_host import protocol
 from fivebar_host.devices import mock, urls
-from fivebar_host.link import FirmwareMismatchError, Link, LinkFaultError
 from fivebar_host.protocol import Banner
+from fivebar_host.run.errors import FaultKind, FirmwareMismatchError, LinkFaultError
+from fivebar_host.run.link import Link
 
 BANNER = Banner("1.0.0", protocol.PROTOCOL_VERSION, 128, 16, 80)
 
@@ -109,7 +110,7 @@ def test_a_banner_glued_to_a_cut_reply_is_a_restart_while_streaming() -> None:
         with pytest.raises(LinkFaultError) as e:
             link.stream([f"G1 A{10 * i} P10000" for i in range(1, 9)])
         assert port.cut is not None and port.cut.startswith(b"ofivebar 1.0.0 proto:")
-        assert e.value.kind == "reset", e.value
+        assert e.value.kind is FaultKind.RESET, e.value
         assert e.value.acked == 2  # line 3's ok was cut away
         assert link.banner == BANNER
     finally:

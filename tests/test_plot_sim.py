@@ -13,8 +13,10 @@ from sim_plot import compiled_copy, laser_steps, planned_draw_steps
 from fivebar_host.devices.sim import toolchain_missing
 from fivebar_host.devices.simtrace import read_trace
 from fivebar_host.executed import executed_path, merge_axes
-from fivebar_host.link import Link
-from fivebar_host.sender import Progress, SendError, resume_path, run_job
+from fivebar_host.run.errors import SendError
+from fivebar_host.run.link import Link
+from fivebar_host.run.resume import resume_path
+from fivebar_host.run.sender import Progress, run_job
 
 pytestmark = pytest.mark.skipif(toolchain_missing() is not None,
                                 reason=f"emulator unavailable: {toolchain_missing()}")

@@ -23,7 +23,7 @@ from fivebar_host.cli import main
 from fivebar_host.devices import simport
 from fivebar_host.devices.sim import toolchain_missing
 from fivebar_host.devices.simtrace import Trace, read_trace
-from fivebar_host.sender import ResumePoint, resume_path
+from fivebar_host.run.resume import ResumePoint, resume_path
 
 pytestmark = [
     pytest.mark.sim,

@@ -148,7 +148,7 @@ def confirm_with(yes: bool) -> Callable[[str], bool]:
 
 def open_link(port: str | None, prof: Profile) -> Any:
     """Open the machine at --port (required for machine commands)."""
-    from fivebar_host.link import Link
+    from fivebar_host.run.link import Link
 
     if port is None:
         fail("give --port PORT")

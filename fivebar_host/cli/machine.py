@@ -29,7 +29,7 @@ from fivebar_host.cli.common import (
 @handle_errors
 def home_cmd(port: str | None, yes: bool, config_path: Path | None) -> None:
     """Give the firmware a known position: $H with endstops, else confirm the home pose."""
-    from fivebar_host.sender import home
+    from fivebar_host.run.sender import home
 
     prof = load(config_path)
     link = open_link(port, prof)
@@ -56,7 +56,8 @@ def jog(port: str | None, motor: str | None, steps: int, dx: float, dy: float, y
 
     A pen move needs a known position (homed) and is checked; a motor move before homing
     (to bring the arms to the home pose) is not checked, and says so."""
-    from fivebar_host.sender import ensure_known_pose, jog_lines
+    from fivebar_host.run.program import jog_lines
+    from fivebar_host.run.sender import ensure_known_pose
 
     if (motor is None) == (dx == 0.0 and dy == 0.0):
         fail("give either --motor with --steps, or --dx/--dy")
@@ -91,7 +92,8 @@ def jog(port: str | None, motor: str | None, steps: int, dx: float, dy: float, y
 def frame(drawing: Path, port: str | None, yes: bool, config_path: Path | None,
           **job_values: Any) -> None:
     """Trace the outline (bounding box) of DRAWING's job with the laser off, then go home."""
-    from fivebar_host.sender import ensure_known_pose, frame_program
+    from fivebar_host.run.program import frame_program
+    from fivebar_host.run.sender import ensure_known_pose
 
     prof, job = compile_from_cli(drawing, config_path, job_values)
     link = open_link(port, prof)

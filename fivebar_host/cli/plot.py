@@ -106,7 +106,7 @@ def _ask_resume() -> bool:
 def _stream_plot(drawing: Path, port: str, prof: Profile, job: Any, *, laser: bool,
                  resume: bool, yes: bool, preview_path: Path) -> None:
     """Stream a compiled job with a progress bar, Ctrl-C hold/resume/abort, final report."""
-    from fivebar_host.sender import Progress, run_job
+    from fivebar_host.run.sender import Progress, run_job
 
     click.echo(f"job: {job.n_segments} segments, {job.n_paths} paths, mode {job.mode}, "
                f"≈ {job.total_time_s:.1f} s, max deviation {job.max_dev_mm:.4f} mm")

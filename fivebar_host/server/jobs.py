@@ -21,7 +21,7 @@ from fivebar_host.config import ConfigError, Profile
 from fivebar_host.errors import FivebarError, InputError, JobError
 from fivebar_host.job import GCODE_SUFFIXES, CompileOptions, Job, compile_drawing
 from fivebar_host.options import check_values
-from fivebar_host.sender import fingerprint
+from fivebar_host.run.resume import fingerprint
 from fivebar_host.toolpath.gcode import read_gcode
 from fivebar_host.toolpath.svg import read_svg
 from kinematics.fivebar import KinematicsError

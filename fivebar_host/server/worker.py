@@ -51,20 +51,13 @@ import numpy as np
 from fivebar_host import protocol
 from fivebar_host.config import Profile
 from fivebar_host.job import Job
-from fivebar_host.link import Link, LinkError, LinkFaultError, StreamResult
 from fivebar_host.protocol import StatusReport
-from fivebar_host.sender import (
-    Program,
-    Progress,
-    ResumePoint,
-    SendError,
-    build_program,
-    home,
-    kept_resume_segment,
-    resume_path,
-    run_job,
-    travel_lines,
-)
+from fivebar_host.run.errors import FaultKind, LinkError, LinkFaultError, SendError
+from fivebar_host.run.link import Link
+from fivebar_host.run.program import Program, build_program, travel_lines
+from fivebar_host.run.resume import ResumePoint, kept_resume_segment, resume_path
+from fivebar_host.run.sender import Progress, home, run_job
+from fivebar_host.run.stream import StreamResult
 from fivebar_host.server import store as st_
 from fivebar_host.server.jobs import CompiledCache, JobOptions, SubmitError, compile_upload
 from fivebar_host.server.store import JobRecord, JobStore, ResumeRecord, StreamRecord
@@ -569,7 +562,7 @@ class Worker(threading.Thread):
                 if req in ("cancel", "pause"):
                     link.realtime(protocol.RT_HOLD)
                     if req == "cancel" or not self._wait_paused(link, rec.id):
-                        raise LinkFaultError("interrupt", f"{link.url}: {self._why()}", -1,
+                        raise LinkFaultError(FaultKind.INTERRUPT, f"{link.url}: {self._why()}", -1,
                                              status=link.last_status)
                     link.realtime(protocol.RT_RESUME)
 
@@ -631,16 +624,16 @@ class Worker(threading.Thread):
             reason = {"terminate": "the daemon was told to stop; the machine ran out of "
                       "queued lines and stopped at a segment boundary",
                       "pause": "paused", "cancel": "cancelled"}.get(
-                          req or "", rp.reason) if kind == "interrupt" else rp.reason
+                          req or "", rp.reason) if kind is FaultKind.INTERRUPT else rp.reason
             self.store.set_resume(rec.id, ResumeRecord(rp.next_segment, rp.position, reason))
-            if kind != "disconnect":
+            if kind is not FaultKind.DISCONNECT:
                 # run_job reset the firmware (queue cleared, counter back to 0): the line
                 # numbers of this stream mean nothing any more; the resume point is exact.
                 self.store.set_stream(rec.id, None)
         self.store.update(rec.id, run_s=run_s)
-        if rp is not None and kind not in (None, "disconnect"):
+        if rp is not None and kind not in (None, FaultKind.DISCONNECT):
             self._set_pose(rp.position is not None, link.last_status)
-        elif kind == "disconnect":
+        elif kind is FaultKind.DISCONNECT:
             self.pose_known = False
         where = (f"segment {rp.next_segment} of {rp.segments}, "
                  + (f"A = {rp.position[0]}, B = {rp.position[1]}" if rp and rp.position

@@ -1,0 +1,173 @@
+"""The resume file of an interrupted job, and mapping a stopped stream back to its segments.
+
+A fault writes a `ResumePoint` next to the drawing (`resume_path`): the job's `fingerprint`,
+the first segment not known to be finished, the position when it is known, and otherwise
+the stream that ran, so that a later `--resume` can read the record a controller keeps
+across a reset (position, `H`, `Ln` done: docs/protocol.md 7) and map it back to the exact
+segment (`kept_resume_segment`, `kept_stream_segment`). The file is JSON; its field names and
+values are a format other sessions read (and the daemon copies the reason into its store).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from fivebar_host.config import Profile
+from fivebar_host.job import Job
+from fivebar_host.protocol import StatusReport
+from fivebar_host.run.errors import SendError
+from fivebar_host.run.program import Program, build_program
+
+RESUME_SUFFIX = ".fivebar-resume.json"
+
+
+def _pair(v: object) -> tuple[int, int] | None:
+    """A JSON `[a, b]` as a pair of ints (None stays None); TypeError/ValueError otherwise."""
+    if v is None:
+        return None
+    if not isinstance(v, list | tuple) or len(v) != 2:
+        raise ValueError(f"expected [a, b], got {v!r}")
+    return int(v[0]), int(v[1])
+
+
+@dataclass(frozen=True)
+class ResumePoint:
+    """Where an interrupted job stopped (written next to the drawing as JSON).
+
+    When the position was read after the fault, `next_segment` and `position` are exact.
+    Otherwise `position` is None, `next_segment` is the first segment no status report
+    confirmed finished, `sent_segment` the first segment none of whose lines had been sent
+    (so at most the segments in between ran), and — when the controller may still hold its
+    record of the stream (docs/protocol.md 7, kept across a reset) — the stream fields say
+    which stream that was: its first and last firmware line numbers and `build_program`'s
+    inputs (start segment, start position, laser), so a later run rebuilds the very program
+    sent and maps the controller's `Ln` done back to the exact segment. Files written before
+    these fields existed read with them None: no stream information.
+    """
+
+    drawing: str
+    fingerprint: str
+    next_segment: int  # first job segment not known to be finished (0-based)
+    position: tuple[int, int] | None  # firmware steps when it stopped; None if unknown
+    reason: str
+    segments: int
+    first_line: int | None = None  # firmware line number of the stream's first line
+    last_line: int | None = None  # ... and of its last line
+    stream_start: int | None = None  # segment the stream started at
+    start_position: tuple[int, int] | None = None  # firmware steps the stream started from
+    laser: bool | None = None  # the stream's laser flag (its lines depend on it)
+    sent_segment: int | None = None  # first segment none of whose lines was sent
+
+    @property
+    def has_stream(self) -> bool:
+        """True when the interrupted stream can be rebuilt (all stream fields present)."""
+        return (self.first_line is not None and self.last_line is not None
+                and self.stream_start is not None and self.start_position is not None
+                and self.laser is not None)
+
+    def save(self, path: Path) -> None:
+        """Write atomically (temporary file + rename)."""
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(json.dumps(asdict(self), indent=2) + "\n", encoding="utf-8")
+        tmp.replace(path)
+
+    @staticmethod
+    def load(path: Path) -> ResumePoint:
+        """Read a resume file; SendError naming the file when it is missing or malformed."""
+        try:
+            d = json.loads(path.read_text(encoding="utf-8"))
+
+            def opt_int(key: str) -> int | None:
+                v = d.get(key)
+                return None if v is None else int(v)
+
+            laser = d.get("laser")
+            if laser is not None and not isinstance(laser, bool):
+                raise ValueError(f"laser must be true or false, got {laser!r}")
+            return ResumePoint(str(d["drawing"]), str(d["fingerprint"]),
+                               int(d["next_segment"]), _pair(d["position"]),
+                               str(d["reason"]), int(d["segments"]),
+                               opt_int("first_line"), opt_int("last_line"),
+                               opt_int("stream_start"), _pair(d.get("start_position")), laser,
+                               opt_int("sent_segment"))
+        except FileNotFoundError:
+            raise SendError(f"{path}: no resume file (nothing was interrupted?)") from None
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
+            raise SendError(f"{path}: unreadable resume file: {e}") from e
+
+
+def resume_path(drawing: str | Path) -> Path:
+    """The resume file of a drawing: `<drawing>.fivebar-resume.json` beside it."""
+    p = Path(drawing)
+    return p.with_name(p.name + RESUME_SUFFIX)
+
+
+def fingerprint(job: Job) -> str:
+    """Hash of what the machine would do (steps, durations, laser), to match resume files."""
+    h = hashlib.sha256()
+    for arr in (job.steps, job.duration_us, job.power, job.draw):
+        h.update(np.ascontiguousarray(arr).tobytes())
+    return h.hexdigest()[:16]
+
+
+def kept_resume_segment(prog: Program, first_line: int, start: int, start_position: ArrayLike,
+                        st: StatusReport, floor: int) -> tuple[int | None, str]:
+    """The exact first unfinished segment from a controller's record kept across a reset.
+
+    A reset that leaves the RAM powered keeps the position, `H` and `Ln` done
+    (docs/protocol.md 7). `prog` is the stream that ran, from firmware line `first_line`,
+    built from segment `start` at `start_position`; `st` is a status report read after the
+    reset, motion over. The record is this stream's when `H:1`, its done line is one of the
+    stream's lines (or the one before the first), the segment it maps to is not before
+    `floor` (a segment a status report of the stream had already confirmed) and the position
+    lies on the stream's path just after that line. Returns (segment, "") or (None, why not):
+    power was lost, or something else ran on the controller since.
+    """
+    last = first_line + len(prog.bodies) - 1
+    if not st.homed:
+        return None, "it reports H:0, its position is unknown: it lost power"
+    if not first_line - 1 <= st.done_line <= last:
+        return None, (f"its last executed line {st.done_line} is not one of the stream's "
+                      f"lines {first_line}..{last}")
+    nxt = prog.finished_segments(first_line, st.done_line, start)
+    if nxt < floor:
+        return None, (f"its last executed line {st.done_line} would mean {nxt} segments done, "
+                      f"fewer than the {floor} a status report had confirmed")
+    if not prog.on_path(first_line, st.done_line, start_position, (st.a, st.b)):
+        return None, (f"its position A = {st.a}, B = {st.b} is not on the stream's path after "
+                      f"line {st.done_line}")
+    return nxt, ""
+
+
+def redraw_text(next_segment: int, sent_segment: int | None) -> str:
+    """How many segments a resume from `next_segment` may draw a second time."""
+    if sent_segment is None:
+        return "segments that ran after it before the fault will be drawn again"
+    n = max(0, sent_segment - next_segment)
+    return f"up to {n} segment{'' if n == 1 else 's'} after it may be drawn twice"
+
+
+def kept_stream_segment(job: Job, profile: Profile, rp: ResumePoint, st: StatusReport
+                        ) -> tuple[int | None, str]:
+    """`kept_resume_segment` for the interrupted stream `rp` describes (`rp.has_stream`).
+
+    The stream is rebuilt from `build_program`'s inputs the resume file kept; it must come
+    out as long as the stream that ran. Returns (segment, "") or (None, why not).
+    """
+    assert (rp.first_line is not None and rp.last_line is not None
+            and rp.stream_start is not None and rp.start_position is not None
+            and rp.laser is not None)
+    try:
+        prog = build_program(job, profile, rp.laser, rp.stream_start, rp.start_position)
+    except SendError as e:
+        return None, f"the interrupted stream cannot be rebuilt: {e}"
+    if len(prog.bodies) != rp.last_line - rp.first_line + 1:
+        return None, "the interrupted stream cannot be rebuilt the same"
+    return kept_resume_segment(prog, rp.first_line, rp.stream_start, rp.start_position, st,
+                               rp.next_segment)

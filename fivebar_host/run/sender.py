@@ -1,0 +1,237 @@
+"""Send compiled jobs to the machine: known start pose, streaming, faults and exact resume.
+
+Pure pipeline step over an open `Link` (no click, no pyserial): the CLI and the daemon call it.
+
+A job is a list of firmware lines (`run.program`), each mapped to the job segment it executes.
+While streaming, the firmware's status reports say which line (so which segment) finished
+last. On a fault the machine is held (laser off), its position read, the firmware reset (queue
+cleared, laser off) and a resume file written next to the drawing (`run.faults`,
+`run.resume`): the job's fingerprint, the first segment not known to be finished and the
+position. `--resume` continues from exactly there: when the pen stopped inside that segment,
+one move finishes the rest of it along the same joint-space line (nothing redrawn); otherwise
+a laser-off travel goes back to the segment's start.
+
+When the controller restarts (a reset banner mid-stream, or a hung controller rebooted through
+DTR) it keeps its position, `H` and `Ln` done (docs/protocol.md 7, kept across a reset): the
+line it finished last maps back to the exact segment, as after a hold. When the link breaks
+the position cannot be read at once; the resume file then also describes the stream (its line
+numbers and `build_program`'s inputs), and `--resume` reads the kept record from the controller
+(opening the port resets an Arduino, which keeps it) and maps it the same way. Only a
+controller that lost power (`H:0`) falls back to the last segment a status report confirmed,
+and segments after it may be drawn twice.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from fivebar_host import protocol
+from fivebar_host.config import Profile
+from fivebar_host.job import Job
+from fivebar_host.protocol import StatusReport
+from fivebar_host.run.errors import LinkFaultError, SendError
+from fivebar_host.run.faults import StreamRun, after_fault
+from fivebar_host.run.link import Link
+from fivebar_host.run.program import build_program
+from fivebar_host.run.resume import (
+    ResumePoint,
+    fingerprint,
+    kept_stream_segment,
+    redraw_text,
+    resume_path,
+)
+from fivebar_host.run.stream import StreamProgress, StreamResult
+
+
+# ------------------------------------------------------------------ start pose
+def ensure_known_pose(link: Link, profile: Profile, confirm: Callable[[str], bool]
+                      ) -> StatusReport:
+    """Make sure the firmware's step count means what the job assumes (0 = homed pose).
+
+    After power-up the firmware does not know where the arms are (`H:0`; a reset, such as
+    the one opening an Arduino's port causes, keeps the position: docs/protocol.md 7): with
+    endstops `$H` homes; without them the user confirms that the arms sit at the profile's
+    home pose, and `G92 A0 B0` sets the position. Alarm or hold states are refused with what
+    to do.
+    """
+    st = link.status()
+    if st.state == "Alarm":
+        raise SendError(f"{link.url}: the machine is in alarm {st.detail} "
+                        f"({_code_text(st.detail)}); clear it with `fivebar home`")
+    if st.state == "Hold":
+        raise SendError(f"{link.url}: the machine is on hold; resume or reset it first")
+    if st.homed:
+        return st
+    return home(link, profile, confirm)
+
+
+def home(link: Link, profile: Profile, confirm: Callable[[str], bool]) -> StatusReport:
+    """Home: `$H` with endstops, otherwise confirmation then `G92 A0 B0`."""
+    if profile.motors.endstops:
+        link.command("$H", timeout_s=120.0)
+        return link.wait_idle(120.0)
+    h1, h2 = (math.degrees(v) for v in profile.motors.home_rad)
+    if not confirm(f"The firmware does not know where the arms are. Are they at the home "
+                   f"pose θ1 = {h1:g}°, θ2 = {h2:g}° (motor angles from +x)?"):
+        raise SendError("position unknown: place the arms at the home pose and confirm, or "
+                        "run `fivebar home`")
+    link.command("G92 A0 B0")
+    return link.wait_idle(10.0)  # G92 is queued: its ok comes before it takes effect
+
+
+def _code_text(code: int | None) -> str:
+    info = protocol.CODES.get(code or -1)
+    return info.description if info else "unknown code"
+
+
+# ------------------------------------------------------------------ running a job
+@dataclass(frozen=True)
+class SendReport:
+    """What a finished send did."""
+
+    segments: int  # job segments executed by this run
+    start_segment: int
+    elapsed_s: float
+    bytes_sent: int
+    resends: int
+    final: StatusReport
+
+
+@dataclass(frozen=True)
+class Progress:
+    """Progress in job terms, for progress bars."""
+
+    segments_done: int
+    segments_total: int
+    elapsed_s: float
+    remaining_s: float
+
+
+def run_job(link: Link, job: Job, profile: Profile, *, drawing: str | Path, laser: bool,
+            confirm: Callable[[str], bool], resume: bool = False,
+            on_progress: Callable[[Progress], None] | None = None,
+            should_stop: Callable[[], bool] | None = None,
+            on_interrupt: Callable[[], bool] | None = None,
+            on_note: Callable[[str], None] | None = None) -> SendReport:
+    """Stream `job` (or its remainder with `resume`) and wait until the machine is idle.
+
+    On any fault: hold, read the position, reset the firmware, write the resume file and raise
+    `SendError` naming the fault, the position and the last segment executed. `on_note`
+    receives what the user should know before a resumed run starts (where it resumes from and
+    whether segments may be drawn twice).
+    """
+    rpath = resume_path(drawing)
+    fp = fingerprint(job)
+    start = 0
+    if resume:
+        rp = ResumePoint.load(rpath)
+        if rp.fingerprint != fp:
+            raise SendError(f"{rpath}: the resume file belongs to a different job (drawing or "
+                            "options changed); run the same command as before with --resume")
+        start, st = _resume_start(link, job, profile, rp, confirm, on_note or (lambda _: None))
+    else:
+        st = ensure_known_pose(link, profile, confirm)
+    start_position = (st.a, st.b)
+    prog = build_program(job, profile, laser, start, start_position)
+    durations = job.duration_us.astype(np.float64) * 1e-6
+    remaining_after = np.concatenate((np.cumsum(durations[::-1])[::-1], [0.0]))
+    t0 = time.monotonic()
+    first_line = link.next_line
+    last_line = first_line + len(prog.bodies) - 1
+
+    def progress(p: StreamProgress) -> None:
+        if on_progress is None:
+            return
+        done = prog.finished_segments(first_line, p.done_line, start)
+        on_progress(Progress(done, job.n_segments, time.monotonic() - t0,
+                             float(remaining_after[min(done, job.n_segments)])))
+
+    try:
+        res: StreamResult = link.stream(prog.bodies, on_progress=progress,
+                                        should_stop=should_stop, on_interrupt=on_interrupt)
+        final = link.wait_idle(max(30.0, 3.0 * job.total_time_s), last_line=last_line,
+                               on_status=lambda s: progress(StreamProgress(
+                                   len(prog.bodies), len(prog.bodies), len(prog.bodies),
+                                   s.done_line, s, 0)))
+    except LinkFaultError as fault:
+        stream = StreamRun(prog, first_line, start, start_position, laser)
+        raise after_fault(link, job, stream, fault, rpath, fp) from fault
+    if rpath.exists():
+        rpath.unlink()
+    return SendReport(job.n_segments - start, start, time.monotonic() - t0, res.bytes_sent,
+                      res.resends, final)
+
+
+
+def _resume_start(link: Link, job: Job, profile: Profile, rp: ResumePoint,
+                  confirm: Callable[[str], bool], note: Callable[[str], None]
+                  ) -> tuple[int, StatusReport]:
+    """The segment a resumed run starts at and the status it starts from.
+
+    An exact resume point is used as it is. Without a position the controller's record
+    kept across its reset (opening the port resets an Arduino) gives the exact segment when
+    it belongs to the interrupted stream (`kept_resume_segment`); otherwise the run starts at
+    the last segment a status report confirmed, after homing if the controller lost its
+    position, and says how many segments may be drawn twice.
+    """
+    st = _resumable_status(link)
+    start = rp.next_segment
+    n = job.n_segments
+    if rp.position is None and st.homed and rp.has_stream:
+        exact, why = kept_stream_segment(job, profile, rp, st)
+        if exact is not None:
+            note(f"resume point read from the controller: it kept its position (A = "
+                 f"{st.a}, B = {st.b} steps) and its last executed line ({st.done_line}) "
+                 f"across its reset; {exact} of {n} segments were executed, continuing "
+                 "exactly from there")
+            return exact, st
+        note(f"the controller's kept record does not belong to the interrupted job ({why}); "
+             f"resuming after segment {start} of {n}, the last a status report confirmed, "
+             f"from the controller's position (A = {st.a}, B = {st.b} steps): "
+             + redraw_text(start, rp.sent_segment))
+        return start, st
+    if not st.homed:
+        return start, _restore_position(link, job, profile, rp, confirm, note)
+    if rp.position is None:
+        note(f"resuming after segment {start} of {n}, the last a status report confirmed, "
+             f"from the controller's position (A = {st.a}, B = {st.b} steps): "
+             + redraw_text(start, rp.sent_segment))
+    return start, st
+
+
+def _resumable_status(link: Link) -> StatusReport:
+    """The status a resume starts from, once the machine is neither running nor stopped."""
+    st = link.status()
+    if st.state == "Run":
+        # A controller that the port's opening did not reset may still be running the
+        # interrupted stream's queue: let it finish, then read where it stopped.
+        st = link.wait_idle(120.0)
+    if st.state in ("Alarm", "Hold"):
+        raise SendError(f"{link.url}: the machine is in {st.state} "
+                        f"({_code_text(st.detail)}); clear it before resuming")
+    return st
+
+
+def _restore_position(link: Link, job: Job, profile: Profile, rp: ResumePoint,
+                      confirm: Callable[[str], bool], note: Callable[[str], None]
+                      ) -> StatusReport:
+    """The controller lost power since the fault: its count is 0; the arms are where they
+    stopped, if that is known and the user confirms it; otherwise home."""
+    if rp.position is not None and confirm(
+            f"Are the arms still where the job stopped (A = {rp.position[0]}, "
+            f"B = {rp.position[1]} steps)?"):
+        link.command(f"G92 A{rp.position[0]} B{rp.position[1]}")
+    else:
+        if rp.position is None:
+            start = rp.next_segment
+            note(f"the controller lost its position (H:0: power was cut since the fault); "
+                 f"after homing, resuming after segment {start} of {job.n_segments}, the last "
+                 f"a status report confirmed: " + redraw_text(start, rp.sent_segment))
+        home(link, profile, confirm)
+    return link.wait_idle(10.0)  # G92 is queued: its ok comes before it takes effect

@@ -1,0 +1,345 @@
+"""Streaming numbered lines to the firmware: a small state machine over one open `Link`.
+
+`Link.stream` hands its lines to a `Streamer`, which owns everything a stream keeps track of:
+the lines in flight, the acknowledged count, a pending rewind, the clocks of the last reply
+and the last status report. Each turn of `Streamer.run` honours a stop request, writes what
+fits, asks for a status report, reads and acts on what arrived, then checks for a lost line
+and for silence. What may be written depends on the phase:
+
+* SENDING — lines are written while their unanswered bytes fit the receive buffer the banner
+  reports (GRBL's character counting; one line at a time without counting);
+* WAITING — every line is written, replies are awaited;
+* DRAINING — the firmware asked for a resend (error 8, 9, 10): nothing is written until the
+  lines in flight are answered, then the stream rewinds to the line it asked for;
+* DONE — every line is answered `ok`; FAULTED — a `LinkFaultError` was raised.
+
+A line whose reply never comes (its newline was lost, so two lines merged into one refused
+line) shows in a status report that has not accepted it while the firmware is free: the stream
+rewinds to the line after the last one accepted. Error replies, alarms, a reset banner,
+silence and a disconnect fault the stream with the index of the first line not acknowledged.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from enum import Enum
+from typing import TYPE_CHECKING
+
+from fivebar_host import protocol
+from fivebar_host.protocol import (
+    AlarmPush,
+    Banner,
+    ErrorReply,
+    Message,
+    Ok,
+    SettingLine,
+    StatusReport,
+)
+from fivebar_host.run.errors import FaultKind, LinkError, LinkFaultError
+
+if TYPE_CHECKING:
+    from fivebar_host.run.link import Link
+
+#: A line in flight is suspected lost when no reply came for this long ...
+LOST_REPLY_S = 0.3
+#: ... and a status report arrived at least this long after the line was written.
+LOST_STATUS_AFTER_S = 0.2
+
+
+@dataclass(frozen=True)
+class StreamProgress:
+    """Progress of a stream, reported after every reply and status report."""
+
+    sent: int  # job lines written (first transmissions)
+    acked: int  # job lines answered ok
+    total: int
+    done_line: int  # firmware line number of the last block executed
+    status: StatusReport | None
+    resends: int
+
+
+@dataclass(frozen=True)
+class StreamResult:
+    """What a completed stream did: line numbers used, resends, bytes and time."""
+
+    first_line: int
+    last_line: int
+    bytes_sent: int
+    resends: int
+    elapsed_s: float
+    final_status: StatusReport
+
+
+class Phase(Enum):
+    """Where a stream is; see the module docstring."""
+
+    SENDING = "sending"
+    WAITING = "waiting"
+    DRAINING = "draining"
+    DONE = "done"
+    FAULTED = "faulted"
+
+
+#: The transitions a stream may take (a phase may always be entered again).
+TRANSITIONS: dict[Phase, frozenset[Phase]] = {
+    Phase.SENDING: frozenset({Phase.WAITING, Phase.DRAINING, Phase.FAULTED}),
+    Phase.WAITING: frozenset({Phase.SENDING, Phase.DRAINING, Phase.DONE, Phase.FAULTED}),
+    Phase.DRAINING: frozenset({Phase.SENDING, Phase.WAITING, Phase.FAULTED}),
+    Phase.DONE: frozenset(),
+    Phase.FAULTED: frozenset(),
+}
+
+
+class InFlight:
+    """The lines written and not yet answered: (job index, bytes, time written), oldest first.
+
+    Replies come in the order the lines were written, so each reply answers the oldest."""
+
+    def __init__(self) -> None:
+        self.lines: deque[tuple[int, int, float]] = deque()
+        self.bytes = 0
+
+    def __bool__(self) -> bool:
+        return bool(self.lines)
+
+    def fits(self, nbytes: int, budget: int) -> bool:
+        """Whether a line of `nbytes` may be written (one line always may, alone)."""
+        return not self.lines or self.bytes + nbytes <= budget
+
+    def push(self, index: int, nbytes: int) -> None:
+        self.lines.append((index, nbytes, time.monotonic()))
+        self.bytes += nbytes
+
+    def pop(self) -> int:
+        """Remove the oldest line; its job index."""
+        index, nbytes, _ = self.lines.popleft()
+        self.bytes -= nbytes
+        return index
+
+    def oldest(self) -> tuple[int, float]:
+        """Job index of the oldest line and when it was written."""
+        index, _, at = self.lines[0]
+        return index, at
+
+    def clear(self) -> None:
+        self.lines.clear()
+        self.bytes = 0
+
+
+class Streamer:
+    """One stream of `bodies` over `link`, from the link's next line number; `run` once.
+
+    Uses the link's raw I/O (`_write`, `_messages`, `_pending`): it is the link's streaming
+    half, kept in its own module. Arguments as `Link.stream`."""
+
+    def __init__(self, link: Link, bodies: Sequence[str], *, counting: bool = True,
+                 on_progress: Callable[[StreamProgress], None] | None = None,
+                 timeout_s: float | None = None,
+                 should_stop: Callable[[], bool] | None = None,
+                 on_interrupt: Callable[[], bool] | None = None) -> None:
+        if link.banner is None:
+            raise LinkError(f"{link.url}: no handshake yet")
+        self.link = link
+        self.bodies = bodies
+        self.on_progress = on_progress
+        self.should_stop = should_stop
+        self.on_interrupt = on_interrupt
+        self.timeout = timeout_s or link.reply_timeout_s
+        self.budget = link.banner.rx if counting else 1
+        self.first = link.next_line
+        self.encoded = [protocol.encode_line(b, self.first + i) for i, b in enumerate(bodies)]
+        self.total = len(self.encoded)
+        self.inflight = InFlight()
+        self.nxt = 0  # next job index to write
+        self.acked = 0
+        self.sent_max = 0
+        self.resends = 0
+        self.rewind_to: int | None = None  # while DRAINING: the job index to resend from
+        self.phase = Phase.SENDING if self.total else Phase.WAITING
+        self.t0 = time.monotonic()
+        self.last_reply = self.t0  # an ok / error arrived
+        self.last_activity = self.t0  # any line arrived
+        self.last_poll = self.t0 - link.poll_interval_s  # ask for a status report at once
+        self.status_at = 0.0
+        self.bytes0 = link.bytes_sent
+
+    # ------------------------------------------------------------------ the machine
+    def run(self) -> StreamResult:
+        """Stream until every line is answered `ok`; LinkFaultError on a fault."""
+        try:
+            while self.acked < self.total:
+                self._turn()
+        except LinkFaultError as e:
+            self._enter(Phase.FAULTED)
+            if e.acked >= 0:
+                raise
+            # A fault of the link's own I/O (or a callback's): give it this stream's place.
+            raise self._fault(e.kind, e.message.removeprefix(f"{self.link.url}: ")) from e
+        self._enter(Phase.DONE)
+        self.link.next_line = self.first + self.total
+        elapsed = time.monotonic() - self.t0
+        final = self.link.last_status or self.link.status()
+        return StreamResult(self.first, self.first + self.total - 1,
+                            self.link.bytes_sent - self.bytes0, self.resends, elapsed, final)
+
+    def _turn(self) -> None:
+        """One turn: stop request, write, poll, read and act, then check the link's health."""
+        self._check_stop()
+        if self.phase is Phase.SENDING:
+            self._send_what_fits()
+        self._poll_status()
+        self._receive()
+        if self.phase is Phase.DRAINING and not self.inflight:
+            assert self.rewind_to is not None
+            self._resend_from(self.rewind_to)
+            return
+        now = time.monotonic()
+        if self._lost_line(now):
+            return
+        self._check_silence(now)
+
+    def _enter(self, phase: Phase) -> None:
+        """Take a transition of `TRANSITIONS` (entering the current phase is a no-op)."""
+        if phase is not self.phase:
+            assert phase in TRANSITIONS[self.phase], f"stream: {self.phase} → {phase}"
+            self.phase = phase
+
+    def _resend_from(self, index: int) -> None:
+        """Rewind: the next line written is job line `index`, acknowledged up to it."""
+        self.acked = self.nxt = index
+        self.resends += 1
+        self.rewind_to = None
+        self._enter(Phase.SENDING if self.nxt < self.total else Phase.WAITING)
+
+    # ------------------------------------------------------------------ each step of a turn
+    def _check_stop(self) -> None:
+        """Hold at once when asked to stop; `on_interrupt` resumes, or the stream faults."""
+        if self.should_stop is None or not self.should_stop():
+            return
+        self.link._write(protocol.RT_HOLD)
+        if self.on_interrupt is None or not self.on_interrupt():
+            raise self._fault(FaultKind.INTERRUPT, f"interrupted by the user at job line "
+                              f"{self.acked + 1} of {self.total}")
+        self.link._write(protocol.RT_RESUME)
+        self.last_reply = self.last_activity = time.monotonic()
+
+    def _send_what_fits(self) -> None:
+        """Write lines while their bytes fit the budget; WAITING once all are written."""
+        while self.nxt < self.total and self.inflight.fits(len(self.encoded[self.nxt]),
+                                                           self.budget):
+            line = self.encoded[self.nxt]
+            self.link._write(line)
+            self.inflight.push(self.nxt, len(line))
+            self.nxt += 1
+            self.sent_max = max(self.sent_max, self.nxt)
+        if self.nxt == self.total:
+            self._enter(Phase.WAITING)
+
+    def _poll_status(self) -> None:
+        now = time.monotonic()
+        if now - self.last_poll >= self.link.poll_interval_s:
+            self.link._write(protocol.RT_STATUS)
+            self.last_poll = now
+
+    def _receive(self) -> None:
+        """Act on what arrived (and what `Link.status` kept meanwhile), in order."""
+        msgs = list(self.link._pending) + self.link._messages(0.01)
+        self.link._pending.clear()
+        for msg in msgs:
+            self._handle(msg)
+
+    def _lost_line(self, now: float) -> bool:
+        """Rewind when the firmware is free and has had time, yet never accepted the oldest
+        line in flight: its newline was lost (two lines merged into one rejected line).
+        Resumes from the last line it accepted."""
+        st = self.link.last_status
+        if not self.inflight or st is None or now - self.last_reply <= LOST_REPLY_S:
+            return False
+        assert self.link.banner is not None
+        index, written_at = self.inflight.oldest()
+        if (self.status_at <= written_at + LOST_STATUS_AFTER_S
+                or st.queued >= self.link.banner.queue - 1
+                or st.accepted_line >= self.first + index):
+            return False
+        self.inflight.clear()
+        self._resend_from(max(0, st.accepted_line + 1 - self.first))
+        self.last_reply = now
+        return True
+
+    def _check_silence(self, now: float) -> None:
+        if now - self.last_activity <= self.timeout:
+            return
+        if self.inflight:
+            index, _ = self.inflight.oldest()
+            what = f"job line {index + 1} ({self.bodies[index]!r})"
+        else:
+            what = "a status report"
+        raise self._fault(FaultKind.TIMEOUT, f"the device went silent: no reply for "
+                          f"{self.timeout:g} s to {what}")
+
+    # ------------------------------------------------------------------ messages
+    def _handle(self, msg: Message) -> None:
+        """One message from the firmware: a status report, a fault, or a reply to a line."""
+        self.last_activity = time.monotonic()
+        if isinstance(msg, StatusReport):
+            self._on_status(msg)
+        elif isinstance(msg, Banner):
+            self.link.banner = msg
+            raise self._fault(FaultKind.RESET, "the firmware restarted (banner received) while "
+                              "streaming: its queue is lost")
+        elif isinstance(msg, AlarmPush):
+            info = protocol.CODES.get(msg.code)
+            raise self._fault(FaultKind.ALARM, f"ALARM:{msg.code} "
+                              f"({info.description if info else 'unknown alarm'})", msg.code)
+        elif not isinstance(msg, SettingLine):
+            self._on_reply(msg)
+
+    def _on_status(self, msg: StatusReport) -> None:
+        self.link.last_status = msg
+        self.status_at = self.last_activity
+        if msg.state == "Alarm":
+            raise self._fault(FaultKind.ALARM, f"alarm {msg.detail} while streaming", msg.detail)
+        self._progress()
+
+    def _on_reply(self, msg: Ok | ErrorReply) -> None:
+        """`ok` acknowledges the oldest line in flight; `error:` asks for a resend or faults."""
+        self.last_reply = self.last_activity
+        if not self.inflight:
+            raise self._fault(FaultKind.ERROR, f"unexpected reply {msg} with no line in flight")
+        index = self.inflight.pop()
+        if isinstance(msg, Ok):
+            if index == self.acked:
+                self.acked += 1
+            self._progress()
+        elif msg.resend is not None:
+            self._on_resend_request(msg.resend)
+        else:
+            info = protocol.CODES.get(msg.code)
+            why = info.description if info else "unknown error code"
+            raise self._fault(FaultKind.ERROR, f"job line {index + 1} ({self.bodies[index]!r}) "
+                              f"refused: error:{msg.code} {why}", msg.code)
+
+    def _on_resend_request(self, line: int) -> None:
+        """DRAINING until the lines in flight are answered, then resend from `line`."""
+        want = line - self.first
+        if not 0 <= want <= self.total:
+            raise self._fault(FaultKind.ERROR, f"firmware asks to resend line {line}, outside "
+                              f"this job ({self.first}..{self.first + self.total - 1})")
+        self.rewind_to = want if self.rewind_to is None else min(self.rewind_to, want)
+        self._enter(Phase.DRAINING)
+
+    # ------------------------------------------------------------------ reporting
+    def _progress(self) -> None:
+        if self.on_progress is not None:
+            st = self.link.last_status
+            self.on_progress(StreamProgress(self.sent_max, self.acked, self.total,
+                                            st.done_line if st else 0, st, self.resends))
+
+    def _fault(self, kind: FaultKind, msg: str, code: int | None = None) -> LinkFaultError:
+        """The fault to raise; the link's next line becomes the first one not acknowledged."""
+        self.link.next_line = self.first + self.acked
+        return LinkFaultError(kind, f"{self.link.url}: {msg}", self.acked, code,
+                              self.link.last_status, self.sent_max)
