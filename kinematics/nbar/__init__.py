@@ -19,7 +19,8 @@ from kinematics.nbar.model import (
     build_mechanism,
     parse_mechanism,
 )
-from kinematics.nbar.solver import LimitReport, Simulation, Status, simulate, sweep
+from kinematics.nbar.results import LimitReport, Simulation, Status
+from kinematics.nbar.solver import simulate, sweep
 from kinematics.nbar.validate import (
     FiveBarValidation,
     fivebar_mechanism,
