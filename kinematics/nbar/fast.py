@@ -97,6 +97,18 @@ def _accepted_prefix(good: NDArray[np.bool_]) -> tuple[int, int, int]:
     return a, BLOCK, BLOCK
 
 
+def _keep(ring: FloatArray, slot: int, hs: list[float], qs: FloatArray, s: float,
+          h: float) -> int:
+    """Append a block's accepted states qs (taken in equal steps h from path parameter s)
+    to the history ring and parameters `hs`; return the new newest slot."""
+    a = qs.shape[0]
+    keep = min(a, HISTORY)
+    ring[_RING_SLOTS[slot][a]] = qs[a - keep:]
+    hs.extend([s + h * (j + 1) for j in range(a - keep, a)])
+    del hs[:-HISTORY]
+    return (slot + a) % HISTORY
+
+
 class FastPath:
     """A sweep's fast path for one tracker: its work rows, and the block size and cool-down
     carried from one `run` to the next."""
@@ -246,14 +258,10 @@ class FastPath:
         h = float(direction)
         if run >= 2 and abs(hs_[-1] - hs_[-2] - h) > 1e-9:
             run = 1  # the history does not end in equal steps of this sweep: start afresh
-        x, n, hsm, m = tr.x, tr.n, self.hs, tr.m
-        d = h * tr.inc
+        x, n, hsm, m, d = tr.x, tr.n, self.hs, tr.m, h * tr.inc
         bound, accept, floor2 = tr.bound, tr.accept, tr.floor2
         last_m2 = tr.last_m2 if tr.last_h == 1.0 else 0.0
-        s = hs_[-1]
-        taken = 0
-        q = tr.q
-        cool = self.cool
+        s, taken, q, cool = hs_[-1], 0, tr.q, self.cool
         while taken < count:
             if cool == 0 and count - taken >= MIN_BLOCK:
                 blk = self._block(ring, slot, run == HISTORY, q, grid[index + direction * taken],
@@ -264,13 +272,9 @@ class FastPath:
                     continue
                 qs_b, m2s, a, its, cool = blk
                 if a:
-                    keep = min(a, HISTORY)
-                    ring[_RING_SLOTS[slot][a]] = qs_b[a - keep:a]
-                    slot = (slot + a) % HISTORY
+                    slot = _keep(ring, slot, hs_, qs_b[:a], s, h)
                     run = min(run + a, HISTORY)
-                    hs_.extend([s + h * (j + 1) for j in range(a - keep, a)])
                     s += h * a
-                    del hs_[:-HISTORY]
                     last_m2 = float(m2s[a - 1])
                     q = qs_b[a - 1]
                     out_q[pos + taken: pos + taken + a] = qs_b[:a]
