@@ -12,7 +12,7 @@ import pytest
 from scipy.optimize import minimize
 
 from kinematics.nbar import Mechanism, parse_mechanism, simulate, sweep
-from kinematics.nbar.solver import FOLD_REASON
+from kinematics.nbar.fold import FOLD_REASON
 
 MECH = Path(__file__).resolve().parent.parent / "configs" / "mechanisms"
 
@@ -92,7 +92,8 @@ def test_step_without_a_fold_is_taken_whatever_the_hint(refused: int, fold_first
     """`advance` told that a fold is likely (`fold_first`) or that the whole step was refused
     (`refused`) on a step with no fold in it: it still reaches the target, on the branch that
     `simulate` follows (the look-ahead and the skipped attempt only change the order of work)."""
-    from kinematics.nbar.solver import Status, _Tracker
+    from kinematics.nbar.results import Status
+    from kinematics.nbar.tracker import _Tracker
 
     mech = parse_mechanism((MECH / "fourbar_crank_rocker.toml").read_text())
     tr = _Tracker(mech, mech.settings)  # at the initial configuration

@@ -1,4 +1,4 @@
-"""The Taylor series of a branch (`_Tracker.taylor`, the predictor of a sweep's first block),
+"""The Taylor series of a branch (`FastPath.taylor`, the predictor of a sweep's first block),
 checked against states solved independently by `simulate` and against the input motion's own
 series (`InputBasis.taylor`) evaluated exactly."""
 
@@ -10,7 +10,9 @@ import numpy as np
 import pytest
 
 from kinematics.nbar import parse_mechanism, simulate, sweep
-from kinematics.nbar.solver import TAYLOR, Status, _Tracker
+from kinematics.nbar.fast import TAYLOR, FastPath
+from kinematics.nbar.results import Status
+from kinematics.nbar.tracker import _Tracker
 
 MECH = Path(__file__).resolve().parent.parent / "configs" / "mechanisms"
 NAMES = sorted(p.stem for p in MECH.glob("*.toml"))
@@ -38,7 +40,7 @@ def test_branch_series_matches_independent_solutions(name: str) -> None:
         pytest.skip("least-squares mechanisms are not predicted by the series")
     tr = _Tracker(mech, mech.settings)
     d = mech.step
-    coef = tr.taylor(tr.q, tr.u, d).copy()
+    coef = FastPath(tr).taylor(tr.q, tr.u, d).copy()
     assert coef.shape == (TAYLOR + 1, mech.system.n_u)
     np.testing.assert_array_equal(coef[0], mech.q0)
     np.testing.assert_allclose(coef[1], tr.tangent()[0] @ d, rtol=0, atol=1e-12)

@@ -8,18 +8,11 @@ linear actuators; numpy only, no I/O. Typical use::
     sim.path("J8"), sim.residual, sim.status, sim.limits
 """
 
+from kinematics.nbar.build import build_mechanism, parse_mechanism
 from kinematics.nbar.constraints import Constraint
-from kinematics.nbar.model import (
-    Input,
-    Joint,
-    Link,
-    Mechanism,
-    MechanismError,
-    Settings,
-    build_mechanism,
-    parse_mechanism,
-)
-from kinematics.nbar.solver import LimitReport, Simulation, Status, simulate, sweep
+from kinematics.nbar.model import Input, Joint, Link, Mechanism, MechanismError, Settings
+from kinematics.nbar.results import LimitReport, Simulation, Status
+from kinematics.nbar.solver import simulate, sweep
 from kinematics.nbar.validate import (
     FiveBarValidation,
     fivebar_mechanism,

@@ -15,9 +15,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from kinematics.fivebar import FiveBar
+from kinematics.nbar.build import build_mechanism
 from kinematics.nbar.constraints import FloatArray
-from kinematics.nbar.model import Mechanism, MechanismError, build_mechanism
-from kinematics.nbar.solver import Simulation, Status, simulate
+from kinematics.nbar.model import Mechanism, MechanismError
+from kinematics.nbar.results import Simulation, Status
+from kinematics.nbar.solver import simulate
 
 
 def _sign(assembly: str | int) -> float:
