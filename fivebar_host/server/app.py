@@ -33,8 +33,9 @@ from fivebar_host.server.jobs import (
     compile_upload,
     parse_origin,
 )
+from fivebar_host.server.machine import ActionError, JobStateError
 from fivebar_host.server.store import JobRecord, JobStore
-from fivebar_host.server.worker import ActionError, JobStateError, Worker
+from fivebar_host.server.worker import Worker
 
 #: Content types a web page can send without a CORS preflight; uploads must not use them.
 SIMPLE_CONTENT_TYPES = frozenset({"application/x-www-form-urlencoded", "multipart/form-data",

@@ -25,6 +25,7 @@ import uvicorn
 from fivebar_host.config import Profile, load_profile
 from fivebar_host.server.app import create_app
 from fivebar_host.server.jobs import CompiledCache
+from fivebar_host.server.machine import WorkerConfig
 from fivebar_host.server.security import (
     Guard,
     Policy,
@@ -33,7 +34,7 @@ from fivebar_host.server.security import (
     load_or_create_token,
 )
 from fivebar_host.server.store import JobStore
-from fivebar_host.server.worker import Worker, WorkerConfig
+from fivebar_host.server.worker import Worker
 
 log = logging.getLogger("fivebar.serve")
 
