@@ -30,42 +30,33 @@ fault handling as `fivebar plot --port`), wrapped as follows:
   know the pose, or with a resume request), or the job is held with the question.
 - **Parking.** Jobs start at the homed pose; when the pose is known but the arms are
   elsewhere (after a cancel), a checked, laser-off travel brings them home first.
-"""
 
+The `Worker` class here is the thread's main loop; it is composed of one class per concern,
+each in its own module: `machine` (shared state, connecting, the pose record and questions,
+the snapshot), `control` (pause / resume / cancel / stop requests and actions, the stop kind
+`Link.stream` consults), `jobrun` (one job's run and what follows a fault or stop),
+`recovery` (where an interrupted job stopped, after a restart or a lost link) and `journal`
+(the journalled link and the progress writer).
+"""
 
 from __future__ import annotations
 
 import logging
-import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from concurrent.futures import Future
-from pathlib import Path
 from typing import Any
 
-from fivebar_host import protocol
-from fivebar_host.job import Job
-from fivebar_host.link import LinkError, LinkFaultError
-from fivebar_host.sender import (
-    Program,
-    Progress,
-    ResumePoint,
-    SendError,
-    build_program,
-    resume_path,
-    run_job,
-)
-from fivebar_host.server import store as st_
-from fivebar_host.server.control import Control
-from fivebar_host.server.jobs import JobOptions, SubmitError
+from fivebar_host.link import LinkError
+from fivebar_host.server.jobrun import JobRunner
 from fivebar_host.server.journal import JournalLink
-from fivebar_host.server.machine import ActionError, Live
+from fivebar_host.server.machine import ActionError
 from fivebar_host.server.recovery import Recovery
-from fivebar_host.server.store import JobRecord, ResumeRecord, StreamRecord
+from fivebar_host.server.store import JobRecord
 
 log = logging.getLogger("fivebar.serve")
 
 
-class Worker(Control, Recovery):
+class Worker(JobRunner, Recovery):
     """The machine thread (see the module docstring)."""
 
     def run(self) -> None:
@@ -87,6 +78,7 @@ class Worker(Control, Recovery):
             self.finished.set()
 
     def _loop(self) -> None:
+        """Until told to stop: (re)connect, recover once per connection, run an action or a job."""
         while True:
             with self._cv:
                 if self._terminate:
@@ -101,23 +93,9 @@ class Worker(Control, Recovery):
                 if not self._recovered:
                     self._recover(link)
                     self._recovered = True
-                action = self._next_action()
-                if action is not None:
-                    fn, fut = action
-                    if fut.set_running_or_notify_cancel():
-                        try:
-                            fut.set_result(fn(link))
-                        except Exception as e:  # handed to the requester
-                            fut.set_exception(e)
+                if self._run_next_action(link):
                     continue
-                # Claim the next job under the lock, so a cancel of it either comes first (it
-                # is no longer queued) or finds it running (and stops it).
-                with self._cv:
-                    rec = (None if self.store.blocking() is not None
-                           else self.store.next_queued())
-                    if rec is not None:
-                        self.current = rec.id
-                        self._request = None
+                rec = self._claim_next()
                 if rec is not None:
                     self._run(link, rec)
                     continue
@@ -129,177 +107,31 @@ class Worker(Control, Recovery):
                 if not self._terminate and not self._actions:
                     self._cv.wait(self.cfg.idle_poll_s)
 
+    def _run_next_action(self, link: JournalLink) -> bool:
+        """Run the next queued action, if any (its result or exception goes to its future)."""
+        action = self._next_action()
+        if action is None:
+            return False
+        fn, fut = action
+        if fut.set_running_or_notify_cancel():
+            try:
+                fut.set_result(fn(link))
+            except Exception as e:  # handed to the requester
+                fut.set_exception(e)
+        return True
+
     def _next_action(self) -> tuple[Callable[[JournalLink], Any], Future[Any]] | None:
         with self._cv:
             return self._actions.popleft() if self._actions else None
 
-    def _run(self, link: JournalLink, rec: JobRecord) -> None:
-        """Run (or resume) one job to its end, a fault, a pause that ends in cancel, or stop."""
-        try:
-            job = self._job(rec)
-        except SubmitError as e:
-            log.error("job %d: %s", rec.id, e)
-            self.store.set_state(rec.id, st_.FAILED, message=str(e))
-            with self._cv:
-                self.current = None
-            return
-        opts = JobOptions.from_json(rec.options)
-        prof = self.cfg.profile
-        base = self._resume_base(rec.id)
-        rpath = resume_path(base)
-        resume = rec.resume is not None
-        start = rec.resume.next_segment if rec.resume is not None else 0
-        if rec.resume is not None:
-            ResumePoint(job.file, rec.fingerprint, rec.resume.next_segment, rec.resume.position,
-                        rec.resume.reason, job.n_segments).save(rpath)
-        else:
-            rpath.unlink(missing_ok=True)
+    def _claim_next(self) -> JobRecord | None:
+        """The next queued job, now current; None while a job blocks the queue or none waits."""
+        # Claim the next job under the lock, so a cancel of it either comes first (it
+        # is no longer queued) or finds it running (and stops it).
         with self._cv:
-            self.current = rec.id
-            self._question = None
-            user_confirm = self._confirm_once.pop(rec.id, False)
-        self.live = Live(rec.id, start, job.n_segments, 0.0,
-                         float(job.duration_us[start:].sum()) * 1e-6)
-        self.store.update(rec.id, state=st_.RUNNING, message="", question=None,
-                          started_at=rec.started_at or time.time())
-        log.info("job %d (%s): %s at segment %d of %d", rec.id, rec.name,
-                 "resuming" if resume else "starting", start, job.n_segments)
-        t0 = time.monotonic()
-        base_run = rec.run_s
-        u0: list[int] = []
-        progress_saved = [0.0]
-        prog_box: list[tuple[Program, int]] = []
-
-        def on_stream_start(bodies: Sequence[str], first_line: int) -> None:
-            st = link.last_status
-            if st is None or prog_box:
-                return
-            try:
-                prog = build_program(job, prof, opts.laser, start, (st.a, st.b))
-            except SendError:
-                return
-            if prog.bodies != list(bodies):
-                log.debug("job %d: a stream that is not the job's program", rec.id)
-                return
-            self.store.set_stream(rec.id, StreamRecord(first_line, start, (st.a, st.b),
-                                                       len(bodies)))
-            prog_box.append((prog, first_line))
-
-        def on_progress(p: Progress) -> None:
-            now = time.monotonic()
-            live = self.live
-            if live is not None:
-                live.segments_done = p.segments_done
-                live.elapsed_s = base_run + (now - t0)
-                live.remaining_s = p.remaining_s
-            st = link.last_status
-            if st is not None and not u0 and prog_box and st.done_line >= prog_box[0][1]:
-                u0.append(st.underruns)
-            if now - progress_saved[0] > 0.25:
-                progress_saved[0] = now
-                self.progress.put(rec.id, segments_done=p.segments_done,
-                                  remaining_s=p.remaining_s, run_s=base_run + (now - t0))
-            if not link.streaming:
-                # All lines are sent; run_job waits for the machine to finish them. A
-                # cancel (or a pause) still has to stop it: hold here, and give up by raising
-                # the interrupt fault run_job handles like any other (hold, reset, record).
-                req = self._stop_kind()
-                if req in ("cancel", "pause"):
-                    link.realtime(protocol.RT_HOLD)
-                    if req == "cancel" or not self._wait_paused(link, rec.id):
-                        raise LinkFaultError("interrupt", f"{link.url}: {self._why()}", -1,
-                                             status=link.last_status)
-                    link.realtime(protocol.RT_RESUME)
-
-        # The person's confirmation given with the submission is for the job's first start;
-        # after an interruption only the daemon's own record or a resume request answers.
-        job_confirm = opts.confirm and not resume
-        try:
-            if not resume:
-                self._park(link, job)
-            link.on_stream_start = on_stream_start
-            report = run_job(link, job, prof, drawing=base, laser=opts.laser,
-                             confirm=lambda q: self._answer(link, q, job_confirm, user_confirm),
-                             resume=resume, on_progress=on_progress,
-                             should_stop=self._should_stop, on_interrupt=self._on_interrupt,
-                             on_note=lambda text: log.warning("job %d: %s", rec.id, text))
-        except SendError as e:
-            self.progress.flush()  # before the final record, never after it
-            self._after_error(link, rec, job, e, rpath, t0, base_run)
-            return
-        except LinkError as e:
-            self.progress.flush()
-            self._after_error(link, rec, job, SendError(str(e)), rpath, t0, base_run)
-            self._disconnected(str(e))
-            return
-        finally:
-            link.on_stream_start = None
-            self.progress.flush()
-            with self._cv:
-                self.current = None
+            rec = (None if self.store.blocking() is not None
+                   else self.store.next_queued())
+            if rec is not None:
+                self.current = rec.id
                 self._request = None
-            self.live = None
-            rpath.unlink(missing_ok=True)
-        underruns = max(0, report.final.underruns - u0[0] - 1) if u0 else None
-        self.store.update(rec.id, segments_done=job.n_segments, remaining_s=0.0,
-                          run_s=base_run + report.elapsed_s, underruns=underruns)
-        self.store.set_state(rec.id, st_.DONE, message=(
-            f"done: {report.segments} segments in {report.elapsed_s:.1f} s (planned "
-            f"{job.total_time_s:.1f} s), {report.bytes_sent} bytes sent, {report.resends} "
-            f"resends; machine at A = {report.final.a}, B = {report.final.b}"))
-        self.cache.drop(rec.id)
-        self._set_pose(True, report.final)
-        log.info("job %d done in %.1f s (%d resends, %s queue underruns mid-job)", rec.id,
-                 report.elapsed_s, report.resends, "?" if underruns is None else underruns)
-
-    def _after_error(self, link: JournalLink, rec: JobRecord, job: Job, e: SendError,
-                     rpath: Path, t0: float, base_run: float) -> None:
-        """Record where a job stopped and put it in the state its cause calls for."""
-        cause = e.__cause__
-        kind = cause.kind if isinstance(cause, LinkFaultError) else None
-        req = self._stop_kind()
-        rp: ResumePoint | None = None
-        if rpath.exists():
-            try:
-                rp = ResumePoint.load(rpath)
-            except SendError:
-                rp = None
-        run_s = base_run + (time.monotonic() - t0)
-        if rp is not None and kind is not None:
-            reason = {"terminate": "the daemon was told to stop; the machine ran out of "
-                      "queued lines and stopped at a segment boundary",
-                      "pause": "paused", "cancel": "cancelled"}.get(
-                          req or "", rp.reason) if kind == "interrupt" else rp.reason
-            self.store.set_resume(rec.id, ResumeRecord(rp.next_segment, rp.position, reason))
-            if kind != "disconnect":
-                # run_job reset the firmware (queue cleared, counter back to 0): the line
-                # numbers of this stream mean nothing any more; the resume point is exact.
-                self.store.set_stream(rec.id, None)
-        self.store.update(rec.id, run_s=run_s)
-        if rp is not None and kind not in (None, "disconnect"):
-            self._set_pose(rp.position is not None, link.last_status)
-        elif kind == "disconnect":
-            self.pose_known = False
-        where = (f"segment {rp.next_segment} of {rp.segments}, "
-                 + (f"A = {rp.position[0]}, B = {rp.position[1]}" if rp and rp.position
-                    else "position unknown")) if rp is not None else ""
-        text = "\n".join(ln for ln in str(e).splitlines() if not ln.startswith("resume file:"))
-        if req == "cancel":
-            self.store.set_state(rec.id, st_.CANCELLED,
-                                 message=f"cancelled at {where}; laser off (held and reset)")
-            self.cache.drop(rec.id)
-            log.info("job %d cancelled at %s", rec.id, where)
-        elif req == "terminate":
-            self.store.set_state(rec.id, st_.HELD, message=(
-                f"stopped when the daemon was told to stop, at {where}; laser off. Resume it "
-                "with POST /api/jobs/{}/resume".format(rec.id)))
-            log.info("job %d stopped for shutdown at %s", rec.id, where)
-        elif self._question is not None:
-            self.store.set_state(rec.id, st_.HELD, question=self._question, message=(
-                f"waiting for a person: {self._question} Answer by resuming the job with "
-                "confirm=true once it is so (nothing has moved)."))
-            log.warning("job %d held: %s", rec.id, self._question)
-        else:
-            self.store.set_state(rec.id, st_.HELD, message=text + (
-                f"\nresume it with POST /api/jobs/{rec.id}/resume" if rp is not None else ""))
-            log.error("job %d held after a fault: %s", rec.id, text.replace("\n", " | "))
+        return rec
