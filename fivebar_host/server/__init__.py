@@ -13,7 +13,10 @@ Modules:
 - `security`: the token file, the loopback rule, request size limits, Host/Origin checks.
 - `jobs`: submitted options and uploads → a compiled, checked `Job` (private temp dir).
 - `worker`: the thread that owns the `Link` and runs the queue (pause, resume, cancel,
-  SIGTERM stop at a segment boundary, recovery after a crash).
+  SIGTERM stop at a segment boundary, recovery after a crash), composed of `machine` (shared
+  state, pose record, snapshot), `control` (pause / resume / cancel / stop requests),
+  `jobrun` (one job's run), `recovery` (after a crash) and `journal` (journalled link,
+  progress writer).
 - `app`: the FastAPI application (routes, JSON models, the OpenAPI description).
 - `daemon`: wiring and lifecycle (uvicorn in a thread, signals, logging).
 - `client`: the stdlib HTTP client used by `fivebar plot --server`.

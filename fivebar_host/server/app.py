@@ -30,8 +30,9 @@ from fivebar_host.errors import OptionError
 from fivebar_host.options import JOB_OPTIONS, parse_query, unknown_option
 from fivebar_host.server import store as st_
 from fivebar_host.server.jobs import CompiledCache, JobOptions, SubmitError, compile_upload
+from fivebar_host.server.machine import ActionError, JobStateError
 from fivebar_host.server.store import JobRecord, JobStore
-from fivebar_host.server.worker import ActionError, JobStateError, Worker
+from fivebar_host.server.worker import Worker
 
 #: Content types a web page can send without a CORS preflight; uploads must not use them.
 SIMPLE_CONTENT_TYPES = frozenset({"application/x-www-form-urlencoded", "multipart/form-data",

@@ -26,6 +26,7 @@ from fivebar_host.config import Profile, load_profile
 from fivebar_host.errors import FivebarError
 from fivebar_host.server.app import create_app
 from fivebar_host.server.jobs import CompiledCache
+from fivebar_host.server.machine import WorkerConfig
 from fivebar_host.server.security import (
     Guard,
     Policy,
@@ -34,7 +35,7 @@ from fivebar_host.server.security import (
     load_or_create_token,
 )
 from fivebar_host.server.store import JobStore
-from fivebar_host.server.worker import Worker, WorkerConfig
+from fivebar_host.server.worker import Worker
 
 log = logging.getLogger("fivebar.serve")
 

@@ -1,0 +1,105 @@
+"""The machine thread's journalled link and its off-thread progress writer.
+
+`JournalLink` is a `Link` that calls back just before a stream's first line is written (so
+the worker can commit the stream record: first line number, start segment, start position)
+and remembers when it last heard a status report (for the snapshot's `status_age_s`).
+`ProgressWriter` commits running jobs' progress to SQLite on its own thread, so a slow
+commit (an fsync on an SD card) never stalls the stream.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from fivebar_host.protocol import StatusReport
+from fivebar_host.run.link import Link
+from fivebar_host.run.stream import StreamResult
+from fivebar_host.server.store import JobStore
+
+log = logging.getLogger("fivebar.serve")
+
+
+class JournalLink(Link):
+    """A `Link` that reports when a stream starts and when it last heard a status report."""
+
+    on_stream_start: Callable[[Sequence[str], int], None] | None = None
+    streaming = False
+    status_at = 0.0
+    _last: StatusReport | None = None
+
+    @property
+    def last_status(self) -> StatusReport | None:
+        """The last status report received (set by `status()`, `stream()` ...)."""
+        return self._last
+
+    @last_status.setter
+    def last_status(self, st: StatusReport | None) -> None:
+        self._last = st
+        if st is not None:
+            self.status_at = time.monotonic()
+
+    def stream(self, bodies: Sequence[str], **kwargs: Any) -> StreamResult:
+        """`Link.stream`, after telling `on_stream_start` the first line number."""
+        hook = self.on_stream_start
+        if hook is not None and len(bodies) > 1:
+            hook(bodies, self.next_line)
+        self.streaming = True
+        try:
+            return super().stream(bodies, **kwargs)
+        finally:
+            self.streaming = False
+
+
+class ProgressWriter(threading.Thread):
+    """Writes running jobs' progress to the database off the streaming thread.
+
+    A commit is quick, but now and then SQLite checkpoints its journal with an fsync, which
+    on an SD card can take longer than the firmware queue lasts; the stream must never wait
+    for that. `put` only records the latest values; this thread commits them every 0.5 s.
+    `flush` (from the machine thread, at the end of a run) waits for a write in progress and
+    commits what is left, so nothing older lands after a job's final record."""
+
+    def __init__(self, store: JobStore, period_s: float = 0.5) -> None:
+        super().__init__(name="fivebar-progress", daemon=True)
+        self.store = store
+        self.period_s = period_s
+        self._pending: dict[int, dict[str, Any]] = {}
+        self._cv = threading.Condition()
+        self._write = threading.Lock()
+        self._halt = False
+
+    def put(self, job_id: int, **fields: Any) -> None:
+        """Remember the latest progress of a job (written within `period_s`)."""
+        with self._cv:
+            self._pending.setdefault(job_id, {}).update(fields)
+
+    def flush(self) -> None:
+        """Commit what is pending now (after any write already under way)."""
+        with self._write:
+            with self._cv:
+                items, self._pending = self._pending, {}
+            for job_id, fields in items.items():
+                try:
+                    self.store.update(job_id, **fields)
+                except Exception:  # pragma: no cover - store closed at shutdown
+                    log.exception("could not record the progress of job %d", job_id)
+
+    def stop(self) -> None:
+        """Write what is pending and end the thread."""
+        with self._cv:
+            self._halt = True
+            self._cv.notify_all()
+        self.join(5.0)
+
+    def run(self) -> None:
+        while True:
+            with self._cv:
+                self._cv.wait(self.period_s)
+                stop = self._halt
+            self.flush()
+            if stop:
+                return
