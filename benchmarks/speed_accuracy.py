@@ -70,15 +70,6 @@ from fivebar_host.job import (  # noqa: E402
 from fivebar_host.linkage import load_mechanism  # noqa: E402
 from fivebar_host.toolpath.geometry import evaluate, nearest_distance  # noqa: E402
 from kinematics import approx  # noqa: E402
-from kinematics.analysis import (  # noqa: E402
-    PageFit,
-    find_page_rectangle,
-    point_safety,
-    step_quantum,
-    type1_circles,
-    type2_traces,
-    workspace_bounds,
-)
 from kinematics.fivebar import WORKING_MODES, FiveBar  # noqa: E402
 from kinematics.nbar import (  # noqa: E402
     MechanismError,
@@ -87,6 +78,15 @@ from kinematics.nbar import (  # noqa: E402
     fivebar_mechanism,
     simulate,
     sweep,
+)
+from kinematics.workspace import (  # noqa: E402
+    PageFit,
+    find_page_rectangle,
+    point_safety,
+    step_quantum,
+    type1_circles,
+    type2_traces,
+    workspace_bounds,
 )
 
 FloatArray = NDArray[np.float64]
@@ -896,7 +896,7 @@ def firmware_rate_cap() -> float:
 
 def step_rows(sc: Scene, cfg: Config, rng: np.random.Generator) -> list[StepRow]:
     """Item 4: the step quantum (largest pen move of one step of either motor, exact forward
-    kinematics, kinematics.analysis.step_quantum) over the page region, per drive setting."""
+    kinematics, kinematics.workspace.step_quantum) over the page region, per drive setting."""
     pts = sc.region_pts
     if pts.shape[0] > 6000:
         pts = pts[rng.choice(pts.shape[0], 6000, replace=False)]
@@ -1994,7 +1994,7 @@ def write_report(res: Results, out_dir: Path, img_rel: str = "img") -> Path:
     L += ["## 4. The physical limit: step resolution against the step quantum", "",
           f"![steps]({img_rel}/perf_steps.png)", "",
           "Step quantum = the largest pen displacement from one step of either motor in "
-          "either direction (exact forward kinematics, `kinematics.analysis.step_quantum`), "
+          "either direction (exact forward kinematics, `kinematics.workspace.step_quantum`), "
           f"over the {sc.region_pts.shape[0]} grid nodes of the page region (sub-sampled). "
           f"Step rate needed at the profile's max joint speed "
           f"({prof.motion.max_joint_rad_s:g} rad/s) against the firmware's default cap "

@@ -668,7 +668,7 @@ def workspace(config_path: Path | None, output: Path, no_plot: bool, mode: str |
     """Workspace per working mode, singularity curves, safe region, largest page rectangle,
     transmission-angle and error-sensitivity maps for the machine profile."""
     from fivebar_host import workspace as ws
-    from kinematics.analysis import NoSafeRegionError, workspace_report
+    from kinematics.workspace import NoSafeRegionError, workspace_report
 
     prof = _profile(config_path)
     page = _page_size(page_text) if page_text is not None else None
@@ -725,7 +725,7 @@ def design(page_text: str, margin_deg: float | None, motor_spacing: str | None,
     import time
 
     from fivebar_host import workspace as ws
-    from kinematics.analysis import design_search
+    from kinematics.design import design_search
 
     prof = _profile(config_path)
     pw, ph = _page_size(page_text)

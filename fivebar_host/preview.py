@@ -33,7 +33,7 @@ from fivebar_host.config import Profile
 from fivebar_host.job import Job, NbarOpinion
 from fivebar_host.steps import step_angles
 from fivebar_host.toolpath.geometry import flatten
-from kinematics import analysis
+from kinematics import workspace as analysis
 from kinematics.fivebar import FiveBar
 
 FloatArray = NDArray[np.float64]

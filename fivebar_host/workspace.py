@@ -1,5 +1,5 @@
 """Workspace and design reports: summary text, CSV/JSON numbers, the workspace picture and the
-profile written by `fivebar design`. The math lives in `kinematics.analysis`; this module only
+profile written by `fivebar design`. The math lives in `kinematics.workspace`; this module only
 formats and draws (matplotlib, Agg backend, so it runs without a display).
 """
 
@@ -24,15 +24,14 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Patch, Rectangle
 
 from fivebar_host.config import ConfigError, parse_profile
-from kinematics.analysis import (
-    DesignCandidate,
-    DesignResult,
+from kinematics.design import DesignCandidate, DesignResult
+from kinematics.fivebar import WORKING_MODES, FiveBar
+from kinematics.workspace import (
     Rect,
     WorkspaceReport,
     perturbation_displacements,
     type1_circles,
 )
-from kinematics.fivebar import WORKING_MODES, FiveBar
 
 PAGE_COLOR = "#17becf"
 MOTOR_COLORS = ("#0000cd", "#000000")
