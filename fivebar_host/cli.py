@@ -439,8 +439,9 @@ def plot(drawing: Path, dry_run: bool, preview_path: Path, port: str | None, res
     if not dry_run and port is None:
         _fail("give --port PORT to plot on a machine (e.g. /dev/ttyUSB0 or fivebar-sim:// "
               "for the emulator), or --dry-run for the preview and report")
+    from fivebar_host.dryrun import report_lines
     from fivebar_host.job import nbar_opinion
-    from fivebar_host.preview import draw_preview, report_lines
+    from fivebar_host.report.preview import draw_preview
 
     prof, job = compile_from_cli(drawing, config_path, mode, tolerance, origin_text, scale,
                                  rotate_deg, fit, layers, keep_order)
@@ -668,6 +669,7 @@ def workspace(config_path: Path | None, output: Path, no_plot: bool, mode: str |
     """Workspace per working mode, singularity curves, safe region, largest page rectangle,
     transmission-angle and error-sensitivity maps for the machine profile."""
     from fivebar_host import workspace as ws
+    from fivebar_host.report.workspace import plot_workspace
     from kinematics.workspace import NoSafeRegionError, workspace_report
 
     prof = _profile(config_path)
@@ -691,7 +693,7 @@ def workspace(config_path: Path | None, output: Path, no_plot: bool, mode: str |
         ws.write_json(json_path, ws.summary_dict(rep, prof.geometry))
         click.echo(f"wrote {json_path}")
     if not no_plot:
-        ws.plot_workspace(rep, prof.geometry, output, title=str(prof.source))
+        plot_workspace(rep, prof.geometry, output, title=str(prof.source))
         click.echo(f"wrote {output}")
     if page is not None and rep.page is None:
         sys.exit(1)
@@ -784,7 +786,8 @@ def linkage_simulate(file: Path, steps: int | None, output: Path | None,
     Prints a summary; a motion limit is reported with its input value (exit 0), inconsistent
     constraints (nothing could move) exit with 1, an unusable file with 2.
     """
-    from fivebar_host.linkage import load_mechanism, plot_simulation, summary, write_result
+    from fivebar_host.linkage import load_mechanism, summary, write_result
+    from fivebar_host.report.linkage import plot_simulation
     from kinematics.nbar import MechanismError, sweep
 
     if output is not None and output.suffix.lower() not in (".csv", ".json"):

@@ -16,6 +16,7 @@ from click.testing import CliRunner
 import kinematics.modes
 from fivebar_host.cli import main
 from fivebar_host.config import load_profile
+from fivebar_host.dryrun import report_lines
 from fivebar_host.errors import JobError
 from fivebar_host.job import (
     CompileOptions,
@@ -26,7 +27,6 @@ from fivebar_host.job import (
     encode_lines,
     read_drawing,
 )
-from fivebar_host.preview import report_lines
 from fivebar_host.steps import step_angles
 from fivebar_host.toolpath.geometry import LINE, evaluate, flatten
 from fivebar_host.toolpath.segment import wrap_to_limits
