@@ -59,13 +59,9 @@ from fivebar_host.toolpath.segment import (
     wrap_to_limits,
 )
 from fivebar_host.toolpath.svg import read_svg
-from kinematics.analysis import (
-    NoSafeRegionError,
-    plan_joint_move,
-    plan_working_modes,
-    point_safety,
-)
 from kinematics.fivebar import WORKING_MODES, FiveBar
+from kinematics.modes import plan_joint_move, plan_working_modes
+from kinematics.workspace import NoSafeRegionError, point_safety
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -124,7 +120,7 @@ class PathStats:
 @dataclass(frozen=True)
 class ModeChange:
     """A pen-up change of working mode compiled into the job (thesis Sec. 7.2), planned by
-    `kinematics.analysis.plan_working_modes` (or `plan_joint_move` for a move home): travel
+    `kinematics.modes.plan_working_modes` (or `plan_joint_move` for a move home): travel
     segments `first_seg` … `end_seg` − 1, laser off, drive the arm(s) whose working-mode sign
     changes through their type-1 singularity (stretched or folded) on the way into job path
     `path` (= `Job.n_paths`: the park move back to the homed pose). Measured on the executed
@@ -513,7 +509,7 @@ def _plan_modes(ch: _Chords, fb: FiveBar, home_th: FloatArray, home_mode: str, a
                 ) -> tuple[_Chords, NDArray[np.str_], dict[int, FloatArray]]:
     """Working modes per job path with pen-up changes (`--mode auto` when no single mode
     clears every check): every path, sampled at most `MODE_SAMPLE_MM` apart, goes through
-    `kinematics.analysis.plan_working_modes` in job order, from the homed pose, in the
+    `kinematics.modes.plan_working_modes` in job order, from the homed pose, in the
     machine's assembly. Paths that change mode inside are broken there (`_break_paths`).
     Returns the new chords, the mode of each job path and the planned joint path of each
     mode change by the travel that runs it (travel j goes into path j)."""

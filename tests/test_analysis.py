@@ -1,4 +1,4 @@
-"""Safe region and page rectangle (kinematics.analysis), against analytic cases and dense
+"""Safe region and page rectangle (kinematics.workspace), against analytic cases and dense
 independent sampling."""
 
 from __future__ import annotations
@@ -8,17 +8,17 @@ import math
 import numpy as np
 import pytest
 
-from kinematics.analysis import (
+from kinematics.fivebar import FiveBar
+from kinematics.workspace import (
     NoSafeRegionError,
     Rect,
-    _max_rectangle,
     angles_within_limits,
     find_page_rectangle,
     largest_page_rectangle,
     point_safety,
     safe_mask,
 )
-from kinematics.fivebar import FiveBar
+from kinematics.workspace.rectangles import _max_rectangle
 
 DEG = math.pi / 180.0
 FB = FiveBar(60.0, 90.0, 60.0, 90.0, 40.0)

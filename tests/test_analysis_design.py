@@ -1,4 +1,4 @@
-"""Design search and working-mode transitions (kinematics.analysis)."""
+"""Design search and working-mode transitions (kinematics.design, kinematics.modes)."""
 
 from __future__ import annotations
 
@@ -7,19 +7,17 @@ import math
 import numpy as np
 import pytest
 
-from kinematics.analysis import (
+from kinematics.design import _screen, design_search
+from kinematics.fivebar import FiveBar
+from kinematics.modes import plan_joint_move, plan_working_modes
+from kinematics.workspace import (
     NoSafeRegionError,
     Rect,
-    _screen,
-    design_search,
     find_page_rectangle,
     measures,
     page_stats,
-    plan_joint_move,
-    plan_working_modes,
     point_safety,
 )
-from kinematics.fivebar import FiveBar
 
 DEG = math.pi / 180.0
 LIMITS = ((10 * DEG, 170 * DEG), (10 * DEG, 170 * DEG))

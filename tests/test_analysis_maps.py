@@ -1,5 +1,5 @@
 """Singularity traces, transmission angle, error sensitivity and condition number
-(kinematics.analysis) against analytic formulas and finite differences of forward kinematics."""
+(kinematics.workspace) against analytic formulas and finite differences of forward kinematics."""
 
 from __future__ import annotations
 
@@ -8,7 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from kinematics.analysis import (
+from kinematics.fivebar import WORKING_MODES, FiveBar
+from kinematics.workspace import (
     condition_numbers,
     measures,
     perturbation_displacements,
@@ -17,7 +18,6 @@ from kinematics.analysis import (
     type1_circles,
     type2_traces,
 )
-from kinematics.fivebar import WORKING_MODES, FiveBar
 
 DEG = math.pi / 180.0
 MACHINES = [FiveBar(60.0, 90.0, 60.0, 90.0, 40.0), FiveBar(100.0, 60.0, 90.0, 75.0, 50.0),

@@ -252,7 +252,7 @@ def test_nbar_second_opinion_agrees() -> None:
 def test_fit_uses_the_machines_assembly() -> None:
     """Mode "++" has a larger safe rectangle below the motors (assembly "-") than above
     them; the default machine is built in "+", so --fit must use the "+" one."""
-    from kinematics.analysis import find_page_rectangle
+    from kinematics.workspace import find_page_rectangle
 
     k = PROF.kinematics
     job = compile_job(EXAMPLES / "simple.svg", PROF, CompileOptions(mode="++", fit=True))

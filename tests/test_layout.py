@@ -12,7 +12,7 @@ from fivebar_host.config import load_profile
 from fivebar_host.toolpath.geometry import flatten
 from fivebar_host.toolpath.layout import place
 from fivebar_host.toolpath.svg import read_svg
-from kinematics.analysis import point_safety
+from kinematics.workspace import point_safety
 
 PROF = load_profile()
 KIN = PROF.kinematics

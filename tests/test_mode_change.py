@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-import kinematics.analysis
+import kinematics.modes
 from fivebar_host.cli import main
 from fivebar_host.config import load_profile
+from fivebar_host.dryrun import report_lines
 from fivebar_host.errors import JobError
 from fivebar_host.job import (
     CompileOptions,
@@ -26,7 +27,6 @@ from fivebar_host.job import (
     encode_lines,
     read_drawing,
 )
-from fivebar_host.preview import report_lines
 from fivebar_host.steps import step_angles
 from fivebar_host.toolpath.geometry import LINE, evaluate, flatten
 from fivebar_host.toolpath.segment import wrap_to_limits
@@ -225,7 +225,7 @@ def test_point_safe_in_no_mode_is_refused_with_each_modes_reason() -> None:
 def test_impossible_transition_is_refused_naming_it(monkeypatch: pytest.MonkeyPatch) -> None:
     """If no pen-up path exists (here: the joint-space planner finds none), the job is
     refused with the planner's reason and the point, not drawn in part."""
-    monkeypatch.setattr(kinematics.analysis, "plan_joint_move", lambda *a, **k: None)
+    monkeypatch.setattr(kinematics.modes, "plan_joint_move", lambda *a, **k: None)
     with pytest.raises(JobError) as ei:
         compile_job(EXAMPLE, PROF, AUTO)
     text = str(ei.value)

@@ -15,7 +15,7 @@ from click.testing import CliRunner
 
 from fivebar_host.cli import main
 from fivebar_host.config import load_profile, parse_profile
-from kinematics.analysis import Rect, largest_page_rectangle, point_safety
+from kinematics.workspace import Rect, largest_page_rectangle, point_safety
 
 
 def _run(args: list[str]) -> tuple[int, str]:
@@ -107,7 +107,7 @@ def test_workspace_searches_the_configured_assembly_only(tmp_path: Path) -> None
     """Mode "++" of the default machine has a larger safe rectangle in assembly "-" (below
     the motors) than in "+"; the machine is built in "+", so `fivebar workspace` reports the
     "+" one — and the underside profile (assembly "-") the other."""
-    from kinematics.analysis import find_page_rectangle
+    from kinematics.workspace import find_page_rectangle
 
     prof = load_profile()
     k = prof.kinematics

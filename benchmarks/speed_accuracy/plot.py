@@ -15,7 +15,7 @@ import numpy as np
 from matplotlib.patches import Rectangle
 
 from benchmarks.speed_accuracy.scene import Scene
-from kinematics.analysis import type1_circles, type2_traces
+from kinematics.workspace import type1_circles, type2_traces
 
 #: Errors are drawn at least this large on log axes (an exact 0 would vanish).
 FLOOR_MM = 1e-16

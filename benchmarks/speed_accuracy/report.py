@@ -259,7 +259,7 @@ def _steps_section(res: Results, img_rel: str) -> list[str]:
     L += ["## 4. The physical limit: step resolution against the step quantum", "",
           f"![steps]({img_rel}/perf_steps.png)", "",
           "Step quantum = the largest pen displacement from one step of either motor in "
-          "either direction (exact forward kinematics, `kinematics.analysis.step_quantum`), "
+          "either direction (exact forward kinematics, `kinematics.workspace.step_quantum`), "
           f"over the {sc.region_pts.shape[0]} grid nodes of the page region (sub-sampled). "
           f"Step rate needed at the profile's max joint speed "
           f"({prof.motion.max_joint_rad_s:g} rad/s) against the firmware's default cap "

@@ -28,7 +28,8 @@ from benchmarks.speed_accuracy.config import (
     FloatArray,
 )
 from fivebar_host.config import Profile, load_profile
-from kinematics.analysis import (
+from kinematics.fivebar import WORKING_MODES, FiveBar
+from kinematics.workspace import (
     PageFit,
     find_page_rectangle,
     point_safety,
@@ -36,7 +37,6 @@ from kinematics.analysis import (
     type2_traces,
     workspace_bounds,
 )
-from kinematics.fivebar import WORKING_MODES, FiveBar
 
 
 @dataclass(frozen=True, eq=False)

@@ -16,7 +16,7 @@ import numpy as np
 from benchmarks.speed_accuracy.config import FIRMWARE_CONFIG, Config
 from benchmarks.speed_accuracy.plot import overlay, save
 from benchmarks.speed_accuracy.scene import Scene
-from kinematics.analysis import step_quantum
+from kinematics.workspace import step_quantum
 
 
 @dataclass(frozen=True)
@@ -40,7 +40,7 @@ def firmware_rate_cap() -> float:
 
 def step_rows(sc: Scene, cfg: Config, rng: np.random.Generator) -> list[StepRow]:
     """Item 4: the step quantum (largest pen move of one step of either motor, exact forward
-    kinematics, kinematics.analysis.step_quantum) over the page region, per drive setting."""
+    kinematics, kinematics.workspace.step_quantum) over the page region, per drive setting."""
     pts = sc.region_pts
     if pts.shape[0] > 6000:
         pts = pts[rng.choice(pts.shape[0], 6000, replace=False)]

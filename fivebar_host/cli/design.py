@@ -37,7 +37,8 @@ def workspace(config_path: Path | None, output: Path, no_plot: bool, mode: str |
     """Workspace per working mode, singularity curves, safe region, largest page rectangle,
     transmission-angle and error-sensitivity maps for the machine profile."""
     from fivebar_host import workspace as ws
-    from kinematics.analysis import NoSafeRegionError, workspace_report
+    from fivebar_host.report.workspace import plot_workspace
+    from kinematics.workspace import NoSafeRegionError, workspace_report
 
     prof = load(config_path)
     page = page_size(page_text) if page_text is not None else None
@@ -60,7 +61,7 @@ def workspace(config_path: Path | None, output: Path, no_plot: bool, mode: str |
         ws.write_json(json_path, ws.summary_dict(rep, prof.geometry))
         click.echo(f"wrote {json_path}")
     if not no_plot:
-        ws.plot_workspace(rep, prof.geometry, output, title=str(prof.source))
+        plot_workspace(rep, prof.geometry, output, title=str(prof.source))
         click.echo(f"wrote {output}")
     if page is not None and rep.page is None:
         sys.exit(1)
@@ -94,7 +95,7 @@ def design(page_text: str, margin_deg: float | None, motor_spacing: str | None,
     import time
 
     from fivebar_host import workspace as ws
-    from kinematics.analysis import design_search
+    from kinematics.design import design_search
 
     prof = load(config_path)
     pw, ph = page_size(page_text)
@@ -153,7 +154,8 @@ def linkage_simulate(file: Path, steps: int | None, output: Path | None,
     Prints a summary; a motion limit is reported with its input value (exit 0), inconsistent
     constraints (nothing could move) exit with 1, an unusable file with 2.
     """
-    from fivebar_host.linkage import load_mechanism, plot_simulation, summary, write_result
+    from fivebar_host.linkage import load_mechanism, summary, write_result
+    from fivebar_host.report.linkage import plot_simulation
     from kinematics.nbar import MechanismError, sweep
 
     if output is not None and output.suffix.lower() not in (".csv", ".json"):

@@ -79,8 +79,9 @@ def plot(drawing: Path, dry_run: bool, preview_path: Path, port: str | None, res
     if not dry_run and port is None:
         fail("give --port PORT to plot on a machine (e.g. /dev/ttyUSB0 or fivebar-sim:// "
              "for the emulator), or --dry-run for the preview and report")
+    from fivebar_host.dryrun import report_lines
     from fivebar_host.job import nbar_opinion
-    from fivebar_host.preview import draw_preview, report_lines
+    from fivebar_host.report.preview import draw_preview
 
     laser = bool(job_values["laser"])
     prof, job = compile_from_cli(drawing, config_path, job_values)

@@ -7,7 +7,7 @@ the machine frame (mm, motor M1 at the origin) by a similarity x ↦ s·R(φ)·x
   drawing origin). The per-point checks then decide whether it can be drawn.
 - default: the drawing's bounding box (after rotation and scale) is centred in the largest
   singularity-safe rectangle of the drawing's aspect in the working mode and the machine's
-  assembly mode (`kinematics.analysis.find_page_rectangle`).
+  assembly mode (`kinematics.workspace.find_page_rectangle`).
 - `--fit`: as the default, and scaled so the box fills that rectangle.
 
 `does_not_fit_hint` words the "drawing is W × H mm, the safe area is w × h mm" message used
@@ -24,8 +24,8 @@ from numpy.typing import NDArray
 
 from fivebar_host.errors import JobError, UsageError, Where
 from fivebar_host.toolpath.geometry import Drawing, bbox
-from kinematics.analysis import NoSafeRegionError, PageFit, Rect, find_page_rectangle
 from kinematics.fivebar import FiveBar
+from kinematics.workspace import NoSafeRegionError, PageFit, Rect, find_page_rectangle
 
 FloatArray = NDArray[np.float64]
 

@@ -1,0 +1,90 @@
+"""The dry-run text report of a compiled job: what `fivebar plot --dry-run` prints.
+
+Paths, segments, lengths, time, deviation, margins, working mode(s) and tool, one line each,
+plus every pen-up working-mode change. Text only; the preview picture drawn next to it is
+`fivebar_host.report.preview`, which shares `mode_sequence` and `format_duration` for its title.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from fivebar_host.job import Job, NbarOpinion
+
+
+def mode_sequence(job: Job) -> str:
+    """"+-" for a one-mode job; "++ (#0–#1) → +- (#2–#3)" for the paths' working modes."""
+    modes = job.path_modes or (job.mode,)
+    if len(set(modes)) == 1:
+        return modes[0]
+    runs: list[tuple[str, int, int]] = []
+    for i, m in enumerate(modes):
+        if runs and runs[-1][0] == m:
+            runs[-1] = (m, runs[-1][1], i)
+        else:
+            runs.append((m, i, i))
+    return " → ".join(f"{m} (#{a})" if a == b else f"{m} (#{a}–#{b})" for m, a, b in runs)
+
+
+def format_duration(t: float) -> str:
+    """A duration for people: "12.3 s", "4 min 5 s", "1 h 2 min"."""
+    if t < 60:
+        return f"{t:.1f} s"
+    m, s = divmod(t, 60.0)
+    if m < 60:
+        return f"{int(m)} min {s:.0f} s"
+    h, m = divmod(m, 60.0)
+    return f"{int(h)} h {int(m)} min"
+
+
+def report_lines(job: Job, nbar: NbarOpinion | None = None, laser: bool = False) -> list[str]:
+    """The dry-run report: paths, segments, lengths, time, deviation, margins, mode, tool (pen,
+    or laser with `laser`: the power the job would send) and the n-bar solver's second
+    opinion on the deviation when given."""
+    deg = math.degrees
+    mm = job.min_margin_rad
+    pl = job.placement
+    w, h = pl.size_mm
+    bx = pl.machine_bbox
+    worst = int(np.nanargmax(job.paths.max_dev_mm)) if np.isfinite(
+        job.paths.max_dev_mm).any() else -1
+    lines = [
+        f"file          {job.file}",
+        f"working mode  {mode_sequence(job)} (assembly {'+' if job.assembly > 0 else '-'}"
+        + (f"; {len(job.mode_changes)} pen-up working-mode change(s), listed below; the "
+           f"homed pose is in {job.home_mode})" if job.mode_changes else ")"),
+        f"placement     {pl.how}: scale {pl.scale:.4g}, rotation {pl.rotate_deg:g}°, "
+        f"{w:.1f} × {h:.1f} mm at ({bx[0]:.1f}, {bx[1]:.1f})–({bx[2]:.1f}, {bx[3]:.1f}) mm",
+        ("tool          laser: S up to "
+         f"{int(job.power.max(initial=0))} while drawing, S0 on travel (--laser)" if laser
+         else "tool          pen: S0 on every line (no laser power without --laser); pen "
+              "down/up = M3/M5 around drawing strokes"),
+        f"paths         {job.n_paths} ({job.joined} joined across gaps < tolerance)",
+        f"segments      {job.n_segments} ({int(job.draw.sum())} drawing, "
+        f"{int((~job.draw).sum())} travel)",
+        f"drawing       {job.draw_length_mm:.1f} mm",
+        f"travel        {job.travel_length_mm:.1f} mm (pen-up straight-line estimate "
+        f"{job.travel_before_mm:.1f} mm in file order → {job.travel_after_mm:.1f} mm "
+        "reordered)",
+        f"time          ≈ {format_duration(job.total_time_s)} (planned durations)",
+        f"tolerance     {job.tolerance_mm:g} mm (curves flattened to "
+        f"{job.flatten_tol_mm:g} mm, the rest for joint-space interpolation)",
+        f"deviation     max {job.max_dev_mm:.4f} mm, mean {job.mean_dev_mm:.4f} mm "
+        f"(from the quantised steps; bound {job.tolerance_mm:g} + step quantum "
+        f"{job.step_quantum_mm:.4f} = {job.tolerance_mm + job.step_quantum_mm:.4f} mm)",
+    ]
+    if nbar is not None:
+        lines.append(f"2nd opinion   {nbar.describe()}")
+    if worst >= 0 and job.n_paths > 1:
+        lines.append(f"worst path    #{worst} (source element "
+                     f"#{int(job.paths.source[worst])}): max "
+                     f"{job.paths.max_dev_mm[worst]:.4f} mm")
+    lines.append(f"margins       smallest type 1: {deg(min(mm[0], mm[1])):.1f}° "
+                 f"(arm 1 {deg(mm[0]):.1f}°, arm 2 {deg(mm[1]):.1f}°), type 2: "
+                 f"{deg(mm[2]):.1f}°")
+    lines.extend(f"mode change {k:<2d}{mc.describe(job.n_paths)}"
+                 for k, mc in enumerate(job.mode_changes, start=1))
+    lines.extend(f"note          {n}" for n in job.notes)
+    return lines
