@@ -20,6 +20,7 @@ from benchmarks.serve_burst import SMALL_GCODE, burst
 from fivebar_host.devices import mock
 from fivebar_host.server import app as app_module
 from fivebar_host.server import security
+from fivebar_host.server.client import ServerClient, ServerError, plot_options
 from fivebar_host.server.daemon import Daemon
 
 GCODE = {"Content-Type": "text/x-gcode"}
@@ -117,3 +118,35 @@ def test_a_submission_that_waits_too_long_for_a_slot_is_refused_busy(
         assert late.headers["retry-after"].isdigit()
         assert answers and answers[0].status == 201, answers
         assert sum(stored(d).values()) == 1
+
+
+def test_the_client_submits_again_after_a_busy_refusal(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """`ServerClient.submit` (and so `plot --server`) waits Retry-After and tries again: the
+    refusal queued nothing, so the drawing is queued exactly once."""
+    gate, entered = threading.Event(), threading.Event()
+    real_compile = app_module.compile_upload
+
+    def slow_compile(*args: Any) -> Any:
+        entered.set()
+        gate.wait(60)
+        return real_compile(*args)
+
+    monkeypatch.setattr(app_module, "compile_upload", slow_compile)
+    with running_daemon(tmp_path, "retry", max_uploads=1) as d:
+        answers: list[Any] = []
+        holder = threading.Thread(target=lambda: answers.append(
+            send(d.url, "POST", "/api/jobs?name=a.gcode", SMALL_GCODE, GCODE)))
+        holder.start()
+        assert entered.wait(30)  # the one upload allowed is in progress
+        refused = send(d.url, "POST", "/api/jobs?name=b.gcode", SMALL_GCODE, GCODE)
+        assert refused.status == 503 and json.loads(refused.body)["error"] == "busy"
+        c = ServerClient(d.url)
+        with pytest.raises(ServerError) as e:
+            c.submit(SMALL_GCODE, "c.gcode", plot_options(), busy_retries=0)
+        assert e.value.error == "busy" and e.value.retry_after_s == security.RETRY_AFTER_S
+        threading.Timer(0.5, gate.set).start()
+        job = c.submit(SMALL_GCODE, "d.gcode", plot_options())  # refused, waits, retried
+        holder.join(30)
+        assert answers[0].status == 201 and job["name"] == "d.gcode"
+        assert [j["name"] for j in c.jobs()] == ["a.gcode", "d.gcode"]
