@@ -4,7 +4,16 @@ FastAPI derives the OpenAPI description (`GET /openapi.json`) from the route sig
 the models below; docs/serve.md explains the API in prose. Every error answers with
 `{"error": <stable key>, "message": <what and why>}` (plus details for refused drawings),
 whatever produced it: a refused drawing, a bad option, an unknown job, a state conflict, a
-missing token or an oversized body (the last two come from `security.Guard`).
+missing token, an oversized body, a malformed query string or a full daemon (the last four
+come from `security.Guard`). Every path and query value is checked before it reaches the
+database: a job id is an integer (else 422), and one no job can have — negative, or beyond
+SQLite's 64-bit range — is simply not found (404); a parameter that takes one value is
+refused when repeated.
+
+Submissions wait for one of `compile_slots` compilation slots on the event loop (they do
+not occupy a thread while waiting, so reads stay quick under a burst of uploads); how many
+may wait at once is the Guard's limit. A submission that waited `SUBMIT_WAIT_S` without a
+slot, or whose client has gone, is not queued.
 
 Handlers never touch the serial port: they read the database and the worker's snapshot, and
 hand pause/resume/cancel/home to the machine thread.
@@ -12,25 +21,30 @@ hand pause/resume/cancel/home to the machine thread.
 
 from __future__ import annotations
 
+import asyncio
+import math
+import re
 import threading
 import time
+import types
 from dataclasses import dataclass
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, Union, get_args, get_origin
 
-from fastapi import Depends, FastAPI, Query, Request
+from fastapi import Depends, FastAPI, Path, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, Response
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, BeforeValidator, Field
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from fivebar_host import __version__
 from fivebar_host.config import Profile
-from fivebar_host.errors import OptionError
+from fivebar_host.errors import FivebarError, OptionError
 from fivebar_host.options import JOB_OPTIONS, parse_query, unknown_option
 from fivebar_host.server import store as st_
 from fivebar_host.server.jobs import CompiledCache, JobOptions, SubmitError, compile_upload
 from fivebar_host.server.machine import ActionError, JobStateError
+from fivebar_host.server.security import RETRY_AFTER_S
 from fivebar_host.server.store import JobRecord, JobStore
 from fivebar_host.server.worker import Worker
 
@@ -41,18 +55,46 @@ SIMPLE_CONTENT_TYPES = frozenset({"application/x-www-form-urlencoded", "multipar
 
 #: How long a built status answer is reused, s.
 STATUS_CACHE_S = 0.05
+#: Longest a submission waits for a compilation slot before it is refused as busy, s.
+SUBMIT_WAIT_S = 120.0
+#: Longest parameter name echoed back in an error message, characters.
+MAX_ECHO = 64
+#: What a job id in a path may look like: decimal digits, optionally negative (a number no
+#: job has is "not found"; anything else — `5_0`, `+5`, ` 5`, `0x5` — is not an id).
+_ID_TEXT = re.compile(r"-?[0-9]+")
 
 
-class ApiError(Exception):
-    """An error answer: HTTP status, stable key, message, optional details."""
+def _id_digits(value: Any) -> Any:
+    """Refuse a path job id that is not plain decimal digits before pydantic's lax int
+    parsing would read `1_0` as job 10."""
+    if isinstance(value, str) and not _ID_TEXT.fullmatch(value):
+        raise ValueError("a job id is a whole number in decimal digits")
+    return value
+
+
+#: A job id in a path (out-of-range numbers are answered 404 by `_Ctx.get_rec`).
+JobId = Annotated[int, BeforeValidator(_id_digits),
+                  Path(description="The job's id (a positive integer).")]
+
+
+class ApiError(FivebarError):
+    """An error answer: HTTP status, stable key, message, optional details and headers."""
 
     def __init__(self, status: int, error: str, message: str,
-                 detail: dict[str, Any] | None = None) -> None:
+                 detail: dict[str, Any] | None = None,
+                 headers: dict[str, str] | None = None) -> None:
         super().__init__(message)
         self.status = status
         self.error = error
         self.message = message
         self.detail = detail or {}
+        self.headers = headers
+
+
+def busy(message: str, retry_after_s: float = RETRY_AFTER_S) -> ApiError:
+    """The 503 answer of a daemon that cannot take more work now (with Retry-After)."""
+    return ApiError(503, "busy", message,
+                    headers={"Retry-After": str(max(1, math.ceil(retry_after_s)))})
 
 
 # ---------------------------------------------------------------------------- models
@@ -198,37 +240,64 @@ class _Ctx:
     cache: CompiledCache
     profile: Profile
     stopping: threading.Event
-    slots: threading.BoundedSemaphore
+    slots: asyncio.Semaphore
     started: float
 
     def get_rec(self, job_id: int) -> JobRecord:
-        """A job, or the 404 answer."""
+        """A job, or the 404 answer (also for numbers no job can have: negative, or beyond
+        SQLite's 64-bit integers, which it could not even look up)."""
+        if not st_.valid_job_id(job_id):
+            raise ApiError(404, "not_found", f"no job {_shown(str(job_id))}: job ids are "
+                           f"{st_.MIN_JOB_ID}..{st_.MAX_JOB_ID}")
         rec = self.store.get(job_id)
         if rec is None:
             raise ApiError(404, "not_found", f"no job {job_id}")
         return rec
 
 
-def _known_query(request: Request) -> set[str]:
+def _repeatable(annotation: Any) -> bool:
+    """Whether a parameter's type takes several values (`list[str] | None` does)."""
+    origin = get_origin(annotation)
+    if origin is Annotated:
+        return _repeatable(get_args(annotation)[0])
+    if origin is Union or origin is types.UnionType:
+        return any(_repeatable(a) for a in get_args(annotation))
+    return origin in (list, tuple, set, frozenset) or annotation in (list, tuple, set)
+
+
+def _known_query(request: Request) -> tuple[set[str], set[str]]:
     """The query parameters the matched route declares (its signature and its OpenAPI
-    extra parameters, which is where the job options are declared)."""
+    extra parameters, which is where the job options are declared), and those of its
+    signature that take one value only (the job options check their own repetition)."""
     route = request.scope.get("route")
     dependant = getattr(route, "dependant", None)
-    names = {p.alias for p in getattr(dependant, "query_params", ())}
+    params = list(getattr(dependant, "query_params", ()))
+    names = {p.alias for p in params}
+    single = {p.alias for p in params if not _repeatable(p.field_info.annotation)}
     extra = getattr(route, "openapi_extra", None) or {}
     names |= {p["name"] for p in extra.get("parameters", ())}
-    return names
+    return names, single
+
+
+def _shown(key: str) -> str:
+    """A client's parameter name as echoed in a message (long ones cut)."""
+    return key if len(key) <= MAX_ECHO else key[:MAX_ECHO - 3] + "..."
 
 
 async def reject_unknown_query(request: Request) -> None:
     """Every route: a query parameter it does not know is an error (`scael=2` must not be
-    queued with the scale left at its default)."""
+    queued with the scale left at its default), and so is a second value for one that takes
+    one (`limit=1&limit=1000` must not silently mean either)."""
     if getattr(request.scope.get("route"), "dependant", None) is None:
         return  # no route matched: the 404 answer follows
-    known = _known_query(request)
-    for key in request.query_params:
+    known, single = _known_query(request)
+    seen: set[str] = set()
+    for key, _ in request.query_params.multi_items():
         if key not in known:
-            raise unknown_option(key, known)
+            raise unknown_option(_shown(key), known)
+        if key in single and key in seen:
+            raise OptionError(key, "given more than once")
+        seen.add(key)
 
 
 def create_app(*, store: JobStore, worker: Worker, cache: CompiledCache, profile: Profile,
@@ -242,8 +311,8 @@ def create_app(*, store: JobStore, worker: Worker, cache: CompiledCache, profile
         "parameters. With a token configured, every request needs "
         "'Authorization: Bearer <token>'.",
         docs_url=None, redoc_url=None, dependencies=[Depends(reject_unknown_query)])
-    ctx = _Ctx(store, worker, cache, profile, stopping,
-               threading.BoundedSemaphore(compile_slots), time.monotonic())
+    ctx = _Ctx(store, worker, cache, profile, stopping, asyncio.Semaphore(compile_slots),
+               time.monotonic())
     _error_handlers(app)
     _status_routes(app, ctx)
     _job_routes(app, ctx)
@@ -257,7 +326,7 @@ def _error_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(ApiError)
     async def api_error(request: Request, exc: ApiError) -> JSONResponse:
-        return _error_response(exc.status, exc.error, exc.message, exc.detail)
+        return _error_response(exc.status, exc.error, exc.message, exc.detail, exc.headers)
 
     @app.exception_handler(OptionError)
     async def option_error(request: Request, exc: OptionError) -> JSONResponse:
@@ -268,7 +337,8 @@ def _error_handlers(app: FastAPI) -> None:
         parts = []
         for err in exc.errors():
             loc = ".".join(str(x) for x in err.get("loc", ()) if x not in ("query", "path"))
-            parts.append(f"{loc}: {err.get('msg', 'invalid')}")
+            msg = str(err.get("msg", "invalid")).removeprefix("Value error, ")
+            parts.append(f"{loc}: {msg}")
         return _error_response(422, "bad_option", "; ".join(parts) or "invalid request")
 
     @app.exception_handler(StarletteHTTPException)
@@ -307,7 +377,9 @@ _SUBMIT_RESPONSES: dict[int | str, dict[str, Any]] = {
           "of range or unknown, or the job cannot run (the CLI's message); nothing was "
           "queued."},
     400: {"model": ErrorOut, "description": "Empty upload or bad name."},
-    503: {"model": ErrorOut, "description": "The daemon is stopping."}}
+    503: {"model": ErrorOut, "description": "The daemon is stopping (`stopping`), or too "
+          "many submissions wait for a compilation slot (`busy`, with Retry-After); nothing "
+          "was queued."}}
 #: The request body and the job options (generated from their one definition).
 _SUBMIT_EXTRA: dict[str, Any] = {
     "requestBody": {"required": True, "description": "The drawing's bytes.", "content": {
@@ -331,7 +403,7 @@ def _submit_route(app: FastAPI, ctx: _Ctx) -> None:
         same definitions as `fivebar plot`'s options); an unknown one is refused."""
         if ctx.stopping.is_set():
             raise ApiError(503, "stopping", "the daemon is stopping; submit again after it "
-                           "restarts")
+                           "restarts", headers={"Retry-After": "10"})
         ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
         if ctype in SIMPLE_CONTENT_TYPES or not ctype:
             raise ApiError(415, "bad_content_type", f"send the drawing's bytes as the body "
@@ -339,15 +411,24 @@ def _submit_route(app: FastAPI, ctx: _Ctx) -> None:
                            f"application/octet-stream (got {ctype or 'none'!r})")
         opts = JobOptions(**parse_query(request.query_params.multi_items(), extra=("name",)))
         body = await request.body()
-
-        def work() -> Any:
-            with ctx.slots:
-                return compile_upload(body, name, opts, ctx.profile)
-
+        # Wait on the event loop (no thread held) for a compilation slot.
         try:
-            compiled = await run_in_threadpool(work)
+            await asyncio.wait_for(ctx.slots.acquire(), SUBMIT_WAIT_S)
+        except TimeoutError:
+            raise busy(f"no compilation slot came free within {SUBMIT_WAIT_S:.0f} s; "
+                       "nothing was queued, submit again later") from None
+        try:
+            if await request.is_disconnected():
+                raise ApiError(499, "client_gone", "the client went away; nothing was queued")
+            compiled = await run_in_threadpool(compile_upload, body, name, opts, ctx.profile)
         except SubmitError as e:
             raise ApiError(e.status, e.code, str(e), e.detail) from e
+        finally:
+            ctx.slots.release()
+        if await request.is_disconnected():
+            # Nobody would learn the job's id: queueing it would start a drawing nobody
+            # knows was accepted (the client reports a failure).
+            raise ApiError(499, "client_gone", "the client went away; nothing was queued")
         return _queue(ctx, name, opts, body, compiled)
 
 
@@ -381,7 +462,7 @@ def _job_routes(app: FastAPI, ctx: _Ctx) -> None:
         return [job_out(r, worker) for r in store.list(tuple(state) or None, limit)]
 
     @app.get("/api/jobs/{job_id}", response_model=JobOut, tags=["jobs"], responses=_ERRORS)
-    def get_job(job_id: int) -> JobOut:
+    def get_job(job_id: JobId) -> JobOut:
         """One job, with live progress while it runs."""
         return job_out(ctx.get_rec(job_id), worker)
 
@@ -397,25 +478,25 @@ def _job_routes(app: FastAPI, ctx: _Ctx) -> None:
 
     @app.post("/api/jobs/{job_id}/pause", response_model=JobOut, status_code=202,
               tags=["jobs"], responses=_ERRORS)
-    def pause(job_id: int) -> JobOut:
+    def pause(job_id: JobId) -> JobOut:
         """Hold the running job at once (laser off); it stays on the machine, paused."""
         return act(job_id, lambda: worker.pause(job_id))
 
     @app.post("/api/jobs/{job_id}/resume", response_model=JobOut, status_code=202,
               tags=["jobs"], responses=_ERRORS)
-    def resume(job_id: int, confirm: bool = Query(
+    def resume(job_id: JobId, confirm: bool = Query(
             False, description="Answer yes to the job's question (held jobs).")) -> JobOut:
         """Continue a paused job, or a held one from its resume point."""
         return act(job_id, lambda: worker.resume(job_id, confirm))
 
     @app.post("/api/jobs/{job_id}/cancel", response_model=JobOut, status_code=202,
               tags=["jobs"], responses=_ERRORS)
-    def cancel(job_id: int) -> JobOut:
+    def cancel(job_id: JobId) -> JobOut:
         """Cancel a job: a running one stops at once (laser off, firmware queue cleared)."""
         return act(job_id, lambda: worker.cancel(job_id))
 
     @app.delete("/api/jobs/{job_id}", status_code=204, tags=["jobs"], responses=_ERRORS)
-    def delete(job_id: int) -> Response:
+    def delete(job_id: JobId) -> Response:
         """Forget a finished job (done, failed or cancelled)."""
         rec = ctx.get_rec(job_id)
         if not store.delete(job_id):

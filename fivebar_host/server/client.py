@@ -28,11 +28,28 @@ class ServerError(FivebarError, RuntimeError):
     """An error answer of the daemon (or no answer): HTTP status, key and message."""
 
     def __init__(self, message: str, status: int = 0, error: str = "unreachable",
-                 body: dict[str, Any] | None = None) -> None:
+                 body: dict[str, Any] | None = None,
+                 retry_after_s: float | None = None) -> None:
         super().__init__(message)
         self.status = status
         self.error = error
         self.body = body or {}
+        #: The answer's Retry-After (busy, stopping), s; None without one.
+        self.retry_after_s = retry_after_s
+
+
+#: How often `ServerClient.submit` tries again after a `busy` refusal, and the longest wait
+#: between tries it accepts from Retry-After, s.
+BUSY_RETRIES = 5
+BUSY_WAIT_MAX_S = 30.0
+
+
+def _retry_after(value: str | None) -> float | None:
+    """A Retry-After header in seconds (the HTTP-date form is not used by the daemon)."""
+    try:
+        return max(0.0, float(value)) if value is not None else None
+    except ValueError:
+        return None
 
 
 def default_token(state_dir: Path | None = None) -> str | None:
@@ -93,7 +110,8 @@ class ServerClient:
             msg = doc.get("message") if isinstance(doc, dict) else None
             raise ServerError(msg or f"{self.base}: HTTP {e.code} {e.reason}", e.code,
                               str(doc.get("error", "http_error")) if isinstance(doc, dict)
-                              else "http_error", doc if isinstance(doc, dict) else {}) from None
+                              else "http_error", doc if isinstance(doc, dict) else {},
+                              _retry_after(e.headers.get("Retry-After"))) from None
         except (urllib.error.URLError, OSError) as e:
             reason = getattr(e, "reason", e)
             raise ServerError(f"{self.base}: no answer from the daemon ({reason}); is "
@@ -106,13 +124,26 @@ class ServerClient:
         out: dict[str, Any] = self.request("GET", "/api/status")
         return out
 
-    def submit(self, data: bytes, name: str, options: dict[str, Any]) -> dict[str, Any]:
-        """POST /api/jobs: queue a drawing (bytes) with plot options (query parameters)."""
+    def submit(self, data: bytes, name: str, options: dict[str, Any],
+               busy_retries: int = BUSY_RETRIES) -> dict[str, Any]:
+        """POST /api/jobs: queue a drawing (bytes) with plot options (query parameters).
+
+        A `busy` refusal (the daemon's upload limits; it queued nothing, so trying again
+        cannot queue the drawing twice) is retried up to `busy_retries` times after the
+        answer's Retry-After."""
         ctype = "image/svg+xml" if name.lower().endswith(".svg") else "text/x-gcode"
-        out: dict[str, Any] = self.request("POST", "/api/jobs", query={"name": name,
-                                                                       **options},
-                                           body=data, content_type=ctype, timeout_s=300.0)
-        return out
+        attempt = 0
+        while True:
+            try:
+                out: dict[str, Any] = self.request(
+                    "POST", "/api/jobs", query={"name": name, **options}, body=data,
+                    content_type=ctype, timeout_s=300.0)
+                return out
+            except ServerError as e:
+                if e.error != "busy" or attempt >= busy_retries:
+                    raise
+                attempt += 1
+                time.sleep(min(BUSY_WAIT_MAX_S, e.retry_after_s or 1.0))
 
     def job(self, job_id: int) -> dict[str, Any]:
         """GET /api/jobs/{id}."""

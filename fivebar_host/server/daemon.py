@@ -28,6 +28,9 @@ from fivebar_host.server.app import create_app
 from fivebar_host.server.jobs import CompiledCache
 from fivebar_host.server.machine import WorkerConfig
 from fivebar_host.server.security import (
+    MAX_IN_FLIGHT,
+    MAX_UPLOAD_BYTES_PENDING,
+    MAX_UPLOADS,
     Guard,
     Policy,
     default_state_dir,
@@ -41,6 +44,8 @@ log = logging.getLogger("fivebar.serve")
 
 DEFAULT_LISTEN = "127.0.0.1:8765"
 DEFAULT_MAX_UPLOAD = 8 * 1024 * 1024
+#: Connections the kernel holds for the daemon before it accepts them.
+LISTEN_BACKLOG = 1024
 
 
 class ServeError(FivebarError, RuntimeError):
@@ -80,6 +85,11 @@ class ServeConfig:
     banner_timeout_s: float | None = None
     ready_file: Path | None = None
     access_log: bool = False
+    #: Load limits (docs/serve.md, Limits): uploads in progress and requests in flight
+    #: before the answer is 503 busy, and compilations at once.
+    max_uploads: int = MAX_UPLOADS
+    max_in_flight: int = MAX_IN_FLIGHT
+    compile_slots: int = 2
 
 
 def _bind(host: str, port: int) -> socket.socket:
@@ -143,12 +153,23 @@ class Daemon:
             reply_timeout_s=ser.reply_timeout_s, auto_resume=self.cfg.auto_resume),
             self.store, cache)
         app = create_app(store=self.store, worker=self.worker, cache=cache,
-                         profile=self.profile, stopping=self.stopping)
+                         profile=self.profile, stopping=self.stopping,
+                         compile_slots=self.cfg.compile_slots)
         guarded = Guard(app, Policy(token=self.token, loopback=loopback,
-                                    upload_limit=self.cfg.max_upload_bytes))
+                                    upload_limit=self.cfg.max_upload_bytes,
+                                    max_in_flight=self.cfg.max_in_flight,
+                                    max_uploads=self.cfg.max_uploads,
+                                    max_upload_bytes_pending=max(
+                                        MAX_UPLOAD_BYTES_PENDING,
+                                        2 * self.cfg.max_upload_bytes)))
+        # No limit_concurrency: uvicorn's cap counts open connections, idle ones included,
+        # and refuses with a plain-text 503 — a burst of 200 connections was refused almost
+        # whole. The Guard caps requests in flight and uploads instead, answering the
+        # documented JSON `busy` with Retry-After; extra connections wait in the backlog.
         config = uvicorn.Config(guarded, log_config=None, access_log=self.cfg.access_log,
-                                lifespan="off", limit_concurrency=128, timeout_keep_alive=5,
-                                server_header=False, h11_max_incomplete_event_size=16 * 1024)
+                                lifespan="off", limit_concurrency=None, backlog=LISTEN_BACKLOG,
+                                timeout_keep_alive=5, server_header=False,
+                                h11_max_incomplete_event_size=16 * 1024)
         self._server = uvicorn.Server(config)
         self.worker.start()
         self._thread = threading.Thread(target=self._server.run, kwargs={"sockets": [sock]},

@@ -11,6 +11,16 @@
   carry an `Origin` other than the daemon's own are refused (a page cannot forge that header,
   so it cannot submit, pause or cancel jobs), and on a loopback listener the `Host` header
   must name a loopback address (against DNS rebinding).
+- **Query strings.** At most `MAX_QUERY_BYTES`, every `%` followed by two hex digits, UTF-8
+  once decoded, no control characters; otherwise 422 `bad_query` (the framework would
+  otherwise pass on replacement characters or a literal `%`).
+- **Load.** At most `Policy.max_in_flight` requests are handled at once and at most
+  `Policy.max_uploads` uploads (being read, waiting for a compilation slot or compiling)
+  holding at most `Policy.max_upload_bytes_pending` bytes between them; past that the
+  answer is 503 `busy` with `Retry-After`, before the body is read. Below these limits a
+  request waits its turn instead: connections are not capped here (the listen backlog and
+  the OS's file limit hold extra ones), because uvicorn's own cap answers a plain-text 503
+  and counts idle connections, so a burst of 200 connections was refused almost entirely.
 
 The middleware is plain ASGI (no framework types), so it runs before routing and before any
 body parsing.
@@ -23,8 +33,10 @@ import ipaddress
 import json
 import logging
 import os
+import re
 import secrets
 import stat
+import urllib.parse
 from collections.abc import Awaitable, Callable, MutableMapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,6 +55,19 @@ ASGIApp = Callable[[Scope, Receive, Send], Awaitable[None]]
 TOKEN_FILE = "token"
 #: Body limit of every request except job uploads, bytes.
 SMALL_BODY_LIMIT = 64 * 1024
+#: Longest query string accepted, bytes (as sent, percent-encoded).
+MAX_QUERY_BYTES = 8 * 1024
+#: Requests handled at once (all routes) before new ones are refused as busy.
+MAX_IN_FLIGHT = 1024
+#: Uploads in progress at once (read, waiting for a compilation slot, or compiling).
+MAX_UPLOADS = 256
+#: Bytes those uploads may hold in memory between them (one upload alone always may).
+MAX_UPLOAD_BYTES_PENDING = 256 * 1024 * 1024
+#: What a busy answer's Retry-After says, s.
+RETRY_AFTER_S = 2
+#: A '%' not followed by two hex digits.
+_BAD_PERCENT = re.compile(rb"%(?![0-9A-Fa-f]{2})")
+_CONTROL = re.compile(r"[\x00-\x1f\x7f]")
 
 
 class SecurityError(FivebarError, RuntimeError):
@@ -102,6 +127,23 @@ def load_or_create_token(state_dir: Path) -> tuple[str, Path, bool]:
     return token, path, False
 
 
+def query_problem(raw: bytes) -> str | None:
+    """What is wrong with a raw query string, or None: too long, malformed
+    percent-encoding, not UTF-8 once decoded, or control characters."""
+    if len(raw) > MAX_QUERY_BYTES:
+        return (f"query string of {len(raw)} bytes is over the limit of {MAX_QUERY_BYTES} "
+                "bytes")
+    if _BAD_PERCENT.search(raw):
+        return "malformed percent-encoding in the query string: '%' must start %XX (hex)"
+    try:
+        text = urllib.parse.unquote_to_bytes(raw.replace(b"+", b" ")).decode("utf-8")
+    except UnicodeDecodeError:
+        return "the query string is not UTF-8 once percent-decoded"
+    if _CONTROL.search(text):
+        return "control characters in the query string"
+    return None
+
+
 @dataclass(frozen=True)
 class Policy:
     """What the guard enforces for one listener."""
@@ -110,6 +152,9 @@ class Policy:
     loopback: bool  # listening on a loopback address (Host header checked)
     upload_limit: int  # body limit of POST /api/jobs, bytes
     upload_path: str = "/api/jobs"
+    max_in_flight: int = MAX_IN_FLIGHT
+    max_uploads: int = MAX_UPLOADS
+    max_upload_bytes_pending: int = MAX_UPLOAD_BYTES_PENDING
 
 
 def _header(scope: Scope, name: bytes) -> str | None:
@@ -136,18 +181,36 @@ async def _reject(send: Send, status: int, error: str, message: str,
     await send({"type": "http.response.body", "body": body})
 
 
+async def _busy(send: Send, message: str) -> None:
+    await _reject(send, 503, "busy", message,
+                  [(b"retry-after", str(RETRY_AFTER_S).encode())])
+
+
 class Guard:
-    """ASGI middleware: token, Host/Origin checks and request body limits (module doc)."""
+    """ASGI middleware: token, Host/Origin checks, query strings, request body limits and
+    the load limits (module doc). The counters are only touched on the event loop."""
 
     def __init__(self, app: ASGIApp, policy: Policy) -> None:
         self.app = app
         self.policy = policy
+        self.in_flight = 0  # requests past the checks, not yet answered
+        self.uploads = 0  # of which uploads
+        self.upload_bytes = 0  # bytes those uploads hold
+
+    def is_upload(self, scope: Scope) -> bool:
+        """Whether a request is a job submission."""
+        return scope.get("method") == "POST" and scope.get("path") == self.policy.upload_path
 
     def limit_for(self, scope: Scope) -> int:
         """The body limit of a request."""
-        if scope.get("method") == "POST" and scope.get("path") == self.policy.upload_path:
-            return self.policy.upload_limit
-        return SMALL_BODY_LIMIT
+        return self.policy.upload_limit if self.is_upload(scope) else SMALL_BODY_LIMIT
+
+    def _over_budget(self, upload: bool, more: int, held: int) -> bool:
+        """Whether `more` bytes for an upload already holding `held` would overrun the
+        bytes all uploads may hold (an upload alone is always within it)."""
+        others = self.upload_bytes - held
+        return (upload and others > 0
+                and self.upload_bytes + more > self.policy.max_upload_bytes_pending)
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
@@ -175,8 +238,13 @@ class Guard:
                               f"{TOKEN_FILE})",
                               [(b"www-authenticate", b'Bearer realm="fivebar"')])
                 return
+        problem = query_problem(bytes(scope.get("query_string", b"")))
+        if problem is not None:
+            await _reject(send, 422, "bad_query", problem)
+            return
         limit = self.limit_for(scope)
         length = _header(scope, b"content-length")
+        n = 0
         if length is not None:
             try:
                 n = int(length)
@@ -187,23 +255,54 @@ class Guard:
                 await _reject(send, 413, "too_large", f"request body of {n} bytes is over "
                               f"the limit of {limit} bytes")
                 return
-        # Read the whole body (bounded), then replay it to the application.
-        chunks: list[bytes] = []
-        size = 0
-        while True:
-            msg = await receive()
-            if msg["type"] == "http.disconnect":
-                return
-            chunk = bytes(msg.get("body", b""))
-            size += len(chunk)
-            if size > limit:
-                await _reject(send, 413, "too_large",
-                              f"request body over the limit of {limit} bytes")
-                return
-            chunks.append(chunk)
-            if not msg.get("more_body", False):
-                break
-        body = b"".join(chunks)
+        upload = self.is_upload(scope)
+        if self.in_flight >= pol.max_in_flight:
+            await _busy(send, f"the daemon is handling {self.in_flight} requests, its limit; "
+                        "retry shortly")
+            return
+        if upload and self.uploads >= pol.max_uploads:
+            await _busy(send, f"{self.uploads} submissions are being read or compiled, the "
+                        "limit; nothing was queued, submit again shortly")
+            return
+        if self._over_budget(upload, max(n, 0), 0):
+            await _busy(send, "the uploads in progress fill the daemon's upload memory; "
+                        "nothing was queued, submit again shortly")
+            return
+        self.in_flight += 1
+        self.uploads += upload
+        held = 0
+        try:
+            # Read the whole body (bounded), then replay it to the application.
+            chunks: list[bytes] = []
+            size = 0
+            while True:
+                msg = await receive()
+                if msg["type"] == "http.disconnect":
+                    return
+                chunk = bytes(msg.get("body", b""))
+                size += len(chunk)
+                if size > limit:
+                    await _reject(send, 413, "too_large",
+                                  f"request body over the limit of {limit} bytes")
+                    return
+                if upload:
+                    if self._over_budget(upload, len(chunk), held):
+                        await _busy(send, "the uploads in progress fill the daemon's upload "
+                                    "memory; nothing was queued, submit again shortly")
+                        return
+                    held += len(chunk)
+                    self.upload_bytes += len(chunk)
+                chunks.append(chunk)
+                if not msg.get("more_body", False):
+                    break
+            await self._call(scope, receive, send, b"".join(chunks))
+        finally:
+            self.in_flight -= 1
+            self.uploads -= upload
+            self.upload_bytes -= held
+
+    async def _call(self, scope: Scope, receive: Receive, send: Send, body: bytes) -> None:
+        """Hand the request to the application with its body already read."""
         replayed = False
 
         async def replay() -> Message:

@@ -44,6 +44,15 @@ FINAL_STATES = frozenset({DONE, FAILED, CANCELLED})
 BLOCKING_STATES = frozenset({RUNNING, PAUSED, HELD})
 
 SCHEMA_VERSION = 1
+#: Job ids SQLite can hold (a signed 64-bit INTEGER PRIMARY KEY; AUTOINCREMENT starts at 1).
+#: A number outside is no job: looked up it is "not found", never an OverflowError.
+MIN_JOB_ID, MAX_JOB_ID = 1, 2**63 - 1
+
+
+def valid_job_id(job_id: int) -> bool:
+    """Whether `job_id` can name a row at all (SQLite refuses to bind larger integers)."""
+    return MIN_JOB_ID <= job_id <= MAX_JOB_ID
+
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS jobs (
     id INTEGER PRIMARY KEY AUTOINCREMENT,
@@ -226,7 +235,9 @@ class JobStore:
         return rec
 
     def get(self, job_id: int) -> JobRecord | None:
-        """One job, or None."""
+        """One job, or None (also for a number no job can have)."""
+        if not valid_job_id(job_id):
+            return None
         with self._lock:
             row = self._db.execute(f"SELECT {_COLUMNS} FROM jobs WHERE id = ?",
                                    (job_id,)).fetchone()
@@ -234,6 +245,8 @@ class JobStore:
 
     def upload(self, job_id: int) -> bytes | None:
         """The drawing bytes of a job (None once the job is over)."""
+        if not valid_job_id(job_id):
+            return None
         with self._lock:
             row = self._db.execute("SELECT upload FROM jobs WHERE id = ?", (job_id,)).fetchone()
         return None if row is None or row[0] is None else bytes(row[0])
@@ -330,6 +343,8 @@ class JobStore:
 
     def delete(self, job_id: int) -> bool:
         """Remove a finished job from the history; False if it is not over (or unknown)."""
+        if not valid_job_id(job_id):
+            return False
         with self._tx() as db:
             cur = db.execute(f"DELETE FROM jobs WHERE id = ? AND state IN "
                              f"({', '.join('?' * len(FINAL_STATES))})",
