@@ -57,8 +57,7 @@ from matplotlib.ticker import NullFormatter  # noqa: E402
 
 from benchmarks.kinematics import bare_forward, bare_inverse, median_time  # noqa: E402
 from benchmarks.pipeline import make_svg  # noqa: E402
-from fivebar_host.config import Profile, load_profile  # noqa: E402
-from fivebar_host.job import (  # noqa: E402
+from fivebar_host.compile import (  # noqa: E402
     MAX_STEP_RAD,
     CompileOptions,
     Job,
@@ -67,6 +66,7 @@ from fivebar_host.job import (  # noqa: E402
     nbar_opinion,
     validate,
 )
+from fivebar_host.config import Profile, load_profile  # noqa: E402
 from fivebar_host.linkage import load_mechanism  # noqa: E402
 from fivebar_host.toolpath.geometry import evaluate, nearest_distance  # noqa: E402
 from kinematics import approx  # noqa: E402

@@ -171,7 +171,7 @@ def compile_from_cli(drawing: Path, config_path: Path | None, mode: str | None,
                      keep_order: bool) -> tuple[Profile, Any]:
     """Compile and check a drawing from `job_options` values: (profile, Job). Raises the
     pipeline's errors (`InputError`, `JobError`, `ConfigError`, `ValueError`)."""
-    from fivebar_host.job import CompileOptions, compile_job
+    from fivebar_host.compile import CompileOptions, compile_job
 
     prof = _profile(config_path)
     opts = CompileOptions(mode=mode, tolerance_mm=tolerance, origin_mm=_xy(origin_text),
@@ -348,7 +348,7 @@ def convert(drawing: Path, output: Path, relative: bool, laser: bool,
     """Compile DRAWING (SVG or G-code) into firmware-ready step lines (G1 A B P S).
 
     Without --laser the job is a pen plot: S0 on every line."""
-    from fivebar_host.job import encode_lines, write_atomic
+    from fivebar_host.compile import encode_lines, write_atomic
 
     prof, job = compile_from_cli(drawing, config_path, mode, tolerance, origin_text, scale,
                                  rotate_deg, fit, layers, keep_order)
@@ -356,7 +356,7 @@ def convert(drawing: Path, output: Path, relative: bool, laser: bool,
     write_atomic(output, "\n".join(lines) + "\n")
     tool = (f"laser (power up to S{int(job.power.max(initial=0))})" if laser
             else "pen (S0, no laser power)")
-    from fivebar_host.job import mode_sequence
+    from fivebar_host.compile import mode_sequence
 
     changes = f" ({len(job.mode_changes)} pen-up mode changes)" if job.mode_changes else ""
     click.echo(f"wrote {output}: {job.n_segments} segments, mode {mode_sequence(job)}{changes}, "
@@ -439,7 +439,7 @@ def plot(drawing: Path, dry_run: bool, preview_path: Path, port: str | None, res
     if not dry_run and port is None:
         _fail("give --port PORT to plot on a machine (e.g. /dev/ttyUSB0 or fivebar-sim:// "
               "for the emulator), or --dry-run for the preview and report")
-    from fivebar_host.job import nbar_opinion
+    from fivebar_host.compile import nbar_opinion
     from fivebar_host.preview import draw_preview, report_lines
 
     prof, job = compile_from_cli(drawing, config_path, mode, tolerance, origin_text, scale,
@@ -514,9 +514,9 @@ def _write_executed(job: Any, prof: Profile, trace: Path, preview_path: Path,
                     first_segment: int) -> None:
     """After an emulator run: the executed path from the recorded pulses, next to the
     preview (CSV of pen points and their deviation), and its largest deviation."""
+    from fivebar_host.compile import write_atomic
     from fivebar_host.devices.simtrace import read_trace
     from fivebar_host.executed import executed_path, merge_axes
-    from fivebar_host.job import write_atomic
 
     tr = read_trace(trace)
     t, track = merge_axes(tr.positions("A"), tr.positions("B"))

@@ -37,8 +37,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fivebar_host import protocol
+from fivebar_host.compile import Job
 from fivebar_host.config import Profile
-from fivebar_host.job import Job
 from fivebar_host.link import Link, LinkError, LinkFaultError, StreamProgress, StreamResult
 from fivebar_host.protocol import StatusReport
 from fivebar_host.steps import step_angles

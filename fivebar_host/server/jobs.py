@@ -18,9 +18,9 @@ from collections import OrderedDict
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
+from fivebar_host.compile import GCODE_SUFFIXES, CompileOptions, Job, compile_drawing
 from fivebar_host.config import ConfigError, Profile
 from fivebar_host.errors import InputError, JobError
-from fivebar_host.job import GCODE_SUFFIXES, CompileOptions, Job, compile_drawing
 from fivebar_host.sender import fingerprint
 from fivebar_host.toolpath.gcode import read_gcode
 from fivebar_host.toolpath.svg import read_svg

@@ -49,8 +49,8 @@ from typing import Any
 import numpy as np
 
 from fivebar_host import protocol
+from fivebar_host.compile import Job
 from fivebar_host.config import Profile
-from fivebar_host.job import Job
 from fivebar_host.link import Link, LinkError, LinkFaultError, StreamResult
 from fivebar_host.protocol import StatusReport
 from fivebar_host.sender import (
