@@ -166,6 +166,29 @@ def _point_text(points: FloatArray, match: re.Match[str]) -> str:
     return f"point ({x:.3f}, {y:.3f}) mm"
 
 
+def _refuse_unsafe(fb: FiveBar, stroke: FloatArray, asm: str, min1: float, min2: float,
+                   limits: tuple[tuple[float, float], tuple[float, float]],
+                   where: Callable[[FloatArray], Where]) -> None:
+    """Raise if a point of `stroke` is safe in no working mode (then no working-mode change
+    can help), with each mode's reason at the first such point."""
+    modes = WORKING_MODES
+    safe = np.zeros(stroke.shape[0], bool)
+    for m in modes:
+        safe |= point_safety(fb, m, stroke, min1, min2, limits, assembly=asm)
+    if not safe.all():
+        k = int(np.flatnonzero(~safe)[0])
+        why = []
+        for m in modes:
+            try:
+                PoseChecker(fb, m, 1 if asm == "+" else -1, min1, min2,
+                            limits).inverse(stroke[k:k + 1])
+            except CheckFailedError as cf:
+                why.append(f"{m}: {cf.message}")
+        raise JobError("no working mode is safe at this point in assembly "
+                       f"{asm}, so no working-mode change can help (" + "; ".join(why)
+                       + ")", where(stroke[k]), "no_mode")
+
+
 def _plan_modes(ch: _Chords, fb: FiveBar, home_th: FloatArray, home_mode: str, asm: str,
                 min1: float, min2: float,
                 limits: tuple[tuple[float, float], tuple[float, float]],
@@ -196,21 +219,7 @@ def _plan_modes(ch: _Chords, fb: FiveBar, home_th: FloatArray, home_mode: str, a
     for p in range(npath):
         g0, g1 = int(s_off[p]), int(s_off[p + 1])
         stroke = np.concatenate((ch.pts[offs[p]][None], dense[g0:g1]))
-        safe = np.zeros(stroke.shape[0], bool)
-        for m in modes:
-            safe |= point_safety(fb, m, stroke, min1, min2, limits, assembly=asm)
-        if not safe.all():
-            k = int(np.flatnonzero(~safe)[0])
-            why = []
-            for m in modes:
-                try:
-                    PoseChecker(fb, m, 1 if asm == "+" else -1, min1, min2,
-                                limits).inverse(stroke[k:k + 1])
-                except CheckFailedError as cf:
-                    why.append(f"{m}: {cf.message}")
-            raise JobError("no working mode is safe at this point in assembly "
-                           f"{asm}, so no working-mode change can help (" + "; ".join(why)
-                           + ")", where_of(p, stroke[k]), "no_mode")
+        _refuse_unsafe(fb, stroke, asm, min1, min2, limits, partial(where_of, p))
         try:
             mp = plan_working_modes(fb, [stroke], cur, min1, min2, limits, assembly=asm,
                                     start_angles=pose, modes=modes)
