@@ -31,8 +31,8 @@ import numpy as np
 # shadow the `kinematics` package: drop the folder before importing the project.
 _HERE = Path(__file__).resolve().parent
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
+from fivebar_host.compile import CompileOptions, compile_job, deviations, validate  # noqa: E402
 from fivebar_host.config import load_profile  # noqa: E402
-from fivebar_host.job import CompileOptions, compile_job, deviations, validate  # noqa: E402
 
 ROOT = _HERE.parent
 

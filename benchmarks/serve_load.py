@@ -38,9 +38,9 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from fivebar_host.compile import CompileOptions, compile_drawing  # noqa: E402
 from fivebar_host.config import load_profile  # noqa: E402
 from fivebar_host.devices import sim  # noqa: E402
-from fivebar_host.job import CompileOptions, compile_drawing  # noqa: E402
 from fivebar_host.server.client import ServerClient, plot_options  # noqa: E402
 from fivebar_host.server.security import is_loopback  # noqa: E402
 from fivebar_host.toolpath.svg import read_svg  # noqa: E402

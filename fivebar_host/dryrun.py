@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from fivebar_host.job import Job, NbarOpinion
+from fivebar_host.compile import Job, NbarOpinion
 
 
 def mode_sequence(job: Job) -> str:

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from fivebar_host.compile import Job, distance_to_request
 from fivebar_host.config import Profile
-from fivebar_host.job import Job, distance_to_request
 from fivebar_host.steps import step_angles
 
 FloatArray = NDArray[np.float64]

@@ -33,7 +33,7 @@ first and out of the last segment of every run between stops (start, pen/laser s
 
 — the second is the average acceleration between the segments' midpoints: a velocity that
 changes at most at rate α has segment averages that differ by at most that much. The job
-(`fivebar_host.job`) gets there in four steps: (1) the continuous profile above with a share of
+(`fivebar_host.compile`) gets there in four steps: (1) the continuous profile above with a share of
 α and of J (and a corner cap for direction changes between short segments, and the firmware's
 shortest P as a speed cap); (2) `ramp_fractions` cuts the speed-up and slow-down parts of every
 segment into pieces short enough in time that the planned speed changes by a fraction of J

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
+from fivebar_host.compile import CompileOptions, Job, compile_job
 from fivebar_host.config import Profile, load_profile
 from fivebar_host.devices.simtrace import Trace
-from fivebar_host.job import CompileOptions, Job, compile_job
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 

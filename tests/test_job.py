@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fivebar_host.compile import CompileOptions, compile_job, deviations, encode_lines
 from fivebar_host.config import load_profile
 from fivebar_host.errors import JobError
-from fivebar_host.job import CompileOptions, compile_job, deviations, encode_lines
 from fivebar_host.steps import step_angles
 from fivebar_host.toolpath.svg import read_svg
 
@@ -238,7 +238,7 @@ def test_layer_selection(tmp_path: Path) -> None:
 
 
 def test_nbar_second_opinion_agrees() -> None:
-    from fivebar_host.job import nbar_opinion
+    from fivebar_host.compile import nbar_opinion
 
     job = compile_job(EXAMPLES / "fivebar_text.svg", PROF)
     op = nbar_opinion(job, PROF)

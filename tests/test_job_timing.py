@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from fivebar_host import protocol
+from fivebar_host.compile import CompileOptions, compile_job, encode_lines
 from fivebar_host.config import load_profile
-from fivebar_host.job import CompileOptions, compile_job, encode_lines
 from fivebar_host.planner import JUNCTION_JUMP_RAD_S
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -15,18 +15,18 @@ from click.testing import CliRunner
 
 import kinematics.modes
 from fivebar_host.cli import main
-from fivebar_host.config import load_profile
-from fivebar_host.dryrun import report_lines
-from fivebar_host.errors import JobError
-from fivebar_host.job import (
+from fivebar_host.compile import (
     CompileOptions,
-    _break_paths,
-    _prepare_chords,
     compile_job,
     deviations,
     encode_lines,
     read_drawing,
 )
+from fivebar_host.compile.chords import _prepare_chords
+from fivebar_host.compile.modes import _break_paths
+from fivebar_host.config import load_profile
+from fivebar_host.dryrun import report_lines
+from fivebar_host.errors import JobError
 from fivebar_host.steps import step_angles
 from fivebar_host.toolpath.geometry import LINE, evaluate, flatten
 from fivebar_host.toolpath.segment import wrap_to_limits
@@ -159,7 +159,7 @@ def test_planned_waypoints_are_executed_exactly(job) -> None:  # type: ignore[no
 
 
 def test_transition_targets_follow_the_planned_polyline() -> None:
-    from fivebar_host.job import _transition_targets
+    from fivebar_host.compile.modes import _transition_targets
 
     corners = np.array([[0.2, 0.3], [0.9, 0.35], [1.0, 1.4], [0.4, 1.5]])
     dense = np.concatenate([np.linspace(p, q, 40)[(1 if i else 0):]

@@ -17,9 +17,9 @@ import pytest
 from click.testing import CliRunner
 
 from fivebar_host.cli import main
+from fivebar_host.compile import CompileOptions, compile_job
 from fivebar_host.config import load_profile
 from fivebar_host.devices import mock
-from fivebar_host.job import CompileOptions, compile_job
 from fivebar_host.server.client import ServerClient, ServerError, follow, plot_options
 from fivebar_host.server.daemon import Daemon, ServeConfig
 from fivebar_host.server.security import SecurityError

@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 import pytest
 
+from fivebar_host.compile import CompileOptions, compile_job
 from fivebar_host.config import load_profile
-from fivebar_host.job import CompileOptions, compile_job
 from fivebar_host.server.client import ServerClient, follow, plot_options
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"

@@ -12,10 +12,10 @@ from typing import Any
 import numpy as np
 import pytest
 
+from fivebar_host.compile import CompileOptions, compile_job
 from fivebar_host.config import load_profile
 from fivebar_host.devices import sim
 from fivebar_host.devices.simtrace import read_trace
-from fivebar_host.job import CompileOptions, compile_job
 from fivebar_host.server.client import ServerClient, follow, plot_options
 from fivebar_host.server.daemon import Daemon, ServeConfig
 

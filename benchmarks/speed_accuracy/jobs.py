@@ -19,7 +19,14 @@ from benchmarks.kinematics import median_time
 from benchmarks.speed_accuracy.config import Config, FloatArray
 from benchmarks.speed_accuracy.plot import save
 from benchmarks.speed_accuracy.scene import Scene
-from fivebar_host.job import CompileOptions, Job, compile_job, deviations, nbar_opinion, validate
+from fivebar_host.compile import (
+    CompileOptions,
+    Job,
+    compile_job,
+    deviations,
+    nbar_opinion,
+    validate,
+)
 from fivebar_host.toolpath.geometry import evaluate, nearest_distance
 from kinematics.fivebar import FiveBar
 
@@ -59,7 +66,7 @@ def fixed_spacing(job: Job, fb: FiveBar, tol: float, samples: int = 16,
     placed drawing into k = ⌈length/h⌉ equal-parameter pieces (one spacing h for the whole
     drawing), take the closed-form inverse at the piece ends and let the machine interpolate
     in joint space between them. Returns the segment count, the largest h whose deviation
-    from the drawing (measured like `fivebar_host.job.deviations`: `samples` + 1 points per
+    from the drawing (measured like `fivebar_host.compile.deviations`: `samples` + 1 points per
     piece through the forward kinematics, distance to the primitive) stays ≤ tol (to 0.1 %
     in h), and that deviation."""
     dr = job.drawing

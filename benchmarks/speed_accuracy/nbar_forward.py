@@ -15,7 +15,7 @@ from benchmarks.speed_accuracy.config import Config, FloatArray
 from benchmarks.speed_accuracy.methods import SetError, set_error
 from benchmarks.speed_accuracy.scene import PointSet, Scene, dist, ref_forward
 from benchmarks.speed_accuracy.timing import interleaved_medians
-from fivebar_host.job import MAX_STEP_RAD
+from fivebar_host.compile import MAX_STEP_RAD
 from kinematics.nbar import MechanismError, Status, fivebar_mechanism, simulate
 
 

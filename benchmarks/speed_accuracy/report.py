@@ -21,7 +21,7 @@ from benchmarks.speed_accuracy.report_stability import (
 )
 from benchmarks.speed_accuracy.results import Results
 from benchmarks.speed_accuracy.steps import firmware_rate_cap
-from fivebar_host.job import MAX_STEP_RAD
+from fivebar_host.compile import MAX_STEP_RAD
 
 
 def _header(res: Results) -> list[str]:

@@ -11,7 +11,7 @@ from benchmarks.speed_accuracy.config import EXACT_MM
 from benchmarks.speed_accuracy.markdown import fmt_g
 from benchmarks.speed_accuracy.results import Results
 from benchmarks.speed_accuracy.stability import CAT_STYLE, Cat
-from fivebar_host.job import MAX_STEP_RAD
+from fivebar_host.compile import MAX_STEP_RAD
 
 #: Failure modes found by the stability map and approaches, with their tests. The wording is
 #: qualitative on purpose; the figures are in the tables above.

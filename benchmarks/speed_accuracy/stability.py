@@ -25,7 +25,7 @@ from benchmarks.speed_accuracy.methods import guard_of, wrap
 from benchmarks.speed_accuracy.nbar_forward import nbar_step_check
 from benchmarks.speed_accuracy.plot import overlay, save
 from benchmarks.speed_accuracy.scene import Scene, closed_form, dist, ref_forward
-from fivebar_host.job import MAX_STEP_RAD
+from fivebar_host.compile import MAX_STEP_RAD
 from kinematics.nbar import fivebar_mechanism
 
 

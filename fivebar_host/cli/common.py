@@ -119,7 +119,7 @@ def compile_from_cli(drawing: Path, config_path: Path | None,
                      values: dict[str, Any]) -> tuple[Profile, Any]:
     """Compile and check a drawing with the job option values a command received:
     (profile, Job). Raises the pipeline's errors."""
-    from fivebar_host.job import CompileOptions, compile_job
+    from fivebar_host.compile import CompileOptions, compile_job
 
     prof = load(config_path)
     return prof, compile_job(drawing, prof, CompileOptions(**compile_values(values)))

@@ -41,7 +41,7 @@ def convert(drawing: Path, output: Path, relative: bool, config_path: Path | Non
     """Compile DRAWING (SVG or G-code) into firmware-ready step lines (G1 A B P S).
 
     Without --laser the job is a pen plot: S0 on every line."""
-    from fivebar_host.job import encode_lines, mode_sequence, write_atomic
+    from fivebar_host.compile import encode_lines, mode_sequence, write_atomic
 
     laser = bool(job_values["laser"])
     prof, job = compile_from_cli(drawing, config_path, job_values)
@@ -79,8 +79,8 @@ def plot(drawing: Path, dry_run: bool, preview_path: Path, port: str | None, res
     if not dry_run and port is None:
         fail("give --port PORT to plot on a machine (e.g. /dev/ttyUSB0 or fivebar-sim:// "
              "for the emulator), or --dry-run for the preview and report")
+    from fivebar_host.compile import nbar_opinion
     from fivebar_host.dryrun import report_lines
-    from fivebar_host.job import nbar_opinion
     from fivebar_host.report.preview import draw_preview
 
     laser = bool(job_values["laser"])
@@ -159,9 +159,9 @@ def _write_executed(job: Any, prof: Profile, trace: Path, preview_path: Path,
                     first_segment: int) -> None:
     """After an emulator run: the executed path from the recorded pulses, next to the
     preview (CSV of pen points and their deviation), and its largest deviation."""
+    from fivebar_host.compile import write_atomic
     from fivebar_host.devices.simtrace import read_trace
     from fivebar_host.executed import executed_path, merge_axes
-    from fivebar_host.job import write_atomic
 
     tr = read_trace(trace)
     t, track = merge_axes(tr.positions("A"), tr.positions("B"))

@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from fivebar_host import protocol
-from fivebar_host.job import Job
+from fivebar_host.compile import Job
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import FaultKind, LinkError, LinkFaultError, SendError
 from fivebar_host.run.link import Link

@@ -19,8 +19,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fivebar_host import protocol
+from fivebar_host.compile import Job
 from fivebar_host.config import Profile
-from fivebar_host.job import Job
 from fivebar_host.run.errors import SendError
 from fivebar_host.steps import absolute_steps, step_angles
 

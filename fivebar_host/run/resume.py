@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike
 
+from fivebar_host.compile import Job
 from fivebar_host.config import Profile
-from fivebar_host.job import Job
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import SendError
 from fivebar_host.run.program import Program, build_program

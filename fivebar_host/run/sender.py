@@ -32,8 +32,8 @@ from pathlib import Path
 import numpy as np
 
 from fivebar_host import protocol
+from fivebar_host.compile import Job
 from fivebar_host.config import Profile
-from fivebar_host.job import Job
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import LinkFaultError, SendError
 from fivebar_host.run.faults import StreamRun, after_fault

@@ -21,7 +21,7 @@ from functools import partial
 from pathlib import Path
 
 from fivebar_host import protocol
-from fivebar_host.job import Job
+from fivebar_host.compile import Job
 from fivebar_host.run.errors import FaultKind, LinkError, LinkFaultError, SendError
 from fivebar_host.run.program import Program, build_program
 from fivebar_host.run.resume import ResumePoint, resume_path

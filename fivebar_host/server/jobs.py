@@ -17,9 +17,9 @@ from collections import OrderedDict
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
+from fivebar_host.compile import GCODE_SUFFIXES, CompileOptions, Job, compile_drawing
 from fivebar_host.config import ConfigError, Profile
 from fivebar_host.errors import FivebarError, InputError, JobError
-from fivebar_host.job import GCODE_SUFFIXES, CompileOptions, Job, compile_drawing
 from fivebar_host.options import check_values
 from fivebar_host.run.resume import fingerprint
 from fivebar_host.toolpath.gcode import read_gcode

@@ -23,8 +23,8 @@ from pathlib import Path
 from typing import Any
 
 from fivebar_host import protocol
+from fivebar_host.compile import Job
 from fivebar_host.config import Profile
-from fivebar_host.job import Job
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import LinkError
 from fivebar_host.run.program import travel_lines

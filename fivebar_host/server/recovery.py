@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from fivebar_host.job import Job
+from fivebar_host.compile import Job
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import SendError
 from fivebar_host.run.program import Program, build_program

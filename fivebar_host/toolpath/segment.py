@@ -21,8 +21,8 @@ segment is also capped (`max_step_rad`) so the planner's acceleration ramps are 
 Where the map is nearly linear, one segment covers a long chord; near singularities the
 segments get dense — the split count follows ‖D²FK‖, not a fixed point count.
 
-Total bound on the drawn path (see `fivebar_host.job`): flattening (chord within tol_f of the
-curve) + interpolation (pen within tol_i of the chord) ≤ tol_f + tol_i = tol. Step
+Total bound on the drawn path (see `fivebar_host.compile.job`): flattening (chord within tol_f of
+the curve) + interpolation (pen within tol_i of the chord) ≤ tol_f + tol_i = tol. Step
 quantisation adds at most one step quantum, reported separately.
 
 Pose checks (`PoseChecker`) run on every target and on the samples between targets: inverse

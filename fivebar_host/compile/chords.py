@@ -1,0 +1,108 @@
+"""Order and join: the flattened strokes of a placed drawing become the job's paths, as one
+array of vertices in machine mm with per-chord provenance and tolerance budgets (`_Chords`).
+
+Paths are ordered (nearest neighbour from the homed pen position, `toolpath.order`), reversed
+where that shortens the travel, and consecutive paths whose gap is below the tolerance and
+whose settings match are joined by a short pen-down bridge. Each chord's interpolation budget
+tol_i follows the tolerance budget in `fivebar_host.compile.job`: tol − tol_f for chords of
+curves, tol for straight input lines, tol − gap/2 for a bridge.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from fivebar_host.compile.model import BoolArray, FloatArray, IntArray
+from fivebar_host.toolpath import order
+from fivebar_host.toolpath.geometry import LINE, Drawing, Polylines
+
+
+@dataclass(frozen=True)
+class _Chords:
+    """The ordered, joined polylines in machine mm with per-chord provenance."""
+
+    pts: FloatArray  # (M, 2)
+    offsets: IntArray  # (P+1,)
+    vert_prim: IntArray  # (M,) primitive the vertex lies on (for messages)
+    chord_from: IntArray  # (C,) vertex index a of chord a → a+1
+    prim: IntArray  # (C,) primitive, −1 for a join bridge
+    tlo: FloatArray
+    thi: FloatArray
+    rev: BoolArray
+    tol_i: FloatArray
+    path_of_chord: IntArray  # (C,) job path
+    path_source: IntArray  # (P,) first source element
+    path_reversed: BoolArray
+    power: FloatArray  # (P,) fraction
+    feed: FloatArray  # (P,) mm/s or NaN
+    joined: int
+    travel_before: float
+    travel_after: float
+
+
+def _prepare_chords(drawing: Drawing, poly: Polylines, tol: float, tol_f: float,
+                    start: FloatArray, keep_order: bool) -> _Chords:
+    """Order, reverse and join the flattened strokes; per-chord provenance and budgets."""
+    pts0 = poly.points
+    offs = poly.offsets
+    npath = offs.shape[0] - 1
+    starts = pts0[offs[:-1]]
+    ends = pts0[offs[1:] - 1]
+    od = order.order_paths(starts, ends, start, start, keep_order=keep_order)
+    lens = np.diff(offs)
+    ordered_lens = lens[od.order]
+    # Vertex index map in the new order (reversed paths walk their vertices backwards).
+    base = np.repeat(offs[:-1][od.order], ordered_lens)
+    k = np.arange(int(ordered_lens.sum())) - np.repeat(np.cumsum(ordered_lens) - ordered_lens,
+                                                       ordered_lens)
+    revv = np.repeat(od.reverse, ordered_lens)
+    idx = np.where(revv, base + np.repeat(ordered_lens, ordered_lens) - 1 - k, base + k)
+    pts = pts0[idx]
+    new_offs = np.concatenate(([0], np.cumsum(ordered_lens))).astype(np.int64)
+    # Per-vertex chord metadata (chord v → v+1 in the new order).
+    # forward: chord lies on prim[idx[v+1]] over [t0, t] of idx[v+1]; reversed: on idx[v].
+    m = pts.shape[0]
+    nxt = np.minimum(np.arange(m) + 1, m - 1)
+    owner = np.where(revv, idx, idx[nxt])
+    c_prim = poly.prim[owner]
+    c_tlo = poly.t0[owner]
+    c_thi = poly.t[owner]
+    is_end = np.zeros(m, dtype=bool)
+    is_end[new_offs[1:] - 1] = True
+    path_idx = np.repeat(np.arange(npath), ordered_lens)
+    stroke = poly.stroke[od.order]
+    power = drawing.stroke_power[stroke]
+    feed = drawing.stroke_feed_mm_s[stroke]
+    source = drawing.stroke_source[stroke]
+    # Join consecutive paths whose gap is below the tolerance and whose settings match.
+    gap = np.hypot(*(pts[new_offs[1:-1]] - pts[new_offs[1:-1] - 1]).T)
+    same = (power[1:] == power[:-1]) & ((feed[1:] == feed[:-1])
+                                        | (np.isnan(feed[1:]) & np.isnan(feed[:-1])))
+    join = (gap < tol) & same
+    bridge_tol = np.full(m, np.nan)
+    bridge_at = new_offs[1:-1][join] - 1  # vertex that ends path p and starts the bridge
+    is_end[bridge_at] = False
+    bridge_tol[bridge_at] = tol - gap[join] / 2
+    c_prim = c_prim.copy()
+    c_prim[bridge_at] = -1
+    keep_path = np.concatenate(([True], ~join))
+    new_path_of_old = np.cumsum(keep_path) - 1
+    joined_offs = np.concatenate((new_offs[:-1][keep_path], [m])).astype(np.int64)
+    chord_from = np.flatnonzero(~is_end)
+    # Drop zero-length chords by merging their vertices (keeps paths ≥ 1 chord if possible).
+    kind = drawing.kind
+    is_line = np.zeros(chord_from.shape[0], dtype=bool)
+    cp = c_prim[chord_from]
+    is_line[cp >= 0] = kind[cp[cp >= 0]] == LINE
+    tol_i = np.where(is_line, tol, tol - tol_f)
+    bt = bridge_tol[chord_from]
+    tol_i = np.where(np.isnan(bt), tol_i, bt)
+    return _Chords(pts=pts, offsets=joined_offs, vert_prim=poly.prim[idx],
+                   chord_from=chord_from, prim=cp, tlo=c_tlo[chord_from],
+                   thi=c_thi[chord_from], rev=revv[chord_from], tol_i=tol_i,
+                   path_of_chord=new_path_of_old[path_idx[chord_from]],
+                   path_source=source[keep_path], path_reversed=od.reverse[keep_path],
+                   power=power[keep_path], feed=feed[keep_path], joined=int(join.sum()),
+                   travel_before=od.travel_before_mm, travel_after=od.travel_after_mm)

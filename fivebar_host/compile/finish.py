@@ -1,0 +1,162 @@
+"""The last stage: per-path bookkeeping, the requested geometry of every draw segment (for
+validation and previews), the smallest singularity margins, the step quantum, the
+working-mode changes as executed, the notes — the `Job`, validated if asked.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from fivebar_host import steps
+from fivebar_host.compile.model import (
+    CompileOptions,
+    FloatArray,
+    IntArray,
+    Job,
+    ModeChange,
+    PathStats,
+)
+from fivebar_host.compile.modes import _densify_joint, _type1_crossings
+from fivebar_host.compile.place import Home, Placed, Setup
+from fivebar_host.compile.solve import Routed, Solved
+from fivebar_host.compile.timing import Planned
+from fivebar_host.compile.travel import Travel
+from fivebar_host.compile.validate import validate
+from fivebar_host.errors import JobError, Where
+from fivebar_host.toolpath.segment import wrap_to_limits
+
+
+def _path_ranges(pd: Planned, npath: int) -> tuple[IntArray, IntArray]:
+    """First draw segment and one past the last of every job path (−1 if none)."""
+    seg_draw, seg_path = pd.draw, pd.path
+    draw_idx = np.flatnonzero(seg_draw)
+    dp = seg_path[draw_idx]
+    first_seg = np.full(npath, -1, dtype=np.int64)
+    end_seg = np.full(npath, -1, dtype=np.int64)
+    if draw_idx.size:
+        u, fi = np.unique(dp, return_index=True)
+        first_seg[u] = draw_idx[fi]
+        li = np.unique(dp[::-1], return_index=True)[1]
+        end_seg[u] = draw_idx[::-1][li] + 1
+    return first_seg, end_seg
+
+
+def _margins(su: Setup, routed: Routed, solved: Solved, tr: Travel,
+             pd: Planned) -> FloatArray:
+    """Smallest margins (3,) over targets and samples; the moves from/to home and the
+    working-mode changes may pass a type-1 singularity on purpose (pen up, changing working
+    mode), so their type-1 columns and targets are left out."""
+    iv, npath, assembly = solved.iv, routed.npath, su.assembly
+    seg_draw, seg_path = pd.draw, pd.path
+    free1 = tr.is_home_move | tr.is_change
+    tmarg_rep = tr.margins.copy()
+    tmarg_rep[free1, :2] = np.inf
+    jmargin = np.minimum(iv.min_margin.min(axis=0) if iv.min_margin.size else np.inf,
+                         tmarg_rep.min(axis=0))
+    seg_mode = np.where(seg_draw, routed.path_mode[np.minimum(seg_path, npath - 1)],
+                        tr.t_mode[seg_path])
+    sgn = np.stack([np.where(np.char.startswith(seg_mode, "+"), 1.0, -1.0),
+                    np.where(np.char.endswith(seg_mode, "+"), 1.0, -1.0),
+                    np.full(seg_mode.shape[0], float(assembly))], axis=1)
+    tm = su.fb.singularity_margins(pd.th, pd.pts) * np.concatenate(
+        ([[1.0, 1.0, float(assembly)]], sgn))
+    home_leg = np.concatenate(([True], ~seg_draw & free1[seg_path]))
+    tm[home_leg, :2] = np.inf
+    return np.minimum(jmargin, tm.min(axis=0))
+
+
+def _executed_mode_changes(su: Setup, file: str, home: Home, routed: Routed, tr: Travel,
+                           pd: Planned) -> list[ModeChange]:
+    """The working-mode changes as executed (quantised steps, sampled ≤ 0.5° apart): each
+    must keep the assembly and the joint limits; where the arms cross type-1."""
+    fb, asm, assembly, mot = su.fb, su.asm, su.assembly, su.profile.motors
+    path_mode, npath, pts_all = routed.path_mode, routed.npath, pd.pts
+    mode_changes: list[ModeChange] = []
+    th_q = steps.step_angles(pd.steps, mot.home_rad, mot.steps_per_rev)
+    for j in sorted(tr.changes):
+        segs = np.flatnonzero(~pd.draw & (pd.path == j))
+        if not segs.size:
+            continue
+        s0, s1 = int(segs[0]), int(segs[-1]) + 1
+        q = th_q[s0:s1 + 1]
+        dense = _densify_joint(q, math.radians(0.5))
+        fk = fb.forward_batch(dense, asm)
+        marg = (fb.singularity_margins(dense, fk.points)[:, 2] * assembly if fk.valid.all()
+                else np.array([-np.inf]))
+        lim_ok = wrap_to_limits(dense, su.limits)[1:]
+        if not (fk.valid.all() and (marg > 0).all() and lim_ok[0].all() and lim_ok[1].all()):
+            raise JobError("the working-mode change before path "
+                           f"#{j} leaves the assembly mode or the joint limits once its "
+                           "targets are rounded to whole steps", Where(file=file),
+                           "assembly")
+        mode_changes.append(ModeChange(
+            from_mode=str(path_mode[j - 1]) if j > 0 else home.mode,
+            to_mode=str(path_mode[j]) if j < npath else home.mode,
+            path=j, first_seg=s0, end_seg=s1,
+            lift_mm=(float(pts_all[s0, 0]), float(pts_all[s0, 1])),
+            land_mm=(float(pts_all[s1, 0]), float(pts_all[s1, 1])),
+            crossings=_type1_crossings(fb, dense, fk.points),
+            min_type2_rad=float(marg.min()),
+            duration_s=float(pd.duration_us[s0:s1].sum()) * 1e-6))
+    return mode_changes
+
+
+def _mode_note(su: Setup, home: Home, routed: Routed, n_changes: int) -> str:
+    """The first note: the working mode(s), the assembly and the homed pen position."""
+    path_mode = routed.path_mode
+    if n_changes:
+        seq = [str(path_mode[0])]
+        for m in path_mode[1:].tolist():
+            if m != seq[-1]:
+                seq.append(m)
+        mode_note = (f"working modes {' → '.join(seq)} with {n_changes} pen-up "
+                     f"working-mode change(s), assembly {su.asm}")
+    else:
+        mode_note = f"working mode {path_mode[0]}, assembly {su.asm}"
+    return (f"{mode_note}; at the homed pose the pen is at ({home.pt[0]:.1f}, "
+            f"{home.pt[1]:.1f}) mm (working mode {home.mode})")
+
+
+def finish(su: Setup, placed: Placed, home: Home, routed: Routed, solved: Solved,
+           tr: Travel, pd: Planned, opts: CompileOptions) -> Job:
+    """The `Job` from every stage's result (validated unless `opts.validate` is off)."""
+    ch, iv, npath, mot = routed.ch, solved.iv, routed.npath, su.profile.motors
+    file = placed.drawing.file
+    a, seg_draw = ch.chord_from, pd.draw
+    first_seg, end_seg = _path_ranges(pd, npath)
+    # Requested geometry per draw segment (for validation and previews).
+    src_rows = pd.perm[seg_draw]  # rows into the draw-interval arrays
+    chord_rows = iv.chord[src_rows]
+    sa_d, sb_d = iv.sa[src_rows], iv.sb[src_rows]  # a piece's part of its interval
+    sa_d, sb_d = sa_d + pd.f0[seg_draw] * (sb_d - sa_d), sa_d + pd.f1[seg_draw] * (sb_d - sa_d)
+    jmargin = _margins(su, routed, solved, tr, pd)
+    jac = su.fb.jacobian(pd.th, pd.pts)
+    quantum = float(steps.step_quantum_mm(jac, mot.rad_per_step).max())
+    mode_changes = _executed_mode_changes(su, file, home, routed, tr, pd)
+    notes = [_mode_note(su, home, routed, len(mode_changes)), *tr.notes,
+             *placed.drawing.warnings]
+    job = Job(
+        file=file, mode=str(routed.path_mode[0]), assembly=su.assembly, tolerance_mm=su.tol,
+        flatten_tol_mm=su.tol_f,
+        placement=placed.pl, drawing=placed.mdraw, steps_per_rev=mot.steps_per_rev,
+        home_rad=mot.home_rad,
+        points_mm=pd.pts, angles_rad=pd.th, steps=pd.steps, draw=seg_draw, power=pd.power,
+        path=pd.path, source=pd.source, source_line=pd.line, duration_us=pd.duration_us,
+        length_mm=pd.length,
+        paths=PathStats(ch.path_source, ch.path_reversed, first_seg, end_seg,
+                        np.full(npath, np.nan), np.full(npath, np.nan)),
+        min_margin_rad=jmargin, step_quantum_mm=quantum,
+        travel_before_mm=ch.travel_before, travel_after_mm=ch.travel_after, joined=ch.joined,
+        notes=notes,
+        seg_prim=ch.prim[chord_rows], seg_tlo=ch.tlo[chord_rows], seg_thi=ch.thi[chord_rows],
+        seg_rev=ch.rev[chord_rows], seg_sa=sa_d, seg_sb=sb_d,
+        seg_ca=ch.pts[a[chord_rows]], seg_cb=ch.pts[a[chord_rows] + 1],
+        ideal_max_dev_mm=float(iv.dev_mm.max()) if iv.dev_mm.size else 0.0,
+        path_modes=tuple(routed.path_mode.tolist()), home_mode=home.mode,
+        mode_changes=tuple(mode_changes),
+    )
+    if opts.validate:
+        job = validate(job, su.profile, opts.validation_samples)
+    return job

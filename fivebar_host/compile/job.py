@@ -1,0 +1,163 @@
+"""Compiling a drawing file into a checked, timed, quantised `Job`.
+
+`compile_job(path, profile, options)` runs the whole pipeline:
+
+    read (SVG / G-code) → place (layout) → flatten curves (tol_f = tol/2) → order and join
+    paths → [--mode auto when no single mode clears every check: working mode per path,
+    `_plan_modes`] → inverse kinematics + checks on every vertex → refine chords in joint
+    space (interpolation budget tol_i, `toolpath.segment`) → pen-up travel (checked
+    joint-space moves, Cartesian fallback; planned pen-up moves for working-mode changes) →
+    absolute steps (quantised once) → plan durations (`planner`: speed-up and slow-down cut
+    into pieces on the same joint-space lines, the firmware's rate staircase within the joint
+    acceleration and junction-jump limits at every boundary) → validate: forward kinematics
+    of the *quantised* steps, including the joint-space interpolation between them, against
+    the requested curves.
+
+Tolerance budget (one `tol`, default from the profile): a curve is flattened so every chord is
+within tol_f = tol/2 of it; each chord is refined so the joint-interpolated pen path stays
+within tol_i of the chord: tol_i = tol − tol_f for chords of curves, tol for straight input
+lines (nothing was flattened), tol − gap/2 for the short pen-down bridge that joins two paths
+whose ends are closer than tol. By the triangle inequality every pen point is within tol of
+the requested path; rounding to whole steps adds at most one step quantum (reported).
+
+`_compile_mode` runs the stages in order; each hands its result on as a frozen dataclass:
+
+    place.setup / place / find_home  → Setup, Placed (placement, placed drawing, polylines),
+                                       Home (homed pose)
+    solve.route                      → Routed (ordered, joined `_Chords`; mode per path;
+                                       planned working-mode changes, `modes._plan_modes`)
+    solve.solve                      → Solved (checked angles per vertex, refined intervals)
+    travel.plan_travel               → Travel (targets, margins, mode changes, notes)
+    segments.assemble                → Segments (merged targets with provenance)
+    segments.drop_zero_moves         → Stepped (absolute steps, zero moves dropped)
+    timing.plan_timing               → Planned (ramp pieces, power, durations)
+    finish.finish                    → Job (per-path bookkeeping, margins, validation)
+
+The data model is in `fivebar_host.compile.model`; validation in `.validate`, the firmware
+lines in `.encode`, `--mode auto`'s working-mode planning in `.modes`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from fivebar_host.compile.finish import finish
+from fivebar_host.compile.model import AUTO_ORDER, CompileOptions, Job
+from fivebar_host.compile.place import find_home, place, setup
+from fivebar_host.compile.segments import assemble, drop_zero_moves
+from fivebar_host.compile.solve import route, solve
+from fivebar_host.compile.timing import plan_timing
+from fivebar_host.compile.travel import plan_travel
+from fivebar_host.config import Profile
+from fivebar_host.errors import InputError, JobError, Where
+from fivebar_host.toolpath.gcode import read_gcode
+from fivebar_host.toolpath.geometry import Drawing
+from fivebar_host.toolpath.svg import read_svg
+from kinematics.fivebar import WORKING_MODES
+
+GCODE_SUFFIXES = {".gcode", ".nc", ".ngc", ".gc", ".g", ".tap", ".cnc"}
+
+
+def read_drawing(path: str | Path, layers: tuple[str, ...] = ()) -> Drawing:
+    """Read an SVG or G-code file, chosen by suffix (or by content when unknown)."""
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix == ".svg":
+        return read_svg(p, layers or None)
+    if suffix in GCODE_SUFFIXES:
+        if layers:
+            raise InputError("--layer applies to SVG files only", str(p))
+        return read_gcode(p)
+    try:
+        head = p.read_bytes()[:512].lstrip()
+    except OSError as e:
+        raise InputError(f"cannot read file: {e.strerror or e}", str(p)) from e
+    if head.startswith((b"<?xml", b"<svg", b"<!--", b"<!DOCTYPE")):
+        return read_svg(p, layers or None)
+    return read_gcode(p)
+
+
+def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
+                  mode: str, plan_modes: bool = False) -> Job:
+    """Compile `drawing`, placed for working mode `mode`. Without `plan_modes` every path is
+    drawn in `mode`. With it (`--mode auto` when no single mode clears every check), the
+    modes come from `_plan_modes` and every change of mode becomes a checked pen-up
+    joint-space move (`ModeChange`). The stages hand their results on as frozen dataclasses
+    (module doc: the pipeline)."""
+    su = setup(profile, opts, mode)
+    placed = place(su, drawing, opts)
+    home = find_home(su, drawing.file)
+    routed = route(su, placed, home, opts.keep_order, plan_modes)
+    solved = solve(su, placed, routed)
+    tr = plan_travel(su, placed, home, routed, solved, plan_modes)
+    segments = assemble(placed, home, routed, solved, tr)
+    stepped = drop_zero_moves(profile.motors, segments)
+    planned = plan_timing(su, routed, solved, stepped)
+    return finish(su, placed, home, routed, solved, tr, planned, opts)
+
+
+def compile_drawing(drawing: Drawing, profile: Profile, opts: CompileOptions) -> Job:
+    """Compile an already-read drawing; `opts.mode` "auto" tries every working mode."""
+    mode = opts.mode or profile.kinematics.working_mode
+    if mode != "auto":
+        if mode not in WORKING_MODES:
+            raise ValueError(f"working mode must be one of {', '.join(WORKING_MODES)} or "
+                             f"auto; got {mode!r}")
+        return _compile_mode(drawing, profile, opts, mode)
+    results: list[Job] = []
+    failures: list[tuple[str, JobError]] = []
+    for m in AUTO_ORDER:
+        try:
+            results.append(_compile_mode(drawing, profile, opts, m))
+        except JobError as e:
+            failures.append((m, e))
+    if not results:
+        lines = "\n".join(f"  mode {m}: {e}" for m, e in failures)
+        try:
+            job = _compile_with_mode_changes(drawing, profile, opts)
+        except JobError as e:
+            raise JobError("no working mode clears every check (--mode auto):\n" + lines
+                           + f"\n  with pen-up working-mode changes: {e}",
+                           Where(file=drawing.file), "no_mode") from None
+        used = ", ".join(dict.fromkeys(job.path_modes))
+        notes = [f"--mode auto: no single working mode clears every check, so the paths are "
+                 f"drawn in modes {used} with {len(job.mode_changes)} pen-up working-mode "
+                 "change(s) (thesis Sec. 7.2)"]
+        notes += [f"  single mode {m}: {e.detail.split(';')[0]}" for m, e in failures]
+        return replace(job, notes=notes + job.notes)
+    best = max(results, key=lambda j: float(np.min(j.min_margin_rad)))
+    why = (f"--mode auto chose {best.mode}: it clears every check with the largest smallest "
+           f"singularity margin ({math.degrees(float(np.min(best.min_margin_rad))):.1f}°)")
+    others = [f"{j.mode}: passes, smallest margin "
+              f"{math.degrees(float(np.min(j.min_margin_rad))):.1f}°"
+              for j in results if j is not best]
+    others += [f"{m}: {e.detail.split(';')[0]}" for m, e in failures]
+    notes = [why] + ([f"  other modes — {o}" for o in others]) + best.notes
+    return replace(best, notes=notes)
+
+
+def _compile_with_mode_changes(drawing: Drawing, profile: Profile,
+                               opts: CompileOptions) -> Job:
+    """`--mode auto`'s second try: working modes per path with pen-up changes. With
+    `--origin` the placement does not depend on the mode; otherwise the placements of the
+    modes are tried in `AUTO_ORDER` (centred in, or fitted to, that mode's safe rectangle)
+    and the first that can be planned wins. Raises the first mode's `JobError` if none can."""
+    placements = AUTO_ORDER[:1] if opts.origin_mm is not None else AUTO_ORDER
+    errors: list[JobError] = []
+    for m in placements:
+        try:
+            return _compile_mode(drawing, profile, opts, m, plan_modes=True)
+        except JobError as e:
+            errors.append(e)
+    raise errors[0]
+
+
+def compile_job(path: str | Path, profile: Profile, opts: CompileOptions | None = None) -> Job:
+    """Read and compile a drawing file (see module doc). Raises `InputError` or `JobError`."""
+    o = opts or CompileOptions()
+    drawing = read_drawing(path, o.layers)
+    return compile_drawing(drawing, profile, o)

@@ -1,0 +1,183 @@
+"""The data model of a compiled job: what the command line can change (`CompileOptions`) and
+what compiling produces (`Job`, with its `PathStats` and `ModeChange` records).
+
+`Job` holds everything streaming, resuming and the reports need, indexed per target (row 0 =
+the homed pose, absolute steps (0, 0)) and per segment k (target k → k+1). It lives apart
+from the pipeline (`fivebar_host.compile.job`) so the sender, the server, the previews and
+the reports can use it without the compiler's stages.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fivebar_host import steps
+from fivebar_host.toolpath import layout
+from fivebar_host.toolpath.geometry import Drawing
+from kinematics.fivebar import FiveBar
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
+
+#: Order in which `--mode auto` tries the working modes (ties keep this order).
+AUTO_ORDER = ("+-", "-+", "++", "--")
+#: Joint-space step cap per segment (rad): keeps the planner's rate staircase fine.
+MAX_STEP_RAD = 0.05
+
+
+@dataclass(frozen=True)
+class CompileOptions:
+    """What the command line can change (None: the profile's value)."""
+
+    mode: str | None = None  # "++", "+-", "-+", "--", "auto"
+    tolerance_mm: float | None = None
+    origin_mm: tuple[float, float] | None = None
+    scale: float | None = None
+    rotate_deg: float = 0.0
+    fit: bool = False
+    layers: tuple[str, ...] = ()
+    keep_order: bool = False
+    validate: bool = True
+    validation_samples: int = 4
+
+
+@dataclass(frozen=True)
+class PathStats:
+    """Per job path (in drawing order): where it came from and how well it is drawn."""
+
+    source: IntArray  # (P,) index of the first source element of the path
+    reversed: BoolArray  # (P,)
+    first_seg: IntArray  # (P,) first draw segment
+    end_seg: IntArray  # (P,) one past the last draw segment
+    max_dev_mm: FloatArray  # (P,) from the quantised steps (validation), NaN if not validated
+    mean_dev_mm: FloatArray
+
+
+@dataclass(frozen=True)
+class ModeChange:
+    """A pen-up change of working mode compiled into the job (thesis Sec. 7.2), planned by
+    `kinematics.modes.plan_working_modes` (or `plan_joint_move` for a move home): travel
+    segments `first_seg` … `end_seg` − 1, laser off, drive the arm(s) whose working-mode sign
+    changes through their type-1 singularity (stretched or folded) on the way into job path
+    `path` (= `Job.n_paths`: the park move back to the homed pose). Measured on the executed
+    move (quantised steps, sampled ≤ 0.5° apart): where each arm crosses (arm, "stretched" /
+    "folded", x, y mm) and the smallest type-2 margin."""
+
+    from_mode: str
+    to_mode: str
+    path: int
+    first_seg: int
+    end_seg: int
+    lift_mm: tuple[float, float]
+    land_mm: tuple[float, float]
+    crossings: tuple[tuple[int, str, float, float], ...]
+    min_type2_rad: float
+    duration_s: float
+
+    def describe(self, n_paths: int) -> str:
+        """One line for the dry-run report."""
+        into = "back to the homed pose" if self.path >= n_paths else f"into path #{self.path}"
+        how = "; ".join(f"arm {a} {k} at ({x:.1f}, {y:.1f}) mm"
+                        for a, k, x, y in self.crossings) or "no arm crossing"
+        return (f"{self.from_mode} → {self.to_mode} {into}: pen up at ({self.lift_mm[0]:.1f}, "
+                f"{self.lift_mm[1]:.1f}) mm, {how}, pen down at ({self.land_mm[0]:.1f}, "
+                f"{self.land_mm[1]:.1f}) mm; segments {self.first_seg}–{self.end_seg - 1} "
+                f"(laser off), {self.duration_s:.2f} s, type-2 margin ≥ "
+                f"{math.degrees(self.min_type2_rad):.1f}°")
+
+
+@dataclass(frozen=True)
+class Job:
+    """A compiled job (see module doc). Per target (T+1 rows; row 0 = homed pose):
+    `points_mm`, `angles_rad`, `steps` (absolute, int64). Per segment (T rows, target k →
+    k+1): `draw`, `power` (0–255, 0 on travel), `path` (job path the segment draws or travels
+    to; P for the final park move), `source` (source element index, −1 on travel),
+    `source_line` (0 if unknown), `duration_us` (int64), `length_mm` (requested pen path)."""
+
+    file: str
+    mode: str
+    assembly: int
+    tolerance_mm: float
+    flatten_tol_mm: float
+    placement: layout.Placement
+    drawing: Drawing
+    steps_per_rev: float
+    home_rad: tuple[float, float]
+    points_mm: FloatArray
+    angles_rad: FloatArray
+    steps: IntArray
+    draw: BoolArray
+    power: NDArray[np.uint8]
+    path: IntArray
+    source: IntArray
+    source_line: IntArray
+    duration_us: IntArray
+    length_mm: FloatArray
+    paths: PathStats
+    min_margin_rad: FloatArray  # (3,) smallest margins on targets and samples (draw+travel)
+    step_quantum_mm: float
+    travel_before_mm: float
+    travel_after_mm: float
+    joined: int
+    notes: list[str] = field(default_factory=list)
+    # validation data (requested geometry of each draw segment)
+    seg_prim: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))
+    seg_tlo: FloatArray = field(default_factory=lambda: np.zeros(0))
+    seg_thi: FloatArray = field(default_factory=lambda: np.zeros(0))
+    seg_rev: BoolArray = field(default_factory=lambda: np.zeros(0, bool))
+    seg_sa: FloatArray = field(default_factory=lambda: np.zeros(0))
+    seg_sb: FloatArray = field(default_factory=lambda: np.zeros(0))
+    seg_ca: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    seg_cb: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    max_dev_mm: float = math.nan
+    mean_dev_mm: float = math.nan
+    ideal_max_dev_mm: float = math.nan
+    # working modes: per job path, at the homed pose, and the pen-up changes between them
+    path_modes: tuple[str, ...] = ()
+    home_mode: str = ""
+    mode_changes: tuple[ModeChange, ...] = ()
+
+    # ------------------------------------------------------------------ derived
+    @property
+    def n_segments(self) -> int:
+        return int(self.draw.shape[0])
+
+    @property
+    def relative_steps(self) -> IntArray:
+        """Per-segment step differences (T, 2): their running sum is `steps[1:]` exactly."""
+        return steps.relative_steps(self.steps)
+
+    @property
+    def total_time_s(self) -> float:
+        return float(self.duration_us.sum()) * 1e-6
+
+    @property
+    def draw_length_mm(self) -> float:
+        return float(self.length_mm[self.draw].sum())
+
+    @property
+    def travel_length_mm(self) -> float:
+        return float(self.length_mm[~self.draw].sum())
+
+    @property
+    def n_paths(self) -> int:
+        return int(self.paths.source.shape[0])
+
+    def rel_or_abs(self, relative: bool) -> IntArray:
+        """Per-segment step words: absolute targets `steps[1:]` or relative moves."""
+        return self.relative_steps if relative else self.steps[1:]
+
+    def executed_points(self, fb: FiveBar, samples: int = 4) -> FloatArray:
+        """Pen positions along the whole job from the quantised steps, `samples` per segment
+        plus the final target (forward kinematics of the joint-space interpolation)."""
+        th = steps.step_angles(self.steps, self.home_rad, self.steps_per_rev)
+        s = np.arange(samples) / samples
+        dth = np.diff(th, axis=0)
+        q = (th[:-1, None, :] + s[None, :, None] * dth[:, None, :]).reshape(-1, 2)
+        q = np.concatenate((q, th[-1:]))
+        return fb.forward_batch(q, "+" if self.assembly > 0 else "-").points

@@ -1,0 +1,105 @@
+"""Order the paths, give each its working mode, and solve them: checked inverse kinematics of
+every vertex and the chords refined in joint space.
+
+`route` orders and joins the flattened strokes (`chords._prepare_chords`) and, for
+`--mode auto` with pen-up changes, plans a working mode per path (`modes._plan_modes`);
+`solve` runs the pose checks (reach, joint limits, both singularity margins, assembly) on
+every vertex in its path's mode and refines every chord until the joint-interpolated pen
+path stays within the chord's budget tol_i (`toolpath.segment.refine`, at most
+`MAX_STEP_RAD` per piece).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fivebar_host.compile.chords import _Chords, _prepare_chords
+from fivebar_host.compile.model import MAX_STEP_RAD, FloatArray
+from fivebar_host.compile.modes import _merge_intervals, _plan_modes
+from fivebar_host.compile.place import Home, Placed, Setup, _where, fail
+from fivebar_host.errors import Where
+from fivebar_host.toolpath.segment import CheckFailedError, Intervals, PoseChecker, refine
+
+
+@dataclass(frozen=True)
+class Routed:
+    """The job's paths (`_Chords`), the working mode of each, and the planned joint path of
+    each working-mode change by the travel that runs it (travel j goes into path j)."""
+
+    ch: _Chords
+    path_mode: NDArray[np.str_]
+    changes: Mapping[int, FloatArray]
+
+    @property
+    def npath(self) -> int:
+        return int(self.ch.offsets.shape[0] - 1)
+
+
+@dataclass(frozen=True)
+class Solved:
+    """One `PoseChecker` per working mode in use, the checked joint angles of every vertex
+    (M, 2), and the refined draw intervals in job order."""
+
+    checkers: dict[str, PoseChecker]
+    th_v: FloatArray
+    iv: Intervals
+
+    @property
+    def checker(self) -> PoseChecker:
+        """For forward kinematics (the same in every working mode)."""
+        return next(iter(self.checkers.values()))
+
+
+def route(su: Setup, placed: Placed, home: Home, keep_order: bool,
+          plan_modes: bool) -> Routed:
+    """Order and join the paths from the homed pen position; without `plan_modes` every path
+    is drawn in `su.mode`, with it the modes (and changes) come from `_plan_modes`."""
+    ch = _prepare_chords(placed.drawing, placed.poly, su.tol, su.tol_f, home.pt, keep_order)
+    changes: dict[int, FloatArray] = {}
+    if plan_modes:
+        first = ch
+
+        def where_of(p: int, point: FloatArray) -> Where:
+            return _where(placed.drawing.file, placed.drawing, placed.pl,
+                          (float(point[0]), float(point[1])),
+                          int(first.vert_prim[first.offsets[p]]))
+
+        ch, path_mode, changes = _plan_modes(ch, su.fb, home.th[0], home.mode, su.asm,
+                                             su.min1, su.min2, su.limits, where_of)
+    else:
+        path_mode = np.full(ch.offsets.shape[0] - 1, su.mode)
+    return Routed(ch=ch, path_mode=path_mode, changes=changes)
+
+
+def solve(su: Setup, placed: Placed, routed: Routed) -> Solved:
+    """Checked inverse kinematics of every vertex, in its path's working mode, then every
+    chord refined in joint space within its budget (intervals merged back into job order)."""
+    ch, path_mode = routed.ch, routed.path_mode
+    checkers = {m: PoseChecker(su.fb, m, su.assembly, su.min1, su.min2, su.limits)
+                for m in dict.fromkeys(path_mode.tolist())}
+    vert_mode = np.repeat(path_mode, np.diff(ch.offsets))
+    th_v = np.empty_like(ch.pts)
+    for m, chk in checkers.items():
+        idx = np.flatnonzero(vert_mode == m)
+        try:
+            th_v[idx] = chk.inverse(ch.pts[idx], idx)
+        except CheckFailedError as cf:
+            raise fail(su, placed, cf, int(ch.vert_prim[cf.index]), in_mode=m) from None
+    a = ch.chord_from
+    chord_mode = path_mode[ch.path_of_chord]
+    parts: list[Intervals] = []
+    for m, chk in checkers.items():
+        cs = np.flatnonzero(chord_mode == m)
+        try:
+            r = refine(chk, ch.pts[a[cs]], ch.pts[a[cs] + 1], th_v[a[cs]], th_v[a[cs] + 1],
+                       ch.tol_i[cs], MAX_STEP_RAD)
+        except CheckFailedError as cf:
+            c = int(cs[cf.index])
+            raise fail(su, placed, cf, int(ch.prim[c]) if ch.prim[c] >= 0
+                       else int(ch.vert_prim[a[c]]), in_mode=m) from None
+        parts.append(r if len(checkers) == 1 else replace(r, chord=cs[r.chord]))
+    return Solved(checkers=checkers, th_v=th_v, iv=_merge_intervals(parts))

@@ -1,0 +1,123 @@
+"""Timing a stepped job: per-segment laser power, feed and stops, then durations from
+`fivebar_host.planner`, in four steps (the reasons are in the planner's module doc):
+
+1. a continuous speed profile (junction passes) with part of the limits (`PLAN_*_SHARE`);
+2. its speed-up and slow-down parts cut into short pieces (new targets on the same
+   joint-space lines, so the path does not change), rounded to whole steps once;
+3. the profile again on the pieces;
+4. every boundary of the staircase the firmware runs (constant rate per G1) made exact.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fivebar_host import planner, protocol, steps
+from fivebar_host.compile.model import BoolArray, FloatArray, IntArray
+from fivebar_host.compile.place import Setup
+from fivebar_host.compile.segments import Stepped
+from fivebar_host.compile.solve import Routed, Solved
+from fivebar_host.config import Motors, Profile
+from fivebar_host.toolpath.segment import PoseChecker
+
+#: Timing (see `fivebar_host.planner`): the continuous profile plans with this share of the
+#: joint acceleration limit and of the junction jump for direction changes; the rest (and a
+#: corner cap from the remaining acceleration) absorbs the staircase the firmware runs.
+PLAN_ACCEL_SHARE = 0.75
+PLAN_JUMP_SHARE = 0.5
+#: Speed-up and slow-down parts are cut into pieces whose planned speed changes by at most
+#: this share of the junction jump from one piece to the next, and of at least this many
+#: steps (rounding a shorter piece to whole steps would shake its rate too much).
+PLAN_PIECE_JUMP_SHARE = 0.6
+PLAN_MIN_PIECE_STEPS = 3
+
+
+@dataclass(frozen=True)
+class Planned(Stepped):
+    """The stepped job after cutting the ramps into pieces, with per segment the laser
+    `power` (0–255, 0 on travel), the piece's part [f0, f1] of the segment it was cut from,
+    and the planned `duration_us`."""
+
+    power: NDArray[np.uint8]
+    f0: FloatArray
+    f1: FloatArray
+    duration_us: IntArray
+
+
+def _settings(profile: Profile, routed: Routed,
+              sp: Stepped) -> tuple[NDArray[np.uint8], FloatArray, BoolArray]:
+    """Per segment: laser power (the path's fraction × the profile's power, 0 on travel),
+    feed (the path's F, else the profile's draw feed; travel feed on travel), and whether the
+    tool stops after it (pen switch or new power)."""
+    ch, npath, motion = routed.ch, routed.npath, profile.motion
+    seg_draw, seg_path = sp.draw, sp.path
+    power_frac = np.where(seg_draw, ch.power[np.minimum(seg_path, npath - 1)], 0.0)
+    power = np.where(seg_draw, np.clip(np.rint(power_frac * profile.laser.power), 0, 255),
+                     0).astype(np.uint8)
+    pfeed = ch.feed[np.minimum(seg_path, npath - 1)]
+    feed = np.where(seg_draw, np.where(np.isnan(pfeed), motion.draw_feed_mm_s, pfeed),
+                    motion.travel_feed_mm_s)
+    stop = np.zeros(seg_draw.shape[0], dtype=bool)
+    stop[:-1] = (seg_draw[1:] != seg_draw[:-1]) | (power[1:] != power[:-1])
+    return power, feed, stop
+
+
+def _cut_ramps(mot: Motors, checker: PoseChecker, sp: Stepped, counts: IntArray,
+               f1: FloatArray
+               ) -> tuple[FloatArray, FloatArray, IntArray, IntArray, FloatArray, FloatArray]:
+    """Step 2: segment k cut into `counts[k]` pieces ending at fractions `f1` of it. Returns
+    the new targets (angles, points, absolute steps; pieces that round to no move dropped),
+    and per piece its segment and its part [f0, f1] of it."""
+    th_all, pts_all = sp.th, sp.pts
+    seg_of = np.repeat(np.arange(counts.shape[0]), counts)
+    inner = np.concatenate((seg_of[1:] == seg_of[:-1], [False]))  # not a segment's last piece
+    # new targets on the ideal joint-space line of their segment, rounded once
+    k_in = seg_of[inner]
+    th_in = th_all[k_in] + f1[inner, None] * (th_all[k_in + 1] - th_all[k_in])
+    order_t = np.argsort(np.concatenate((np.arange(th_all.shape[0]) * 1.0,
+                                         k_in + f1[inner])), kind="stable")
+    th_all = np.concatenate((th_all, th_in))[order_t]
+    pts_all = np.concatenate((pts_all, checker.forward(th_in)[0]))[order_t]
+    st = steps.absolute_steps(th_all, mot.home_rad, mot.steps_per_rev)
+    keep = np.concatenate(([True], (np.diff(st, axis=0) != 0).any(axis=1)))
+    st, th_all, pts_all = st[keep], th_all[keep], pts_all[keep]
+    seg_of, f1 = seg_of[keep[1:]], f1[keep[1:]]
+    f1[np.concatenate((seg_of[1:] != seg_of[:-1], [True]))] = 1.0
+    f0 = np.where(np.concatenate(([True], seg_of[1:] != seg_of[:-1])), 0.0,
+                  np.concatenate(([0.0], f1[:-1])))
+    return th_all, pts_all, st, seg_of, f0, f1
+
+
+def plan_timing(su: Setup, routed: Routed, solved: Solved, sp: Stepped) -> Planned:
+    """Durations for every segment (module doc: steps 1–4)."""
+    mot, motion = su.profile.motors, su.profile.motion
+    power, feed, stop = _settings(su.profile, routed, sp)
+    a_c = PLAN_ACCEL_SHARE * motion.max_joint_rad_s2
+    j_lim = planner.JUNCTION_JUMP_RAD_S
+    prof_kw = {"junction_jump_rad_s": PLAN_JUMP_SHARE * j_lim,
+               "min_duration_s": protocol.P_MIN_US * 1e-6,
+               "corner_accel_rad_s2": (1.0 - PLAN_ACCEL_SHARE) * motion.max_joint_rad_s2}
+    dq = np.diff(steps.step_angles(sp.steps, mot.home_rad, mot.steps_per_rev), axis=0)
+    pln = planner.plan(dq, sp.length, feed, motion.max_joint_rad_s, a_c, stop_after=stop,
+                       **prof_kw)
+    counts, f1 = planner.ramp_fractions(pln, np.abs(dq).max(axis=1), a_c,
+                                        PLAN_PIECE_JUMP_SHARE * j_lim / a_c,
+                                        PLAN_MIN_PIECE_STEPS * mot.rad_per_step)
+    th_all, pts_all, st, seg_of, f0, f1 = _cut_ramps(mot, solved.checker, sp, counts, f1)
+    seg_draw = sp.draw[seg_of]
+    power, feed = power[seg_of], feed[seg_of]
+    stop = stop[seg_of] & np.concatenate((seg_of[1:] != seg_of[:-1], [True]))
+    length = np.where(seg_draw, sp.length[seg_of] * (f1 - f0),
+                      np.hypot(*np.diff(pts_all, axis=0).T))
+    dq = np.diff(steps.step_angles(st, mot.home_rad, mot.steps_per_rev), axis=0)
+    pln = planner.plan(dq, length, feed, motion.max_joint_rad_s, a_c, stop_after=stop,
+                       **prof_kw)
+    duration_us = planner.enforce_staircase(dq, pln.duration_us, stop,
+                                            motion.max_joint_rad_s2, j_lim)
+    return Planned(th=th_all, pts=pts_all, draw=seg_draw, path=sp.path[seg_of],
+                   source=sp.source[seg_of], line=sp.line[seg_of], length=length,
+                   perm=sp.perm[seg_of], steps=st, power=power, f0=f0, f1=f1,
+                   duration_us=duration_us)

@@ -1,0 +1,136 @@
+"""Validation: how far the executed pen path (forward kinematics of the *quantised* steps,
+including the joint-space interpolation between them) lies from the requested curves.
+
+`deviations` measures every draw segment (Newton's method on the primitive, a join bridge to
+its end points), `validate` fills the per-path and overall figures into the `Job`,
+`nbar_opinion` asks the general n-bar solver (`kinematics.nbar`) for a second opinion, and
+`distance_to_request` is shared with `fivebar_host.executed` (recorded runs).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from fivebar_host import steps
+from fivebar_host.compile.model import BoolArray, FloatArray, IntArray, Job
+from fivebar_host.config import Profile
+from fivebar_host.toolpath.geometry import nearest_distance
+
+
+def deviations(job: Job, profile: Profile, samples: int = 4,
+               quantised: bool = True) -> tuple[FloatArray, IntArray]:
+    """Deviation (mm) of the executed pen path from the requested path, measured on the
+    quantised steps: for every draw segment, `samples` points of the joint-space
+    interpolation between its quantised end targets (s = 0, 1/samples, …) plus each path's
+    last target, through forward kinematics, each measured to the requested curve (Newton's
+    method on the primitive; a join bridge is measured to its two end points). Returns the
+    distances and the segment index of each. `quantised=False` measures the ideal
+    (unrounded) joint targets instead: the tolerance bound itself, without the step quantum."""
+    fb = profile.geometry
+    th = (steps.step_angles(job.steps, job.home_rad, job.steps_per_rev) if quantised
+          else job.angles_rad)
+    di = np.flatnonzero(job.draw)
+    s = np.arange(samples + 1) / samples
+    tha, thb = th[di], th[di + 1]
+    q = (tha[:, None, :] + s[None, :, None] * (thb - tha)[:, None, :]).reshape(-1, 2)
+    fk = fb.forward_batch(q, "+" if job.assembly > 0 else "-")
+    return _deviation_of(job, fk.points, fk.valid, di, samples)
+
+
+def _deviation_of(job: Job, e: FloatArray, valid: BoolArray, di: IntArray,
+                  samples: int) -> tuple[FloatArray, IntArray]:
+    """Distances of pen points e ((len(di)·(samples+1), 2), samples s = 0, 1/S, …, 1 of each
+    draw segment di) to the requested curves; invalid rows count as infinitely far."""
+    s = np.tile(np.arange(samples + 1) / samples, di.shape[0])
+    rank = np.repeat(np.arange(di.shape[0]), samples + 1)
+    dist = distance_to_request(job, e, rank, s)
+    dist[~valid] = np.inf
+    return dist, di[rank]
+
+
+def distance_to_request(job: Job, e: FloatArray, rank: IntArray, s: FloatArray) -> FloatArray:
+    """Distance of pen points `e` to the requested curve of draw segment number `rank`
+    (counted among draw segments), at fraction `s` ∈ [0, 1] along it as the parameter guess
+    for Newton's method on the primitive (a join bridge: distance to its nearer end)."""
+    sig = job.seg_sa[rank] + s * (job.seg_sb - job.seg_sa)[rank]
+    span = job.seg_thi - job.seg_tlo
+    tg = np.where(job.seg_rev[rank], job.seg_thi[rank] - sig * span[rank],
+                  job.seg_tlo[rank] + sig * span[rank])
+    prim = job.seg_prim[rank]
+    dist = np.empty(e.shape[0])
+    real = prim >= 0
+    if real.any():
+        dist[real] = nearest_distance(job.drawing.kind[prim[real]],
+                                      job.drawing.params[prim[real]], e[real], tg[real])
+    if (~real).any():
+        ca, cb = job.seg_ca[rank[~real]], job.seg_cb[rank[~real]]
+        dist[~real] = np.minimum(np.hypot(*(e[~real] - ca).T), np.hypot(*(e[~real] - cb).T))
+    return dist
+
+
+#: Most poses the n-bar second opinion follows (continuation is ~25 µs per pose).
+NBAR_MAX_POSES = 20_000
+
+
+@dataclass(frozen=True)
+class NbarOpinion:
+    """The general n-bar solver's view of the executed path (quantised steps, `samples` per
+    segment): its largest deviation from the requested path, its largest disagreement with the
+    closed form, and how many poses were followed (of how many)."""
+
+    max_dev_mm: float
+    max_disagreement_mm: float
+    poses: int
+    total_poses: int
+
+    def describe(self) -> str:
+        part = ("" if self.poses == self.total_poses
+                else f" (the first {self.poses} of {self.total_poses} poses)")
+        return (f"n-bar solver: max deviation {self.max_dev_mm:.4f} mm, differs from the closed "
+                f"form by at most {self.max_disagreement_mm:.2g} mm{part}")
+
+
+def nbar_opinion(job: Job, profile: Profile, samples: int = 4,
+                 max_poses: int = NBAR_MAX_POSES) -> NbarOpinion | None:
+    """Second opinion on the validation through `kinematics.nbar` (continuation along the
+    whole executed path from the homed pose); None if that solver is not installed."""
+    try:
+        from kinematics.nbar.validate import validate_fivebar_path
+    except ImportError:  # pragma: no cover - the n-bar package ships with the project
+        return None
+    th = steps.step_angles(job.steps, job.home_rad, job.steps_per_rev)
+    s = np.arange(samples) / samples
+    q = (th[:-1, None, :] + s[None, :, None] * np.diff(th, axis=0)[:, None, :]).reshape(-1, 2)
+    q = np.concatenate((q, th[-1:]))
+    total = q.shape[0]
+    n = min(total, max_poses)
+    v = validate_fivebar_path(profile.geometry, q[:n], job.assembly)
+    pts, ok = v.nbar_points, v.valid
+    # draw segments whose samples (incl. the end, the next segment's first) were all followed
+    di = np.flatnonzero(job.draw)
+    di = di[(di + 1) * samples < n]
+    idx = (di[:, None] * samples + np.arange(samples + 1)[None, :]).ravel()
+    dist, _ = _deviation_of(job, pts[idx], ok[idx], di, samples)
+    dis = v.deviation[ok]
+    return NbarOpinion(float(dist.max()) if dist.size else 0.0,
+                       float(dis.max()) if dis.size else math.nan, n, total)
+
+
+def validate(job: Job, profile: Profile, samples: int = 4) -> Job:
+    """Fill the per-path and overall max/mean deviation from the quantised steps."""
+    if not job.draw.any():
+        return job
+    dist, seg = deviations(job, profile, samples)
+    path = job.path[seg]
+    n = job.n_paths
+    mx = np.full(n, -np.inf)
+    np.maximum.at(mx, path, dist)
+    cnt = np.bincount(path, minlength=n)
+    mean = np.bincount(path, weights=dist, minlength=n) / np.maximum(cnt, 1)
+    mx[cnt == 0] = np.nan
+    mean[cnt == 0] = np.nan
+    ps = replace(job.paths, max_dev_mm=mx, mean_dev_mm=mean)
+    return replace(job, paths=ps, max_dev_mm=float(dist.max()), mean_dev_mm=float(dist.mean()))
