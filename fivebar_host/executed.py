@@ -12,14 +12,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
 from fivebar_host.compile import Job, distance_to_request
 from fivebar_host.config import Profile
 from fivebar_host.steps import step_angles
-
-FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.int64]
+from kinematics.arrays import FloatArray, IntArray
 
 
 @dataclass(frozen=True)

@@ -49,11 +49,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
-FloatArray = NDArray[np.float64]
-BoolArray = NDArray[np.bool_]
-IntArray = NDArray[np.int64]
+from kinematics.arrays import BoolArray, FloatArray, IntArray
 
 #: Default largest instantaneous joint-speed change at a junction, rad/s.
 JUNCTION_JUMP_RAD_S = 0.5

@@ -11,10 +11,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numpy.typing import NDArray
 
-FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.int64]
+from kinematics.arrays import FloatArray, IntArray
 
 
 def absolute_steps(angles_rad: FloatArray, home_rad: tuple[float, float],

@@ -12,8 +12,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
+from kinematics.arrays import BoolArray, FloatArray
 from kinematics.fivebar import WORKING_MODES, FiveBar
 from kinematics.workspace import (
     Limits,
@@ -24,9 +24,6 @@ from kinematics.workspace import (
     page_stats,
     point_safety,
 )
-
-FloatArray = NDArray[np.float64]
-BoolArray = NDArray[np.bool_]
 
 __all__ = ["DesignCandidate", "DesignResult", "design_search"]
 

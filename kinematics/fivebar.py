@@ -24,9 +24,9 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from kinematics.arrays import FloatArray
 from kinematics.errors import FivebarError
 
-FloatArray = NDArray[np.float64]
 ModeStr = Literal["++", "+-", "-+", "--"]
 WORKING_MODES: tuple[ModeStr, ...] = ("++", "+-", "-+", "--")
 

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from kinematics.arrays import BoolArray, FloatArray
 from kinematics.fivebar import WORKING_MODES, FiveBar
 from kinematics.workspace import (
     Limits,
@@ -28,8 +29,6 @@ from kinematics.workspace import (
     point_safety,
 )
 
-FloatArray = NDArray[np.float64]
-BoolArray = NDArray[np.bool_]
 Node = tuple[int, int]
 
 __all__ = ["DrawPiece", "ModePlan", "Transition", "plan_joint_move", "plan_working_modes"]

@@ -14,13 +14,11 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from kinematics.arrays import BoolArray, FloatArray, IndexArray
 from kinematics.fivebar import WORKING_MODES, FiveBar
 
-FloatArray = NDArray[np.float64]
-BoolArray = NDArray[np.bool_]
-IntArray = NDArray[np.intp]
 Box = tuple[float, float, float, float]  # (u_min, u_max, v_min, v_max)
 Form = Literal["similarity", "affine"]
 Kind = Literal["inverse", "forward"]
@@ -152,7 +150,7 @@ class Grid:
         return np.stack((uu.ravel(), vv.ravel()), axis=1)
 
     def locate(self, q: FloatArray, ncu: int, ncv: int
-               ) -> tuple[IntArray, IntArray, FloatArray, FloatArray, BoolArray]:
+               ) -> tuple[IndexArray, IndexArray, FloatArray, FloatArray, BoolArray]:
         """Cell indices (i, j) in [0, ncu) × [0, ncv), local coordinates (fu, fv) and the
         inside-the-box mask for query points q (N, 2)."""
         fu = (q[:, 0] - self.box[0]) * (1.0 / self.hu)

@@ -18,9 +18,7 @@ from numpy.typing import ArrayLike
 
 from benchmarks.approx.common import (
     Approximation,
-    BoolArray,
     Box,
-    FloatArray,
     Form,
     Grid,
     Kind,
@@ -37,6 +35,7 @@ from benchmarks.approx.common import (
     to_thesis,
     unwrap_about,
 )
+from kinematics.arrays import BoolArray, FloatArray
 from kinematics.fivebar import FiveBar
 
 

@@ -17,11 +17,8 @@ from numpy.typing import ArrayLike
 
 from benchmarks.approx.common import (
     Approximation,
-    BoolArray,
     Box,
-    FloatArray,
     Grid,
-    IntArray,
     Kind,
     Order,
     as_rows,
@@ -35,6 +32,7 @@ from benchmarks.approx.common import (
     reachable,
     unwrap_about,
 )
+from kinematics.arrays import BoolArray, FloatArray, IndexArray
 from kinematics.fivebar import FiveBar
 
 
@@ -79,7 +77,7 @@ class LookupTable:
         """Memory held by the table's arrays, bytes."""
         return int(self.values.nbytes + self.cell_ok.nbytes + self.cell_error.nbytes)
 
-    def _raw(self, q: FloatArray) -> tuple[FloatArray, BoolArray, IntArray]:
+    def _raw(self, q: FloatArray) -> tuple[FloatArray, BoolArray, IndexArray]:
         """Interpolated values, ok mask (in box and usable cell) and flat cell index."""
         g = self.grid
         nx = g.nx

@@ -18,10 +18,11 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
-from benchmarks.speed_accuracy.config import EXACT_MM, Config, FloatArray
+from benchmarks.speed_accuracy.config import EXACT_MM, Config
 from benchmarks.speed_accuracy.plot import FLOOR_MM, save
 from benchmarks.speed_accuracy.scene import Scene, dist, make_scene, ref_forward, signs
 from benchmarks.speed_accuracy.stability import map_methods
+from kinematics.arrays import FloatArray
 from kinematics.fivebar import FiveBar
 from kinematics.nbar import Status, fivebar_mechanism, simulate
 

@@ -11,10 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from numpy.typing import NDArray
 
-FloatArray = NDArray[np.float64]
-BoolArray = NDArray[np.bool_]
 Box = tuple[float, float, float, float]
 
 #: The repository root (docs/, configs/, examples/ and firmware/ are read from here).

@@ -16,10 +16,11 @@ import numpy as np
 from matplotlib.ticker import NullFormatter
 
 from benchmarks.kinematics import median_time
-from benchmarks.speed_accuracy.config import ROOT, Config, FloatArray
+from benchmarks.speed_accuracy.config import ROOT, Config
 from benchmarks.speed_accuracy.plot import FLOOR_MM, save
 from benchmarks.speed_accuracy.timing import interleaved_medians
 from fivebar_host.linkage import load_mechanism
+from kinematics.arrays import FloatArray
 from kinematics.nbar import sweep
 
 

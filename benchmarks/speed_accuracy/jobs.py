@@ -16,7 +16,7 @@ import numpy as np
 from matplotlib.ticker import NullFormatter
 
 from benchmarks.kinematics import median_time
-from benchmarks.speed_accuracy.config import Config, FloatArray
+from benchmarks.speed_accuracy.config import Config
 from benchmarks.speed_accuracy.plot import save
 from benchmarks.speed_accuracy.scene import Scene
 from fivebar_host.compile import (
@@ -28,6 +28,7 @@ from fivebar_host.compile import (
     validate,
 )
 from fivebar_host.toolpath.geometry import evaluate, nearest_distance
+from kinematics.arrays import FloatArray
 from kinematics.fivebar import FiveBar
 
 

@@ -16,7 +16,7 @@ import numpy as np
 
 from benchmarks import approx
 from benchmarks.kinematics import bare_forward, bare_inverse
-from benchmarks.speed_accuracy.config import BoolArray, Config, FloatArray
+from benchmarks.speed_accuracy.config import Config
 from benchmarks.speed_accuracy.scene import (
     PointSet,
     Scene,
@@ -27,6 +27,7 @@ from benchmarks.speed_accuracy.scene import (
     wrapped,
 )
 from benchmarks.speed_accuracy.timing import interleaved_medians, timed_build
+from kinematics.arrays import BoolArray, FloatArray
 
 
 @dataclass(frozen=True, eq=False)

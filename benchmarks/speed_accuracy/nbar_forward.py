@@ -11,11 +11,12 @@ from functools import partial
 
 import numpy as np
 
-from benchmarks.speed_accuracy.config import Config, FloatArray
+from benchmarks.speed_accuracy.config import Config
 from benchmarks.speed_accuracy.methods import SetError, set_error
 from benchmarks.speed_accuracy.scene import PointSet, Scene, dist, ref_forward
 from benchmarks.speed_accuracy.timing import interleaved_medians
 from fivebar_host.compile import MAX_STEP_RAD
+from kinematics.arrays import FloatArray
 from kinematics.nbar import MechanismError, Status, fivebar_mechanism, simulate
 
 

@@ -23,11 +23,10 @@ from benchmarks.speed_accuracy.config import (
     NEAR_TYPE1_MM,
     NEAR_TYPE2_MM,
     WELL_DEG,
-    BoolArray,
     Box,
-    FloatArray,
 )
 from fivebar_host.config import Profile, load_profile
+from kinematics.arrays import BoolArray, FloatArray
 from kinematics.fivebar import WORKING_MODES, FiveBar
 from kinematics.workspace import (
     PageFit,

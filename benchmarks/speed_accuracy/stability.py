@@ -20,12 +20,13 @@ from matplotlib.patches import Patch
 from numpy.typing import NDArray
 
 from benchmarks import approx
-from benchmarks.speed_accuracy.config import EXACT_MM, BoolArray, Config, FloatArray
+from benchmarks.speed_accuracy.config import EXACT_MM, Config
 from benchmarks.speed_accuracy.methods import guard_of, wrap
 from benchmarks.speed_accuracy.nbar_forward import nbar_step_check
 from benchmarks.speed_accuracy.plot import overlay, save
 from benchmarks.speed_accuracy.scene import Scene, closed_form, dist, ref_forward
 from fivebar_host.compile import MAX_STEP_RAD
+from kinematics.arrays import BoolArray, FloatArray
 from kinematics.nbar import fivebar_mechanism
 
 

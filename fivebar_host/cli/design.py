@@ -38,20 +38,16 @@ def workspace(config_path: Path | None, output: Path, no_plot: bool, mode: str |
     transmission-angle and error-sensitivity maps for the machine profile."""
     from fivebar_host import workspace as ws
     from fivebar_host.report.workspace import plot_workspace
-    from kinematics.workspace import NoSafeRegionError, workspace_report
+    from kinematics.workspace import workspace_report
 
     prof = load(config_path)
     page = page_size(page_text) if page_text is not None else None
     kin = prof.kinematics
-    try:
-        rep = workspace_report(
-            prof.geometry, mode or kin.working_mode, kin.min_type1_margin_rad,
-            kin.min_type2_margin_rad, prof.motors.limits_rad, prof.motors.rad_per_step,
-            delta_rad=math.radians(delta_deg), resolution_mm=resolution, page=page,
-            assembly=kin.assembly)
-    except NoSafeRegionError as e:
-        fail(str(e))
-        return
+    rep = workspace_report(
+        prof.geometry, mode or kin.working_mode, kin.min_type1_margin_rad,
+        kin.min_type2_margin_rad, prof.motors.limits_rad, prof.motors.rad_per_step,
+        delta_rad=math.radians(delta_deg), resolution_mm=resolution, page=page,
+        assembly=kin.assembly)
     for line in ws.summary_lines(rep, prof.geometry):
         click.echo(line)
     if csv_path is not None:
@@ -147,6 +143,7 @@ def linkage() -> None:
               help="Write every step (inputs, joints, residual, status) to a .csv or .json.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
               default=None, help="Draw the mechanism and the tracer curve (.png, .svg, .pdf).")
+@handle_errors
 def linkage_simulate(file: Path, steps: int | None, output: Path | None,
                      plot_path: Path | None) -> None:
     """Simulate the mechanism FILE from its initial pose in equal input steps.
@@ -156,16 +153,12 @@ def linkage_simulate(file: Path, steps: int | None, output: Path | None,
     """
     from fivebar_host.linkage import load_mechanism, summary, write_result
     from fivebar_host.report.linkage import plot_simulation
-    from kinematics.nbar import MechanismError, sweep
+    from kinematics.nbar import sweep
 
     if output is not None and output.suffix.lower() not in (".csv", ".json"):
         fail(f"{output}: -o must end in .csv or .json")
         return
-    try:
-        mech = load_mechanism(file)
-    except MechanismError as e:
-        fail(str(e))
-        return
+    mech = load_mechanism(file)
     sim = sweep(mech, steps)
     click.echo(summary(sim))
     if output is not None:

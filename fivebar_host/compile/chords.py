@@ -14,9 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fivebar_host.compile.model import BoolArray, FloatArray, IntArray
 from fivebar_host.toolpath import order
 from fivebar_host.toolpath.geometry import LINE, Drawing, Polylines
+from kinematics.arrays import BoolArray, FloatArray, IntArray
 
 
 @dataclass(frozen=True)

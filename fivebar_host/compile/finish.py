@@ -12,8 +12,6 @@ import numpy as np
 from fivebar_host import steps
 from fivebar_host.compile.model import (
     CompileOptions,
-    FloatArray,
-    IntArray,
     Job,
     ModeChange,
     PathStats,
@@ -26,6 +24,7 @@ from fivebar_host.compile.travel import Travel
 from fivebar_host.compile.validate import validate
 from fivebar_host.errors import JobError, Where
 from fivebar_host.toolpath.segment import wrap_to_limits
+from kinematics.arrays import FloatArray, IntArray
 
 
 def _path_ranges(pd: Planned, npath: int) -> tuple[IntArray, IntArray]:

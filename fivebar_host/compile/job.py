@@ -53,7 +53,7 @@ from fivebar_host.compile.solve import route, solve
 from fivebar_host.compile.timing import plan_timing
 from fivebar_host.compile.travel import plan_travel
 from fivebar_host.config import Profile
-from fivebar_host.errors import InputError, JobError, Where
+from fivebar_host.errors import InputError, JobError, OptionError, Where
 from fivebar_host.toolpath.gcode import read_gcode
 from fivebar_host.toolpath.geometry import Drawing
 from fivebar_host.toolpath.svg import read_svg
@@ -105,8 +105,8 @@ def compile_drawing(drawing: Drawing, profile: Profile, opts: CompileOptions) ->
     mode = opts.mode or profile.kinematics.working_mode
     if mode != "auto":
         if mode not in WORKING_MODES:
-            raise ValueError(f"working mode must be one of {', '.join(WORKING_MODES)} or "
-                             f"auto; got {mode!r}")
+            raise OptionError("mode", f"must be one of {', '.join(WORKING_MODES)} or auto; "
+                              f"got {mode!r}")
         return _compile_mode(drawing, profile, opts, mode)
     results: list[Job] = []
     failures: list[tuple[str, JobError]] = []

@@ -18,11 +18,8 @@ from numpy.typing import NDArray
 from fivebar_host import steps
 from fivebar_host.toolpath import layout
 from fivebar_host.toolpath.geometry import Drawing
+from kinematics.arrays import BoolArray, FloatArray, IntArray
 from kinematics.fivebar import FiveBar
-
-FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.int64]
-BoolArray = NDArray[np.bool_]
 
 #: Order in which `--mode auto` tries the working modes (ties keep this order).
 AUTO_ORDER = ("+-", "-+", "++", "--")

@@ -21,9 +21,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fivebar_host.compile.chords import _Chords
-from fivebar_host.compile.model import FloatArray, IntArray
 from fivebar_host.errors import JobError, Where
 from fivebar_host.toolpath.segment import CheckFailedError, Intervals, PoseChecker
+from kinematics.arrays import FloatArray, IntArray
 from kinematics.fivebar import WORKING_MODES, FiveBar
 from kinematics.modes import plan_working_modes
 from kinematics.workspace import NoSafeRegionError, point_safety

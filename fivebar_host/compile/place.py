@@ -14,13 +14,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fivebar_host.compile.model import AUTO_ORDER, CompileOptions, FloatArray
+from fivebar_host.compile.model import AUTO_ORDER, CompileOptions
 from fivebar_host.compile.modes import _mode_at
 from fivebar_host.config import Profile
-from fivebar_host.errors import JobError, Where
+from fivebar_host.errors import JobError, OptionError, Where
 from fivebar_host.toolpath import layout
 from fivebar_host.toolpath.geometry import Drawing, Polylines, flatten
 from fivebar_host.toolpath.segment import CheckFailedError
+from kinematics.arrays import FloatArray
 from kinematics.fivebar import FiveBar
 
 
@@ -71,7 +72,7 @@ def setup(profile: Profile, opts: CompileOptions, mode: str) -> Setup:
     tol = float(opts.tolerance_mm if opts.tolerance_mm is not None
                 else profile.motion.tolerance_mm)
     if not (math.isfinite(tol) and tol > 0):
-        raise ValueError(f"tolerance must be a positive number of mm; got {tol!r}")
+        raise OptionError("tolerance", f"must be a positive number of mm; got {tol!r}")
     asm = kin.assembly
     return Setup(profile=profile, mode=mode, tol=tol, tol_f=tol / 2.0,
                  min1=kin.min_type1_margin_rad, min2=kin.min_type2_margin_rad,

@@ -14,11 +14,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from fivebar_host import steps
-from fivebar_host.compile.model import BoolArray, FloatArray, IntArray
 from fivebar_host.compile.place import Home, Placed
 from fivebar_host.compile.solve import Routed, Solved
 from fivebar_host.compile.travel import Travel
 from fivebar_host.config import Motors
+from kinematics.arrays import BoolArray, FloatArray, IntArray
 
 
 @dataclass(frozen=True)

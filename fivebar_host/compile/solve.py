@@ -18,11 +18,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fivebar_host.compile.chords import _Chords, _prepare_chords
-from fivebar_host.compile.model import MAX_STEP_RAD, FloatArray
+from fivebar_host.compile.model import MAX_STEP_RAD
 from fivebar_host.compile.modes import _merge_intervals, _plan_modes
 from fivebar_host.compile.place import Home, Placed, Setup, _where, fail
 from fivebar_host.errors import Where
 from fivebar_host.toolpath.segment import CheckFailedError, Intervals, PoseChecker, refine
+from kinematics.arrays import FloatArray
 
 
 @dataclass(frozen=True)

@@ -16,12 +16,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fivebar_host import planner, protocol, steps
-from fivebar_host.compile.model import BoolArray, FloatArray, IntArray
 from fivebar_host.compile.place import Setup
 from fivebar_host.compile.segments import Stepped
 from fivebar_host.compile.solve import Routed, Solved
 from fivebar_host.config import Motors, Profile
 from fivebar_host.toolpath.segment import PoseChecker
+from kinematics.arrays import BoolArray, FloatArray, IntArray
 
 #: Timing (see `fivebar_host.planner`): the continuous profile plans with this share of the
 #: joint acceleration limit and of the junction jump for direction changes; the rest (and a

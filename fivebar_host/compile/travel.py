@@ -19,11 +19,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from fivebar_host.compile.model import MAX_STEP_RAD, BoolArray, FloatArray, IntArray
+from fivebar_host.compile.model import MAX_STEP_RAD
 from fivebar_host.compile.modes import _transition_targets
 from fivebar_host.compile.place import Home, Placed, Setup, fail
 from fivebar_host.compile.solve import Routed, Solved
 from fivebar_host.toolpath.segment import REASON_KEY, CheckFailedError, joint_moves, refine
+from kinematics.arrays import BoolArray, FloatArray, IntArray
 from kinematics.modes import plan_joint_move
 
 #: Interpolation tolerance for the Cartesian fallback of pen-up travel, mm.

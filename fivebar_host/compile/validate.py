@@ -15,9 +15,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from fivebar_host import steps
-from fivebar_host.compile.model import BoolArray, FloatArray, IntArray, Job
+from fivebar_host.compile.model import Job
 from fivebar_host.config import Profile
 from fivebar_host.toolpath.geometry import nearest_distance
+from kinematics.arrays import BoolArray, FloatArray, IntArray
 
 
 def deviations(job: Job, profile: Profile, samples: int = 4,

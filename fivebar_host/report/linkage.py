@@ -16,11 +16,9 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-from numpy.typing import NDArray
 
+from kinematics.arrays import FloatArray
 from kinematics.nbar import Mechanism, Simulation
-
-FloatArray = NDArray[np.float64]
 
 
 def _link_polylines(mech: Mechanism, coords: FloatArray) -> list[FloatArray]:

@@ -34,10 +34,10 @@ from fivebar_host.config import Profile
 from fivebar_host.dryrun import format_duration, mode_sequence
 from fivebar_host.steps import step_angles
 from fivebar_host.toolpath.geometry import flatten
+from kinematics.arrays import FloatArray
 from kinematics.fivebar import FiveBar
 from kinematics.workspace import safe_mask, type2_traces
 
-FloatArray = NDArray[np.float64]
 Box = tuple[float, float, float, float]  # x0, x1, y0, y1 of the view, mm
 Handles = list[Line2D | Patch]
 #: (fill, edge) colours of the safe regions of the working modes a job draws in.

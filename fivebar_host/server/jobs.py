@@ -18,13 +18,12 @@ from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 from fivebar_host.compile import GCODE_SUFFIXES, CompileOptions, Job, compile_drawing
-from fivebar_host.config import ConfigError, Profile
-from fivebar_host.errors import FivebarError, InputError, JobError
+from fivebar_host.config import Profile
+from fivebar_host.errors import FivebarError, InputError, JobError, OptionError
 from fivebar_host.options import check_values
 from fivebar_host.run.resume import fingerprint
 from fivebar_host.toolpath.gcode import read_gcode
 from fivebar_host.toolpath.svg import read_svg
-from kinematics.fivebar import KinematicsError
 
 #: What a file name may look like: printable, no separators, at most 128 characters.
 _NAME = re.compile(r"^[^/\\\x00-\x1f]{1,128}$")
@@ -137,7 +136,9 @@ def compile_upload(data: bytes, name: str, opts: JobOptions, profile: Profile) -
                                "drawing_xy": list(w.drawing_xy) if w.drawing_xy else None,
                                "machine_xy": list(w.machine_xy) if w.machine_xy else None}
         raise SubmitError("job_error", str(e), detail=detail) from e
-    except (ConfigError, KinematicsError, ValueError) as e:
+    except OptionError as e:
+        raise SubmitError("bad_option", str(e)) from e
+    except FivebarError as e:
         raise SubmitError("invalid", str(e)) from e
     return Compiled(job, fingerprint(job), hashlib.sha256(data).hexdigest())
 

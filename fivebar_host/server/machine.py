@@ -25,6 +25,7 @@ from typing import Any
 from fivebar_host import protocol
 from fivebar_host.compile import Job
 from fivebar_host.config import Profile
+from fivebar_host.errors import FivebarError
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import LinkError
 from fivebar_host.run.program import travel_lines
@@ -37,11 +38,11 @@ log = logging.getLogger("fivebar.serve")
 _POSITION_Q = re.compile(r"A = (-?\d+), B = (-?\d+)")
 
 
-class ActionError(RuntimeError):
+class ActionError(FivebarError, RuntimeError):
     """A machine action (home) that cannot be done now; the message says why."""
 
 
-class JobStateError(RuntimeError):
+class JobStateError(FivebarError, RuntimeError):
     """A job request that does not fit the job's state (e.g. pausing a finished job)."""
 
 

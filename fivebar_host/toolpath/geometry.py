@@ -27,9 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fivebar_host.errors import InputError
-
-FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.int64]
+from kinematics.arrays import FloatArray, IntArray
 
 LINE = 0
 CUBIC = 1

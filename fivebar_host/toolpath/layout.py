@@ -20,14 +20,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
 from fivebar_host.errors import JobError, UsageError, Where
 from fivebar_host.toolpath.geometry import Drawing, bbox
+from kinematics.arrays import FloatArray
 from kinematics.fivebar import FiveBar
 from kinematics.workspace import NoSafeRegionError, PageFit, Rect, find_page_rectangle
-
-FloatArray = NDArray[np.float64]
 
 
 @dataclass(frozen=True)

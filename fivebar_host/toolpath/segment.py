@@ -39,11 +39,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from kinematics.arrays import BoolArray, FloatArray, IntArray
 from kinematics.fivebar import FiveBar, UnreachableError
-
-FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.int64]
-BoolArray = NDArray[np.bool_]
 
 SAFETY = 0.8
 SAMPLES = np.array([0.25, 0.5, 0.75])

@@ -18,8 +18,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from kinematics.arrays import FloatArray
 from kinematics.nbar import constraints as cst
-from kinematics.nbar.constraints import Constraint, ConstraintKind, FloatArray
+from kinematics.nbar.constraints import Constraint, ConstraintKind
 from kinematics.nbar.links import Row, reduce_link, spread
 from kinematics.nbar.model import Input, Kind, Link, Mechanism, MechanismError
 from kinematics.nbar.perturb import build_basis

@@ -18,8 +18,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.intp]
+from kinematics.arrays import FloatArray, IndexArray
 
 ConstraintKind = Literal["RR", "RP", "PP", "PPsin", "NORM", "SPHERE", "ACT"]
 
@@ -239,9 +238,9 @@ class _Block:
 
     kind: str
     ends: int
-    first: IntArray
-    second: IntArray
-    rows: IntArray
+    first: IndexArray
+    second: IndexArray
+    rows: IndexArray
     run: slice | None
     k: int
     value: FloatArray
@@ -259,9 +258,9 @@ class RowGroups:
     scale: FloatArray
     m: int
     blocks: tuple[_Block, ...] = ()
-    _take: dict[tuple[bool, int], IntArray] = field(default_factory=dict, repr=False)
+    _take: dict[tuple[bool, int], IndexArray] = field(default_factory=dict, repr=False)
 
-    def take(self, planar: bool, n: int) -> IntArray:
+    def take(self, planar: bool, n: int) -> IndexArray:
         """Rows of the (W·n, S) table of n joints (`_joint_table`) that `exact_residuals`
         gathers: block by block, primitive end by end, slot by slot, the rows of the block
         (each run of k rows becomes one contiguous (k, S) array). Cached per (planar, n)."""

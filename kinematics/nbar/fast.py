@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from kinematics.nbar.constraints import FloatArray
+from kinematics.arrays import FloatArray
 from kinematics.nbar.guard import NO_PREVIOUS, step_accepted
 from kinematics.nbar.history import HISTORY, UNIFORM
 from kinematics.nbar.system import CONTRACTION, newton_raw, solve

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from kinematics.nbar.constraints import FloatArray
+from kinematics.arrays import FloatArray
 from kinematics.nbar.guard import NO_PREVIOUS, step_accepted
 from kinematics.nbar.system import newton_raw, solve
 

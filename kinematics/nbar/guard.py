@@ -18,7 +18,7 @@ from typing import Any, overload
 import numpy as np
 from numpy.typing import NDArray
 
-from kinematics.nbar.constraints import FloatArray
+from kinematics.arrays import FloatArray
 
 #: Newton may correct the predictor by at most this fraction of the predicted motion.
 CONTINUITY = 0.5

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from kinematics.nbar.constraints import FloatArray
+from kinematics.arrays import FloatArray
 
 #: Most states the predictor extrapolates through (order HISTORY − 1 on equal steps).
 HISTORY = 7

@@ -16,8 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from kinematics.arrays import FloatArray
 from kinematics.nbar import constraints as cst
-from kinematics.nbar.constraints import ConstraintKind, FloatArray
+from kinematics.nbar.constraints import ConstraintKind
 from kinematics.nbar.model import Kind, Link, MechanismError
 
 #: Smallest acceptable independence (σ_min of the unit constraint gradients on the joint's own

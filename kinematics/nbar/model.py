@@ -16,8 +16,10 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from kinematics.arrays import FloatArray
+from kinematics.errors import FivebarError
 from kinematics.nbar import constraints as cst
-from kinematics.nbar.constraints import Constraint, FloatArray
+from kinematics.nbar.constraints import Constraint
 from kinematics.nbar.perturb import InputBasis
 from kinematics.nbar.system import QuadraticSystem
 
@@ -26,7 +28,7 @@ JointType = Literal["revolute", "prismatic", "point", "spherical"]
 InputKind = Literal["revolute", "prismatic", "actuator"]
 
 
-class MechanismError(ValueError):
+class MechanismError(FivebarError, ValueError):
     """A mechanism description that cannot be simulated; the message names the culprit."""
 
 

@@ -26,7 +26,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from kinematics.nbar.constraints import FloatArray
+from kinematics.arrays import FloatArray
 
 MotionKind = Literal["rotate-plane", "translate-plane", "rotate-sphere", "actuator"]
 

@@ -15,7 +15,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from kinematics.nbar.constraints import FloatArray
+from kinematics.arrays import FloatArray
 from kinematics.nbar.model import Mechanism
 
 

@@ -22,7 +22,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from kinematics.nbar.constraints import FloatArray
+from kinematics.arrays import FloatArray
 from kinematics.nbar.fast import FastPath, rows
 from kinematics.nbar.history import HISTORY
 from kinematics.nbar.model import Mechanism, Settings

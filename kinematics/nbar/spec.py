@@ -17,7 +17,7 @@ from typing import Any, NamedTuple, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from kinematics.nbar.constraints import FloatArray
+from kinematics.arrays import FloatArray
 from kinematics.nbar.model import (
     Input,
     InputKind,

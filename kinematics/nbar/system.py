@@ -23,7 +23,8 @@ from typing import NamedTuple, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from kinematics.nbar.constraints import Constraint, FloatArray, IntArray
+from kinematics.arrays import FloatArray, IndexArray
+from kinematics.nbar.constraints import Constraint
 
 
 def _lapack_solve() -> Callable[[FloatArray, FloatArray], FloatArray]:
@@ -70,8 +71,8 @@ class QuadraticSystem:
     n_u: int
     n_d: int
     n_act: int
-    unknown_flat: IntArray
-    driven_flat: IntArray
+    unknown_flat: IndexArray
+    driven_flat: IndexArray
     curvature: float
 
     @property

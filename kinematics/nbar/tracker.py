@@ -23,7 +23,7 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 
-from kinematics.nbar.constraints import FloatArray
+from kinematics.arrays import FloatArray
 from kinematics.nbar.fold import FOLD_MESSAGE, FOLD_REASON, fold_limit
 from kinematics.nbar.guard import NO_PREVIOUS, step_accepted
 from kinematics.nbar.history import History

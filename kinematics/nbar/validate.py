@@ -14,9 +14,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from kinematics.arrays import FloatArray
 from kinematics.fivebar import FiveBar
 from kinematics.nbar.build import build_mechanism
-from kinematics.nbar.constraints import FloatArray
 from kinematics.nbar.model import Mechanism, MechanismError
 from kinematics.nbar.results import Simulation, Status
 from kinematics.nbar.solver import simulate

@@ -12,8 +12,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
+from kinematics.arrays import BoolArray, FloatArray
 from kinematics.fivebar import WORKING_MODES, FiveBar
 from kinematics.workspace.measures import (
     PageStats,
@@ -24,9 +24,6 @@ from kinematics.workspace.measures import (
 from kinematics.workspace.rectangles import PageFit, Rect, find_page_rectangle
 from kinematics.workspace.region import Limits, NoSafeRegionError, assembly_sign
 from kinematics.workspace.singularities import SingularityTrace, type2_traces
-
-FloatArray = NDArray[np.float64]
-BoolArray = NDArray[np.bool_]
 
 __all__ = ["WorkspaceReport", "workspace_report"]
 

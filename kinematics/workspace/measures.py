@@ -14,12 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from kinematics.arrays import BoolArray, FloatArray
 from kinematics.fivebar import FiveBar
 from kinematics.workspace.rectangles import Rect
 from kinematics.workspace.region import NoSafeRegionError
-
-FloatArray = NDArray[np.float64]
-BoolArray = NDArray[np.bool_]
 
 __all__ = [
     "PageStats",

@@ -13,8 +13,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
+from kinematics.arrays import BoolArray, FloatArray
 from kinematics.fivebar import FiveBar
 from kinematics.workspace.region import (
     Limits,
@@ -26,9 +26,6 @@ from kinematics.workspace.region import (
     safe_mask,
     workspace_bounds,
 )
-
-FloatArray = NDArray[np.float64]
-BoolArray = NDArray[np.bool_]
 
 __all__ = ["PageFit", "Rect", "find_page_rectangle", "largest_page_rectangle"]
 

@@ -14,11 +14,12 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from kinematics.arrays import BoolArray
+from kinematics.errors import FivebarError
 from kinematics.fivebar import WORKING_MODES, FiveBar
 
-BoolArray = NDArray[np.bool_]
 Limits = Sequence[Sequence[float]]  # ((lo1, hi1), (lo2, hi2)) in rad
 
 __all__ = [
@@ -34,7 +35,7 @@ __all__ = [
 ]
 
 
-class NoSafeRegionError(ValueError):
+class NoSafeRegionError(FivebarError, ValueError):
     """No point of the searched area is safe (or no rectangle of the asked shape fits)."""
 
 

@@ -15,10 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from kinematics.arrays import BoolArray, FloatArray
 from kinematics.fivebar import FiveBar
-
-FloatArray = NDArray[np.float64]
-BoolArray = NDArray[np.bool_]
 
 __all__ = ["SingularityTrace", "type1_circles", "type2_traces"]
 

@@ -60,10 +60,11 @@ import serial
 
 from fivebar_host import protocol
 from fivebar_host.devices.mock.codes import E_SOFT_LIMIT, SCHEME
+from fivebar_host.errors import FivebarError
 from fivebar_host.protocol import POS_LIMIT
 
 
-class MockURLError(serial.SerialException, ValueError):
+class MockURLError(FivebarError, serial.SerialException, ValueError):
     """A ``fivebar-mock://`` URL with an unknown option or a malformed value."""
 
 
