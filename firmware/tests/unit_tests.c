@@ -1018,6 +1018,65 @@ static void test_strict_framing(void)
 	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,1|L:0|U:0|H:0>\r\n");
 }
 
+/*
+ * The watchdog feeding rule (fb_main.c feed_watchdog, mo_alive): the main
+ * loop feeds only while the step generator is stopped, held, or its
+ * interrupt ran since the last look.  Here the fake's step timer runs only
+ * when the test says so, so "the main loop runs, the step interrupt does not"
+ * is a hung or dead step interrupt.
+ */
+static void test_watchdog_feeding(void)
+{
+	boot_at_zero();
+	fake_take_tx();
+	uint32_t f = fake_wdt_feeds;
+	fb_poll();
+	fb_poll();
+	CHECK(fake_wdt_feeds == f + 2, "idle: every main loop pass feeds");
+	send("M3 S255\nG1 A100 P100000\n");
+	for (int i = 0; i < 10; i++)
+		fb_poll();
+	fake_ms += 100;
+	f = fake_wdt_feeds;
+	fb_poll(); /* starts the queue: the timer is armed, no event yet */
+	CHECK(mo_running() && fake_timer_on && fake_wdt_feeds == f,
+	      "the segment runs; no feed before its first interrupt");
+	fake_run(fake_timer_delay); /* the first event: the segment starts, laser on */
+	fb_poll();
+	CHECK(fake_laser == 255 && fake_wdt_feeds == f + 1, "its first interrupt: fed");
+	f = fake_wdt_feeds;
+	for (int i = 0; i < 20; i++)
+		fb_poll();
+	CHECK(fake_wdt_feeds == f && fake_laser == 255,
+	      "a dead step interrupt stops the feeding (laser on: the watchdog turns it off)");
+	/* one step event per pass: every pass feeds; passes between events do not */
+	for (int i = 0; i < 5; i++) {
+		f = fake_wdt_feeds;
+		fake_run(fake_timer_delay);
+		fb_poll();
+		CHECK(fake_wdt_feeds == f + 1, "an interrupt since the last pass: fed");
+		fb_poll();
+		CHECK(fake_wdt_feeds == f + 1, "no interrupt since the last pass: not fed");
+	}
+	/* held: the step timer is paused on purpose, the main loop alone feeds */
+	fb_rx_isr('!');
+	f = fake_wdt_feeds;
+	fb_poll();
+	fb_poll();
+	CHECK(fake_timer_paused && fake_wdt_feeds == f + 2, "held: fed without steps");
+	fb_rx_isr('~');
+	fb_poll();
+	f = fake_wdt_feeds;
+	fb_poll();
+	CHECK(fake_wdt_feeds == f, "resumed: the interrupt must run again before a feed");
+	fake_run(UINT64_MAX / 2);
+	fb_poll();
+	f = fake_wdt_feeds;
+	fb_poll();
+	CHECK(!mo_running() && fake_wdt_feeds == f + 1, "the queue ran empty: idle, fed again");
+	fake_take_tx();
+}
+
 int main(void)
 {
 	test_crc();
@@ -1036,6 +1095,7 @@ int main(void)
 	test_strict_framing();
 	test_kept_record();
 	test_reset_during_homing();
+	test_watchdog_feeding();
 	printf("%d checks, %d failed\n", checks, failures);
 	return failures ? 1 : 0;
 }
