@@ -109,8 +109,8 @@ def test_options_parse() -> None:
     o = parse_mock_url("fivebar-mock://?speed=0&drop=0.01&corrupt=0.02&seed=7"
                        "&disconnect_after=9&reset_after=8&error_on=3&error_code=9"
                        "&stall_after=6&endstops=-300,&rx=64&queue=8&line=40&version=2.0"
-                       "&proto=3&machine=m")
-    assert (o.speed, o.drop, o.corrupt, o.seed) == (0.0, 0.01, 0.02, 7)
+                       "&proto=3&machine=m&watchdog=120")
+    assert (o.speed, o.drop, o.corrupt, o.seed, o.watchdog) == (0.0, 0.01, 0.02, 7, 120)
     assert (o.disconnect_after, o.reset_after, o.error_on, o.error_code, o.stall_after) == (
         9, 8, 3, 9, 6)
     assert o.endstops == (-300, None)
@@ -356,7 +356,7 @@ def test_error_on_with_a_resend_code() -> None:
 
 
 def test_stall_after_n_lines_freezes_everything_until_dtr_reset() -> None:
-    port = open_mock("stall_after=4&speed=1")
+    port = open_mock("stall_after=4&speed=1&watchdog=0")  # no watchdog: the hang lasts
     assert reply(port, "G92 A5") == Ok()
     assert reply(port, "M3 S200") == Ok()
     assert reply(port, "G1 A1000 P1000000") == Ok()
@@ -365,7 +365,7 @@ def test_stall_after_n_lines_freezes_everything_until_dtr_reset() -> None:
     port.write(b"?G90\n!\x18")
     assert port.read(100) == b""  # no status, no reply, no banner
     frozen = port.ledger[-1]
-    time.sleep(0.05)
+    time.sleep(0.3)  # longer than the watchdog would take
     assert port.ledger[-1] == frozen and frozen.fraction < 1
     assert port.machine.laser == 200  # a hung controller keeps its pins
     port.dtr = False
@@ -378,12 +378,54 @@ def test_stall_after_n_lines_freezes_everything_until_dtr_reset() -> None:
     assert reply(port, "G90") == Ok()
 
 
+def test_the_watchdog_resets_a_hung_device_laser_off_within_its_timeout() -> None:
+    """docs/protocol.md section 9: the firmware's watchdog resets it 256 ms after a hang
+    (laser off first), and it boots with its .noinit record, as after a DTR reset."""
+    port = open_mock("stall_after=4&speed=1", timeout=1.0)
+    assert port.options.watchdog == 256
+    assert reply(port, "G92 A5") == Ok()
+    assert reply(port, "M3 S200") == Ok()
+    assert reply(port, "G1 A1000 P1000000") == Ok()
+    time.sleep(0.05)  # the move runs
+    assert reply(port, "G90") == Ok()  # answered, then the device hangs
+    fw = port.firmware
+    assert fw is not None and fw.hung_at is not None
+    hung_at = fw.hung_at
+    port.write(b"?G91\n")  # lost: the firmware hangs
+    frozen = port.ledger[-1]
+    assert port.machine.laser == 200  # still on: a hung controller keeps its pins
+    assert port.readline() == (BANNER + "\r\n").encode()  # the watchdog's reset
+    (t_off, power), = [e for e in port.machine.laser_log if e[0] >= hung_at]
+    laser_off_s = t_off - hung_at
+    print(f"\nmock: laser off {laser_off_s * 1000:.1f} ms after the hang")
+    assert power == 0 and 0.256 <= laser_off_s < 0.2561 and laser_off_s <= 0.5
+    cut = port.ledger[-1]
+    assert (cut.line, cut.stopped, cut.end) == (frozen.line, "watchdog", frozen.end)
+    assert cut.fraction < 1  # the motors stopped where the hang froze them
+    st = status(port)
+    assert (st.state, st.a, st.b, st.homed, st.done_line, st.accepted_line, st.laser) == (
+        "Idle", *frozen.end, True, 1, 0, 0)
+    assert reply(port, "G90") == Ok()  # it runs again; each fault fires once
+    time.sleep(0.3)
+    assert reply(port, "G1 A5 P100000") == Ok()
+
+
 def test_stall_after_zero_is_a_device_that_never_answers() -> None:
     urls.register()
-    port = serial.serial_for_url("fivebar-mock://?stall_after=0", timeout=0.05)
+    port = serial.serial_for_url("fivebar-mock://?stall_after=0&watchdog=0", timeout=0.05)
     assert port.readline() == (BANNER + "\r\n").encode()  # the banner came before the hang
     port.write(b"$I\n?")
     assert port.read(10) == b""
+
+
+def test_stall_after_zero_with_the_watchdog_answers_after_its_reset() -> None:
+    urls.register()
+    port = serial.serial_for_url("fivebar-mock://?stall_after=0", timeout=1.0)
+    assert port.readline() == (BANNER + "\r\n").encode()  # the banner came before the hang
+    port.write(b"$I\n")  # lost
+    assert port.readline() == (BANNER + "\r\n").encode()  # the watchdog's reset
+    port.write(b"$I\n")
+    assert port.read_until(b"ok\r\n") == (BANNER + "\r\nok\r\n").encode()
 
 
 # --------------------------------------------------------------------------- ledger, machines

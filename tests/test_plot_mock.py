@@ -143,13 +143,15 @@ def resume_and_check(drawing: Path, m: mock.Machine, name: str, profile: Path | 
 
 @pytest.mark.parametrize(("fault", "word"), [
     ("error_on=60", "refused: error:11"),
-    ("stall_after=150", "went silent"),
+    ("stall_after=150&watchdog=0", "went silent"),  # no watchdog: the reply timeout
+    ("stall_after=150", "the firmware restarted"),  # the watchdog reset it (protocol 9)
     ("reset_after=90", "the firmware restarted"),
 ])
 def test_fault_then_resume_completes_exactly(drawing: Path, quick_profile: Path, fault: str,
                                              word: str) -> None:
     """The position is read after the fault: at once when the controller answers, from the
-    record it kept across its restart after a reset or a stall (rebooted through DTR)."""
+    record it kept across its restart after a reset or a stall (reset by its watchdog, or
+    rebooted through DTR when it has none)."""
     code, out = run("plot", str(drawing), "--port", url("f", fault), "--laser", "--yes",
                     "--config", str(quick_profile))
     assert code == 3, out
@@ -161,7 +163,7 @@ def test_fault_then_resume_completes_exactly(drawing: Path, quick_profile: Path,
     assert f"stopped at A = {rp.position[0]}, B = {rp.position[1]} steps" in out
     if fault.startswith(("stall", "reset")):
         assert "kept its position and its last executed line" in out
-    if fault.startswith("stall"):
+    if "watchdog=0" in fault:
         assert "rebooted through DTR: laser off" in out
     assert 0 < rp.next_segment < rp.segments
     resume_and_check(drawing, m, "f", quick_profile)

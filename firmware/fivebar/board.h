@@ -18,6 +18,9 @@
 #define FB_CAT(a, b) FB_CAT2(a, b)
 #define FB_ALWAYS_INLINE static inline __attribute__((always_inline))
 
+/* Pins, UART, timers; last of all it starts the hardware watchdog
+ * (CFG_WDT_MS), which from then on resets the MCU unless board_wdt_feed()
+ * is called in time. */
 void board_init(void);
 
 /*
@@ -64,6 +67,14 @@ void board_timer_resume(void);
  * to do on the AVR, where the interrupt makes progress; the host fake runs
  * its simulated timer here. */
 void board_idle(void);
+
+/*
+ * Watchdog feed (the AVR's WDR): restarts the watchdog's timeout.  Only
+ * fb_main.c calls it, from the main loop, and only when mo_alive() says the
+ * step generator is alive too, so a hung main loop or a dead step interrupt
+ * lets the watchdog reset the MCU (docs/protocol.md section 9).
+ */
+void board_wdt_feed(void);
 
 /*
  * Also, inline on AVR (they run in the step interrupt, where a call would

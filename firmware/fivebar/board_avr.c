@@ -13,6 +13,7 @@
 
 #include <avr/io.h>
 #include <avr/interrupt.h>
+#include <avr/wdt.h>
 #include "board.h"
 #include "config.h"
 #include "fb_main.h"
@@ -38,6 +39,47 @@
 /* Not cleared by the C start-up code: a reset that leaves the RAM powered
  * finds it as the firmware left it (board.h). */
 volatile fb_keep_t board_keep __attribute__((section(".noinit")));
+
+#if CFG_WDT_MS == 250
+#define WDT_TIMEOUT WDTO_250MS
+#elif CFG_WDT_MS == 120
+#define WDT_TIMEOUT WDTO_120MS
+#elif CFG_WDT_MS == 60
+#define WDT_TIMEOUT WDTO_60MS
+#elif CFG_WDT_MS == 30
+#define WDT_TIMEOUT WDTO_30MS
+#else
+#error "CFG_WDT_MS must be 250, 120, 60 or 30"
+#endif
+
+/* MCUSR as this reset left it, saved by early_init() before anything clears
+ * it (the C start-up code clears .bss after .init3, hence .noinit). */
+static uint8_t reset_flags __attribute__((section(".noinit")));
+
+/*
+ * The first code after any reset: .init3 runs once .init2 has set up the
+ * stack and the zero register, before .data/.bss are initialised and before
+ * main().  The step and laser pins are high-impedance during and after a
+ * reset; the laser pin is driven low here first (PORT bit cleared, then the
+ * pin made an output), so a watchdog reset of a hung controller turns the
+ * laser off within a few cycles of the reset.  Then the watchdog: after a
+ * watchdog reset it stays enabled at its shortest timeout (16 ms) and WDRF in
+ * MCUSR forces WDE on, so (ATmega328P datasheet, 10.9.2 "Watchdog Timer",
+ * and avr-libc's <avr/wdt.h>) MCUSR is read and cleared first, then the timed
+ * sequence (WDCE|WDE, then 0 within four cycles: wdt_disable()) turns it off
+ * until board_init() starts it with the configured timeout.  The Uno's
+ * optiboot does the same before it starts the sketch, and clears MCUSR.
+ * Naked and in .init3: no prologue, no return; `used` keeps it through LTO.
+ */
+__attribute__((naked, used, section(".init3")))
+static void early_init(void)
+{
+	FB_REG_PORT(PIN_LASER_PORT) &= (uint8_t)~(1u << PIN_LASER_BIT);
+	FB_REG_DDR(PIN_LASER_PORT) |= (uint8_t)(1u << PIN_LASER_BIT);
+	reset_flags = MCUSR;
+	MCUSR = 0;
+	wdt_disable();
+}
 
 static volatile uint8_t tx_buf[CFG_TX_SIZE];
 static volatile uint8_t tx_head, tx_tail;
@@ -86,14 +128,20 @@ void board_init(void)
 	TIMSK2 = 0;
 	TCCR2A = (uint8_t)((1u << WGM21) | (1u << WGM20));
 	TCCR2B = (uint8_t)(1u << CS21);
+	wdt_enable(WDT_TIMEOUT);
 	sei();
 }
 
 uint8_t board_power_on(void)
 {
-	uint8_t flags = MCUSR;
-	MCUSR = 0;
+	uint8_t flags = reset_flags;
+	reset_flags = 0;
 	return (flags & (1u << PORF)) != 0;
+}
+
+void board_wdt_feed(void)
+{
+	wdt_reset();
 }
 
 ISR(TIMER0_COMPA_vect)

@@ -56,6 +56,15 @@
 #define CFG_START_BLOCKS    4
 #define CFG_START_DELAY_MS  20
 
+/* ---- hardware watchdog ------------------------------------------------------ */
+/* Timeout of the AVR watchdog: 250 (2^15 cycles of its 128 kHz oscillator,
+ * 256 ms nominal), 120, 60 or 30.  The main loop feeds it only while it also
+ * sees the step interrupt alive (fb_main.c feed_watchdog); a hang resets the
+ * MCU and the laser output goes low first thing (board_avr.c early_init).
+ * Hang to laser off on an Uno: this timeout (+ the oscillator's tolerance)
+ * + 65 ms of reset start-up delay (fuses SUT=11) + a few cycles, under 0.5 s. */
+#define CFG_WDT_MS          250
+
 /* ---- defaults of the $ settings ------------------------------------------- */
 #define DEF_MAX_RATE        20000L   /* $0  steps/s per motor */
 #define DEF_LIMIT_A_MIN     (-100000L) /* $1 */

@@ -380,10 +380,26 @@ static uint8_t exec_g1(const fb_cmd_t *c)
 	return FB_OK;
 }
 
+/*
+ * The hardware watchdog (board.h): fed from the main loop (fb_poll and the
+ * homing wait, its only long inner loop), and only while the step generator
+ * is alive too: stopped or held legitimately, or its interrupt ran since the
+ * last look (mo_alive).  So a main loop that hangs (interrupts on or off), a
+ * step interrupt that spins, and a step interrupt that stopped coming while
+ * the generator runs all stop the feeding, and the watchdog resets the MCU:
+ * laser off at once (board_avr.c), position, H and Ln done kept (section 7).
+ */
+static void feed_watchdog(void)
+{
+	if (mo_alive())
+		board_wdt_feed();
+}
+
 /* Wait for the generator to stop, serving status requests; 0 if aborted. */
 static uint8_t home_wait(void)
 {
 	while (mo_running()) {
+		feed_watchdog();
 		board_idle();
 		if (f_status) {
 			f_status = 0;
@@ -696,4 +712,5 @@ void fb_poll(void)
 		try_execute();
 	else
 		assemble();
+	feed_watchdog();
 }

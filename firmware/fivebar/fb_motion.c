@@ -33,6 +33,9 @@ static uint32_t s_now;           /* cycle of the pending event within cur */
 static uint8_t s_due;            /* motors stepping at that event */
 static uint8_t s_home_axes, s_es_enabled, s_seek_neg;
 static volatile uint8_t s_running, s_alarm, s_home_hits, s_laser;
+/* s_beat: set by every mo_event() (the step interrupt is alive), consumed by
+ * mo_alive(); s_held: the generator's timer is paused by mo_hold() */
+static volatile uint8_t s_beat, s_held;
 static volatile uint32_t s_underruns;
 
 #define K board_keep
@@ -95,6 +98,7 @@ void mo_init(void)
 	s_now = 0;
 	s_due = 0;
 	s_running = 0;
+	s_held = 0;
 	s_laser = 0;
 	s_underruns = 0;
 	board_laser(0);
@@ -177,6 +181,7 @@ void mo_start(void)
 		s_now = 0;
 		s_due = 0;
 		s_running = 1;
+		s_held = 0;
 		board_timer_start(64);
 	}
 	board_irq_restore(sreg);
@@ -187,6 +192,7 @@ void mo_stop(void)
 	uint8_t sreg = board_irq_save();
 	board_timer_stop();
 	s_running = 0;
+	s_held = 0;
 	if (cur) {
 		/* the interrupted block is dropped */
 		q_tail = (uint8_t)(q_tail + 1u);
@@ -200,8 +206,10 @@ void mo_stop(void)
 void mo_hold(void)
 {
 	uint8_t sreg = board_irq_save();
-	if (s_running)
+	if (s_running) {
 		board_timer_pause();
+		s_held = 1;
+	}
 	set_laser(0);
 	board_irq_restore(sreg);
 }
@@ -212,6 +220,7 @@ void mo_resume(void)
 	if (s_running) {
 		if (cur)
 			set_laser(cur->power);
+		s_held = 0;
 		board_timer_resume();
 	}
 	board_irq_restore(sreg);
@@ -325,6 +334,7 @@ uint16_t mo_event(void)
 {
 	fb_block_t *b = cur;
 	uint8_t due = s_due;
+	s_beat = 1;
 	if (due) {
 		/* a reset from here until busy = 0 finds the record invalid: a
 		 * boot cannot know whether the drivers saw the step */
@@ -370,6 +380,15 @@ uint16_t mo_event(void)
 }
 
 uint8_t mo_running(void) { return s_running; }
+
+uint8_t mo_alive(void)
+{
+	uint8_t sreg = board_irq_save();
+	uint8_t ok = s_beat || !s_running || s_held;
+	s_beat = 0;
+	board_irq_restore(sreg);
+	return ok;
+}
 
 void mo_get_pos(int32_t pos[2])
 {

@@ -89,6 +89,17 @@ void mo_hold(void);
 void mo_resume(void);
 
 uint8_t mo_running(void);
+/*
+ * The watchdog's view of the step generator (fb_main.c feeds the watchdog
+ * only when this says 1): 1 when the generator is legitimately quiet
+ * (stopped, or held with its timer paused), or when the step interrupt has
+ * run mo_event() since the previous call; 0 while it should be running and
+ * has not run since.  Each call consumes the interrupt's beat.  While running,
+ * the interrupt runs at least every MO_MAX_DELAY cycles (1.5 ms), so a main
+ * loop that calls this more often misses some beats but feeds every ~1.5 ms;
+ * a step interrupt that stopped while the generator runs stops the feeding.
+ */
+uint8_t mo_alive(void);
 void mo_get_pos(int32_t pos[2]);
 /* Only while stopped. */
 void mo_set_pos(const int32_t pos[2]);

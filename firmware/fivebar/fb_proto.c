@@ -295,6 +295,31 @@ static uint8_t parse_body(const char *s, uint8_t i, uint8_t end, fb_cmd_t *cmd)
 	return check_ranges(cmd);
 }
 
+/*
+ * Whether a line without N is a numbered line that lost its "N" and its '*'
+ * to line noise (docs/protocol.md 5.2, step 5): it starts with a digit (the
+ * line number's, once the N is gone), or it has no '*' and ends with
+ * "<digit>/<digits>" and blanks (its checksum field, once the '*' is gone).
+ * No valid line does either: a command starts with G, M or $, and '/' occurs
+ * only in comments.  Without this the first numbered line, before numbered
+ * mode begins, could lose both and be accepted unnumbered (as error:4, or
+ * executed when a ';' replaced the N), which 5.1 promises never happens.
+ */
+static uint8_t lost_number(const char *s, uint8_t i, uint8_t end, uint8_t len, uint8_t has_star)
+{
+	if (i < end && is_digit(s[i]))
+		return 1;
+	if (has_star)
+		return 0;
+	uint8_t j = len;
+	while (j > 0 && is_ws(s[j - 1]))
+		j--;
+	uint8_t last = j;
+	while (j > 0 && is_digit(s[j - 1]))
+		j--;
+	return j < last && j >= 2 && s[j - 1] == '/' && is_digit(s[j - 2]);
+}
+
 uint8_t fb_parse_line(fb_lines_t *lines, const char *line, uint8_t len, fb_cmd_t *cmd)
 {
 	memset(cmd, 0, sizeof(*cmd));
@@ -320,6 +345,8 @@ uint8_t fb_parse_line(fb_lines_t *lines, const char *line, uint8_t len, fb_cmd_t
 			return FB_ERR_BAD_NUMBER;
 		cmd->has_n = 1;
 		cmd->n = n;
+	} else if (lost_number(line, i, end, len, has_star)) {
+		return FB_ERR_NO_CHECKSUM;
 	}
 
 	uint8_t st = parse_body(line, i, end, cmd);

@@ -70,7 +70,10 @@ uint16_t fb_crc16(const char *s, uint8_t len);
  * without N is refused with FB_ERR_NO_CHECKSUM, so a numbered line that lost
  * both its "N<n> " and its "*<crc>/<len>" to line noise is never executed.
  * Only an unnumbered M110 (which sets last to 0 and ends strict framing) is
- * accepted then; a numbered M110 keeps it.
+ * accepted then; a numbered M110 keeps it.  In either mode a line without N
+ * that starts with a digit, or that has no '*' and ends with
+ * "<digit>/<digits>" (and blanks), is refused the same way: a numbered line
+ * that lost both (the first one, before strict framing begins, included).
  */
 uint8_t fb_parse_line(fb_lines_t *lines, const char *line, uint8_t len, fb_cmd_t *cmd);
 

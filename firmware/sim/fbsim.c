@@ -35,8 +35,17 @@
  *            then "reset"
  *   power    a power cut and power-on: as "reset", but the SRAM comes back
  *            with random contents
- *   freeze   the CPU stops (a hung controller): pins keep their levels,
- *            bytes from the host are lost, until a reset
+ *   freeze   the CPU stops (a hung controller whose watchdog does not
+ *            run either): pins keep their levels, bytes from the host are
+ *            lost, until a reset
+ *   hang     the firmware hangs with interrupts off (a main loop or an
+ *            interrupt handler that never ends): the CPU spins at the
+ *            firmware's own "rjmp ." (avr-libc's __stop_program), pins keep
+ *            their levels; the firmware's watchdog resets it
+ *   spin     the main loop hangs, interrupts keep coming (the step
+ *            interrupt finishes its segment): the same spin, interrupts on
+ *   stepoff  the step interrupt stops coming (OCIE1A cleared), the main
+ *            loop runs on
  *   flush    write the trace file out
  *   quit     stop
  * A reset, power cut or freeze first lets the bytes the client wrote before
@@ -50,6 +59,17 @@
  * traced output pin that was high is traced low (the pins float until the
  * firmware drives them again), and what the harness set up at start is set
  * again (INT0/INT1 polling off, UART flags, endstop levels, the I/O timer).
+ * hang, spin and stepoff take effect the same way, and write
+ * "<cycle> <command> 1" to the trace at that instruction.
+ *
+ * The watchdog: simavr 1.6 emulates the ATmega328P's (WDTCSR with its timed
+ * sequence, WDR, the 128 kHz timeouts, WDRF and the 16 ms restart after a
+ * watchdog reset), and on a timeout it replaces avr->run by a callback that
+ * calls avr_reset().  The harness sees that before the callback runs and does
+ * the reset itself, as a reset that keeps the RAM (the watchdog's own reset
+ * hook still sets WDRF and restores avr->run): "<cycle> wdt 1" in the trace,
+ * output pins traced low, the SRAM kept, the set-up redone.  No
+ * acknowledgement is written (no command asked for it).
  */
 #define _GNU_SOURCE
 #include <errno.h>
@@ -110,7 +130,13 @@ static int endstop_pressed[2] = { -1, -1 };
 static avr_irq_t *endstop_irq[2];
 
 /* control (-C) */
-enum { CTL_NONE, CTL_RESET, CTL_POWER };
+enum { CTL_NONE, CTL_RESET, CTL_POWER, CTL_WATCHDOG };
+enum { FAULT_NONE, FAULT_HANG, FAULT_SPIN, FAULT_STEPOFF };
+static const char *const fault_names[] = { "", "hang", "spin", "stepoff" };
+static int pending_fault;
+static avr_run_t core_run;  /* avr->run as set up: another value is a watchdog reset */
+#define REG_TIMSK1 0x6F
+#define BIT_OCIE1A 1
 static int control, ctl_out = -1;
 static char ctl_line[128];
 static size_t ctl_len;
@@ -288,6 +314,13 @@ static void run_command(const char *cmd)
 			return;
 		}
 		pending_freeze = 1;
+	} else if (!strcmp(cmd, "hang") || !strcmp(cmd, "spin") || !strcmp(cmd, "stepoff")) {
+		if (frozen) {
+			ack(cmd);
+			return;
+		}
+		pending_fault = !strcmp(cmd, "hang") ? FAULT_HANG :
+				!strcmp(cmd, "spin") ? FAULT_SPIN : FAULT_STEPOFF;
 	} else if (!strcmp(cmd, "flush")) {
 		if (trace)
 			fflush(trace);
@@ -343,7 +376,7 @@ static avr_cycle_count_t pump_timer(avr_t *a, avr_cycle_count_t when, void *para
 	(void)param;
 	pump_io();
 	read_control();
-	if (pending_reset | pending_freeze) {
+	if (pending_reset | pending_freeze | pending_fault) {
 		if (!link_quiet())
 			quiet_since = a->cycle;
 		else if (a->cycle - quiet_since >= pump_period)
@@ -491,6 +524,8 @@ static void apply_reset(int kind)
 	static uint8_t sram[65536];
 	unsigned lo = (unsigned)avr->ioend + 1u, n = (unsigned)avr->ramend + 1u - lo;
 	memcpy(sram, avr->data + lo, n);
+	if (kind == CTL_WATCHDOG)
+		trace_event("wdt", 1);
 	for (int pin = 0; pin < PIN_COUNT; pin++)
 		if (pin_level[pin])
 			trace_pin(pin, 0);
@@ -512,11 +547,48 @@ static void apply_reset(int kind)
 		wall_start.tv_nsec += now.tv_nsec - frozen_at.tv_nsec;
 		frozen = 0;
 	}
-	pending_reset = CTL_NONE;
-	pending_freeze = 0;
 	if (trace)
 		fflush(trace);
+	if (kind == CTL_WATCHDOG)
+		return;  /* the firmware's own reset: a pending command stays pending */
+	pending_reset = CTL_NONE;
+	pending_freeze = 0;
+	pending_fault = FAULT_NONE;
 	ack(reset_name);
+}
+
+/* The word address of a one-instruction loop ("rjmp .", 0xCFFF) in the
+ * firmware, or -1: avr-libc links one (__stop_program) after main. */
+static long self_loop(void)
+{
+	for (uint32_t a = 0; a + 1 <= avr->flashend; a += 2)
+		if (avr->flash[a] == 0xFF && avr->flash[a + 1] == 0xCF)
+			return (long)(a / 2);
+	return -1;
+}
+
+/* hang / spin: the CPU leaves whatever it ran for a loop it never leaves
+ * (hang: with interrupts off); stepoff: the step interrupt is disabled. */
+static void apply_fault(int fault)
+{
+	trace_event(fault_names[fault], 1);
+	if (fault == FAULT_STEPOFF) {
+		avr->data[REG_TIMSK1] &= (uint8_t)~(1u << BIT_OCIE1A);
+	} else {
+		long loop = self_loop();
+		if (loop < 0) {
+			fprintf(stderr, "fbsim: no 'rjmp .' in the firmware to hang in\n");
+			stop_req = 1;
+			return;
+		}
+		avr->pc = (avr_flashaddr_t)(loop * 2);
+		if (fault == FAULT_HANG)
+			avr->sreg[S_I] = 0;
+	}
+	if (trace)
+		fflush(trace);
+	pending_fault = FAULT_NONE;
+	ack(fault_names[fault]);
 }
 
 /* A pending reset or freeze, once the firmware is between two of its state
@@ -527,6 +599,8 @@ static void apply_pending(void)
 		return;
 	if (pending_reset) {
 		apply_reset(pending_reset);
+	} else if (pending_fault && !frozen) {
+		apply_fault(pending_fault);
 	} else if (pending_freeze && !frozen) {
 		frozen = 1;
 		pending_freeze = 0;
@@ -600,6 +674,7 @@ int main(int argc, char **argv)
 	avr_load_firmware(avr, &fw);
 	avr->frequency = (uint32_t)freq;
 	avr->sleep = no_sleep;
+	core_run = avr->run;
 	pump_period = avr->frequency / 1000;
 
 	uart_in_irq = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
@@ -695,7 +770,9 @@ int main(int argc, char **argv)
 			break;
 		if (max_cycles && avr->cycle >= max_cycles)
 			break;
-		if (pending_reset | pending_freeze)
+		if (avr->run != core_run)
+			apply_reset(CTL_WATCHDOG);  /* simavr's watchdog fired */
+		if (pending_reset | pending_freeze | pending_fault)
 			apply_pending();
 	}
 	pump_io();

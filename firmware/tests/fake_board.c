@@ -20,6 +20,7 @@ void (*fake_irq_hook)(void);
 int fake_irq_countdown;
 void (*fake_step_hook)(void);
 uint8_t fake_power_on;
+uint32_t fake_wdt_feeds;
 volatile fb_keep_t board_keep;
 static uint8_t irq_on = 1;
 static char tx_copy[65536];
@@ -43,9 +44,12 @@ void fake_reset(void)
 	fake_step_hook = 0;
 	irq_on = 1;
 	fake_power_on = 1;
+	fake_wdt_feeds = 0;
 }
 
 void board_init(void) {}
+
+void board_wdt_feed(void) { fake_wdt_feeds++; }
 
 uint8_t board_power_on(void)
 {

@@ -48,6 +48,8 @@ extern void (*fake_step_hook)(void);
  * fake_reset(); fb_setup(); is a power-on; clear it for a reset that keeps
  * the RAM (board_keep, which a test may also corrupt). */
 extern uint8_t fake_power_on;
+/* board_wdt_feed() calls since fake_reset(): the watchdog feeds. */
+extern uint32_t fake_wdt_feeds;
 
 void fake_reset(void);
 /* Run the step timer until it stops or max_cycles pass; returns events run. */

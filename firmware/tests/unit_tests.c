@@ -79,7 +79,6 @@ static void test_parse_table(void)
 		{ "M999", FB_ERR_UNKNOWN_COMMAND, CMD_NONE },
 		{ "hello", FB_ERR_UNKNOWN_COMMAND, CMD_NONE },
 		{ "A10 P100", FB_ERR_UNKNOWN_COMMAND, CMD_NONE },
-		{ "123", FB_ERR_UNKNOWN_COMMAND, CMD_NONE },
 		{ "G", FB_ERR_BAD_NUMBER, CMD_NONE },
 		{ "G1\x01 P100", FB_ERR_INVALID_CHAR, CMD_NONE },
 		{ "G1 P100 \x7f", FB_ERR_INVALID_CHAR, CMD_NONE },
@@ -192,6 +191,28 @@ static void test_framing(void)
 	CHECK(parse(&ln, buf, &c) == FB_OK && ln.last == 5, "comment inside the checksum");
 	framed(buf, sizeof buf, "Nx G90");
 	CHECK(parse(&ln, buf, &c) == FB_ERR_BAD_NUMBER && ln.last == 5, "malformed N");
+	/* a numbered line that lost its N and its '*' is refused in either mode,
+	 * also as the first line after boot (docs/protocol.md 5.2, step 5): the
+	 * host's N1 G1 A10 P1000*13217/15 without "N" and "*" */
+	static const char *const lost[] = {
+		"1 G1 A10 P100013217/15", "  1 G1 A10 P100013217/15  ", "123", "1",
+		"; 1 G1 A10 P100013217/15", "G1 G1 A10 P100013217/15", "G90 ; 1/2 \t",
+		"1 G1 A10 P1000;13217/15", "1*51074/1",
+	};
+	for (int mode = 0; mode < 2; mode++) {
+		for (size_t k = 0; k < sizeof lost / sizeof lost[0]; k++) {
+			fb_lines_t fresh = { 7, (uint8_t)mode };
+			CHECK(parse(&fresh, lost[k], &c) == FB_ERR_NO_CHECKSUM && fresh.last == 7 &&
+			      fresh.numbered == mode, "'%s' (numbered %d): refused with a resend", lost[k],
+			      mode);
+		}
+	}
+	static const char *const kept[] = { "G90 ; 1/", "G90 ; a/2", "G90 ; 1/a", "G90 ; /2",
+					    "G90 ; 1 /2" };
+	for (size_t k = 0; k < sizeof kept / sizeof kept[0]; k++) {
+		fb_lines_t fresh = { 7, 0 };
+		CHECK(parse(&fresh, kept[k], &c) == FB_OK && fresh.last == 8, "'%s' accepted", kept[k]);
+	}
 	CHECK(fb_is_resend(FB_ERR_CHECKSUM) && fb_is_resend(FB_ERR_LINE_NUMBER) &&
 	      fb_is_resend(FB_ERR_NO_CHECKSUM) && !fb_is_resend(FB_ERR_BAD_WORD), "resend codes");
 }
@@ -214,6 +235,7 @@ static const char *const noise_lines[] = {
 	"N19311 G1 A-11807 B2341 P15132 S193",
 	"N9 G90",                                        /* a one-digit length */
 	"N1 G1 P100",                                    /* length 10: "1" and "0" */
+	"N1 G1 A10 P1000",          /* lost N and '*': 1 G1 A10 P100013217/15 */
 	"N4294967295 G1 A-100000000 B-100000000 P100000000 S255", /* the longest G1 */
 };
 
@@ -224,12 +246,14 @@ static uint8_t noise_byte(int b)
 	return b != '\n' && b != '\r' && b != '?' && b != '!' && b != '~' && b != 0x18;
 }
 
-/* Parse s as the line expected after line n-1 in numbered mode: 1 when it is
- * refused with a resend and the counter stays, 2 when it is accepted as line n
- * without error, 0 otherwise. */
+/* Parse s as the line expected after line n-1, in numbered mode or (noise_mode
+ * 0) as the first numbered line after a boot: 1 when it is refused with a
+ * resend and the counter stays, 2 when it is accepted as line n without error,
+ * 0 otherwise. */
+static uint8_t noise_mode;
 static int noisy_outcome(uint32_t n, const char *s, size_t len)
 {
-	fb_lines_t ln = { n - 1u, 1 };
+	fb_lines_t ln = { n - 1u, noise_mode };
 	fb_cmd_t c;
 	uint8_t st = fb_parse_line(&ln, s, (uint8_t)len, &c);
 	if (fb_is_resend(st))
@@ -239,6 +263,7 @@ static int noisy_outcome(uint32_t n, const char *s, size_t len)
 
 static void test_line_noise(void)
 {
+	for (noise_mode = 0; noise_mode < 2; noise_mode++) {
 	/* Bytes that two insertions or two adjacent replacements are drawn from:
 	 * any other byte in the checksum field breaks its form; in the body any
 	 * byte inserted changes the length, and any two replaced are within the
@@ -322,6 +347,7 @@ static void test_line_noise(void)
 			}
 		}
 		CHECK(bad == 0, "%s: %d replacements of 2 adjacent bytes not refused", valid, bad);
+	}
 	}
 }
 
@@ -1018,6 +1044,65 @@ static void test_strict_framing(void)
 	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,1|L:0|U:0|H:0>\r\n");
 }
 
+/*
+ * The watchdog feeding rule (fb_main.c feed_watchdog, mo_alive): the main
+ * loop feeds only while the step generator is stopped, held, or its
+ * interrupt ran since the last look.  Here the fake's step timer runs only
+ * when the test says so, so "the main loop runs, the step interrupt does not"
+ * is a hung or dead step interrupt.
+ */
+static void test_watchdog_feeding(void)
+{
+	boot_at_zero();
+	fake_take_tx();
+	uint32_t f = fake_wdt_feeds;
+	fb_poll();
+	fb_poll();
+	CHECK(fake_wdt_feeds == f + 2, "idle: every main loop pass feeds");
+	send("M3 S255\nG1 A100 P100000\n");
+	for (int i = 0; i < 10; i++)
+		fb_poll();
+	fake_ms += 100;
+	f = fake_wdt_feeds;
+	fb_poll(); /* starts the queue: the timer is armed, no event yet */
+	CHECK(mo_running() && fake_timer_on && fake_wdt_feeds == f,
+	      "the segment runs; no feed before its first interrupt");
+	fake_run(fake_timer_delay); /* the first event: the segment starts, laser on */
+	fb_poll();
+	CHECK(fake_laser == 255 && fake_wdt_feeds == f + 1, "its first interrupt: fed");
+	f = fake_wdt_feeds;
+	for (int i = 0; i < 20; i++)
+		fb_poll();
+	CHECK(fake_wdt_feeds == f && fake_laser == 255,
+	      "a dead step interrupt stops the feeding (laser on: the watchdog turns it off)");
+	/* one step event per pass: every pass feeds; passes between events do not */
+	for (int i = 0; i < 5; i++) {
+		f = fake_wdt_feeds;
+		fake_run(fake_timer_delay);
+		fb_poll();
+		CHECK(fake_wdt_feeds == f + 1, "an interrupt since the last pass: fed");
+		fb_poll();
+		CHECK(fake_wdt_feeds == f + 1, "no interrupt since the last pass: not fed");
+	}
+	/* held: the step timer is paused on purpose, the main loop alone feeds */
+	fb_rx_isr('!');
+	f = fake_wdt_feeds;
+	fb_poll();
+	fb_poll();
+	CHECK(fake_timer_paused && fake_wdt_feeds == f + 2, "held: fed without steps");
+	fb_rx_isr('~');
+	fb_poll();
+	f = fake_wdt_feeds;
+	fb_poll();
+	CHECK(fake_wdt_feeds == f, "resumed: the interrupt must run again before a feed");
+	fake_run(UINT64_MAX / 2);
+	fb_poll();
+	f = fake_wdt_feeds;
+	fb_poll();
+	CHECK(!mo_running() && fake_wdt_feeds == f + 1, "the queue ran empty: idle, fed again");
+	fake_take_tx();
+}
+
 int main(void)
 {
 	test_crc();
@@ -1036,6 +1121,7 @@ int main(void)
 	test_strict_framing();
 	test_kept_record();
 	test_reset_during_homing();
+	test_watchdog_feeding();
 	printf("%d checks, %d failed\n", checks, failures);
 	return failures ? 1 : 0;
 }

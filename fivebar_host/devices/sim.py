@@ -3,8 +3,9 @@
 ``Emulator`` launches firmware/build/fbsim (the libsimavr harness) on
 firmware/build/fivebar.elf and hands back the pseudo-terminal path that a
 host opens like a serial port; ``Emulator.control`` resets the AVR (with its
-RAM kept, like the Uno's DTR reset, or after a power cut), freezes it or
-flushes its pin trace through the harness's command channel.
+RAM kept, like the Uno's DTR reset, or after a power cut), freezes it, hangs
+it (so that its watchdog resets it) or flushes its pin trace through the
+harness's command channel.
 ``FirmwareSession`` is a small synchronous client over such a port (send a
 line, read its reply, poll status, stream with character counting) used by
 the firmware tests and the benchmark; it is the only place here that needs
@@ -87,7 +88,7 @@ def ensure_built(directory: Path | None = None) -> BuildPaths:
 
 
 #: The harness's control commands (firmware/sim/fbsim.c ``-C``).
-CONTROL_COMMANDS = ("reset", "open", "power", "freeze", "flush")
+CONTROL_COMMANDS = ("reset", "open", "power", "freeze", "hang", "spin", "stepoff", "flush")
 
 
 class Emulator:
@@ -96,8 +97,12 @@ class Emulator:
     The harness takes control commands on its stdin (``control``): ``reset`` (a reset
     that keeps the RAM, as by the Uno's DTR line), ``open`` (a client reopened the pty:
     its unread output is dropped, then ``reset``), ``power`` (a power cut: the RAM comes
-    back random), ``freeze`` (the CPU hangs until a reset) and ``flush`` (the trace file
-    is written out).
+    back random), ``freeze`` (the CPU stops until a reset: a hang that not even the
+    watchdog sees), ``hang`` (the firmware spins with interrupts off: its watchdog resets
+    it), ``spin`` (the main loop spins, interrupts keep running), ``stepoff`` (the step
+    interrupt stops coming, the main loop runs on) and ``flush`` (the trace file is written
+    out).  ``hang``, ``spin`` and ``stepoff`` write ``<cycle> <command> 1`` to the trace, and
+    the watchdog reset that follows ``<cycle> wdt 1``.
     """
 
     def __init__(

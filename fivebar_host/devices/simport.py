@@ -25,8 +25,10 @@ URL options: `fivebar-sim://?trace=PATH&realtime=1&endstops=A,B&machine=NAME&res
 - `reset_after=N`: after the N-th line the AVR resets with its RAM kept, as by a glitch;
 - `power_cut_after=N`: after the N-th line the AVR loses power and boots again: its RAM comes
   back random (position, `H` and `Ln` done are lost); the motors stay where they are;
-- `stall_after=N`: after the N-th line the AVR freezes (no replies, no motion, pins unchanged)
-  until a DTR reset;
+- `stall_after=N`: after the N-th line the firmware hangs (the harness's `hang`: it spins with
+  interrupts off, no replies, no motion, pins unchanged) until its watchdog resets it, about
+  256 ms of emulated time later: laser off, banner, the position, `H` and `Ln` done kept, as
+  after a DTR reset;
 - `drop=P`, `corrupt=P`, `seed=N`: line noise, as on the mock: each host→device byte other than
   a real-time byte is lost with probability P, or replaced by another printable byte that is
   not a real-time byte (seeded generator, default seed 0); line counting for the options
@@ -35,7 +37,7 @@ URL options: `fivebar-sim://?trace=PATH&realtime=1&endstops=A,B&machine=NAME&res
 For the three glitches the bytes written up to the N-th line reach the AVR first and the rest of
 that write is lost; each fault fires once per port.  A DTR edge (`port.dtr = False`, then
 `True`, as `Link.hardware_reset` does) resets the AVR with its RAM kept.  The harness applies a
-reset or freeze where the firmware has interrupts enabled (firmware/sim/fbsim.c).
+reset or a hang where the firmware has interrupts enabled (firmware/sim/fbsim.c).
 
 The harness dies with the thread that started it (`PR_SET_PDEATHSIG`): open a named machine
 for the first time from a thread that lives as long as the machine should.
@@ -63,7 +65,7 @@ SCHEME = "fivebar-sim"
 HARNESS_OPTIONS = ("trace", "realtime", "endstops")
 #: Fault options: what happens after the N-th line, and the harness command for it.
 FAULTS = {"disconnect_after": None, "reset_after": "reset", "power_cut_after": "power",
-          "stall_after": "freeze"}
+          "stall_after": "hang"}
 #: Line noise options (per-byte probabilities) and the seed of their generator.
 NOISE = ("drop", "corrupt")
 _KNOWN = (*HARNESS_OPTIONS, "machine", *FAULTS, *NOISE, "seed")

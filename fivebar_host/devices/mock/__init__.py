@@ -26,8 +26,9 @@ firmware does at 115200 baud.
 **URL options** (``fivebar-mock://?speed=10&drop=0.01&seed=1``: faults, buffer sizes,
 banner, ``machine=NAME``) are listed in ``fivebar_host.devices.mock.options``.
 
-**Resets.**  A DTR edge, a reopen of a named machine, ``reset_after`` and a revived stall are
-resets with the RAM powered: the firmware's ``.noinit`` record brings back the position,
+**Resets.**  A DTR edge, a reopen of a named machine, ``reset_after``, the watchdog's reset
+of a ``stall_after`` hang (``watchdog`` ms after it, laser off then) and a stall revived by
+DTR are resets with the RAM powered: the firmware's ``.noinit`` record brings back the position,
 ``H`` and ``Ln`` done; everything else restarts as at power-on.  Only the first open of a
 machine, ``power_cut_after`` and ``Machine.power_cut`` are power-ons.
 

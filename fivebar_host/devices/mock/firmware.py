@@ -67,6 +67,7 @@ class MockFirmware(MotionCore):
         self.t = now
         self.lines_seen = 0  # lines taken from the receive buffer, for the fault options
         self.stalled = False
+        self.hung_at: float | None = None  # when a stall_after hang began (the watchdog's)
         self.disconnected = False
         self.rebooted = False  # set by a reboot; MockSerial drops the rest of the write
         self._faults_fired: set[str] = set()
@@ -87,6 +88,7 @@ class MockFirmware(MotionCore):
         self.homed = kept.homed if kept is not None else False
         self.alarm = 0
         self.stalled = False
+        self.hung_at = None
         self.laser = 0
         self._log_laser(now)
         self.cur = None
@@ -199,11 +201,43 @@ class MockFirmware(MotionCore):
 
     # ----------------------------------------------------------------- time
 
+    def watchdog_at(self) -> float | None:
+        """When the watchdog resets the hung firmware (None: not hung, or no watchdog)."""
+        if self.hung_at is None or not self.opt.watchdog:
+            return None
+        return self.hung_at + self.opt.watchdog / 1000
+
+    def next_event(self) -> tuple[float, int] | None:
+        """As ``MotionCore.next_event``; while hung only the watchdog (kind 3) happens."""
+        if self.stalled:
+            wd = self.watchdog_at()
+            return None if wd is None else (wd, 3)
+        return super().next_event()
+
+    def _hang(self) -> None:
+        """The firmware hangs (``stall_after``): nothing runs, the pins stay as they are,
+        until the watchdog or a DTR reset."""
+        self.stalled = True
+        self.hung_at = self.t
+
+    def _watchdog_reset(self, at: float) -> None:
+        """The watchdog's reset of the hung firmware at ``at`` (fb_main.c feed_watchdog):
+        the motors stopped where the hang froze them, the laser goes off now, and the
+        firmware boots with its ``.noinit`` record, as after any reset that keeps the RAM.
+        Unlike a DTR reset it cuts no host write: bytes after it reach the new firmware."""
+        self.t = max(self.t, at)
+        rebooted = self.rebooted
+        self._reboot_now("watchdog", keep=True)
+        self.rebooted = rebooted
+
     def advance(self, now: float) -> None:
         """Run the device up to clock time ``now``, event by event."""
         if self.stalled:
-            self.t = max(self.t, now)
-            return
+            wd = self.watchdog_at()
+            if wd is None or now < wd:
+                self.t = max(self.t, now)
+                return
+            self._watchdog_reset(wd)
         while True:
             ev = self.next_event()
             if ev is None or ev[0] > now:
@@ -335,13 +369,13 @@ class MockFirmware(MotionCore):
         if (o.stall_after is not None and k >= o.stall_after
                 and "stall_after" not in self._faults_fired):
             self._faults_fired.add("stall_after")
-            self.stalled = True
+            self._hang()
 
     def check_startup_faults(self) -> None:
         """Faults that fire after zero lines (``stall_after=0``, ``disconnect_after=0``)."""
         if self.opt.stall_after == 0:
             self._faults_fired.add("stall_after")
-            self.stalled = True
+            self._hang()
         if self.opt.disconnect_after == 0:
             self.disconnected = True
 

@@ -27,9 +27,15 @@ fault-free device.
   line with that code (the counter advances, a running job holds with ``Hold:2``; codes
   8/9/10 refuse the line with a resend request instead).
 - ``stall_after=N``: once the N-th line has been handled the device hangs: no reply, no
-  status, no motion; bytes are swallowed; output pins (laser) keep their state.  A DTR
-  reset (reopening with the same ``machine``) revives it, keeping the position, ``H`` and
-  ``Ln`` done it had when it hung.
+  status, no motion; bytes are swallowed; output pins (laser) keep their state.  Its
+  watchdog (docs/protocol.md section 9) resets it ``watchdog`` ms (wall time) later, as
+  the firmware's does: laser off, banner, the position, ``H`` and ``Ln`` done it had when
+  it hung kept.  A DTR reset (reopening with the same ``machine``) revives it sooner, the
+  same way.
+- ``watchdog=MS`` (256): the watchdog timeout after a ``stall_after`` hang, the firmware's
+  (2^15 cycles of the AVR's 128 kHz watchdog oscillator); 0 = no watchdog: the hang lasts
+  until a DTR reset (a board without it, or a hung USB-serial bridge), so the host's
+  reply timeout is what notices it.
 - ``endstops=A,B``: switch A (B) is pressed while motor A's (B's) physical position is at
   most A (B) steps — the simavr harness's ``-a``/``-b`` semantics; either may be empty.
 - ``rx=N`` (128), ``queue=N`` (16), ``line=N`` (80): buffer sizes, reported in the banner.
@@ -81,6 +87,7 @@ class MockOptions:
     error_on: int | None = None
     error_code: int = E_SOFT_LIMIT
     stall_after: int | None = None
+    watchdog: int = 256
     power_cut_after: int | None = None
     endstops: tuple[int | None, int | None] = (None, None)
     rx: int = 128
@@ -153,6 +160,7 @@ _PARSERS: dict[str, Callable[[str, str], Any]] = {
     "error_on": lambda k, v: _int_option(k, v, 1, 2**32),
     "error_code": _error_code_option,
     "stall_after": lambda k, v: _int_option(k, v, 0, 2**32),
+    "watchdog": lambda k, v: _int_option(k, v, 0, 60000),
     "power_cut_after": lambda k, v: _int_option(k, v, 1, 2**32),
     "endstops": _endstops_option,
     "rx": lambda k, v: _int_option(k, v, 8, 65536),

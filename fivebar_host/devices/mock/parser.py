@@ -220,6 +220,24 @@ def _checksum_field_ok(line: bytes, end: int) -> bool:
             and crc16(line[:end]) == crc)
 
 
+def _lost_number(line: bytes, i: int, end: int, star: int) -> bool:
+    """Whether a line without N is a numbered line that lost its ``N`` and its ``*``
+    (fb_proto.c lost_number, docs/protocol.md 5.2 step 5): it starts with a digit, or it
+    has no ``*`` and ends with ``<digit>/<digits>`` and blanks.  No valid line does either,
+    so the first numbered line, before strict framing begins, is refused too."""
+    if i < end and _is_digit(line[i]):
+        return True
+    if star >= 0:
+        return False
+    j = len(line)
+    while j > 0 and _is_ws(line[j - 1]):
+        j -= 1
+    last = j
+    while j > 0 and _is_digit(line[j - 1]):
+        j -= 1
+    return j < last and j >= 2 and line[j - 1] == ord("/") and _is_digit(line[j - 2])
+
+
 def parse_line(last: int, line: bytes, numbered: bool = False) -> Parsed:
     """Frame and parse one received line (without its newline) as the firmware does.
 
@@ -230,7 +248,8 @@ def parse_line(last: int, line: bytes, numbered: bool = False) -> Parsed:
     ``numbered`` is the strict-framing state: once a numbered line was accepted, a line
     without N is refused with ``error:10`` (not accepted, not executed) until an
     unnumbered ``M110`` (which ends it) or a reset.  ``Parsed.numbered`` is the state after
-    the line.
+    the line.  In either state a line without N that starts with a digit, or has no ``*``
+    and ends with ``<digit>/<digits>``, is refused the same way (``_lost_number``).
     """
     cmd = Command()
     end = len(line)
@@ -247,6 +266,8 @@ def parse_line(last: int, line: bytes, numbered: bool = False) -> Parsed:
         if st != OK:
             return Parsed(E_BAD_NUMBER, last, False, cmd, numbered)
         cmd.n = n
+    elif _lost_number(line, i, end, star):
+        return Parsed(E_NO_CHECKSUM, last, False, cmd, numbered)
     st = _parse_body(line, i, end, cmd)
     if st == OK and cmd.kind == "M110":
         return Parsed(OK, cmd.n if cmd.n is not None else 0, True, cmd, cmd.n is not None)
