@@ -39,7 +39,7 @@ def test_hardware_reset_revives_a_hung_controller_and_restarts_the_numbering() -
     """DTR reboots a hung controller: a banner, laser off, the line counter back to 0 (the
     next line is 1) and the position, H and Ln done kept (docs/protocol.md 7)."""
     urls.register()
-    port = serial.serial_for_url("fivebar-mock://?speed=0&stall_after=3", timeout=0.02)
+    port = serial.serial_for_url("fivebar-mock://?speed=0&stall_after=3&watchdog=0", timeout=0.02)
     try:
         link = Link(port, url="hung", reply_timeout_s=0.3)
         link.handshake(1.5)
