@@ -2,7 +2,7 @@
 
 A run prepares the job (compiled again if it is not cached; its resume point written from
 the database to the private resume file `run_job` reads), parks the arms when they are known
-to be elsewhere, and streams it with `sender.run_job`, wired to the worker: the journalled
+to be elsewhere, and streams it with `run.sender.run_job`, wired to the worker: the journalled
 link's stream-start hook commits the stream record once the stream is checked to be the
 job's very program; the progress hook keeps the live snapshot and the progress writer up to
 date and still stops the machine for a cancel or pause once all lines are sent; the pose

@@ -7,7 +7,7 @@ position, number of lines) and the controller's own record say where exactly eac
 - the controller was not reset: it kept its queue and line counter; once it has run out of
   lines, the last line it executed maps to the first unfinished segment;
 - it was reset since (opening the port resets an Arduino) but kept its position, `H` and the
-  last line executed (docs/protocol.md 7): `sender.kept_resume_segment` checks that record
+  last line executed (docs/protocol.md 7): `run.resume.kept_resume_segment` checks that record
   is the stream's and maps it;
 - otherwise the last resume point recorded, or the last segment the daemon saw finish
   (position unknown), or — if the job never started drawing — back to the queue.

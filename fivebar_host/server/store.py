@@ -6,11 +6,11 @@ Everything the daemon needs to carry on after a crash, a power loss or SIGKILL l
 - each job's upload (the drawing bytes, dropped once the job is over), its options, state,
   progress and time estimates;
 - its resume point: the first segment not known to be finished and the firmware position
-  where the machine stopped (None when unknown) — the same fields as `sender.ResumePoint`;
+  where the machine stopped (None when unknown) — the same fields as `run.resume.ResumePoint`;
 - its *stream record*, written before the first line of a stream leaves the host: the
   firmware line number of the stream's first line, the segment it started at and the start
   position. The program streamed is a pure function of the job and those three values
-  (`sender.build_program`), so after a crash the firmware's own `Ln` counter (the line of
+  (`run.program.build_program`), so after a crash the firmware's own `Ln` counter (the line of
   the last block it executed) maps back to the exact segment the machine reached;
 - what the daemon knows about the machine: whether its position is trusted ("pose known")
   and the firmware's line counter when that was last recorded.
@@ -96,7 +96,7 @@ class StoreError(FivebarError, RuntimeError):
 
 @dataclass(frozen=True)
 class ResumeRecord:
-    """A job's resume point (mirrors `sender.ResumePoint` without the file name)."""
+    """A job's resume point (mirrors `run.resume.ResumePoint` without the file name)."""
 
     next_segment: int
     position: tuple[int, int] | None
