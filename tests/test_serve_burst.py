@@ -92,8 +92,9 @@ def test_past_the_upload_limit_the_refusal_is_json_busy_with_retry_after(
         assert mock.machine("burst20").ledger == []
 
 
-def test_a_submission_that_waits_too_long_for_a_slot_is_refused_busy(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def hold_compilation(monkeypatch: pytest.MonkeyPatch) -> tuple[threading.Event,
+                                                                threading.Event]:
+    """Make every compilation wait for `gate` (set `entered` when one starts)."""
     gate, entered = threading.Event(), threading.Event()
     real_compile = app_module.compile_upload
 
@@ -103,6 +104,12 @@ def test_a_submission_that_waits_too_long_for_a_slot_is_refused_busy(
         return real_compile(*args)
 
     monkeypatch.setattr(app_module, "compile_upload", slow_compile)
+    return gate, entered
+
+
+def test_a_submission_that_waits_too_long_for_a_slot_is_refused_busy(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    gate, entered = hold_compilation(monkeypatch)
     monkeypatch.setattr(app_module, "SUBMIT_WAIT_S", 0.3)
     with running_daemon(tmp_path, "wait", compile_slots=1) as d:
         answers: list[Any] = []
@@ -124,15 +131,7 @@ def test_the_client_submits_again_after_a_busy_refusal(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """`ServerClient.submit` (and so `plot --server`) waits Retry-After and tries again: the
     refusal queued nothing, so the drawing is queued exactly once."""
-    gate, entered = threading.Event(), threading.Event()
-    real_compile = app_module.compile_upload
-
-    def slow_compile(*args: Any) -> Any:
-        entered.set()
-        gate.wait(60)
-        return real_compile(*args)
-
-    monkeypatch.setattr(app_module, "compile_upload", slow_compile)
+    gate, entered = hold_compilation(monkeypatch)
     with running_daemon(tmp_path, "retry", max_uploads=1) as d:
         answers: list[Any] = []
         holder = threading.Thread(target=lambda: answers.append(
