@@ -217,11 +217,39 @@ def test_power_lost_falls_back_to_the_last_confirmed_segment(drawing: Path,
     rp = ResumePoint.load(resume_path(drawing))
     assert rp.position is None and rp.sent_segment is not None
     m.phys = [0, 0]  # the user puts the arms at the home pose
+    code, out = run("home", "--port", url("p"), "--yes")  # ... and says so
+    assert code == 0 and "homed" in out, out
     out = resume_and_check(drawing, m, "p")
     n = rp.sent_segment - rp.next_segment
     assert f"up to {n} segments after it may be drawn twice" in out and n > 0
-    assert "lost its position" in out
+    assert "the last a status report confirmed" in out
     assert np.all(drawn_steps(m) >= planned_draw_steps(drawing))  # nothing lost
+
+
+@pytest.mark.parametrize("fault", ["power_cut_after=90", "disconnect_after=70"])
+def test_resume_yes_after_a_power_loss_is_refused(drawing: Path, fault: str) -> None:
+    """Issue 16.2: `--yes` never stands in for a homing or for a person's word that the arms
+    were placed after a power loss. The resume refuses, exits 3, says what to do, and
+    nothing is sent; after `fivebar home` it proceeds."""
+    code, out = run("plot", str(drawing), "--port", url("q", fault), "--laser", "--yes")
+    assert code == 3, out
+    m = mock.machine("q")
+    wait_stopped(m)
+    if fault.startswith("disconnect"):
+        m.power_cut()
+    rp_before = resume_path(drawing).read_text()
+    phys, ledger = list(m.phys), len(m.ledger)
+    code, out = run("plot", str(drawing), "--port", url("q"), "--laser", "--yes", "--resume")
+    assert code == 3, out
+    assert "lost power" in out and "--yes does not answer" in out, out
+    assert f"fivebar home --port {url('q')}" in out, out
+    assert m.phys == phys and len(m.ledger) == ledger  # no step, no line after the refusal
+    assert m.laser == 0 and resume_path(drawing).read_text() == rp_before
+    m.phys = [0, 0]  # the person puts the arms at the home pose ...
+    code, out = run("home", "--port", url("q"), "--yes")  # ... and says so
+    assert code == 0, out
+    out = resume_and_check(drawing, m, "q")
+    assert np.all(drawn_steps(m) >= planned_draw_steps(drawing))
 
 
 def test_kept_record_of_another_stream_falls_back(drawing: Path) -> None:

@@ -146,6 +146,22 @@ def confirm_with(yes: bool) -> Callable[[str], bool]:
     return ask
 
 
+def confirm_placed(yes: bool) -> Callable[[str], bool]:
+    """A question only a person may answer (where the arms are after a power loss): asked on
+    a terminal, never answered by --yes; without a terminal the answer is no."""
+
+    def ask(question: str) -> bool:
+        if not sys.stdin.isatty():
+            click.echo(f"{question} (no terminal to ask; --yes does not answer this)"
+                       if yes else f"{question} (no terminal to ask)", err=True)
+            return False
+        if yes:
+            click.echo("--yes does not answer this question after a power loss:", err=True)
+        return click.confirm(question, default=False)
+
+    return ask
+
+
 def open_link(port: str | None, prof: Profile) -> Any:
     """Open the machine at --port (required for machine commands)."""
     from fivebar_host.run.link import Link

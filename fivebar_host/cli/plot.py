@@ -15,6 +15,7 @@ import click
 
 from fivebar_host.cli.common import (
     compile_from_cli,
+    confirm_placed,
     confirm_with,
     fail,
     handle_errors,
@@ -140,6 +141,7 @@ def _stream_plot(drawing: Path, port: str, prof: Profile, job: Any, *, laser: bo
 
             report = run_job(link, job, prof, drawing=drawing, laser=laser,
                              confirm=confirm_with(yes), resume=resume,
+                             confirm_placed=confirm_placed(yes),
                              on_progress=on_progress,
                              should_stop=lambda: interrupted["flag"],
                              on_interrupt=on_interrupt, on_note=click.echo)
