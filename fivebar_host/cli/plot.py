@@ -154,11 +154,12 @@ def _stream_plot(drawing: Path, port: str, prof: Profile, job: Any, *, laser: bo
                f"B = {report.final.b}")
     trace = getattr(link.port, "trace_path", None)
     if trace is not None and Path(trace).exists():
-        _write_executed(job, prof, Path(trace), preview_path, report.start_segment)
+        _write_executed(job, prof, Path(trace), preview_path, report.start_segment,
+                        report.start_position)
 
 
 def _write_executed(job: Any, prof: Profile, trace: Path, preview_path: Path,
-                    first_segment: int) -> None:
+                    first_segment: int, start_position: tuple[int, int]) -> None:
     """After an emulator run: the executed path from the recorded pulses, next to the
     preview (CSV of pen points and their deviation), and its largest deviation."""
     from fivebar_host.compile import write_atomic
@@ -167,7 +168,7 @@ def _write_executed(job: Any, prof: Profile, trace: Path, preview_path: Path,
 
     tr = read_trace(trace)
     t, track = merge_axes(tr.positions("A"), tr.positions("B"))
-    ex = executed_path(job, prof, t / tr.freq, track, first_segment)
+    ex = executed_path(job, prof, t / tr.freq, track, first_segment, start_position)
     out = preview_path.with_name(preview_path.stem + ".executed.csv")
     rows = ["t_s,a_steps,b_steps,x_mm,y_mm,segment,deviation_mm"]
     rows += [f"{ti:.6f},{a},{b},{x:.4f},{y:.4f},{sg},{'' if d != d else f'{d:.5f}'}"
@@ -175,6 +176,7 @@ def _write_executed(job: Any, prof: Profile, trace: Path, preview_path: Path,
                                                   ex.points.tolist(), ex.segment.tolist(),
                                                   ex.deviation_mm.tolist(), strict=True)]
     write_atomic(out, "\n".join(rows) + "\n")
-    click.echo(f"executed path (from the emulator's step pulses): {out}; max deviation "
+    click.echo(f"executed path (from the emulator's step pulses): {out}; drawing segments' "
+               f"max deviation "
                f"{ex.max_deviation_mm:.4f} mm (bound {job.tolerance_mm:g} + step quantum "
                f"{job.step_quantum_mm:.4f} mm)")

@@ -101,6 +101,7 @@ class SendReport:
     bytes_sent: int
     resends: int
     final: StatusReport
+    start_position: tuple[int, int] = (0, 0)  # firmware steps the run started from
 
 
 @dataclass(frozen=True)
@@ -174,7 +175,7 @@ def run_job(link: Link, job: Job, profile: Profile, *, drawing: str | Path, lase
     if rpath.exists():
         rpath.unlink()
     return SendReport(job.n_segments - start, start, time.monotonic() - t0, res.bytes_sent,
-                      res.resends, final)
+                      res.resends, final, start_position)
 
 
 
