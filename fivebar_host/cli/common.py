@@ -12,7 +12,6 @@ OS error. Nothing else is caught, so a bug still shows its traceback.
 
 from __future__ import annotations
 
-import math
 import sys
 from collections.abc import Callable
 from functools import wraps
@@ -24,7 +23,7 @@ import click
 from fivebar_host import __version__
 from fivebar_host.config import Profile, load_profile
 from fivebar_host.errors import FivebarError, OptionError
-from fivebar_host.options import JOB_OPTIONS, Option, compile_values
+from fivebar_host.options import JOB_OPTIONS, Option, compile_values, parse_page
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -173,13 +172,16 @@ def open_link(port: str | None, prof: Profile) -> Any:
                      reply_timeout_s=prof.serial.reply_timeout_s)
 
 
-def page_size(text: str) -> tuple[float, float]:
-    """Parse a page size "WxH" in mm (also "W×H"), e.g. "200x150"."""
-    parts = text.lower().replace("×", "x").split("x")
+def page_size(text: str, landscape: bool = False) -> tuple[float, float]:
+    """A page size (width, height) in mm from --page: a name (A4, letter …) or WxH with
+    optional units ("200x150", "8.5inx11in"); `landscape` puts the longer side across."""
     try:
-        w, h = (float(v) for v in parts)
-    except ValueError:
-        raise click.BadParameter(f"page size must look like 200x150 (mm); got {text!r}") from None
-    if not (math.isfinite(w) and math.isfinite(h) and w > 0 and h > 0):
-        raise click.BadParameter(f"page size must be positive; got {text!r}")
-    return w, h
+        return parse_page(text, landscape)
+    except ValueError as e:
+        raise click.BadParameter(str(e), param_hint="--page") from None
+
+
+landscape_option = click.option(
+    "--landscape", is_flag=True,
+    help="Turn a --page size so that its longer side runs along x (A4 is 210x297 mm "
+    "portrait, 297x210 mm landscape).")
