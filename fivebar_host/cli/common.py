@@ -161,6 +161,26 @@ def confirm_placed(yes: bool) -> Callable[[str], bool]:
     return ask
 
 
+def position_text(prof: Profile, a_steps: int, b_steps: int, homed: bool = True) -> str:
+    """A machine position as the user reads it: motor steps and, by forward kinematics of
+    the profile's assembly, the pen in mm ("A = 120 steps, B = -40 steps (x 12.3 mm,
+    y 95.0 mm)"). Without a known position (not homed) the mm are not shown."""
+    text = f"A = {a_steps} steps, B = {b_steps} steps"
+    if not homed:
+        return text + " (position unknown: not homed)"
+    import numpy as np
+
+    from fivebar_host.steps import step_angles
+
+    th = step_angles(np.array([[a_steps, b_steps]]), prof.motors.home_rad,
+                     prof.motors.steps_per_rev)
+    fwd = prof.geometry.forward_batch(th, prof.kinematics.assembly)
+    if not fwd.valid[0]:
+        return text + " (no pen position: the links cannot close there)"
+    x, y = fwd.points[0]
+    return f"{text} (x {x:.1f} mm, y {y:.1f} mm)"
+
+
 def open_link(port: str | None, prof: Profile) -> Any:
     """Open the machine at --port (required for machine commands)."""
     from fivebar_host.run.link import Link
