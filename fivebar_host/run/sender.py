@@ -236,12 +236,16 @@ def _restore_position(link: Link, job: Job, profile: Profile, rp: ResumePoint,
     where the arms are (where the job stopped, when that is known, or the home pose). When
     nobody confirms, `PowerLossError` says what to do; nothing has moved."""
     start = rp.next_segment
-    if rp.position is None:
-        note(f"the controller lost its position (H:0: power was cut since the fault); "
-             f"after homing, resuming after segment {start} of {job.n_segments}, the last "
-             f"a status report confirmed: " + redraw_text(start, rp.sent_segment))
+
+    def homed_note() -> None:
+        if rp.position is None:
+            note(f"the controller lost its position (H:0: power was cut since the fault); "
+                 f"after homing, resuming after segment {start} of {job.n_segments}, the "
+                 f"last a status report confirmed: " + redraw_text(start, rp.sent_segment))
+
     if profile.motors.endstops:
         link.command("$H", timeout_s=120.0)
+        homed_note()
         return link.wait_idle(120.0)
     if rp.position is not None and confirm_placed(
             f"The controller lost power. Are the arms still exactly where the job stopped "
@@ -251,6 +255,7 @@ def _restore_position(link: Link, job: Job, profile: Profile, rp: ResumePoint,
     h1, h2 = (math.degrees(v) for v in profile.motors.home_rad)
     if confirm_placed(f"The controller lost power. Are the arms at the home pose "
                       f"θ1 = {h1:g}°, θ2 = {h2:g}° (motor angles from +x)?"):
+        homed_note()
         link.command("G92 A0 B0")
         return link.wait_idle(10.0)
     raise PowerLossError(
