@@ -12,9 +12,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from fivebar_host.compile import Job, distance_to_request
 from fivebar_host.config import Profile
+from fivebar_host.run.program import line_param
 from fivebar_host.steps import step_angles
 from kinematics.arrays import FloatArray, IntArray
 
@@ -58,10 +60,14 @@ def merge_axes(a_events: list[tuple[int, int]], b_events: list[tuple[int, int]],
 
 
 def executed_path(job: Job, profile: Profile, time: FloatArray, track: IntArray,
-                  first_segment: int = 0) -> ExecutedPath:
+                  first_segment: int = 0, start_steps: ArrayLike | None = None
+                  ) -> ExecutedPath:
     """Assign recorded positions to the job's segments and measure each drawing point.
 
-    The machine must have started at the start of `first_segment` (job.steps[first_segment]).
+    The run started at `start_steps` (default: the start of `first_segment`). A resumed run
+    that starts inside `first_segment` (on its joint-space line) finishes it in place; one
+    that starts elsewhere (after homing) first travels back to the segment's start, laser
+    off: those events belong to no segment (−1) and are not measured against the drawing.
     Assignment walks the events once: an event belongs to the segment being executed, and a
     segment ends at the event whose position equals its target.
     """
@@ -69,6 +75,11 @@ def executed_path(job: Job, profile: Profile, time: FloatArray, track: IntArray,
     n = job.n_segments
     seg = np.full(track.shape[0], -1, dtype=np.int64)
     k = first_segment
+    first_event = 0
+    if (start_steps is not None and k < n
+            and line_param(tgt[k], tgt[k + 1], start_steps) is None):
+        arrived = np.flatnonzero((track == tgt[k]).all(axis=1))
+        first_event = int(arrived[0]) + 1 if arrived.size else track.shape[0]
 
     def skip_empty(k: int) -> int:
         while k < n and np.array_equal(tgt[k], tgt[k + 1]):
@@ -76,7 +87,7 @@ def executed_path(job: Job, profile: Profile, time: FloatArray, track: IntArray,
         return k
 
     k = skip_empty(k)
-    for i in range(track.shape[0]):
+    for i in range(first_event, track.shape[0]):
         if k >= n:
             break
         seg[i] = k
