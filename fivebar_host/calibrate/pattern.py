@@ -37,7 +37,7 @@ from kinematics.calibration_analysis import SafeGrid, design_marks, safe_grid
 
 FORMAT = "fivebar-calibration-pattern/1"
 CROSS_MM = 1.5  # half the length of a cross arm
-EROSION_MM = 2.0  # mark centres keep this far inside the safe region
+EROSION_MM = 3.0  # mark centres keep this far inside the safe region (the cross + 1.5 mm)
 DIGIT_W, DIGIT_H, DIGIT_GAP = 1.2, 2.4, 0.6  # mm
 DEFAULT_COUNT = 30
 MIN_COUNT = 25
@@ -182,7 +182,7 @@ def layout_marks(profile: Profile, mode: str, count: int) -> tuple[FloatArray, l
     region = pattern_region(profile, mode)
     full = safe_grid(nominal_params(profile), mode, k.min_type1_margin_rad,
                      k.min_type2_margin_rad, profile.motors.limits_rad, k.assembly,
-                     GRID_MM).eroded(GRID_MM)  # nearest-node lookups stay inside
+                     GRID_MM).eroded(1.5)  # labels keep 1.5 mm inside too
     cand = region.points()
     cand = cand[_label_fits(cand, full)]
     if cand.shape[0] < 4 * count:
@@ -199,8 +199,8 @@ def layout_marks(profile: Profile, mode: str, count: int) -> tuple[FloatArray, l
     taken = [np.array([c - CROSS_MM, c + CROSS_MM]) for c in centres]
     strokes: list[FloatArray] = []
     for n, c in enumerate(centres, start=1):
-        strokes.append(np.array([c - (CROSS_MM, 0), c, (*c, CROSS_MM, 0)]))
-        strokes.append(np.array([c - (0, CROSS_MM), c, (*c, 0, CROSS_MM)]))
+        for arm in (np.array([CROSS_MM, 0.0]), np.array([0.0, CROSS_MM])):
+            strokes.append(np.array([c - arm, c, c + arm]))  # the centre is a vertex
         box = _place_label(c, len(str(n)), full, taken)
         taken.append(box)
         strokes.extend(digit_strokes(n, float(box[0, 0]), float(box[0, 1])))
