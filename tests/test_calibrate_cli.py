@@ -176,6 +176,7 @@ def test_end_to_end_pattern_plot_measure_fit_replot(pattern: tuple[Path, Path, d
     before, quantum = _drawn_error(svg, doc, "before", None)
     after, _ = _drawn_error(svg, doc, "after", fitted)
     assert before > 0.3
+    print(f"end to end: drawn shape error before {before:.3f} mm, after {after:.3f} mm")
     assert after <= 0.1 + quantum and after <= before / 4, (before, after)
     # The check map of the old profile, taking the fitted one as true.
     png = tmp_path / "check.png"
