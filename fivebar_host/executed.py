@@ -5,11 +5,18 @@ show what the machine really drew, and in the end-to-end tests to prove it: ever
 position is assigned to the job segment being executed (segments run in order and each ends
 exactly on its target), turned into a pen point by forward kinematics of the job's assembly,
 and measured against the requested curve of that segment.
+
+With `true` (a `kinematics.calibration.MachineParams`: the machine's real link lengths and
+home angles, e.g. the mock's ``true=`` URL option via `true_params`), the pen points are
+those of that machine rather than the profile's: what a miscalibrated machine really draws.
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -19,6 +26,7 @@ from fivebar_host.config import Profile
 from fivebar_host.run.program import line_param
 from fivebar_host.steps import step_angles
 from kinematics.arrays import FloatArray, IntArray
+from kinematics.calibration import MachineParams
 
 
 @dataclass(frozen=True)
@@ -59,9 +67,27 @@ def merge_axes(a_events: list[tuple[int, int]], b_events: list[tuple[int, int]],
     return t, track
 
 
+def true_params(values: Sequence[float] | None) -> MachineParams | None:
+    """A true geometry (a1, b1, a2, b2, w mm, home1, home2 degrees) as MachineParams."""
+    if values is None:
+        return None
+    a1, b1, a2, b2, w, h1, h2 = (float(x) for x in values)
+    return MachineParams(a1, b1, a2, b2, w, math.radians(h1), math.radians(h2))
+
+
+def ledger_track(ledger: Sequence[Any]) -> tuple[FloatArray, IntArray]:
+    """(time, positions) of a mock's ledger: the start and the end of every G1 block."""
+    g1 = [e for e in ledger if e.kind == "G1"]
+    if not g1:
+        return np.zeros(0), np.zeros((0, 2), dtype=np.int64)
+    t = np.array([g1[0].started_s] + [e.started_s for e in g1], dtype=np.float64)
+    pos = np.array([g1[0].start] + [e.end for e in g1], dtype=np.int64)
+    return t, pos
+
+
 def executed_path(job: Job, profile: Profile, time: FloatArray, track: IntArray,
-                  first_segment: int = 0, start_steps: ArrayLike | None = None
-                  ) -> ExecutedPath:
+                  first_segment: int = 0, start_steps: ArrayLike | None = None,
+                  true: MachineParams | None = None) -> ExecutedPath:
     """Assign recorded positions to the job's segments and measure each drawing point.
 
     The run started at `start_steps` (default: the start of `first_segment`). A resumed run
@@ -94,8 +120,10 @@ def executed_path(job: Job, profile: Profile, time: FloatArray, track: IntArray,
         if track[i, 0] == tgt[k + 1, 0] and track[i, 1] == tgt[k + 1, 1]:
             k = skip_empty(k + 1)
     completed = k
-    th = step_angles(track, job.home_rad, job.steps_per_rev)
-    fwd = profile.geometry.forward_batch(th, "+" if job.assembly > 0 else "-")
+    home = job.home_rad if true is None else true.home_rad
+    fb = profile.geometry if true is None else true.fivebar()
+    th = step_angles(track, home, job.steps_per_rev)
+    fwd = fb.forward_batch(th, "+" if job.assembly > 0 else "-")
     dev = np.full(track.shape[0], np.nan)
     draw_idx = np.flatnonzero((seg >= 0) & job.draw[np.maximum(seg, 0)])
     if draw_idx.size:
