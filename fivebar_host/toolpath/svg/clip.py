@@ -155,56 +155,70 @@ def clip_subpaths(subpaths: Subpaths, region: BaseGeometry, tol: float) -> Subpa
         return subpaths
     if not region.intersects(env):
         return []
-    boundary = region.boundary
-    out: Subpaths = []
+    grown = region.buffer(tol * 1e-4)  # a line on the clip edge is inside despite rounding
+    runs: list[tuple[list[Prim], float]] = []
     for sub in subpaths:
         cur: list[Prim] = []
+        length = 0.0
         for kind, p in sub:
-            pieces = _inside_intervals(kind, p, region, boundary, tol)
+            pieces = _inside_intervals(kind, p, grown, tol)
             if not pieces and cur:
-                out.append(cur)
-                cur = []
-            for ta, tb in pieces:
+                runs.append((cur, length))
+                cur, length = [], 0.0
+            for ta, tb, n in pieces:
                 if cur and ta > 0.0:
-                    out.append(cur)
-                    cur = []
+                    runs.append((cur, length))
+                    cur, length = [], 0.0
                 cur.append(_sub_primitive(kind, p, ta, tb))
+                length += n
                 if tb < 1.0:
-                    out.append(cur)
-                    cur = []
+                    runs.append((cur, length))
+                    cur, length = [], 0.0
         if cur:
-            out.append(cur)
-    return out
+            runs.append((cur, length))
+    # A run shorter than 10 tolerances is where a line touches the region, not a line.
+    return [r for r, n in runs if n >= 10 * tol]
 
 
 def _inside_intervals(kind: int, p: tuple[float, ...], region: BaseGeometry,
-                      boundary: BaseGeometry, tol: float) -> list[tuple[float, float]]:
+                      tol: float) -> list[tuple[float, float, float]]:
+    """Parameter intervals of a primitive inside `region`: each chord of a fine polyline is
+    intersected with the region (straight pieces, so their ends map back to the chord's
+    parameter without ambiguity), and touching pieces are merged. Each interval comes with
+    its length."""
     pts, ts = polyline(kind, p, tol)
-    seg = np.hypot(*np.diff(pts, axis=0).T)
-    cum = np.concatenate(([0.0], np.cumsum(seg)))
-    cuts = [0.0, 1.0]
-    if cum[-1] > 0:
-        line = shapely.LineString(pts)
-        hits = shapely.get_coordinates(shapely.intersection(line, boundary))
-        if hits.shape[0]:
-            d = shapely.line_locate_point(line, shapely.points(hits))
-            cuts += list(np.interp(d, cum, ts))
-    t = np.unique(np.clip(np.asarray(cuts), 0.0, 1.0))
-    if t.shape[0] < 2:
+    a, b = pts[:-1], pts[1:]
+    ab = b - a
+    ll = np.einsum("ij,ij->i", ab, ab)
+    ok = ll > 0
+    if not ok.any():
         return []
-    mids = (t[:-1] + t[1:]) / 2
-    mp = evaluate(np.full(mids.shape[0], kind, dtype=np.int8),
-                  np.repeat(np.array([p]), mids.shape[0], 0), mids)
-    inside = shapely.dwithin(region, shapely.points(mp), tol)
-    out: list[tuple[float, float]] = []
-    for a, b, keep in zip(t[:-1], t[1:], inside, strict=True):
-        if not keep or b - a <= 1e-12:
-            continue
-        if out and out[-1][1] == a:
-            out[-1] = (out[-1][0], float(b))
+    a, ab, ll, t0, dt = a[ok], ab[ok], ll[ok], ts[:-1][ok], np.diff(ts)[ok]
+    chords = shapely.linestrings(np.stack((a, a + ab), axis=1))
+    parts, idx = shapely.get_parts(shapely.intersection(chords, region), return_index=True)
+    # LineString pieces (points are touches)
+    lines = (shapely.get_type_id(parts) == 1) & ~shapely.is_empty(parts)
+    parts, idx = parts[lines], idx[lines]
+    if parts.shape[0] == 0:
+        return []
+    first = shapely.get_coordinates(shapely.get_point(parts, 0))
+    last = shapely.get_coordinates(shapely.get_point(parts, -1))
+    fa = np.einsum("ij,ij->i", first - a[idx], ab[idx]) / ll[idx]
+    fb = np.einsum("ij,ij->i", last - a[idx], ab[idx]) / ll[idx]
+    lo, hi = np.clip(np.minimum(fa, fb), 0, 1), np.clip(np.maximum(fa, fb), 0, 1)
+    ta, tb = t0[idx] + lo * dt[idx], t0[idx] + hi * dt[idx]
+    length = (hi - lo) * np.sqrt(ll[idx])
+    order = np.argsort(ta, kind="stable")
+    out: list[list[float]] = []
+    for x, y, n in zip(ta[order], tb[order], length[order], strict=True):
+        if out and x <= out[-1][1] + 1e-12:
+            out[-1][1] = max(out[-1][1], float(y))
+            out[-1][2] += float(n)
         else:
-            out.append((float(a), float(b)))
-    return out
+            out.append([float(x), float(y), float(n)])
+    # Ends within rounding of the primitive's ends are the ends (keeps strokes chained).
+    res = [(0.0 if x < 1e-12 else x, 1.0 if y > 1 - 1e-12 else y, n) for x, y, n in out]
+    return [(x, y, n) for x, y, n in res if y - x > 1e-12]
 
 
 def _sub_primitive(kind: int, p: tuple[float, ...], ta: float, tb: float) -> Prim:

@@ -151,7 +151,7 @@ class Masking:
                                  "fivebar cannot turn into outlines: convert text to paths "
                                  "(Inkscape: Path > Object to Path)", w.file, child.line)
         spec = w.sheet.cascade(ref)
-        inner = Ctx(m, c.props, c.lengths, c.layer, True, None, 1.0)
+        inner = Ctx(m, w.props_at(ref), c.lengths, c.layer, True, None, 1.0)
         kids = [k for k in ref.children if k.tag in SHAPES or k.tag == "use"]
         items = self.collect(kids, inner, True)
         subs = [s for it in items for s in it.subpaths]
@@ -181,7 +181,7 @@ class Masking:
             m = m @ bb
         alpha_mask = (w.sheet.cascade(ref).get("mask-type") or ref.get("mask-type") or
                       "").strip() == "alpha"
-        inner = Ctx(m, c.props, c.lengths, c.layer, True, None, 1.0)
+        inner = Ctx(m, w.props_at(ref), c.lengths, c.layer, True, None, 1.0)
         items = self.collect(list(ref.children), inner, False)
         subs = [s for it in items for s in it.subpaths]
         tol = clip.tolerance(clip.extent(subs))

@@ -125,6 +125,19 @@ class Walker:
                              "height", self.file, node.line)
         return v[0], v[1], v[2], v[3]
 
+    def props_at(self, node: Node) -> dict[str, str]:
+        """Inherited properties of an element from its own ancestors (for the content of a
+        `<clipPath>` or `<mask>`, which inherits from where it is defined, not used)."""
+        chain = []
+        n: Node | None = node
+        while n is not None:
+            chain.append(n)
+            n = n.parent
+        props = root_props()
+        for a in reversed(chain):
+            props = inherit(props, self.sheet.cascade(a))
+        return props
+
     # ---------------------------------------------------------------- traversal
     def walk(self, node: Node, ctx: Ctx) -> None:
         if not node.is_svg or node.tag in NOT_RENDERED:
