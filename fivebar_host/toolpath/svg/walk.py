@@ -284,7 +284,8 @@ class Walker:
             width = 1.0  # an invalid declaration is ignored (CSS)
         stroke = (painted(p["stroke"]) and number_or_percent(p["stroke-opacity"]) > 0
                   and width > 0)
-        fill = painted(p["fill"]) and number_or_percent(p["fill-opacity"]) > 0
+        fill = (node.tag != "line" and painted(p["fill"])
+                and number_or_percent(p["fill-opacity"]) > 0)  # a line has no interior
         if not (stroke or fill):
             return False
         if c.opacity < 1.0 or (stroke and number_or_percent(p["stroke-opacity"]) < 1) or (
