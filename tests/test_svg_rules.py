@@ -344,3 +344,9 @@ def test_partial_opacity_and_dashes_are_said_once_per_kind() -> None:
     assert sum("partial opacity" in w for w in d.warnings) == 1
     assert any("dashed" in w and "3 elements" in w for w in d.warnings)
     assert math.isclose(runs(d)[0][1, 0], 9)
+
+
+def test_unknown_xml_encoding_is_a_named_error() -> None:
+    # found by the byte-mutation fuzz: expat raised a bare LookupError
+    with pytest.raises(InputError, match="cannot decode the file: unknown encoding"):
+        read_svg(b'<?xml version="1.0" encoding="TTF-8"?><svg/>')

@@ -84,6 +84,8 @@ def parse_xml(data: bytes, file: str) -> Node:
     except xml.parsers.expat.ExpatError as e:
         raise InputError(f"malformed XML: {xml.parsers.expat.ErrorString(e.code)} "
                          f"(line {e.lineno}, column {e.offset + 1})", file, e.lineno) from e
+    except (LookupError, UnicodeError) as e:  # an XML declaration naming an unknown encoding
+        raise InputError(f"cannot decode the file: {e}", file) from e
     if not root:
         raise InputError("no XML root element", file)
     return root[0]
