@@ -179,7 +179,7 @@ JOB_OPTIONS: tuple[Option, ...] = (
            help="Largest deviation of the drawn path, mm (default: the profile's)."),
     Option("origin_mm", "--origin", "origin", "xy", unit="mm", metavar="X,Y",
            help="Put the drawing's origin (SVG: page bottom-left) at machine X,Y mm "
-           "(default: centred in the largest safe rectangle)."),
+           "(default: SVG centred in the largest safe rectangle; G-code at its own coordinates)."),
     Option("scale", "--scale", "scale", "float", lo=0.0, lo_open=True,
            help="Scale factor (default 1)."),
     Option("rotate_deg", "--rotate", "rotate", "float", unit="degrees", default=0.0,

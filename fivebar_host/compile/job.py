@@ -54,6 +54,7 @@ from fivebar_host.compile.timing import plan_timing
 from fivebar_host.compile.travel import plan_travel
 from fivebar_host.config import Profile
 from fivebar_host.errors import InputError, JobError, OptionError, Where
+from fivebar_host.toolpath import layout
 from fivebar_host.toolpath.gcode import read_gcode
 from fivebar_host.toolpath.geometry import Drawing
 from fivebar_host.toolpath.svg import read_svg
@@ -143,10 +144,12 @@ def compile_drawing(drawing: Drawing, profile: Profile, opts: CompileOptions) ->
 def _compile_with_mode_changes(drawing: Drawing, profile: Profile,
                                opts: CompileOptions) -> Job:
     """`--mode auto`'s second try: working modes per path with pen-up changes. With
-    `--origin` the placement does not depend on the mode; otherwise the placements of the
+    `--origin` (or a G-code file at its own coordinates) the placement does not depend on
+    the mode; otherwise the placements of the
     modes are tried in `AUTO_ORDER` (centred in, or fitted to, that mode's safe rectangle)
     and the first that can be planned wins. Raises the first mode's `JobError` if none can."""
-    placements = AUTO_ORDER[:1] if opts.origin_mm is not None else AUTO_ORDER
+    fixed = layout.keeps_own_coordinates(drawing, opts.origin_mm, opts.fit)
+    placements = AUTO_ORDER[:1] if opts.origin_mm is not None or fixed else AUTO_ORDER
     errors: list[JobError] = []
     for m in placements:
         try:
