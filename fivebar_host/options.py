@@ -197,6 +197,9 @@ JOB_OPTIONS: tuple[Option, ...] = (
     Option("confirm", "--yes", "confirm", "bool", default=False, cli=False,
            help="Answer yes if the daemon must ask whether the arms are at the home pose "
            "(first job after power-up)."),
+    Option("no_simplify", "--no-simplify", "no_simplify", "bool", default=False,
+           help="Keep every vertex of densely sampled straight-line input (default: runs of "
+           "lines are simplified within half the tolerance, the drawn path still within it)."),
 )
 BY_NAME: dict[str, Option] = {o.name: o for o in JOB_OPTIONS}
 BY_QUERY: dict[str, Option] = {o.query: o for o in JOB_OPTIONS}

@@ -14,10 +14,13 @@
     the requested curves.
 
 Tolerance budget (one `tol`, default from the profile): a curve is flattened so every chord is
-within tol_f = tol/2 of it; each chord is refined so the joint-interpolated pen path stays
-within tol_i of the chord: tol_i = tol − tol_f for chords of curves, tol for straight input
-lines (nothing was flattened), tol − gap/2 for the short pen-down bridge that joins two paths
-whose ends are closer than tol. By the triangle inequality every pen point is within tol of
+within tol_f = tol/2 of it; runs of straight input lines (dense polylines) are simplified so
+every chord is within ε = tol_f of the lines it replaces and they of it
+(`toolpath.simplify`, off with `--no-simplify`); each chord is refined so the
+joint-interpolated pen path stays within tol_i of the chord: tol_i = tol − tol_f for chords
+of curves and for chords that replace several lines, tol for a single straight input line
+(exact), tol − gap/2 for the short pen-down bridge that joins two paths whose ends are
+closer than tol. By the triangle inequality every pen point is within tol of
 the requested path; rounding to whole steps adds at most one step quantum (reported).
 
 `_compile_mode` runs the stages in order; each hands its result on as a frozen dataclass:
@@ -92,7 +95,7 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
     su = setup(profile, opts, mode)
     placed = place(su, drawing, opts)
     home = find_home(su, drawing.file)
-    routed = route(su, placed, home, opts.keep_order, plan_modes)
+    routed = route(su, placed, home, opts.keep_order, plan_modes, not opts.no_simplify)
     solved = solve(su, placed, routed)
     tr = plan_travel(su, placed, home, routed, solved, plan_modes)
     segments = assemble(placed, home, routed, solved, tr)
