@@ -11,8 +11,14 @@ against segment count and measured deviation.
    fivebar_text.svg, fitted to the safe rectangle): segments produced and the max deviation
    measured with 16 samples per segment, on the ideal joint targets (the tolerance bound) and
    on the quantised steps (tolerance + one step quantum).
+3. Dense input: the text example's curves sampled every 0.05 mm into straight lines (what
+   `vpype read -q 0.05mm` writes), once as SVG polylines and once as G-code G1 moves at the
+   machine coordinates the SVG was drawn at (what vpype-gcode writes): planned plot time
+   and segments against the source curves, with the line simplification off
+   (`--no-simplify`) and on (`toolpath.simplify`), and the validated max deviation from the
+   original dense lines. Target: the dense copy within ~10 % of the source's plan time.
 
-Run: python benchmarks/pipeline.py [--repeat 3] [--paths 10000]
+Run: python benchmarks/pipeline.py [--repeat 3] [--paths 10000] [--dense-only]
 """
 
 from __future__ import annotations
@@ -31,8 +37,16 @@ import numpy as np
 # shadow the `kinematics` package: drop the folder before importing the project.
 _HERE = Path(__file__).resolve().parent
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
-from fivebar_host.compile import CompileOptions, compile_job, deviations, validate  # noqa: E402
-from fivebar_host.config import load_profile  # noqa: E402
+from fivebar_host.compile import (  # noqa: E402
+    CompileOptions,
+    compile_job,
+    deviations,
+    read_drawing,
+    validate,
+)
+from fivebar_host.config import Profile, load_profile  # noqa: E402
+from fivebar_host.toolpath.geometry import Drawing, evaluate  # noqa: E402
+from kinematics.arrays import FloatArray  # noqa: E402
 
 ROOT = _HERE.parent
 
@@ -62,12 +76,85 @@ def make_svg(n_paths: int = 10_000, segs: int = 10, seed: int = 0, w: float = 80
     return "\n".join(out)
 
 
+def dense_points(drawing: Drawing, step_mm: float) -> list[FloatArray]:
+    """Every stroke of `drawing` sampled at most `step_mm` apart along its curves (the
+    points lie on the curves, as a resampling tool writes them), in the drawing frame."""
+    out = []
+    for s in range(drawing.n_strokes):
+        pieces = []
+        for i in np.flatnonzero(drawing.stroke == s):
+            k, p = drawing.kind[i:i + 1], drawing.params[i:i + 1]
+            probe = evaluate(np.repeat(k, 257), np.repeat(p, 257, 0), np.linspace(0, 1, 257))
+            n = max(1, int(np.ceil(np.hypot(*np.diff(probe, axis=0).T).sum() / step_mm)))
+            q = evaluate(np.repeat(k, n + 1), np.repeat(p, n + 1, 0), np.linspace(0, 1, n + 1))
+            pieces.append(q if not pieces else q[1:])
+        out.append(np.concatenate(pieces))
+    return out
+
+
+def dense_svg(drawing: Drawing, polylines: list[FloatArray]) -> str:
+    """The polylines as an SVG page of the drawing's size (page frame: y down)."""
+    assert drawing.page_size_mm is not None
+    w, h = drawing.page_size_mm
+    out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}mm" height="{h}mm" '
+           f'viewBox="0 0 {w} {h}">']
+    for q in polylines:
+        f = drawing.to_file_frame(q)
+        pts = " ".join(f"{x:.4f},{y:.4f}" for x, y in f)
+        out.append(f'<polyline points="{pts}" stroke="black" fill="none"/>')
+    return "\n".join([*out, "</svg>"])
+
+
+def dense_gcode(polylines: list[FloatArray]) -> str:
+    """The polylines as pen-plotter G-code (G0 to each start, G1 along it), coordinates as
+    given (machine mm: drawn where it says)."""
+    out = ["G21", "G90"]
+    for q in polylines:
+        out.append(f"G0 X{q[0, 0]:.4f} Y{q[0, 1]:.4f}")
+        out += [f"G1 X{x:.4f} Y{y:.4f}" for x, y in q[1:]]
+    return "\n".join(out) + "\n"
+
+
+def dense_section(prof: Profile, tmp: Path, step_mm: float = 0.05) -> None:
+    """Section 3 of the module doc: plan time of dense copies vs the source curves."""
+    text = ROOT / "examples" / "fivebar_text.svg"
+    src = compile_job(text, prof)
+    d = read_drawing(text)
+    lines = dense_points(d, step_mm)
+    svg = tmp / "dense.svg"
+    svg.write_text(dense_svg(d, lines))
+    gc = tmp / "dense.gcode"
+    gc.write_text(dense_gcode([src.placement.to_machine(q) for q in lines]))
+    n_lines = sum(q.shape[0] - 1 for q in lines)
+    print(f"dense input ({text.name}, {d.kind.shape[0]} curves; dense copies: {n_lines} "
+          f"lines {step_mm:g} mm long; default placement, tolerance {src.tolerance_mm:g} mm):")
+    print(f"  {'input':<34} {'plan s':>7} {'vs src':>7} {'segments':>9} {'max dev':>8} "
+          f"{'bound':>7} {'compile s':>9}")
+    rows = [("source curves (SVG)", text, False), ("SVG polylines, --no-simplify", svg, True),
+            ("SVG polylines, simplified", svg, False),
+            ("G-code G1 moves, --no-simplify", gc, True),
+            ("G-code G1 moves, simplified", gc, False)]
+    for name, path, off in rows:
+        t0 = time.perf_counter()
+        j = compile_job(path, prof, CompileOptions(no_simplify=off))
+        dt = time.perf_counter() - t0
+        bound = j.tolerance_mm + j.step_quantum_mm
+        print(f"  {name:<34} {j.total_time_s:>7.2f} {j.total_time_s / src.total_time_s:>6.0%} "
+              f"{j.n_segments:>9d} {j.max_dev_mm:>8.4f} {bound:>7.4f} {dt:>9.3f}"
+              f"  {'ok' if j.max_dev_mm <= bound else 'EXCEEDED'}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--paths", type=int, default=10_000)
+    ap.add_argument("--dense-only", action="store_true", help="only section 3 (dense input)")
     args = ap.parse_args()
     prof = load_profile()
+    if args.dense_only:
+        with tempfile.TemporaryDirectory() as tmp:
+            dense_section(prof, Path(tmp))
+        return
     with tempfile.TemporaryDirectory() as tmp:
         svg = Path(tmp) / "big.svg"
         svg.write_text(make_svg(args.paths))
@@ -116,6 +203,9 @@ def main() -> None:
         print(f"  {tol:>7g} {j.n_segments:>9d} {int(j.draw.sum()):>8d} {ideal.max():>10.4f} "
               f"{quant.max():>14.4f} {j.step_quantum_mm:>8.4f} "
               f"{tol + j.step_quantum_mm:>8.4f} {dt:>9.3f}  {'ok' if ok else 'EXCEEDED'}")
+    print()
+    with tempfile.TemporaryDirectory() as tmp:
+        dense_section(prof, Path(tmp))
 
 
 if __name__ == "__main__":

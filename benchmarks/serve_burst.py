@@ -36,7 +36,7 @@ from fivebar_host.server.daemon import Daemon, ServeConfig  # noqa: E402
 from fivebar_host.server.security import MAX_UPLOADS, is_loopback  # noqa: E402
 
 #: A small drawing in reach of the default profile (a 5 mm L: 33 segments).
-SMALL_GCODE = b"G21\nG90\nG0 X0 Y0\nG1 X5 Y0\nG1 X5 Y5\n"
+SMALL_GCODE = b"G21\nG90\nG0 X10 Y100\nG1 X15 Y100\nG1 X15 Y105\n"  # machine mm
 
 
 @dataclass(frozen=True)

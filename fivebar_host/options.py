@@ -274,8 +274,8 @@ JOB_OPTIONS: tuple[Option, ...] = (
            "(default: the profile's)."),
     Option("origin_mm", "--origin", "origin", "xy", unit="mm", metavar="X,Y",
            help="Put the drawing's origin (SVG: page bottom-left) at machine X,Y: mm, or "
-           "with units (1in,4in; mm, cm, in, pt, px) (default: centred in the largest safe "
-           "rectangle)."),
+           "with units (1in,4in; mm, cm, in, pt, px) (default: SVG centred in the largest safe "
+           "rectangle; G-code at its own coordinates)."),
     Option("scale", "--scale", "scale", "float", lo=0.0, lo_open=True, percent=True,
            help="Scale factor or percentage: 0.5 or 50% (default 1)."),
     Option("rotate_deg", "--rotate", "rotate", "float", unit="degrees", default=0.0,
@@ -305,6 +305,9 @@ JOB_OPTIONS: tuple[Option, ...] = (
     Option("confirm", "--yes", "confirm", "bool", default=False, cli=False,
            help="Answer yes if the daemon must ask whether the arms are at the home pose "
            "(first job after power-up)."),
+    Option("no_simplify", "--no-simplify", "no_simplify", "bool", default=False,
+           help="Keep every vertex of densely sampled straight-line input (default: runs of "
+           "lines are simplified within half the tolerance, the drawn path still within it)."),
 )
 BY_NAME: dict[str, Option] = {o.name: o for o in JOB_OPTIONS}
 BY_QUERY: dict[str, Option] = {o.query: o for o in JOB_OPTIONS}

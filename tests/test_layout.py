@@ -4,6 +4,7 @@ largest singularity-safe rectangle of the working mode; bad combinations are ref
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -64,3 +65,39 @@ def test_fit_fills_the_rectangle() -> None:
 def test_bad_combinations(kw: dict[str, object], msg: str) -> None:
     with pytest.raises(ValueError, match=msg):
         place(read_svg(SVG), *ARGS, **kw)  # type: ignore[arg-type]
+
+
+# --------------------------------------------------------------------- G-code placement
+GCODE_SQUARE = b"G21 G90\nG0 X5 Y95\nG1 X35 Y95\nG1 X35 Y125\nG1 X5 Y125\nG1 X5 Y95\n"
+
+
+def test_gcode_is_drawn_at_its_own_coordinates_by_default() -> None:
+    from fivebar_host.toolpath.gcode import read_gcode
+    d = read_gcode(GCODE_SQUARE, "sq.gcode")
+    pl = place(d, *ARGS)
+    assert pl.how == "as written" and pl.area is None
+    assert np.allclose(pl.to_machine(np.array([[5.0, 95.0], [35.0, 125.0]])),
+                       [[5.0, 95.0], [35.0, 125.0]])
+    # --fit and --origin still place it elsewhere
+    assert place(d, *ARGS, fit=True).how == "fit"
+    po = place(d, *ARGS, origin_mm=(1.0, 2.0))
+    assert np.allclose(po.to_machine(np.array([[5.0, 95.0]])), [[6.0, 97.0]])
+    # an SVG is still centred
+    assert place(read_svg(SVG), *ARGS).how == "centred"
+
+
+def test_gcode_out_of_reach_is_refused_naming_point_line_and_remedy(tmp_path: Path) -> None:
+    from fivebar_host.compile import CompileOptions, compile_job
+    from fivebar_host.errors import FivebarError, JobError
+    f = tmp_path / "corner.gcode"
+    f.write_bytes(b"G21 G90\nG0 X0 Y0\nG1 X5 Y0\nG1 X5 Y5\n")
+    with pytest.raises(JobError) as ei:
+        compile_job(f, PROF)
+    msg = str(ei.value)
+    assert isinstance(ei.value, FivebarError)
+    assert "corner.gcode:3" in msg and "machine (0.000, 0.000) mm" in msg
+    assert "drawn at its own coordinates" in msg and "use --fit or --origin" in msg
+    job = compile_job(f, PROF, CompileOptions(fit=True))
+    assert job.placement.how == "fit" and job.max_dev_mm <= job.tolerance_mm + job.step_quantum_mm
+    job = compile_job(f, PROF, CompileOptions(origin_mm=(10.0, 100.0)))
+    assert job.placement.how == "origin"

@@ -26,7 +26,7 @@ from fivebar_host.options import JOB_OPTIONS
 from fivebar_host.server.daemon import Daemon
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
-SMALL_GCODE = b"G21\nG90\nG0 X0 Y0\nG1 X5 Y0\nG1 X5 Y5\n"
+SMALL_GCODE = b"G21\nG90\nG0 X10 Y100\nG1 X15 Y100\nG1 X15 Y105\n"  # machine mm
 FUZZ_EXAMPLES = int(os.environ.get("FIVEBAR_FUZZ_EXAMPLES", "500"))
 HUGE = "9" * 26  # the id of the bug report: beyond SQLite's INTEGER
 

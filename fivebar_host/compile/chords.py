@@ -6,6 +6,11 @@ where that shortens the travel, and consecutive paths whose gap is below the tol
 whose settings match are joined by a short pen-down bridge. Each chord's interpolation budget
 tol_i follows the tolerance budget in `fivebar_host.compile.job`: tol − tol_f for chords of
 curves, tol for straight input lines, tol − gap/2 for a bridge.
+
+Before that, runs of straight input lines are simplified (`toolpath.simplify`, unless
+switched off with `--no-simplify`): a chord that replaces several input lines is within
+ε = tol_f of them, so its budget is tol − ε, and it records the range of primitives it
+covers (`prim_first` … `prim`) so validation measures against the original lines.
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ import numpy as np
 
 from fivebar_host.toolpath import order
 from fivebar_host.toolpath.geometry import LINE, Drawing, Polylines
+from fivebar_host.toolpath.simplify import simplify_polylines
 from kinematics.arrays import BoolArray, FloatArray, IntArray
 
 
@@ -28,6 +34,7 @@ class _Chords:
     vert_prim: IntArray  # (M,) primitive the vertex lies on (for messages)
     chord_from: IntArray  # (C,) vertex index a of chord a → a+1
     prim: IntArray  # (C,) primitive, −1 for a join bridge
+    prim_first: IntArray  # (C,) first primitive covered (< prim: simplified run of lines)
     tlo: FloatArray
     thi: FloatArray
     rev: BoolArray
@@ -40,11 +47,15 @@ class _Chords:
     joined: int
     travel_before: float
     travel_after: float
+    simplified: int = 0  # input vertices removed by the simplification
 
 
 def _prepare_chords(drawing: Drawing, poly: Polylines, tol: float, tol_f: float,
-                    start: FloatArray, keep_order: bool) -> _Chords:
-    """Order, reverse and join the flattened strokes; per-chord provenance and budgets."""
+                    start: FloatArray, keep_order: bool, simplify: bool = True) -> _Chords:
+    """Simplify runs of lines (ε = tol_f), order, reverse and join the flattened strokes;
+    per-chord provenance and budgets."""
+    simp = simplify_polylines(poly, drawing.kind, tol_f if simplify else 0.0)
+    poly = simp.poly
     pts0 = poly.points
     offs = poly.offsets
     npath = offs.shape[0] - 1
@@ -67,6 +78,7 @@ def _prepare_chords(drawing: Drawing, poly: Polylines, tol: float, tol_f: float,
     nxt = np.minimum(np.arange(m) + 1, m - 1)
     owner = np.where(revv, idx, idx[nxt])
     c_prim = poly.prim[owner]
+    c_first = simp.prim_first[owner]
     c_tlo = poly.t0[owner]
     c_thi = poly.t[owner]
     is_end = np.zeros(m, dtype=bool)
@@ -87,6 +99,8 @@ def _prepare_chords(drawing: Drawing, poly: Polylines, tol: float, tol_f: float,
     bridge_tol[bridge_at] = tol - gap[join] / 2
     c_prim = c_prim.copy()
     c_prim[bridge_at] = -1
+    c_first = c_first.copy()
+    c_first[bridge_at] = -1
     keep_path = np.concatenate(([True], ~join))
     new_path_of_old = np.cumsum(keep_path) - 1
     joined_offs = np.concatenate((new_offs[:-1][keep_path], [m])).astype(np.int64)
@@ -96,13 +110,15 @@ def _prepare_chords(drawing: Drawing, poly: Polylines, tol: float, tol_f: float,
     is_line = np.zeros(chord_from.shape[0], dtype=bool)
     cp = c_prim[chord_from]
     is_line[cp >= 0] = kind[cp[cp >= 0]] == LINE
-    tol_i = np.where(is_line, tol, tol - tol_f)
+    cf = c_first[chord_from]
+    tol_i = np.where(is_line, np.where(cf < cp, tol - tol_f, tol), tol - tol_f)
     bt = bridge_tol[chord_from]
     tol_i = np.where(np.isnan(bt), tol_i, bt)
     return _Chords(pts=pts, offsets=joined_offs, vert_prim=poly.prim[idx],
-                   chord_from=chord_from, prim=cp, tlo=c_tlo[chord_from],
+                   chord_from=chord_from, prim=cp, prim_first=cf, tlo=c_tlo[chord_from],
                    thi=c_thi[chord_from], rev=revv[chord_from], tol_i=tol_i,
                    path_of_chord=new_path_of_old[path_idx[chord_from]],
                    path_source=source[keep_path], path_reversed=od.reverse[keep_path],
                    power=power[keep_path], feed=feed[keep_path], joined=int(join.sum()),
-                   travel_before=od.travel_before_mm, travel_after=od.travel_after_mm)
+                   travel_before=od.travel_before_mm, travel_after=od.travel_after_mm,
+                   simplified=simp.removed)

@@ -14,10 +14,13 @@
     the requested curves.
 
 Tolerance budget (one `tol`, default from the profile): a curve is flattened so every chord is
-within tol_f = tol/2 of it; each chord is refined so the joint-interpolated pen path stays
-within tol_i of the chord: tol_i = tol − tol_f for chords of curves, tol for straight input
-lines (nothing was flattened), tol − gap/2 for the short pen-down bridge that joins two paths
-whose ends are closer than tol. By the triangle inequality every pen point is within tol of
+within tol_f = tol/2 of it; runs of straight input lines (dense polylines) are simplified so
+every chord is within ε = tol_f of the lines it replaces and they of it
+(`toolpath.simplify`, off with `--no-simplify`); each chord is refined so the
+joint-interpolated pen path stays within tol_i of the chord: tol_i = tol − tol_f for chords
+of curves and for chords that replace several lines, tol for a single straight input line
+(exact), tol − gap/2 for the short pen-down bridge that joins two paths whose ends are
+closer than tol. By the triangle inequality every pen point is within tol of
 the requested path; rounding to whole steps adds at most one step quantum (reported).
 
 `_compile_mode` runs the stages in order; each hands its result on as a frozen dataclass:
@@ -54,6 +57,7 @@ from fivebar_host.compile.timing import plan_timing
 from fivebar_host.compile.travel import plan_travel
 from fivebar_host.config import Profile
 from fivebar_host.errors import InputError, JobError, OptionError, Where
+from fivebar_host.toolpath import layout
 from fivebar_host.toolpath.gcode import read_gcode
 from fivebar_host.toolpath.geometry import Drawing
 from fivebar_host.toolpath.svg import read_svg
@@ -91,7 +95,7 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
     su = setup(profile, opts, mode)
     placed = place(su, drawing, opts)
     home = find_home(su, drawing.file)
-    routed = route(su, placed, home, opts.keep_order, plan_modes)
+    routed = route(su, placed, home, opts.keep_order, plan_modes, not opts.no_simplify)
     solved = solve(su, placed, routed)
     tr = plan_travel(su, placed, home, routed, solved, plan_modes)
     segments = assemble(placed, home, routed, solved, tr)
@@ -154,10 +158,12 @@ def compile_drawing(drawing: Drawing, profile: Profile, opts: CompileOptions) ->
 def _compile_with_mode_changes(drawing: Drawing, profile: Profile,
                                opts: CompileOptions) -> Job:
     """`--mode auto`'s second try: working modes per path with pen-up changes. With
-    `--origin` the placement does not depend on the mode; otherwise the placements of the
+    `--origin` (or a G-code file at its own coordinates) the placement does not depend on
+    the mode; otherwise the placements of the
     modes are tried in `AUTO_ORDER` (centred in, or fitted to, that mode's safe rectangle)
     and the first that can be planned wins. Raises the first mode's `JobError` if none can."""
-    placements = AUTO_ORDER[:1] if opts.origin_mm is not None else AUTO_ORDER
+    fixed = layout.keeps_own_coordinates(drawing, opts.origin_mm, opts.fit)
+    placements = AUTO_ORDER[:1] if opts.origin_mm is not None or fixed else AUTO_ORDER
     errors: list[JobError] = []
     for m in placements:
         try:

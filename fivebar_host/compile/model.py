@@ -44,6 +44,7 @@ class CompileOptions:
     accel_fraction: float | None = None  # share (0, 1] of [motion] max_joint_rad_s2
     validate: bool = True
     validation_samples: int = 4
+    no_simplify: bool = False  # keep every vertex of dense straight-line input
 
 
 @dataclass(frozen=True)
@@ -127,6 +128,9 @@ class Job:
     notes: list[str] = field(default_factory=list)
     # validation data (requested geometry of each draw segment)
     seg_prim: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))
+    #: first primitive each draw segment's chord covers (< seg_prim: a simplified run of
+    #: input lines, measured against all of them); empty: one primitive per segment
+    seg_prim_first: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))
     seg_tlo: FloatArray = field(default_factory=lambda: np.zeros(0))
     seg_thi: FloatArray = field(default_factory=lambda: np.zeros(0))
     seg_rev: BoolArray = field(default_factory=lambda: np.zeros(0, bool))

@@ -155,7 +155,8 @@ def _break_paths(ch: _Chords, brk_chord: IntArray, brk_frac: FloatArray) -> _Cho
                            ins_pos, ch.path_of_chord[bc][rep])
     po = old_path_v[offsets[:-1]]
     return replace(ch, pts=pts, offsets=offsets, vert_prim=vert_prim, chord_from=cf,
-                   prim=ch.prim[c], tlo=tlo, thi=thi, rev=rev, tol_i=ch.tol_i[c],
+                   prim=ch.prim[c], prim_first=ch.prim_first[c], tlo=tlo, thi=thi, rev=rev,
+                   tol_i=ch.tol_i[c],
                    path_of_chord=np.searchsorted(offsets, cf, side="right") - 1,
                    path_source=ch.path_source[po], path_reversed=ch.path_reversed[po],
                    power=ch.power[po], feed=ch.feed[po])

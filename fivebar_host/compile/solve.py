@@ -56,10 +56,11 @@ class Solved:
 
 
 def route(su: Setup, placed: Placed, home: Home, keep_order: bool,
-          plan_modes: bool) -> Routed:
+          plan_modes: bool, simplify: bool = True) -> Routed:
     """Order and join the paths from the homed pen position; without `plan_modes` every path
     is drawn in `su.mode`, with it the modes (and changes) come from `_plan_modes`."""
-    ch = _prepare_chords(placed.drawing, placed.poly, su.tol, su.tol_f, home.pt, keep_order)
+    ch = _prepare_chords(placed.drawing, placed.poly, su.tol, su.tol_f, home.pt, keep_order,
+                         simplify)
     changes: dict[int, FloatArray] = {}
     if plan_modes:
         first = ch

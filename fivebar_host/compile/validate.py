@@ -18,6 +18,7 @@ from fivebar_host import steps
 from fivebar_host.compile.model import Job
 from fivebar_host.config import Profile
 from fivebar_host.toolpath.geometry import nearest_distance
+from fivebar_host.toolpath.simplify import segment_distance
 from kinematics.arrays import BoolArray, FloatArray, IntArray
 
 
@@ -66,10 +67,27 @@ def distance_to_request(job: Job, e: FloatArray, rank: IntArray, s: FloatArray) 
     if real.any():
         dist[real] = nearest_distance(job.drawing.kind[prim[real]],
                                       job.drawing.params[prim[real]], e[real], tg[real])
+    if job.seg_prim_first.shape == job.seg_prim.shape:
+        first = job.seg_prim_first[rank]
+        run = real & (first < prim)
+        if run.any():
+            dist[run] = _distance_to_lines(job, e[run], first[run], prim[run])
     if (~real).any():
         ca, cb = job.seg_ca[rank[~real]], job.seg_cb[rank[~real]]
         dist[~real] = np.minimum(np.hypot(*(e[~real] - ca).T), np.hypot(*(e[~real] - cb).T))
     return dist
+
+
+def _distance_to_lines(job: Job, e: FloatArray, first: IntArray, last: IntArray) -> FloatArray:
+    """Distance of each point e[i] to the nearest of the input lines first[i] … last[i] (a
+    simplified run, `toolpath.simplify`): exact, by projection onto every line of the run."""
+    span = last - first + 1
+    row = np.repeat(np.arange(e.shape[0]), span)
+    start = np.cumsum(span) - span
+    prim = first[row] + (np.arange(row.shape[0]) - start[row])
+    p = job.drawing.params[prim]
+    d = segment_distance(e[row], p[:, 0:2], p[:, 2:4])
+    return np.asarray(np.minimum.reduceat(d, start), dtype=np.float64)
 
 
 #: Most poses the n-bar second opinion follows (continuation is ~25 µs per pose).

@@ -5,10 +5,15 @@ the machine frame (mm, motor M1 at the origin) by a similarity x ↦ s·R(φ)·x
 
 - `--origin X,Y`: the drawing's origin lands at machine (X, Y) (scale and rotation about the
   drawing origin). The per-point checks then decide whether it can be drawn.
-- default: the drawing's bounding box (after rotation and scale) is centred in the largest
-  singularity-safe rectangle of the drawing's aspect in the working mode and the machine's
-  assembly mode (`kinematics.workspace.find_page_rectangle`).
-- `--fit`: as the default, and scaled so the box fills that rectangle.
+- default for a G-code file: its own coordinates are machine coordinates (origin at machine
+  (0, 0), how = "as written"), as a CNC or laser controller runs it. A G-code file is written
+  for a machine frame, so moving it silently would draw somewhere else than the file says;
+  points out of reach are refused by the per-point checks, with a hint to use --fit or
+  --origin.
+- default for an SVG (or any page drawing): the drawing's bounding box (after rotation and
+  scale) is centred in the largest singularity-safe rectangle of the drawing's aspect in the
+  working mode and the machine's assembly mode (`kinematics.workspace.find_page_rectangle`).
+- `--fit`: centred, and scaled so the box fills that rectangle.
 
 `does_not_fit_hint` words the "drawing is W × H mm, the safe area is w × h mm" message used
 when a placed drawing is refused.
@@ -39,7 +44,7 @@ class Placement:
     drawing_bbox: tuple[float, float, float, float]  # drawing frame, unscaled, unrotated
     machine_bbox: tuple[float, float, float, float]
     area: Rect | None  # the safe rectangle used for centring/fitting (None with --origin)
-    how: str  # "origin", "centred", "fit"
+    how: str  # "origin", "as written" (G-code default), "centred", "fit"
 
     def to_machine(self, pts: FloatArray) -> FloatArray:
         return np.asarray(pts, dtype=np.float64) @ self.matrix.T + self.offset
@@ -52,6 +57,23 @@ class Placement:
     def size_mm(self) -> tuple[float, float]:
         x0, y0, x1, y1 = self.machine_bbox
         return x1 - x0, y1 - y0
+
+
+#: `Placement.how` of a G-code file drawn at its own coordinates (no --origin, no --fit).
+AS_WRITTEN = "as written"
+
+
+def is_machine_coordinates(drawing: Drawing) -> bool:
+    """Whether the drawing comes from a G-code file (every source a G-code cutting run): its
+    coordinates are meant as machine coordinates, so the default placement keeps them."""
+    return bool(drawing.sources) and all(s.tag == "gcode" for s in drawing.sources)
+
+
+def keeps_own_coordinates(drawing: Drawing, origin_mm: tuple[float, float] | None,
+                          fit: bool) -> bool:
+    """Whether `place` draws `drawing` at its own coordinates: a G-code file without --origin
+    and --fit (the placement then does not depend on the working mode)."""
+    return origin_mm is None and not fit and is_machine_coordinates(drawing)
 
 
 def safe_area(fb: FiveBar, mode: str, min_type1_rad: float, min_type2_rad: float,
@@ -88,10 +110,11 @@ def place(drawing: Drawing, fb: FiveBar, mode: str, min_type1_rad: float,
     rbox = bbox(drawing.transformed(rot, np.zeros(2))) if rotate_deg % 360.0 else dbox
     bw, bh = rbox[2] - rbox[0], rbox[3] - rbox[1]
     s = 1.0 if scale is None else float(scale)
-    if origin_mm is not None:
+    if origin_mm is not None or keeps_own_coordinates(drawing, origin_mm, fit):
         a = s * rot
-        b = np.asarray(origin_mm, dtype=np.float64)
-        return _finish(a, b, s, rotate_deg, dbox, rbox, None, "origin")
+        b = np.asarray(origin_mm if origin_mm is not None else (0.0, 0.0), dtype=np.float64)
+        return _finish(a, b, s, rotate_deg, dbox, rbox, None,
+                       "origin" if origin_mm is not None else AS_WRITTEN)
     big = max(bw, bh)
     eps = max(big * 1e-3, 1e-6)
     aspect = max(bw, eps) / max(bh, eps)
@@ -129,6 +152,12 @@ def does_not_fit_hint(pl: Placement, fb: FiveBar, mode: str, min_type1_rad: floa
                    max(w, eps) / max(h, eps), assembly)
     anyshape = safe_area(fb, mode, min_type1_rad, min_type2_rad, limits_rad, None, assembly)
     msg = f"the drawing is {w:.1f} × {h:.1f} mm"
+    if pl.how == AS_WRITTEN:
+        x0, y0, x1, y1 = pl.machine_bbox
+        msg = (f"a G-code file is drawn at its own coordinates ({x0:.1f}…{x1:.1f}, "
+               f"{y0:.1f}…{y1:.1f} mm in the machine frame, motor M1 at (0, 0)): out of reach "
+               "or too close to a singularity there; use --fit or --origin X,Y to place it; "
+               + msg)
     if pf is None or anyshape is None:
         return msg + f"; working mode {mode} has no safe area" + (
             "" if assembly is None else f" in assembly {assembly}")
@@ -141,4 +170,9 @@ def does_not_fit_hint(pl: Placement, fb: FiveBar, mode: str, min_type1_rad: floa
         msg += f"; try --fit or --scale {math.floor(ratio * pl.scale * 100) / 100:g}"
     elif pl.how == "origin":
         msg += "; the drawing would fit: drop --origin to centre it there"
+    elif pl.how == AS_WRITTEN:
+        mb = pl.machine_bbox
+        ox = r.center[0] - (mb[0] + mb[2]) / 2 + pl.offset[0]
+        oy = r.center[1] - (mb[1] + mb[3]) / 2 + pl.offset[1]
+        msg += f"; the drawing would fit: --origin {ox:.1f},{oy:.1f} centres it there"
     return msg
