@@ -77,7 +77,7 @@ def test_vpype_plot_on_the_mock_streams_every_segment(plugin_path: Path,
     job = next(ln for ln in r.stdout.splitlines() if ln.startswith("job: "))
     done = next(ln for ln in r.stdout.splitlines() if ln.startswith("done: "))
     n = int(job.split()[1])
-    assert done.startswith(f"done: {n} segments") and "machine at A = 0, B = 0" in done
+    assert done.startswith(f"done: {n} segments") and "machine at A = 0 steps, B = 0 steps" in done
 
 
 def test_vpype_plot_refusal_names_the_reason(plugin_path: Path, tmp_path: Path) -> None:
