@@ -7,7 +7,7 @@ Only this package imports click. One module per command group (vpype's library/C
 calls pure functions, and turns fivebar's errors into one line and a non-zero exit.
 """
 
-from fivebar_host.cli import design, machine, plot, pose, serve  # noqa: F401  (commands)
+from fivebar_host.cli import bridge, design, machine, plot, pose, serve  # noqa: F401  (commands)
 from fivebar_host.cli.common import main
 
 __all__ = ["main"]
