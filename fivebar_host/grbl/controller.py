@@ -71,6 +71,9 @@ class Bridge:
         self.settings = views.Settings()
         if laser:
             self.settings.values[32] = 1
+        for n in (110, 111, 112):  # max rates: the profile's pen-up travel feed, mm/min
+            self.settings.values[n] = round(profile.motion.travel_feed_mm_s * 60.0, 3)
+        self.default_settings = dict(self.settings.values)
         self.view = views.StatusView()
         self.ov = Overrides()
         self.input = InputBuffer(self._realtime)
@@ -141,7 +144,7 @@ class Bridge:
     def detach(self, writer: Callable[[bytes], None]) -> None:
         """The sender went away: hold the machine (laser off), forget its partial input."""
         with self._wlock:
-            if self._writer is not writer:
+            if self._writer != writer:  # bound methods compare equal, never identical
                 return
             self._writer = None
         self.input.clear()

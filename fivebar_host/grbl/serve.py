@@ -152,7 +152,7 @@ class Server:
             if e.errno == errno.EIO:
                 return
             raise
-        if data and self.owner is pty.write:
+        if data and self.owner == pty.write:
             self.bridge.input.feed(data)
 
     def _accept(self) -> None:

@@ -94,7 +94,7 @@ def _restore(bridge: Bridge, what: str) -> None:
     if what not in ("$", "#", "*"):
         raise GrblError(codes.INVALID_STATEMENT, f"$RST={what}")
     if what in ("$", "*"):
-        bridge.settings.values = dict(views.DEFAULTS)
+        bridge.settings.values = dict(bridge.default_settings)
     if what in ("#", "*"):
         fresh = ModalState()
         bridge.modal = ModalState(position=bridge.modal.position, g28=bridge.home_point,
