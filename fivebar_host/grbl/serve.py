@@ -62,8 +62,7 @@ class _Pty:
 
     def hung_up(self) -> bool:
         """True while no process has the slave open."""
-        p = select_poll(self.master)
-        return p
+        return select_poll(self.master)
 
     def close(self) -> None:
         with contextlib.suppress(FileNotFoundError):
