@@ -8,7 +8,15 @@ Each command parses units at the edge, calls pure functions, and turns fivebar's
 one line and a non-zero exit.
 """
 
-from fivebar_host.cli import calibrate, design, machine, plot, pose, serve  # noqa: F401
+from fivebar_host.cli import (  # noqa: F401  (commands)
+    bridge,
+    calibrate,
+    design,
+    machine,
+    plot,
+    pose,
+    serve,
+)
 from fivebar_host.cli.common import main
 
 __all__ = ["main"]

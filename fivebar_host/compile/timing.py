@@ -93,8 +93,16 @@ def _cut_ramps(mot: Motors, checker: PoseChecker, sp: Stepped, counts: IntArray,
 
 def plan_timing(su: Setup, routed: Routed, solved: Solved, sp: Stepped) -> Planned:
     """Durations for every segment (module doc: steps 1–4)."""
-    mot, motion = su.profile.motors, su.profile.motion
     power, feed, stop = _settings(su.profile, routed, sp)
+    return time_stepped(su.profile, solved.checker, sp, power, feed, stop)
+
+
+def time_stepped(profile: Profile, checker: PoseChecker, sp: Stepped,
+                 power: NDArray[np.uint8], feed: FloatArray, stop: BoolArray) -> Planned:
+    """Steps 1–4 of the module doc on stepped segments with their laser power, pen feed
+    (mm/s) and stops given per segment (also used by the GRBL bridge's online compiler,
+    `fivebar_host.grbl.online`, on small batches of moves)."""
+    mot, motion = profile.motors, profile.motion
     a_c = PLAN_ACCEL_SHARE * motion.max_joint_rad_s2
     j_lim = planner.JUNCTION_JUMP_RAD_S
     prof_kw = {"junction_jump_rad_s": PLAN_JUMP_SHARE * j_lim,
@@ -106,7 +114,7 @@ def plan_timing(su: Setup, routed: Routed, solved: Solved, sp: Stepped) -> Plann
     counts, f1 = planner.ramp_fractions(pln, np.abs(dq).max(axis=1), a_c,
                                         PLAN_PIECE_JUMP_SHARE * j_lim / a_c,
                                         PLAN_MIN_PIECE_STEPS * mot.rad_per_step)
-    th_all, pts_all, st, seg_of, f0, f1 = _cut_ramps(mot, solved.checker, sp, counts, f1)
+    th_all, pts_all, st, seg_of, f0, f1 = _cut_ramps(mot, checker, sp, counts, f1)
     seg_draw = sp.draw[seg_of]
     power, feed = power[seg_of], feed[seg_of]
     stop = stop[seg_of] & np.concatenate((seg_of[1:] != seg_of[:-1], [True]))

@@ -1,0 +1,494 @@
+"""The GRBL 1.1 controller a sender talks to, in front of a fivebar machine: `Bridge`.
+
+Bytes from the sender (any transport: `fivebar_host.grbl.serve`) go through
+`realtime.InputBuffer`: real-time bytes are acted on at once on the transport's thread
+(`?` answered from the last machine status, `!`, `~`, Ctrl-X, jog cancel, overrides); lines
+wait for the bridge's own thread, which answers each with exactly one `ok` or `error:N`, in
+order, as GRBL does, so a sender's character counting against 128 bytes holds.
+
+A G-code line is parsed (`gcode`), run on a copy of the modal state (`interp`), and its moves
+are solved at once (`online.OnlineCompiler.solve`: reach, joint limits, singularity margins,
+joint-space segmentation). A refused move raises ALARM:2 with a `[MSG:…]` before anything of
+it moves: the machine is stopped (laser off), the look-ahead dropped, every later line gets
+`error:9` until `$X`. Accepted moves wait in the look-ahead buffer until `LOOKAHEAD_MOVES`
+are there, the sender pauses for `FLUSH_IDLE_S`, or something needs them run (dwell, pause,
+end of program, a `$` command); then they are planned as one batch and handed to the
+machine thread (`machine.MachineDriver`).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from fivebar_host.config import Profile
+from fivebar_host.grbl import codes, views
+from fivebar_host.grbl.codes import GrblAlarmError, GrblError
+from fivebar_host.grbl.gcode import parse, preparse
+from fivebar_host.grbl.interp import Dwell, ModalState, Move, ProgramFlow, Vec, execute
+from fivebar_host.grbl.machine import MachineDriver
+from fivebar_host.grbl.online import LOOKAHEAD_MOVES, OnlineCompiler, Solved, dwell_lines
+from fivebar_host.grbl.online import Batch as _Batch
+from fivebar_host.grbl.realtime import (
+    RT_CYCLE_START,
+    RT_HOLD,
+    RT_JOG_CANCEL,
+    RT_RESET,
+    RT_STATUS,
+    InputBuffer,
+    Overrides,
+)
+from fivebar_host.grbl.system import run_system
+from fivebar_host.run.link import Link
+
+FLUSH_IDLE_S = 0.05
+UNLOCK_MSG = "[MSG:'$H'|'$X' to unlock]"
+
+
+@dataclass(frozen=True)
+class PenSync:
+    """The sender changed the pen state (Z, M3/M5) without moving: bring the pen there."""
+
+    down: bool
+
+
+Item = Solved | Dwell | PenSync
+
+
+class Bridge:
+    """GRBL 1.1 in front of the machine behind `link` (module doc)."""
+
+    def __init__(self, link: Link, profile: Profile, *, laser: bool, tolerance_mm: float,
+                 origin_mm: tuple[float, float] = (0.0, 0.0), mode: str | None = None,
+                 log: Callable[[str], None] | None = None) -> None:
+        self.profile = profile
+        self.laser = laser
+        self.log = log or (lambda _: None)
+        self.settings = views.Settings()
+        if laser:
+            self.settings.values[32] = 1
+        for n in (110, 111, 112):  # max rates: the profile's pen-up travel feed, mm/min
+            self.settings.values[n] = round(profile.motion.travel_feed_mm_s * 60.0, 3)
+        self.default_settings = dict(self.settings.values)
+        self.view = views.StatusView()
+        self.ov = Overrides()
+        self.input = InputBuffer(self._realtime)
+        self.machine = MachineDriver(link, self._on_fault)
+        st = self.machine.status
+        mot = profile.motors
+        self.compiler = OnlineCompiler(profile, self._mode(mode), tolerance_mm, laser)
+        home_pt = self.compiler.point_of(np.array(mot.home_rad)) or (0.0, 0.0)
+        self.home_point: Vec = (home_pt[0], home_pt[1], 0.0)
+        self.default_offsets = ((origin_mm[0], origin_mm[1], 0.0),) + ((0.0, 0.0, 0.0),) * 5
+        self.modal = ModalState(offsets=self.default_offsets, g28=self.home_point,
+                                g30=self.home_point)
+        self.th = self.compiler.angles_of_steps(st.a, st.b)
+        self._sync_position()
+        self.pending: list[Item] = []
+        self.plan_th = self.th
+        self.plan_pt = self.modal.position[:2]
+        self.alarm: int | None = None
+        self.locked = not st.homed  # position unknown: GRBL's boot alarm lock
+        self.check_mode = False
+        self.held = False
+        self.homing = False
+        self._writer: Callable[[bytes], None] | None = None
+        self._wlock = threading.Lock()
+        self._reset_req = threading.Event()
+        self._jog_cancel_req = threading.Event()
+        self._stop = threading.Event()
+        self._last_line_at = time.monotonic()
+        self._speed = (time.monotonic(), self.modal.position[:2], 0.0)
+        self.thread = threading.Thread(target=self._loop, name="grbl-bridge", daemon=True)
+
+    def _mode(self, mode: str | None) -> str:
+        """The working mode: the option, else the profile's; "auto": the mode at home."""
+        from fivebar_host.compile.modes import _mode_at
+
+        m = mode or self.profile.kinematics.working_mode
+        if m != "auto":
+            return m
+        fb, mot = self.profile.geometry, self.profile.motors
+        th = np.array(mot.home_rad)
+        pt = fb.forward_batch(th.reshape(1, 2), self.profile.kinematics.assembly).points[0]
+        return _mode_at(fb, th, pt, "+-")
+
+    # ------------------------------------------------------------------ life cycle
+    def start(self) -> None:
+        self.machine.start()
+        self.thread.start()
+
+    def close(self) -> None:
+        self._stop.set()
+        self.input.clear()
+        if self.thread.is_alive():
+            self.thread.join(5.0)
+        self.machine.hold()
+        time.sleep(0.2)
+        self.machine.close()
+
+    def attach(self, writer: Callable[[bytes], None]) -> None:
+        """A sender connected: GRBL's banner (and the unlock hint when locked)."""
+        with self._wlock:
+            self._writer = writer
+        self.view.reset()
+        self.send("")
+        self.send(views.BANNER)
+        if self.alarm is not None or self.locked:
+            self.send(UNLOCK_MSG)
+
+    def detach(self, writer: Callable[[bytes], None]) -> None:
+        """The sender went away: hold the machine (laser off), forget its partial input."""
+        with self._wlock:
+            if self._writer != writer:  # bound methods compare equal, never identical
+                return
+            self._writer = None
+        self.input.clear()
+        if self.grbl_state() not in ("Idle", "Alarm", "Check"):
+            self.held = True
+            self.machine.hold()
+        self.log("sender disconnected: machine held, laser off")
+
+    def send(self, text: str) -> None:
+        with self._wlock:
+            w = self._writer
+            if w is not None:
+                try:
+                    w(text.encode("ascii", "replace") + b"\r\n")
+                except OSError:
+                    self._writer = None
+
+    # ------------------------------------------------------------------ state
+    def grbl_state(self) -> str:
+        if self.alarm is not None or self.locked:
+            return "Alarm"
+        if self.check_mode:
+            return "Check"
+        if self.homing:
+            return "Home"
+        st = self.machine.status
+        if self.held or st.state == "Hold":
+            return "Hold:0"
+        if self.machine.jogging:
+            return "Jog"
+        if (self.pending or self.machine.busy or not self.machine.batches.empty()
+                or st.state == "Run" or st.queued):
+            return "Run"
+        return "Idle"
+
+    def _mpos(self) -> Vec:
+        st = self.machine.status
+        p = self.compiler.point_of(self.compiler.angles_of_steps(st.a, st.b))
+        x, y = p if p is not None else (float("nan"), float("nan"))
+        return (x, y, self.modal.position[2])
+
+    def status_report(self) -> str:
+        mpos = self._mpos()
+        t0, p0, v0 = self._speed
+        now = time.monotonic()
+        if now - t0 > 0.05:
+            v0 = float(np.hypot(mpos[0] - p0[0], mpos[1] - p0[1]) / (now - t0) * 60.0)
+            self._speed = (now, mpos[:2], v0)
+        laser_on = self.machine.status.laser > 0
+        bf = (max(0, views.PLANNER_BLOCKS - len(self.pending)),
+              max(0, views.RX_BUFFER - self.input.pending_bytes()))
+        acc = ("S" if self.modal.spindle == 3 else "C" if self.modal.spindle == 4 else "")
+        acc += "".join(c for k, c in ((8, "F"), (7, "M")) if k in self.modal.coolant)
+        return self.view.report(self.grbl_state(), mpos, self.modal.work_offset(),
+                                self.settings, bf, (v0, self.modal.s if laser_on else 0.0),
+                                self.ov.tuple(), acc)
+
+    # ------------------------------------------------------------------ real-time bytes
+    def _realtime(self, byte: int) -> None:
+        """Acted on at once, on the transport's thread."""
+        if byte == RT_STATUS:
+            self.send(self.status_report())
+        elif byte == RT_RESET:
+            self.input.clear()
+            self._reset_req.set()
+        elif byte == RT_HOLD:
+            if self.machine.jogging:
+                self._jog_cancel_req.set()
+            elif self.alarm is None and not self.locked and not self.check_mode:
+                self.held = True
+                self.machine.hold()
+        elif byte == RT_CYCLE_START:
+            if self.held:
+                self.held = False
+                self.machine.resume()
+        elif byte == RT_JOG_CANCEL:
+            if self.machine.jogging or any(getattr(i, "jog", False) for i in self.pending):
+                self._jog_cancel_req.set()
+        else:
+            self.ov.apply(byte)
+
+    # ------------------------------------------------------------------ the bridge thread
+    def _loop(self) -> None:
+        while not self._stop.is_set():
+            if self._reset_req.is_set():
+                self._soft_reset()
+                continue
+            if self._jog_cancel_req.is_set():
+                self._jog_cancel_req.clear()
+                self._stop_motion()
+                continue
+            n_moves = sum(isinstance(i, Solved) for i in self.pending)
+            if n_moves >= LOOKAHEAD_MOVES:
+                if self.machine.batches.qsize() < 1:
+                    self.flush()
+                else:
+                    time.sleep(0.005)
+                continue
+            got = self.input.take(0.01 if self.pending else 0.1)
+            if got is None:
+                if self.pending and time.monotonic() - self._last_line_at > FLUSH_IDLE_S:
+                    self.flush()
+                continue
+            self._last_line_at = time.monotonic()
+            self.send(self.handle_line(*got[:2]))
+
+    def handle_line(self, raw: str, overflow: bool) -> str:
+        """One line → its reply (`ok` / `error:N`); output it causes is sent before."""
+        try:
+            if overflow:
+                raise GrblError(codes.LINE_OVERFLOW, "line too long")
+            text = preparse(raw)
+            if not text:
+                return "ok"
+            if text.startswith("$"):
+                run_system(self, text)
+            else:
+                self._gcode(text)
+        except GrblError as e:
+            self.log(f"{raw.strip()!r}: {e}")
+            return f"error:{e.code}"
+        except GrblAlarmError as e:
+            self.raise_alarm(e.code, e.message)
+            return f"error:{codes.GCODE_LOCK}"
+        return "ok"
+
+    # ------------------------------------------------------------------ G-code
+    def _gcode(self, text: str) -> None:
+        if self.alarm is not None or self.locked or self.machine.jogging:
+            raise GrblError(codes.GCODE_LOCK, "alarm or jog state")
+        block = parse(text)
+        state, actions = execute(self.modal, block, self.compiler.tolerance_mm / 2)
+        th = self.th
+        items: list[Item] = []
+        for act in actions:
+            if isinstance(act, Move):
+                solved = self._solve(act, th)
+                if solved is not None:
+                    items.append(solved)
+                    th = solved.th[-1]
+            elif isinstance(act, Dwell):
+                items.append(act)
+        was_down = self._pen_wanted(self.modal)
+        self.modal, self.th = state, th
+        if not self.laser and self._pen_wanted(state) != was_down and not items:
+            items.append(PenSync(self._pen_wanted(state)))
+        if not self.check_mode:
+            self.pending += items
+        for act in actions:
+            if isinstance(act, ProgramFlow):
+                self._program_flow(act.code)
+
+    def _pen_wanted(self, st: ModalState | Move) -> bool:
+        z = st.position[2] if isinstance(st, ModalState) else st.z
+        return (st.z_seen and z <= 0.0) or (st.spindle in (3, 4) and st.s > 0)
+
+    def _power(self, s: float) -> int:
+        full = self.settings.values[30]
+        if s <= self.settings.values[31] or s <= 0:
+            return 0
+        return int(min(255, round(255 * min(1.0, s / full) * self.ov.spindle / 100)))
+
+    def _solve(self, mv: Move, th: np.ndarray, jog: bool = False) -> Solved | None:
+        if mv.rapid:
+            feed = self.profile.motion.travel_feed_mm_s * self.ov.rapid / 100
+        else:
+            feed = min(mv.feed_mm_min * self.ov.feed / 100,
+                       self.settings.feed_cap_mm_min()) / 60.0
+        if self.laser:
+            draw = mv.spindle in (3, 4) and self._power(mv.s) > 0
+        else:
+            draw = self._pen_wanted(mv)
+        dynamic = mv.spindle == 4 and bool(self.settings.values[32])
+        return self.compiler.solve(th, (mv.start[0], mv.start[1]), list(mv.points),
+                                   rapid=mv.rapid, draw=draw and not jog, feed_mm_s=feed,
+                                   power=self._power(mv.s) if self.laser else 0,
+                                   dynamic=dynamic, arc=len(mv.points) > 1, jog=jog)
+
+    def _program_flow(self, code: int) -> None:
+        if code in (2, 30):
+            self.flush()
+            if not self.laser:
+                self.pending.append(PenSync(False))
+                self.flush()
+        elif code == 0:
+            self.flush()
+            self.wait_idle()
+            self.held = True
+            self.machine.hold()
+
+    # ------------------------------------------------------------------ batches
+    def flush(self) -> None:
+        """Plan the look-ahead buffer into batches and hand them to the machine."""
+        items, self.pending = self.pending, []
+        chunk: list[Solved] = []
+        for item in [*items, None]:
+            if isinstance(item, Solved) and (not chunk or chunk[0].jog == item.jog):
+                chunk.append(item)
+                continue
+            self._submit_chunk(chunk)
+            chunk = [item] if isinstance(item, Solved) else []
+            if isinstance(item, Dwell):
+                self.machine.submit(_Batch(dwell_lines(item.seconds), item.seconds,
+                                           (0, 0)))
+            elif isinstance(item, PenSync):
+                lines = self.compiler.pen_lines(item.down)
+                if lines:
+                    self.machine.submit(_Batch(lines, 0.0, (0, 0)))
+
+    def _submit_chunk(self, chunk: list[Solved]) -> None:
+        if not chunk:
+            return
+        batch = self.compiler.plan(self.plan_th, self.plan_pt, chunk)
+        self.plan_th = chunk[-1].th[-1]
+        self.plan_pt = (float(chunk[-1].pts[-1, 0]), float(chunk[-1].pts[-1, 1]))
+        self.machine.submit(batch)
+
+    def wait_idle(self, timeout_s: float = 600.0) -> bool:
+        """Wait until everything accepted has run (False on reset or timeout)."""
+        deadline = time.monotonic() + timeout_s
+        time.sleep(0.15)
+        while time.monotonic() < deadline:
+            if self._reset_req.is_set() or self.alarm is not None:
+                return False
+            if not self.pending and self.machine.idle:
+                return True
+            time.sleep(0.02)
+        return False
+
+    # ------------------------------------------------------------------ jogging, homing
+    def jog(self, words: str) -> None:
+        """`$J=`: a checked move in mm at its own F, planned and sent at once."""
+        if self.alarm is not None or self.locked:
+            raise GrblError(codes.GCODE_LOCK, "jog in alarm")
+        block = parse(words)
+        extra_g = set(block.g) - {"units", "distance", "non_modal"}
+        if (extra_g or block.m or block.g.get("non_modal", 530) != 530
+                or set(block.values) - set("XYZF")):
+            raise GrblError(codes.INVALID_JOG_COMMAND, "only G20/G21/G90/G91/G53 X Y Z F")
+        if "F" not in block.values:
+            raise GrblError(codes.UNDEFINED_FEED_RATE, "jog without F")
+        if not block.axes:
+            raise GrblError(codes.NO_AXIS_WORDS, "jog without axis words")
+        block.g["motion"] = 10
+        jog_state = replace(self.modal, spindle=5)
+        state, actions = execute(jog_state, block, self.compiler.tolerance_mm / 2)
+        mv = actions[0]
+        assert isinstance(mv, Move)
+        try:
+            solved = self._solve(mv, self.th, jog=True)
+        except GrblAlarmError as e:
+            raise GrblError(codes.TRAVEL_EXCEEDED, e.message) from None
+        self.modal = replace(self.modal, position=state.position)
+        if solved is not None and not self.check_mode:
+            self.th = solved.th[-1]
+            self.flush()
+            self.pending.append(solved)
+            self.flush()
+            self.machine.jogging = True
+
+    def home(self) -> None:
+        """`$H`: the firmware's homing with endstops ($22=1 and the profile's endstops)."""
+        if not self.settings.values[22] or not self.profile.motors.endstops:
+            raise GrblError(codes.SETTING_DISABLED, "homing needs $22=1 and endstops")
+        self.homing = True
+        try:
+            self.machine.reset()
+            self.machine.submit(_Batch(["$H"], 0.0, (0, 0)))
+            self.wait_idle(180.0)
+        finally:
+            self.homing = False
+        self.alarm = None
+        self.locked = not self.machine.status.homed
+        self._resync()
+
+    def unlock(self) -> None:
+        """`$X`: clear the alarm; an unknown position is taken to be the profile's homed
+        pose (the arms placed there, as `fivebar home` asks without endstops)."""
+        if self.alarm is None and not self.locked:
+            return
+        if self.locked:
+            self.machine.submit(_Batch(["G92 A0 B0"], 0.0, (0, 0)))
+            self.wait_idle(10.0)
+        self.alarm = None
+        self.locked = False
+        self._resync()
+        self.send("[MSG:Caution: Unlocked]")
+
+    # ------------------------------------------------------------------ stops and alarms
+    def _sync_position(self) -> None:
+        p = self.compiler.point_of(self.th)
+        if p is not None:
+            self.modal = replace(self.modal, position=(p[0], p[1], self.modal.position[2]))
+
+    def _resync(self) -> None:
+        """After a stop: the parser and the planner start from where the machine is."""
+        st = self.machine.status
+        self.th = self.plan_th = self.compiler.angles_of_steps(st.a, st.b)
+        self._sync_position()
+        self.plan_pt = self.modal.position[:2]
+        self.compiler.pen_down = False
+
+    def _stop_motion(self) -> None:
+        """Stop now (firmware Ctrl-X: queue cleared, laser off, position kept)."""
+        self.pending = []
+        self.machine.reset()
+        self.held = False
+        self._resync()
+
+    def request_reset(self) -> None:
+        self._reset_req.set()
+
+    def _soft_reset(self) -> None:
+        """Ctrl-X: stop, GRBL's modal state to defaults, banner (alarm kept)."""
+        self._reset_req.clear()
+        self._stop_motion()
+        self.modal = replace(self.modal.after_reset(), g92=(0.0, 0.0, 0.0))
+        self._resync()
+        self.check_mode = False
+        self.attach_banner()
+
+    def attach_banner(self) -> None:
+        self.view.reset()
+        self.send(views.BANNER)
+        if self.alarm is not None or self.locked:
+            self.send(UNLOCK_MSG)
+            return
+        for text in self.settings.startup:
+            if text:
+                self.send(f">{text}:{self.handle_line(text, False)}")
+
+    def raise_alarm(self, code: int, message: str) -> None:
+        """ALARM:<code> and why; the machine stops, laser off; `$X` clears."""
+        self._stop_motion()
+        self.alarm = code
+        self.send(f"ALARM:{code}")
+        self.send(f"[MSG:{message}]")
+        self.log(f"ALARM:{code} {message}")
+
+    def _on_fault(self, message: str, firmware_alarm: int | None) -> None:
+        """A machine-side fault (machine thread): GRBL's nearest alarm."""
+        code = codes.FIRMWARE_ALARM.get(firmware_alarm or 0, codes.ALARM_ABORT_CYCLE)
+        self.pending = []
+        self.alarm = code
+        self.send(f"ALARM:{code}")
+        self.send(f"[MSG:machine: {message}]")
+        self.log(f"machine fault: {message}")
