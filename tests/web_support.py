@@ -101,6 +101,7 @@ def wait(driver: Any, pred: Callable[[Any], Any], timeout_s: float = 20.0,
 
 def shot(driver: Any, name: str) -> Path:
     """Save a screenshot of the whole page (beyond the window's height) as NAME.png."""
+    driver.execute_script("window.scrollTo(0, 0)")  # the sticky header at the top
     time.sleep(0.1)  # let a pending animation frame paint the canvas
     w, h = driver.execute_script("return [document.documentElement.clientWidth, "
                                  "document.documentElement.scrollHeight]")
