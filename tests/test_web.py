@@ -11,6 +11,7 @@ latency from a status change on the machine to the page."""
 from __future__ import annotations
 
 import time
+import urllib.error
 import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
@@ -29,8 +30,8 @@ from tests.web_support import (
     EXAMPLES,
     PHONE,
     browser_missing,
-    click_job_button,
     chromium,
+    click_job_button,
     daemon,
     drop_file,
     errors_shown,
