@@ -1,10 +1,12 @@
 #!/usr/bin/env bash
-# Install what fivebar needs on a Debian machine: the AVR toolchain and simavr (apt), then the
-# Python package with its test extras (pip, editable). Safe to run again; skips what is there.
+# Install what fivebar needs on a Debian machine: the AVR toolchain and simavr, Chromium and its
+# WebDriver for the web page's browser tests (apt), then the Python package with its test
+# extras (pip, editable). Safe to run again; skips what is there.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-APT_PKGS=(gcc-avr avr-libc binutils-avr simavr libsimavr-dev libelf-dev arduino-core-avr make gcc pkg-config)
+APT_PKGS=(gcc-avr avr-libc binutils-avr simavr libsimavr-dev libelf-dev arduino-core-avr make gcc pkg-config
+          chromium chromium-driver)
 missing=()
 for p in "${APT_PKGS[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -42,7 +42,13 @@ from fivebar_host.config import Profile
 from fivebar_host.errors import FivebarError, OptionError
 from fivebar_host.options import JOB_OPTIONS, parse_query, unknown_option
 from fivebar_host.server import store as st_
-from fivebar_host.server.jobs import CompiledCache, JobOptions, SubmitError, compile_upload
+from fivebar_host.server.jobs import (
+    Compiled,
+    CompiledCache,
+    JobOptions,
+    SubmitError,
+    compile_upload,
+)
 from fivebar_host.server.machine import ActionError, JobStateError
 from fivebar_host.server.security import RETRY_AFTER_S
 from fivebar_host.server.store import JobRecord, JobStore
@@ -176,6 +182,9 @@ class MachineOut(BaseModel):
     accepted_line: int | None
     underruns: int | None = Field(description="Times the queue ran empty since reset (U:).")
     pose_known: bool = Field(description="The daemon trusts the firmware's position.")
+    motors_off: bool = Field(False, description="The motors were switched off (M18); the "
+                             "next motion switches them on (M17).")
+    alarm: str | None = Field(None, description="Alarm: its code and reason in words.")
     status_age_s: float | None = Field(description="Age of the last status report, s.")
 
 
@@ -318,6 +327,9 @@ def create_app(*, store: JobStore, worker: Worker, cache: CompiledCache, profile
     _job_routes(app, ctx)
     _submit_route(app, ctx)
     _machine_routes(app, ctx)
+    from fivebar_host.server.web import add_web_routes  # web imports this module
+
+    add_web_routes(app, ctx)
     return app
 
 
@@ -401,30 +413,7 @@ def _submit_route(app: FastAPI, ctx: _Ctx) -> None:
 
         The job options are the query parameters declared in `fivebar_host.options` (the
         same definitions as `fivebar plot`'s options); an unknown one is refused."""
-        if ctx.stopping.is_set():
-            raise ApiError(503, "stopping", "the daemon is stopping; submit again after it "
-                           "restarts", headers={"Retry-After": "10"})
-        ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
-        if ctype in SIMPLE_CONTENT_TYPES or not ctype:
-            raise ApiError(415, "bad_content_type", f"send the drawing's bytes as the body "
-                           f"with Content-Type image/svg+xml, text/x-gcode or "
-                           f"application/octet-stream (got {ctype or 'none'!r})")
-        opts = JobOptions(**parse_query(request.query_params.multi_items(), extra=("name",)))
-        body = await request.body()
-        # Wait on the event loop (no thread held) for a compilation slot.
-        try:
-            await asyncio.wait_for(ctx.slots.acquire(), SUBMIT_WAIT_S)
-        except TimeoutError:
-            raise busy(f"no compilation slot came free within {SUBMIT_WAIT_S:.0f} s; "
-                       "nothing was queued, submit again later") from None
-        try:
-            if await request.is_disconnected():
-                raise ApiError(499, "client_gone", "the client went away; nothing was queued")
-            compiled = await run_in_threadpool(compile_upload, body, name, opts, ctx.profile)
-        except SubmitError as e:
-            raise ApiError(e.status, e.code, str(e), e.detail) from e
-        finally:
-            ctx.slots.release()
+        opts, body, compiled = await compile_request(ctx, request, name)
         if await request.is_disconnected():
             # Nobody would learn the job's id: queueing it would start a drawing nobody
             # knows was accepted (the client reports a failure).
@@ -432,7 +421,39 @@ def _submit_route(app: FastAPI, ctx: _Ctx) -> None:
         return _queue(ctx, name, opts, body, compiled)
 
 
-def _queue(ctx: _Ctx, name: str, opts: JobOptions, body: bytes, compiled: Any) -> JobOut:
+async def compile_request(ctx: _Ctx, request: Request, name: str
+                          ) -> tuple[JobOptions, bytes, Compiled]:
+    """A submission's options, bytes and compiled job (the submit and dry-run routes):
+    content type checked, options parsed from their definitions, compiled in one of the
+    compilation slots; `ApiError` with the CLI's message when it cannot run."""
+    if ctx.stopping.is_set():
+        raise ApiError(503, "stopping", "the daemon is stopping; submit again after it "
+                       "restarts", headers={"Retry-After": "10"})
+    ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    if ctype in SIMPLE_CONTENT_TYPES or not ctype:
+        raise ApiError(415, "bad_content_type", f"send the drawing's bytes as the body "
+                       f"with Content-Type image/svg+xml, text/x-gcode or "
+                       f"application/octet-stream (got {ctype or 'none'!r})")
+    opts = JobOptions(**parse_query(request.query_params.multi_items(), extra=("name",)))
+    body = await request.body()
+    # Wait on the event loop (no thread held) for a compilation slot.
+    try:
+        await asyncio.wait_for(ctx.slots.acquire(), SUBMIT_WAIT_S)
+    except TimeoutError:
+        raise busy(f"no compilation slot came free within {SUBMIT_WAIT_S:.0f} s; "
+                   "nothing was queued, submit again later") from None
+    try:
+        if await request.is_disconnected():
+            raise ApiError(499, "client_gone", "the client went away; nothing was queued")
+        compiled = await run_in_threadpool(compile_upload, body, name, opts, ctx.profile)
+    except SubmitError as e:
+        raise ApiError(e.status, e.code, str(e), e.detail) from e
+    finally:
+        ctx.slots.release()
+    return opts, body, compiled
+
+
+def _queue(ctx: _Ctx, name: str, opts: JobOptions, body: bytes, compiled: Compiled) -> JobOut:
     """Store a compiled submission and wake the machine thread."""
     job = compiled.job
     rec = ctx.store.add_job(name=name, options=opts.to_json(), upload=body,

@@ -107,6 +107,7 @@ class Control(MachineState):
             if not self.cfg.profile.motors.endstops and not at_home:
                 raise ActionError("the machine has no endstops: place the arms at the home pose "
                                   "and confirm with at_home=true")
+            self._motors_on(link)
             home(link, self.cfg.profile, lambda q: at_home)
             st = link.wait_idle(120.0)
             self._set_pose(True, st)

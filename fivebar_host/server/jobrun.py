@@ -107,6 +107,7 @@ class JobRunner(Control):
         # after an interruption only the daemon's own record or a resume request answers.
         job_confirm = run.opts.confirm and not run.resume
         try:
+            self._motors_on(link)
             if not run.resume:
                 self._park(link, run.job)
             link.on_stream_start = partial(self._on_stream_start, run)
@@ -178,6 +179,7 @@ class JobRunner(Control):
             live.segments_done = p.segments_done
             live.elapsed_s = run.base_run + (now - run.t0)
             live.remaining_s = p.remaining_s
+            self.on_change()
         st = link.last_status
         if (st is not None and run.underruns0 is None and run.program is not None
                 and st.done_line >= run.program[1]):

@@ -2,7 +2,8 @@
 
 `JournalLink` is a `Link` that calls back just before a stream's first line is written (so
 the worker can commit the stream record: first line number, start segment, start position)
-and remembers when it last heard a status report (for the snapshot's `status_age_s`).
+and remembers when it last heard a status report (for the snapshot's `status_age_s`), telling
+`on_status` (the web page's event stream) that a new one came.
 `ProgressWriter` commits running jobs' progress to SQLite on its own thread, so a slow
 commit (an fsync on an SD card) never stalls the stream.
 """
@@ -15,7 +16,7 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from fivebar_host.protocol import StatusReport
+from fivebar_host.protocol import AlarmPush, StatusReport
 from fivebar_host.run.link import Link
 from fivebar_host.run.stream import StreamResult
 from fivebar_host.server.store import JobStore
@@ -27,6 +28,8 @@ class JournalLink(Link):
     """A `Link` that reports when a stream starts and when it last heard a status report."""
 
     on_stream_start: Callable[[Sequence[str], int], None] | None = None
+    #: Called (on the machine thread) after every status report; must be quick.
+    on_status: Callable[[], None] | None = None
     streaming = False
     status_at = 0.0
     _last: StatusReport | None = None
@@ -41,6 +44,21 @@ class JournalLink(Link):
         self._last = st
         if st is not None:
             self.status_at = time.monotonic()
+            hook = self.on_status
+            if hook is not None:
+                hook()
+
+    def take_alarm_pushes(self) -> list[AlarmPush]:
+        """Remove the `ALARM:n` pushes kept from status requests while idle. The status
+        report says the machine is in alarm; left here, the push would make the next
+        command (clearing the alarm with `$X`, homing) fail as if its own line had
+        raised it."""
+        pushes = [m for m in self._pending if isinstance(m, AlarmPush)]
+        if pushes:
+            kept = [m for m in self._pending if not isinstance(m, AlarmPush)]
+            self._pending.clear()
+            self._pending.extend(kept)
+        return pushes
 
     def stream(self, bodies: Sequence[str], **kwargs: Any) -> StreamResult:
         """`Link.stream`, after telling `on_stream_start` the first line number."""

@@ -5,7 +5,9 @@ job run, the controls and the crash recovery share, and the few things all of th
 (re)connecting the `JournalLink`, recording whether the pose is trusted (in SQLite, with the
 controller's line counter), answering `run_job`'s pose questions, parking the arms, and
 compiling a job record again. Only the machine thread calls its underscore methods;
-`machine()` is the snapshot any thread may read (no serial traffic).
+`machine()` is the snapshot any thread may read (no serial traffic); `on_change` is called
+(machine thread) after every status report and progress update, so the web page's event
+stream can push the change at once.
 """
 
 from __future__ import annotations
@@ -36,6 +38,16 @@ from fivebar_host.server.store import JobRecord, JobStore
 log = logging.getLogger("fivebar.serve")
 
 _POSITION_Q = re.compile(r"A = (-?\d+), B = (-?\d+)")
+
+
+def _nothing() -> None:
+    """No one listens for changes."""
+
+
+def _code_text(code: int | None) -> str:
+    """An alarm's reason in words, from the protocol's code table."""
+    info = protocol.CODES.get(code if code is not None else -1)
+    return f"alarm {code}: {info.description}" if info else f"alarm {code}"
 
 
 class ActionError(FivebarError, RuntimeError):
@@ -97,6 +109,11 @@ class MachineState(threading.Thread):
         self._question: str | None = None
         self._recovered = False
         self.progress = ProgressWriter(store)
+        #: The motors were switched off (M18): the arms move freely, the pose is unknown,
+        #: and the next motion switches them on again (M17) first.
+        self.motors_disabled = False
+        #: Told of every status report and progress update (any quick callable).
+        self.on_change: Callable[[], None] = _nothing
 
     # ================================================================== snapshot (any thread)
     def machine(self) -> dict[str, Any]:
@@ -120,6 +137,8 @@ class MachineState(threading.Thread):
             "accepted_line": None if st is None else st.accepted_line,
             "underruns": None if st is None else st.underruns,
             "pose_known": self.pose_known,
+            "motors_off": self.motors_disabled,
+            "alarm": None if st is None or st.state != "Alarm" else _code_text(st.detail),
             "status_age_s": None if link is None or st is None
             else round(time.monotonic() - link.status_at, 3),
         }
@@ -139,6 +158,7 @@ class MachineState(threading.Thread):
             return False
         assert isinstance(opened, JournalLink)
         link = opened
+        link.on_status = lambda: self.on_change()
         self.link = link
         self.error = None
         st = link.last_status
@@ -172,6 +192,13 @@ class MachineState(threading.Thread):
         with contextlib.suppress(Exception):
             link.realtime(protocol.RT_HOLD)
             link.reset()
+
+    def _motors_on(self, link: JournalLink) -> None:
+        """Switch the motors on again (`M17`) before a motion, after a motors-off."""
+        if self.motors_disabled:
+            link.command("M17")
+            self.motors_disabled = False
+            log.info("motors on (M17)")
 
     # ------------------------------------------------------------------ pose
     def _set_pose(self, known: bool, st: StatusReport | None) -> None:

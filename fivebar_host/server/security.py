@@ -1,12 +1,14 @@
 """What keeps the daemon's API to the people it is meant for: token, limits, Host and Origin.
 
 - **Token.** Generated on first start (32 random bytes, URL-safe) and stored in the state
-  directory with mode 0600. Required as `Authorization: Bearer <token>` on *every* request
+  directory with mode 0600. Required as `Authorization: Bearer <token>` on every request
   when the daemon listens on an address that is not loopback (or with `--require-token`,
-  e.g. on a computer shared by several users, since loopback is open to all of them).
+  e.g. on a computer shared by several users, since loopback is open to all of them) —
+  except GETs of the web page's own files (`/`, `/static/…`), which hold nothing secret:
+  the page asks for the token and sends it in the header of each API request.
 - **Request size limits.** The body of a request is read into memory up to a limit (the
-  upload limit for `POST /api/jobs`, a small one elsewhere); a larger body is refused with
-  413 before the application sees any of it.
+  upload limit for `POST /api/jobs` and `POST /api/dryrun`, a small one elsewhere); a
+  larger body is refused with 413 before the application sees any of it.
 - **Browsers.** A web page the user visits may send requests to 127.0.0.1. Requests that
   carry an `Origin` other than the daemon's own are refused (a page cannot forge that header,
   so it cannot submit, pause or cancel jobs), and on a loopback listener the `Host` header
@@ -150,8 +152,12 @@ class Policy:
 
     token: str | None  # required on every request when set
     loopback: bool  # listening on a loopback address (Host header checked)
-    upload_limit: int  # body limit of POST /api/jobs, bytes
-    upload_path: str = "/api/jobs"
+    upload_limit: int  # body limit of uploads (POST /api/jobs, /api/dryrun), bytes
+    upload_paths: frozenset[str] = frozenset({"/api/jobs", "/api/dryrun"})
+    #: The web page's files: no secret in them, so served without the token (GET only);
+    #: the page then asks for the token and sends it with every API request.
+    public_paths: frozenset[str] = frozenset({"/"})
+    public_prefix: str = "/static/"
     max_in_flight: int = MAX_IN_FLIGHT
     max_uploads: int = MAX_UPLOADS
     max_upload_bytes_pending: int = MAX_UPLOAD_BYTES_PENDING
@@ -199,7 +205,13 @@ class Guard:
 
     def is_upload(self, scope: Scope) -> bool:
         """Whether a request is a job submission."""
-        return scope.get("method") == "POST" and scope.get("path") == self.policy.upload_path
+        return scope.get("method") == "POST" and scope.get("path") in self.policy.upload_paths
+
+    def is_public(self, scope: Scope) -> bool:
+        """Whether a request is for the web page's files (no token needed)."""
+        path = str(scope.get("path", ""))
+        return scope.get("method") in ("GET", "HEAD") and (
+            path in self.policy.public_paths or path.startswith(self.policy.public_prefix))
 
     def limit_for(self, scope: Scope) -> int:
         """The body limit of a request."""
@@ -227,7 +239,7 @@ class Guard:
             await _reject(send, 403, "cross_origin", f"requests from web pages of another "
                           f"origin ({origin}) are refused")
             return
-        if pol.token is not None:
+        if pol.token is not None and not self.is_public(scope):
             auth = _header(scope, b"authorization") or ""
             scheme, _, given = auth.partition(" ")
             if scheme.lower() != "bearer" or not hmac.compare_digest(

@@ -13,7 +13,12 @@ Everything the daemon needs to carry on after a crash, a power loss or SIGKILL l
   (`run.program.build_program`), so after a crash the firmware's own `Ln` counter (the line of
   the last block it executed) maps back to the exact segment the machine reached;
 - what the daemon knows about the machine: whether its position is trusted ("pose known")
-  and the firmware's line counter when that was last recorded.
+  and the firmware's line counter when that was last recorded;
+- the order of the queue: a job's `queue_key` (its id until someone reorders the queue). A
+  job that already started (resumed after a hold) runs before the others.
+
+Every committed write bumps `JobStore.version` and calls the `listeners` (the web page's
+event stream wakes on them instead of polling the database).
 
 All access goes through one connection guarded by a lock: the HTTP threads read, the worker
 writes, and SQLite's own locking would add nothing but "database is locked" retries.
@@ -21,12 +26,13 @@ writes, and SQLite's own locking would add nothing but "database is locked" retr
 
 from __future__ import annotations
 
+import builtins
 import json
 import os
 import sqlite3
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,7 +49,7 @@ FINAL_STATES = frozenset({DONE, FAILED, CANCELLED})
 #: States that keep later jobs from starting (the paper holds a half-drawn job).
 BLOCKING_STATES = frozenset({RUNNING, PAUSED, HELD})
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 #: Job ids SQLite can hold (a signed 64-bit INTEGER PRIMARY KEY; AUTOINCREMENT starts at 1).
 #: A number outside is no job: looked up it is "not found", never an OverflowError.
 MIN_JOB_ID, MAX_JOB_ID = 1, 2**63 - 1
@@ -83,7 +89,8 @@ CREATE TABLE IF NOT EXISTS jobs (
     stream_start_segment INTEGER,
     stream_start_a INTEGER,
     stream_start_b INTEGER,
-    stream_lines INTEGER
+    stream_lines INTEGER,
+    queue_key REAL
 );
 CREATE INDEX IF NOT EXISTS jobs_state ON jobs(state);
 CREATE TABLE IF NOT EXISTS machine (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -140,6 +147,9 @@ class JobRecord:
     stream: StreamRecord | None
 
 
+#: The order queued jobs run in: those that started before (resumed) first, then by key.
+_QUEUE_ORDER = "(started_at IS NULL), COALESCE(queue_key, id), id"
+
 _COLUMNS = ("id, name, options, upload_sha256, state, message, question, submitted_at, "
             "started_at, finished_at, fingerprint, mode, max_dev_mm, segments_total, "
             "estimated_s, segments_done, remaining_s, run_s, underruns, resume_next, resume_a, "
@@ -184,6 +194,9 @@ class JobStore:
             raise StoreError(f"{path}: cannot open the database: {e}") from e
         self._db.row_factory = sqlite3.Row
         self._lock = threading.RLock()
+        #: Bumped by every committed write; `listeners` are called after it (any thread).
+        self.version = 0
+        self.listeners: list[Callable[[], None]] = []
         try:
             with self._lock:
                 self._db.execute("PRAGMA journal_mode=WAL")
@@ -196,6 +209,9 @@ class JobStore:
                     raise StoreError(f"{path}: database schema {version} is newer than this "
                                      f"program's ({SCHEMA_VERSION}); upgrade fivebar")
                 self._db.executescript(_SCHEMA)
+                cols = {str(r[1]) for r in self._db.execute("PRAGMA table_info(jobs)")}
+                if "queue_key" not in cols:  # schema 1: the queue ran in id order
+                    self._db.execute("ALTER TABLE jobs ADD COLUMN queue_key REAL")
                 self._db.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
         except sqlite3.Error as e:
             raise StoreError(f"{path}: not a usable fivebar database: {e}") from e
@@ -215,6 +231,9 @@ class JobStore:
                 self._db.execute("ROLLBACK")
                 raise
             self._db.execute("COMMIT")
+            self.version += 1
+        for fn in list(self.listeners):
+            fn()
 
     # ------------------------------------------------------------------ jobs
     def add_job(self, *, name: str, options: dict[str, Any], upload: bytes, upload_sha256: str,
@@ -265,11 +284,39 @@ class JobStore:
         return [_record(r) for r in reversed(rows)]
 
     def next_queued(self) -> JobRecord | None:
-        """The job to run next: the oldest queued one (resumed jobs keep their old id)."""
+        """The job to run next: a resumed one (it started before), else the first queued
+        one in queue order (`queue_key`, the id until the queue is reordered)."""
         with self._lock:
             row = self._db.execute(f"SELECT {_COLUMNS} FROM jobs WHERE state = ? "
-                                   "ORDER BY id LIMIT 1", (QUEUED,)).fetchone()
+                                   f"ORDER BY {_QUEUE_ORDER} LIMIT 1", (QUEUED,)).fetchone()
         return None if row is None else _record(row)
+
+    def queue_order(self) -> builtins.list[int]:
+        """The ids of the queued jobs in the order they will run."""
+        with self._lock:
+            rows = self._db.execute(f"SELECT id FROM jobs WHERE state = ? "
+                                    f"ORDER BY {_QUEUE_ORDER}", (QUEUED,)).fetchall()
+        return [int(r[0]) for r in rows]
+
+    def move(self, job_id: int, index: int) -> builtins.list[int] | None:
+        """Move a queued job that has not started to place `index` (0 = next to run, clamped)
+        among the queued jobs that have not started; the new queue order, or None when the
+        job is not such a job (it runs, ran, or is unknown)."""
+        if not valid_job_id(job_id):
+            return None
+        with self._tx() as db:
+            rows = db.execute("SELECT id, COALESCE(queue_key, id) FROM jobs WHERE state = ? "
+                              f"AND started_at IS NULL ORDER BY {_QUEUE_ORDER}",
+                              (QUEUED,)).fetchall()
+            ids = [int(r[0]) for r in rows]
+            if job_id not in ids:
+                return None
+            keys = sorted(float(r[1]) for r in rows)
+            ids.remove(job_id)
+            ids.insert(max(0, min(index, len(ids))), job_id)
+            db.executemany("UPDATE jobs SET queue_key = ? WHERE id = ?", zip(keys, ids,
+                                                                             strict=True))
+        return self.queue_order()
 
     def blocking(self) -> JobRecord | None:
         """A job that keeps the queue from moving (running, paused or held), if any."""

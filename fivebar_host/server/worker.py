@@ -35,8 +35,8 @@ The `Worker` class here is the thread's main loop; it is composed of one class p
 each in its own module: `machine` (shared state, connecting, the pose record and questions,
 the snapshot), `control` (pause / resume / cancel / stop requests and actions, the stop kind
 `Link.stream` consults), `jobrun` (one job's run and what follows a fault or stop),
-`recovery` (where an interrupted job stopped, after a restart or a lost link) and `journal`
-(the journalled link and the progress writer).
+`recovery` (where an interrupted job stopped, after a restart or a lost link), `manual`
+(jog, motors off, clear alarm) and `journal` (the journalled link and the progress writer).
 """
 
 from __future__ import annotations
@@ -50,13 +50,14 @@ from fivebar_host.run.errors import LinkError
 from fivebar_host.server.jobrun import JobRunner
 from fivebar_host.server.journal import JournalLink
 from fivebar_host.server.machine import ActionError
+from fivebar_host.server.manual import Manual
 from fivebar_host.server.recovery import Recovery
 from fivebar_host.server.store import JobRecord
 
 log = logging.getLogger("fivebar.serve")
 
 
-class Worker(JobRunner, Recovery):
+class Worker(JobRunner, Manual, Recovery):
     """The machine thread (see the module docstring)."""
 
     def run(self) -> None:
@@ -100,6 +101,8 @@ class Worker(JobRunner, Recovery):
                     self._run(link, rec)
                     continue
                 link.status()
+                for push in link.take_alarm_pushes():
+                    log.error("machine alarm %d while idle (clear it, or home)", push.code)
             except LinkError as e:
                 self._disconnected(str(e))
                 continue
