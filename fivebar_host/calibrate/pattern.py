@@ -7,9 +7,10 @@ placed where the fit would otherwise extrapolate (`design_marks`), so the region
 where a wrong geometry shows most, are covered. That eroded region is "the pattern's region"
 the drawing-shape error is measured over.
 
-Each mark is a cross (two strokes through the centre, the centre an explicit vertex of both)
-with its number drawn beside it as stroke digits (no <text>: the pen must draw them), the
-label on the side where it stays inside the safe region and clear of the other marks.
+Each mark is a cross (four arms, each a stroke that starts at the centre, so the centre is a
+target of the job even after dense input is simplified) with its number drawn beside it as
+stroke digits (no <text>: the pen must draw them), the label on the side where it stays
+inside the safe region and clear of the other marks.
 
 The SVG is placed 1:1: its page bottom-left is machine (X0, Y0) mm, so it must be plotted
 with `--origin X0,Y0 --mode MODE` (written into the SVG, the JSON and the command's output).
@@ -200,7 +201,9 @@ def layout_marks(profile: Profile, mode: str, count: int) -> tuple[FloatArray, l
     strokes: list[FloatArray] = []
     for n, c in enumerate(centres, start=1):
         for arm in (np.array([CROSS_MM, 0.0]), np.array([0.0, CROSS_MM])):
-            strokes.append(np.array([c - arm, c, c + arm]))  # the centre is a vertex
+            # each arm starts at the centre: a stroke's end is a target of the job even
+            # after dense input is simplified (a collinear middle vertex would not be)
+            strokes.extend((np.array([c, c + arm]), np.array([c, c - arm])))
         box = _place_label(c, len(str(n)), full, taken)
         taken.append(box)
         strokes.extend(digit_strokes(n, float(box[0, 0]), float(box[0, 1])))
