@@ -62,6 +62,48 @@ def make_svg(n_paths: int = 10_000, segs: int = 10, seed: int = 0, w: float = 80
     return "\n".join(out)
 
 
+def write_svg(path: Path, size_bytes: int, seed: int = 0, w: float = 80.0,
+              h: float = 36.0, chunk: int = 20_000) -> int:
+    """Write `make_svg`'s kind of drawing (10 segments per path, every third a quadratic) of
+    about `size_bytes` to `path`, generated in vectorised chunks so a 200 MB file takes
+    seconds; returns the number of paths."""
+    rng = np.random.default_rng(seed)
+    segs = 10
+    written = 0
+    n_paths = 0
+    with path.open("w") as f:
+        head = (f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}mm" height="{h}mm" '
+                f'viewBox="0 0 {w} {h}">\n')
+        f.write(head)
+        written += len(head)
+        while written < size_bytes:
+            cx = rng.uniform(3, w - 3, (chunk, 1))
+            cy = rng.uniform(3, h - 3, (chunk, 1))
+            ang = np.cumsum(rng.normal(0, 0.9, (chunk, segs + 1)), axis=1)
+            st = rng.uniform(0.3, 1.2, (chunk, segs + 1))
+            x = np.clip(cx + np.cumsum(st * np.cos(ang), axis=1), 0.5, w - 0.5)
+            y = np.clip(cy + np.cumsum(st * np.sin(ang), axis=1), 0.5, h - 0.5)
+            qx = (x[:, :-1] + x[:, 1:]) / 2 + 0.3
+            qy = (y[:, :-1] + y[:, 1:]) / 2 - 0.3
+            lines = []
+            for i in range(chunk):
+                xi, yi, qxi, qyi = x[i].tolist(), y[i].tolist(), qx[i].tolist(), qy[i].tolist()
+                d = [f"M{xi[0]:.3f} {yi[0]:.3f}"]
+                for k in range(1, segs + 1):
+                    if k % 3 == 0:
+                        d.append(f"Q{qxi[k - 1]:.3f} {qyi[k - 1]:.3f} {xi[k]:.3f} {yi[k]:.3f}")
+                    else:
+                        d.append(f"L{xi[k]:.3f} {yi[k]:.3f}")
+                lines.append(f'<path d="{"".join(d)}" stroke="black" fill="none"/>\n')
+                n_paths += 1
+                written += len(lines[-1])
+                if written >= size_bytes:
+                    break
+            f.write("".join(lines))
+        f.write("</svg>\n")
+    return n_paths
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--repeat", type=int, default=3)
