@@ -44,6 +44,7 @@ class CompileOptions:
     accel_fraction: float | None = None  # share (0, 1] of [motion] max_joint_rad_s2
     validate: bool = True
     validation_samples: int = 4
+    max_segments: float | None = None  # None: `toolpath.svg.reader.DEFAULT_MAX_SEGMENTS`
 
 
 @dataclass(frozen=True)

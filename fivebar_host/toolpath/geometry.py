@@ -350,9 +350,15 @@ class Polylines:
     stroke: IntArray  # stroke index of each polyline (into the Drawing's strokes)
 
 
-def flatten(drawing: Drawing, tol_mm: float) -> Polylines:
+#: Primitives flattened at a time (bounds the per-vertex temporaries of `flatten`).
+FLATTEN_BLOCK = 1 << 16
+
+
+def flatten(drawing: Drawing, tol_mm: float, max_points: int | None = None) -> Polylines:
     """Flatten every stroke into a polyline whose chords are within `tol_mm` of the curves
-    (bound in `piece_counts`), vectorised over all primitives at once."""
+    (bound in `piece_counts`), vectorised over blocks of primitives (each primitive's
+    vertices depend on it alone, so blocks give the same arrays as one pass). More than
+    `max_points` vertices is an `InputError`, raised before they are computed."""
     kind, params = drawing.kind, drawing.params
     nprim = kind.shape[0]
     if nprim == 0:
@@ -364,21 +370,34 @@ def flatten(drawing: Drawing, tol_mm: float) -> Polylines:
     first[1:] = drawing.stroke[1:] != drawing.stroke[:-1]
     # Each primitive contributes n points (t = 1/n … 1); each stroke also its start point.
     counts = n + first
-    total = int(counts.sum())
-    prim = np.repeat(np.arange(nprim), counts)
     start_of = np.cumsum(counts) - counts
-    local = np.arange(total) - np.repeat(start_of, counts)  # 0.. counts-1
-    j = local + 1 - np.repeat(first, counts)  # 0 for the stroke start point, else 1..n
-    nn = np.repeat(n, counts)
-    t = j / nn
-    pts = evaluate(kind[prim], params[prim], t)
-    t0 = np.where(j > 0, (j - 1) / nn, 0.0)
-    is_start = j == 0
-    stroke_of_prim = drawing.stroke
-    starts = np.flatnonzero(is_start)
+    total = int(start_of[-1] + counts[-1])
+    if max_points is not None and total > max_points:
+        raise InputError(f"flattened within {tol_mm:g} mm, the curves have {total:,} points, "
+                         f"more than the limit {max_points:,} (4 × --max-segments); raise "
+                         "--max-segments or the tolerance if the machine has the memory",
+                         drawing.file)
+    pts = np.empty((total, 2))
+    prim_out = np.empty(total, dtype=np.int64)
+    t_out = np.empty(total)
+    t0_out = np.empty(total)
+    for i in range(0, nprim, FLATTEN_BLOCK):
+        c = counts[i:i + FLATTEN_BLOCK]
+        v0 = int(start_of[i])
+        v1 = v0 + int(c.sum())
+        prim = np.repeat(np.arange(i, i + c.shape[0]), c)
+        local = np.arange(v0, v1) - np.repeat(start_of[i:i + FLATTEN_BLOCK], c)
+        j = local + 1 - np.repeat(first[i:i + FLATTEN_BLOCK], c)  # 0: the stroke's start
+        nn = np.repeat(n[i:i + FLATTEN_BLOCK], c)
+        t = j / nn
+        pts[v0:v1] = evaluate(kind[prim], params[prim], t)
+        t0_out[v0:v1] = np.where(j > 0, (j - 1) / nn, 0.0)
+        t_out[v0:v1] = t
+        prim_out[v0:v1] = prim
+    starts = start_of[first]
     offsets = np.append(starts, total).astype(np.int64)
-    return Polylines(pts, offsets, prim.astype(np.int64), t, t0,
-                     stroke_of_prim[prim[starts]].astype(np.int64))
+    return Polylines(pts, offsets, prim_out, t_out, t0_out,
+                     drawing.stroke[first].astype(np.int64))
 
 
 def bbox(drawing: Drawing, rel_tol: float = 1e-4) -> tuple[float, float, float, float]:
