@@ -12,13 +12,21 @@ against segment count and measured deviation.
    measured with 16 samples per segment, on the ideal joint targets (the tolerance bound) and
    on the quantised steps (tolerance + one step quantum).
 
-Run: python benchmarks/pipeline.py [--repeat 3] [--paths 10000]
+3. Peak memory per input byte: drawings of 2, 20 and 200 MB of the same kind (`write_svg`,
+   in a temporary folder) compiled and validated as `fivebar convert` does, each in a fresh
+   process; the process's real peak (RSS high-water mark, `ru_maxrss`), in MiB per MB of
+   SVG, and the time. Target ≤ 30 bytes per input byte on large drawings. `--max-segments`
+   is raised for these runs (the 200 MB drawing has 8.6 million path segments).
+
+Run: python benchmarks/pipeline.py [--repeat 3] [--paths 10000] [--memory-mb 2,20,200]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -104,10 +112,43 @@ def write_svg(path: Path, size_bytes: int, seed: int = 0, w: float = 80.0,
     return n_paths
 
 
+_PEAK_RUN = """
+import json, resource, sys, time
+from fivebar_host.compile import CompileOptions, compile_job
+from fivebar_host.config import load_profile
+t0 = time.perf_counter()
+job = compile_job(sys.argv[1], load_profile(), CompileOptions(max_segments=1e9))
+print(json.dumps({"s": time.perf_counter() - t0, "segments": job.n_segments,
+                  "peak": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}))
+"""
+
+
+def peak_memory(sizes_mb: list[float]) -> None:
+    """Section 3 (module doc): peak RSS per input MB, one fresh process per size."""
+    print("peak memory per input byte (compile + validate, fresh process per size, "
+          "ru_maxrss):")
+    print(f"  {'SVG MB':>7} {'paths':>8} {'segments':>10} {'peak MiB':>9} {'MiB/MB':>7} "
+          f"{'B/B':>6} {'time s':>7}")
+    for mb in sizes_mb:
+        with tempfile.TemporaryDirectory() as tmp:
+            svg = Path(tmp) / "drawing.svg"
+            n = write_svg(svg, int(mb * 1e6))
+            size = svg.stat().st_size
+            out = subprocess.run([sys.executable, "-c", _PEAK_RUN, str(svg)], check=True,
+                                 capture_output=True, text=True, cwd=ROOT).stdout
+        r = json.loads(out)
+        peak = r["peak"]
+        print(f"  {size / 1e6:>7.0f} {n:>8d} {r['segments']:>10d} {peak / 2**20:>9.0f} "
+              f"{peak / 2**20 / (size / 1e6):>7.1f} {peak / size:>6.1f} {r['s']:>7.1f}  "
+              f"{'MET' if peak / size <= 30 else 'NOT MET'} (≤ 30 B/B)")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--paths", type=int, default=10_000)
+    ap.add_argument("--memory-mb", default="2,20,200",
+                    help="SVG sizes (MB) for the peak-memory figure; empty: skip")
     args = ap.parse_args()
     prof = load_profile()
     with tempfile.TemporaryDirectory() as tmp:
@@ -158,6 +199,9 @@ def main() -> None:
         print(f"  {tol:>7g} {j.n_segments:>9d} {int(j.draw.sum()):>8d} {ideal.max():>10.4f} "
               f"{quant.max():>14.4f} {j.step_quantum_mm:>8.4f} "
               f"{tol + j.step_quantum_mm:>8.4f} {dt:>9.3f}  {'ok' if ok else 'EXCEEDED'}")
+    if args.memory_mb:
+        print()
+        peak_memory([float(x) for x in args.memory_mb.split(",")])
 
 
 if __name__ == "__main__":

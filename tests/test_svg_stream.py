@@ -126,3 +126,14 @@ def test_segment_limit_names_the_file_the_count_and_the_option() -> None:
         read_svg(data, file="big.svg", max_segments=19)
     msg = str(e.value)
     assert "big.svg" in msg and "19" in msg and "--max-segments" in msg
+
+
+def test_flattened_point_limit_is_checked_before_flattening() -> None:
+    from fivebar_host.toolpath.geometry import flatten
+
+    d = read_svg((HEAD + '<circle cx="50" cy="50" r="40" stroke="black"/></svg>').encode(),
+                 file="circle.svg")
+    n = flatten(d, 0.01).points.shape[0]
+    assert flatten(d, 0.01, max_points=n).points.shape[0] == n
+    with pytest.raises(InputError, match=r"circle\.svg.*--max-segments"):
+        flatten(d, 0.01, max_points=n - 1)
