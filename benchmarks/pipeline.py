@@ -18,13 +18,22 @@ against segment count and measured deviation.
    (`--no-simplify`) and on (`toolpath.simplify`), and the validated max deviation from the
    original dense lines. Target: the dense copy within ~10 % of the source's plan time.
 
+4. Peak memory per input byte: drawings of 2, 20 and 200 MB of the same kind (`write_svg`,
+   in a temporary folder) compiled and validated as `fivebar convert` does, each in a fresh
+   process; the process's real peak (RSS high-water mark, `ru_maxrss`), in MiB per MB of
+   SVG, and the time. Target ≤ 30 bytes per input byte on large drawings. `--max-segments`
+   is raised for these runs (the 200 MB drawing has 8.6 million path segments).
+
 Run: python benchmarks/pipeline.py [--repeat 3] [--paths 10000] [--dense-only]
+     [--memory-mb 2,20,200]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -142,6 +151,77 @@ def dense_section(prof: Profile, tmp: Path, step_mm: float = 0.05) -> None:
         print(f"  {name:<34} {j.total_time_s:>7.2f} {j.total_time_s / src.total_time_s:>6.0%} "
               f"{j.n_segments:>9d} {j.max_dev_mm:>8.4f} {bound:>7.4f} {dt:>9.3f}"
               f"  {'ok' if j.max_dev_mm <= bound else 'EXCEEDED'}")
+def write_svg(path: Path, size_bytes: int, seed: int = 0, w: float = 80.0,
+              h: float = 36.0, chunk: int = 20_000) -> int:
+    """Write `make_svg`'s kind of drawing (10 segments per path, every third a quadratic) of
+    about `size_bytes` to `path`, generated in vectorised chunks so a 200 MB file takes
+    seconds; returns the number of paths."""
+    rng = np.random.default_rng(seed)
+    segs = 10
+    written = 0
+    n_paths = 0
+    with path.open("w") as f:
+        head = (f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}mm" height="{h}mm" '
+                f'viewBox="0 0 {w} {h}">\n')
+        f.write(head)
+        written += len(head)
+        while written < size_bytes:
+            cx = rng.uniform(3, w - 3, (chunk, 1))
+            cy = rng.uniform(3, h - 3, (chunk, 1))
+            ang = np.cumsum(rng.normal(0, 0.9, (chunk, segs + 1)), axis=1)
+            st = rng.uniform(0.3, 1.2, (chunk, segs + 1))
+            x = np.clip(cx + np.cumsum(st * np.cos(ang), axis=1), 0.5, w - 0.5)
+            y = np.clip(cy + np.cumsum(st * np.sin(ang), axis=1), 0.5, h - 0.5)
+            qx = (x[:, :-1] + x[:, 1:]) / 2 + 0.3
+            qy = (y[:, :-1] + y[:, 1:]) / 2 - 0.3
+            lines = []
+            for i in range(chunk):
+                xi, yi, qxi, qyi = x[i].tolist(), y[i].tolist(), qx[i].tolist(), qy[i].tolist()
+                d = [f"M{xi[0]:.3f} {yi[0]:.3f}"]
+                for k in range(1, segs + 1):
+                    if k % 3 == 0:
+                        d.append(f"Q{qxi[k - 1]:.3f} {qyi[k - 1]:.3f} {xi[k]:.3f} {yi[k]:.3f}")
+                    else:
+                        d.append(f"L{xi[k]:.3f} {yi[k]:.3f}")
+                lines.append(f'<path d="{"".join(d)}" stroke="black" fill="none"/>\n')
+                n_paths += 1
+                written += len(lines[-1])
+                if written >= size_bytes:
+                    break
+            f.write("".join(lines))
+        f.write("</svg>\n")
+    return n_paths
+
+
+_PEAK_RUN = """
+import json, resource, sys, time
+from fivebar_host.compile import CompileOptions, compile_job
+from fivebar_host.config import load_profile
+t0 = time.perf_counter()
+job = compile_job(sys.argv[1], load_profile(), CompileOptions(max_segments=1e9))
+print(json.dumps({"s": time.perf_counter() - t0, "segments": job.n_segments,
+                  "peak": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}))
+"""
+
+
+def peak_memory(sizes_mb: list[float]) -> None:
+    """Section 3 (module doc): peak RSS per input MB, one fresh process per size."""
+    print("peak memory per input byte (compile + validate, fresh process per size, "
+          "ru_maxrss):")
+    print(f"  {'SVG MB':>7} {'paths':>8} {'segments':>10} {'peak MiB':>9} {'MiB/MB':>7} "
+          f"{'B/B':>6} {'time s':>7}")
+    for mb in sizes_mb:
+        with tempfile.TemporaryDirectory() as tmp:
+            svg = Path(tmp) / "drawing.svg"
+            n = write_svg(svg, int(mb * 1e6))
+            size = svg.stat().st_size
+            out = subprocess.run([sys.executable, "-c", _PEAK_RUN, str(svg)], check=True,
+                                 capture_output=True, text=True, cwd=ROOT).stdout
+        r = json.loads(out)
+        peak = r["peak"]
+        print(f"  {size / 1e6:>7.0f} {n:>8d} {r['segments']:>10d} {peak / 2**20:>9.0f} "
+              f"{peak / 2**20 / (size / 1e6):>7.1f} {peak / size:>6.1f} {r['s']:>7.1f}  "
+              f"{'MET' if peak / size <= 30 else 'NOT MET'} (≤ 30 B/B)")
 
 
 def main() -> None:
@@ -149,6 +229,8 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--paths", type=int, default=10_000)
     ap.add_argument("--dense-only", action="store_true", help="only section 3 (dense input)")
+    ap.add_argument("--memory-mb", default="2,20,200",
+                    help="SVG sizes (MB) for the peak-memory figure; empty: skip")
     args = ap.parse_args()
     prof = load_profile()
     if args.dense_only:
@@ -206,6 +288,9 @@ def main() -> None:
     print()
     with tempfile.TemporaryDirectory() as tmp:
         dense_section(prof, Path(tmp))
+    if args.memory_mb:
+        print()
+        peak_memory([float(x) for x in args.memory_mb.split(",")])
 
 
 if __name__ == "__main__":

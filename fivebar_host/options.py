@@ -299,6 +299,10 @@ JOB_OPTIONS: tuple[Option, ...] = (
            percent=True, metavar="FRACTION",
            help="Joint acceleration as a share of the profile's max_joint_rad_s2: 0.5 or "
            "50% (default 1)."),
+    Option("max_segments", "--max-segments", "max_segments", "float", lo=1.0, hi=1e9,
+           metavar="N", help="Refuse a drawing with more path segments than this, or whose "
+           "flattened curves have more than 4 times as many points, before memory runs out "
+           "(default 2000000: about 4 GB of memory)."),
     Option("laser", "--laser", "laser", "bool", default=False,
            help="Laser job: drawing segments carry the profile's power (S > 0). Without it "
            "every line says S0 (pen plotter: pen down/up = M3/M5 around drawing strokes)."),

@@ -28,7 +28,8 @@ def test_query_round_trip_of_every_option() -> None:
     values = {"mode": "auto", "tolerance_mm": 0.2, "origin_mm": (10.5, -95.25), "scale": 0.5,
               "rotate_deg": 30.0, "fit": True, "layers": ("a", "b c"), "keep_order": True,
               "draw_feed_mm_s": 25.0, "travel_feed_mm_s": 60.0, "accel_fraction": 0.5,
-              "laser": True, "confirm": True, "no_simplify": True}
+              "laser": True, "confirm": True, "no_simplify": True,
+              "max_segments": 3e6}
     assert set(values) == {o.name for o in JOB_OPTIONS}
     q = to_query(values)
     pairs = [(k, v) for k, vs in q.items() for v in (vs if isinstance(vs, list) else [vs])]

@@ -61,17 +61,21 @@ from fivebar_host.toolpath import layout
 from fivebar_host.toolpath.gcode import read_gcode
 from fivebar_host.toolpath.geometry import Drawing
 from fivebar_host.toolpath.svg import read_svg
+from fivebar_host.toolpath.svg.reader import DEFAULT_MAX_SEGMENTS
 from kinematics.fivebar import WORKING_MODES
 
 GCODE_SUFFIXES = {".gcode", ".nc", ".ngc", ".gc", ".g", ".tap", ".cnc"}
 
 
-def read_drawing(path: str | Path, layers: tuple[str, ...] = ()) -> Drawing:
-    """Read an SVG or G-code file, chosen by suffix (or by content when unknown)."""
+def read_drawing(path: str | Path, layers: tuple[str, ...] = (),
+                 max_segments: float | None = None) -> Drawing:
+    """Read an SVG or G-code file, chosen by suffix (or by content when unknown); an SVG
+    with more than `max_segments` path segments (None: the reader's default) is refused."""
     p = Path(path)
     suffix = p.suffix.lower()
+    limit = DEFAULT_MAX_SEGMENTS if max_segments is None else int(max_segments)
     if suffix == ".svg":
-        return read_svg(p, layers or None)
+        return read_svg(p, layers or None, max_segments=limit)
     if suffix in GCODE_SUFFIXES:
         if layers:
             raise InputError("--layer applies to SVG files only", str(p))
@@ -81,7 +85,7 @@ def read_drawing(path: str | Path, layers: tuple[str, ...] = ()) -> Drawing:
     except OSError as e:
         raise InputError(f"cannot read file: {e.strerror or e}", str(p)) from e
     if head.startswith((b"<?xml", b"<svg", b"<!--", b"<!DOCTYPE")):
-        return read_svg(p, layers or None)
+        return read_svg(p, layers or None, max_segments=limit)
     return read_gcode(p)
 
 
@@ -100,6 +104,7 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
     tr = plan_travel(su, placed, home, routed, solved, plan_modes)
     segments = assemble(placed, home, routed, solved, tr)
     stepped = drop_zero_moves(profile.motors, segments)
+    del segments  # the stepped copy replaces it (memory on large drawings)
     planned = plan_timing(su, routed, solved, stepped)
     return finish(su, placed, home, routed, solved, tr, planned, opts)
 
@@ -176,5 +181,5 @@ def _compile_with_mode_changes(drawing: Drawing, profile: Profile,
 def compile_job(path: str | Path, profile: Profile, opts: CompileOptions | None = None) -> Job:
     """Read and compile a drawing file (see module doc). Raises `InputError` or `JobError`."""
     o = opts or CompileOptions()
-    drawing = read_drawing(path, o.layers)
+    drawing = read_drawing(path, o.layers, o.max_segments)
     return compile_drawing(drawing, profile, o)

@@ -45,6 +45,7 @@ class CompileOptions:
     validate: bool = True
     validation_samples: int = 4
     no_simplify: bool = False  # keep every vertex of dense straight-line input
+    max_segments: float | None = None  # None: `toolpath.svg.reader.DEFAULT_MAX_SEGMENTS`
 
 
 @dataclass(frozen=True)

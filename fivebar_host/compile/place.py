@@ -21,8 +21,13 @@ from fivebar_host.errors import JobError, OptionError, Where
 from fivebar_host.toolpath import layout
 from fivebar_host.toolpath.geometry import Drawing, Polylines, flatten
 from fivebar_host.toolpath.segment import CheckFailedError
+from fivebar_host.toolpath.svg.reader import DEFAULT_MAX_SEGMENTS
 from kinematics.arrays import FloatArray
 from kinematics.fivebar import FiveBar
+
+#: Flattened points allowed per path segment of `--max-segments` (curves flatten into a few
+#: chords each; a huge arc at a fine tolerance into many).
+POINTS_PER_SEGMENT = 4
 
 
 @dataclass(frozen=True)
@@ -85,7 +90,9 @@ def place(su: Setup, drawing: Drawing, opts: CompileOptions) -> Placed:
                       origin_mm=opts.origin_mm, scale=opts.scale, rotate_deg=opts.rotate_deg,
                       fit=opts.fit, assembly=su.asm)
     mdraw = drawing.transformed(pl.matrix, pl.offset)
-    return Placed(drawing=drawing, pl=pl, mdraw=mdraw, poly=flatten(mdraw, su.tol_f))
+    limit = DEFAULT_MAX_SEGMENTS if opts.max_segments is None else int(opts.max_segments)
+    return Placed(drawing=drawing, pl=pl, mdraw=mdraw,
+                  poly=flatten(mdraw, su.tol_f, POINTS_PER_SEGMENT * limit))
 
 
 def find_home(su: Setup, file: str) -> Home:

@@ -12,7 +12,7 @@ path stays within the chord's budget tol_i (`toolpath.segment.refine`, at most
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -97,11 +97,37 @@ def solve(su: Setup, placed: Placed, routed: Routed) -> Solved:
     for m, chk in checkers.items():
         cs = np.flatnonzero(chord_mode == m)
         try:
-            r = refine(chk, ch.pts[a[cs]], ch.pts[a[cs] + 1], th_v[a[cs]], th_v[a[cs] + 1],
-                       ch.tol_i[cs], MAX_STEP_RAD)
+            r = _refine_blocks(chk, ch, th_v, cs)
         except CheckFailedError as cf:
             c = int(cs[cf.index])
             raise fail(su, placed, cf, int(ch.prim[c]) if ch.prim[c] >= 0
                        else int(ch.vert_prim[a[c]]), in_mode=m) from None
         parts.append(r if len(checkers) == 1 else replace(r, chord=cs[r.chord]))
     return Solved(checkers=checkers, th_v=th_v, iv=_merge_intervals(parts))
+
+
+#: Chords refined at a time: every chord is refined on its own, so blocks give the same
+#: intervals as one pass while the refinement's temporaries (samples, checks, candidate
+#: pieces: a few hundred bytes a chord) stay bounded on large drawings.
+REFINE_BLOCK = 1 << 16
+
+
+def _refine_blocks(chk: PoseChecker, ch: _Chords, th_v: FloatArray,
+                   cs: NDArray[np.int64]) -> Intervals:
+    """`refine` of chords `cs` in blocks of `REFINE_BLOCK`; chord ids (and a failure's
+    index) are positions in `cs`, as one call of `refine` would give."""
+    a = ch.chord_from
+    out: list[Intervals] = []
+    for i in range(0, max(cs.shape[0], 1), REFINE_BLOCK):
+        b = cs[i:i + REFINE_BLOCK]
+        try:
+            r = refine(chk, ch.pts[a[b]], ch.pts[a[b] + 1], th_v[a[b]], th_v[a[b] + 1],
+                       ch.tol_i[b], MAX_STEP_RAD)
+        except CheckFailedError as cf:
+            cf.index += i
+            raise
+        out.append(r if i == 0 else replace(r, chord=r.chord + i))
+    if len(out) == 1:
+        return out[0]
+    return Intervals(*(np.concatenate([getattr(r, f.name) for r in out])
+                       for f in fields(Intervals)))

@@ -21,6 +21,11 @@ from fivebar_host.toolpath.geometry import nearest_distance
 from fivebar_host.toolpath.simplify import segment_distance
 from kinematics.arrays import BoolArray, FloatArray, IntArray
 
+#: Draw segments measured at a time (bounds the temporaries of forward kinematics and
+#: Newton's method: a few hundred bytes a sample) — every sample is measured on its own, so
+#: the distances are the same as in one pass.
+VALIDATE_BLOCK = 1 << 15
+
 
 def deviations(job: Job, profile: Profile, samples: int = 4,
                quantised: bool = True) -> tuple[FloatArray, IntArray]:
@@ -31,15 +36,28 @@ def deviations(job: Job, profile: Profile, samples: int = 4,
     method on the primitive; a join bridge is measured to its two end points). Returns the
     distances and the segment index of each. `quantised=False` measures the ideal
     (unrounded) joint targets instead: the tolerance bound itself, without the step quantum."""
-    fb = profile.geometry
+    di = np.flatnonzero(job.draw)
+    return _sample_distances(job, profile, samples, quantised, di), np.repeat(di, samples + 1)
+
+
+def _sample_distances(job: Job, profile: Profile, samples: int, quantised: bool,
+                      di: IntArray) -> FloatArray:
+    """`deviations`' distances, draw segments `di`, in blocks of `VALIDATE_BLOCK`."""
     th = (steps.step_angles(job.steps, job.home_rad, job.steps_per_rev) if quantised
           else job.angles_rad)
-    di = np.flatnonzero(job.draw)
     s = np.arange(samples + 1) / samples
-    tha, thb = th[di], th[di + 1]
-    q = (tha[:, None, :] + s[None, :, None] * (thb - tha)[:, None, :]).reshape(-1, 2)
-    fk = fb.forward_batch(q, "+" if job.assembly > 0 else "-")
-    return _deviation_of(job, fk.points, fk.valid, di, samples)
+    out = np.empty(di.shape[0] * (samples + 1))
+    asm = "+" if job.assembly > 0 else "-"
+    for i in range(0, di.shape[0], VALIDATE_BLOCK):
+        b = di[i:i + VALIDATE_BLOCK]
+        tha, thb = th[b], th[b + 1]
+        q = (tha[:, None, :] + s[None, :, None] * (thb - tha)[:, None, :]).reshape(-1, 2)
+        fk = profile.geometry.forward_batch(q, asm)
+        rank = np.repeat(np.arange(i, i + b.shape[0]), samples + 1)
+        d = distance_to_request(job, fk.points, rank, np.tile(s, b.shape[0]))
+        d[~fk.valid] = np.inf
+        out[i * (samples + 1):(i + b.shape[0]) * (samples + 1)] = d
+    return out
 
 
 def _deviation_of(job: Job, e: FloatArray, valid: BoolArray, di: IntArray,
@@ -57,10 +75,10 @@ def distance_to_request(job: Job, e: FloatArray, rank: IntArray, s: FloatArray) 
     """Distance of pen points `e` to the requested curve of draw segment number `rank`
     (counted among draw segments), at fraction `s` ∈ [0, 1] along it as the parameter guess
     for Newton's method on the primitive (a join bridge: distance to its nearer end)."""
-    sig = job.seg_sa[rank] + s * (job.seg_sb - job.seg_sa)[rank]
-    span = job.seg_thi - job.seg_tlo
-    tg = np.where(job.seg_rev[rank], job.seg_thi[rank] - sig * span[rank],
-                  job.seg_tlo[rank] + sig * span[rank])
+    sa, tlo, thi = job.seg_sa[rank], job.seg_tlo[rank], job.seg_thi[rank]
+    sig = sa + s * (job.seg_sb[rank] - sa)
+    span = thi - tlo
+    tg = np.where(job.seg_rev[rank], thi - sig * span, tlo + sig * span)
     prim = job.seg_prim[rank]
     dist = np.empty(e.shape[0])
     real = prim >= 0
@@ -142,8 +160,9 @@ def validate(job: Job, profile: Profile, samples: int = 4) -> Job:
     """Fill the per-path and overall max/mean deviation from the quantised steps."""
     if not job.draw.any():
         return job
-    dist, seg = deviations(job, profile, samples)
-    path = job.path[seg]
+    di = np.flatnonzero(job.draw)
+    dist = _sample_distances(job, profile, samples, True, di)
+    path = np.repeat(job.path[di], samples + 1)
     n = job.n_paths
     mx = np.full(n, -np.inf)
     np.maximum.at(mx, path, dist)

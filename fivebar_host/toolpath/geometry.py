@@ -20,6 +20,7 @@ Primitives are grouped into *strokes* (pen-down runs; an SVG subpath or a G-code
 from __future__ import annotations
 
 import math
+from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -91,21 +92,29 @@ class Drawing:
 
 
 class DrawingBuilder:
-    """Accumulates primitives from a reader; `build` returns the `Drawing` arrays."""
+    """Accumulates primitives from a reader; `build` returns the `Drawing` arrays.
 
-    def __init__(self, file: str) -> None:
+    Primitives go into typed `array.array` buffers (8 bytes a number) rather than lists of
+    tuples (about 30 bytes a number as Python floats), so a large drawing's memory while it
+    is read is close to that of its final arrays. `limit` (None: none) is the largest number
+    of primitives accepted: the next one raises `InputError` naming the file, so a drawing
+    too large for the memory stops while it is read, not when the memory runs out."""
+
+    def __init__(self, file: str, limit: int | None = None, limit_hint: str = "") -> None:
         self.file = file
-        self.kinds: list[int] = []
-        self.params: list[tuple[float, ...]] = []
-        self.strokes: list[int] = []
-        self.lines: list[int] = []
+        self.limit = limit
+        self.limit_hint = limit_hint
+        self.kinds = array("b")
+        self.params = array("d")
+        self.strokes = array("q")
+        self.lines = array("q")
         self.stroke_source: list[int] = []
         self.stroke_power: list[float] = []
         self.stroke_feed: list[float] = []
         self.sources: list[SourceInfo] = []
         self.warnings: list[str] = []
         self.matrices: list[NDArray[np.float64]] = []
-        self.matrix_ids: list[int] = []
+        self.matrix_ids = array("q")
         self._open = False
 
     def add_source(self, ident: str | None, line: int | None, tag: str,
@@ -134,12 +143,15 @@ class DrawingBuilder:
         indexes `self.matrices` (the affine map applied at `build`), −1 for none."""
         if not self._open:
             raise RuntimeError("add() before begin_stroke()")
+        n = len(prims)
+        if self.limit is not None and len(self.kinds) + n > self.limit:
+            raise InputError(f"the drawing has more than {self.limit:,} path segments (lines, "
+                             f"curves, arcs), the limit{self.limit_hint}", self.file, line)
         stroke = len(self.stroke_source) - 1
         pad = (0.0,) * 8
         for kind, p in prims:
             self.kinds.append(kind)
-            self.params.append(p + pad[:8 - len(p)] if len(p) < 8 else p)
-        n = len(prims)
+            self.params.extend(p + pad[:8 - len(p)] if len(p) < 8 else p)
         self.strokes.extend([stroke] * n)
         self.lines.extend([line] * n)
         self.matrix_ids.extend([matrix] * n)
@@ -151,18 +163,17 @@ class DrawingBuilder:
             self.stroke_power.pop()
             self.stroke_feed.pop()
         self._open = False
-        params = (np.array(self.params, dtype=np.float64).reshape(-1, 8) if self.params
-                  else np.zeros((0, 8)))
-        kind = np.array(self.kinds, dtype=np.int8)
-        ids = np.array(self.matrix_ids, dtype=np.int64)
+        params = np.frombuffer(self.params, dtype=np.float64).reshape(-1, 8)
+        kind = np.frombuffer(self.kinds, dtype=np.int8)
+        ids = np.frombuffer(self.matrix_ids, dtype=np.int64)
         if self.matrices and ids.size:
-            # Apply each primitive's affine map (3×3, last row 0 0 1) in one vectorised pass.
-            mats = np.stack(self.matrices)[np.maximum(ids, 0)]
-            mats[ids < 0] = np.identity(3)
-            params = _transform_each(kind, params, mats[:, :2, :2], mats[:, :2, 2])
+            params = _transform_by_matrix(kind, params, np.stack(self.matrices), ids)
+        else:
+            params = params.copy()
+        self.params = array("d")
         return Drawing(
             file=self.file,
-            kind=kind,
+            kind=kind.copy(),
             params=params,
             stroke=np.array(self.strokes, dtype=np.int64),
             line=np.array(self.lines, dtype=np.int64),
@@ -174,6 +185,25 @@ class DrawingBuilder:
             page_size_mm=page_size_mm,
             warnings=self.warnings,
         )
+
+
+#: Primitives mapped per block by `_transform_by_matrix` (bounds its temporary arrays).
+TRANSFORM_BLOCK = 1 << 16
+
+
+def _transform_by_matrix(kind: NDArray[np.int8], params: FloatArray, mats: FloatArray,
+                         ids: NDArray[np.int64]) -> FloatArray:
+    """Primitive i mapped by the affine map mats[ids[i]] (3×3; −1: identity), in blocks so
+    the per-primitive matrices never exist for the whole drawing at once (each row's
+    arithmetic is the same as in one pass)."""
+    out = np.empty_like(params)
+    for i in range(0, kind.shape[0], TRANSFORM_BLOCK):
+        sl = slice(i, i + TRANSFORM_BLOCK)
+        bid = ids[sl]
+        m = mats[np.maximum(bid, 0)]
+        m[bid < 0] = np.identity(3)
+        out[sl] = _transform_each(kind[sl], params[sl], m[:, :2, :2], m[:, :2, 2])
+    return out
 
 
 # --------------------------------------------------------------------------- affine maps
@@ -320,9 +350,15 @@ class Polylines:
     stroke: IntArray  # stroke index of each polyline (into the Drawing's strokes)
 
 
-def flatten(drawing: Drawing, tol_mm: float) -> Polylines:
+#: Primitives flattened at a time (bounds the per-vertex temporaries of `flatten`).
+FLATTEN_BLOCK = 1 << 16
+
+
+def flatten(drawing: Drawing, tol_mm: float, max_points: int | None = None) -> Polylines:
     """Flatten every stroke into a polyline whose chords are within `tol_mm` of the curves
-    (bound in `piece_counts`), vectorised over all primitives at once."""
+    (bound in `piece_counts`), vectorised over blocks of primitives (each primitive's
+    vertices depend on it alone, so blocks give the same arrays as one pass). More than
+    `max_points` vertices is an `InputError`, raised before they are computed."""
     kind, params = drawing.kind, drawing.params
     nprim = kind.shape[0]
     if nprim == 0:
@@ -334,21 +370,34 @@ def flatten(drawing: Drawing, tol_mm: float) -> Polylines:
     first[1:] = drawing.stroke[1:] != drawing.stroke[:-1]
     # Each primitive contributes n points (t = 1/n … 1); each stroke also its start point.
     counts = n + first
-    total = int(counts.sum())
-    prim = np.repeat(np.arange(nprim), counts)
     start_of = np.cumsum(counts) - counts
-    local = np.arange(total) - np.repeat(start_of, counts)  # 0.. counts-1
-    j = local + 1 - np.repeat(first, counts)  # 0 for the stroke start point, else 1..n
-    nn = np.repeat(n, counts)
-    t = j / nn
-    pts = evaluate(kind[prim], params[prim], t)
-    t0 = np.where(j > 0, (j - 1) / nn, 0.0)
-    is_start = j == 0
-    stroke_of_prim = drawing.stroke
-    starts = np.flatnonzero(is_start)
+    total = int(start_of[-1] + counts[-1])
+    if max_points is not None and total > max_points:
+        raise InputError(f"flattened within {tol_mm:g} mm, the curves have {total:,} points, "
+                         f"more than the limit {max_points:,} (4 × --max-segments); raise "
+                         "--max-segments or the tolerance if the machine has the memory",
+                         drawing.file)
+    pts = np.empty((total, 2))
+    prim_out = np.empty(total, dtype=np.int64)
+    t_out = np.empty(total)
+    t0_out = np.empty(total)
+    for i in range(0, nprim, FLATTEN_BLOCK):
+        c = counts[i:i + FLATTEN_BLOCK]
+        v0 = int(start_of[i])
+        v1 = v0 + int(c.sum())
+        prim = np.repeat(np.arange(i, i + c.shape[0]), c)
+        local = np.arange(v0, v1) - np.repeat(start_of[i:i + FLATTEN_BLOCK], c)
+        j = local + 1 - np.repeat(first[i:i + FLATTEN_BLOCK], c)  # 0: the stroke's start
+        nn = np.repeat(n[i:i + FLATTEN_BLOCK], c)
+        t = j / nn
+        pts[v0:v1] = evaluate(kind[prim], params[prim], t)
+        t0_out[v0:v1] = np.where(j > 0, (j - 1) / nn, 0.0)
+        t_out[v0:v1] = t
+        prim_out[v0:v1] = prim
+    starts = start_of[first]
     offsets = np.append(starts, total).astype(np.int64)
-    return Polylines(pts, offsets, prim.astype(np.int64), t, t0,
-                     stroke_of_prim[prim[starts]].astype(np.int64))
+    return Polylines(pts, offsets, prim_out, t_out, t0_out,
+                     drawing.stroke[first].astype(np.int64))
 
 
 def bbox(drawing: Drawing, rel_tol: float = 1e-4) -> tuple[float, float, float, float]:

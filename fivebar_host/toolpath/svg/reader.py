@@ -22,6 +22,7 @@ import numpy as np
 from fivebar_host.errors import InputError
 from fivebar_host.toolpath.geometry import MAX_COORD_MM, Drawing, bbox, read_source
 from fivebar_host.toolpath.svg.masking import Masking
+from fivebar_host.toolpath.svg.stream import StreamTree, scan
 from fivebar_host.toolpath.svg.units import MM_PER_PX, Lengths, parse_length, viewport_transform
 from fivebar_host.toolpath.svg.walk import Ctx, Walker, root_props
 from fivebar_host.toolpath.svg.xmltree import Node, parse_xml
@@ -50,20 +51,62 @@ def _page_size(r: Walker, root: Node, name: str) -> tuple[float, float, bool]:
     return w, h, known
 
 
+#: Path segments (lines, curves, arcs) read from one file before it is refused by default.
+DEFAULT_MAX_SEGMENTS = 2_000_000
+LIMIT_HINT = ("; raise it with --max-segments (job option max_segments) if the machine has "
+              "the memory: compiling takes about 2 GB per million segments")
+
+
 def read_svg(source: str | Path | bytes, layers: Sequence[str] | None = None,
-             file: str | None = None, language: str = "en") -> Drawing:
+             file: str | None = None, language: str = "en",
+             max_segments: int | None = DEFAULT_MAX_SEGMENTS) -> Drawing:
     """Read an SVG file (path or bytes) into a `Drawing` in mm, y up, page bottom-left at 0.
 
     `layers`: Inkscape layer labels or ids to draw (None: everything visible). `language`:
-    the user language `<switch>`'s `systemLanguage` is matched against.
+    the user language `<switch>`'s `systemLanguage` is matched against. `max_segments`: the
+    most path segments drawn (None: no limit); more is an `InputError` raised while reading.
+    The document is walked while it is parsed where its references allow (`stream`).
     """
     data, name = read_source(source, file, "<svg>")
-    root = parse_xml(data, name)
+    sc = scan(data, name)
+    r = Walker(name, layers, language, max_segments, LIMIT_HINT)
+    Masking(r)
+    for text, line in sc.sheets:
+        r.sheet.add_sheet(text, f"<style> at line {line}")
+    page: list[float] = []
+
+    def on_root(root: Node) -> Ctx | None:
+        ctx, height_mm, width_mm, known = _enter_root(r, root, name)
+        page.extend((height_mm, width_mm, float(known)))
+        return ctx
+
+    if sc.streamable:
+        StreamTree(r, sc.referenced, on_root).parse(data, name)
+    else:
+        root = parse_xml(data, name)
+        r.index(root)
+        ctx = on_root(root)
+        if ctx is not None:
+            for child in root.children:
+                r.walk(child, ctx)
+    del data
+    height_mm, width_mm, known = page
+    _check_layers(r, name)
+    r.b.warnings.extend(_warnings(r))
+    drawing = r.b.build(page_height_mm=height_mm, page_size_mm=(width_mm, height_mm))
+    _check_coordinates(drawing, name)
+    if drawing.kind.shape[0] == 0:
+        raise InputError(_nothing_message(r), name)
+    if not known:
+        drawing = _page_from_content(drawing, name)
+    return drawing
+
+
+def _enter_root(r: Walker, root: Node, name: str) -> tuple[Ctx | None, float, float, bool]:
+    """The root's checks, page (height, width in mm, whether known) and the context of its
+    content (None when it is fully transparent)."""
     if root.tag != "svg":
         raise InputError(f"root element is <{root.tag}>, not <svg>", name, root.line)
-    r = Walker(name, layers, language)
-    Masking(r)
-    r.index(root)
     vb = r.viewbox(root)
     width_mm, height_mm, known = _page_size(r, root, name)
     if vb is not None:
@@ -79,18 +122,7 @@ def read_svg(source: str | Path | bytes, layers: Sequence[str] | None = None,
         raise InputError("the root <svg> has display:none", name, root.line)
     ctx = Ctx(flip @ page, root_props(), lengths, None, not r.layers)
     ctx = r.enter(root, spec, ctx, False)
-    if ctx.opacity > 0:
-        for child in root.children:
-            r.walk(child, ctx)
-    _check_layers(r, name)
-    r.b.warnings.extend(_warnings(r))
-    drawing = r.b.build(page_height_mm=height_mm, page_size_mm=(width_mm, height_mm))
-    _check_coordinates(drawing, name)
-    if drawing.kind.shape[0] == 0:
-        raise InputError(_nothing_message(r), name)
-    if not known:
-        drawing = _page_from_content(drawing, name)
-    return drawing
+    return (ctx if ctx.opacity > 0 else None), height_mm, width_mm, known
 
 
 def _check_layers(r: Walker, name: str) -> None:

@@ -62,12 +62,13 @@ class Collected:
 
 
 class Walker:
-    def __init__(self, file: str, layers: Sequence[str] | None, language: str) -> None:
+    def __init__(self, file: str, layers: Sequence[str] | None, language: str,
+                 max_segments: int | None = None, limit_hint: str = "") -> None:
         self.file = file
         self.layers = [s for s in (layers or []) if s]
         self.language = language.lower()
         self.found_layers: list[tuple[str | None, str | None]] = []
-        self.b = DrawingBuilder(file)
+        self.b = DrawingBuilder(file, max_segments, limit_hint)
         self.ids: dict[str, Node] = {}
         self.sheet = StyleSheet()
         self.skipped_hidden = 0
@@ -92,16 +93,14 @@ class Walker:
             self.notes[kind] = (message, node, 1)
 
     def index(self, root: Node) -> None:
-        """Ids and style sheets of the whole document (iteratively: files nest deeply)."""
+        """Ids of the whole document, first one wins (iteratively: files nest deeply). The
+        style sheets come from the reader's first pass (`stream.scan`)."""
         stack = [root]
         while stack:
             node = stack.pop()
             ident = node.get("id")
             if ident and ident not in self.ids:
                 self.ids[ident] = node
-            if node.tag == "style" and node.is_svg and (node.get("type") or "text/css") in (
-                    "text/css", ""):
-                self.sheet.add_sheet(node.text, f"<style> at line {node.line}")
             stack.extend(reversed(node.children))
 
     def transform(self, text: str, node: Node) -> np.ndarray:

@@ -47,21 +47,47 @@ class Node:
         return f'<{self.tag} id="{ident}">' if ident else f"<{self.tag}>"
 
 
+def clean_attrs(attrs: dict[str, str]) -> dict[str, str]:
+    """Attribute names as `Node.attrs` keeps them: local names for SVG (or no) namespace,
+    'ns local' for foreign ones."""
+    clean: dict[str, str] = {}
+    for k, v in attrs.items():
+        kns, _, kl = k.rpartition(" ")
+        clean[kl if kns in ("", SVG_NS) else f"{kns} {kl}"] = v
+    return clean
+
+
+def new_parser() -> xml.parsers.expat.XMLParserType:
+    """An expat parser reporting namespaced names as 'ns local'."""
+    return xml.parsers.expat.ParserCreate(namespace_separator=" ")
+
+
+def run_parser(parser: xml.parsers.expat.XMLParserType, data: bytes, file: str) -> None:
+    """Parse all of `data`; XML and decoding errors become `InputError`s naming the line."""
+    try:
+        parser.Parse(data, True)
+    except xml.parsers.expat.ExpatError as e:
+        raise InputError(f"malformed XML: {xml.parsers.expat.ErrorString(e.code)} "
+                         f"(line {e.lineno}, column {e.offset + 1})", file, e.lineno) from e
+    except (LookupError, UnicodeError) as e:  # an XML declaration naming an unknown encoding
+        raise InputError(f"cannot decode the file: {e}", file) from e
+
+
+def too_deep(file: str, line: int) -> InputError:
+    return InputError(f"elements nest deeper than {MAX_DEPTH} levels", file, line)
+
+
 def parse_xml(data: bytes, file: str) -> Node:
     """Parse with expat (keeps line numbers); external entities are never fetched."""
-    parser = xml.parsers.expat.ParserCreate(namespace_separator=" ")
+    parser = new_parser()
     root: list[Node] = []
     stack: list[Node] = []
 
     def start(name: str, attrs: dict[str, str]) -> None:
         ns, _, local = name.rpartition(" ")
-        clean: dict[str, str] = {}
-        for k, v in attrs.items():
-            kns, _, kl = k.rpartition(" ")
-            clean[kl if kns in ("", SVG_NS) else f"{kns} {kl}"] = v
-        node = Node(local, ns, clean, parser.CurrentLineNumber)
+        node = Node(local, ns, clean_attrs(attrs), parser.CurrentLineNumber)
         if len(stack) >= MAX_DEPTH:
-            raise InputError(f"elements nest deeper than {MAX_DEPTH} levels", file, node.line)
+            raise too_deep(file, node.line)
         if stack:
             node.parent = stack[-1]
             stack[-1].children.append(node)
@@ -79,13 +105,7 @@ def parse_xml(data: bytes, file: str) -> Node:
     parser.StartElementHandler = start
     parser.EndElementHandler = end
     parser.CharacterDataHandler = chars
-    try:
-        parser.Parse(data, True)
-    except xml.parsers.expat.ExpatError as e:
-        raise InputError(f"malformed XML: {xml.parsers.expat.ErrorString(e.code)} "
-                         f"(line {e.lineno}, column {e.offset + 1})", file, e.lineno) from e
-    except (LookupError, UnicodeError) as e:  # an XML declaration naming an unknown encoding
-        raise InputError(f"cannot decode the file: {e}", file) from e
+    run_parser(parser, data, file)
     if not root:
         raise InputError("no XML root element", file)
     return root[0]
