@@ -226,7 +226,11 @@ void mo_prepare_pen(fb_block_t *b, uint16_t from_us, uint16_t to_us, uint16_t mo
 		    uint16_t settle_ms)
 {
 	uint32_t d16 = (uint32_t)(from_us > to_us ? from_us - to_us : to_us - from_us) << 4;
+	/* the board sends each frame's width one frame after asking mo_pen_frame()
+	 * for it, so the move takes one frame less: its last width is on the wire
+	 * within move_ms of the block start (and a move under two frames jumps) */
 	uint32_t frames = move_ms / CFG_SERVO_FRAME_MS;
+	frames = frames ? frames - 1u : 0u;
 	uint32_t step = frames ? (d16 + frames - 1u) / frames : 0xffffu;
 	mo_prepare_cycles(b, 0, 0, ((uint32_t)move_ms + settle_ms) * (FB_F_CPU / 1000UL), 0);
 	b->type = BLK_PEN;
