@@ -27,7 +27,9 @@ EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 def test_query_round_trip_of_every_option() -> None:
     values = {"mode": "auto", "tolerance_mm": 0.2, "origin_mm": (10.5, -95.25), "scale": 0.5,
               "rotate_deg": 30.0, "fit": True, "layers": ("a", "b c"), "keep_order": True,
-              "laser": True, "confirm": True}
+              "laser": True, "confirm": True, "pen_up_position": 70.0,
+              "pen_down_position": 20.5, "pen_up_rate": 300.0, "pen_down_rate": 150.0,
+              "pen_up_delay_ms": 80.0, "pen_down_delay_ms": 120.0}
     assert set(values) == {o.name for o in JOB_OPTIONS}
     q = to_query(values)
     pairs = [(k, v) for k, vs in q.items() for v in (vs if isinstance(vs, list) else [vs])]

@@ -2,9 +2,10 @@
 
 Only this package imports click. One module per command group (vpype's library/CLI split):
 `common` (the group, errors, the generated job options), `plot` (convert, plot), `remote`
-(plot --server), `machine` (home, jog, frame), `pen` (pen up|down|toggle, motors off), `pose` (config check, ik, fk), `design`
-(workspace, design, linkage) and `serve` (the daemon). Each command parses units at the edge,
-calls pure functions, and turns fivebar's errors into one line and a non-zero exit.
+(plot --server), `machine` (home, jog, frame), `pen` (pen up|down|toggle, motors off), `pose`
+(config check, ik, fk), `design` (workspace, design, linkage) and `serve` (the daemon). Each
+command parses units at the edge, calls pure functions, and turns fivebar's errors into one
+line and a non-zero exit.
 """
 
 from fivebar_host.cli import design, machine, pen, plot, pose, serve  # noqa: F401  (commands)

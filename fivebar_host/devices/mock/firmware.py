@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections import deque
 
+from fivebar_host import protocol
 from fivebar_host.devices.mock.codes import (
     A_ENDSTOP,
     CYCLES_PER_US,
@@ -48,7 +49,6 @@ from fivebar_host.devices.mock.homing import Homing
 from fivebar_host.devices.mock.motion import MotionCore
 from fivebar_host.devices.mock.options import MockOptions
 from fivebar_host.devices.mock.parser import Command, parse_line
-from fivebar_host import protocol
 from fivebar_host.protocol import EOL, POS_LIMIT, RESEND_CODES, SETTINGS
 
 _RT_STATUS, _RT_HOLD, _RT_RESUME, _RT_RESET = (ord(b) for b in ("?", "!", "~", "\x18"))
@@ -289,9 +289,7 @@ class MockFirmware(MotionCore):
         elif c == _RT_HOLD:
             if self.homing is not None:
                 self.homing.abort()
-            elif not self.held and not self.alarm:
-                self._hold(0)
-            elif self.resume_at is not None:  # held again while the pen went back down
+            elif (not self.held and not self.alarm) or self.resume_at is not None:
                 self._hold(0)
         elif c == _RT_RESUME:
             if self.held and self.resume_at is None:
