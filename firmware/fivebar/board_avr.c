@@ -151,7 +151,8 @@ void board_wdt_feed(void)
 /* ---- pen servo ----------------------------------------------------------------
  *
  * Timer0 counts 4 us per count (F_CPU/64) and wraps every 250 counts (1 ms,
- * the tick).  A servo frame is CFG_SERVO_FRAME_MS ticks.  Both edges of a
+ * the tick).  A servo frame is CFG_SERVO_FRAME_MS ticks, counted on the low
+ * byte of the tick count (frames start at sv_frame, 20 ticks apart).  Both edges of a
  * pulse are set by the compare B interrupt at exact counts: the rise at
  * count sv_rise of the frame's first tick, the fall sv_rise + width/4 counts
  * later, in the same tick or, armed by the tick interrupt, in a later one.
@@ -168,28 +169,28 @@ void board_wdt_feed(void)
 #define SV_RISE_EARLY 25u
 #define SV_RISE_LATE 150u
 #define SV_MARGIN 16u
-#define SV_NONE 0xffu
 #define SERVO_PORT FB_REG_PORT(PIN_SERVO_PORT)
 
-static uint8_t sv_phase;              /* tick within the frame */
-static uint8_t sv_arm_tick = 0;       /* tick whose start arms compare B, or SV_NONE */
+/* the first frame starts at the first tick after boot (ms_ticks 0 -> 1) */
+static uint8_t sv_frame = 1;          /* low byte of ms_ticks at this frame's first tick */
+static uint8_t sv_arm_at = 1;         /* low byte of ms_ticks whose tick arms compare B */
 static uint8_t sv_arm_count = SV_RISE_EARLY;
 static uint8_t sv_falling;            /* the armed compare is a fall */
 static uint16_t sv_width;             /* counts of this frame's pulse, 0 = none */
 static uint8_t sv_rise = SV_RISE_EARLY;
 
+/* The 1 kHz tick.  Its only servo work is one byte compare, so the step
+ * interrupt it can delay waits no longer than before the servo (the
+ * benchmarks' step figures depend on it): the low byte of the tick count
+ * says when to arm compare B. */
 ISR(TIMER0_COMPA_vect)
 {
-	ms_ticks++;
-	uint8_t ph = (uint8_t)(sv_phase + 1u);
-	if (ph >= CFG_SERVO_FRAME_MS)
-		ph = 0;
-	sv_phase = ph;
-	if (ph == sv_arm_tick) {
+	uint32_t t = ms_ticks + 1u;
+	ms_ticks = t;
+	if ((uint8_t)t == sv_arm_at) {
 		OCR0B = sv_arm_count;
 		TIFR0 = (uint8_t)(1u << OCF0B);
 		TIMSK0 |= (uint8_t)(1u << OCIE0B);
-		sv_arm_tick = SV_NONE;
 	}
 }
 
@@ -205,7 +206,8 @@ static void servo_next_frame(void)
 	sv_rise = end < SV_MARGIN ? SV_RISE_LATE : SV_RISE_EARLY;
 	sv_falling = 0;
 	sv_arm_count = sv_rise;
-	sv_arm_tick = 0;
+	sv_frame = (uint8_t)(sv_frame + CFG_SERVO_FRAME_MS);
+	sv_arm_at = sv_frame;
 	TIMSK0 &= (uint8_t)~(1u << OCIE0B);
 }
 
@@ -233,7 +235,7 @@ ISR(TIMER0_COMPB_vect)
 	} else {
 		TIMSK0 &= (uint8_t)~(1u << OCIE0B);
 		sv_arm_count = (uint8_t)end;
-		sv_arm_tick = tick;
+		sv_arm_at = (uint8_t)(sv_frame + tick);
 	}
 }
 
