@@ -12,11 +12,16 @@ Prints, all measured in emulated CPU cycles of the 16 MHz ATmega328P:
   checksums on) without the queue ever running empty.
 
 The harness runs throttled to real time (-R) so the Python host streams at
-the link's real pace.  Run: python benchmarks/firmware.py
+the link's real pace.  Run: python benchmarks/firmware.py [--pen]
+
+With --pen every run first sets up the pen servo ($14=1800, then M280 S1000:
+pen down) so its pulses (Timer0 compare B on D12) run all through the
+measurement: the figures show what the servo costs the step generator.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 import statistics
@@ -32,6 +37,16 @@ from fivebar_host.devices import sim
 from fivebar_host.devices.simtrace import Trace
 
 F_CPU = 16_000_000
+#: --pen: lines that start the pen servo's pulses before each measurement.
+PEN_LINES = ("$14=1800", "M280 S1000") if "--pen" in sys.argv[1:] else ()
+
+
+def start_pen(s: sim.FirmwareSession) -> int:
+    """Send PEN_LINES and wait for them; the queue stops it caused (0 without --pen)."""
+    for line in PEN_LINES:
+        if s.send(line) != protocol.Ok():
+            raise sim.EmulatorError(f"{line} refused")
+    return s.wait_idle().underruns if PEN_LINES else 0
 
 
 @dataclass(frozen=True)
@@ -74,16 +89,19 @@ def run_rate(build: sim.BuildPaths, rate_a: int, rate_b: int, tmp: Path) -> Rate
     dev = sim.start_device(build, tmp / "rate.trace", realtime=True)
     try:
         s = dev.session
+        base = start_pen(s)
         for line in ("$0=40000", "G91"):
             if s.send(line) != protocol.Ok():
                 return RateResult(False, f"{line} refused", 0, 0.0, 0)
-        replies = s.stream([protocol.g1(a, b, p) for a, b, p in segs], numbered_from=3)
+        replies = s.stream([protocol.g1(a, b, p) for a, b, p in segs],
+                           numbered_from=3 + len(PEN_LINES))
         if any(r != protocol.Ok() for r in replies):
             return RateResult(False, f"refused: {replies}", 0, 0.0, 0)
         report = s.wait_idle()
         trace = dev.finish()
     finally:
         dev.close()
+    report = dataclasses.replace(report, underruns=report.underruns - base)
     devs, why = deviations(trace, segs)
     if why:
         return RateResult(False, why, 0, 0.0, report.underruns)
@@ -103,15 +121,16 @@ def run_segments(build: sim.BuildPaths, p_us: int, tmp: Path, count: int = 1000)
     dev = sim.start_device(build, tmp / "seg.trace", realtime=True)
     try:
         s = dev.session
+        base = start_pen(s)
         s.send("G91")
         lines = [protocol.g1(3 if i % 2 else -3, 2, p_us) for i in range(count)]
-        replies = s.stream(lines, numbered_from=2)
+        replies = s.stream(lines, numbered_from=2 + len(PEN_LINES))
         if any(r != protocol.Ok() for r in replies):
             raise sim.EmulatorError(f"segments refused: {replies[:3]}")
         report = s.wait_idle()
     finally:
         dev.close()
-    return report.underruns - 1
+    return report.underruns - base - 1
 
 
 def memory(build: sim.BuildPaths) -> tuple[str, str]:
@@ -131,6 +150,8 @@ def main() -> int:
     flash, ram = memory(build)
     print("fivebar firmware benchmark (simavr, ATmega328P @ 16 MHz, emulated cycles)")
     print(f"  flash: {flash}   RAM (static): {ram}")
+    if PEN_LINES:
+        print("  pen servo running all through (--pen): " + ", ".join(PEN_LINES))
     with tempfile.TemporaryDirectory() as tmpdir:
         tmp = Path(tmpdir)
         for label, ratio in (("equal rates", 1.0), ("ratio 1:0.73", 0.73)):

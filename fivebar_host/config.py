@@ -89,6 +89,51 @@ class Laser:
 
 
 @dataclass(frozen=True)
+class Pen:
+    """A servo pen lift (the `[pen]` table; docs/protocol.md 6.2 for the firmware side).
+
+    Positions are percent of the servo's range like AxiDraw's (0 % = `servo_min_us`, 100 %
+    = `servo_max_us`), rates percent of that range per second, delays the time the pen
+    needs to settle after a move before the arms may move (ms). `z_threshold_mm`: G-code Z
+    above it means pen up."""
+
+    servo_min_us: int
+    servo_max_us: int
+    up_position: float
+    down_position: float
+    up_rate: float
+    down_rate: float
+    up_delay_ms: int
+    down_delay_ms: int
+    z_threshold_mm: float
+
+    def pulse_us(self, position: float) -> int:
+        """Servo pulse of a position in percent of the range, µs."""
+        span = self.servo_max_us - self.servo_min_us
+        return round(self.servo_min_us + position / 100.0 * span)
+
+    def move_ms(self, down: bool) -> int:
+        """Time the firmware takes to move the pulse between up and down (R of M280),
+        rounded up to whole 20 ms servo frames: the pulse changes once a frame, so a move
+        ends at most this long after it starts, and the settle delay follows in full."""
+        rate = self.down_rate if down else self.up_rate
+        ms = abs(self.up_position - self.down_position) / rate * 1000.0
+        return min(10_000, 20 * math.ceil(ms / 20.0 - 1e-9))
+
+    def command(self, down: bool) -> str:
+        """The firmware line that lowers (`down`) or raises the pen."""
+        from fivebar_host.protocol import m280
+
+        pos = self.down_position if down else self.up_position
+        return m280(self.pulse_us(pos), self.move_ms(down),
+                    self.down_delay_ms if down else self.up_delay_ms)
+
+    def time_s(self, down: bool) -> float:
+        """How long one lowering (`down`) or raising keeps the arms waiting, s."""
+        return (self.move_ms(down) + (self.down_delay_ms if down else self.up_delay_ms)) / 1e3
+
+
+@dataclass(frozen=True)
 class SerialCfg:
     """Serial link settings."""
 
@@ -108,6 +153,8 @@ class Profile:
     laser: Laser
     serial: SerialCfg
     source: str
+    tool: str = "laser"  # "pen" (a servo pen lift, `pen` set) or "laser"
+    pen: Pen | None = None
 
 
 class _Table:
@@ -188,7 +235,68 @@ class _Table:
                               + did_you_mean(extra, self.used))
 
 
-KNOWN_TABLES = ("geometry", "motors", "kinematics", "motion", "laser", "serial")
+KNOWN_TABLES = ("geometry", "motors", "kinematics", "motion", "laser", "serial", "tool", "pen")
+TOOLS = ("pen", "laser")
+#: Pulse range a hobby servo takes (the firmware refuses others).
+SERVO_RANGE_US = (500, 2500)
+
+
+def _parse_pen(doc: dict[str, Any], source: str) -> tuple[str, Pen | None]:
+    """The `[tool] kind` ("pen" when a `[pen]` table is given, else "laser") and the pen."""
+    kind = "pen" if "pen" in doc else "laser"
+    if "tool" in doc:
+        t = _Table(doc, "tool", source)
+        kind = t.choice("kind", TOOLS)
+        t.done()
+    if kind == "laser":
+        if "pen" in doc:
+            raise ConfigError(f"{source}: [pen]: a pen table on a laser profile ([tool] kind "
+                              "= \"laser\"); remove it or set kind = \"pen\"")
+        return kind, None
+    p = _Table(doc, "pen", source)
+    lo, hi = SERVO_RANGE_US
+    smin = p.integer("servo_min_us", lo, hi)
+    smax = p.integer("servo_max_us", lo, hi)
+    if smax <= smin:
+        raise ConfigError(f"{p.where('servo_max_us')}: must be > servo_min_us ({smin}); "
+                          f"got {smax}")
+    pos = {k: p.number(k, 0.0, 100.0) for k in ("up_position", "down_position")}
+    rates = {k: p.number(k, 0.0, 1e6, lo_open=True) for k in ("up_rate", "down_rate")}
+    delays = {k: p.integer(k, 0, 10_000) for k in ("up_delay_ms", "down_delay_ms")}
+    z = p.number("z_threshold_mm", -1e4, 1e4)
+    p.done()
+    if pos["up_position"] == pos["down_position"]:
+        raise ConfigError(f"{p.where('down_position')}: must differ from up_position")
+    return kind, Pen(smin, smax, pos["up_position"], pos["down_position"], rates["up_rate"],
+                     rates["down_rate"], delays["up_delay_ms"], delays["down_delay_ms"], z)
+
+
+def require_tool(profile: Profile, laser: bool) -> None:
+    """Refuse a laser job on a pen machine (its laser output drives no laser)."""
+    if laser and profile.tool == "pen":
+        raise ConfigError(f"{profile.source}: --laser refused: this profile's tool is a pen "
+                          "([tool] kind = \"pen\"), the machine has no laser to burn with")
+
+
+def with_pen_overrides(profile: Profile, values: dict[str, Any]) -> Profile:
+    """The profile with the job's pen options (`pen_*` values that are not None) applied,
+    checked as the profile's own values would be."""
+    given: dict[str, Any] = {k[4:]: v for k, v in values.items()
+                             if k.startswith("pen_") and v is not None}
+    for key in ("up_delay_ms", "down_delay_ms"):
+        if key in given:
+            given[key] = round(given[key])
+    if not given:
+        return profile
+    if profile.pen is None:
+        raise ConfigError(f"{profile.source}: pen options given, but the profile has no [pen] "
+                          "table (its tool is a laser)")
+    import dataclasses
+
+    pen = dataclasses.replace(profile.pen, **given)
+    if pen.up_position == pen.down_position:
+        raise ConfigError("pen up and down positions must differ")
+    return dataclasses.replace(profile, pen=pen)
 
 
 def did_you_mean(names: list[str], known: Iterable[str]) -> str:
@@ -289,7 +397,8 @@ def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
         se.number("reply_timeout_s", 0.0, 600.0, lo_open=True),
     )
     se.done()
-    return Profile(geometry, motors, kin, motion, laser, serial, source)
+    tool, pen = _parse_pen(doc, source)
+    return Profile(geometry, motors, kin, motion, laser, serial, source, tool, pen)
 
 
 def _read_toml(p: Path) -> dict[str, Any]:
@@ -369,7 +478,9 @@ def _toml_value(v: Any) -> str:
 def describe(profile: Profile) -> str:
     """Human-readable summary of a parsed profile (for `fivebar config check`)."""
     lines = [f"profile {profile.source}"]
-    for name in ("geometry", "motors", "kinematics", "motion", "laser", "serial"):
+    names = ["geometry", "motors", "kinematics", "motion", "laser", "serial"]
+    lines.append(f"[tool]\n  kind = {profile.tool!r}")
+    for name in names + (["pen"] if profile.pen is not None else []):
         obj = getattr(profile, name)
         lines.append(f"[{name}]")
         for f in fields(obj):

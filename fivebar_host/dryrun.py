@@ -12,6 +12,7 @@ import math
 import numpy as np
 
 from fivebar_host.compile import Job, NbarOpinion
+from fivebar_host.config import Profile
 
 
 def mode_sequence(job: Job) -> str:
@@ -39,10 +40,29 @@ def format_duration(t: float) -> str:
     return f"{int(h)} h {int(m)} min"
 
 
-def report_lines(job: Job, nbar: NbarOpinion | None = None, laser: bool = False) -> list[str]:
+def tool_line(job: Job, laser: bool, profile: Profile | None = None) -> str:
+    """Which tool the profile has and what the job does with it: the laser's power with
+    `laser`, a servo pen's positions, moves, delays and lifts, or a pen at S0."""
+    if laser:
+        return ("tool          laser: S up to "
+                f"{int(job.power.max(initial=0))} while drawing, S0 on travel (--laser)")
+    pen = profile.pen if profile is not None else None
+    if pen is None:
+        return ("tool          pen: S0 on every line (no laser power without --laser); pen "
+                "down/up = M3/M5 around drawing strokes")
+    return (f"tool          pen servo (profile [tool] pen): down {pen.down_position:g} % "
+            f"({pen.pulse_us(pen.down_position)} µs) in {pen.move_ms(True)} ms + "
+            f"{pen.down_delay_ms} ms settle, up {pen.up_position:g} % "
+            f"({pen.pulse_us(pen.up_position)} µs) in {pen.move_ms(False)} ms + "
+            f"{pen.up_delay_ms} ms; {job.pen_downs} lifts, {job.tool_time_s:.1f} s of pen "
+            "moves and delays (in the time below)")
+
+
+def report_lines(job: Job, nbar: NbarOpinion | None = None, laser: bool = False,
+                 profile: Profile | None = None) -> list[str]:
     """The dry-run report: paths, segments, lengths, time, deviation, margins, mode, tool (pen,
-    or laser with `laser`: the power the job would send) and the n-bar solver's second
-    opinion on the deviation when given."""
+    or laser with `laser`: the power the job would send; a servo pen's moves with
+    `profile`) and the n-bar solver's second opinion on the deviation when given."""
     deg = math.degrees
     mm = job.min_margin_rad
     pl = job.placement
@@ -57,10 +77,7 @@ def report_lines(job: Job, nbar: NbarOpinion | None = None, laser: bool = False)
            f"homed pose is in {job.home_mode})" if job.mode_changes else ")"),
         f"placement     {pl.how}: scale {pl.scale:.4g}, rotation {pl.rotate_deg:g}°, "
         f"{w:.1f} × {h:.1f} mm at ({bx[0]:.1f}, {bx[1]:.1f})–({bx[2]:.1f}, {bx[3]:.1f}) mm",
-        ("tool          laser: S up to "
-         f"{int(job.power.max(initial=0))} while drawing, S0 on travel (--laser)" if laser
-         else "tool          pen: S0 on every line (no laser power without --laser); pen "
-              "down/up = M3/M5 around drawing strokes"),
+        tool_line(job, laser, profile),
         f"paths         {job.n_paths} ({job.joined} joined across gaps < tolerance)",
         f"segments      {job.n_segments} ({int(job.draw.sum())} drawing, "
         f"{int((~job.draw).sum())} travel)",
@@ -68,7 +85,8 @@ def report_lines(job: Job, nbar: NbarOpinion | None = None, laser: bool = False)
         f"travel        {job.travel_length_mm:.1f} mm (pen-up straight-line estimate "
         f"{job.travel_before_mm:.1f} mm in file order → {job.travel_after_mm:.1f} mm "
         "reordered)",
-        f"time          ≈ {format_duration(job.total_time_s)} (planned durations)",
+        f"time          ≈ {format_duration(job.total_time_s)} (planned durations"
+        + (f", pen {job.tool_time_s:.1f} s)" if job.tool_time_s else ")"),
         f"tolerance     {job.tolerance_mm:g} mm (curves flattened to "
         f"{job.flatten_tol_mm:g} mm, the rest for joint-space interpolation)",
         f"deviation     max {job.max_dev_mm:.4f} mm, mean {job.mean_dev_mm:.4f} mm "

@@ -144,3 +144,65 @@ def _distance_to_request(job: Job, e: FloatArray, pos: IntArray, seg: IntArray) 
     dd = d[rows, ax]
     s = np.where(dd != 0, (pos[rows, ax] - s0[rows, ax]) / np.where(dd != 0, dd, 1.0), 0.0)
     return distance_to_request(job, e, rank, np.clip(s, 0.0, 1.0))
+
+
+#: A pulse within this of the profile's up (down) pulse counts as pen up (down), µs: the
+#: firmware's 4 µs timer count plus the jitter of its edges, which the step interrupt can
+#: delay by up to about 25 µs while steps are dense (firmware/README.md, pen servo).
+PEN_MATCH_US = 30.0
+
+
+@dataclass(frozen=True)
+class PenReport:
+    """What the pen servo did during a run, from the recorded pins (docs/protocol.md 6.2):
+    lifts, steps on travel segments while the pen was not up, steps on drawing segments
+    while it was not down, and the shortest time from a pen move's end (its pulse at the
+    new position) to the next step."""
+
+    lifts: int
+    travel_down_steps: int
+    draw_up_steps: int
+    min_settle_ms: float  # inf when no pen move was followed by a step
+
+    def line(self) -> str:
+        """`pen: <n> lifts; travel steps with the pen down <k>; …` as `plot` prints it."""
+        t = "none" if self.min_settle_ms == float("inf") else f"{self.min_settle_ms:.0f}"
+        return (f"pen: {self.lifts} lifts; travel steps with the pen down "
+                f"{self.travel_down_steps}; drawing steps with the pen up "
+                f"{self.draw_up_steps}; shortest settle before motion {t} ms")
+
+
+def pen_report(job: Job, profile: Profile, pulses: list[tuple[int, int]], freq: float,
+               ex: ExecutedPath) -> PenReport:
+    """Check the pen against the steps: `pulses` are the servo's (rise, width) in cycles at
+    `freq` Hz (simtrace.Trace.pen_pulses), `ex` the executed path with its time in seconds.
+
+    Each step is judged by the last pulse before it (the servo's command then): on a travel
+    segment (or outside the job) it must be the up pulse, on a drawing segment the down
+    pulse. A move ends at the first pulse of a run at a new up or down width; its settle is
+    the time from there to the next step."""
+    pen = profile.pen
+    if pen is None or not pulses:
+        return PenReport(0, 0, 0, float("inf"))
+    up, down = pen.pulse_us(pen.up_position), pen.pulse_us(pen.down_position)
+    rise = np.array([r for r, _ in pulses], dtype=np.float64) / freq
+    width = np.array([w for _, w in pulses], dtype=np.float64) / freq * 1e6
+    if width.size >= 3:  # median of 3: one late edge never flips a frame's state
+        width[1:-1] = np.median(np.stack((width[:-2], width[1:-1], width[2:])), axis=0)
+    state = np.where(np.abs(width - up) <= PEN_MATCH_US, 1,
+                     np.where(np.abs(width - down) <= PEN_MATCH_US, -1, 0))
+    at = np.searchsorted(rise, ex.time, side="right") - 1
+    step_state = np.where(at >= 0, state[np.maximum(at, 0)], 0)
+    drawing = (ex.segment >= 0) & job.draw[np.maximum(ex.segment, 0)]
+    travel_down = int(((~drawing) & (step_state != 1)).sum())
+    draw_up = int((drawing & (step_state != -1)).sum())
+    arrive = np.flatnonzero((state != 0) & np.concatenate(([True], state[1:] != state[:-1])))
+    seq = state[arrive]
+    lifts = int(((seq[1:] == 1) & (seq[:-1] == -1)).sum())
+    settle = float("inf")
+    for j, i in enumerate(arrive.tolist()):
+        k = int(np.searchsorted(ex.time, rise[i], side="left"))
+        end = rise[arrive[j + 1]] if j + 1 < arrive.size else np.inf
+        if k < ex.time.size and ex.time[k] < end:
+            settle = min(settle, float(ex.time[k] - rise[i]) * 1e3)
+    return PenReport(lifts, travel_down, draw_up, settle)

@@ -306,6 +306,22 @@ JOB_OPTIONS: tuple[Option, ...] = (
     Option("laser", "--laser", "laser", "bool", default=False,
            help="Laser job: drawing segments carry the profile's power (S > 0). Without it "
            "every line says S0 (pen plotter: pen down/up = M3/M5 around drawing strokes)."),
+    # pen servo (profile [pen]; AxiDraw's names): None keeps the profile's value
+    Option("pen_up_position", "--pen-pos-up", "pen_pos_up", "float", unit="%", lo=0.0,
+           hi=100.0, help="Pen up position, percent of the servo range (default: the "
+           "profile's [pen] up_position)."),
+    Option("pen_down_position", "--pen-pos-down", "pen_pos_down", "float", unit="%", lo=0.0,
+           hi=100.0, help="Pen down position, percent of the servo range (default: the "
+           "profile's)."),
+    Option("pen_up_rate", "--pen-rate-raise", "pen_rate_raise", "float", unit="%/s", lo=0.0,
+           lo_open=True, help="Pen raising speed, percent of the servo range per second."),
+    Option("pen_down_rate", "--pen-rate-lower", "pen_rate_lower", "float", unit="%/s",
+           lo=0.0, lo_open=True, help="Pen lowering speed, percent of the servo range per "
+           "second."),
+    Option("pen_up_delay_ms", "--pen-delay-up", "pen_delay_up", "float", unit="ms", lo=0.0,
+           hi=10_000.0, help="Wait after raising the pen before the arms move, ms."),
+    Option("pen_down_delay_ms", "--pen-delay-down", "pen_delay_down", "float", unit="ms",
+           lo=0.0, hi=10_000.0, help="Wait after lowering the pen before the arms move, ms."),
     Option("confirm", "--yes", "confirm", "bool", default=False, cli=False,
            help="Answer yes if the daemon must ask whether the arms are at the home pose "
            "(first job after power-up)."),
@@ -315,9 +331,11 @@ JOB_OPTIONS: tuple[Option, ...] = (
 )
 BY_NAME: dict[str, Option] = {o.name: o for o in JOB_OPTIONS}
 BY_QUERY: dict[str, Option] = {o.query: o for o in JOB_OPTIONS}
-#: The options that shape the compiled job (everything but laser and confirm).
+#: The pen servo overrides (applied to the profile: config.with_pen_overrides).
+PEN_NAMES: tuple[str, ...] = tuple(o.name for o in JOB_OPTIONS if o.name.startswith("pen_"))
+#: The options that shape the compiled job (everything but laser, confirm and the pen's).
 COMPILE_NAMES: tuple[str, ...] = tuple(o.name for o in JOB_OPTIONS
-                                       if o.name not in ("laser", "confirm"))
+                                       if o.name not in ("laser", "confirm", *PEN_NAMES))
 
 
 def defaults() -> dict[str, Any]:

@@ -45,6 +45,10 @@ P_MIN_US: Final = 100
 P_MAX_US: Final = 100_000_000
 POS_LIMIT: Final = 100_000_000
 POWER_MAX: Final = 255
+#: Servo pulse range of the pen (M280 S, $14) and the longest M280 move or settle time.
+SERVO_MIN_US: Final = 500
+SERVO_MAX_US: Final = 2500
+PEN_MS_MAX: Final = 10_000
 
 
 @dataclass(frozen=True)
@@ -82,6 +86,7 @@ CODES: Final[dict[int, Code]] = _codes(
     Code(16, "HOMING_DISABLED", "$H without endstops ($7=0)"),
     Code(17, "UNKNOWN_SETTING", "no such $ setting"),
     Code(18, "RX_OVERFLOW", "receive buffer overflowed: bytes were lost"),
+    Code(19, "NO_PEN", "M280 while no pen servo is set up ($14=0)"),
     Code(30, "ENDSTOP", "endstop hit outside homing", alarm=True),
     Code(31, "HOMING_FAIL", "homing found no switch, or the switch stayed pressed", alarm=True),
     Code(32, "HOMING_ABORT", "homing interrupted by hold or reset", alarm=True),
@@ -93,7 +98,7 @@ RESEND_CODES: Final = frozenset({8, 9, 10})
 #: Hold reasons shown as ``Hold:<reason>`` in status reports.
 HOLD_REASONS: Final[dict[int, str]] = {
     0: "host sent !",
-    1: "host silent too long while the laser was on",
+    1: "host silent too long while the laser was on or the pen down",
     2: "a line was refused while a job was queued or running",
 }
 
@@ -113,6 +118,7 @@ SETTINGS: Final[dict[int, tuple[str, int, int]]] = {
     11: ("home_b", -POS_LIMIT, POS_LIMIT),
     12: ("homing_travel", 1, 10_000_000),
     13: ("homing_dir_mask", 0, 3),
+    14: ("pen_park_us", 0, 2500),
 }
 
 
@@ -195,6 +201,23 @@ def g1(a: int | None, b: int | None, p_us: int, s: int | None = None) -> str:
     return " ".join(words)
 
 
+def m280(pulse_us: int, move_ms: int = 0, settle_ms: int = 0) -> str:
+    """The body of a pen servo command (docs/protocol.md 6.2): a queued block that moves the
+    servo pulse to `pulse_us` over `move_ms`, then keeps the next segment waiting `settle_ms`
+    more. Raises ProtocolError for values the firmware refuses."""
+    if not SERVO_MIN_US <= pulse_us <= SERVO_MAX_US:
+        raise ProtocolError(f"pen pulse S{pulse_us} outside {SERVO_MIN_US}..{SERVO_MAX_US} us")
+    for letter, ms in (("R", move_ms), ("D", settle_ms)):
+        if not 0 <= ms <= PEN_MS_MAX:
+            raise ProtocolError(f"pen {letter}{ms} outside 0..{PEN_MS_MAX} ms")
+    words = [f"M280 S{pulse_us}"]
+    if move_ms:
+        words.append(f"R{move_ms}")
+    if settle_ms:
+        words.append(f"D{settle_ms}")
+    return " ".join(words)
+
+
 @dataclass(frozen=True)
 class Ok:
     """``ok``: the line was accepted (queued or done), not necessarily executed."""
@@ -227,6 +250,7 @@ class StatusReport:
     laser: int  # laser power output now
     underruns: int  # motion stops because the queue ran empty, since reset
     homed: bool = False  # H:1: position set by an executed G92 or a completed $H since power-on
+    pen: int | None = None  # P: pen servo pulse now, us (0: no pen); None: firmware without it
 
 
 @dataclass(frozen=True)
@@ -260,7 +284,7 @@ Message = Ok | ErrorReply | StatusReport | Banner | AlarmPush | SettingLine
 _ERROR = re.compile(r"error:(\d+)(?: resend:(\d+))?")
 _STATUS = re.compile(
     r"<(Idle|Run|Hold|Home|Alarm)(?::(\d+))?\|A:(-?\d+),B:(-?\d+)\|Q:(\d+)"
-    r"\|Ln:(\d+),(\d+)\|L:(\d+)\|U:(\d+)\|H:([01])>"
+    r"\|Ln:(\d+),(\d+)\|L:(\d+)\|U:(\d+)\|H:([01])(?:\|P:(\d+))?>"
 )
 _BANNER = re.compile(r"fivebar (\S+) proto:(\d+) rx:(\d+) queue:(\d+) line:(\d+)")
 _BANNER_AT_END = re.compile(_BANNER.pattern + r"\Z")
@@ -298,6 +322,7 @@ def parse_message(line: str) -> Message:
             laser=int(m.group(8)),
             underruns=int(m.group(9)),
             homed=m.group(10) == "1",
+            pen=int(m.group(11)) if m.group(11) is not None else None,
         )
     if m := _BANNER.fullmatch(text):
         return Banner(

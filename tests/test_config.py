@@ -187,3 +187,70 @@ def test_a_misspelt_key_gets_did_you_mean(tmp_path: Path, text: str, hint: str) 
     p.write_text(text)
     with pytest.raises(ConfigError, match=hint):
         load_profile(p)
+
+
+# ------------------------------------------------------------------ the pen servo ([tool], [pen])
+PEN_PROFILE = Path(__file__).resolve().parents[1] / "configs" / "pen-servo.toml"
+
+
+def _pen_doc() -> dict:
+    import tomllib
+
+    return tomllib.loads(PEN_PROFILE.read_text(encoding="utf-8"))
+
+
+def test_pen_profile_loads_with_its_pulses_and_times() -> None:
+    prof = load_profile(PEN_PROFILE)
+    assert prof.tool == "pen" and prof.pen is not None
+    pen = prof.pen
+    assert (pen.pulse_us(pen.up_position), pen.pulse_us(pen.down_position)) == (1800, 1000)
+    # 40 points at 200 %/s = 200 ms; at 400 %/s = 100 ms; whole 20 ms frames
+    assert (pen.move_ms(True), pen.move_ms(False)) == (200, 100)
+    assert pen.command(True) == "M280 S1000 R200 D150"
+    assert pen.command(False) == "M280 S1800 R100 D100"
+    assert load_profile().tool == "laser" and load_profile().pen is None
+
+
+@pytest.mark.parametrize(("table", "key", "value", "needle"), [
+    ("pen", "up_position", 100.5, "[pen] up_position: must be ≤ 100"),
+    ("pen", "down_position", -1.0, "[pen] down_position: must be ≥ 0"),
+    ("pen", "up_rate", -5.0, "[pen] up_rate: must be > 0"),
+    ("pen", "down_rate", 0.0, "[pen] down_rate: must be > 0"),
+    ("pen", "up_delay_ms", -1, "[pen] up_delay_ms: must be in [0, 10000]"),
+    ("pen", "servo_min_us", 400, "[pen] servo_min_us: must be in [500, 2500]"),
+    ("pen", "servo_max_us", 500, "[pen] servo_max_us: must be > servo_min_us"),
+    ("pen", "lift", 1, "[pen] unknown key(s): lift"),
+    ("tool", "kind", "laser", "[pen]: a pen table on a laser profile"),
+    ("tool", "kind", "drill", "[tool] kind: must be one of pen, laser"),
+])
+def test_pen_profile_errors_name_the_key(table: str, key: str, value: object,
+                                         needle: str) -> None:
+    doc = _pen_doc()
+    doc[table][key] = value
+    with pytest.raises(ConfigError) as e:
+        parse_profile(doc, "pen.toml")
+    assert needle in str(e.value)
+
+
+def test_a_pen_profile_without_a_pen_table_is_refused() -> None:
+    doc = _pen_doc()
+    del doc["pen"]
+    with pytest.raises(ConfigError, match=r"missing table \[pen\]"):
+        parse_profile(doc, "pen.toml")
+
+
+def test_laser_on_a_pen_profile_is_refused_and_overrides_are_checked() -> None:
+    from fivebar_host.config import require_tool, with_pen_overrides
+
+    prof = load_profile(PEN_PROFILE)
+    with pytest.raises(ConfigError, match="--laser refused: this profile's tool is a pen"):
+        require_tool(prof, laser=True)
+    require_tool(prof, laser=False)
+    changed = with_pen_overrides(prof, {"pen_down_position": 10.0, "pen_down_delay_ms": 300.0,
+                                        "pen_up_rate": None})
+    # 55 points at 200 %/s: 275 ms, whole 20 ms frames
+    assert changed.pen is not None and changed.pen.command(True) == "M280 S700 R280 D300"
+    with pytest.raises(ConfigError, match="must differ"):
+        with_pen_overrides(prof, {"pen_down_position": 65.0})
+    with pytest.raises(ConfigError, match="no \\[pen\\] table"):
+        with_pen_overrides(load_profile(), {"pen_up_position": 50.0})

@@ -29,7 +29,9 @@ def test_query_round_trip_of_every_option() -> None:
               "rotate_deg": 30.0, "fit": True, "layers": ("a", "b c"), "keep_order": True,
               "draw_feed_mm_s": 25.0, "travel_feed_mm_s": 60.0, "accel_fraction": 0.5,
               "laser": True, "confirm": True, "no_simplify": True,
-              "max_segments": 3e6}
+              "max_segments": 3e6, "pen_up_position": 70.0,
+              "pen_down_position": 20.5, "pen_up_rate": 300.0, "pen_down_rate": 150.0,
+              "pen_up_delay_ms": 80.0, "pen_down_delay_ms": 120.0}
     assert set(values) == {o.name for o in JOB_OPTIONS}
     q = to_query(values)
     pairs = [(k, v) for k, vs in q.items() for v in (vs if isinstance(vs, list) else [vs])]

@@ -69,6 +69,17 @@ void board_timer_resume(void);
 void board_idle(void);
 
 /*
+ * The pen servo's park pulse ($14), kept where a power cut does not lose it
+ * (the EEPROM on the AVR) so that every boot parks the pen up.  load returns
+ * 0xffff when nothing valid is stored; store writes only when it changes.
+ * The servo output itself is the board's: every CFG_SERVO_FRAME_MS it calls
+ * fb's mo_pen_frame() and sends one pulse of the width it returns (none for
+ * 0), timed by hardware compares so that the step interrupt is not delayed.
+ */
+uint16_t board_pen_park_load(void);
+void board_pen_park_store(uint16_t us);
+
+/*
  * Watchdog feed (the AVR's WDR): restarts the watchdog's timeout.  Only
  * fb_main.c calls it, from the main loop, and only when mo_alive() says the
  * step generator is alive too, so a hung main loop or a dead step interrupt

@@ -3,7 +3,8 @@
  *
  * Timers:  Timer0  1 kHz tick (CTC, TIMER0_COMPA; Arduino's own TIMER0_OVF
  *                  never fires in this mode, so the sketch also links
- *                  against the Arduino core)
+ *                  against the Arduino core); its compare B times both
+ *                  edges of the pen servo pulse on D12 (see servo below)
  *          Timer1  free-running at F_CPU; OCR1A schedules step events
  *          Timer2  8-bit fast PWM at F_CPU/8/256 = 7.8 kHz on OC2A (laser)
  * UART0 115200 8N1 with U2X (set before UBRR: simavr latches the baud rate
@@ -13,6 +14,7 @@
 
 #include <avr/io.h>
 #include <avr/interrupt.h>
+#include <avr/eeprom.h>
 #include <avr/wdt.h>
 #include "board.h"
 #include "config.h"
@@ -101,6 +103,8 @@ void board_init(void)
 	REG_DDR(PIN_ENABLE_PORT) |= (uint8_t)(1u << PIN_ENABLE_BIT);
 	REG_PORT(PIN_LASER_PORT) &= (uint8_t)~(1u << PIN_LASER_BIT);
 	REG_DDR(PIN_LASER_PORT) |= (uint8_t)(1u << PIN_LASER_BIT);
+	REG_PORT(PIN_SERVO_PORT) &= (uint8_t)~(1u << PIN_SERVO_BIT);
+	REG_DDR(PIN_SERVO_PORT) |= (uint8_t)(1u << PIN_SERVO_BIT);
 	REG_DDR(PIN_ENDSTOP_PORT) &= (uint8_t)~ENDSTOP_PINS;
 	if (CFG_ENDSTOP_ACTIVE_LOW)
 		REG_PORT(PIN_ENDSTOP_PORT) |= ENDSTOP_PINS;
@@ -144,9 +148,108 @@ void board_wdt_feed(void)
 	wdt_reset();
 }
 
+/* ---- pen servo ----------------------------------------------------------------
+ *
+ * Timer0 counts 4 us per count (F_CPU/64) and wraps every 250 counts (1 ms,
+ * the tick).  A servo frame is CFG_SERVO_FRAME_MS ticks, counted on the low
+ * byte of the tick count (frames start at sv_frame, 20 ticks apart).  Both edges of a
+ * pulse are set by the compare B interrupt at exact counts: the rise at
+ * count sv_rise of the frame's first tick, the fall sv_rise + width/4 counts
+ * later, in the same tick or, armed by the tick interrupt, in a later one.
+ * Armed compares are never within 16 counts of a tick start (the rise moves
+ * from count 25 to 150 when the fall would be), so the tick interrupt has
+ * always left and re-armed in time.  Both edges take the same path through
+ * the same interrupt, so the width is exact to a count whatever the latency;
+ * each interrupt is a few stores, 100 a second, and the step generator's
+ * Timer1 is untouched.  The width comes from mo_pen_frame() (the move
+ * towards the pen's target), asked once per frame after the fall.
+ */
+#define SV_TICK_COUNTS 250u
+#define SV_US_PER_COUNT 4u
+#define SV_RISE_EARLY 25u
+#define SV_RISE_LATE 150u
+#define SV_MARGIN 16u
+#define SERVO_PORT FB_REG_PORT(PIN_SERVO_PORT)
+
+/* the first frame starts at the first tick after boot (ms_ticks 0 -> 1) */
+static uint8_t sv_frame = 1;          /* low byte of ms_ticks at this frame's first tick */
+static uint8_t sv_arm_at = 1;         /* low byte of ms_ticks whose tick arms compare B */
+static uint8_t sv_arm_count = SV_RISE_EARLY;
+static uint8_t sv_falling;            /* the armed compare is a fall */
+static uint16_t sv_width;             /* counts of this frame's pulse, 0 = none */
+static uint8_t sv_rise = SV_RISE_EARLY;
+
+/* The 1 kHz tick.  Its only servo work is one byte compare, so the step
+ * interrupt it can delay waits no longer than before the servo (the
+ * benchmarks' step figures depend on it): the low byte of the tick count
+ * says when to arm compare B. */
 ISR(TIMER0_COMPA_vect)
 {
-	ms_ticks++;
+	uint32_t t = ms_ticks + 1u;
+	ms_ticks = t;
+	if ((uint8_t)t == sv_arm_at) {
+		OCR0B = sv_arm_count;
+		TIFR0 = (uint8_t)(1u << OCF0B);
+		TIMSK0 |= (uint8_t)(1u << OCIE0B);
+	}
+}
+
+/* The next frame's pulse: width from the core, rise count that keeps the
+ * fall clear of a tick start; armed at the frame's first tick. */
+static void servo_next_frame(void)
+{
+	uint16_t us = mo_pen_frame();
+	sv_width = (uint16_t)(us / SV_US_PER_COUNT);
+	uint16_t end = (uint16_t)(SV_RISE_EARLY + sv_width);
+	while (end >= SV_TICK_COUNTS)
+		end = (uint16_t)(end - SV_TICK_COUNTS);
+	sv_rise = end < SV_MARGIN ? SV_RISE_LATE : SV_RISE_EARLY;
+	sv_falling = 0;
+	sv_arm_count = sv_rise;
+	sv_frame = (uint8_t)(sv_frame + CFG_SERVO_FRAME_MS);
+	sv_arm_at = sv_frame;
+	TIMSK0 &= (uint8_t)~(1u << OCIE0B);
+}
+
+ISR(TIMER0_COMPB_vect)
+{
+	if (sv_falling) {
+		SERVO_PORT &= (uint8_t)~(1u << PIN_SERVO_BIT);
+		servo_next_frame();
+		return;
+	}
+	if (!sv_width) {
+		servo_next_frame();
+		return;
+	}
+	SERVO_PORT |= (uint8_t)(1u << PIN_SERVO_BIT);
+	uint16_t end = (uint16_t)(sv_rise + sv_width);
+	uint8_t tick = 0;
+	while (end >= SV_TICK_COUNTS) {
+		end = (uint16_t)(end - SV_TICK_COUNTS);
+		tick++;
+	}
+	sv_falling = 1;
+	if (tick == 0) {
+		OCR0B = (uint8_t)end;  /* later in this tick: stays enabled */
+	} else {
+		TIMSK0 &= (uint8_t)~(1u << OCIE0B);
+		sv_arm_count = (uint8_t)end;
+		sv_arm_at = (uint8_t)(sv_frame + tick);
+	}
+}
+
+uint16_t board_pen_park_load(void)
+{
+	uint16_t v = eeprom_read_word((const uint16_t *)CFG_EE_PEN_PARK);
+	uint16_t n = eeprom_read_word((const uint16_t *)(CFG_EE_PEN_PARK + 2));
+	return (uint16_t)~n == v ? v : 0xffffu;
+}
+
+void board_pen_park_store(uint16_t us)
+{
+	eeprom_update_word((uint16_t *)CFG_EE_PEN_PARK, us);
+	eeprom_update_word((uint16_t *)(CFG_EE_PEN_PARK + 2), (uint16_t)~us);
 }
 
 uint32_t board_ms(void)

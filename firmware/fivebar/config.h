@@ -32,6 +32,15 @@
 #define PIN_ENDSTOP_PORT  B
 #define PIN_ENDSTOP_A_BIT 1     /* D9: X limit */
 #define PIN_ENDSTOP_B_BIT 2     /* D10: Y limit */
+/* Pen servo signal: D12, the header marked "SpnEn" on the common CNC shield
+ * (V3): GRBL 0.9's spindle enable, Z limit in GRBL 1.1's layout, free here
+ * since D11 (the Z+/Z- endstop header) carries the laser.  Its pulses come
+ * from Timer0's compare B (board_avr.c), not a PWM pin: every hardware PWM
+ * pin of the Uno is taken (OC0A/OC0B = D6/D5 dir, OC1A/OC1B = D9/D10
+ * endstops, OC2A = D11 laser, OC2B = D3 step), and Timer1 is the step
+ * generator's. */
+#define PIN_SERVO_PORT    B
+#define PIN_SERVO_BIT     4     /* D12 */
 
 /* Direction pin level for positive steps: 0 = high means positive. Bit 0 = A. */
 #define CFG_DIR_INVERT_MASK      0
@@ -55,6 +64,16 @@
  * streamed job does not stutter on its first segments. */
 #define CFG_START_BLOCKS    4
 #define CFG_START_DELAY_MS  20
+
+/* ---- pen servo (M280, $14) ---------------------------------------------- */
+/* Hobby servo: a pulse every CFG_SERVO_FRAME_MS (50 Hz) of 500-2500 us. */
+#define CFG_SERVO_MIN_US    500
+#define CFG_SERVO_MAX_US    2500
+#define CFG_SERVO_FRAME_MS  20
+/* Longest M280 move (R) and settle (D) time, ms. */
+#define CFG_PEN_MS_MAX      10000
+/* EEPROM address of the $14 park pulse (the value, then its complement). */
+#define CFG_EE_PEN_PARK     0
 
 /* ---- hardware watchdog ------------------------------------------------------ */
 /* Timeout of the AVR watchdog: 250 (2^15 cycles of its 128 kHz oscillator,
@@ -80,5 +99,9 @@
 #define DEF_HOME_B          0L       /* $11 */
 #define DEF_HOMING_TRAVEL   20000L   /* $12 longest seek, steps */
 #define DEF_HOMING_DIR      0        /* $13 bit0: A seeks +, bit1: B seeks + (else -) */
+/* $14 pen up (park) pulse, us: 0 = no pen servo (no pulses), else 500-2500.
+ * The one setting kept in EEPROM: a boot parks the pen at the value stored
+ * last, and uses this default only while the EEPROM holds none. */
+#define DEF_PEN_PARK        0
 
 #endif

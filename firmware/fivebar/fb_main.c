@@ -23,7 +23,7 @@
 
 enum { SET_MAX_RATE, SET_A_MIN, SET_A_MAX, SET_B_MIN, SET_B_MAX, SET_SOFT_LIMITS,
        SET_LASER_TIMEOUT, SET_HOMING, SET_HOMING_RATE, SET_PULLOFF, SET_HOME_A,
-       SET_HOME_B, SET_TRAVEL, SET_HOMING_DIR, SET_COUNT };
+       SET_HOME_B, SET_TRAVEL, SET_HOMING_DIR, SET_PEN_PARK, SET_COUNT };
 
 enum { HOLD_HOST = 0, HOLD_LASER_TIMEOUT = 1, HOLD_ERROR = 2 };
 
@@ -33,6 +33,9 @@ static volatile uint8_t rx_head, rx_tail, rx_discard, rx_overflow;
 static volatile uint32_t last_rx_ms;
 static volatile uint8_t f_status, f_reset, f_home_abort;
 static volatile uint8_t held, hold_reason, homing, alarm;
+/* a '~' lowered a parked pen again: the timeline resumes at this board_ms()
+ * (0 = no resume pending) */
+static volatile uint32_t resume_at;
 
 static char line[CFG_LINE_MAX];
 static uint8_t line_len, line_over;
@@ -44,6 +47,7 @@ static int32_t settings[SET_COUNT];
 static uint32_t min_interval;
 static uint8_t absolute, laser_on, laser_s, motors_on;
 static int32_t plan[2];
+static uint16_t pen_plan;  /* pen pulse after the queued M280 blocks */
 static uint32_t first_queued_ms;
 
 /* ---- output ---------------------------------------------------------------- */
@@ -137,6 +141,8 @@ static void status_report(void)
 	put_u32(mo_underruns());
 	put_P(FB_PSTR("|H:"));
 	board_tx(mo_homed() ? '1' : '0');
+	put_P(FB_PSTR("|P:"));
+	put_u32(mo_pen());
 	board_tx('>');
 	put_eol();
 }
@@ -159,6 +165,8 @@ static void settings_defaults(void)
 	settings[SET_HOME_B] = DEF_HOME_B;
 	settings[SET_TRAVEL] = DEF_HOMING_TRAVEL;
 	settings[SET_HOMING_DIR] = DEF_HOMING_DIR;
+	uint16_t park = board_pen_park_load();
+	settings[SET_PEN_PARK] = park == 0xffffu ? DEF_PEN_PARK : park;
 }
 
 static uint32_t interval_for(int32_t rate)
@@ -197,6 +205,8 @@ static uint8_t setting_range(uint8_t n, int32_t *lo, int32_t *hi)
 		*lo = 1; *hi = 10000000L; return 1;
 	case SET_HOMING_DIR:
 		*lo = 0; *hi = 3; return 1;
+	case SET_PEN_PARK:
+		*lo = 0; *hi = CFG_SERVO_MAX_US; return 1;
 	default:
 		return 0;
 	}
@@ -212,6 +222,7 @@ static uint8_t is_idle(void)
 static void sync_plan(void)
 {
 	mo_get_pos(plan);
+	pen_plan = mo_pen_target();
 }
 
 static void raise_alarm(uint8_t code)
@@ -219,6 +230,7 @@ static void raise_alarm(uint8_t code)
 	mo_stop();
 	mo_clear_queue();
 	held = 0;
+	resume_at = 0;
 	alarm = code;
 	sync_plan();
 	put_P(FB_PSTR("ALARM:"));
@@ -233,6 +245,7 @@ static void do_reset(void)
 	rx_tail = rx_discard;
 	rx_overflow = 0;
 	held = 0;
+	resume_at = 0;
 	board_irq_restore(sreg);
 	mo_init();
 	line_len = 0;
@@ -264,12 +277,25 @@ void fb_rx_isr(uint8_t c)
 			held = 1;
 			hold_reason = HOLD_HOST;
 			mo_hold();
+		} else if (resume_at) {
+			/* held again while the pen was going back down */
+			resume_at = 0;
+			hold_reason = HOLD_HOST;
+			mo_hold();
 		}
 		return;
 	case '~':
-		if (held) {
-			held = 0;
-			mo_resume();
+		if (held && !resume_at) {
+			/* a parked pen goes back first; the timeline waits its time */
+			uint16_t ms = mo_pen_unpark();
+			if (ms) {
+				resume_at = board_ms() + ms;
+				if (!resume_at)
+					resume_at = 1;
+			} else {
+				held = 0;
+				mo_resume();
+			}
 		}
 		return;
 	case CTRL_X:
@@ -380,6 +406,23 @@ static uint8_t exec_g1(const fb_cmd_t *c)
 	return FB_OK;
 }
 
+/* M280: a queued pen block (protocol section 6.2). */
+static uint8_t exec_pen(const fb_cmd_t *c)
+{
+	if (!settings[SET_PEN_PARK])
+		return FB_ERR_NO_PEN;
+	if (!slot_free())
+		return ST_WAIT;
+	uint16_t to = (uint16_t)c->s;
+	fb_block_t *blk = mo_slot();
+	mo_prepare_pen(blk, pen_plan, to, (uint16_t)c->r, (uint16_t)c->d);
+	blk->line = lines.last;
+	if (!commit_block())
+		return ST_WAIT;
+	pen_plan = to;
+	return FB_OK;
+}
+
 /*
  * The hardware watchdog (board.h): fed from the main loop (fb_poll and the
  * homing wait, its only long inner loop), and only while the step generator
@@ -483,12 +526,18 @@ static uint8_t exec_set(const fb_cmd_t *c)
 	int32_t lo, hi;
 	if (!setting_range(c->setting, &lo, &hi))
 		return FB_ERR_UNKNOWN_SETTING;
-	if (c->value < lo || c->value > hi)
+	if (c->value < lo || c->value > hi ||
+	    (c->setting == SET_PEN_PARK && c->value && c->value < CFG_SERVO_MIN_US))
 		return FB_ERR_OUT_OF_RANGE;
 	if (!is_idle())
 		return FB_ERR_BUSY;
 	settings[c->setting] = c->value;
 	settings_apply();
+	if (c->setting == SET_PEN_PARK) {
+		board_pen_park_store((uint16_t)c->value);
+		mo_pen_setup((uint16_t)c->value);
+		sync_plan();
+	}
 	return FB_OK;
 }
 
@@ -541,6 +590,8 @@ static uint8_t execute(const fb_cmd_t *c)
 	case CMD_M5:
 		laser_on = 0;
 		return FB_OK;
+	case CMD_M280:
+		return exec_pen(c);
 	case CMD_M17:
 	case CMD_M18: {
 		uint8_t st = queue_sync_block(c->kind == CMD_M17 ? BLK_ENABLE : BLK_DISABLE, 0, 0);
@@ -656,15 +707,39 @@ static uint32_t since_last_rx(void)
 	return board_ms() - t;
 }
 
+/*
+ * Host silence (protocol section 9): with the laser on or the pen down and
+ * no byte for $6 ms, a job is held (laser off, pen parked); an idle machine
+ * only parks its pen.
+ */
 static void laser_watchdog(void)
 {
-	if (mo_laser() && !held && since_last_rx() > (uint32_t)settings[SET_LASER_TIMEOUT]) {
+	if ((mo_laser() || mo_pen_down()) && !held &&
+	    since_last_rx() > (uint32_t)settings[SET_LASER_TIMEOUT]) {
 		uint8_t sreg = board_irq_save();
-		held = 1;
-		hold_reason = HOLD_LASER_TIMEOUT;
-		mo_hold();
+		if (mo_running() || mo_queue_count()) {
+			held = 1;
+			hold_reason = HOLD_LASER_TIMEOUT;
+			mo_hold();
+		} else {
+			mo_pen_park();
+		}
 		board_irq_restore(sreg);
 	}
+}
+
+/* After a '~' that lowered a parked pen: resume once it has had its time. */
+static void resume_when_settled(void)
+{
+	if (!resume_at)  /* a torn read is re-checked below, interrupts off */
+		return;
+	uint8_t sreg = board_irq_save();
+	if (resume_at && (int32_t)(board_ms() - resume_at) >= 0) {
+		resume_at = 0;
+		held = 0;
+		mo_resume();
+	}
+	board_irq_restore(sreg);
 }
 
 static void maybe_start(void)
@@ -688,6 +763,8 @@ void fb_setup(void)
 	/* position, H and Ln done survive a reset that leaves the RAM powered;
 	 * after a power-on they start at 0 (the position is unknown) */
 	mo_boot(board_power_on());
+	/* the pen parks up at every boot (a watchdog reset included) */
+	mo_pen_setup((uint16_t)settings[SET_PEN_PARK]);
 	do_reset();
 }
 
@@ -707,6 +784,7 @@ void fb_poll(void)
 		status_report();
 	}
 	laser_watchdog();
+	resume_when_settled();
 	maybe_start();
 	if (pending)
 		try_execute();

@@ -38,6 +38,11 @@ static volatile uint8_t s_running, s_alarm, s_home_hits, s_laser;
 static volatile uint8_t s_beat, s_held;
 static volatile uint32_t s_underruns;
 
+/* pen servo: pulse now in 1/16 us, target and park in us, step per frame in
+ * 1/16 us; p_saved: the target a park interrupted (0 = none); p_time: move +
+ * settle ms of the M280 that set the target (the time to get back to it) */
+static volatile uint16_t p_now16, p_target, p_park, p_step16, p_saved, p_time;
+
 #define K board_keep
 #define FB_KEEP_MAGIC 0xFB5AFE17UL
 /* off is folded into base when a step takes it to +-OFF_FOLD */
@@ -90,6 +95,60 @@ uint8_t mo_boot(uint8_t power_on)
 	return kept;
 }
 
+/* Pulse to the park value at once; keep the target to go back to if asked
+ * (a hold), else forget it (a stop: reset, alarm).  Interrupts off. */
+static void pen_park_now(uint8_t keep)
+{
+	if (keep && p_target != p_park && !p_saved) {
+		p_saved = p_target;
+	} else if (!keep) {
+		p_saved = 0;
+	}
+	p_target = p_park;
+	p_now16 = (uint16_t)(p_park << 4);
+}
+
+void mo_pen_setup(uint16_t park_us)
+{
+	uint8_t sreg = board_irq_save();
+	p_park = park_us;
+	pen_park_now(0);
+	board_irq_restore(sreg);
+}
+
+void mo_pen_park(void)
+{
+	uint8_t sreg = board_irq_save();
+	pen_park_now(1);
+	board_irq_restore(sreg);
+}
+
+uint16_t mo_pen_unpark(void)
+{
+	uint16_t t = p_saved;
+	if (!t)
+		return 0;
+	p_saved = 0;
+	p_target = t;
+	p_now16 = (uint16_t)(t << 4);
+	return p_time ? p_time : 1u;
+}
+
+uint8_t mo_pen_down(void) { return p_target != p_park; }
+uint16_t mo_pen(void) { return (uint16_t)(p_now16 >> 4); }
+uint16_t mo_pen_target(void) { return p_target; }
+
+uint16_t mo_pen_frame(void)
+{
+	uint16_t now = p_now16, to = (uint16_t)(p_target << 4), st = p_step16;
+	if (now < to)
+		now = (uint16_t)(to - now > st ? now + st : to);
+	else if (now > to)
+		now = (uint16_t)(now - to > st ? now - st : to);
+	p_now16 = now;
+	return (uint16_t)(now >> 4);
+}
+
 void mo_init(void)
 {
 	board_timer_stop();
@@ -102,6 +161,7 @@ void mo_init(void)
 	s_laser = 0;
 	s_underruns = 0;
 	board_laser(0);
+	pen_park_now(0);
 }
 
 uint8_t mo_queue_count(void) { return (uint8_t)((q_head - q_tail) & 0xffu); }
@@ -162,6 +222,24 @@ uint8_t mo_prepare_cycles(fb_block_t *b, int32_t da, int32_t db, uint32_t cycles
 	return st;
 }
 
+void mo_prepare_pen(fb_block_t *b, uint16_t from_us, uint16_t to_us, uint16_t move_ms,
+		    uint16_t settle_ms)
+{
+	uint32_t d16 = (uint32_t)(from_us > to_us ? from_us - to_us : to_us - from_us) << 4;
+	/* the board sends each frame's width one frame after asking mo_pen_frame()
+	 * for it, so the move takes one frame less: its last width is on the wire
+	 * within move_ms of the block start (and a move under two frames jumps) */
+	uint32_t frames = move_ms / CFG_SERVO_FRAME_MS;
+	frames = frames ? frames - 1u : 0u;
+	uint32_t step = frames ? (d16 + frames - 1u) / frames : 0xffffu;
+	mo_prepare_cycles(b, 0, 0, ((uint32_t)move_ms + settle_ms) * (FB_F_CPU / 1000UL), 0);
+	b->type = BLK_PEN;
+	b->power = 0;
+	b->q[0] = to_us;
+	b->q[1] = step ? (step > 0xffffu ? 0xffffu : step) : 1u;
+	b->r2[0] = (uint32_t)move_ms + settle_ms;
+}
+
 uint8_t mo_prepare(fb_block_t *b, int32_t da, int32_t db, uint32_t p_us, uint32_t min_interval)
 {
 	return mo_prepare_cycles(b, da, db, p_us * (FB_F_CPU / 1000000UL), min_interval);
@@ -200,6 +278,7 @@ void mo_stop(void)
 	}
 	s_due = 0;
 	set_laser(0);
+	pen_park_now(0);
 	board_irq_restore(sreg);
 }
 
@@ -211,6 +290,7 @@ void mo_hold(void)
 		s_held = 1;
 	}
 	set_laser(0);
+	pen_park_now(1);
 	board_irq_restore(sreg);
 }
 
@@ -256,6 +336,17 @@ FB_ALWAYS_INLINE fb_block_t *boundary(void)
 			board_enable_motors(b->type == BLK_ENABLE);
 			keep_done(b->line);
 			continue;
+		case BLK_PEN:
+			/* stores only: the servo frame interrupt moves the pulse */
+			p_target = (uint16_t)b->q[0];
+			p_step16 = (uint16_t)b->q[1];
+			p_time = (uint16_t)b->r2[0];
+			p_saved = 0;
+			if (b->cycles == 0) {
+				keep_done(b->line);
+				continue;
+			}
+			break;  /* a dwell of move + settle time */
 		default:
 			break;
 		}

@@ -19,7 +19,8 @@ enum fb_block_type {
 	BLK_HOME,       /* like MOVE, but each motor stops at its endstop */
 	BLK_SETPOS,     /* G92: position := n[] (as int32) */
 	BLK_ENABLE,     /* M17 */
-	BLK_DISABLE     /* M18 */
+	BLK_DISABLE,    /* M18 */
+	BLK_PEN         /* M280: servo to q[0] us at q[1] per frame, then a dwell */
 };
 
 /*
@@ -72,6 +73,39 @@ uint8_t mo_prepare(fb_block_t *b, int32_t da, int32_t db, uint32_t p_us,
 uint8_t mo_prepare_cycles(fb_block_t *b, int32_t da, int32_t db, uint32_t cycles,
 			  uint32_t min_interval);
 
+/*
+ * Fill a PEN block (M280): when it starts, the servo pulse moves from where
+ * it is to to_us in steps of at most the rate that takes it from from_us
+ * (the pen position the main loop planned) to to_us in move_ms, one step per
+ * 20 ms servo frame; the block then lasts move_ms + settle_ms with no step,
+ * so the next segment's first step waits until the pen has had its time.
+ */
+void mo_prepare_pen(fb_block_t *b, uint16_t from_us, uint16_t to_us, uint16_t move_ms,
+		    uint16_t settle_ms);
+
+/*
+ * The pen servo (docs/protocol.md 6.2).  The pulse is 0 (no pulses: no pen)
+ * while the park pulse ($14) is 0.  Parking sets the pulse to the park value
+ * at once (the servo then moves at its own speed).
+ */
+/* Set the park (pen up) pulse and park there; 0 = no pen servo. */
+void mo_pen_setup(uint16_t park_us);
+/* Park the pen (hold, silence): the target it had is kept for mo_pen_unpark. */
+void mo_pen_park(void);
+/* Back to the target a park interrupted; returns the ms the pen needs to get
+ * there (the move + settle time of the M280 that set it), 0 when nothing was
+ * parked.  Interrupts off or in an interrupt. */
+uint16_t mo_pen_unpark(void);
+/* The pen is away from its park position (a lowered pen). */
+uint8_t mo_pen_down(void);
+/* The pulse width output now, us (0 = none). */
+uint16_t mo_pen(void);
+/* The target of the pen (where the last executed M280 or a park sent it). */
+uint16_t mo_pen_target(void);
+/* The servo frame's interrupt calls this every CFG_SERVO_FRAME_MS: one step
+ * of the move towards the target; returns the pulse to send, us (0 = none). */
+uint16_t mo_pen_frame(void);
+
 /* Start executing the queue (no-op while running). */
 void mo_start(void);
 /* The step interrupt's body: handle the due event, return cycles until the
@@ -82,9 +116,12 @@ void mo_start(void);
 #define MO_MAX_DELAY 0x6000u
 #define MO_WAIT 0x4000u
 uint16_t mo_event(void);
-/* Stop at once: no further steps, laser off, the current block is dropped. */
+/* Stop at once: no further steps, laser off, pen parked (and no way back:
+ * a reset or an alarm forgets where it was), the current block is dropped. */
 void mo_stop(void);
-/* Freeze / continue the timeline of the running segment; laser follows. */
+/* Freeze / continue the timeline of the running segment; laser follows.
+ * mo_hold also parks the pen (mo_pen_park); the caller lowers it again with
+ * mo_pen_unpark and waits its time before mo_resume. */
 void mo_hold(void);
 void mo_resume(void);
 

@@ -148,6 +148,7 @@ static uint8_t allowed_words(uint8_t kind)
 	case CMD_G1: return W_A | W_B | W_P | W_S;
 	case CMD_G92: return W_A | W_B;
 	case CMD_M3: return W_S;
+	case CMD_M280: return W_S | W_R | W_D;
 	default: return 0;
 	}
 }
@@ -215,6 +216,7 @@ static uint8_t command_kind(char letter, uint32_t code)
 	case 17: return CMD_M17;
 	case 18: return CMD_M18;
 	case 110: return CMD_M110;
+	case 280: return CMD_M280;
 	default: return CMD_NONE;
 	}
 }
@@ -225,8 +227,19 @@ static uint8_t check_ranges(fb_cmd_t *cmd)
 		return FB_ERR_OUT_OF_RANGE;
 	if ((cmd->has & W_B) && (cmd->b > CFG_POS_LIMIT || cmd->b < -CFG_POS_LIMIT))
 		return FB_ERR_OUT_OF_RANGE;
-	if ((cmd->has & W_S) && (cmd->s < 0 || cmd->s > 255))
+	if (cmd->kind == CMD_M280) {
+		/* S is a servo pulse here, not a laser power */
+		if ((cmd->has & W_S) && (cmd->s < CFG_SERVO_MIN_US || cmd->s > CFG_SERVO_MAX_US))
+			return FB_ERR_OUT_OF_RANGE;
+		if ((cmd->has & W_R) && (cmd->r < 0 || cmd->r > CFG_PEN_MS_MAX))
+			return FB_ERR_OUT_OF_RANGE;
+		if ((cmd->has & W_D) && (cmd->d < 0 || cmd->d > CFG_PEN_MS_MAX))
+			return FB_ERR_OUT_OF_RANGE;
+		if (!(cmd->has & W_S))
+			return FB_ERR_MISSING_WORD;
+	} else if ((cmd->has & W_S) && (cmd->s < 0 || cmd->s > 255)) {
 		return FB_ERR_OUT_OF_RANGE;
+	}
 	if ((cmd->has & W_P) && (cmd->p < CFG_P_MIN_US || cmd->p > CFG_P_MAX_US))
 		return FB_ERR_OUT_OF_RANGE;
 	if (cmd->kind == CMD_G1 && !(cmd->has & W_P))
@@ -282,6 +295,8 @@ static uint8_t parse_body(const char *s, uint8_t i, uint8_t end, fb_cmd_t *cmd)
 		case 'B': bit = W_B; dst = &cmd->b; break;
 		case 'P': bit = W_P; dst = &cmd->p; break;
 		case 'S': bit = W_S; dst = &cmd->s; break;
+		case 'R': bit = W_R; dst = &cmd->r; break;
+		case 'D': bit = W_D; dst = &cmd->d; break;
 		default: return FB_ERR_BAD_WORD;
 		}
 		if (!(allowed & bit) || (cmd->has & bit))

@@ -25,7 +25,8 @@ enum fb_cmd_kind {
 	CMD_LIST,       /* $$ list settings */
 	CMD_HOME,       /* $H */
 	CMD_UNLOCK,     /* $X */
-	CMD_SET         /* $<n>=<v> */
+	CMD_SET,        /* $<n>=<v> */
+	CMD_M280        /* pen servo: S<us> [R<ms>] [D<ms>] (queued) */
 };
 
 /* Word presence bits in fb_cmd_t.has */
@@ -33,6 +34,8 @@ enum fb_cmd_kind {
 #define W_B 0x02u
 #define W_P 0x04u
 #define W_S 0x08u
+#define W_R 0x10u
+#define W_D 0x20u
 
 typedef struct {
 	uint8_t kind;       /* enum fb_cmd_kind */
@@ -41,6 +44,7 @@ typedef struct {
 	uint8_t setting;    /* CMD_SET: setting number */
 	uint32_t n;         /* line number when has_n */
 	int32_t a, b, p, s; /* word values */
+	int32_t r, d;       /* M280: move and settle time, ms */
 	int32_t value;      /* CMD_SET: value */
 } fb_cmd_t;
 

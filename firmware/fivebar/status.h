@@ -30,6 +30,7 @@
 #define FB_ERR_HOMING_DISABLED   16 /* $H without endstops ($7=0) */
 #define FB_ERR_UNKNOWN_SETTING   17 /* no such $ setting */
 #define FB_ERR_RX_OVERFLOW       18 /* receive buffer overflowed: bytes were lost */
+#define FB_ERR_NO_PEN            19 /* M280 while no pen servo is set up ($14=0) */
 
 #define FB_ALARM_ENDSTOP         30 /* endstop hit outside homing */
 #define FB_ALARM_HOMING_FAIL     31 /* homing found no switch, or the switch stayed pressed */

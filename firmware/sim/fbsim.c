@@ -5,7 +5,8 @@
  *     -m MCU      AVR core (default atmega328p)
  *     -f HZ       clock (default 16000000)
  *     -t FILE     trace file: one "<cycle> <pin> <level>" line per change of a
- *                 step, direction, enable or laser pin (pins from config.h)
+ *                 step, direction, enable, laser or pen servo pin (names
+ *                 stepA stepB dirA dirB enable laser pen; pins from config.h)
  *     -w          hold the CPU until a client opens the pty, so the boot
  *                 banner is not lost to the client's input flush
  *     -g MS       grace after the client opened (default 50 ms, with -w)
@@ -148,8 +149,8 @@ static avr_cycle_count_t pending_since;
 static struct timespec frozen_at;
 
 /* last traced level of each output pin, to trace them low on a reset */
-enum { PIN_STEPA, PIN_STEPB, PIN_DIRA, PIN_DIRB, PIN_ENABLE, PIN_LASER, PIN_COUNT };
-static const char *const pin_names[PIN_COUNT] = { "stepA", "stepB", "dirA", "dirB", "enable", "laser" };
+enum { PIN_STEPA, PIN_STEPB, PIN_DIRA, PIN_DIRB, PIN_ENABLE, PIN_LASER, PIN_PEN, PIN_COUNT };
+static const char *const pin_names[PIN_COUNT] = { "stepA", "stepB", "dirA", "dirB", "enable", "laser", "pen" };
 static int pin_level[PIN_COUNT];
 
 /* Timer1 debug log (-D) */
@@ -702,6 +703,8 @@ int main(int argc, char **argv)
 				(void *)(intptr_t)PIN_ENABLE);
 	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_LASER_PORT), PIN_LASER_BIT), named_hook,
 				(void *)(intptr_t)PIN_LASER);
+	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_SERVO_PORT), PIN_SERVO_BIT), named_hook,
+				(void *)(intptr_t)PIN_PEN);
 	if (debug_path) {
 		dbg = fopen(debug_path, "w");
 		if (!dbg) {

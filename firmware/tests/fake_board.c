@@ -22,6 +22,11 @@ void (*fake_step_hook)(void);
 uint8_t fake_power_on;
 uint32_t fake_wdt_feeds;
 volatile fb_keep_t board_keep;
+uint16_t fake_ee_park = 0xffffu;
+uint16_t fake_pen_pulse;
+uint32_t fake_pen_frames;
+static uint64_t next_frame;
+#define FRAME_CYCLES (16000ULL * CFG_SERVO_FRAME_MS)
 static uint8_t irq_on = 1;
 static char tx_copy[65536];
 
@@ -45,7 +50,14 @@ void fake_reset(void)
 	irq_on = 1;
 	fake_power_on = 1;
 	fake_wdt_feeds = 0;
+	fake_ee_park = 0xffffu;
+	fake_pen_pulse = 0;
+	fake_pen_frames = 0;
+	next_frame = FRAME_CYCLES;
 }
+
+uint16_t board_pen_park_load(void) { return fake_ee_park; }
+void board_pen_park_store(uint16_t us) { fake_ee_park = us; }
 
 void board_init(void) {}
 
@@ -115,6 +127,11 @@ size_t fake_run(uint64_t max_cycles)
 	       fake_budget) {
 		fake_budget--;
 		fake_now += fake_timer_delay;
+		while (fake_now >= next_frame) {
+			fake_pen_pulse = mo_pen_frame();
+			fake_pen_frames++;
+			next_frame += FRAME_CYCLES;
+		}
 		uint16_t d = mo_event();
 		events++;
 		if (!d) {
@@ -133,6 +150,7 @@ void board_steps_high(uint8_t mask)
 		fake_steps[fake_nsteps].mask = mask;
 		fake_steps[fake_nsteps].dirs = fake_dirs;
 		fake_steps[fake_nsteps].laser = fake_laser;
+		fake_steps[fake_nsteps].pen = fake_pen_pulse;
 		fake_nsteps++;
 	}
 	if (fake_step_hook)

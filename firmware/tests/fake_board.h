@@ -15,6 +15,7 @@ typedef struct {
 	uint8_t mask;    /* motors stepped */
 	uint8_t dirs;    /* direction mask in force */
 	uint8_t laser;   /* laser power in force */
+	uint16_t pen;    /* servo pulse (us) of the last frame before the step */
 } fake_step_t;
 
 extern uint64_t fake_now;            /* simulated cycle counter */
@@ -50,6 +51,13 @@ extern void (*fake_step_hook)(void);
 extern uint8_t fake_power_on;
 /* board_wdt_feed() calls since fake_reset(): the watchdog feeds. */
 extern uint32_t fake_wdt_feeds;
+
+/* The EEPROM word of the pen park pulse (0xffff: none); fake_reset() blanks it. */
+extern uint16_t fake_ee_park;
+/* Servo pulse of the last frame (mo_pen_frame() runs every 20 ms of fake_now
+ * in fake_run), and the number of frames run. */
+extern uint16_t fake_pen_pulse;
+extern uint32_t fake_pen_frames;
 
 void fake_reset(void);
 /* Run the step timer until it stops or max_cycles pass; returns events run. */

@@ -617,13 +617,13 @@ static void test_app(void)
 	fb_setup();
 	expect("", "fivebar " FB_VERSION " proto:2 rx:128 queue:16 line:80\r\n");
 	expect("$I\n", "fivebar " FB_VERSION " proto:2 rx:128 queue:16 line:80\r\nok\r\n");
-	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,1|L:0|U:0|H:0>\r\n");
+	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,1|L:0|U:0|H:0|P:0>\r\n");
 	expect("G1 A10 B-4 P1000\n", "ok\r\n");
 	tick(100);
-	expect("?", "<Idle|A:10,B:-4|Q:0|Ln:2,2|L:0|U:1|H:0>\r\n");
+	expect("?", "<Idle|A:10,B:-4|Q:0|Ln:2,2|L:0|U:1|H:0|P:0>\r\n");
 	expect("G91\nG1 A5 P1000\nG90\n", "ok\r\nok\r\nok\r\n");
 	tick(100);
-	expect("?", "<Idle|A:15,B:-4|Q:0|Ln:4,5|L:0|U:2|H:0>\r\n");
+	expect("?", "<Idle|A:15,B:-4|Q:0|Ln:4,5|L:0|U:2|H:0|P:0>\r\n");
 	expect("G1 A200000 P100000\n", "error:11\r\n");
 	expect("G1 A10 P100\n", "error:12\r\n");
 	memset(buf, 'A', 100);
@@ -641,7 +641,7 @@ static void test_app(void)
 	strcat(buf, "\n");
 	expect(buf, "ok\r\n");
 	tick(100);
-	expect("?", "<Idle|A:0,B:0|Q:0|Ln:1,1|L:0|U:3|H:0>\r\n");
+	expect("?", "<Idle|A:0,B:0|Q:0|Ln:1,1|L:0|U:3|H:0|P:0>\r\n");
 	/* numbered mode: a line too long for the buffer (two lines merged by a
 	 * lost newline) is refused with a resend, as a checksum error */
 	framed(buf, sizeof buf, "N2 G1 A-100000000 B-100000000 P100000000 S255");
@@ -649,17 +649,17 @@ static void test_app(void)
 	strcat(buf, "\n");
 	CHECK(strlen(buf) > CFG_LINE_MAX + 1, "merged lines too long");
 	expect(buf, "error:8 resend:2\r\n");
-	expect("?", "<Idle|A:0,B:0|Q:0|Ln:1,1|L:0|U:3|H:0>\r\n");
+	expect("?", "<Idle|A:0,B:0|Q:0|Ln:1,1|L:0|U:3|H:0|P:0>\r\n");
 	/* strict framing until an unnumbered M110 (or a reset) */
 	expect("G1 A5 P1000\n$I\n", "error:10 resend:2\r\nerror:10 resend:2\r\n");
 	expect("M110\nG90\n", "ok\r\nok\r\n");
-	expect("?", "<Idle|A:0,B:0|Q:0|Ln:1,1|L:0|U:3|H:0>\r\n");
+	expect("?", "<Idle|A:0,B:0|Q:0|Ln:1,1|L:0|U:3|H:0|P:0>\r\n");
 
 	/* hold before the job starts, then resume */
 	expect("!", "");
 	expect("M3 S77\nG1 A100 P100000\n", "ok\r\nok\r\n");
 	tick(100);
-	expect("?", "<Hold:0|A:0,B:0|Q:1|Ln:1,3|L:0|U:3|H:0>\r\n");
+	expect("?", "<Hold:0|A:0,B:0|Q:1|Ln:1,3|L:0|U:3|H:0|P:0>\r\n");
 	CHECK(fake_nsteps == 0 || fake_laser == 0, "nothing runs while held");
 	fake_nsteps = 0;
 	fb_rx_isr('~');
@@ -668,9 +668,9 @@ static void test_app(void)
 	CHECK(fake_laser == 77, "laser on during the segment");
 	fb_rx_isr('!');
 	CHECK(fake_laser == 0, "hold turns the laser off at once");
-	expect("?", "<Hold:0|A:50,B:0|Q:0|Ln:1,3|L:0|U:3|H:0>\r\n");
+	expect("?", "<Hold:0|A:50,B:0|Q:0|Ln:1,3|L:0|U:3|H:0|P:0>\r\n");
 	expect("~", "");
-	expect("?", "<Idle|A:100,B:0|Q:0|Ln:3,3|L:0|U:4|H:0>\r\n");
+	expect("?", "<Idle|A:100,B:0|Q:0|Ln:3,3|L:0|U:4|H:0|P:0>\r\n");
 
 	/* an error while a job runs holds it */
 	expect("G1 A0 P100000\n", "ok\r\n");
@@ -679,13 +679,13 @@ static void test_app(void)
 	fake_run(16u * 10000u);
 	expect("G7\n", "error:4\r\n");
 	CHECK(fake_laser == 0, "laser off after an error");
-	expect("?", "<Hold:2|A:90,B:0|Q:0|Ln:3,5|L:0|U:4|H:0>\r\n");
+	expect("?", "<Hold:2|A:90,B:0|Q:0|Ln:3,5|L:0|U:4|H:0|P:0>\r\n");
 
 	/* reset: banner, queue dropped, position kept */
 	send("\x18");
 	CHECK(fake_laser == 0 && !fake_timer_on, "reset stops at once");
 	expect("", "fivebar " FB_VERSION " proto:2 rx:128 queue:16 line:80\r\n");
-	expect("?", "<Idle|A:90,B:0|Q:0|Ln:0,0|L:0|U:0|H:0>\r\n");
+	expect("?", "<Idle|A:90,B:0|Q:0|Ln:0,0|L:0|U:0|H:0|P:0>\r\n");
 
 	/* the laser watchdog */
 	expect("M3 S255\nG1 A0 P10000000\n", "ok\r\nok\r\n");
@@ -696,7 +696,7 @@ static void test_app(void)
 	fake_ms += DEF_LASER_TIMEOUT + 1;
 	fb_poll();
 	CHECK(fake_laser == 0, "laser off after host silence");
-	expect("?", "<Hold:1|A:90,B:0|Q:0|Ln:0,2|L:0|U:0|H:0>\r\n");
+	expect("?", "<Hold:1|A:90,B:0|Q:0|Ln:0,2|L:0|U:0|H:0|P:0>\r\n");
 	send("\x18");
 	expect("", "fivebar " FB_VERSION " proto:2 rx:128 queue:16 line:80\r\n");
 
@@ -796,7 +796,7 @@ static void test_reset_while_a_line_waits(void)
 		out = fake_take_tx();
 		CHECK(strcmp(out, BANNER) == 0, "k=%d: only the banner after the reset: '%s'", k, out);
 		CHECK(mo_queue_count() == 0 && !mo_running() && fake_laser == 0, "k=%d: queue cleared", k);
-		expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,0|L:0|U:0|H:0>\r\n");
+		expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,0|L:0|U:0|H:0|P:0>\r\n");
 	}
 	CHECK(k >= 2, "the Ctrl-X was delivered inside the pass (%d points)", k - 1);
 }
@@ -808,36 +808,36 @@ static void test_homed_flag(void)
 {
 	boot_at_zero();
 	fake_take_tx();
-	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,0|L:0|U:0|H:0>\r\n");
+	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,0|L:0|U:0|H:0|P:0>\r\n");
 	expect("G92 A5 B-5\n", "ok\r\n");
-	expect("?", "<Run|A:0,B:0|Q:1|Ln:0,1|L:0|U:0|H:0>\r\n"); /* queued, not executed */
+	expect("?", "<Run|A:0,B:0|Q:1|Ln:0,1|L:0|U:0|H:0|P:0>\r\n"); /* queued, not executed */
 	send("\x18");
 	expect("", BANNER);
-	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,0|L:0|U:0|H:0>\r\n"); /* discarded: never set */
+	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,0|L:0|U:0|H:0|P:0>\r\n"); /* discarded: never set */
 	expect("G92 A5 B-5\n", "ok\r\n");
 	tick(100);
-	expect("?", "<Idle|A:5,B:-5|Q:0|Ln:1,1|L:0|U:1|H:1>\r\n");
+	expect("?", "<Idle|A:5,B:-5|Q:0|Ln:1,1|L:0|U:1|H:1|P:0>\r\n");
 	send("\x18");
 	expect("", BANNER);
-	expect("?", "<Idle|A:5,B:-5|Q:0|Ln:0,0|L:0|U:0|H:1>\r\n"); /* Ctrl-X keeps it */
+	expect("?", "<Idle|A:5,B:-5|Q:0|Ln:0,0|L:0|U:0|H:1|P:0>\r\n"); /* Ctrl-X keeps it */
 	/* a homing restarts the count at 0: unknown until it completes */
 	fake_endstops = 0;
 	expect("$7=1\n$12=10\n$8=40000\n$H\n", "ok\r\nok\r\nok\r\nALARM:31\r\nerror:31\r\n");
 	send("?");
 	const char *out = poll_out(5);
-	CHECK(has(out, "<Alarm:31|A:-10,B:-10|") && has(out, "|H:0>"), "failed $H: '%s'", out);
+	CHECK(has(out, "<Alarm:31|A:-10,B:-10|") && has(out, "|H:0|P:0>"), "failed $H: '%s'", out);
 	expect("$X\n$7=0\nG92 A1\n", "ok\r\nok\r\nok\r\n");
 	tick(100);
 	send("?");
 	out = poll_out(5);
-	CHECK(has(out, "<Idle|A:1,B:-10|") && has(out, "|H:1>"), "G92 after $X: '%s'", out);
+	CHECK(has(out, "<Idle|A:1,B:-10|") && has(out, "|H:1|P:0>"), "G92 after $X: '%s'", out);
 	/* power-on; the Ctrl-X only empties the fake's receive ring */
 	fb_rx_isr(0x18);
 	fb_poll();
 	fake_reset();
 	fb_setup();
 	fake_take_tx();
-	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,0|L:0|U:0|H:0>\r\n");
+	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,0|L:0|U:0|H:0|P:0>\r\n");
 }
 
 /* ---- the record kept across a reset (docs/protocol.md section 7) ------------------------- */
@@ -897,20 +897,20 @@ static void test_kept_record(void)
 {
 	char want[96];
 	reboot(1);
-	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,0|L:0|U:0|H:0>\r\n");
+	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,0|L:0|U:0|H:0|P:0>\r\n");
 	expect("$9=5\nG92 A100 B-50\nG1 A150 B-40 P10000\nG91\n", "ok\r\nok\r\nok\r\nok\r\n");
 	tick(100);
-	expect("?", "<Idle|A:150,B:-40|Q:0|Ln:3,4|L:0|U:1|H:1>\r\n");
+	expect("?", "<Idle|A:150,B:-40|Q:0|Ln:3,4|L:0|U:1|H:1|P:0>\r\n");
 
 	/* a reset that keeps the RAM: position, H and Ln done stay; the rest boots */
 	reboot(0);
-	expect("?", "<Idle|A:150,B:-40|Q:0|Ln:3,0|L:0|U:0|H:1>\r\n");
+	expect("?", "<Idle|A:150,B:-40|Q:0|Ln:3,0|L:0|U:0|H:1|P:0>\r\n");
 	send("$$\n");
 	const char *out = poll_out(5);
 	CHECK(strstr(out, "$9=100\r\n") != 0, "settings at their boot values: '%s'", out);
 	expect("G1 A-300 B-40 P100000\n", "ok\r\n"); /* G90 again: absolute, folds off below 0 */
 	tick(100);
-	expect("?", "<Idle|A:-300,B:-40|Q:0|Ln:2,2|L:0|U:1|H:1>\r\n");
+	expect("?", "<Idle|A:-300,B:-40|Q:0|Ln:2,2|L:0|U:1|H:1|P:0>\r\n");
 
 	/* a reset mid-segment: the motors stop part-way, exactly counted */
 	fake_nsteps = 0;
@@ -923,19 +923,19 @@ static void test_kept_record(void)
 	CHECK(700 < a && a < 1700 && b < 60 && b > -40, "part-way: %d, %d", a, b);
 	reboot(0);
 	CHECK(fake_laser == 0 && !fake_timer_on, "a boot stops motion, laser off");
-	snprintf(want, sizeof want, "<Idle|A:%d,B:%d|Q:0|Ln:4,0|L:0|U:0|H:1>\r\n", a, b);
+	snprintf(want, sizeof want, "<Idle|A:%d,B:%d|Q:0|Ln:4,0|L:0|U:0|H:1|P:0>\r\n", a, b);
 	expect("?", want);
 	CHECK(steps_of(0) == 0 && steps_of(1) == 0, "no step after the reset");
 
 	/* Ctrl-X after it: Ln done to 0, position and H kept */
 	send("\x18");
 	expect("", BANNER);
-	snprintf(want, sizeof want, "<Idle|A:%d,B:%d|Q:0|Ln:0,0|L:0|U:0|H:1>\r\n", a, b);
+	snprintf(want, sizeof want, "<Idle|A:%d,B:%d|Q:0|Ln:0,0|L:0|U:0|H:1|P:0>\r\n", a, b);
 	expect("?", want);
 
 	/* the record is used only when it is whole: not at the instant a step's
 	 * pins rose (the drivers saw the step, the count may not have it yet) */
-	static const char power_on[] = "<Idle|A:0,B:0|Q:0|Ln:0,0|L:0|U:0|H:0>\r\n";
+	static const char power_on[] = "<Idle|A:0,B:0|Q:0|Ln:0,0|L:0|U:0|H:0|P:0>\r\n";
 	run_lines("G1 A-100 P100000\n");
 	fake_ms += 100;
 	fb_poll();
@@ -950,7 +950,7 @@ static void test_kept_record(void)
 	run_lines("G92 A7 B8\n");
 	tick(100);
 	reboot(0);
-	expect("?", "<Idle|A:7,B:8|Q:0|Ln:1,0|L:0|U:0|H:1>\r\n");
+	expect("?", "<Idle|A:7,B:8|Q:0|Ln:1,0|L:0|U:0|H:1|P:0>\r\n");
 	board_keep.check ^= 0x100u;
 	reboot(0);
 	expect("?", power_on);
@@ -1036,12 +1036,12 @@ static void test_strict_framing(void)
 	expect(buf, "ok\r\n");
 	expect("G1 A50 P100000\n", "error:10 resend:3\r\n");
 	tick(100);
-	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,2|L:0|U:0|H:0>\r\n");
+	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,2|L:0|U:0|H:0|P:0>\r\n");
 	CHECK(fake_nsteps == 0, "the refused line did not move");
 	send("\x18");
 	expect("", BANNER);
 	expect("$I\n", BANNER "ok\r\n"); /* a reset ends strict framing */
-	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,1|L:0|U:0|H:0>\r\n");
+	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,1|L:0|U:0|H:0|P:0>\r\n");
 }
 
 /*
@@ -1103,6 +1103,128 @@ static void test_watchdog_feeding(void)
 	fake_take_tx();
 }
 
+
+/* Run the step timer for ms of simulated time (servo frames included). */
+static void run_ms(uint32_t ms)
+{
+	fake_ms += ms;
+	fb_poll();
+	fake_run(16000ull * ms);
+	fb_poll();
+}
+
+/*
+ * The pen servo: M280 parsing, $14 (kept in the EEPROM), the queued pen
+ * block whose move and settle time no step may enter, and the park at a
+ * hold (lowered again before '~' resumes), a reset, an alarm, a boot and
+ * host silence.
+ */
+static void test_pen(void)
+{
+	fb_lines_t ln = { 0, 0 };
+	fb_cmd_t c;
+	CHECK(parse(&ln, "M280 S1500 R200 D150", &c) == FB_OK && c.kind == CMD_M280 &&
+	      c.s == 1500 && c.r == 200 && c.d == 150, "M280 parses");
+	CHECK(parse(&ln, "M280 S499", &c) == FB_ERR_OUT_OF_RANGE, "S below the servo range");
+	CHECK(parse(&ln, "M280 S2501", &c) == FB_ERR_OUT_OF_RANGE, "S above the servo range");
+	CHECK(parse(&ln, "M280 S1500 R-1", &c) == FB_ERR_OUT_OF_RANGE, "negative R");
+	CHECK(parse(&ln, "M280 S1500 D10001", &c) == FB_ERR_OUT_OF_RANGE, "D too long");
+	CHECK(parse(&ln, "M280 R10", &c) == FB_ERR_MISSING_WORD, "S required");
+	CHECK(parse(&ln, "M280 S1500 P10", &c) == FB_ERR_BAD_WORD, "no P on M280");
+	CHECK(parse(&ln, "G1 A1 P100 R5", &c) == FB_ERR_BAD_WORD, "no R on G1");
+	CHECK(parse(&ln, "M3 S300", &c) == FB_ERR_OUT_OF_RANGE, "M3 S stays 0..255");
+
+	int32_t zero[2] = { 0, 0 };
+	reboot(1);
+	mo_set_pos(zero);
+	expect("M280 S1000\n", "error:19\r\n");
+	expect("$14=499\n", "error:7\r\n");
+	expect("$14=1800\n", "ok\r\n");
+	CHECK(fake_ee_park == 1800, "$14 stored in the EEPROM: %u", fake_ee_park);
+	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,3|L:0|U:0|H:0|P:1800>\r\n");
+	run_ms(40);
+	CHECK(fake_pen_pulse == 0, "no frames while idle in the fake");
+
+	/* pen down over 200 ms, settle 100 ms, then a segment: its first step
+	 * comes after both, with the pulse at the down value */
+	fake_nsteps = 0;
+	expect("M280 S1000 R200 D100\nG1 A10 P10000\n", "ok\r\nok\r\n");
+	run_ms(100);
+	CHECK(mo_pen() < 1800 && mo_pen() > 1000, "the pulse moves: %u", mo_pen());
+	CHECK(fake_nsteps == 0, "no step while the pen moves");
+	run_ms(1000);
+	CHECK(fake_nsteps == 10, "the segment ran: %zu steps", fake_nsteps);
+	CHECK(fake_steps[0].cycle >= 16000ull * 300 && fake_steps[0].pen == 1000,
+	      "first step at %llu cycles with pulse %u", (unsigned long long)fake_steps[0].cycle,
+	      fake_steps[0].pen);
+	expect("?", "<Idle|A:10,B:0|Q:0|Ln:5,5|L:0|U:1|H:0|P:1000>\r\n");
+
+	/* a hold parks the pen; '~' lowers it and waits its time (300 ms) first */
+	expect("G1 A20 P100000\n", "ok\r\n");
+	run_ms(50);
+	size_t before = fake_nsteps;
+	expect("!", "");
+	CHECK(mo_pen() == 1800, "hold parks the pen: %u", mo_pen());
+	expect("~", "");
+	CHECK(mo_pen() == 1000, "'~' lowers it again");
+	run_ms(200);
+	CHECK(fake_nsteps == before, "no step before the pen's time is over");
+	expect("?", "<Hold:0|A:15,B:0|Q:0|Ln:5,6|L:0|U:1|H:0|P:1000>\r\n");
+	run_ms(200);
+	run_ms(200);
+	CHECK(fake_nsteps > before, "resumed after it");
+	run_ms(1000);
+	expect("?", "<Idle|A:20,B:0|Q:0|Ln:6,6|L:0|U:2|H:0|P:1000>\r\n");
+
+	/* host silence with the pen down parks it, idle or not */
+	fake_ms += DEF_LASER_TIMEOUT + 1;
+	fb_poll();
+	CHECK(mo_pen() == 1800, "silence parks an idle pen: %u", mo_pen());
+	expect("M280 S1000\nG1 A30 P10000000\n", "ok\r\nok\r\n");
+	run_ms(100);
+	fake_ms += DEF_LASER_TIMEOUT + 1;
+	fb_poll();
+	expect("?", "<Hold:1|A:20,B:0|Q:0|Ln:7,8|L:0|U:2|H:0|P:1800>\r\n");
+
+	/* Ctrl-X parks and forgets: '~' has nothing to lower */
+	send("\x18");
+	expect("", BANNER);
+	CHECK(mo_pen() == 1800 && !mo_pen_down(), "reset parks");
+	expect("M280 S900 D50\n", "ok\r\n");
+	run_ms(100);
+	CHECK(mo_pen() == 900, "down at once without R");
+	/* an alarm parks */
+	expect("$7=1\n", "ok\r\n");
+	fake_endstops = 1;
+	expect("G1 A-5 P100000\n", "ok\r\n");
+	run_ms(200);
+	const char *out = poll_out(5);
+	CHECK(strstr(out, "ALARM:30") != 0 || mo_alarm() == 0, "alarm raised: '%s'", out);
+	CHECK(mo_pen() == 1800, "alarm parks: %u", mo_pen());
+	fake_endstops = 0;
+	expect("$X\n$7=0\n", "ok\r\nok\r\n");
+
+	/* a boot, power-on included, parks at the EEPROM's value */
+	expect("M280 S700\n", "ok\r\n");
+	run_ms(100);
+	CHECK(mo_pen_target() == 700, "down");
+	fb_rx_isr(0x18);
+	fake_power_on = 0;
+	fb_setup();
+	fake_take_tx();
+	CHECK(mo_pen() == 1800, "a reset that keeps the RAM parks: %u", mo_pen());
+	uint16_t ee = fake_ee_park;
+	fake_reset();
+	fake_ee_park = ee;
+	fb_setup();
+	fake_take_tx();
+	CHECK(mo_pen() == 1800, "a power-on parks at the stored value: %u", mo_pen());
+	fake_reset();
+	fb_setup();
+	fake_take_tx();
+	CHECK(mo_pen() == DEF_PEN_PARK, "blank EEPROM: the default %u", mo_pen());
+}
+
 int main(void)
 {
 	test_crc();
@@ -1122,6 +1244,7 @@ int main(void)
 	test_kept_record();
 	test_reset_during_homing();
 	test_watchdog_feeding();
+	test_pen();
 	printf("%d checks, %d failed\n", checks, failures);
 	return failures ? 1 : 0;
 }

@@ -2,10 +2,10 @@
 
 Only this package imports click. One module per command group (vpype's library/CLI split):
 `common` (the group, errors, the generated job options), `plot` (convert, plot), `remote`
-(plot --server), `machine` (home, jog, frame), `pose` (config check, ik, fk), `design`
-(workspace, design, linkage), `calibrate` (pattern, fit, check) and `serve` (the daemon).
-Each command parses units at the edge, calls pure functions, and turns fivebar's errors into
-one line and a non-zero exit.
+(plot --server), `machine` (home, jog, frame), `pen` (pen up|down|toggle, motors off), `pose`
+(config check, ik, fk), `design` (workspace, design, linkage), `calibrate` (pattern, fit,
+check), `bridge` (the GRBL front door) and `serve` (the daemon). Each command parses units at
+the edge, calls pure functions, and turns fivebar's errors into one line and a non-zero exit.
 """
 
 from fivebar_host.cli import (  # noqa: F401  (commands)
@@ -13,6 +13,7 @@ from fivebar_host.cli import (  # noqa: F401  (commands)
     calibrate,
     design,
     machine,
+    pen,
     plot,
     pose,
     serve,

@@ -119,8 +119,10 @@ def compile_from_cli(drawing: Path, config_path: Path | None,
     """Compile and check a drawing with the job option values a command received:
     (profile, Job). Raises the pipeline's errors."""
     from fivebar_host.compile import CompileOptions, compile_job
+    from fivebar_host.config import require_tool, with_pen_overrides
 
-    prof = load(config_path)
+    prof = with_pen_overrides(load(config_path), values)
+    require_tool(prof, bool(values.get("laser")))
     return prof, compile_job(drawing, prof, CompileOptions(**compile_values(values)))
 
 

@@ -92,7 +92,7 @@ def plot(drawing: Path, dry_run: bool, preview_path: Path, port: str | None, res
     laser = bool(job_values["laser"])
     prof, job = compile_from_cli(drawing, config_path, job_values)
     if dry_run:
-        for line in report_lines(job, nbar_opinion(job, prof), laser=laser):
+        for line in report_lines(job, nbar_opinion(job, prof), laser=laser, profile=prof):
             click.echo(line)
         draw_preview(job, prof, preview_path)
         click.echo(f"preview       {preview_path}")
@@ -117,9 +117,12 @@ def _stream_plot(drawing: Path, port: str, prof: Profile, job: Any, *, laser: bo
 
     click.echo(f"job: {job.n_segments} segments, {job.n_paths} paths, mode {job.mode}, "
                f"≈ {job.total_time_s:.1f} s, max deviation {job.max_dev_mm:.4f} mm")
-    if not laser:
-        click.echo("laser/pen power output stays at 0 (pen plot: M3/M5 lift the pen); "
-                   "pass --laser to burn")
+    if prof.pen is not None:
+        click.echo("pen plot: the servo lifts the pen (M280) between strokes; laser output "
+                   "stays at 0")
+    elif not laser:
+        click.echo("laser/pen power output stays at 0 (no servo pen in the profile: M3/M5 "
+                   "only mark pen down/up); pass --laser to burn")
     interrupted = {"flag": False}
 
     def on_sigint(signum: int, frame: Any) -> None:
@@ -199,7 +202,7 @@ def _write_executed(job: Any, prof: Profile, trace: Path, preview_path: Path,
     preview (CSV of pen points and their deviation), and its largest deviation."""
     from fivebar_host.compile import write_atomic
     from fivebar_host.devices.simtrace import read_trace
-    from fivebar_host.executed import executed_path, merge_axes
+    from fivebar_host.executed import executed_path, merge_axes, pen_report
 
     tr = read_trace(trace)
     t, track = merge_axes(tr.positions("A"), tr.positions("B"))
@@ -215,3 +218,5 @@ def _write_executed(job: Any, prof: Profile, trace: Path, preview_path: Path,
                f"max deviation "
                f"{ex.max_deviation_mm:.4f} mm (bound {job.tolerance_mm:g} + step quantum "
                f"{job.step_quantum_mm:.4f} mm)")
+    if prof.pen is not None:
+        click.echo(pen_report(job, prof, tr.pen_pulses(), tr.freq, ex).line())

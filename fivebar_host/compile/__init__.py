@@ -9,7 +9,14 @@ The public API, for the CLI, the sender, the server, the previews, the benchmark
 - `encode`: `encode_lines`, `mode_sequence`, `write_atomic` (firmware lines).
 """
 
-from fivebar_host.compile.encode import MAX_LINE_BYTES, encode_lines, mode_sequence, write_atomic
+from fivebar_host.compile.encode import (
+    MAX_LINE_BYTES,
+    encode_lines,
+    mode_sequence,
+    pen_setup_lines,
+    pen_switch_lines,
+    write_atomic,
+)
 from fivebar_host.compile.job import GCODE_SUFFIXES, compile_drawing, compile_job, read_drawing
 from fivebar_host.compile.model import (
     AUTO_ORDER,
@@ -46,6 +53,8 @@ __all__ = [
     "encode_lines",
     "mode_sequence",
     "nbar_opinion",
+    "pen_setup_lines",
+    "pen_switch_lines",
     "read_drawing",
     "validate",
     "write_atomic",

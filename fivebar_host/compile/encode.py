@@ -34,6 +34,24 @@ def mode_sequence(job: Job, arrow: str = " → ") -> str:
     return arrow.join(seq)
 
 
+def pen_switch_lines(profile: Profile) -> tuple[str, str]:
+    """The lines that lower and raise the pen around a run of drawing segments: the servo's
+    `M280` (with its move and settle time, docs/protocol.md 6.2) on a pen profile, else the
+    laser-enable state at S0 (`M3 S0` / `M5`)."""
+    if profile.pen is not None:
+        return profile.pen.command(True), profile.pen.command(False)
+    return "M3 S0", "M5"
+
+
+def pen_setup_lines(profile: Profile) -> list[str]:
+    """On a pen profile: `$14=<up pulse>` (the firmware parks the pen there at once, and at
+    every boot, hold, alarm and silence, and keeps it in its EEPROM), then a pen up with its
+    move and settle time, since the pen may have been anywhere before its first pulse."""
+    if profile.pen is None:
+        return []
+    return [f"$14={profile.pen.pulse_us(profile.pen.up_position)}", profile.pen.command(False)]
+
+
 def encode_lines(job: Job, profile: Profile, relative: bool = False,
                  laser: bool = False) -> list[str]:
     """Firmware-ready lines for a job (docs/protocol.md; each G1 body from
@@ -70,7 +88,8 @@ def encode_lines(job: Job, profile: Profile, relative: bool = False,
         _comment(f"steps count from the homed pose ({math.degrees(h[0]):g}, "
                  f"{math.degrees(h[1]):g}) deg"),
         _comment(f"laser: power from the profile, S up to {int(power.max(initial=0))}"
-                 if laser else "pen: S0 on every line; pen down = M3, pen up = M5"),
+                 if laser else "pen: S0 on every line; pen down/up = "
+                 + " / ".join(pen_switch_lines(profile))),
         "G91" if relative else "G90",
     ]
     body = [protocol.g1(int(a), int(b), int(p), int(s)) for a, b, p, s in
@@ -78,15 +97,16 @@ def encode_lines(job: Job, profile: Profile, relative: bool = False,
                 power.tolist(), strict=True)]
     if laser:
         return [*head, f"{profile.laser.on_command} S0", *body, "M5"]
-    out = [*head, "M5"]
+    out = [*head, *pen_setup_lines(profile), "M5"]
+    down, up = pen_switch_lines(profile)
     draw = job.draw.tolist()
     n = len(draw)
     for k, line in enumerate(body):
         if draw[k] and (k == 0 or not draw[k - 1]):
-            out.append("M3 S0")
+            out.append(down)
         out.append(line)
         if draw[k] and (k == n - 1 or not draw[k + 1]):
-            out.append("M5")
+            out.append(up)
     if out[-1] != "M5":
         out.append("M5")
     return out

@@ -19,7 +19,7 @@ from fivebar_host.compile.model import (
 from fivebar_host.compile.modes import _densify_joint, _type1_crossings
 from fivebar_host.compile.place import Home, Placed, Setup
 from fivebar_host.compile.solve import Routed, Solved
-from fivebar_host.compile.timing import Planned
+from fivebar_host.compile.timing import Planned, tool_time_s
 from fivebar_host.compile.travel import Travel
 from fivebar_host.compile.validate import validate
 from fivebar_host.errors import JobError, Where
@@ -155,7 +155,7 @@ def finish(su: Setup, placed: Placed, home: Home, routed: Routed, solved: Solved
         seg_ca=ch.pts[a[chord_rows]], seg_cb=ch.pts[a[chord_rows] + 1],
         ideal_max_dev_mm=float(iv.dev_mm.max()) if iv.dev_mm.size else 0.0,
         path_modes=tuple(routed.path_mode.tolist()), home_mode=home.mode,
-        mode_changes=tuple(mode_changes),
+        mode_changes=tuple(mode_changes), tool_time_s=tool_time_s(seg_draw, su.profile),
     )
     if opts.validate:
         job = validate(job, su.profile, opts.validation_samples)

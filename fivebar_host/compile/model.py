@@ -146,6 +146,8 @@ class Job:
     path_modes: tuple[str, ...] = ()
     home_mode: str = ""
     mode_changes: tuple[ModeChange, ...] = ()
+    # pen servo moves and settle delays between the segments (0 without a pen), s
+    tool_time_s: float = 0.0
 
     # ------------------------------------------------------------------ derived
     @property
@@ -159,7 +161,14 @@ class Job:
 
     @property
     def total_time_s(self) -> float:
-        return float(self.duration_us.sum()) * 1e-6
+        """Planned time: the segments' durations plus the pen's moves and delays."""
+        return float(self.duration_us.sum()) * 1e-6 + self.tool_time_s
+
+    @property
+    def pen_downs(self) -> int:
+        """Runs of drawing segments: each is one pen down and one pen up on a pen machine."""
+        d = self.draw
+        return int(d[0]) + int((d[1:] & ~d[:-1]).sum()) if d.size else 0
 
     @property
     def draw_length_mm(self) -> float:

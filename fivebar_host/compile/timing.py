@@ -129,3 +129,14 @@ def time_stepped(profile: Profile, checker: PoseChecker, sp: Stepped,
                    source=sp.source[seg_of], line=sp.line[seg_of], length=length,
                    perm=sp.perm[seg_of], steps=st, power=power, f0=f0, f1=f1,
                    duration_us=duration_us)
+
+
+def tool_time_s(draw: BoolArray, profile: Profile) -> float:
+    """Time the arms wait for the pen, s: every run of drawing segments is bracketed by a
+    pen down and a pen up (run.program), each a servo move plus its settle delay, during
+    which the firmware issues no step (docs/protocol.md 6.2). 0 without a pen."""
+    pen = profile.pen
+    if pen is None or not draw.size:
+        return 0.0
+    runs = int(draw[0]) + int((draw[1:] & ~draw[:-1]).sum())
+    return runs * (pen.time_s(True) + pen.time_s(False))

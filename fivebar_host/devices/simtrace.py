@@ -135,6 +135,19 @@ class Trace:
         """True if ``cycle`` falls inside a laser-on interval."""
         return any(s <= cycle < e for s, e in self.laser_intervals(max_gap))
 
+    def pen_pulses(self) -> list[tuple[int, int]]:
+        """(rising-edge cycle, high time in cycles) of every complete pulse of the pen
+        servo's signal (D12: one pulse per 20 ms frame, its width the servo position)."""
+        out: list[tuple[int, int]] = []
+        rise: int | None = None
+        for cycle, level in self.pin("pen"):
+            if level == 1:
+                rise = cycle
+            elif rise is not None:
+                out.append((rise, cycle - rise))
+                rise = None
+        return out
+
     def last_cycle(self) -> int:
         """Cycle of the last recorded change (0 for an empty trace)."""
         return max((ch[-1][0] for ch in self.changes.values() if ch), default=0)

@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fivebar_host import protocol
-from fivebar_host.compile import Job
+from fivebar_host.compile import Job, pen_setup_lines, pen_switch_lines
 from fivebar_host.config import Profile
 from fivebar_host.run.errors import SendError
 from fivebar_host.steps import absolute_steps, step_angles
@@ -189,9 +189,10 @@ def job_bodies(job: Job, profile: Profile, laser: bool, first: int,
     """Firmware lines for segments `first`… of `job` and the segment of each (−1: none).
 
     Laser job (`laser`): `M3 S0` once, then drawing segments carry the profile's power.
-    Pen job: S0 everywhere, pen down (`M3 S0`) before and pen up (`M5`) after each run of
-    drawing segments. `first_line` replaces the first segment's G1 (a partial segment).
-    The same encoding as `fivebar convert` (job.encode_lines)."""
+    Pen job: S0 everywhere, pen down before and pen up after each run of drawing segments
+    (`compile.pen_switch_lines`: the servo's `M280` with its move and settle time on a pen
+    profile, else `M3 S0` / `M5`). `first_line` replaces the first segment's G1 (a partial
+    segment). The same encoding as `fivebar convert` (job.encode_lines)."""
     n = job.n_segments
     power = job.power if laser else np.zeros_like(job.power)
     draw = job.draw.tolist()
@@ -204,16 +205,17 @@ def job_bodies(job: Job, profile: Profile, laser: bool, first: int,
     b = job.steps[1:, 1].tolist()
     dur = job.duration_us.tolist()
     pw = power.tolist()
+    down, up = pen_switch_lines(profile)
     for k in range(first, n):
         if not laser and draw[k] and (k == first or not draw[k - 1]):
-            bodies.append("M3 S0")
+            bodies.append(down)
             seg.append(-1)
         line = first_line if (k == first and first_line is not None) else protocol.g1(
             a[k], b[k], dur[k], pw[k])
         bodies.append(line)
         seg.append(k)
         if not laser and draw[k] and (k == n - 1 or not draw[k + 1]):
-            bodies.append("M5")
+            bodies.append(up)
             seg.append(-1)
     if not bodies or bodies[-1] != "M5":
         bodies.append("M5")
@@ -232,8 +234,8 @@ def build_program(job: Job, profile: Profile, laser: bool, start_segment: int,
     line that stands for it, so nothing is redrawn. Power is sent only with `laser` (the
     CLI's explicit `--laser` opt-in).
     """
-    bodies = ["G90", "M5"]
-    seg: list[int] = [-1, -1]
+    bodies = ["G90", *pen_setup_lines(profile), "M5"]
+    seg: list[int] = [-1] * len(bodies)
     k = start_segment
     steps = job.steps
     pos = np.asarray(position, dtype=np.int64)

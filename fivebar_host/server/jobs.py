@@ -18,9 +18,9 @@ from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 from fivebar_host.compile import GCODE_SUFFIXES, CompileOptions, Job, compile_drawing
-from fivebar_host.config import Profile
+from fivebar_host.config import Profile, require_tool
 from fivebar_host.errors import FivebarError, InputError, JobError, OptionError
-from fivebar_host.options import check_values
+from fivebar_host.options import PEN_NAMES, check_values
 from fivebar_host.run.resume import fingerprint
 from fivebar_host.toolpath.gcode import read_gcode
 from fivebar_host.toolpath.svg import read_svg
@@ -54,6 +54,14 @@ class JobOptions(CompileOptions):
     #: Answer yes to the daemon's question "are the arms at the home pose?" (or "still where
     #: the job stopped?") when the daemon cannot know it itself (first job after power-up).
     confirm: bool = False
+    #: Pen servo overrides (fivebar_host.options PEN_NAMES): declared so that the API knows
+    #: them, but the daemon runs its own profile's pen and refuses them (compile_upload).
+    pen_up_position: float | None = None
+    pen_down_position: float | None = None
+    pen_up_rate: float | None = None
+    pen_down_rate: float | None = None
+    pen_up_delay_ms: float | None = None
+    pen_down_delay_ms: float | None = None
 
     def compile_options(self) -> CompileOptions:
         """The compiler's options (everything but laser and confirm)."""
@@ -120,7 +128,12 @@ class Compiled:
 def compile_upload(data: bytes, name: str, opts: JobOptions, profile: Profile) -> Compiled:
     """Parse and compile a submission; `SubmitError` with the CLI's message if it cannot run."""
     check_name(name)
+    given = [n for n in PEN_NAMES if getattr(opts, n) is not None]
+    if given:
+        raise SubmitError("bad_option", f"{', '.join(given)}: pen overrides are not applied by "
+                          "the daemon; set them in its profile's [pen] table")
     try:
+        require_tool(profile, opts.laser)
         drawing = read_upload(data, name, opts.layers)
         job = compile_drawing(drawing, profile, opts.compile_options())
     except SubmitError:

@@ -27,7 +27,8 @@ from fivebar_host.protocol import (
 )
 
 #: Boot values of the settings, docs/protocol.md section 8.
-DOC_DEFAULTS = [20000, -100000, 100000, -100000, 100000, 1, 2000, 0, 2000, 100, 0, 0, 20000, 0]
+DOC_DEFAULTS = [20000, -100000, 100000, -100000, 100000, 1, 2000, 0, 2000, 100, 0, 0, 20000, 0,
+                0]
 
 
 def poll(dev: Device, until: Callable[[StatusReport], bool], timeout: float = 10.0,
@@ -122,7 +123,7 @@ _BAD_LINES: list[tuple[int, list[bytes]]] = [
     (11, [b"G1 A200000 P10000000", b"G1 B-100001 P10000000"]),
     (12, [b"G1 A1000 P1000", b"G1 B-21 P1000"]),
     (16, [b"$H"]),
-    (17, [b"$14=1", b"$99=0", b"$300=1"]),
+    (17, [b"$15=1", b"$99=0", b"$300=1"]),
 ]
 
 

@@ -21,12 +21,13 @@ START_DELAY_S: Final = 0.020  # config.h CFG_START_DELAY_MS
 P_MIN_US: Final = protocol.P_MIN_US
 P_MAX_US: Final = protocol.P_MAX_US
 
-#: Boot values of the $ settings, in order 0..13 (firmware/fivebar/config.h DEF_*).  Names
+#: Boot values of the $ settings, in order 0..14 (firmware/fivebar/config.h DEF_*).  Names
 #: and ranges come from protocol.SETTINGS; the contract suite compares ``$$`` of both devices.
+#: $14 (the pen's park pulse) is kept in the EEPROM: a boot takes the stored value.
 DEFAULT_SETTINGS: Final = (20000, -100000, 100000, -100000, 100000, 1, 2000, 0, 2000, 100,
-                           0, 0, 20000, 0)
+                           0, 0, 20000, 0, 0)
 S_MAX_RATE, S_A_MIN, S_A_MAX, S_B_MIN, S_B_MAX, S_SOFT, S_LASER_TIMEOUT, S_HOMING = range(8)
-S_HOMING_RATE, S_PULLOFF, S_HOME_A, S_HOME_B, S_TRAVEL, S_HOMING_DIR = range(8, 14)
+S_HOMING_RATE, S_PULLOFF, S_HOME_A, S_HOME_B, S_TRAVEL, S_HOMING_DIR, S_PEN_PARK = range(8, 15)
 
 # Reply codes (status.h), by name from the shared table.
 _CODE = {c.name: c.code for c in protocol.CODES.values()}
@@ -49,6 +50,7 @@ E_MOTORS_OFF: Final = _CODE["MOTORS_OFF"]
 E_HOMING_DISABLED: Final = _CODE["HOMING_DISABLED"]
 E_UNKNOWN_SETTING: Final = _CODE["UNKNOWN_SETTING"]
 E_RX_OVERFLOW: Final = _CODE["RX_OVERFLOW"]
+E_NO_PEN: Final = _CODE["NO_PEN"]
 A_ENDSTOP: Final = _CODE["ENDSTOP"]
 A_HOMING_FAIL: Final = _CODE["HOMING_FAIL"]
 A_HOMING_ABORT: Final = _CODE["HOMING_ABORT"]

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections import deque
 
+from fivebar_host import protocol
 from fivebar_host.devices.mock.codes import (
     A_ENDSTOP,
     CYCLES_PER_US,
@@ -26,6 +27,7 @@ from fivebar_host.devices.mock.codes import (
     E_HOMING_DISABLED,
     E_LINE_TOO_LONG,
     E_MOTORS_OFF,
+    E_NO_PEN,
     E_OUT_OF_RANGE,
     E_RX_OVERFLOW,
     E_SOFT_LIMIT,
@@ -38,6 +40,7 @@ from fivebar_host.devices.mock.codes import (
     S_B_MIN,
     S_HOMING,
     S_MAX_RATE,
+    S_PEN_PARK,
     S_SOFT,
     WAIT,
 )
@@ -83,6 +86,9 @@ class MockFirmware(MotionCore):
         m.boots += 1
         self.boot = m.boots
         self.settings = list(DEFAULT_SETTINGS)
+        if m.pen_park_ee is not None:
+            self.settings[S_PEN_PARK] = m.pen_park_ee
+        m.pen.setup(now, self.settings[S_PEN_PARK])  # parked up at every boot
         self.pos = list(kept.position) if kept is not None else [0, 0]
         # position set by an executed G92 or a completed $H; kept by Ctrl-X and by a reset
         self.homed = kept.homed if kept is not None else False
@@ -111,6 +117,7 @@ class MockFirmware(MotionCore):
         self.pending: Command | None = None
         self.held = False
         self.hold_reason = 0
+        self.resume_at = None
         self.queue.clear()
         self.done_line = 0
         self.underruns = 0
@@ -178,7 +185,8 @@ class MockFirmware(MotionCore):
             state = "Idle"
         a, b = self.position()
         return (f"<{state}|A:{a},B:{b}|Q:{len(self.queue)}|Ln:{self.done_line},{self.last}"
-                f"|L:{self.laser}|U:{self.underruns}|H:{int(self.homed)}>")
+                f"|L:{self.laser}|U:{self.underruns}|H:{int(self.homed)}"
+                f"|P:{self.machine.pen.pulse(self.t)}>")
 
     def _finish(self, st: int) -> None:
         """Reply to a line: ``ok`` or ``error:<code>`` (errors hold a running job)."""
@@ -195,6 +203,7 @@ class MockFirmware(MotionCore):
         self._stop("alarm")
         self.queue.clear()
         self.held = False
+        self.resume_at = None
         self.alarm = code
         self.plan = list(self.pos)
         self._emit(f"ALARM:{code}")
@@ -261,7 +270,9 @@ class MockFirmware(MotionCore):
                 self.done_line = self.cur_entry.line
                 self._load_next()
         elif kind == 1:
-            self._hold(1)
+            self._silence()
+        elif kind == 4:
+            self._resume()
         else:
             self._start()
 
@@ -278,13 +289,15 @@ class MockFirmware(MotionCore):
         elif c == _RT_HOLD:
             if self.homing is not None:
                 self.homing.abort()
-            elif not self.held and not self.alarm:
+            elif (not self.held and not self.alarm) or self.resume_at is not None:
                 self._hold(0)
         elif c == _RT_RESUME:
-            if self.held:
-                self.held = False
-                if self.cur is not None:
-                    self._set_laser(self.cur.power)
+            if self.held and self.resume_at is None:
+                wait_ms = self.machine.pen.unpark(now)
+                if wait_ms:
+                    self.resume_at = now + wait_ms / 1000
+                else:
+                    self._resume()
         elif c == _RT_RESET:
             self._stop("reset")
             if self.homing is not None:
@@ -417,6 +430,8 @@ class MockFirmware(MotionCore):
         if k == "M5":
             self.laser_on = False
             return OK
+        if k == "M280":
+            return self._exec_pen(c)
         if k in ("M17", "M18"):
             if self._queue_full():
                 return WAIT
@@ -479,15 +494,32 @@ class MockFirmware(MotionCore):
         self.plan = t
         return OK
 
+    def _exec_pen(self, c: Command) -> int:
+        """M280: a queued pen block, a dwell of its move + settle time (fb_main.c)."""
+        if not self.settings[S_PEN_PARK]:
+            return E_NO_PEN
+        if self._queue_full():
+            return WAIT
+        w = c.words
+        move, settle = w.get("R", 0), w.get("D", 0)
+        dur = (move + settle) * 1000
+        self._push(Block("M280", self.last, duration_us=float(dur), p_us=dur,
+                         pen=(w["S"], move, settle)))
+        return OK
+
     def _exec_set(self, c: Command) -> int:
         if c.setting not in SETTINGS:
             return E_UNKNOWN_SETTING
         _, lo, hi = SETTINGS[c.setting]
-        if not lo <= c.value <= hi:
+        if not lo <= c.value <= hi or (c.setting == S_PEN_PARK
+                                       and 0 < c.value < protocol.SERVO_MIN_US):
             return E_OUT_OF_RANGE
         if self.running or self.queue or self.homing is not None:
             return E_BUSY
         self.settings[c.setting] = c.value
+        if c.setting == S_PEN_PARK:  # kept in the EEPROM; the pen parks there at once
+            self.machine.pen_park_ee = c.value
+            self.machine.pen.setup(self.t, c.value)
         return OK
 
     def _exec_home(self) -> int:

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from fivebar_host.devices.mock.codes import F_CPU
+from fivebar_host.devices.mock.pen import PenServo
 
 if TYPE_CHECKING:
     from fivebar_host.devices.mock.firmware import MockFirmware
@@ -43,13 +44,14 @@ def step_cycle(n: int, cycles: int, k: int) -> int:
 class Block:
     """A queued or running block: a segment, a homing move or a synchronous command."""
 
-    kind: str  # G1 G92 M17 M18 home-seek home-pulloff
+    kind: str  # G1 G92 M17 M18 M280 home-seek home-pulloff
     line: int
     delta: tuple[int, int] = (0, 0)  # signed steps (G92: the new position)
     cycles: tuple[int, int] = (0, 0)  # DDA length per motor, CPU cycles
     duration_us: float = 0.0  # when the block ends, firmware µs
     power: int = 0
     p_us: int = 0  # commanded duration (G1)
+    pen: tuple[int, int, int] = (0, 0, 0)  # M280: pulse µs, move ms, settle ms
 
 
 @dataclass
@@ -101,6 +103,8 @@ class Machine:
     ledger: list[LedgerEntry] = field(default_factory=list)
     laser_log: list[tuple[float, int]] = field(default_factory=list)  # (clock s, power)
     boots: int = 0
+    pen_park_ee: int | None = None  # the $14 the EEPROM holds (None: blank)
+    pen: PenServo = field(default_factory=PenServo)  # the servo pulse over time
     firmware: MockFirmware | None = None
     port: MockSerial | None = None
     true: tuple[float, ...] | None = None  # URL option true=: the real geometry (mm, deg)

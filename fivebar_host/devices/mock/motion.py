@@ -22,6 +22,7 @@ from fivebar_host.devices.mock.codes import (
     S_HOMING,
     S_HOMING_DIR,
     S_LASER_TIMEOUT,
+    S_PEN_PARK,
     START_BLOCKS,
     START_DELAY_S,
 )
@@ -61,6 +62,12 @@ class MotionCore:
     motors_enabled: bool  # the enable pin: M17/M18 executed
     first_queued: float  # when the first block of an idle queue was queued
     last_rx: float  # when the last byte arrived (laser silence timeout)
+    resume_at: float | None  # a '~' lowered a parked pen: the hold ends then
+
+    @property
+    def pen_down(self) -> bool:
+        """The pen is lowered (a pen servo is set up and away from its park pulse)."""
+        return bool(self.settings[S_PEN_PARK]) and self.machine.pen.down
 
     def position(self) -> tuple[int, int]:
         """Position now in steps (every issued step counted), firmware coordinates."""
@@ -194,6 +201,15 @@ class MotionCore:
                 self.homed = True
                 self.done_line = blk.line
                 continue
+            if blk.kind == "M280":
+                pulse, move_ms, settle_ms = blk.pen
+                speed = self.opt.speed or math.inf
+                self.machine.pen.start_block(self.t, pulse, move_ms / 1e3 / speed,
+                                             move_ms + settle_ms)
+                if move_ms + settle_ms == 0:
+                    self._record_instant("M280", blk.line, (self.pos[0], self.pos[1]))
+                    self.done_line = blk.line
+                    continue
             if blk.kind in ("M17", "M18"):
                 self._record_instant(blk.kind, blk.line, (self.pos[0], self.pos[1]))
                 self.motors_enabled = blk.kind == "M17"
@@ -217,11 +233,29 @@ class MotionCore:
             self._retire(why)
         self.running = False
         self._set_laser(0)
+        self.machine.pen.park_now(self.t, keep=False)
 
     def _hold(self, reason: int) -> None:
         self.held = True
         self.hold_reason = reason
+        self.resume_at = None
         self._set_laser(0)
+        self.machine.pen.park_now(self.t, keep=True)
+
+    def _silence(self) -> None:
+        """Host silence with the laser on or the pen down (fb_main.c laser_watchdog): a job
+        is held; an idle machine only parks its pen."""
+        if self.running or self.queue:
+            self._hold(1)
+        else:
+            self.machine.pen.park_now(self.t, keep=True)
+
+    def _resume(self) -> None:
+        """The hold ends: the timeline continues, the laser returns to the block's power."""
+        self.held = False
+        self.resume_at = None
+        if self.cur is not None:
+            self._set_laser(self.cur.power)
 
     def _error_hold(self) -> None:
         if not self.held and (self.running or self.queue):
@@ -232,16 +266,18 @@ class MotionCore:
 
     def next_event(self) -> tuple[float, int] | None:
         """(time, kind) of the next thing that happens without the host: 0 = the running
-        block reaches its end (or its endstop alarm), 1 = laser silence timeout, 2 = the
-        queue's start delay runs out."""
+        block reaches its end (or its endstop alarm), 1 = laser (or pen) silence timeout,
+        2 = the queue's start delay runs out, 4 = a lowered pen has had its time after `~`."""
         events: list[tuple[float, int]] = []
         if self.cur is not None and not self.held:
             events.append((self._wall_until(self.cur_stop_us), 0))
-        if self.laser and not self.held:
+        if (self.laser or self.pen_down) and not self.held:
             events.append((self.last_rx + self.settings[S_LASER_TIMEOUT] / 1000 + 1e-6, 1))
         if (self.queue and not self.running and not self.held and not self.alarm
                 and self.homing is None):
             events.append((self.first_queued + START_DELAY_S, 2))
+        if self.resume_at is not None:
+            events.append((self.resume_at, 4))
         return min(events) if events else None
 
     def _move_to(self, t: float) -> None:

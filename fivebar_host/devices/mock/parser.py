@@ -34,7 +34,7 @@ from fivebar_host.protocol import POS_LIMIT, crc16
 class Command:
     """One parsed line: command kind (``""`` for an empty line), words, line number."""
 
-    kind: str = ""  # "", G1 G90 G91 G92 M3 M5 M17 M18 M110 $I $$ $H $X $=
+    kind: str = ""  # "", G1 G90 G91 G92 M3 M5 M17 M18 M110 M280 $I $$ $H $X $=
     words: dict[str, int] = field(default_factory=dict)
     n: int | None = None
     setting: int = 0
@@ -91,9 +91,9 @@ def _parse_int(s: bytes, i: int, end: int) -> tuple[int, int, int]:
     return st, -v if neg else v, i
 
 
-_ALLOWED = {"G1": "ABPS", "G92": "AB", "M3": "S"}
+_ALLOWED = {"G1": "ABPS", "G92": "AB", "M3": "S", "M280": "SRD"}
 _G_CODES = {1: "G1", 90: "G90", 91: "G91", 92: "G92"}
-_M_CODES = {3: "M3", 5: "M5", 17: "M17", 18: "M18", 110: "M110"}
+_M_CODES = {3: "M3", 5: "M5", 17: "M17", 18: "M18", 110: "M110", 280: "M280"}
 
 
 def _parse_dollar(s: bytes, i: int, end: int, cmd: Command) -> int:
@@ -130,7 +130,14 @@ def _check_ranges(cmd: Command) -> int:
     for axis in "AB":
         if axis in w and not -POS_LIMIT <= w[axis] <= POS_LIMIT:
             return E_OUT_OF_RANGE
-    if "S" in w and not 0 <= w["S"] <= protocol.POWER_MAX:
+    if cmd.kind == "M280":  # S is a servo pulse here (fb_proto.c check_ranges)
+        if "S" in w and not protocol.SERVO_MIN_US <= w["S"] <= protocol.SERVO_MAX_US:
+            return E_OUT_OF_RANGE
+        if any(k in w and not 0 <= w[k] <= protocol.PEN_MS_MAX for k in "RD"):
+            return E_OUT_OF_RANGE
+        if "S" not in w:
+            return E_MISSING_WORD
+    elif "S" in w and not 0 <= w["S"] <= protocol.POWER_MAX:
         return E_OUT_OF_RANGE
     if "P" in w and not P_MIN_US <= w["P"] <= P_MAX_US:
         return E_OUT_OF_RANGE
@@ -168,14 +175,14 @@ def _parse_body(s: bytes, i: int, end: int, cmd: Command) -> int:
 
 
 def _parse_words(s: bytes, i: int, end: int, cmd: Command) -> int:
-    """The words after the command (each of A B P S at most once, as the command allows)."""
+    """The words after the command (each of A B P S R D at most once, as it allows)."""
     allowed = _ALLOWED.get(cmd.kind, "")
     while True:
         i = _skip_ws(s, i, end)
         if i >= end:
             return OK
         w = chr(_upper(s[i]))
-        if w not in "ABPS" or w not in allowed or w in cmd.words:
+        if w not in "ABPSRD" or w not in allowed or w in cmd.words:
             return E_BAD_WORD
         st, v, i = _parse_int(s, i + 1, end)
         if st != OK:
