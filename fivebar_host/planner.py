@@ -42,6 +42,21 @@ change; (3) the profile again on the pieces; (4) `enforce_staircase` measures th
 the rounded steps and integer durations and slows (never speeds up) the few segments that
 still break a limit (step rounding makes short pieces' rates uneven) until none does.
 `staircase_ratios` reports the result.
+
+Short segments (issue 20). A segment shorter than two of the cutting's smallest pieces
+(`min_piece_rad`, 3 steps) cannot be cut, so the speed change the continuous profile plans
+across it — up to √(2αD) from a junction cap, 1.0 rad/s on a 3-step chord at 900 rad/s² —
+reaches the staircase whole, as one jump. On 0.1 mm chords (3 steps each, whose rounding
+changes the direction by δ = 1/3 every few chords, capping those junctions at 0.75 rad/s)
+the profile was a sawtooth between capped junctions and peaks the acceleration allows;
+`enforce_staircase` then slowed both sides of every broken boundary by one factor, which
+broke the next boundary, up to 22× on single segments: more acceleration or feed meant a
+taller sawtooth and a longer plan (7.8 s → 11.1 s from 100 mm/s, 15 rad/s, 600 rad/s² to
+200 / 30 / 1200 on 5 × 1000 such chords). So `plan` can limit the speed change per segment
+to c_k = c · max(1, D_k / D_min) (`step_jump_rad_s`, c = the pieces' share of J): at the
+junctions — a pair of passes in v, |v_{n+1} − v_n| ≤ c_n, alternated with the passes in v²
+until both hold — and at the peak, v_p ≤ (v0 + v1 + c_k)/2. Every cap and step still only
+grows with the limits, so the profile stays monotone: raising a limit never lengthens it.
 """
 
 from __future__ import annotations
@@ -76,7 +91,8 @@ def plan(dtheta_rad: FloatArray, length_mm: FloatArray, feed_mm_s: FloatArray,
          max_joint_rad_s: float, max_joint_rad_s2: float,
          stop_after: BoolArray | None = None,
          junction_jump_rad_s: float = JUNCTION_JUMP_RAD_S, min_duration_s: float = 0.0,
-         corner_accel_rad_s2: float | None = None) -> Plan:
+         corner_accel_rad_s2: float | None = None, step_jump_rad_s: float | None = None,
+         min_piece_rad: float = 0.0) -> Plan:
     """Plan the chain of segments (see module doc).
 
     dtheta_rad (K, 2), length_mm (K,) pen path length, feed_mm_s (K,) allowed pen speed,
@@ -87,6 +103,12 @@ def plan(dtheta_rad: FloatArray, length_mm: FloatArray, feed_mm_s: FloatArray,
     a joint-velocity change δ·v between two segments whose midpoints are about
     (D_a + D_b)/(2v) apart in time is an acceleration, so v ≤ √(a·(D_a + D_b)/(2δ)) (the
     joint-space analogue of a centripetal limit; δ = max_j |u_{k+1,j} − u_{k,j}|).
+    `step_jump_rad_s` (c) limits how much the speed may change across a segment that the ramp
+    cutting cannot split: the firmware runs one constant rate per segment, so a change
+    within a segment becomes a jump on the staircase, and `ramp_fractions` makes no piece
+    shorter than `min_piece_rad` (D_min). Segment k may change the speed by at most
+    c_k = c · max(1, D_k / D_min), between its junctions and up to its peak (module doc,
+    "short segments").
     """
     dth = np.asarray(dtheta_rad, dtype=np.float64).reshape(-1, 2)
     k = dth.shape[0]
@@ -119,17 +141,15 @@ def plan(dtheta_rad: FloatArray, length_mm: FloatArray, feed_mm_s: FloatArray,
     cap[1:k][~(moving[:-1] & moving[1:])] = 0.0
     w_cap = cap * cap
 
-    d2 = 2.0 * alpha * dist
-    s = np.concatenate(([0.0], np.cumsum(d2)))  # S_n
-    fwd = s + np.minimum.accumulate(w_cap - s)
-    # backward: R_n = Σ_{k ≥ n} d2_k = S_K − S_n
-    r = s[-1] - s
-    bwd = r + np.minimum.accumulate((w_cap - r)[::-1])[::-1]
-    w = np.clip(np.minimum(fwd, bwd), 0.0, None)
-    w = np.minimum(w, w_cap)
-    v = np.sqrt(w)
+    dv = None
+    if step_jump_rad_s is not None:
+        dv = step_jump_rad_s * np.maximum(1.0, dist / min_piece_rad if min_piece_rad > 0
+                                          else 1.0)
+    v = _junction_speeds(w_cap, 2.0 * alpha * dist, dv)
     v0, v1 = v[:-1], v[1:]
     vp = np.minimum(vmax, np.sqrt(0.5 * (v0 * v0 + v1 * v1) + alpha * dist))
+    if dv is not None:  # up by a and down by b with a + b ≤ c_k: vp ≤ (v0 + v1 + c_k)/2
+        vp = np.minimum(vp, 0.5 * (v0 + v1 + dv))
     vp = np.maximum(vp, np.maximum(v0, v1))
     with np.errstate(divide="ignore", invalid="ignore"):
         t_acc = (vp - v0) / alpha
@@ -140,6 +160,36 @@ def plan(dtheta_rad: FloatArray, length_mm: FloatArray, feed_mm_s: FloatArray,
     us = np.ceil(np.round(t * 1e6, 6)).astype(np.int64)
     us[moving & (us < 1)] = 1
     return Plan(v0, v1, vp, t, us)
+
+
+def _running_caps(x_cap: FloatArray, step: FloatArray) -> FloatArray:
+    """Largest x ≤ x_cap with x_{n+1} − x_n ≤ step_n and x_n − x_{n+1} ≤ step_n: the forward
+    and backward passes in closed form (module doc: a running minimum of x − Σ step)."""
+    s = np.concatenate(([0.0], np.cumsum(step)))  # S_n
+    fwd = s + np.minimum.accumulate(x_cap - s)
+    r = s[-1] - s  # backward: R_n = Σ_{k ≥ n} step_k = S_K − S_n
+    bwd = r + np.minimum.accumulate((x_cap - r)[::-1])[::-1]
+    return np.minimum(np.minimum(fwd, bwd), x_cap)
+
+
+def _junction_speeds(w_cap: FloatArray, d2: FloatArray, dv: FloatArray | None) -> FloatArray:
+    """Junction speeds v (K+1,): the largest with v² ≤ w_cap, |v_{n+1}² − v_n²| ≤ d2_n
+    (acceleration) and, when `dv` is given, |v_{n+1} − v_n| ≤ dv_n (short segments). Each
+    family alone is one pair of passes (in v² and in v); alternating them only lowers v and
+    stops at the largest v that meets both — usually after two or three rounds, one per
+    switch between the binding families along a ramp."""
+    v = np.sqrt(np.clip(_running_caps(w_cap, d2), 0.0, None))
+    if dv is None:
+        return v
+    for _ in range(len(v) + 1):
+        nv = np.sqrt(np.clip(_running_caps(np.square(_running_caps(v, dv)), d2), 0.0, None))
+        done = bool(np.all(nv >= v - 1e-12 * (1.0 + v)))
+        v = np.minimum(v, nv)
+        if done:
+            return v
+    # Not reached in practice (each round settles a switch between the families); if it
+    # were, `enforce_staircase` still measures and slows whatever this leaves too fast.
+    return v  # pragma: no cover
 
 
 def check_plan(pl: Plan, dtheta_rad: FloatArray, length_mm: FloatArray,

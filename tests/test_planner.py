@@ -161,3 +161,27 @@ def test_ramp_fractions_cut_ramps_into_short_pieces() -> None:
     assert vp == pytest.approx(vmax) and counts[0] == 2 * math.ceil(vmax / a / piece) + 1
     counts, f = ramp_fractions(p, np.array([2.0]), a, piece, min_piece_rad=0.01)
     assert np.diff(np.concatenate(([0.0], f * 2.0))).min() >= 0.01 - 1e-12
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(min_value=1, max_value=60), st.integers(min_value=0, max_value=2**31),
+       st.lists(st.floats(1.0, 5.0), min_size=3, max_size=3))
+def test_profile_never_slower_with_a_raised_limit(n: int, seed: int,
+                                                 raise_by: list[float]) -> None:
+    """The continuous profile is the largest speed under caps and acceleration steps that
+    only grow with the limits, so no segment gets longer when feed, joint speed or joint
+    acceleration is raised — with the short-segment speed steps (`step_jump_rad_s`) too.
+    Slack: the junction passes stop within 1e-12 relative, which can move one µs rounding."""
+    rng = np.random.default_rng(seed)
+    d = rng.normal(0, 0.01, (n, 2))
+    length = np.abs(rng.normal(0.5, 0.3, n)) + 0.01
+    feed, w, a = rng.uniform(5, 80), rng.uniform(1, 10), rng.uniform(20, 600)
+    stop = rng.random(n) < 0.1
+    kw = {"stop_after": stop, "junction_jump_rad_s": 0.25, "step_jump_rad_s": 0.3,
+          "min_piece_rad": 3 * 2 * math.pi / 12800, "min_duration_s": 1e-4}
+    p0 = plan(d, length, np.full(n, feed), w, a, corner_accel_rad_s2=0.3 * a,
+              **kw)  # type: ignore[arg-type]
+    fr, wr, ar = raise_by
+    p1 = plan(d, length, np.full(n, feed * fr), w * wr, a * ar,
+              corner_accel_rad_s2=0.3 * a * ar, **kw)  # type: ignore[arg-type]
+    assert (p1.duration_us <= p0.duration_us + 1).all()

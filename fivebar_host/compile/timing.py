@@ -30,7 +30,9 @@ PLAN_ACCEL_SHARE = 0.75
 PLAN_JUMP_SHARE = 0.5
 #: Speed-up and slow-down parts are cut into pieces whose planned speed changes by at most
 #: this share of the junction jump from one piece to the next, and of at least this many
-#: steps (rounding a shorter piece to whole steps would shake its rate too much).
+#: steps (rounding a shorter piece to whole steps would shake its rate too much). The same
+#: share bounds the speed change across a segment too short to be cut (`planner.plan`'s
+#: `step_jump_rad_s`; planner doc, "Short segments").
 PLAN_PIECE_JUMP_SHARE = 0.6
 PLAN_MIN_PIECE_STEPS = 3
 
@@ -99,7 +101,9 @@ def plan_timing(su: Setup, routed: Routed, solved: Solved, sp: Stepped) -> Plann
     j_lim = planner.JUNCTION_JUMP_RAD_S
     prof_kw = {"junction_jump_rad_s": PLAN_JUMP_SHARE * j_lim,
                "min_duration_s": protocol.P_MIN_US * 1e-6,
-               "corner_accel_rad_s2": (1.0 - PLAN_ACCEL_SHARE) * motion.max_joint_rad_s2}
+               "corner_accel_rad_s2": (1.0 - PLAN_ACCEL_SHARE) * motion.max_joint_rad_s2,
+               "step_jump_rad_s": PLAN_PIECE_JUMP_SHARE * j_lim,
+               "min_piece_rad": PLAN_MIN_PIECE_STEPS * mot.rad_per_step}
     dq = np.diff(steps.step_angles(sp.steps, mot.home_rad, mot.steps_per_rev), axis=0)
     pln = planner.plan(dq, sp.length, feed, motion.max_joint_rad_s, a_c, stop_after=stop,
                        **prof_kw)
