@@ -7,8 +7,11 @@ out-of-range values raise `ConfigError` naming the file, the key and the bound.
 
 from __future__ import annotations
 
+import difflib
+import json
 import math
 import tomllib
+from collections.abc import Iterable
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -181,10 +184,21 @@ class _Table:
     def done(self) -> None:
         extra = sorted(set(self.raw) - self.used)
         if extra:
-            raise ConfigError(f"{self.source}: [{self.name}] unknown key(s): {', '.join(extra)}")
+            raise ConfigError(f"{self.source}: [{self.name}] unknown key(s): {', '.join(extra)}"
+                              + did_you_mean(extra, self.used))
 
 
 KNOWN_TABLES = ("geometry", "motors", "kinematics", "motion", "laser", "serial")
+
+
+def did_you_mean(names: list[str], known: Iterable[str]) -> str:
+    """" (did you mean 'x'?)" for the first misspelt name close to a known one, else ""."""
+    pool = {k.lower(): k for k in sorted(known)}
+    for name in names:
+        close = difflib.get_close_matches(name.lower(), list(pool), n=1, cutoff=0.6)
+        if close:
+            return f" (did you mean {pool[close[0]]!r} for {name!r}?)"
+    return ""
 
 
 def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
@@ -192,7 +206,8 @@ def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
     unknown = sorted(set(doc) - set(KNOWN_TABLES))
     if unknown:
         raise ConfigError(f"{source}: unknown table(s): {', '.join(unknown)} "
-                          f"(known: {', '.join(KNOWN_TABLES)})")
+                          f"(known: {', '.join(KNOWN_TABLES)})"
+                          + did_you_mean(unknown, KNOWN_TABLES))
 
     g = _Table(doc, "geometry", source)
     lengths = {k: g.number(k, 0.0, 1e5, lo_open=True) for k in ("a1", "b1", "a2", "b2", "w")}
@@ -277,18 +292,78 @@ def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
     return Profile(geometry, motors, kin, motion, laser, serial, source)
 
 
-def load_profile(path: str | Path | None = None) -> Profile:
-    """Read and validate a profile file (the bundled default when `path` is None)."""
-    p = Path(path) if path is not None else DEFAULT_PROFILE
+def _read_toml(p: Path) -> dict[str, Any]:
     try:
         text = p.read_text(encoding="utf-8")
     except OSError as e:
         raise ConfigError(f"{p}: cannot read profile: {e.strerror or e}") from e
     try:
-        doc = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(f"{p}: not valid TOML: {e}") from e
+
+
+def merged_document(path: str | Path | None = None
+                    ) -> tuple[dict[str, Any], dict[tuple[str, str], str]]:
+    """A profile file over the bundled default: (the merged TOML document, and for each
+    (table, key) the file its value came from).
+
+    A partial profile needs only the keys that differ from configs/default.toml; the rest
+    are inherited, and `fivebar config show` says which. A key or table the default does
+    not have is not inherited: `parse_profile` refuses it (with "did you mean")."""
+    base = _read_toml(DEFAULT_PROFILE)
+    default_name = str(DEFAULT_PROFILE)
+    p = Path(path) if path is not None else DEFAULT_PROFILE
+    user = base if p.resolve() == DEFAULT_PROFILE else _read_toml(p)
+    merged: dict[str, Any] = {}
+    sources: dict[tuple[str, str], str] = {}
+    for table in {**base, **user}:
+        mine, theirs = user.get(table, {}), base.get(table, {})
+        if not isinstance(mine, dict) or not isinstance(theirs, dict):
+            merged[table] = mine if table in user else theirs
+            continue
+        merged[table] = {**theirs, **mine}
+        for key in merged[table]:
+            sources[(table, key)] = str(p) if key in mine else default_name
+    return merged, sources
+
+
+def load_profile(path: str | Path | None = None) -> Profile:
+    """Read and validate a profile file (the bundled default when `path` is None); keys it
+    leaves out come from the bundled default (`merged_document`)."""
+    p = Path(path) if path is not None else DEFAULT_PROFILE
+    doc, _ = merged_document(p)
     return parse_profile(doc, str(p))
+
+
+def show_lines(path: str | Path | None = None) -> list[str]:
+    """`fivebar config show`: every key of the profile with its value and the file it came
+    from (the profile, or the bundled default it inherits). Validates the profile first."""
+    p = Path(path) if path is not None else DEFAULT_PROFILE
+    doc, sources = merged_document(p)
+    parse_profile(doc, str(p))
+    inherited = sum(1 for src in sources.values() if src != str(p))
+    lines = [f"profile {p}" + (f" ({inherited} keys from the bundled default "
+                               f"{DEFAULT_PROFILE})" if inherited else "")]
+    width = max((len(k) for _, k in sources), default=0)
+    for table, keys in doc.items():
+        lines.append(f"[{table}]")
+        for key, value in keys.items():
+            src = sources[(table, key)]
+            mark = "profile" if src == str(p) else "default"
+            lines.append(f"  {key:<{width}} = {_toml_value(value):<24} # {mark}")
+    return lines
+
+
+def _toml_value(v: Any) -> str:
+    """A value as TOML writes it (numbers, booleans, strings, nested lists)."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, list):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    return repr(v)
 
 
 def describe(profile: Profile) -> str:

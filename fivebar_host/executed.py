@@ -5,18 +5,28 @@ show what the machine really drew, and in the end-to-end tests to prove it: ever
 position is assigned to the job segment being executed (segments run in order and each ends
 exactly on its target), turned into a pen point by forward kinematics of the job's assembly,
 and measured against the requested curve of that segment.
+
+With `true` (a `kinematics.calibration.MachineParams`: the machine's real link lengths and
+home angles, e.g. the mock's ``true=`` URL option via `true_params`), the pen points are
+those of that machine rather than the profile's: what a miscalibrated machine really draws.
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from fivebar_host.compile import Job, distance_to_request
 from fivebar_host.config import Profile
+from fivebar_host.run.program import line_param
 from fivebar_host.steps import step_angles
 from kinematics.arrays import FloatArray, IntArray
+from kinematics.calibration import MachineParams
 
 
 @dataclass(frozen=True)
@@ -57,11 +67,33 @@ def merge_axes(a_events: list[tuple[int, int]], b_events: list[tuple[int, int]],
     return t, track
 
 
+def true_params(values: Sequence[float] | None) -> MachineParams | None:
+    """A true geometry (a1, b1, a2, b2, w mm, home1, home2 degrees) as MachineParams."""
+    if values is None:
+        return None
+    a1, b1, a2, b2, w, h1, h2 = (float(x) for x in values)
+    return MachineParams(a1, b1, a2, b2, w, math.radians(h1), math.radians(h2))
+
+
+def ledger_track(ledger: Sequence[Any]) -> tuple[FloatArray, IntArray]:
+    """(time, positions) of a mock's ledger: the start and the end of every G1 block."""
+    g1 = [e for e in ledger if e.kind == "G1"]
+    if not g1:
+        return np.zeros(0), np.zeros((0, 2), dtype=np.int64)
+    t = np.array([g1[0].started_s] + [e.started_s for e in g1], dtype=np.float64)
+    pos = np.array([g1[0].start] + [e.end for e in g1], dtype=np.int64)
+    return t, pos
+
+
 def executed_path(job: Job, profile: Profile, time: FloatArray, track: IntArray,
-                  first_segment: int = 0) -> ExecutedPath:
+                  first_segment: int = 0, start_steps: ArrayLike | None = None,
+                  true: MachineParams | None = None) -> ExecutedPath:
     """Assign recorded positions to the job's segments and measure each drawing point.
 
-    The machine must have started at the start of `first_segment` (job.steps[first_segment]).
+    The run started at `start_steps` (default: the start of `first_segment`). A resumed run
+    that starts inside `first_segment` (on its joint-space line) finishes it in place; one
+    that starts elsewhere (after homing) first travels back to the segment's start, laser
+    off: those events belong to no segment (−1) and are not measured against the drawing.
     Assignment walks the events once: an event belongs to the segment being executed, and a
     segment ends at the event whose position equals its target.
     """
@@ -69,6 +101,11 @@ def executed_path(job: Job, profile: Profile, time: FloatArray, track: IntArray,
     n = job.n_segments
     seg = np.full(track.shape[0], -1, dtype=np.int64)
     k = first_segment
+    first_event = 0
+    if (start_steps is not None and k < n
+            and line_param(tgt[k], tgt[k + 1], start_steps) is None):
+        arrived = np.flatnonzero((track == tgt[k]).all(axis=1))
+        first_event = int(arrived[0]) + 1 if arrived.size else track.shape[0]
 
     def skip_empty(k: int) -> int:
         while k < n and np.array_equal(tgt[k], tgt[k + 1]):
@@ -76,15 +113,17 @@ def executed_path(job: Job, profile: Profile, time: FloatArray, track: IntArray,
         return k
 
     k = skip_empty(k)
-    for i in range(track.shape[0]):
+    for i in range(first_event, track.shape[0]):
         if k >= n:
             break
         seg[i] = k
         if track[i, 0] == tgt[k + 1, 0] and track[i, 1] == tgt[k + 1, 1]:
             k = skip_empty(k + 1)
     completed = k
-    th = step_angles(track, job.home_rad, job.steps_per_rev)
-    fwd = profile.geometry.forward_batch(th, "+" if job.assembly > 0 else "-")
+    home = job.home_rad if true is None else true.home_rad
+    fb = profile.geometry if true is None else true.fivebar()
+    th = step_angles(track, home, job.steps_per_rev)
+    fwd = fb.forward_batch(th, "+" if job.assembly > 0 else "-")
     dev = np.full(track.shape[0], np.nan)
     draw_idx = np.flatnonzero((seg >= 0) & job.draw[np.maximum(seg, 0)])
     if draw_idx.size:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, NoReturn
@@ -31,6 +32,80 @@ _FALSE = frozenset({"false", "0", "no", "off"})
 #: Most layers a job may select, and the longest layer name.
 MAX_LAYERS = 64
 MAX_LAYER_CHARS = 200
+
+
+#: Millimetres per unit of a length written in an option value (CSS/SVG units: 96 px and
+#: 72 pt to the inch, as vpype and Inkscape read them).
+LENGTH_UNITS: dict[str, float] = {"mm": 1.0, "cm": 10.0, "in": 25.4, "pt": 25.4 / 72.0,
+                                  "px": 25.4 / 96.0}
+#: Paper sizes by name, portrait (width, height) in mm: ISO 216 and the US sizes.
+PAGE_SIZES: dict[str, tuple[float, float]] = {
+    "a6": (105.0, 148.0), "a5": (148.0, 210.0), "a4": (210.0, 297.0), "a3": (297.0, 420.0),
+    "letter": (215.9, 279.4), "legal": (215.9, 355.6), "tabloid": (279.4, 431.8)}
+_LENGTH = re.compile(r"^\s*([-+]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|nan|inf))\s*"
+                     r"([a-zA-Z]*)\s*$", re.IGNORECASE)
+
+
+def parse_length(text: str) -> float:
+    """A length in mm from text: a number with an optional unit (mm, cm, in, pt, px; none
+    means mm), e.g. "0.1mm", "1in", "72pt". ValueError says what it must look like."""
+    m = _LENGTH.match(text)
+    unit = m.group(2).lower() if m else ""
+    if m is None or unit not in ("", *LENGTH_UNITS):
+        raise ValueError(f"must be a length such as 12.5, 0.1mm, 1in, 2cm, 72pt or 96px; "
+                         f"got {text!r}")
+    return float(m.group(1)) * LENGTH_UNITS.get(unit, 1.0)
+
+
+_SPEED = re.compile(r"^(.*?)\s*/\s*(s|sec|min)\s*$", re.IGNORECASE)
+
+
+def parse_speed(text: str) -> float:
+    """A speed in mm/s from text: a length per second or minute ("40", "40mm/s", "1in/s",
+    "2400mm/min"; a bare number is mm/s). ValueError says what it must look like."""
+    m = _SPEED.match(text.strip())
+    try:
+        if m is None:
+            return parse_length(text)
+        per_s = 60.0 if m.group(2).lower() == "min" else 1.0
+        return parse_length(m.group(1)) / per_s
+    except ValueError:
+        raise ValueError(f"must be a speed such as 40, 40mm/s, 1.5in/s or 2400mm/min; "
+                         f"got {text!r}") from None
+
+
+def parse_fraction(text: str) -> float:
+    """A plain number or a percentage ("0.5", "50%")."""
+    t = text.strip()
+    return float(t[:-1]) / 100.0 if t.endswith("%") else float(t)
+
+
+def parse_page(text: str, landscape: bool = False) -> tuple[float, float]:
+    """A page size (width, height) in mm: a name (A3, A4, A5, A6, letter, legal, tabloid;
+    portrait unless `landscape`) or "WxH" with optional units on each side ("200x150",
+    "8.5inx11in", "21cmx29.7cm"). `landscape` puts the longer side across. ValueError says
+    what it must look like."""
+    key = text.strip().lower()
+    if key in PAGE_SIZES:
+        w, h = PAGE_SIZES[key]
+    else:
+        try:
+            w, h = (parse_length(v) for v in _split_page(key))
+        except ValueError:
+            raise ValueError("page size must be a name (A3, A4, A5, A6, letter, legal, "
+                             "tabloid) or WxH with optional units (200x150, 8.5inx11in); "
+                             f"got {text!r}") from None
+    if not (math.isfinite(w) and math.isfinite(h) and w > 0 and h > 0):
+        raise ValueError(f"page size must be positive; got {text!r}")
+    return (max(w, h), min(w, h)) if landscape else (w, h)
+
+
+def _split_page(text: str) -> tuple[str, str]:
+    """"WxH" into its two sides ("x" or "×" between two lengths)."""
+    m = re.match(r"^\s*(.+?[0-9.a-wyz])\s*[x×]\s*([-+0-9.].*)$", text)
+    if m is None:
+        raise ValueError(text)
+    return m.group(1), m.group(2)
 
 
 @dataclass(frozen=True)
@@ -57,6 +132,7 @@ class Option:
     repeat: bool = False
     metavar: str = ""
     cli: bool = True
+    percent: bool = False  # a float that may be written as a percentage ("50%")
 
     # ------------------------------------------------------------------ parsing
     def parse(self, text: str) -> Any:
@@ -74,18 +150,30 @@ class Option:
             return text
         if self.kind == "float":
             try:
-                v = float(text)
-            except ValueError:
-                return self._fail(f"must be a number{self._unit_text()}; got {text!r}")
+                v = self._number(text)
+            except ValueError as e:
+                why = str(e) if self.unit in ("mm", "mm/s") else (
+                    f"must be a number{self._unit_text()}"
+                    + (" or a percentage (50%)" if self.percent else "") + f"; got {text!r}")
+                return self._fail(why)
             return self.check(v)
         if self.kind == "xy":
-            parts = text.replace(" ", "").split(",")
+            parts = text.split(",")
             try:
-                x, y = (float(p) for p in parts)
+                x, y = (parse_length(p) for p in parts)
             except ValueError:
-                return self._fail(f"must look like X,Y in mm (e.g. 10,95); got {text!r}")
+                return self._fail(f"must look like X,Y in mm or with units (e.g. 10,95 or "
+                                  f"1in,4in); got {text!r}")
             return self.check((x, y))
         return self.check(text)
+
+    def _number(self, text: str) -> float:
+        """The number of a float option's text, in its unit (ValueError when malformed)."""
+        if self.unit == "mm":
+            return parse_length(text)
+        if self.unit == "mm/s":
+            return parse_speed(text)
+        return parse_fraction(text) if self.percent else float(text)
 
     def check(self, value: Any) -> Any:
         """Validate an already typed value (range, finiteness, length); returns it."""
@@ -129,6 +217,8 @@ class Option:
         if self.hi is None:
             return f"{'>' if self.lo_open else '>='} {self.lo:g}"
         unit = f" {self.unit}" if self.unit else ""
+        if self.lo_open:
+            return f"> {self.lo:g} and <= {self.hi:g}{unit}"
         return f"{self.lo:g}..{self.hi:g}{unit}"
 
     def describe(self) -> str:
@@ -160,6 +250,10 @@ class Option:
                 schema["exclusiveMinimum" if self.lo_open else "minimum"] = self.lo
             if self.hi is not None:
                 schema["maximum"] = self.hi
+            if self.unit in ("mm", "mm/s") or self.percent:  # also "0.1mm", "1in/s", "50%"
+                # (minimum/maximum apply to the number; the text is checked by `parse`)
+                del schema["type"]
+                schema["anyOf"] = [{"type": "number"}, {"type": "string"}]
         if self.repeat:
             schema = {"type": "array", "items": schema, "maxItems": MAX_LAYERS}
         elif self.default is not None:
@@ -176,12 +270,14 @@ JOB_OPTIONS: tuple[Option, ...] = (
            help="Working mode; auto tries all four and picks one that clears every check "
            "(default: the profile's)."),
     Option("tolerance_mm", "--tolerance", "tolerance", "float", unit="mm", lo=1e-4, hi=10.0,
-           help="Largest deviation of the drawn path, mm (default: the profile's)."),
+           help="Largest deviation of the drawn path, mm or with a unit (0.1mm, 0.004in) "
+           "(default: the profile's)."),
     Option("origin_mm", "--origin", "origin", "xy", unit="mm", metavar="X,Y",
-           help="Put the drawing's origin (SVG: page bottom-left) at machine X,Y mm "
-           "(default: centred in the largest safe rectangle)."),
-    Option("scale", "--scale", "scale", "float", lo=0.0, lo_open=True,
-           help="Scale factor (default 1)."),
+           help="Put the drawing's origin (SVG: page bottom-left) at machine X,Y: mm, or "
+           "with units (1in,4in; mm, cm, in, pt, px) (default: centred in the largest safe "
+           "rectangle)."),
+    Option("scale", "--scale", "scale", "float", lo=0.0, lo_open=True, percent=True,
+           help="Scale factor or percentage: 0.5 or 50% (default 1)."),
     Option("rotate_deg", "--rotate", "rotate", "float", unit="degrees", default=0.0,
            help="Rotate the drawing, degrees counter-clockwise."),
     Option("fit", "--fit", "fit", "bool", default=False,
@@ -191,6 +287,18 @@ JOB_OPTIONS: tuple[Option, ...] = (
            help="Only this Inkscape layer (label or id); repeatable."),
     Option("keep_order", "--keep-order", "keep_order", "bool", default=False,
            help="Draw paths in file order (no reordering to cut travel)."),
+    Option("draw_feed_mm_s", "--draw-speed", "draw_speed", "float", unit="mm/s", lo=0.0,
+           lo_open=True, hi=10_000.0, metavar="SPEED",
+           help="Pen speed while drawing: mm/s, or with units (25mm/s, 1in/s, 1500mm/min) "
+           "(default: the profile's draw_feed_mm_s; G-code F words still apply)."),
+    Option("travel_feed_mm_s", "--travel-speed", "travel_speed", "float", unit="mm/s",
+           lo=0.0, lo_open=True, hi=10_000.0, metavar="SPEED",
+           help="Pen speed between strokes (pen up, laser off), like --draw-speed (default: "
+           "the profile's travel_feed_mm_s)."),
+    Option("accel_fraction", "--accel", "accel", "float", lo=0.0, lo_open=True, hi=1.0,
+           percent=True, metavar="FRACTION",
+           help="Joint acceleration as a share of the profile's max_joint_rad_s2: 0.5 or "
+           "50% (default 1)."),
     Option("laser", "--laser", "laser", "bool", default=False,
            help="Laser job: drawing segments carry the profile's power (S > 0). Without it "
            "every line says S0 (pen plotter: pen down/up = M3/M5 around drawing strokes)."),

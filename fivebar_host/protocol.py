@@ -13,6 +13,7 @@ implementation of the format.
 
 from __future__ import annotations
 
+import binascii
 import re
 from dataclasses import dataclass
 from typing import Final
@@ -119,26 +120,6 @@ class ProtocolError(FivebarError, ValueError):
     """A line does not follow docs/protocol.md (host side or firmware side)."""
 
 
-def _crc16_table() -> tuple[int, ...]:
-    """The 256 register updates of CRC-16/CCITT-FALSE, one per value of the top byte.
-
-    Entry i is the register after shifting i, placed in the top byte, through the
-    polynomial 0x1021 bit by bit, MSB first (the firmware's loop, fb_proto.c), so the
-    register can then advance a whole byte per lookup: the usual table-driven form of a
-    non-reflected CRC.
-    """
-    table = []
-    for i in range(256):
-        crc = i << 8
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1021) & 0xFFFF if crc & 0x8000 else (crc << 1) & 0xFFFF
-        table.append(crc)
-    return tuple(table)
-
-
-_CRC16_TABLE: Final = _crc16_table()
-
-
 def crc16(data: bytes) -> int:
     """CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no final XOR): the line
     checksum of docs/protocol.md 5.1, 0..65535.
@@ -147,13 +128,13 @@ def crc16(data: bytes) -> int:
     one byte or of two adjacent bytes; two corrupted bytes apart get through only when the
     CRC happens to match, about once in 65536 instead of once in 256.  A lost or added
     byte is caught by the body's length, which the checksum field carries too
-    (checksum_field).  Table-driven because the host encodes every job line with it; the
-    firmware computes the same value bit by bit (fb_proto.c).
+    (checksum_field).  The standard library's `binascii.crc_hqx` is this CRC (it takes the
+    initial register value); it runs in C, about 40 times faster than a table-driven loop
+    in Python, and the host encodes every job line with it.  The firmware computes the same
+    value bit by bit (fb_proto.c); tests/test_line_checksum.py checks both against the
+    catalogue's check value 0x29B1 for b"123456789".
     """
-    crc = 0xFFFF
-    for byte in data:
-        crc = ((crc << 8) & 0xFFFF) ^ _CRC16_TABLE[(crc >> 8) ^ byte]
-    return crc
+    return binascii.crc_hqx(data, 0xFFFF)
 
 
 def checksum_field(body: bytes) -> bytes:

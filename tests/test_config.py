@@ -152,3 +152,38 @@ def test_cli_version_and_help() -> None:
     runner = CliRunner()
     assert runner.invoke(main, ["--version"]).output.startswith("fivebar, version")
     assert "five-bar" in runner.invoke(main, ["--help"]).output
+
+
+def test_a_partial_profile_inherits_the_default_and_says_where(tmp_path: Path) -> None:
+    """Only the keys that differ: the rest come from configs/default.toml, and `config show`
+    marks each key with its source."""
+    from click.testing import CliRunner
+
+    from fivebar_host.cli import main
+
+    part = tmp_path / "mine.toml"
+    part.write_text("[geometry]\nb1 = 95.0\nb2 = 95.0\n[motion]\ndraw_feed_mm_s = 25\n")
+    mine, default = load_profile(part), load_profile()
+    assert (mine.geometry.b1, mine.geometry.b2, mine.motion.draw_feed_mm_s) == (95.0, 95.0, 25.0)
+    assert mine.geometry.a1 == default.geometry.a1 and mine.motors == default.motors
+    assert mine.motion.travel_feed_mm_s == default.motion.travel_feed_mm_s
+    res = CliRunner().invoke(main, ["config", "show", "--config", str(part)])
+    assert res.exit_code == 0, res.output
+    rows = {ln.split("=")[0].strip(): ln for ln in res.output.splitlines() if "=" in ln}
+    assert rows["b1"].endswith("# profile") and "95.0" in rows["b1"]
+    assert rows["draw_feed_mm_s"].endswith("# profile")
+    assert rows["a1"].endswith("# default") and rows["baud"].endswith("# default")
+    n_default = sum(ln.endswith("# default") for ln in rows.values())
+    assert f"({n_default} keys from the bundled default" in res.output.splitlines()[0]
+
+
+@pytest.mark.parametrize(("text", "hint"), [
+    ("[motion]\ndraw_feed_mms = 25\n", "did you mean 'draw_feed_mm_s'"),
+    ("[moton]\ndraw_feed_mm_s = 25\n", "did you mean 'motion'"),
+    ("[geometry]\nB1 = 95.0\n", "did you mean 'b1'"),
+])
+def test_a_misspelt_key_gets_did_you_mean(tmp_path: Path, text: str, hint: str) -> None:
+    p = tmp_path / "typo.toml"
+    p.write_text(text)
+    with pytest.raises(ConfigError, match=hint):
+        load_profile(p)

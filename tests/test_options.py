@@ -27,6 +27,7 @@ EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 def test_query_round_trip_of_every_option() -> None:
     values = {"mode": "auto", "tolerance_mm": 0.2, "origin_mm": (10.5, -95.25), "scale": 0.5,
               "rotate_deg": 30.0, "fit": True, "layers": ("a", "b c"), "keep_order": True,
+              "draw_feed_mm_s": 25.0, "travel_feed_mm_s": 60.0, "accel_fraction": 0.5,
               "laser": True, "confirm": True}
     assert set(values) == {o.name for o in JOB_OPTIONS}
     q = to_query(values)
@@ -38,6 +39,13 @@ def test_query_round_trip_of_every_option() -> None:
     ("tolerance", "99", "within 0.0001..10 mm"),
     ("tolerance", "0", "within"),
     ("tolerance", "nan", "finite"),
+    ("tolerance", "1ft", "must be a length such as"),
+    ("origin", "1in,4yd", "1in,4in"),
+    ("scale", "50 %x", "or a percentage"),
+    ("accel", "0", "> 0 and <= 1"),
+    ("accel", "150%", "> 0 and <= 1"),
+    ("draw_speed", "3ft/s", "must be a speed"),
+    ("travel_speed", "0mm/s", "within"),
     ("scale", "-1", "within"),
     ("scale", "0", "within"),
     ("rotate", "inf", "finite"),
@@ -101,3 +109,72 @@ def test_check_values_fills_defaults_and_checks() -> None:
     assert v["scale"] == 2.0 and v["fit"] is False and v["layers"] == ()
     with pytest.raises(OptionError):
         check_values({"origin_mm": (math.nan, 0.0)})
+
+
+@pytest.mark.parametrize(("key", "text", "value"), [
+    ("tolerance", "0.1mm", 0.1), ("tolerance", "0.004in", 0.004 * 25.4),
+    ("tolerance", "0.01cm", 0.1), ("tolerance", "0.1", 0.1),
+    ("origin", "1in,4in", (25.4, 101.6)), ("origin", "10, 95", (10.0, 95.0)),
+    ("origin", "72pt,96px", (25.4, 25.4)), ("origin", "-1cm,9.5cm", (-10.0, 95.0)),
+    ("scale", "50%", 0.5), ("scale", "0.5", 0.5), ("scale", "250%", 2.5),
+    ("accel", "50%", 0.5), ("accel", "1", 1.0),
+    ("draw_speed", "25", 25.0), ("draw_speed", "25mm/s", 25.0), ("draw_speed", "1in/s", 25.4),
+    ("travel_speed", "1200mm/min", 20.0), ("travel_speed", "6 cm / s", 60.0),
+])
+def test_values_with_units_on_the_api_and_the_cli(key: str, text: str, value: object) -> None:
+    """Units are read once, in `fivebar_host.options`: the daemon's query and the CLI take
+    the same text (1 in = 25.4 mm, 72 pt and 96 px to the inch, 50% = 0.5)."""
+    name = next(o.name for o in JOB_OPTIONS if o.query == key)
+    got = parse_query([(key, text)])[name]
+    assert got == pytest.approx(value)
+    flag = next(o.flag for o in JOB_OPTIONS if o.query == key)
+    res = CliRunner().invoke(main, ["convert", str(EXAMPLES / "simple.svg"), "-o", "/dev/null",
+                                    flag, text, "--tolerance", "bogus"])
+    assert "--tolerance" in res.output  # everything else parsed: the bogus one is named
+    if key != "tolerance":
+        assert flag not in res.output.split("Error:")[1]
+
+
+@pytest.mark.parametrize(("text", "landscape", "size"), [
+    ("A4", False, (210.0, 297.0)), ("a4", True, (297.0, 210.0)), ("A5", False, (148.0, 210.0)),
+    ("A3", True, (420.0, 297.0)), ("letter", False, (215.9, 279.4)),
+    ("Legal", True, (355.6, 215.9)), ("200x150", False, (200.0, 150.0)),
+    ("150x200", True, (200.0, 150.0)), ("8.5inx11in", False, (215.9, 279.4)),
+    ("21cm x 29.7cm", False, (210.0, 297.0)), ("200×150", False, (200.0, 150.0)),
+])
+def test_page_sizes_by_name_and_with_units(text: str, landscape: bool,
+                                           size: tuple[float, float]) -> None:
+    from fivebar_host.options import parse_page
+
+    assert parse_page(text, landscape) == pytest.approx(size)
+
+
+@pytest.mark.parametrize("text", ["A7", "200", "x150", "0x150", "200x-1", "1ftx2ft"])
+def test_bad_page_sizes_say_what_a_page_looks_like(text: str) -> None:
+    res = CliRunner().invoke(main, ["design", "--page", text])
+    assert res.exit_code == 2
+    assert "page size must" in res.output
+
+
+def test_speed_options_replace_the_profile_s_motion_values(tmp_path: Path) -> None:
+    """--draw-speed/--travel-speed/--accel compile the same job as a profile that says so
+    (the independent route: the TOML file), and slower settings take longer."""
+    from fivebar_host.compile import CompileOptions, compile_job
+    from fivebar_host.config import load_profile
+
+    text = (Path(__file__).resolve().parents[1] / "configs" / "default.toml").read_text()
+    slow = tmp_path / "slow.toml"
+    slow.write_text(text.replace("draw_feed_mm_s = 40.0", "draw_feed_mm_s = 12.7")
+                    .replace("travel_feed_mm_s = 80.0", "travel_feed_mm_s = 30.0")
+                    .replace("max_joint_rad_s2 = 60.0", "max_joint_rad_s2 = 15.0"))
+    drawing = EXAMPLES / "simple.svg"
+    values = parse_query([("draw_speed", "0.5in/s"), ("travel_speed", "1800mm/min"),
+                          ("accel", "25%")])
+    by_option = compile_job(drawing, load_profile(), CompileOptions(
+        draw_feed_mm_s=values["draw_feed_mm_s"], travel_feed_mm_s=values["travel_feed_mm_s"],
+        accel_fraction=values["accel_fraction"]))
+    by_profile = compile_job(drawing, load_profile(slow))
+    assert (by_option.duration_us == by_profile.duration_us).all()
+    assert (by_option.steps == by_profile.steps).all()
+    default = compile_job(drawing, load_profile())
+    assert by_option.total_time_s > 1.5 * default.total_time_s

@@ -217,11 +217,39 @@ def test_power_lost_falls_back_to_the_last_confirmed_segment(drawing: Path,
     rp = ResumePoint.load(resume_path(drawing))
     assert rp.position is None and rp.sent_segment is not None
     m.phys = [0, 0]  # the user puts the arms at the home pose
+    code, out = run("home", "--port", url("p"), "--yes")  # ... and says so
+    assert code == 0 and "homed" in out, out
     out = resume_and_check(drawing, m, "p")
     n = rp.sent_segment - rp.next_segment
     assert f"up to {n} segments after it may be drawn twice" in out and n > 0
-    assert "lost its position" in out
+    assert "the last a status report confirmed" in out
     assert np.all(drawn_steps(m) >= planned_draw_steps(drawing))  # nothing lost
+
+
+@pytest.mark.parametrize("fault", ["power_cut_after=90", "disconnect_after=70"])
+def test_resume_yes_after_a_power_loss_is_refused(drawing: Path, fault: str) -> None:
+    """Issue 16.2: `--yes` never stands in for a homing or for a person's word that the arms
+    were placed after a power loss. The resume refuses, exits 3, says what to do, and
+    nothing is sent; after `fivebar home` it proceeds."""
+    code, out = run("plot", str(drawing), "--port", url("q", fault), "--laser", "--yes")
+    assert code == 3, out
+    m = mock.machine("q")
+    wait_stopped(m)
+    if fault.startswith("disconnect"):
+        m.power_cut()
+    rp_before = resume_path(drawing).read_text()
+    phys, ledger = list(m.phys), len(m.ledger)
+    code, out = run("plot", str(drawing), "--port", url("q"), "--laser", "--yes", "--resume")
+    assert code == 3, out
+    assert "lost power" in out and "--yes does not answer" in out, out
+    assert f"fivebar home --port {url('q')}" in out, out
+    assert m.phys == phys and len(m.ledger) == ledger  # no step, no line after the refusal
+    assert m.laser == 0 and resume_path(drawing).read_text() == rp_before
+    m.phys = [0, 0]  # the person puts the arms at the home pose ...
+    code, out = run("home", "--port", url("q"), "--yes")  # ... and says so
+    assert code == 0, out
+    out = resume_and_check(drawing, m, "q")
+    assert np.all(drawn_steps(m) >= planned_draw_steps(drawing))
 
 
 def test_kept_record_of_another_stream_falls_back(drawing: Path) -> None:
@@ -366,3 +394,30 @@ def test_a_segment_whose_steps_are_all_issued_is_not_drawn_again() -> None:
     assert first_g1 == f"G1 A{a} B{b} P100 S0"
     assert prog.segment[prog.bodies.index(first_g1)] == k
     assert sum(1 for x in prog.bodies if x.startswith("G1")) == job.n_segments - k
+
+
+def test_positions_are_shown_in_steps_and_mm() -> None:
+    """The home pose of configs/default.toml (θ = 120°, 60°; a = 60, b = 90, w = 40 mm) puts
+    the pen at x = 20, y = 60 sin 60° + √(90² − 50²) = 126.79 mm (worked by hand); a 5 mm jog
+    in x shows x 25.0 mm."""
+    code, out = run("status", "--port", url("pos"))
+    assert code == 0 and "A = 0 steps, B = 0 steps (position unknown: not homed)" in out, out
+    code, out = run("home", "--port", url("pos"), "--yes")
+    assert code == 0 and "homed: A = 0 steps, B = 0 steps (x 20.0 mm, y 126.8 mm)" in out, out
+    code, out = run("jog", "--port", url("pos"), "--dx", "5")
+    assert code == 0 and "(x 25.0 mm, y 126.8 mm)" in out, out
+    code, out = run("status", "--port", url("pos"))
+    assert code == 0 and out.startswith("Idle: A = ") and "(x 25.0 mm, y 126.8 mm)" in out
+
+
+def test_progress_lines_without_a_terminal(drawing: Path) -> None:
+    """In a log file: a progress line at least every 10 % (percent, segment n/m, time left),
+    not nothing between "plotting" and "done"."""
+    code, out = run("plot", str(drawing), "--port", url("log", speed=5), "--yes")
+    assert code == 0, out
+    lines = [ln for ln in out.splitlines() if ln.startswith("plotting: ")]
+    pct = [int(ln.split()[1].rstrip("%")) for ln in lines]
+    assert len(lines) >= 8 and pct == sorted(pct) and pct[0] <= 15 and pct[-1] >= 85, out
+    assert max(np.diff([0, *pct, 100])) <= 15  # no gap wider than the pace allows
+    assert all("segment " in ln and "elapsed" in ln and "left" in ln for ln in lines)
+    assert "done: " in out.splitlines()[-1] and "(x 20.0 mm, y 126.8 mm)" in out

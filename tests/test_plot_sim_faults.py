@@ -121,3 +121,47 @@ def test_line_noise_is_absorbed_by_resends(tmp_path: Path, monkeypatch: pytest.M
     assert not laser_on_at_end(tr)
     assert np.array_equal(laser_steps(tr), planned_draw_steps(job))
     assert np.array_equal(all_steps(tr), planned_steps(job))
+
+
+def test_resume_yes_after_a_power_cut_is_refused(tmp_path: Path, quick_profile: Path,
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 16.2 on the real firmware: after a power cut `--resume --yes` refuses (exit 3),
+    says to home first, and not one step pulse follows the refusal; after `fivebar home`
+    the resume completes and every planned drawing step was drawn."""
+    monkeypatch.chdir(tmp_path)
+    drawing, _, job = compiled_copy(tmp_path, "simple.svg")
+    trace = tmp_path / "pins.trace"
+    cfg = ("--config", str(quick_profile))
+    code, out = run("plot", str(drawing), "--port",
+                    f"fivebar-sim://?machine=pc&trace={trace}&power_cut_after=90", "--laser",
+                    "--yes", *cfg)
+    assert code == 3 and "position unknown" in out, out
+    machine = simport.machine("pc")
+    before = settled_trace(machine)
+    assert not laser_on_at_end(before)
+    code, out = run("plot", str(drawing), "--port", "fivebar-sim://?machine=pc", "--laser",
+                    "--yes", "--resume", *cfg)
+    assert code == 3, out
+    assert "lost power" in out and "fivebar home --port fivebar-sim://" in out, out
+    after = settled_trace(machine)
+    assert np.array_equal(all_steps(after), all_steps(before))  # nothing moved
+    assert not laser_on_at_end(after)
+    assert resume_path(drawing).exists()
+    # The arms stopped mid-job: a person brings them home (here: the emulator's count is the
+    # physical pose, so jog them back) and confirms with `fivebar home`.
+    a = after.positions("A")[-1][1] if after.positions("A") else 0
+    b = after.positions("B")[-1][1] if after.positions("B") else 0
+    for motor, steps in (("A", -a), ("B", -b)):
+        if steps:
+            code, out = run("jog", "--port", "fivebar-sim://?machine=pc", "--motor", motor,
+                            "--steps", str(steps), *cfg)
+            assert code == 0, out
+    code, out = run("home", "--port", "fivebar-sim://?machine=pc", "--yes", *cfg)
+    assert code == 0, out
+    code, out = run("plot", str(drawing), "--port", "fivebar-sim://?machine=pc", "--laser",
+                    "--yes", "--resume", *cfg)
+    assert code == 0, out
+    machine.stop()
+    tr = read_trace(trace)
+    assert not laser_on_at_end(tr)
+    assert np.all(laser_steps(tr) >= planned_draw_steps(job))  # nothing lost

@@ -12,7 +12,6 @@ OS error. Nothing else is caught, so a bug still shows its traceback.
 
 from __future__ import annotations
 
-import math
 import sys
 from collections.abc import Callable
 from functools import wraps
@@ -24,7 +23,7 @@ import click
 from fivebar_host import __version__
 from fivebar_host.config import Profile, load_profile
 from fivebar_host.errors import FivebarError, OptionError
-from fivebar_host.options import JOB_OPTIONS, Option, compile_values
+from fivebar_host.options import JOB_OPTIONS, Option, compile_values, parse_page
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -146,6 +145,42 @@ def confirm_with(yes: bool) -> Callable[[str], bool]:
     return ask
 
 
+def confirm_placed(yes: bool) -> Callable[[str], bool]:
+    """A question only a person may answer (where the arms are after a power loss): asked on
+    a terminal, never answered by --yes; without a terminal the answer is no."""
+
+    def ask(question: str) -> bool:
+        if not sys.stdin.isatty():
+            click.echo(f"{question} (no terminal to ask; --yes does not answer this)"
+                       if yes else f"{question} (no terminal to ask)", err=True)
+            return False
+        if yes:
+            click.echo("--yes does not answer this question after a power loss:", err=True)
+        return click.confirm(question, default=False)
+
+    return ask
+
+
+def position_text(prof: Profile, a_steps: int, b_steps: int, homed: bool = True) -> str:
+    """A machine position as the user reads it: motor steps and, by forward kinematics of
+    the profile's assembly, the pen in mm ("A = 120 steps, B = -40 steps (x 12.3 mm,
+    y 95.0 mm)"). Without a known position (not homed) the mm are not shown."""
+    text = f"A = {a_steps} steps, B = {b_steps} steps"
+    if not homed:
+        return text + " (position unknown: not homed)"
+    import numpy as np
+
+    from fivebar_host.steps import step_angles
+
+    th = step_angles(np.array([[a_steps, b_steps]]), prof.motors.home_rad,
+                     prof.motors.steps_per_rev)
+    fwd = prof.geometry.forward_batch(th, prof.kinematics.assembly)
+    if not fwd.valid[0]:
+        return text + " (no pen position: the links cannot close there)"
+    x, y = fwd.points[0]
+    return f"{text} (x {x:.1f} mm, y {y:.1f} mm)"
+
+
 def open_link(port: str | None, prof: Profile) -> Any:
     """Open the machine at --port (required for machine commands)."""
     from fivebar_host.run.link import Link
@@ -157,13 +192,16 @@ def open_link(port: str | None, prof: Profile) -> Any:
                      reply_timeout_s=prof.serial.reply_timeout_s)
 
 
-def page_size(text: str) -> tuple[float, float]:
-    """Parse a page size "WxH" in mm (also "W×H"), e.g. "200x150"."""
-    parts = text.lower().replace("×", "x").split("x")
+def page_size(text: str, landscape: bool = False) -> tuple[float, float]:
+    """A page size (width, height) in mm from --page: a name (A4, letter …) or WxH with
+    optional units ("200x150", "8.5inx11in"); `landscape` puts the longer side across."""
     try:
-        w, h = (float(v) for v in parts)
-    except ValueError:
-        raise click.BadParameter(f"page size must look like 200x150 (mm); got {text!r}") from None
-    if not (math.isfinite(w) and math.isfinite(h) and w > 0 and h > 0):
-        raise click.BadParameter(f"page size must be positive; got {text!r}")
-    return w, h
+        return parse_page(text, landscape)
+    except ValueError as e:
+        raise click.BadParameter(str(e), param_hint="--page") from None
+
+
+landscape_option = click.option(
+    "--landscape", is_flag=True,
+    help="Turn a --page size so that its longer side runs along x (A4 is 210x297 mm "
+    "portrait, 297x210 mm landscape).")

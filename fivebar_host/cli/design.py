@@ -9,7 +9,15 @@ from pathlib import Path
 
 import click
 
-from fivebar_host.cli.common import config_option, fail, handle_errors, load, main, page_size
+from fivebar_host.cli.common import (
+    config_option,
+    fail,
+    handle_errors,
+    landscape_option,
+    load,
+    main,
+    page_size,
+)
 
 
 @main.command("workspace")
@@ -19,8 +27,10 @@ from fivebar_host.cli.common import config_option, fail, handle_errors, load, ma
 @click.option("--no-plot", is_flag=True, help="Print the figures only, draw nothing.")
 @click.option("--mode", type=click.Choice(["++", "+-", "-+", "--", "auto"]), default=None,
               help="Working mode to analyse in detail (default: the profile's).")
-@click.option("--page", "page_text", default=None, metavar="WxH",
-              help="Also check that a page of W x H mm fits (exit status 1 if not).")
+@click.option("--page", "page_text", default=None, metavar="SIZE",
+              help="Also check that a page fits (exit status 1 if not): WxH in mm or with "
+              "units (200x150, 8.5inx11in), or a name (A4, A5, letter …).")
+@landscape_option
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False, path_type=Path),
               default=None, help="Per-grid-point numbers (CSV).")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
@@ -32,7 +42,7 @@ from fivebar_host.cli.common import config_option, fail, handle_errors, load, ma
               help="Motor error for the ±δ sensitivity traces (thesis Sec. 4.1).")
 @handle_errors
 def workspace(config_path: Path | None, output: Path, no_plot: bool, mode: str | None,
-              page_text: str | None, csv_path: Path | None, json_path: Path | None,
+              page_text: str | None, landscape: bool, csv_path: Path | None, json_path: Path | None,
               resolution: float | None, delta_deg: float) -> None:
     """Workspace per working mode, singularity curves, safe region, largest page rectangle,
     transmission-angle and error-sensitivity maps for the machine profile."""
@@ -41,7 +51,7 @@ def workspace(config_path: Path | None, output: Path, no_plot: bool, mode: str |
     from kinematics.workspace import workspace_report
 
     prof = load(config_path)
-    page = page_size(page_text) if page_text is not None else None
+    page = page_size(page_text, landscape) if page_text is not None else None
     kin = prof.kinematics
     rep = workspace_report(
         prof.geometry, mode or kin.working_mode, kin.min_type1_margin_rad,
@@ -64,8 +74,10 @@ def workspace(config_path: Path | None, output: Path, no_plot: bool, mode: str |
 
 
 @main.command("design")
-@click.option("--page", "page_text", required=True, metavar="WxH",
-              help="Page size in mm that must fit inside the safe workspace, e.g. 200x150.")
+@click.option("--page", "page_text", required=True, metavar="SIZE",
+              help="Page that must fit inside the safe workspace: WxH in mm or with units "
+              "(200x150, 8.5inx11in), or a name (A4, A5, letter …).")
+@landscape_option
 @click.option("--margin-deg", type=click.FloatRange(min=0.0, max=89.0), default=None,
               help="Minimum margin to both singularity types (default: the profile's).")
 @click.option("--motor-spacing", default=None, metavar="W|LO:HI",
@@ -82,7 +94,7 @@ def workspace(config_path: Path | None, output: Path, no_plot: bool, mode: str |
               help="Profile (TOML) written for the best candidate.")
 @config_option
 @handle_errors
-def design(page_text: str, margin_deg: float | None, motor_spacing: str | None,
+def design(page_text: str, landscape: bool, margin_deg: float | None, motor_spacing: str | None,
            mode: str | None, candidates: int, seed: int, top: int, output: Path,
            config_path: Path | None) -> None:
     """Search link lengths (a1, b1, a2, b2, w) whose safe workspace holds the page, ranked by
@@ -94,7 +106,7 @@ def design(page_text: str, margin_deg: float | None, motor_spacing: str | None,
     from kinematics.design import design_search
 
     prof = load(config_path)
-    pw, ph = page_size(page_text)
+    pw, ph = page_size(page_text, landscape)
     spacing: float | tuple[float, float] | None = None
     if motor_spacing is not None:
         try:

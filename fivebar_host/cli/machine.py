@@ -18,6 +18,7 @@ from fivebar_host.cli.common import (
     main,
     open_link,
     port_option,
+    position_text,
     yes_option,
 )
 
@@ -37,7 +38,7 @@ def home_cmd(port: str | None, yes: bool, config_path: Path | None) -> None:
         st = home(link, prof, confirm_with(yes))
     finally:
         link.close()
-    click.echo(f"homed: A = {st.a}, B = {st.b} steps")
+    click.echo(f"homed: {position_text(prof, st.a, st.b)}")
 
 
 @main.command("jog")
@@ -80,7 +81,7 @@ def jog(port: str | None, motor: str | None, steps: int, dx: float, dy: float, y
         st = link.wait_idle(60.0)
     finally:
         link.close()
-    click.echo(f"at A = {st.a}, B = {st.b} steps")
+    click.echo(f"at {position_text(prof, st.a, st.b, st.homed)}")
 
 
 @main.command("frame")
@@ -105,5 +106,22 @@ def frame(drawing: Path, port: str | None, yes: bool, config_path: Path | None,
     finally:
         link.close()
     x0, y0, x1, y1 = job.placement.machine_bbox
-    click.echo(f"framed ({x0:.1f}, {y0:.1f})–({x1:.1f}, {y1:.1f}) mm; back at A = {st.a}, "
-               f"B = {st.b}")
+    click.echo(f"framed ({x0:.1f}, {y0:.1f})–({x1:.1f}, {y1:.1f}) mm; back at "
+               f"{position_text(prof, st.a, st.b)}")
+
+
+@main.command("status")
+@port_option
+@config_option
+@handle_errors
+def status_cmd(port: str | None, config_path: Path | None) -> None:
+    """Where the machine is (motor steps and pen mm) and what it is doing; moves nothing."""
+    prof = load(config_path)
+    link = open_link(port, prof)
+    try:
+        st = link.status()
+    finally:
+        link.close()
+    state = st.state + (f" {st.detail}" if st.detail is not None else "")
+    click.echo(f"{state}: {position_text(prof, st.a, st.b, st.homed)}; laser "
+               f"{'on' if st.laser else 'off'}")

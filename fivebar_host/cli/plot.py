@@ -8,6 +8,9 @@ from __future__ import annotations
 
 import signal
 import sys
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -15,6 +18,7 @@ import click
 
 from fivebar_host.cli.common import (
     compile_from_cli,
+    confirm_placed,
     confirm_with,
     fail,
     handle_errors,
@@ -22,10 +26,12 @@ from fivebar_host.cli.common import (
     main,
     open_link,
     port_option,
+    position_text,
     yes_option,
 )
 from fivebar_host.cli.remote import server_option
 from fivebar_host.config import Profile
+from fivebar_host.run.sender import Progress
 
 
 @main.command("convert")
@@ -107,7 +113,7 @@ def _ask_resume() -> bool:
 def _stream_plot(drawing: Path, port: str, prof: Profile, job: Any, *, laser: bool,
                  resume: bool, yes: bool, preview_path: Path) -> None:
     """Stream a compiled job with a progress bar, Ctrl-C hold/resume/abort, final report."""
-    from fivebar_host.run.sender import Progress, run_job
+    from fivebar_host.run.sender import run_job
 
     click.echo(f"job: {job.n_segments} segments, {job.n_paths} paths, mode {job.mode}, "
                f"≈ {job.total_time_s:.1f} s, max deviation {job.max_dev_mm:.4f} mm")
@@ -126,20 +132,10 @@ def _stream_plot(drawing: Path, port: str, prof: Profile, job: Any, *, laser: bo
     link = open_link(port, prof)
     previous = signal.signal(signal.SIGINT, on_sigint)
     try:
-        with click.progressbar(length=job.n_segments, label="plotting",
-                               show_eta=False, show_percent=True,
-                               item_show_func=lambda s: s) as bar:
-            state = {"done": 0}
-
-            def on_progress(p: Progress) -> None:
-                if p.segments_done > state["done"]:
-                    bar.update(p.segments_done - state["done"],
-                               f"segment {p.segments_done}/{p.segments_total}, "
-                               f"{p.elapsed_s:.0f} s elapsed, ≈ {p.remaining_s:.0f} s left")
-                    state["done"] = p.segments_done
-
+        with _progress_display(job.n_segments) as on_progress:
             report = run_job(link, job, prof, drawing=drawing, laser=laser,
                              confirm=confirm_with(yes), resume=resume,
+                             confirm_placed=confirm_placed(yes),
                              on_progress=on_progress,
                              should_stop=lambda: interrupted["flag"],
                              on_interrupt=on_interrupt, on_note=click.echo)
@@ -148,15 +144,57 @@ def _stream_plot(drawing: Path, port: str, prof: Profile, job: Any, *, laser: bo
         link.close()
     click.echo(f"done: {report.segments} segments in {report.elapsed_s:.1f} s "
                f"(planned {job.total_time_s:.1f} s), {report.bytes_sent} bytes sent, "
-               f"{report.resends} resends; machine at A = {report.final.a}, "
-               f"B = {report.final.b}")
+               f"{report.resends} resends; machine at "
+               f"{position_text(prof, report.final.a, report.final.b)}")
     trace = getattr(link.port, "trace_path", None)
     if trace is not None and Path(trace).exists():
-        _write_executed(job, prof, Path(trace), preview_path, report.start_segment)
+        _write_executed(job, prof, Path(trace), preview_path, report.start_segment,
+                        report.start_position)
+
+
+#: Without a terminal (a log file, systemd): a progress line every this many seconds or
+#: this share of the job, whichever comes first.
+PROGRESS_EVERY_S = 5.0
+PROGRESS_EVERY_SHARE = 0.1
+
+
+@contextmanager
+def _progress_display(total: int) -> Iterator[Callable[[Progress], None]]:
+    """The progress hook: a progress bar on a terminal; otherwise one line at a steady pace
+    ("plotting: 40% (segment 110/275), 4 s elapsed, ≈ 6 s left"), so a log shows that the
+    job advances and when it will end."""
+    def text(p: Progress) -> str:
+        return (f"segment {p.segments_done}/{p.segments_total}, {p.elapsed_s:.0f} s elapsed, "
+                f"≈ {p.remaining_s:.0f} s left")
+
+    if not sys.stdout.isatty():
+        last = {"t": time.monotonic(), "share": 0.0}
+
+        def log_line(p: Progress) -> None:
+            share = p.segments_done / max(1, p.segments_total)
+            now = time.monotonic()
+            if (share >= last["share"] + PROGRESS_EVERY_SHARE and share < 1.0) or (
+                    now - last["t"] >= PROGRESS_EVERY_S and share > last["share"]):
+                click.echo(f"plotting: {100 * share:.0f}% ({text(p)})")
+                last.update(t=now, share=share)
+
+        click.echo("plotting")
+        yield log_line
+        return
+    with click.progressbar(length=total, label="plotting", show_eta=False, show_percent=True,
+                           item_show_func=lambda s: s) as bar:
+        state = {"done": 0}
+
+        def on_progress(p: Progress) -> None:
+            if p.segments_done > state["done"]:
+                bar.update(p.segments_done - state["done"], text(p))
+                state["done"] = p.segments_done
+
+        yield on_progress
 
 
 def _write_executed(job: Any, prof: Profile, trace: Path, preview_path: Path,
-                    first_segment: int) -> None:
+                    first_segment: int, start_position: tuple[int, int]) -> None:
     """After an emulator run: the executed path from the recorded pulses, next to the
     preview (CSV of pen points and their deviation), and its largest deviation."""
     from fivebar_host.compile import write_atomic
@@ -165,7 +203,7 @@ def _write_executed(job: Any, prof: Profile, trace: Path, preview_path: Path,
 
     tr = read_trace(trace)
     t, track = merge_axes(tr.positions("A"), tr.positions("B"))
-    ex = executed_path(job, prof, t / tr.freq, track, first_segment)
+    ex = executed_path(job, prof, t / tr.freq, track, first_segment, start_position)
     out = preview_path.with_name(preview_path.stem + ".executed.csv")
     rows = ["t_s,a_steps,b_steps,x_mm,y_mm,segment,deviation_mm"]
     rows += [f"{ti:.6f},{a},{b},{x:.4f},{y:.4f},{sg},{'' if d != d else f'{d:.5f}'}"
@@ -173,6 +211,7 @@ def _write_executed(job: Any, prof: Profile, trace: Path, preview_path: Path,
                                                   ex.points.tolist(), ex.segment.tolist(),
                                                   ex.deviation_mm.tolist(), strict=True)]
     write_atomic(out, "\n".join(rows) + "\n")
-    click.echo(f"executed path (from the emulator's step pulses): {out}; max deviation "
+    click.echo(f"executed path (from the emulator's step pulses): {out}; drawing segments' "
+               f"max deviation "
                f"{ex.max_deviation_mm:.4f} mm (bound {job.tolerance_mm:g} + step quantum "
                f"{job.step_quantum_mm:.4f} mm)")

@@ -1,4 +1,5 @@
-"""`fivebar config check`, `fivebar ik` and `fivebar fk`: the profile and single poses."""
+"""`fivebar config check` / `config show`, `fivebar ik` and `fivebar fk`: the profile and
+single poses."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import click
 import numpy as np
 
 from fivebar_host.cli.common import config_option, handle_errors, load, main
-from fivebar_host.config import describe, load_profile
+from fivebar_host.config import describe, load_profile, show_lines
 
 
 @main.group()
@@ -23,6 +24,16 @@ def config() -> None:
 def config_check(path: Path) -> None:
     """Parse and validate the profile PATH; print it, or the error naming the key."""
     click.echo(describe(load_profile(path)))
+
+
+@config.command("show")
+@config_option
+@handle_errors
+def config_show(config_path: Path | None) -> None:
+    """Every key of the profile with its value and where it came from: the profile itself,
+    or the bundled default that a partial profile inherits."""
+    for line in show_lines(config_path):
+        click.echo(line)
 
 
 @main.command("ik")

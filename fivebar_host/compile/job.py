@@ -100,8 +100,19 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
     return finish(su, placed, home, routed, solved, tr, planned, opts)
 
 
+def with_job_motion(profile: Profile, opts: CompileOptions) -> Profile:
+    """The profile with the job's speed options in place of its [motion] values (the feeds,
+    and the acceleration limit scaled by `accel_fraction` ≤ 1: never above the profile's)."""
+    mo = profile.motion
+    new = replace(mo, draw_feed_mm_s=opts.draw_feed_mm_s or mo.draw_feed_mm_s,
+                  travel_feed_mm_s=opts.travel_feed_mm_s or mo.travel_feed_mm_s,
+                  max_joint_rad_s2=mo.max_joint_rad_s2 * (opts.accel_fraction or 1.0))
+    return profile if new == mo else replace(profile, motion=new)
+
+
 def compile_drawing(drawing: Drawing, profile: Profile, opts: CompileOptions) -> Job:
     """Compile an already-read drawing; `opts.mode` "auto" tries every working mode."""
+    profile = with_job_motion(profile, opts)
     mode = opts.mode or profile.kinematics.working_mode
     if mode != "auto":
         if mode not in WORKING_MODES:

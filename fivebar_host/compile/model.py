@@ -39,6 +39,9 @@ class CompileOptions:
     fit: bool = False
     layers: tuple[str, ...] = ()
     keep_order: bool = False
+    draw_feed_mm_s: float | None = None  # None: the profile's [motion] values
+    travel_feed_mm_s: float | None = None
+    accel_fraction: float | None = None  # share (0, 1] of [motion] max_joint_rad_s2
     validate: bool = True
     validation_samples: int = 4
 

@@ -14,6 +14,7 @@ pyserial, and imports it lazily.
 
 from __future__ import annotations
 
+import atexit
 import os
 import select
 import shutil
@@ -21,6 +22,7 @@ import signal
 import subprocess
 import threading
 import time
+import weakref
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,6 +40,18 @@ APT_PACKAGES = "gcc-avr avr-libc simavr libsimavr-dev libelf-dev"
 
 class EmulatorError(FivebarError, RuntimeError):
     """The firmware or harness could not be built, started or talked to."""
+
+
+#: Harnesses started and not yet stopped; stopped at exit so that none outlives the host.
+_LIVE: weakref.WeakSet[Emulator] = weakref.WeakSet()
+
+
+def _stop_live() -> None:
+    for emu in list(_LIVE):
+        emu.stop()
+
+
+atexit.register(_stop_live)
 
 
 def firmware_dir() -> Path:
@@ -143,12 +157,18 @@ class Emulator:
         """Start the harness and return the pty path to open (115200 8N1)."""
         if self.proc is not None:
             raise EmulatorError("emulator already started")
+        # Its own session: a Ctrl-C on the terminal reaches the host only (which holds the
+        # machine and asks), never the emulated controller, which would stop ("device
+        # gone"). It still ends with the host: stop() / atexit, its stdin's end, and
+        # PR_SET_PDEATHSIG when the host dies (firmware/sim/fbsim.c).
         self.proc = subprocess.Popen(
             self.command(),
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
+            start_new_session=True,
         )
+        _LIVE.add(self)
         self._out = b""
         line = self._read_line(timeout)
         if not line.startswith("PTY "):
@@ -209,6 +229,7 @@ class Emulator:
         except subprocess.TimeoutExpired:
             self.proc.kill()
             _, raw = self.proc.communicate()
+        _LIVE.discard(self)
         err = raw.decode("utf-8", errors="replace")
         self.stats = err
         self.returncode = self.proc.returncode

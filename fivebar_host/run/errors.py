@@ -70,3 +70,8 @@ class LinkFaultError(LinkError):
 
 class SendError(LinkError):
     """A job could not be sent or finished; says what happened, where, and what to do."""
+
+
+class PowerLossError(SendError):
+    """A resume found a controller that lost power (`H:0`) and nobody confirmed where the
+    arms are (`--yes` never does): refused before anything moved; says what to do."""

@@ -29,7 +29,7 @@ from fivebar_host.steps import absolute_steps, step_angles
 SAFE_SHARE = 0.5
 
 
-def _line_param(p0: ArrayLike, p1: ArrayLike, pos: ArrayLike) -> float | None:
+def line_param(p0: ArrayLike, p1: ArrayLike, pos: ArrayLike) -> float | None:
     """Where `pos` lies on the straight joint-space line p0 → p1: t in [0, 1] measured on
     the axis that moves most, when every axis is within one step of the line; else None.
     (The DDA spreads each motor's steps evenly, so a move stopped part-way sits there.)"""
@@ -90,7 +90,7 @@ class Program:
         later = pts[idx + 1:]
         moving = np.flatnonzero(np.any(later != p0, axis=1))
         p1 = later[moving[0]] if moving.size else p0
-        return _line_param(p0, p1, position) is not None
+        return line_param(p0, p1, position) is not None
 
 
 def _ramped_move(start: ArrayLike, end: ArrayLike, rad_per_step: float,
@@ -239,7 +239,7 @@ def build_program(job: Job, profile: Profile, laser: bool, start_segment: int,
     pos = np.asarray(position, dtype=np.int64)
     partial: str | None = None
     if k < job.n_segments and not np.array_equal(pos, steps[k]):
-        t = _line_param(steps[k], steps[k + 1], pos)
+        t = line_param(steps[k], steps[k + 1], pos)
         if t is not None and t > 0.0:
             rest = max(protocol.P_MIN_US, round(float(job.duration_us[k]) * (1.0 - t)))
             at_end = np.array_equal(pos, steps[k + 1])

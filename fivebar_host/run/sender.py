@@ -35,7 +35,7 @@ from fivebar_host import protocol
 from fivebar_host.compile import Job
 from fivebar_host.config import Profile
 from fivebar_host.protocol import StatusReport
-from fivebar_host.run.errors import LinkFaultError, SendError
+from fivebar_host.run.errors import LinkFaultError, PowerLossError, SendError
 from fivebar_host.run.faults import StreamRun, after_fault
 from fivebar_host.run.link import Link
 from fivebar_host.run.program import build_program
@@ -101,6 +101,7 @@ class SendReport:
     bytes_sent: int
     resends: int
     final: StatusReport
+    start_position: tuple[int, int] = (0, 0)  # firmware steps the run started from
 
 
 @dataclass(frozen=True)
@@ -118,8 +119,16 @@ def run_job(link: Link, job: Job, profile: Profile, *, drawing: str | Path, lase
             on_progress: Callable[[Progress], None] | None = None,
             should_stop: Callable[[], bool] | None = None,
             on_interrupt: Callable[[], bool] | None = None,
-            on_note: Callable[[str], None] | None = None) -> SendReport:
+            on_note: Callable[[str], None] | None = None,
+            confirm_placed: Callable[[str], bool] | None = None) -> SendReport:
     """Stream `job` (or its remainder with `resume`) and wait until the machine is idle.
+
+    `confirm` answers the first-start question "are the arms at the home pose?" (the CLI's
+    `--yes` may answer it). `confirm_placed` answers where the arms are when a resume finds
+    a controller that lost power: only a person may answer that (the CLI asks on a terminal
+    and never takes `--yes` for it); when it says no, the resume is refused before anything
+    moves (`PowerLossError`). Without it, `confirm` answers (the daemon: a person's resume
+    request).
 
     On any fault: hold, read the position, reset the firmware, write the resume file and raise
     `SendError` naming the fault, the position and the last segment executed. `on_note`
@@ -134,7 +143,8 @@ def run_job(link: Link, job: Job, profile: Profile, *, drawing: str | Path, lase
         if rp.fingerprint != fp:
             raise SendError(f"{rpath}: the resume file belongs to a different job (drawing or "
                             "options changed); run the same command as before with --resume")
-        start, st = _resume_start(link, job, profile, rp, confirm, on_note or (lambda _: None))
+        start, st = _resume_start(link, job, profile, rp, confirm_placed or confirm,
+                                  on_note or (lambda _: None))
     else:
         st = ensure_known_pose(link, profile, confirm)
     start_position = (st.a, st.b)
@@ -165,7 +175,7 @@ def run_job(link: Link, job: Job, profile: Profile, *, drawing: str | Path, lase
     if rpath.exists():
         rpath.unlink()
     return SendReport(job.n_segments - start, start, time.monotonic() - t0, res.bytes_sent,
-                      res.resends, final)
+                      res.resends, final, start_position)
 
 
 
@@ -219,19 +229,39 @@ def _resumable_status(link: Link) -> StatusReport:
 
 
 def _restore_position(link: Link, job: Job, profile: Profile, rp: ResumePoint,
-                      confirm: Callable[[str], bool], note: Callable[[str], None]
+                      confirm_placed: Callable[[str], bool], note: Callable[[str], None]
                       ) -> StatusReport:
-    """The controller lost power since the fault: its count is 0; the arms are where they
-    stopped, if that is known and the user confirms it; otherwise home."""
-    if rp.position is not None and confirm(
-            f"Are the arms still where the job stopped (A = {rp.position[0]}, "
-            f"B = {rp.position[1]} steps)?"):
-        link.command(f"G92 A{rp.position[0]} B{rp.position[1]}")
-    else:
+    """The controller lost power since the fault: its count is 0 and the arms are wherever
+    they stopped (or were pushed). With endstops `$H` homes; otherwise a person confirms
+    where the arms are (where the job stopped, when that is known, or the home pose). When
+    nobody confirms, `PowerLossError` says what to do; nothing has moved."""
+    start = rp.next_segment
+
+    def homed_note() -> None:
         if rp.position is None:
-            start = rp.next_segment
             note(f"the controller lost its position (H:0: power was cut since the fault); "
-                 f"after homing, resuming after segment {start} of {job.n_segments}, the last "
-                 f"a status report confirmed: " + redraw_text(start, rp.sent_segment))
-        home(link, profile, confirm)
-    return link.wait_idle(10.0)  # G92 is queued: its ok comes before it takes effect
+                 f"after homing, resuming after segment {start} of {job.n_segments}, the "
+                 f"last a status report confirmed: " + redraw_text(start, rp.sent_segment))
+
+    if profile.motors.endstops:
+        link.command("$H", timeout_s=120.0)
+        homed_note()
+        return link.wait_idle(120.0)
+    if rp.position is not None and confirm_placed(
+            f"The controller lost power. Are the arms still exactly where the job stopped "
+            f"(A = {rp.position[0]}, B = {rp.position[1]} steps)?"):
+        link.command(f"G92 A{rp.position[0]} B{rp.position[1]}")
+        return link.wait_idle(10.0)  # G92 is queued: its ok comes before it takes effect
+    h1, h2 = (math.degrees(v) for v in profile.motors.home_rad)
+    if confirm_placed(f"The controller lost power. Are the arms at the home pose "
+                      f"θ1 = {h1:g}°, θ2 = {h2:g}° (motor angles from +x)?"):
+        homed_note()
+        link.command("G92 A0 B0")
+        return link.wait_idle(10.0)
+    raise PowerLossError(
+        f"{link.url}: the controller lost power since the job stopped (H:0): its position is "
+        "unknown, and --yes does not answer for where the arms are after a power loss. "
+        f"Place the arms at the home pose (θ1 = {h1:g}°, θ2 = {h2:g}°) and run `fivebar home "
+        f"--port {link.url}`, then this command again with --resume (or run it on a terminal "
+        "without --yes and confirm there). Nothing was sent.")
+

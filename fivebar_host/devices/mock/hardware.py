@@ -103,6 +103,7 @@ class Machine:
     boots: int = 0
     firmware: MockFirmware | None = None
     port: MockSerial | None = None
+    true: tuple[float, ...] | None = None  # URL option true=: the real geometry (mm, deg)
 
     @property
     def laser(self) -> int:

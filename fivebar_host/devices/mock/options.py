@@ -96,6 +96,7 @@ class MockOptions:
     version: str = "1.0.0"
     proto: int = protocol.PROTOCOL_VERSION
     machine: str | None = None
+    true: tuple[float, ...] | None = None
 
 
 def _int_option(key: str, value: str, lo: int, hi: int) -> int:
@@ -149,6 +150,18 @@ def _machine_option(key: str, value: str) -> str:
     return value
 
 
+def _true_option(key: str, value: str) -> tuple[float, ...]:
+    parts = value.split(",")
+    if len(parts) != 7:
+        raise MockURLError(f"{SCHEME}: true must be a1,b1,a2,b2,w,home1,home2 (mm, degrees); "
+                           f"got {value!r}")
+    vals = tuple(_float_option(key, p.strip(), -1e5, 1e5) for p in parts)
+    if any(v <= 0 for v in vals[:5]) or any(abs(v) > 360 for v in vals[5:]):
+        raise MockURLError(f"{SCHEME}: true needs positive lengths and home angles within "
+                           f"±360°; got {value!r}")
+    return vals
+
+
 #: Each option's parser, (key, text) → value; the order is the one error messages list.
 _PARSERS: dict[str, Callable[[str, str], Any]] = {
     "speed": lambda k, v: _float_option(k, v, 0.0, 1e9),
@@ -169,6 +182,7 @@ _PARSERS: dict[str, Callable[[str, str], Any]] = {
     "version": _version_option,
     "proto": lambda k, v: _int_option(k, v, 0, 2**16),
     "machine": _machine_option,
+    "true": _true_option,
 }
 _KNOWN = tuple(_PARSERS)
 

@@ -76,6 +76,7 @@ class MockSerial(serial.SerialBase):
             # (first open, or after a power cut) is powered up.
             kept = m.firmware.power_off(now) if m.firmware is not None else None
             self.machine = m
+            m.true = self.options.true
             self._rng = random.Random(self.options.seed)
             self.firmware = MockFirmware(self.options, m, now, kept)
             m.firmware = self.firmware

@@ -1,0 +1,1 @@
+"""Calibration pipeline steps (pattern, measure, fit, check) over kinematics.calibration."""
