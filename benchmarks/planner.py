@@ -3,14 +3,16 @@
 The job: a circle of 100 mm circumference as 1000 chords of 0.1 mm, drawn five times (5000
 segments, one pen-down path), on the bundled profile with the draw feed, joint speed and
 joint acceleration replaced. Printed per limit set: total plan time and its drawing part
-(the draw segments' durations) for each tree. Before the fix (main) raising the limits
-lengthened the plan (7.8 s at 100 mm/s, 15 rad/s, 600 rad/s² → 11.1 s at 200 / 30 / 1200).
+(the draw segments' durations) for each tree. Before the fix raising the limits lengthened
+the plan (7.8 s at 100 mm/s, 15 rad/s, 600 rad/s² → 11.1 s at 200 / 30 / 1200; main, which
+now also simplifies dense polylines, 6.2 s → 29.6 s).
 Then the drawing part against the feed with joint limits far above need (100 rad/s,
-10⁴ rad/s²), where the feed binds up to ~50 mm/s.
+10⁴ rad/s²), where the feed binds up to ~50 mm/s. Last, the bundled examples on their
+profiles (as tests/test_job_timing.py compiles them): plan time and segments per tree.
 
 Each tree is compiled in its own interpreter (same module names), side by side in one run:
 
-    git worktree add /tmp/plan-old main
+    git worktree add --detach /tmp/plan-old main
     python benchmarks/planner.py --old /tmp/plan-old
 """
 
@@ -29,6 +31,13 @@ HERE = Path(__file__).resolve().parent
 SETS = [(100.0, 15.0, 600.0), (200.0, 30.0, 1200.0), (200.0, 15.0, 600.0),
         (150.0, 15.0, 600.0)]
 FEEDS = [25.0, 50.0, 100.0, 200.0]
+EXAMPLES: list[tuple[str, str, dict[str, object]]] = [
+    ("fivebar_text.svg", "default.toml", {}),
+    ("simple.svg", "default.toml", {"tolerance_mm": 0.2}),
+    ("mode_change.gcode", "default.toml", {"origin_mm": (0.0, 0.0), "mode": "auto"}),
+    ("underside_machine_coords.gcode", "underside.toml", {"origin_mm": (0.0, 0.0),
+                                                          "mode": "++"}),
+]
 
 
 def issue_svg(path: Path, turns: int = 5, chords: int = 1000, circ_mm: float = 100.0) -> None:
@@ -61,6 +70,19 @@ def measure(svg: Path, limits: list[tuple[float, float, float]]) -> list[tuple[f
     return out
 
 
+def measure_examples(tree: Path) -> list[tuple[float, float]]:
+    """(plan s, segments) of each of `EXAMPLES`, compiled by the tree on sys.path."""
+    from fivebar_host.compile import CompileOptions, compile_job
+    from fivebar_host.config import load_profile
+
+    out = []
+    for name, config, kw in EXAMPLES:
+        prof = load_profile(tree / "configs" / config)
+        job = compile_job(tree / "examples" / name, prof, CompileOptions(**kw))  # type: ignore[arg-type]
+        out.append((float(job.duration_us.sum()) * 1e-6, float(job.n_segments)))
+    return out
+
+
 def run_tree(tree: Path, svg: Path, limits: list[tuple[float, float, float]]
              ) -> list[tuple[float, float]]:
     """`measure` in a fresh interpreter with `tree` first on the import path."""
@@ -68,7 +90,7 @@ def run_tree(tree: Path, svg: Path, limits: list[tuple[float, float, float]]
     res = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--child", str(svg),
                           json.dumps(limits)], env=env, cwd=tree, check=True,
                          capture_output=True, text=True)
-    return [tuple(x) for x in json.loads(res.stdout)]  # type: ignore[misc]
+    return [(float(x[0]), float(x[1])) for x in json.loads(res.stdout)]
 
 
 def main() -> None:
@@ -79,7 +101,8 @@ def main() -> None:
     args = ap.parse_args()
     if args.child:
         sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != HERE]
-        print(json.dumps(measure(Path(args.child[0]), json.loads(args.child[1]))))
+        rows = measure(Path(args.child[0]), json.loads(args.child[1]))
+        print(json.dumps(rows + measure_examples(Path.cwd())))
         return
     trees = [("this", HERE.parent)] + ([("old", args.old)] if args.old.is_dir() else [])
     fast = [(f, 100.0, 1e4) for f in FEEDS]
@@ -88,6 +111,7 @@ def main() -> None:
         issue_svg(svg)
         got = {name: run_tree(t, svg, SETS + fast) for name, t in trees}
     report([n for n, _ in trees], got, SETS + fast)
+    report_examples([n for n, _ in trees], {n: g[len(SETS) + len(fast):] for n, g in got.items()})
 
 
 def report(names: list[str], got: dict[str, list[tuple[float, float]]],
@@ -105,6 +129,16 @@ def report(names: list[str], got: dict[str, list[tuple[float, float]]],
         d = {f: got[n][len(SETS) + k][1] for k, f in enumerate(FEEDS)}
         print(f"{n}: drawing part 50 vs 25 mm/s = {d[50.0] / d[25.0]:.3f}, "
               f"200 vs 100 mm/s = {d[200.0] / d[100.0]:.3f}")
+
+
+
+def report_examples(names: list[str], got: dict[str, list[tuple[float, float]]]) -> None:
+    """Print plan time and segments of the bundled examples per tree."""
+    print("bundled examples on their profiles: plan s (segments)")
+    for i, (name, _, _) in enumerate(EXAMPLES):
+        row = "".join(f"{got[n][i][0]:11.2f} ({got[n][i][1]:5.0f})" for n in names)
+        print(f"{name:>32s}{row}")
+
 
 if __name__ == "__main__":
     main()
