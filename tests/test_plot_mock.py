@@ -178,7 +178,7 @@ def test_disconnect_then_resume_reads_the_kept_record(drawing: Path, wait: bool)
     the exact segment — after the queue ran out, or mid-segment when the reopen cut it."""
     # At real speed the queue still runs when the resume reopens the port at once.
     code, out = run("plot", str(drawing), "--port",
-                    url("d", "disconnect_after=70", speed=20 if wait else 1), "--laser",
+                    url("d", "disconnect_after=150", speed=20 if wait else 1), "--laser",
                     "--yes")
     assert code == 3, out
     assert "device gone" in out and "resume file" in out
@@ -199,7 +199,7 @@ def test_disconnect_then_resume_reads_the_kept_record(drawing: Path, wait: bool)
     assert np.array_equal(all_steps(m), planned_steps(drawing))  # no travel back either
 
 
-@pytest.mark.parametrize("fault", ["power_cut_after=90", "disconnect_after=70"])
+@pytest.mark.parametrize("fault", ["power_cut_after=90", "disconnect_after=150"])
 def test_power_lost_falls_back_to_the_last_confirmed_segment(drawing: Path,
                                                              fault: str) -> None:
     """A controller that lost power (H:0) kept nothing: home, resume after the last
