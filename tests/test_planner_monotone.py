@@ -48,7 +48,7 @@ def _zigzag(x0: float, y0: float, w: float, h: float, n: int) -> str:
     return _polyline([(x0 + w * k / n, y0 + (h if k % 2 else 0.0)) for k in range(n + 1)])
 
 
-coord = st.floats(min_value=2.0, max_value=28.0)
+coord = st.integers(20, 280).map(lambda v: v / 10.0)  # 0.1 mm grid: no zero-extent shape
 shape = st.one_of(
     st.lists(st.tuples(coord, coord), min_size=2, max_size=12, unique=True).map(_polyline),
     st.builds(_circle, st.floats(10.0, 20.0), st.floats(10.0, 20.0), st.floats(0.5, 8.0),
