@@ -106,3 +106,39 @@ def test_error_reply_mid_job_then_exact_resume(tmp_path: Path) -> None:
     tr = read_trace(trace)
     assert np.array_equal(laser_steps(tr), planned_draw_steps(job))
     assert (tr.positions("A")[-1][1], tr.positions("B")[-1][1]) == (0, 0)
+
+
+def test_the_executed_path_report_draws_with_the_true_machine(tmp_path: Path) -> None:
+    """`fivebar-sim://?true=…` (calibration): the executed-path CSV holds where the machine
+    as really built draws the recorded steps — checked against that machine's own forward
+    kinematics — and a 0.5 mm longer b1 shows as a deviation beyond the bound."""
+    import csv
+
+    from click.testing import CliRunner
+
+    from fivebar_host.cli import main
+    from fivebar_host.config import load_profile
+    from kinematics.fivebar import FiveBar
+
+    true = (60.0, 90.5, 60.0, 90.0, 40.0, 120.0, 60.0)  # default.toml with b1 0.5 mm longer
+    preview = tmp_path / "p.png"
+    url = "fivebar-sim://?true=" + ",".join(f"{v:g}" for v in true)
+    res = CliRunner().invoke(main, ["plot", str(Path(__file__).parents[1] / "examples" /
+                                                 "simple.svg"), "--port", url, "--yes",
+                                    "--preview", str(preview)])
+    assert res.exit_code == 0, res.output
+    line = next(ln for ln in res.output.splitlines() if ln.startswith("executed path"))
+    assert "true= machine" in line
+    dev = float(line.split("max deviation ")[1].split(" mm")[0])
+    bound = float(line.split("(bound ")[1].split(" +")[0]) + float(
+        line.split("step quantum ")[1].split(" mm")[0])
+    assert dev > bound + 0.1, line
+    prof = load_profile(None)
+    fb = FiveBar(*true[:5])
+    with preview.with_name("p.executed.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    steps = np.array([[int(r["a_steps"]), int(r["b_steps"])] for r in rows], dtype=float)
+    th = np.radians(true[5:]) + steps * prof.motors.rad_per_step
+    pts = np.array([fb.forward(t, prof.kinematics.assembly) for t in th[::25]])
+    got = np.array([[float(r["x_mm"]), float(r["y_mm"])] for r in rows])[::25]
+    assert np.abs(pts - got).max() < 1e-3

@@ -197,3 +197,35 @@ def test_jog_and_motors_off(tmp_path: Path) -> None:
         kinds = [e.kind for e in mock.machine("w-jog").ledger]
         assert kinds[kinds.index("M18") + 1] == "M17"
         assert out["position"]["b"] == off["position"]["b"] - 40
+
+
+def _wait_connected(c: ServerClient, timeout_s: float = 10.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not c.status()["machine"]["connected"]:
+        assert time.monotonic() < deadline, "the daemon did not connect to the mock"
+        time.sleep(0.05)
+
+
+def test_pen_up_and_down_from_the_page_on_a_pen_machine(tmp_path: Path) -> None:
+    """The machine panel's pen buttons (`POST /api/machine/pen`): the profile's pulses reach
+    the mock's servo; a laser machine refuses them with the reason."""
+    pen_profile = EXAMPLES.parent / "configs" / "pen-servo.toml"
+    pen = load_profile(pen_profile).pen
+    assert pen is not None
+    with running_daemon(tmp_path / "p", "w-pen", profile_path=pen_profile) as d:
+        c = ServerClient(d.url)
+        _wait_connected(c)
+        opts = c.request("GET", "/api/options")
+        assert opts["features"]["pen"] is True
+        c.request("POST", "/api/machine/pen", query={"down": "true"})
+        servo = mock.machine("w-pen").pen
+        assert servo.down and servo.target == pen.pulse_us(pen.down_position)
+        c.request("POST", "/api/machine/pen", query={"down": "false"})
+        assert not mock.machine("w-pen").pen.down
+        bad = send(d.url, "POST", "/api/machine/pen")
+        assert bad.status == 422 and _json(bad)["error"] == "bad_option"
+    with running_daemon(tmp_path / "l", "w-laser") as d:
+        _wait_connected(ServerClient(d.url))
+        refused = send(d.url, "POST", "/api/machine/pen?down=true")
+        assert refused.status == 409 and "no [pen] table" in _json(refused)["message"]
+        assert all(e.kind != "M280" for e in mock.machine("w-laser").ledger)

@@ -152,7 +152,8 @@ def _stream_plot(drawing: Path, port: str, prof: Profile, job: Any, *, laser: bo
     trace = getattr(link.port, "trace_path", None)
     if trace is not None and Path(trace).exists():
         _write_executed(job, prof, Path(trace), preview_path, report.start_segment,
-                        report.start_position)
+                        report.start_position,
+                        getattr(getattr(link.port, "options", None), "true", None))
 
 
 #: Without a terminal (a log file, systemd): a progress line every this many seconds or
@@ -197,16 +198,19 @@ def _progress_display(total: int) -> Iterator[Callable[[Progress], None]]:
 
 
 def _write_executed(job: Any, prof: Profile, trace: Path, preview_path: Path,
-                    first_segment: int, start_position: tuple[int, int]) -> None:
+                    first_segment: int, start_position: tuple[int, int],
+                    true: tuple[float, ...] | None = None) -> None:
     """After an emulator run: the executed path from the recorded pulses, next to the
-    preview (CSV of pen points and their deviation), and its largest deviation."""
+    preview (CSV of pen points and their deviation), and its largest deviation. With the
+    emulator's `true=` geometry, the pen points are where that machine really draws."""
     from fivebar_host.compile import write_atomic
     from fivebar_host.devices.simtrace import read_trace
-    from fivebar_host.executed import executed_path, merge_axes, pen_report
+    from fivebar_host.executed import executed_path, merge_axes, pen_report, true_params
 
     tr = read_trace(trace)
     t, track = merge_axes(tr.positions("A"), tr.positions("B"))
-    ex = executed_path(job, prof, t / tr.freq, track, first_segment, start_position)
+    ex = executed_path(job, prof, t / tr.freq, track, first_segment, start_position,
+                       true=true_params(true))
     out = preview_path.with_name(preview_path.stem + ".executed.csv")
     rows = ["t_s,a_steps,b_steps,x_mm,y_mm,segment,deviation_mm"]
     rows += [f"{ti:.6f},{a},{b},{x:.4f},{y:.4f},{sg},{'' if d != d else f'{d:.5f}'}"
@@ -214,8 +218,9 @@ def _write_executed(job: Any, prof: Profile, trace: Path, preview_path: Path,
                                                   ex.points.tolist(), ex.segment.tolist(),
                                                   ex.deviation_mm.tolist(), strict=True)]
     write_atomic(out, "\n".join(rows) + "\n")
-    click.echo(f"executed path (from the emulator's step pulses): {out}; drawing segments' "
-               f"max deviation "
+    where = " (drawn by the URL's true= machine)" if true is not None else ""
+    click.echo(f"executed path (from the emulator's step pulses{where}): {out}; drawing "
+               f"segments' max deviation "
                f"{ex.max_deviation_mm:.4f} mm (bound {job.tolerance_mm:g} + step quantum "
                f"{job.step_quantum_mm:.4f} mm)")
     if prof.pen is not None:

@@ -29,6 +29,9 @@ URL options: `fivebar-sim://?trace=PATH&realtime=1&endstops=A,B&machine=NAME&res
   interrupts off, no replies, no motion, pins unchanged) until its watchdog resets it, about
   256 ms of emulated time later: laser off, banner, the position, `H` and `Ln` done kept, as
   after a DTR reset;
+- `true=a1,b1,a2,b2,w,home1,home2` (mm, degrees): the machine as really built, where it
+  differs from the profile; the executed-path report after `fivebar plot` then measures where
+  that machine draws (calibration tests: docs/calibration.md);
 - `drop=P`, `corrupt=P`, `seed=N`: line noise, as on the mock: each host→device byte other than
   a real-time byte is lost with probability P, or replaced by another printable byte that is
   not a real-time byte (seeded generator, default seed 0); line counting for the options
@@ -46,6 +49,7 @@ for the first time from a thread that lives as long as the machine should.
 from __future__ import annotations
 
 import atexit
+import math
 import random
 import tempfile
 import threading
@@ -68,7 +72,7 @@ FAULTS = {"disconnect_after": None, "reset_after": "reset", "power_cut_after": "
           "stall_after": "hang"}
 #: Line noise options (per-byte probabilities) and the seed of their generator.
 NOISE = ("drop", "corrupt")
-_KNOWN = (*HARNESS_OPTIONS, "machine", *FAULTS, *NOISE, "seed")
+_KNOWN = (*HARNESS_OPTIONS, "machine", *FAULTS, *NOISE, "seed", "true")
 #: Real-time bytes pass untouched; a corruption never produces one (docs/protocol.md 2).
 _REALTIME = frozenset(b"?!~\x18")
 _CORRUPT_BYTES = bytes(c for c in range(0x20, 0x7F) if c not in _REALTIME)
@@ -86,7 +90,24 @@ class SimOptions:
     drop: float = 0.0
     corrupt: float = 0.0
     seed: int = 0
+    #: The machine as really built (a1, b1, a2, b2, w mm, home1, home2 degrees), where it
+    #: differs from the profile: the executed-path report measures what it really draws.
+    true: tuple[float, ...] | None = None
     given: frozenset[str] = frozenset()  # the harness options the URL names
+
+
+def parse_true_geometry(text: str, url: str) -> tuple[float, ...]:
+    """`true=a1,b1,a2,b2,w,home1,home2` (mm, degrees): seven finite numbers, positive
+    lengths, home angles within ±360°."""
+    try:
+        vals = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        vals = ()
+    if (len(vals) != 7 or not all(math.isfinite(v) for v in vals)
+            or any(v <= 0 for v in vals[:5]) or any(abs(v) > 360 for v in vals[5:])):
+        raise ValueError(f"{url}: true must be a1,b1,a2,b2,w,home1,home2 (positive mm, "
+                         f"degrees within ±360), got {text!r}")
+    return vals
 
 
 def parse_sim_url(url: str) -> SimOptions:
@@ -133,6 +154,8 @@ def parse_sim_url(url: str) -> SimOptions:
             if not value.isdigit():
                 raise ValueError(f"{url}: seed must be a whole number >= 0, got {value!r}")
             opts.seed = int(value)
+        elif key == "true":
+            opts.true = parse_true_geometry(value, url)
         else:
             raise ValueError(f"{url}: unknown option {key!r} (known: {', '.join(_KNOWN)})")
     opts.given = frozenset(given & set(HARNESS_OPTIONS))

@@ -131,6 +131,26 @@ class Manual(Control):
         result: StatusReport = self.run_action(act, ACTION_TIMEOUT_S)
         return result
 
+    def pen(self, down: bool) -> StatusReport:
+        """Lower or raise the servo pen (the profile's [pen]: `$14` park pulse, then the
+        `M280` block, docs/protocol.md 6.2), as `fivebar pen up|down`."""
+        pen = self.cfg.profile.pen
+        if pen is None:
+            raise ActionError(f"{self.cfg.profile.source}: no [pen] table: this machine's "
+                              "tool is a laser")
+        self._idle_machine("move the pen")
+
+        def act(link: JournalLink) -> StatusReport:
+            link.command(f"$14={pen.pulse_us(pen.up_position)}")
+            link.command(pen.command(down))
+            st = link.wait_idle(30.0)
+            log.info("pen %s (%d µs)", "down" if down else "up",
+                     pen.pulse_us(pen.down_position if down else pen.up_position))
+            return st
+
+        result: StatusReport = self.run_action(act, ACTION_TIMEOUT_S)
+        return result
+
     def clear_alarm(self) -> StatusReport:
         """Clear an alarm (`$X`; the position is kept)."""
         self._idle_machine("clear the alarm")

@@ -276,6 +276,13 @@ def _manual_routes(app: FastAPI, ctx: _Ctx) -> None:
         """Switch the motors off (M18): the arms move by hand; home before the next job."""
         return done(worker.motors_off)
 
+    @app.post("/api/machine/pen", response_model=MachineOut, tags=["machine"],
+              responses=responses)
+    def pen(down: bool = Query(..., description="true: lower the pen; false: raise it.")
+            ) -> MachineOut:
+        """Lower or raise the servo pen (pen machines only; the machine must be idle)."""
+        return done(lambda: worker.pen(down))
+
     @app.post("/api/machine/clear_alarm", response_model=MachineOut, tags=["machine"],
               responses=responses)
     def clear_alarm() -> MachineOut:
