@@ -1,15 +1,11 @@
 """Timing a stepped job: per-segment laser power, feed and stops, then durations from
-`fivebar_host.planner`, in three steps (the reasons are in the planner's module doc):
+`fivebar_host.planner`, in four steps (the reasons are in the planner's module doc):
 
-1. every segment cut into pieces by a fixed geometric rule (`planner.cut_fractions`: short
-   pieces at both ends growing inward, one in the middle) — new targets on the same
-   joint-space lines, so the path does not change, rounded to whole steps once;
-2. the pieces' pen lengths, feeds and stops;
-3. the least integer durations that honour every limit on the staircase the firmware runs
-   (constant rate per G1) exactly (`planner.staircase_durations`).
-
-Nothing in steps 1–2 depends on the speed limits, and step 3's durations only shrink when a
-limit is raised, so a plan never gets longer with a raised feed, joint speed or acceleration.
+1. a continuous speed profile (junction passes) with part of the limits (`PLAN_*_SHARE`);
+2. its speed-up and slow-down parts cut into short pieces (new targets on the same
+   joint-space lines, so the path does not change), rounded to whole steps once;
+3. the profile again on the pieces;
+4. every boundary of the staircase the firmware runs (constant rate per G1) made exact.
 """
 
 from __future__ import annotations
@@ -27,19 +23,21 @@ from fivebar_host.config import Motors, Profile
 from fivebar_host.toolpath.segment import PoseChecker
 from kinematics.arrays import BoolArray, FloatArray, IntArray
 
-#: Segments are cut by a fixed rule (`planner.piece_sizes`): from each end, pieces of
-#: max(first, ⌈growth·i⌉) steps, i = 1 … max_per_end, and one piece in the middle. With
-#: g = 6 steps a ramp that changes the speed by the junction jump J per piece spends
-#: g·q/J ≈ 6 ms per piece (q one step): coarse enough that one step of rounding per piece
-#: stays well inside J, fine enough for the default 60 rad/s² (J/α ≈ 8 ms per piece).
-PIECE_FIRST_STEPS = 6.0
-PIECE_GROWTH_STEPS = 6.0
-PIECE_MAX_PER_END = 60
+#: Timing (see `fivebar_host.planner`): the continuous profile plans with this share of the
+#: joint acceleration limit and of the junction jump for direction changes; the rest (and a
+#: corner cap from the remaining acceleration) absorbs the staircase the firmware runs.
+PLAN_ACCEL_SHARE = 0.75
+PLAN_JUMP_SHARE = 0.5
+#: Speed-up and slow-down parts are cut into pieces whose planned speed changes by at most
+#: this share of the junction jump from one piece to the next, and of at least this many
+#: steps (rounding a shorter piece to whole steps would shake its rate too much).
+PLAN_PIECE_JUMP_SHARE = 0.6
+PLAN_MIN_PIECE_STEPS = 3
 
 
 @dataclass(frozen=True)
 class Planned(Stepped):
-    """The stepped job after cutting its segments into pieces, with per segment the laser
+    """The stepped job after cutting the ramps into pieces, with per segment the laser
     `power` (0–255, 0 on travel), the piece's part [f0, f1] of the segment it was cut from,
     and the planned `duration_us`."""
 
@@ -67,10 +65,10 @@ def _settings(profile: Profile, routed: Routed,
     return power, feed, stop
 
 
-def _cut_pieces(mot: Motors, checker: PoseChecker, sp: Stepped, counts: IntArray,
+def _cut_ramps(mot: Motors, checker: PoseChecker, sp: Stepped, counts: IntArray,
                f1: FloatArray
                ) -> tuple[FloatArray, FloatArray, IntArray, IntArray, FloatArray, FloatArray]:
-    """Step 1: segment k cut into `counts[k]` pieces ending at fractions `f1` of it. Returns
+    """Step 2: segment k cut into `counts[k]` pieces ending at fractions `f1` of it. Returns
     the new targets (angles, points, absolute steps; pieces that round to no move dropped),
     and per piece its segment and its part [f0, f1] of it."""
     th_all, pts_all = sp.th, sp.pts
@@ -94,30 +92,39 @@ def _cut_pieces(mot: Motors, checker: PoseChecker, sp: Stepped, counts: IntArray
 
 
 def plan_timing(su: Setup, routed: Routed, solved: Solved, sp: Stepped) -> Planned:
-    """Durations for every segment (module doc: steps 1–3)."""
+    """Durations for every segment (module doc: steps 1–4)."""
     power, feed, stop = _settings(su.profile, routed, sp)
     return time_stepped(su.profile, solved.checker, sp, power, feed, stop)
 
 
 def time_stepped(profile: Profile, checker: PoseChecker, sp: Stepped,
                  power: NDArray[np.uint8], feed: FloatArray, stop: BoolArray) -> Planned:
-    """Steps 1–3 of the module doc on stepped segments with their laser power, pen feed
+    """Steps 1–4 of the module doc on stepped segments with their laser power, pen feed
     (mm/s) and stops given per segment (also used by the GRBL bridge's online compiler,
     `fivebar_host.grbl.online`, on small batches of moves)."""
     mot, motion = profile.motors, profile.motion
-    n_steps = np.abs(np.diff(sp.steps, axis=0)).max(axis=1)
-    counts, f1 = planner.cut_fractions(
-        n_steps, planner.piece_sizes(PIECE_FIRST_STEPS, PIECE_GROWTH_STEPS, PIECE_MAX_PER_END))
-    th_all, pts_all, st, seg_of, f0, f1 = _cut_pieces(mot, checker, sp, counts, f1)
+    a_c = PLAN_ACCEL_SHARE * motion.max_joint_rad_s2
+    j_lim = planner.JUNCTION_JUMP_RAD_S
+    prof_kw = {"junction_jump_rad_s": PLAN_JUMP_SHARE * j_lim,
+               "min_duration_s": protocol.P_MIN_US * 1e-6,
+               "corner_accel_rad_s2": (1.0 - PLAN_ACCEL_SHARE) * motion.max_joint_rad_s2}
+    dq = np.diff(steps.step_angles(sp.steps, mot.home_rad, mot.steps_per_rev), axis=0)
+    pln = planner.plan(dq, sp.length, feed, motion.max_joint_rad_s, a_c, stop_after=stop,
+                       **prof_kw)
+    counts, f1 = planner.ramp_fractions(pln, np.abs(dq).max(axis=1), a_c,
+                                        PLAN_PIECE_JUMP_SHARE * j_lim / a_c,
+                                        PLAN_MIN_PIECE_STEPS * mot.rad_per_step)
+    th_all, pts_all, st, seg_of, f0, f1 = _cut_ramps(mot, checker, sp, counts, f1)
     seg_draw = sp.draw[seg_of]
     power, feed = power[seg_of], feed[seg_of]
     stop = stop[seg_of] & np.concatenate((seg_of[1:] != seg_of[:-1], [True]))
     length = np.where(seg_draw, sp.length[seg_of] * (f1 - f0),
                       np.hypot(*np.diff(pts_all, axis=0).T))
     dq = np.diff(steps.step_angles(st, mot.home_rad, mot.steps_per_rev), axis=0)
-    duration_us = planner.staircase_durations(
-        dq, length, feed, motion.max_joint_rad_s, motion.max_joint_rad_s2, stop,
-        planner.JUNCTION_JUMP_RAD_S, protocol.P_MIN_US)
+    pln = planner.plan(dq, length, feed, motion.max_joint_rad_s, a_c, stop_after=stop,
+                       **prof_kw)
+    duration_us = planner.enforce_staircase(dq, pln.duration_us, stop,
+                                            motion.max_joint_rad_s2, j_lim)
     return Planned(th=th_all, pts=pts_all, draw=seg_draw, path=sp.path[seg_of],
                    source=sp.source[seg_of], line=sp.line[seg_of], length=length,
                    perm=sp.perm[seg_of], steps=st, power=power, f0=f0, f1=f1,
