@@ -167,15 +167,21 @@ function optionField(o) {
   if (o.range) label.append(el('small', 'muted', o.range));
   return label;
 }
+// The options this machine takes from the page: the daemon jobs use its own profile's pen
+// settings (the pen overrides are refused), and a pen machine has no laser.
+function pageOptions() {
+  return S.options.filter(o => !o.name.startsWith('pen_')
+                               && !(o.name === 'laser' && S.features.pen));
+}
 function buildForm() {
   const form = $('#options');
-  form.replaceChildren(...S.options.map(optionField));
+  form.replaceChildren(...pageOptions().map(optionField));
   form.addEventListener('input', invalidate);
 }
 function queryString() {
   const q = new URLSearchParams();
   q.append('name', S.file.name);
-  for (const o of S.options) {
+  for (const o of pageOptions()) {
     const input = document.getElementById('opt-' + o.query);
     if (!input) continue;
     if (o.kind === 'bool') {
