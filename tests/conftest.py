@@ -6,6 +6,8 @@ from pathlib import Path
 
 import pytest
 
+from fivebar_host.devices import sim
+
 
 @pytest.fixture
 def quick_profile(tmp_path: Path) -> Path:
@@ -16,3 +18,12 @@ def quick_profile(tmp_path: Path) -> Path:
     p.write_text(text.replace("reply_timeout_s = 10.0", "reply_timeout_s = 1.0")
                  .replace("banner_timeout_s = 5.0", "banner_timeout_s = 1.0"))
     return p
+
+
+@pytest.fixture(scope="session")
+def sim_build() -> sim.BuildPaths:
+    """Firmware and harness, built once per session; skip only without the toolchain."""
+    reason = sim.toolchain_missing()
+    if reason is not None:
+        pytest.skip(f"emulator unavailable: {reason}")
+    return sim.ensure_built()

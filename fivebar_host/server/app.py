@@ -526,6 +526,21 @@ def _job_routes(app: FastAPI, ctx: _Ctx) -> None:
         return Response(status_code=204)
 
 
+def machine_action(worker: Worker, fn: Any) -> MachineOut:
+    """Run a manual machine action on the machine thread; its outcome as the API answers
+    it: the machine afterwards, or 409 (not now: a job runs, alarm, unknown pose, unsafe),
+    504 (did not finish in time) or 502 (a link fault, whose message says what happened)."""
+    try:
+        fn()
+    except ActionError as e:
+        raise ApiError(409, "conflict", str(e)) from e
+    except TimeoutError as e:
+        raise ApiError(504, "timeout", "the machine did not finish in time") from e
+    except Exception as e:  # a link fault: the message says what happened
+        raise ApiError(502, "machine_error", str(e)) from e
+    return MachineOut(**worker.machine())
+
+
 def _machine_routes(app: FastAPI, ctx: _Ctx) -> None:
     worker = ctx.worker
 
@@ -536,12 +551,4 @@ def _machine_routes(app: FastAPI, ctx: _Ctx) -> None:
                                    "confirms the arms are at the profile's home pose.")
              ) -> MachineOut:
         """Home: `$H` with endstops, else set the position to the home pose (G92 A0 B0)."""
-        try:
-            worker.home(at_home)
-        except ActionError as e:
-            raise ApiError(409, "conflict", str(e)) from e
-        except TimeoutError as e:
-            raise ApiError(504, "timeout", "homing did not finish in time") from e
-        except Exception as e:  # a link fault: the message says what happened
-            raise ApiError(502, "machine_error", str(e)) from e
-        return MachineOut(**worker.machine())
+        return machine_action(worker, lambda: worker.home(at_home))

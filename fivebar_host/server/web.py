@@ -45,10 +45,10 @@ from fivebar_host.server.app import (
     _Ctx,
     compile_request,
     job_out,
+    machine_action,
 )
 from fivebar_host.server.events import JOBS_SENT, EventHub
 from fivebar_host.server.jobs import SubmitError
-from fivebar_host.server.machine import ActionError
 
 #: The page's files: name → media type. Only these are served.
 STATIC_TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=utf-8",
@@ -244,15 +244,7 @@ def _manual_routes(app: FastAPI, ctx: _Ctx) -> None:
               "or in alarm, the position is unknown, or the move is not safe."}}
 
     def done(fn: Any) -> MachineOut:
-        try:
-            fn()
-        except ActionError as e:
-            raise ApiError(409, "conflict", str(e)) from e
-        except TimeoutError as e:
-            raise ApiError(504, "timeout", "the machine did not finish in time") from e
-        except Exception as e:  # a link fault: the message says what happened
-            raise ApiError(502, "machine_error", str(e)) from e
-        return MachineOut(**worker.machine())
+        return machine_action(worker, fn)
 
     @app.post("/api/machine/jog", response_model=MachineOut, tags=["machine"],
               responses=responses)

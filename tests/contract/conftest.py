@@ -17,17 +17,6 @@ from pathlib import Path
 import pytest
 from contract_devices import Device, Endstops, open_mock, open_sim
 
-from fivebar_host.devices import sim
-
-
-@pytest.fixture(scope="session")
-def sim_build() -> sim.BuildPaths:
-    """Firmware and harness, built once per session; skip only without the toolchain."""
-    reason = sim.toolchain_missing()
-    if reason is not None:
-        pytest.skip(f"emulator unavailable: {reason}")
-    return sim.ensure_built()
-
 
 @pytest.fixture(params=["mock", pytest.param("sim", marks=pytest.mark.sim)])
 def device_kind(request: pytest.FixtureRequest) -> str:

@@ -9,16 +9,6 @@ import pytest
 from grbl_client import GrblClient
 from grbl_support import Running, start_bridge, stop_bridge
 
-from fivebar_host.devices import sim
-
-
-@pytest.fixture(scope="session")
-def sim_build() -> sim.BuildPaths:
-    reason = sim.toolchain_missing()
-    if reason is not None:
-        pytest.skip(f"emulator unavailable: {reason}")
-    return sim.ensure_built()
-
 
 @pytest.fixture(params=["mock", pytest.param("sim", marks=pytest.mark.sim)])
 def bridge(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Running]:
