@@ -174,3 +174,25 @@ def test_ctrl_c_holds_and_names_the_exact_segment() -> None:
     assert line_param(job.steps[k], job.steps[k + 1], pos) is not None
     assert sum(b.done < 1.0 for b in board.blocks) <= 1  # stopped once, nothing after
     assert board.received[-1] != job_program_last(job, prof)  # the job did not finish
+
+
+def test_home_jog_frame_and_convert_on_grbl(tmp_path: Path) -> None:
+    _configure("mc")
+    url = "fivebar-grbl://mc?speed=50"
+    code, out = _cli("home", "--controller", "grbl", "--port", url, "--yes")
+    assert code == 0 and "homed: X 120.000°, Y 60.000°" in out, out
+    code, out = _cli("jog", "--controller", "grbl", "--port", url, "--yes", "--motor", "A",
+                     "--steps", "200")
+    assert code == 0, out
+    board = grblmock.board("mc")
+    assert board.blocks[-1].end[:2] == (200, 0)  # GRBL's steps are fivebar's steps
+    code, out = _cli("frame", str(TEXT), "--controller", "grbl", "--port", url, "--yes")
+    assert code == 0, out  # the board rebooted on open: the count restarted at the arms
+    assert board.blocks[-1].end[:2] == (0, 0) and all(b.laser == 0 for b in board.blocks)
+    out_file = tmp_path / "job.nc"
+    code, out = _cli("convert", str(TEXT), "--controller", "grbl", "-o", str(out_file),
+                     "--laser")
+    assert code == 0, out
+    text = out_file.read_text().splitlines()
+    assert text[0].startswith("G21 G90") and any(x.startswith("M4 S") for x in text)
+    assert not any(" A" in x and x.startswith("G1") for x in text)
