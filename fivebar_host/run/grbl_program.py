@@ -76,7 +76,9 @@ def soft_limits(profile: Profile) -> tuple[bool, float, float]:
 
 def needed_settings(profile: Profile) -> list[Setting]:
     """The `$` settings the board needs for this profile (`fivebar grbl-settings`): laser
-    mode on, unless the profile has a servo pen (a GRBL servo build, `$32=0`)."""
+    mode on, unless the profile has a servo pen (a GRBL servo build, `$32=0`). The reasons
+    are plain ASCII: they ride on the lines as `;` comments, and GRBL takes bytes ≥ 0x80 as
+    real-time commands (UTF-8's 0x94 or 0x97 would be feed or rapid overrides)."""
     m, mo = profile.motors, profile.motion
     spd = steps_per_degree(profile)
     rate = math.degrees(mo.max_joint_rad_s) * 60.0
@@ -84,19 +86,19 @@ def needed_settings(profile: Profile) -> list[Setting]:
     span = [math.degrees(v[1] - v[0]) for v in m.limits_rad]
     soft, pull, _ = soft_limits(profile)
     servo = profile.pen is not None
-    motors = f"{m.full_steps:g} × {m.microsteps:g} × {m.gear_ratio:g} / 360"
+    motors = f"{m.full_steps:g} x {m.microsteps:g} x {m.gear_ratio:g} / 360"
     return [
         Setting(10, 1, "status reports MPos (machine position in degrees)", 0),
         Setting(13, 0, "report in the machine's units (degrees), not inches", 0),
         Setting(20, 1 if soft else 0, "soft limits = joint limits" if soft else
-                "soft limits off: GRBL's cannot hold these joint limits (docs/grbl.md); "
-                "the host checks every target", 0),
+                "soft limits off: GRBL's 0...-travel cannot mirror these joint limits; the "
+                "host checks every target", 0),
         Setting(22, 1 if m.endstops else 0, "homing cycle" if m.endstops else
                 "no endstops: no homing cycle", 0),
-        Setting(27, pull, "homing pull-off = upper joint limit − home angle" if soft else
+        Setting(27, pull, "homing pull-off = upper joint limit - home angle" if soft else
                 "homing pull-off (unused)"),
-        Setting(30, S_MAX, "maximum S: laser power 255 ↔ S1000" if not servo else
-                "maximum S: servo pulse 0.5 ms ↔ S0, 2.5 ms ↔ S1000", 0),
+        Setting(30, S_MAX, "maximum S: laser power 255 = S1000" if not servo else
+                "maximum S: servo pulse 0.5 ms = S0, 2.5 ms = S1000", 0),
         Setting(31, 0, "minimum S", 0),
         Setting(32, 0 if servo else 1,
                 "laser mode (M4 power follows speed, off in G0 and holds)" if not servo
@@ -105,8 +107,8 @@ def needed_settings(profile: Profile) -> list[Setting]:
         Setting(101, spd, f"B motor steps per degree: {motors}", 6),
         Setting(110, rate, f"A max rate, deg/min (max_joint_rad_s {mo.max_joint_rad_s:g})"),
         Setting(111, rate, f"B max rate, deg/min (max_joint_rad_s {mo.max_joint_rad_s:g})"),
-        Setting(120, acc, f"A acceleration, deg/s² (max_joint_rad_s2 {mo.max_joint_rad_s2:g})"),
-        Setting(121, acc, f"B acceleration, deg/s² (max_joint_rad_s2 {mo.max_joint_rad_s2:g})"),
+        Setting(120, acc, f"A acceleration, deg/s^2 (max_joint_rad_s2 {mo.max_joint_rad_s2:g})"),
+        Setting(121, acc, f"B acceleration, deg/s^2 (max_joint_rad_s2 {mo.max_joint_rad_s2:g})"),
         Setting(130, span[0], "A travel = joint range, degrees"),
         Setting(131, span[1], "B travel = joint range, degrees"),
     ]
