@@ -253,7 +253,7 @@ class GrblLink:
         st = StreamState()
         self._skipped.clear()
         inflight: deque[int] = deque()
-        last_poll = time.monotonic()
+        last_poll = last_heard = time.monotonic()
         i = 0
         while i < len(lines) or inflight:
             if should_stop is not None and should_stop():
@@ -269,9 +269,11 @@ class GrblLink:
                 last_poll = time.monotonic()
             reply = self._skipped.popleft() if self._skipped else self._readline(0.05)
             if reply is None:
-                if time.monotonic() - last_poll > self.reply_timeout_s:
-                    raise GrblStreamError(f"{self.url}: the board went silent", st)
+                if time.monotonic() - last_heard > self.reply_timeout_s:
+                    raise GrblStreamError(f"{self.url}: the board went silent for "
+                                          f"{self.reply_timeout_s:g} s", st)
                 continue
+            last_heard = time.monotonic()
             self._take(reply, st, inflight, lines)
             if on_progress is not None:
                 on_progress(st)
