@@ -4,7 +4,8 @@ Only this package imports click. One module per command group (vpype's library/C
 `common` (the group, errors, the generated job options), `plot` (convert, plot), `remote`
 (plot --server), `machine` (home, jog, frame), `pen` (pen up|down|toggle, motors off), `pose`
 (config check, ik, fk), `design` (workspace, design, linkage), `calibrate` (pattern, fit,
-check), `bridge` (the GRBL front door) and `serve` (the daemon). Each command parses units at
+check), `bridge` (the GRBL front door), `grbl` (`--controller grbl`,
+grbl-settings) and `serve` (the daemon). Each command parses units at
 the edge, calls pure functions, and turns fivebar's errors into one line and a non-zero exit.
 """
 
@@ -12,6 +13,7 @@ from fivebar_host.cli import (  # noqa: F401  (commands)
     bridge,
     calibrate,
     design,
+    grbl,
     machine,
     pen,
     plot,

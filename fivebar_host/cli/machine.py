@@ -21,18 +21,25 @@ from fivebar_host.cli.common import (
     position_text,
     yes_option,
 )
+from fivebar_host.cli.grbl import controller_option
 
 
 @main.command("home")
 @port_option
 @yes_option
+@controller_option
 @config_option
 @handle_errors
-def home_cmd(port: str | None, yes: bool, config_path: Path | None) -> None:
+def home_cmd(port: str | None, yes: bool, controller: str, config_path: Path | None) -> None:
     """Give the firmware a known position: $H with endstops, else confirm the home pose."""
     from fivebar_host.run.sender import home
 
     prof = load(config_path)
+    if controller == "grbl":
+        from fivebar_host.cli.grbl import grbl_home
+
+        grbl_home(port, prof, yes)
+        return
     link = open_link(port, prof)
     try:
         st = home(link, prof, confirm_with(yes))
@@ -49,10 +56,11 @@ def home_cmd(port: str | None, yes: bool, config_path: Path | None) -> None:
 @click.option("--dx", type=float, default=0.0, help="Move the pen by this much in x, mm.")
 @click.option("--dy", type=float, default=0.0, help="Move the pen by this much in y, mm.")
 @yes_option
+@controller_option
 @config_option
 @handle_errors
 def jog(port: str | None, motor: str | None, steps: int, dx: float, dy: float, yes: bool,
-        config_path: Path | None) -> None:
+        controller: str, config_path: Path | None) -> None:
     """Move one motor by --steps, or the pen by --dx/--dy mm (laser off).
 
     A pen move needs a known position (homed) and is checked; a motor move before homing
@@ -65,6 +73,14 @@ def jog(port: str | None, motor: str | None, steps: int, dx: float, dy: float, y
     prof = load(config_path)
     kin = prof.kinematics
     mode = kin.working_mode if kin.working_mode != "auto" else "+-"
+    if controller == "grbl":
+        from fivebar_host.cli.grbl import grbl_moves
+
+        pos = grbl_moves(port, prof, yes, lambda p: jog_lines(
+            prof, 1 if kin.assembly == "+" else -1, mode, p, motor=motor, steps=steps,
+            dxy_mm=None if motor else (dx, dy), checked=True))
+        click.echo(f"at {position_text(prof, *pos)}")
+        return
     link = open_link(port, prof)
     try:
         st = link.status()
@@ -88,15 +104,22 @@ def jog(port: str | None, motor: str | None, steps: int, dx: float, dy: float, y
 @click.argument("drawing", type=click.Path(dir_okay=False, path_type=Path))
 @port_option
 @yes_option
+@controller_option
 @job_options(laser=False)
 @handle_errors
-def frame(drawing: Path, port: str | None, yes: bool, config_path: Path | None,
-          **job_values: Any) -> None:
+def frame(drawing: Path, port: str | None, yes: bool, controller: str,
+          config_path: Path | None, **job_values: Any) -> None:
     """Trace the outline (bounding box) of DRAWING's job with the laser off, then go home."""
     from fivebar_host.run.program import frame_program
     from fivebar_host.run.sender import ensure_known_pose
 
     prof, job = compile_from_cli(drawing, config_path, job_values)
+    if controller == "grbl":
+        from fivebar_host.cli.grbl import grbl_moves
+
+        pos = grbl_moves(port, prof, yes, lambda p: frame_program(job, prof, p).bodies)
+        click.echo(f"framed; back at {position_text(prof, *pos)}")
+        return
     link = open_link(port, prof)
     try:
         st = ensure_known_pose(link, prof, confirm_with(yes))

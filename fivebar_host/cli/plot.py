@@ -29,6 +29,7 @@ from fivebar_host.cli.common import (
     position_text,
     yes_option,
 )
+from fivebar_host.cli.grbl import controller_option
 from fivebar_host.cli.remote import server_option
 from fivebar_host.config import Profile
 from fivebar_host.run.sender import Progress
@@ -40,17 +41,24 @@ from fivebar_host.run.sender import Progress
               required=True, help="Where to write the firmware lines.")
 @click.option("--relative", is_flag=True,
               help="Relative step moves (G91) instead of absolute targets (G90).")
+@controller_option
 @job_options()
 @handle_errors
-def convert(drawing: Path, output: Path, relative: bool, config_path: Path | None,
-            **job_values: Any) -> None:
+def convert(drawing: Path, output: Path, relative: bool, controller: str,
+            config_path: Path | None, **job_values: Any) -> None:
     """Compile DRAWING (SVG or G-code) into firmware-ready step lines (G1 A B P S).
 
-    Without --laser the job is a pen plot: S0 on every line."""
+    Without --laser the job is a pen plot: S0 on every line. With --controller grbl: the
+    lines a stock GRBL board runs (G1 X<θA> Y<θB> F in degrees)."""
     from fivebar_host.compile import encode_lines, mode_sequence, write_atomic
 
     laser = bool(job_values["laser"])
     prof, job = compile_from_cli(drawing, config_path, job_values)
+    if controller == "grbl":
+        from fivebar_host.cli.grbl import grbl_convert
+
+        grbl_convert(output, prof, job, laser)
+        return
     lines = encode_lines(job, prof, relative=relative, laser=laser)
     write_atomic(output, "\n".join(lines) + "\n")
     tool = (f"laser (power up to S{int(job.power.max(initial=0))})" if laser
@@ -72,10 +80,11 @@ def convert(drawing: Path, output: Path, relative: bool, config_path: Path | Non
 @click.option("--resume", is_flag=True,
               help="Continue an interrupted plot from its resume file (same drawing and options).")
 @yes_option
+@controller_option
 @job_options()
 @handle_errors
 def plot(drawing: Path, dry_run: bool, preview_path: Path, port: str | None, resume: bool,
-         yes: bool, config_path: Path | None, **job_values: Any) -> None:
+         yes: bool, controller: str, config_path: Path | None, **job_values: Any) -> None:
     """Compile and check DRAWING, then plot it on the machine at --port (or --dry-run).
 
     Everything is checked before anything moves. Ctrl-C holds the machine at once (laser
@@ -98,6 +107,14 @@ def plot(drawing: Path, dry_run: bool, preview_path: Path, port: str | None, res
         click.echo(f"preview       {preview_path}")
         return
     assert port is not None
+    if controller == "grbl":
+        from fivebar_host.cli.grbl import grbl_plot
+
+        if resume:
+            fail("--resume is not available with --controller grbl (GRBL reports no line "
+                 "numbers; a stopped GRBL job names the segment where the pen stopped)")
+        grbl_plot(port, prof, job, laser=laser, yes=yes)
+        return
     _stream_plot(drawing, port, prof, job, laser=laser, resume=resume, yes=yes,
                  preview_path=preview_path)
 

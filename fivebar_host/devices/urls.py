@@ -24,9 +24,10 @@ def _install(scheme: str, module: ModuleType) -> None:
 
 
 def register() -> None:
-    """Register ``fivebar-mock://`` and ``fivebar-sim://``; idempotent."""
-    from fivebar_host.devices import mock, simport
+    """Register ``fivebar-mock://``, ``fivebar-sim://`` and ``fivebar-grbl://``; idempotent."""
+    from fivebar_host.devices import grblmock, mock, simport
 
+    _install(grblmock.SCHEME, grblmock)
     _install(mock.SCHEME, mock)
     _install(simport.SCHEME, simport)
     if PACKAGE not in serial.protocol_handler_packages:

@@ -1,0 +1,198 @@
+"""`--controller grbl`: fivebar drives a stock GRBL 1.1 board (the `fivebar-grbl://` model)
+in joint space — settings, refusal, the drawn path, the laser, character counting, holds."""
+
+from __future__ import annotations
+
+import math
+import re
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import serial
+from click.testing import CliRunner
+
+from fivebar_host.cli import main
+from fivebar_host.compile import CompileOptions, compile_job
+from fivebar_host.config import load_profile
+from fivebar_host.devices import grblmock, urls
+from fivebar_host.executed import executed_path
+from fivebar_host.run.grbl_link import GrblError, GrblLink
+from fivebar_host.run.grbl_run import run_grbl_job
+from fivebar_host.run.program import line_param
+
+ROOT = Path(__file__).resolve().parents[1]
+TEXT = ROOT / "examples" / "fivebar_text.svg"
+
+
+@pytest.fixture(autouse=True)
+def _boards() -> None:
+    urls.register()
+    grblmock.forget_boards()
+
+
+def _cli(*args: str) -> tuple[int, str]:
+    res = CliRunner().invoke(main, list(args))
+    return res.exit_code, res.output
+
+
+def _configure(name: str) -> None:
+    """Send `fivebar grbl-settings` to the board line by line, as a user would."""
+    code, out = _cli("grbl-settings", "--config", str(ROOT / "configs" / "default.toml"))
+    assert code == 0
+    port = serial.serial_for_url(f"fivebar-grbl://{name}", timeout=1.0)
+    try:
+        port.readline(), port.readline()  # banner
+        for line in out.splitlines():
+            port.write((line + "\n").encode())
+            assert port.readline() == b"ok\r\n", line
+    finally:
+        port.close()
+
+
+def test_grbl_settings_match_an_independent_computation() -> None:
+    code, out = _cli("grbl-settings", "--config", str(ROOT / "configs" / "default.toml"))
+    assert code == 0 and out.isascii()  # GRBL takes bytes >= 0x80 as real-time commands
+    got = {int(r.split("=")[0][1:]): float(r.split("=")[1].split()[0])
+           for r in out.splitlines()}
+    # configs/default.toml: 200 full steps × 16 microsteps × 4:1, 6 rad/s, 60 rad/s²,
+    # limits [10, 170]° on both joints, no endstops, no servo pen.
+    spd = 200 * 16 * 4 / 360
+    assert got[100] == pytest.approx(spd, abs=1e-6) and got[101] == got[100]
+    assert got[110] == pytest.approx(6 * 180 / math.pi * 60, abs=1e-3) == got[111]
+    assert got[120] == pytest.approx(60 * 180 / math.pi, abs=1e-3) == got[121]
+    assert got[130] == got[131] == 160.0
+    assert (got[32], got[30], got[20], got[22], got[13], got[10]) == (1, 1000, 0, 0, 0, 1)
+
+
+def test_plot_draws_the_job_with_the_laser_only_while_drawing() -> None:
+    _configure("plot")
+    code, out = _cli("plot", str(TEXT), "--controller", "grbl", "--laser", "--yes",
+                     "--port", "fivebar-grbl://plot?speed=50")
+    assert code == 0, out
+    board = grblmock.board("plot")
+    assert board.overflow == 0
+    prof = load_profile()
+    job = compile_job(TEXT, prof, CompileOptions())
+    t, track, laser = grblmock.executed_steps(board.blocks)
+    bound = job.tolerance_mm + job.step_quantum_mm
+    ex = executed_path(job, prof, t, track)
+    assert ex.segments_completed == job.n_segments
+    measured = ex.deviation_mm[~np.isnan(ex.deviation_mm)]
+    assert measured.size > 1000 and np.isfinite(measured).all()
+    print(f"GRBL executed path: max deviation {ex.max_deviation_mm:.4f} mm over "
+          f"{measured.size} step events (bound {bound:.4f} mm)")
+    assert 0.0 < ex.max_deviation_mm <= bound
+    on_draw = job.draw[np.maximum(ex.segment, 0)] & (ex.segment >= 0)
+    assert not (laser & ~on_draw).any(), "laser on outside a drawing segment"
+    drawing = on_draw & (job.power[np.maximum(ex.segment, 0)] > 0)
+    assert laser[drawing].all(), "laser off while drawing"
+    # the planned durations reach GRBL: its run time at nominal rates ≈ the plan
+    ran = sum(b.duration_s for b in board.blocks)
+    assert ran == pytest.approx(job.total_time_s, rel=0.01)
+
+
+def test_plot_refuses_a_board_with_other_settings() -> None:
+    grblmock.board("stock")  # GRBL's defaults: $100=250, $32=0 …
+    code, out = _cli("plot", str(TEXT), "--controller", "grbl", "--laser", "--yes",
+                     "--port", "fivebar-grbl://stock?speed=50")
+    assert code == 3
+    assert "$100: board 250, needed 35.555556" in out
+    assert "$32: board 0, needed 1" in out and "$120: board 10, needed 3437.747" in out
+    assert grblmock.board("stock").blocks == []
+
+
+def test_character_counting_keeps_the_receive_buffer_from_overflowing() -> None:
+    lines = [f"G1 X{120 + 0.01 * i:.4f} Y60.0000 F600" for i in range(60)]
+    port = serial.serial_for_url("fivebar-grbl://raw?speed=1", timeout=0.2)
+    port.write(("G10 L2 P1 X-120 Y-60\n" + "\n".join(lines) + "\n").encode())
+    time.sleep(0.2)
+    replies = port.read(4000).decode()
+    port.close()
+    blind = grblmock.board("raw")  # a sender that does not count: bytes and lines lost
+    assert blind.overflow > 0 and len(blind.received) < 1 + len(lines)
+    assert replies.count("ok") < 1 + len(lines)
+    link = GrblLink.open("fivebar-grbl://counted?speed=200")
+    try:
+        link.command("G10 L2 P1 X-120 Y-60")
+        st = link.stream(lines)
+        link.wait_idle(10.0)
+    finally:
+        link.close()
+    counted = grblmock.board("counted")
+    assert counted.overflow == 0 and st.acked == len(lines) == len(counted.received) - 1
+
+
+def test_mock_answers_as_grbl_documents() -> None:
+    link = GrblLink.open("fivebar-grbl://doc")
+    try:
+        for bad, code in (("G1 X1", "error:22"), ("G2 X1 Y1 I1", "error:20"),
+                          ("$20=1", "error:10"), ("$999=1", "error:3")):
+            with pytest.raises(GrblError, match=code):
+                link.command(bad)
+        st = link.status()
+        assert st.state == "Idle" and st.machine == (0.0, 0.0) and st.wco == (0.0, 0.0)
+    finally:
+        link.close()
+
+
+def job_program_last(job: object, prof: object) -> str:
+    """The job's last motion line as the board would log it."""
+    from fivebar_host.run.grbl_program import job_program
+
+    lines = [x for x in job_program(job, prof, True).lines  # type: ignore[arg-type]
+             if x.startswith("G1")]
+    return lines[-1].replace(" ", "")
+
+
+def test_ctrl_c_holds_and_names_the_exact_segment() -> None:
+    _configure("hold")
+    prof = load_profile()
+    job = compile_job(TEXT, prof, CompileOptions())
+    link = GrblLink.open("fivebar-grbl://hold?speed=5")
+    calls = {"n": 0}
+
+    def stop() -> bool:
+        calls["n"] += 1
+        return calls["n"] == 300
+
+    try:
+        with pytest.raises(GrblError, match=r"in segment (\d+) of") as info:
+            run_grbl_job(link, job, prof, laser=True, confirm=lambda q: True,
+                         should_stop=stop, on_interrupt=lambda: False)
+    finally:
+        link.close()
+    found = re.search(r"in segment (\d+) of", str(info.value))
+    assert found is not None and "Laser off" in str(info.value)
+    k = int(found.group(1))
+    board = grblmock.board("hold")
+    last = board.blocks[-1]
+    pos = last.start[:2] if last.done == 0 else tuple(
+        round(last.start[i] + last.done * (last.end[i] - last.start[i])) for i in range(2))
+    assert 0 < k < job.n_segments
+    assert line_param(job.steps[k], job.steps[k + 1], pos) is not None
+    assert sum(b.done < 1.0 for b in board.blocks) <= 1  # stopped once, nothing after
+    assert board.received[-1] != job_program_last(job, prof)  # the job did not finish
+
+
+def test_home_jog_frame_and_convert_on_grbl(tmp_path: Path) -> None:
+    _configure("mc")
+    url = "fivebar-grbl://mc?speed=50"
+    code, out = _cli("home", "--controller", "grbl", "--port", url, "--yes")
+    assert code == 0 and "homed: X 120.000°, Y 60.000°" in out, out
+    code, out = _cli("jog", "--controller", "grbl", "--port", url, "--yes", "--motor", "A",
+                     "--steps", "200")
+    assert code == 0, out
+    board = grblmock.board("mc")
+    assert board.blocks[-1].end[:2] == (200, 0)  # GRBL's steps are fivebar's steps
+    code, out = _cli("frame", str(TEXT), "--controller", "grbl", "--port", url, "--yes")
+    assert code == 0, out  # the board rebooted on open: the count restarted at the arms
+    assert board.blocks[-1].end[:2] == (0, 0) and all(b.laser == 0 for b in board.blocks)
+    out_file = tmp_path / "job.nc"
+    code, out = _cli("convert", str(TEXT), "--controller", "grbl", "-o", str(out_file),
+                     "--laser")
+    assert code == 0, out
+    text = out_file.read_text().splitlines()
+    assert text[0].startswith("G21 G90") and any(x.startswith("M4 S") for x in text)
+    assert not any(" A" in x and x.startswith("G1") for x in text)
