@@ -90,7 +90,7 @@ def test_comments_line_numbers_checksums() -> None:
 @pytest.mark.parametrize(("text", "line", "what"), [
     ("G1 X1\nG1 Z-1\n", 2, "unsupported axis word Z-1"),
     ("G1 X1\nG28\n", 2, "unsupported G-code word G28"),
-    ("G4 P1\n", 1, "unsupported G-code word G4"),
+    ("G1 X1\nG4 P1 G28\n", 2, "unsupported G-code word G28"),
     ("M6 T1\n", 1, "unsupported M-code word M6"),
     ("G1 X1 Q5\n", 1, "unsupported word Q5"),
     ("G1 X1\nG1 X$\n", 2, "cannot read"),

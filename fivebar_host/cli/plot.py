@@ -30,8 +30,10 @@ from fivebar_host.cli.common import (
     yes_option,
 )
 from fivebar_host.cli.grbl import controller_option
+from fivebar_host.cli.keys import HELP, override_keys
 from fivebar_host.cli.remote import server_option
 from fivebar_host.config import Profile
+from fivebar_host.run.overrides import FEED_MAX_PCT, Overrides
 from fivebar_host.run.sender import Progress
 
 
@@ -141,24 +143,38 @@ def _stream_plot(drawing: Path, port: str, prof: Profile, job: Any, *, laser: bo
         click.echo("laser/pen power output stays at 0 (no servo pen in the profile: M3/M5 "
                    "only mark pen down/up); pass --laser to burn")
     interrupted = {"flag": False}
+    overrides = Overrides()
 
     def on_sigint(signum: int, frame: Any) -> None:
         interrupted["flag"] = True
 
-    def on_interrupt() -> bool:
-        interrupted["flag"] = False
-        return _ask_resume()
-
     link = open_link(port, prof)
     previous = signal.signal(signal.SIGINT, on_sigint)
     try:
-        with _progress_display(job.n_segments) as on_progress:
-            report = run_job(link, job, prof, drawing=drawing, laser=laser,
-                             confirm=confirm_with(yes), resume=resume,
-                             confirm_placed=confirm_placed(yes),
-                             on_progress=on_progress,
-                             should_stop=lambda: interrupted["flag"],
-                             on_interrupt=on_interrupt, on_note=click.echo)
+        with override_keys(overrides) as keys:
+            if keys is not None:
+                click.echo(HELP)
+
+            def should_stop() -> bool:
+                if keys is not None:
+                    keys.poll()
+                return interrupted["flag"]
+
+            def on_interrupt() -> bool:
+                interrupted["flag"] = False
+                if keys is None:
+                    return _ask_resume()
+                with keys.paused():
+                    return _ask_resume()
+
+            shown = overrides if keys is not None else None
+            with _progress_display(job.n_segments, shown, laser) as on_progress:
+                report = run_job(link, job, prof, drawing=drawing, laser=laser,
+                                 confirm=confirm_with(yes), resume=resume,
+                                 confirm_placed=confirm_placed(yes),
+                                 on_progress=on_progress, should_stop=should_stop,
+                                 on_interrupt=on_interrupt, on_note=click.echo,
+                                 overrides=overrides)
     finally:
         signal.signal(signal.SIGINT, previous)
         link.close()
@@ -180,13 +196,20 @@ PROGRESS_EVERY_SHARE = 0.1
 
 
 @contextmanager
-def _progress_display(total: int) -> Iterator[Callable[[Progress], None]]:
+def _progress_display(total: int, overrides: Overrides | None = None,
+                      laser: bool = False) -> Iterator[Callable[[Progress], None]]:
     """The progress hook: a progress bar on a terminal; otherwise one line at a steady pace
     ("plotting: 40% (segment 110/275), 4 s elapsed, ≈ 6 s left"), so a log shows that the
-    job advances and when it will end."""
+    job advances and when it will end. With `overrides` (keys on a terminal) the bar shows
+    the requested feed (and, with `laser`, power) and the time left at that feed."""
     def text(p: Progress) -> str:
-        return (f"segment {p.segments_done}/{p.segments_total}, {p.elapsed_s:.0f} s elapsed, "
-                f"≈ {p.remaining_s:.0f} s left")
+        if overrides is None:
+            return (f"segment {p.segments_done}/{p.segments_total}, {p.elapsed_s:.0f} s "
+                    f"elapsed, ≈ {p.remaining_s:.0f} s left")
+        feed, power = overrides.values()
+        left = p.remaining_s * FEED_MAX_PCT / feed
+        return (f"segment {p.segments_done}/{p.segments_total}, ≈ {left:.0f} s left, "
+                f"feed {feed}%" + (f" power {power}%" if laser else ""))
 
     if not sys.stdout.isatty():
         last = {"t": time.monotonic(), "share": 0.0}

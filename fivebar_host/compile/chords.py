@@ -11,16 +11,20 @@ Before that, runs of straight input lines are simplified (`toolpath.simplify`, u
 switched off with `--no-simplify`): a chord that replaces several input lines is within
 ε = tol_f of them, so its budget is tol − ε, and it records the range of primitives it
 covers (`prim_first` … `prim`) so validation measures against the original lines.
+
+A drawing with dwells (G-code `G4`, `geometry.Dwell`) keeps its file order and directions
+(a dwell happens at a stroke's start or end, at its time in the file), and a path never
+joins across a dwell, so every dwell stays at its path's start or end.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from fivebar_host.toolpath import order
-from fivebar_host.toolpath.geometry import LINE, Drawing, Polylines
+from fivebar_host.toolpath.geometry import LINE, Drawing, Dwell, Polylines
 from fivebar_host.toolpath.simplify import simplify_polylines
 from kinematics.arrays import BoolArray, FloatArray, IntArray
 
@@ -48,6 +52,8 @@ class _Chords:
     travel_before: float
     travel_after: float
     simplified: int = 0  # input vertices removed by the simplification
+    #: the drawing's dwells with `stroke` replaced by the job path they start or end
+    dwells: tuple[Dwell, ...] = field(default_factory=tuple)
 
 
 def _prepare_chords(drawing: Drawing, poly: Polylines, tol: float, tol_f: float,
@@ -61,7 +67,8 @@ def _prepare_chords(drawing: Drawing, poly: Polylines, tol: float, tol_f: float,
     npath = offs.shape[0] - 1
     starts = pts0[offs[:-1]]
     ends = pts0[offs[1:] - 1]
-    od = order.order_paths(starts, ends, start, start, keep_order=keep_order)
+    od = order.order_paths(starts, ends, start, start,
+                           keep_order=keep_order or bool(drawing.dwells))
     lens = np.diff(offs)
     ordered_lens = lens[od.order]
     # Vertex index map in the new order (reversed paths walk their vertices backwards).
@@ -92,7 +99,7 @@ def _prepare_chords(drawing: Drawing, poly: Polylines, tol: float, tol_f: float,
     gap = np.hypot(*(pts[new_offs[1:-1]] - pts[new_offs[1:-1] - 1]).T)
     same = (power[1:] == power[:-1]) & ((feed[1:] == feed[:-1])
                                         | (np.isnan(feed[1:]) & np.isnan(feed[:-1])))
-    join = (gap < tol) & same
+    join = (gap < tol) & same & ~_dwell_between(drawing, stroke)
     bridge_tol = np.full(m, np.nan)
     bridge_at = new_offs[1:-1][join] - 1  # vertex that ends path p and starts the bridge
     is_end[bridge_at] = False
@@ -121,4 +128,29 @@ def _prepare_chords(drawing: Drawing, poly: Polylines, tol: float, tol_f: float,
                    path_source=source[keep_path], path_reversed=od.reverse[keep_path],
                    power=power[keep_path], feed=feed[keep_path], joined=int(join.sum()),
                    travel_before=od.travel_before_mm, travel_after=od.travel_after_mm,
-                   simplified=simp.removed)
+                   simplified=simp.removed,
+                   dwells=_path_dwells(drawing, stroke, new_path_of_old))
+
+
+def _dwell_between(drawing: Drawing, stroke: IntArray) -> BoolArray:
+    """For consecutive ordered strokes: whether a dwell ends the first or starts the
+    second (such paths are not joined)."""
+    n = drawing.n_strokes
+    after = np.zeros(n + 1, dtype=bool)
+    before = np.zeros(n + 1, dtype=bool)
+    for d in drawing.dwells:
+        (after if d.after else before)[d.stroke] = True
+    return np.asarray(after[stroke[:-1]] | before[stroke[1:]], dtype=bool)
+
+
+def _path_dwells(drawing: Drawing, stroke: IntArray,
+                 path_of: IntArray) -> tuple[Dwell, ...]:
+    """The dwells on job paths (order kept: a stroke's place in `stroke` is its path before
+    joining, `path_of` maps it to the joined path)."""
+    if not drawing.dwells:
+        return ()
+    where = np.full(drawing.n_strokes, -1, dtype=np.int64)
+    where[stroke] = np.arange(stroke.shape[0])
+    if (where[[d.stroke for d in drawing.dwells]] < 0).any():
+        raise RuntimeError("a dwell's stroke has no path")
+    return tuple(replace(d, stroke=int(path_of[where[d.stroke]])) for d in drawing.dwells)

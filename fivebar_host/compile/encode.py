@@ -59,6 +59,7 @@ def encode_lines(job: Job, profile: Profile, relative: bool = False,
 
         G90 | G91                      absolute or relative step coordinates
         G1 A<steps> B<steps> P<µs> S<0-255>   one per segment, in job order
+        G1 P<µs> S<0-255>              a dwell (G4; `compile.dwell`): no motion
         M5                             at the end
 
     Laser power is opt-in (issue 6): only with `laser=True` (the CLI's `--laser`) do the
@@ -92,14 +93,15 @@ def encode_lines(job: Job, profile: Profile, relative: bool = False,
                  + " / ".join(pen_switch_lines(profile))),
         "G91" if relative else "G90",
     ]
-    body = [protocol.g1(int(a), int(b), int(p), int(s)) for a, b, p, s in
-            zip(st[:, 0].tolist(), st[:, 1].tolist(), job.duration_us.tolist(),
-                power.tolist(), strict=True)]
+    body = [protocol.g1(None if w else int(a), None if w else int(b), int(p), int(s))
+            for a, b, p, s, w in zip(st[:, 0].tolist(), st[:, 1].tolist(),
+                                     job.duration_us.tolist(), power.tolist(),
+                                     job.is_dwell.tolist(), strict=True)]
     if laser:
         return [*head, f"{profile.laser.on_command} S0", *body, "M5"]
     out = [*head, *pen_setup_lines(profile), "M5"]
     down, up = pen_switch_lines(profile)
-    draw = job.draw.tolist()
+    draw = job.tool_on.tolist()
     n = len(draw)
     for k, line in enumerate(body):
         if draw[k] and (k == 0 or not draw[k - 1]):

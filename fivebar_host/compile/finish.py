@@ -75,7 +75,7 @@ def _executed_mode_changes(su: Setup, file: str, home: Home, routed: Routed, tr:
     mode_changes: list[ModeChange] = []
     th_q = steps.step_angles(pd.steps, mot.home_rad, mot.steps_per_rev)
     for j in sorted(tr.changes):
-        segs = np.flatnonzero(~pd.draw & (pd.path == j))
+        segs = np.flatnonzero(~pd.draw & ~pd.dwell & (pd.path == j))
         if not segs.size:
             continue
         s0, s1 = int(segs[0]), int(segs[-1]) + 1
@@ -118,6 +118,17 @@ def _mode_note(su: Setup, home: Home, routed: Routed, n_changes: int) -> str:
             f"{home.pt[1]:.1f}) mm (working mode {home.mode})")
 
 
+def _dwell_notes(routed: Routed) -> list[str]:
+    """One note on the G4 dwells, if any: how many, how long, how many with the tool on."""
+    dw = routed.ch.dwells
+    if not dw:
+        return []
+    on = sum(d.tool_on for d in dw)
+    return [f"{len(dw)} dwell(s) (G4), {sum(d.seconds for d in dw):g} s in all, {on} with "
+            "the tool on (laser at the current power with --laser, pen down); paths drawn "
+            "in file order"]
+
+
 def finish(su: Setup, placed: Placed, home: Home, routed: Routed, solved: Solved,
            tr: Travel, pd: Planned, opts: CompileOptions) -> Job:
     """The `Job` from every stage's result (validated unless `opts.validate` is off)."""
@@ -135,7 +146,7 @@ def finish(su: Setup, placed: Placed, home: Home, routed: Routed, solved: Solved
     quantum = float(steps.step_quantum_mm(jac, mot.rad_per_step).max())
     mode_changes = _executed_mode_changes(su, file, home, routed, tr, pd)
     notes = [_mode_note(su, home, routed, len(mode_changes)), *tr.notes,
-             *placed.drawing.warnings]
+             *placed.drawing.warnings, *_dwell_notes(routed)]
     job = Job(
         file=file, mode=str(routed.path_mode[0]), assembly=su.assembly, tolerance_mm=su.tol,
         flatten_tol_mm=su.tol_f,
@@ -155,7 +166,9 @@ def finish(su: Setup, placed: Placed, home: Home, routed: Routed, solved: Solved
         seg_ca=ch.pts[a[chord_rows]], seg_cb=ch.pts[a[chord_rows] + 1],
         ideal_max_dev_mm=float(iv.dev_mm.max()) if iv.dev_mm.size else 0.0,
         path_modes=tuple(routed.path_mode.tolist()), home_mode=home.mode,
-        mode_changes=tuple(mode_changes), tool_time_s=tool_time_s(seg_draw, su.profile),
+        mode_changes=tuple(mode_changes),
+        tool_time_s=tool_time_s(seg_draw | (pd.dwell & (pd.power > 0)), su.profile),
+        dwell=pd.dwell,
     )
     if opts.validate:
         job = validate(job, su.profile, opts.validation_samples)

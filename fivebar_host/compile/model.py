@@ -99,7 +99,9 @@ class Job:
     `points_mm`, `angles_rad`, `steps` (absolute, int64). Per segment (T rows, target k →
     k+1): `draw`, `power` (0–255, 0 on travel), `path` (job path the segment draws or travels
     to; P for the final park move), `source` (source element index, −1 on travel),
-    `source_line` (0 if unknown), `duration_us` (int64), `length_mm` (requested pen path)."""
+    `source_line` (0 if unknown), `duration_us` (int64), `length_mm` (requested pen path),
+    `dwell` (a G-code dwell: no motion, not a drawing segment, `power` the laser power it
+    burns with; `compile.dwell`; empty: none)."""
 
     file: str
     mode: str
@@ -148,11 +150,28 @@ class Job:
     mode_changes: tuple[ModeChange, ...] = ()
     # pen servo moves and settle delays between the segments (0 without a pen), s
     tool_time_s: float = 0.0
+    dwell: BoolArray = field(default_factory=lambda: np.zeros(0, bool))
 
     # ------------------------------------------------------------------ derived
     @property
     def n_segments(self) -> int:
         return int(self.draw.shape[0])
+
+    @property
+    def is_dwell(self) -> BoolArray:
+        """Per segment: a dwell (`dwell`, or all False when the job has none)."""
+        return self.dwell if self.dwell.size else np.zeros(self.n_segments, dtype=bool)
+
+    @property
+    def tool_on(self) -> BoolArray:
+        """Per segment: the tool is on (pen down, laser at `power` with `--laser`): drawing
+        segments and dwells with a power above 0."""
+        return self.draw | (self.is_dwell & (self.power > 0))
+
+    @property
+    def dwell_time_s(self) -> float:
+        """Planned time of the dwells, s (part of `total_time_s`)."""
+        return float(self.duration_us[self.is_dwell].sum()) * 1e-6
 
     @property
     def relative_steps(self) -> IntArray:

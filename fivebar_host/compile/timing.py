@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fivebar_host import planner, protocol, steps
+from fivebar_host.compile.dwell import dwell_stops, insert_dwells
 from fivebar_host.compile.place import Setup
 from fivebar_host.compile.segments import Stepped
 from fivebar_host.compile.solve import Routed, Solved
@@ -39,12 +40,13 @@ PLAN_MIN_PIECE_STEPS = 3
 class Planned(Stepped):
     """The stepped job after cutting the ramps into pieces, with per segment the laser
     `power` (0–255, 0 on travel), the piece's part [f0, f1] of the segment it was cut from,
-    and the planned `duration_us`."""
+    the planned `duration_us`, and whether it is a `dwell` (`compile.dwell`: no motion)."""
 
     power: NDArray[np.uint8]
     f0: FloatArray
     f1: FloatArray
     duration_us: IntArray
+    dwell: BoolArray
 
 
 def _settings(profile: Profile, routed: Routed,
@@ -92,9 +94,14 @@ def _cut_ramps(mot: Motors, checker: PoseChecker, sp: Stepped, counts: IntArray,
 
 
 def plan_timing(su: Setup, routed: Routed, solved: Solved, sp: Stepped) -> Planned:
-    """Durations for every segment (module doc: steps 1–4)."""
+    """Durations for every segment (module doc: steps 1–4), then the dwells inserted as
+    segments without motion, each after a stop (`compile.dwell`)."""
     power, feed, stop = _settings(su.profile, routed, sp)
-    return time_stepped(su.profile, solved.checker, sp, power, feed, stop)
+    dwells = routed.ch.dwells
+    if dwells:
+        stop = stop | dwell_stops(dwells, sp)
+    pd = time_stepped(su.profile, solved.checker, sp, power, feed, stop)
+    return insert_dwells(dwells, su.profile, pd)
 
 
 def time_stepped(profile: Profile, checker: PoseChecker, sp: Stepped,
@@ -128,13 +135,14 @@ def time_stepped(profile: Profile, checker: PoseChecker, sp: Stepped,
     return Planned(th=th_all, pts=pts_all, draw=seg_draw, path=sp.path[seg_of],
                    source=sp.source[seg_of], line=sp.line[seg_of], length=length,
                    perm=sp.perm[seg_of], steps=st, power=power, f0=f0, f1=f1,
-                   duration_us=duration_us)
+                   duration_us=duration_us, dwell=np.zeros(seg_of.shape[0], dtype=bool))
 
 
 def tool_time_s(draw: BoolArray, profile: Profile) -> float:
-    """Time the arms wait for the pen, s: every run of drawing segments is bracketed by a
-    pen down and a pen up (run.program), each a servo move plus its settle delay, during
-    which the firmware issues no step (docs/protocol.md 6.2). 0 without a pen."""
+    """Time the arms wait for the pen, s: every run of segments with the tool on (`draw`:
+    drawing segments and dwells with the pen down, `Job.tool_on`) is bracketed by a pen
+    down and a pen up (run.program), each a servo move plus its settle delay, during which
+    the firmware issues no step (docs/protocol.md 6.2). 0 without a pen."""
     pen = profile.pen
     if pen is None or not draw.size:
         return 0.0

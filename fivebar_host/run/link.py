@@ -29,6 +29,7 @@ from fivebar_host.run.errors import (
     LinkFaultError,
     NoBannerError,
 )
+from fivebar_host.run.overrides import Overrides
 from fivebar_host.run.stream import Streamer, StreamProgress, StreamResult
 
 
@@ -290,7 +291,8 @@ class Link:
                on_progress: Callable[[StreamProgress], None] | None = None,
                timeout_s: float | None = None,
                should_stop: Callable[[], bool] | None = None,
-               on_interrupt: Callable[[], bool] | None = None) -> StreamResult:
+               on_interrupt: Callable[[], bool] | None = None,
+               overrides: Overrides | None = None) -> StreamResult:
         """Send `bodies` as numbered, checksummed lines; return when every line is `ok`.
 
         Character counting keeps the unanswered bytes within the banner's `rx:`; with
@@ -303,8 +305,9 @@ class Link:
 
         When `should_stop()` turns true the machine is held at once (`!`, laser off) and
         `on_interrupt()` decides: True resumes (`~`) and streaming goes on, False (or no
-        callback) raises `LinkFaultError(FaultKind.INTERRUPT)`. See `run.stream.Streamer`.
+        callback) raises `LinkFaultError(FaultKind.INTERRUPT)`. `overrides` (live feed and
+        power, `run.overrides`) apply to the lines not yet written. See `run.stream.Streamer`.
         """
         return Streamer(self, bodies, counting=counting, on_progress=on_progress,
                         timeout_s=timeout_s, should_stop=should_stop,
-                        on_interrupt=on_interrupt).run()
+                        on_interrupt=on_interrupt, overrides=overrides).run()

@@ -190,12 +190,14 @@ def job_bodies(job: Job, profile: Profile, laser: bool, first: int,
 
     Laser job (`laser`): `M3 S0` once, then drawing segments carry the profile's power.
     Pen job: S0 everywhere, pen down before and pen up after each run of drawing segments
-    (`compile.pen_switch_lines`: the servo's `M280` with its move and settle time on a pen
-    profile, else `M3 S0` / `M5`). `first_line` replaces the first segment's G1 (a partial
-    segment). The same encoding as `fivebar convert` (job.encode_lines)."""
+    (and dwells with the tool on, `Job.tool_on`; `compile.pen_switch_lines`: the servo's
+    `M280` with its move and settle time on a pen profile, else `M3 S0` / `M5`). A dwell is
+    `G1 P<µs> S<power>` without A/B (`compile.dwell`). `first_line` replaces the first
+    segment's G1 (a partial segment). The same encoding as `fivebar convert` (job.encode_lines)."""
     n = job.n_segments
     power = job.power if laser else np.zeros_like(job.power)
-    draw = job.draw.tolist()
+    draw = job.tool_on.tolist()
+    dwell = job.is_dwell.tolist()
     bodies: list[str] = []
     seg: list[int] = []
     if laser:
@@ -211,7 +213,7 @@ def job_bodies(job: Job, profile: Profile, laser: bool, first: int,
             bodies.append(down)
             seg.append(-1)
         line = first_line if (k == first and first_line is not None) else protocol.g1(
-            a[k], b[k], dur[k], pw[k])
+            None if dwell[k] else a[k], None if dwell[k] else b[k], dur[k], pw[k])
         bodies.append(line)
         seg.append(k)
         if not laser and draw[k] and (k == n - 1 or not draw[k + 1]):

@@ -38,6 +38,7 @@ from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import LinkFaultError, PowerLossError, SendError
 from fivebar_host.run.faults import StreamRun, after_fault
 from fivebar_host.run.link import Link
+from fivebar_host.run.overrides import FEED_MAX_PCT, FEED_MIN_PCT, Overrides
 from fivebar_host.run.program import build_program
 from fivebar_host.run.resume import (
     ResumePoint,
@@ -120,7 +121,8 @@ def run_job(link: Link, job: Job, profile: Profile, *, drawing: str | Path, lase
             should_stop: Callable[[], bool] | None = None,
             on_interrupt: Callable[[], bool] | None = None,
             on_note: Callable[[str], None] | None = None,
-            confirm_placed: Callable[[str], bool] | None = None) -> SendReport:
+            confirm_placed: Callable[[str], bool] | None = None,
+            overrides: Overrides | None = None) -> SendReport:
     """Stream `job` (or its remainder with `resume`) and wait until the machine is idle.
 
     `confirm` answers the first-start question "are the arms at the home pose?" (the CLI's
@@ -133,7 +135,9 @@ def run_job(link: Link, job: Job, profile: Profile, *, drawing: str | Path, lase
     On any fault: hold, read the position, reset the firmware, write the resume file and raise
     `SendError` naming the fault, the position and the last segment executed. `on_note`
     receives what the user should know before a resumed run starts (where it resumes from and
-    whether segments may be drawn twice).
+    whether segments may be drawn twice). `overrides` (live feed and laser power,
+    `run.overrides`) change the lines not yet written; the resume file maps lines to segments
+    by number, so a resume after an override stays exact.
     """
     rpath = resume_path(drawing)
     fp = fingerprint(job)
@@ -164,8 +168,10 @@ def run_job(link: Link, job: Job, profile: Profile, *, drawing: str | Path, lase
 
     try:
         res: StreamResult = link.stream(prog.bodies, on_progress=progress,
-                                        should_stop=should_stop, on_interrupt=on_interrupt)
-        final = link.wait_idle(max(30.0, 3.0 * job.total_time_s), last_line=last_line,
+                                        should_stop=should_stop, on_interrupt=on_interrupt,
+                                        overrides=overrides)
+        slowest = FEED_MAX_PCT / FEED_MIN_PCT if overrides is not None else 1.0
+        final = link.wait_idle(max(30.0, 3.0 * slowest * job.total_time_s), last_line=last_line,
                                on_status=lambda s: progress(StreamProgress(
                                    len(prog.bodies), len(prog.bodies), len(prog.bodies),
                                    s.done_line, s, 0)))

@@ -17,6 +17,10 @@ A line whose reply never comes (its newline was lost, so two lines merged into o
 line) shows in a status report that has not accepted it while the firmware is free: the stream
 rewinds to the line after the last one accepted. Error replies, alarms, a reset banner,
 silence and a disconnect fault the stream with the index of the first line not acknowledged.
+
+With `overrides` (`run.overrides`: live feed and laser power) each line is encoded when it is
+first written, with the factors in force then; once written it is never changed (a resend
+sends the same bytes). Without them every line is encoded up front.
 """
 
 from __future__ import annotations
@@ -39,6 +43,7 @@ from fivebar_host.protocol import (
     StatusReport,
 )
 from fivebar_host.run.errors import FaultKind, LinkError, LinkFaultError
+from fivebar_host.run.overrides import OverrideEncoder, Overrides
 
 if TYPE_CHECKING:
     from fivebar_host.run.link import Link
@@ -139,7 +144,8 @@ class Streamer:
                  on_progress: Callable[[StreamProgress], None] | None = None,
                  timeout_s: float | None = None,
                  should_stop: Callable[[], bool] | None = None,
-                 on_interrupt: Callable[[], bool] | None = None) -> None:
+                 on_interrupt: Callable[[], bool] | None = None,
+                 overrides: Overrides | None = None) -> None:
         if link.banner is None:
             raise LinkError(f"{link.url}: no handshake yet")
         self.link = link
@@ -150,8 +156,11 @@ class Streamer:
         self.timeout = timeout_s or link.reply_timeout_s
         self.budget = link.banner.rx if counting else 1
         self.first = link.next_line
-        self.encoded = [protocol.encode_line(b, self.first + i) for i, b in enumerate(bodies)]
-        self.total = len(self.encoded)
+        self.encoder = None if overrides is None else OverrideEncoder(bodies, overrides)
+        self.encoded: list[bytes] = []  # the lines as written (or to be), job index order
+        self.total = len(bodies)
+        if self.encoder is None and self.total:
+            self._line(self.total - 1)
         self.inflight = InFlight()
         self.nxt = 0  # next job index to write
         self.acked = 0
@@ -228,7 +237,7 @@ class Streamer:
 
     def _send_what_fits(self) -> None:
         """Write lines while their bytes fit the budget; WAITING once all are written."""
-        while self.nxt < self.total and self.inflight.fits(len(self.encoded[self.nxt]),
+        while self.nxt < self.total and self.inflight.fits(len(self._line(self.nxt)),
                                                            self.budget):
             line = self.encoded[self.nxt]
             self.link._write(line)
@@ -237,6 +246,15 @@ class Streamer:
             self.sent_max = max(self.sent_max, self.nxt)
         if self.nxt == self.total:
             self._enter(Phase.WAITING)
+
+    def _line(self, index: int) -> bytes:
+        """Job line `index` encoded: the lines up to it are encoded now if they were not
+        yet (with the overrides in force), and never again."""
+        while len(self.encoded) <= index:
+            j = len(self.encoded)
+            body = self.bodies[j] if self.encoder is None else self.encoder.body(j)
+            self.encoded.append(protocol.encode_line(body, self.first + j))
+        return self.encoded[index]
 
     def _poll_status(self) -> None:
         now = time.monotonic()

@@ -12,7 +12,18 @@ What draws: a G1/G2/G3 move while the laser is on (M3/M4 active with S > 0) — 
 with no M3/M4 at all (pen-plotter style), every G1/G2/G3 move. G0 moves and moves with the
 laser off are travel: the job compiler plans its own travel, so their geometry is not kept.
 
-Anything else (Z or other axes, G18/G19, G28, G4, tool changes, unknown words, a bad number)
+Dwells: `G4 P<seconds>` as GRBL 1.1 reads it (P in seconds, a decimal allowed; LinuxCNC
+agrees; Marlin's P in milliseconds and S in seconds are not followed: S is the laser power
+word here, so a Marlin `G4 S2` is refused for want of P). The machine waits there with the
+tool as it is at that line: on (a laser at the current S burns a dot, as GRBL's M3 does; a
+pen stays down) when a G1 move would cut now — the motion mode is G1/G2/G3 and, in a file with
+M3/M4, `M3` is on with S > 0 (`M4` is GRBL's dynamic power, zero at rest: off) — else off. A
+dwell ends the stroke it follows (`geometry.Dwell`: after a stroke's end, or before the start
+of the stroke that begins where it was read); one with the tool off between strokes waits at
+the end of the stroke before it. A dwell with the tool on where no cut starts or ends is
+refused: fivebar plans its own travel, so it has no such point to burn.
+
+Anything else (Z or other axes, G18/G19, G28, tool changes, unknown words, a bad number)
 is an `InputError` naming the file, the line and the word: it is refused, never ignored.
 """
 
@@ -20,7 +31,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from fivebar_host.errors import InputError
@@ -30,6 +41,7 @@ from fivebar_host.toolpath.geometry import (
     MAX_COORD_MM,
     Drawing,
     DrawingBuilder,
+    Dwell,
     read_source,
 )
 
@@ -38,11 +50,11 @@ _PAREN = re.compile(r"\([^)]*\)")
 _LASER_ON = re.compile(r"(?<![A-Za-z])[Mm]\s*0*[34](?![\d.])")
 
 #: G codes that are accepted; values are what they select.
-_G_OK = {0.0, 1.0, 2.0, 3.0, 17.0, 20.0, 21.0, 90.0, 91.0, 90.1, 91.1, 92.0, 94.0, 54.0}
+_G_OK = {0.0, 1.0, 2.0, 3.0, 4.0, 17.0, 20.0, 21.0, 90.0, 91.0, 90.1, 91.1, 92.0, 94.0, 54.0}
 _M_OK = {2.0, 3.0, 4.0, 5.0, 30.0}
 _MOTIONS = (0.0, 1.0, 2.0, 3.0)
 #: Words that carry a value for this line (coordinates, arc centre or radius, feed, power).
-_VALUE_WORDS = ("X", "Y", "I", "J", "R", "F", "S")
+_VALUE_WORDS = ("X", "Y", "I", "J", "R", "F", "S", "P")
 #: Axis words of other machines: refused with a hint.
 _OTHER_AXES = ("Z", "A", "B", "C", "U", "V", "W")
 
@@ -78,6 +90,7 @@ class _Reader:
     arc_abs: bool = False
     motion: float = -1.0  # no motion mode until the first G0-G3
     laser_on: bool = False
+    laser_m4: bool = False  # M4 (dynamic power: off at rest, so during a dwell)
     power_s: float = 0.0
     feed_mm_s: float = math.nan
     pos: tuple[float, float] = (0.0, 0.0)  # current position, mm, in the drawing frame
@@ -85,6 +98,9 @@ class _Reader:
     stroke_open: bool = False
     stroke_key: tuple[float, float] | None = None
     max_s: float = 0.0
+    last_stroke: int = -1  # the stroke that got the last primitive
+    at_stroke_end: bool = False  # the position is that stroke's end
+    pending: list[tuple[Dwell, int]] = field(default_factory=list)  # not yet placed, line
 
 
 def _strip(raw: str, file: str, ln: int) -> str:
@@ -128,6 +144,9 @@ def _read_line(rd: _Reader, raw: str, ln: int) -> bool:
         _apply_g92(rd, w, ln)
         return False
     _select_motion(rd, w, ln)
+    if 4.0 in w.gs or "P" in w.axes:
+        _dwell(rd, w, ln)
+        return end_program
     if not w.has("X", "Y", "I", "J", "R"):
         return end_program
     if rd.motion < 0:
@@ -182,7 +201,7 @@ def _g_code(value: float, tok: str, file: str, ln: int) -> float:
     """A supported G code's number (rounded to one decimal: G90.1), else an error."""
     g = round(value, 1)
     if g not in _G_OK:
-        raise InputError(f"unsupported G-code word {tok} (supported: G0 G1 G2 G3 "
+        raise InputError(f"unsupported G-code word {tok} (supported: G0 G1 G2 G3 G4 "
                          "G17 G20 G21 G54 G90 G91 G90.1 G91.1 G92 G94)", file, ln)
     return g
 
@@ -212,6 +231,7 @@ def _apply_modal(rd: _Reader, w: _Words, ln: int) -> bool:
     for mcode in w.ms:
         if mcode in (3.0, 4.0):
             rd.laser_on = True
+            rd.laser_m4 = mcode == 4.0
         elif mcode == 5.0:
             rd.laser_on = False
         else:
@@ -274,6 +294,8 @@ def _move(rd: _Reader, w: _Words, ln: int) -> None:
         _draw(rd, w, (x, y), ln)
     else:
         rd.stroke_open = False
+        if (x, y) != rd.pos:
+            _leave(rd)
     rd.pos = (x, y)
 
 
@@ -289,25 +311,79 @@ def _draw(rd: _Reader, w: _Words, end: tuple[float, float], ln: int) -> None:
         rd.stroke_key = key
     pos = rd.pos
     if rd.motion == 1.0:
-        if end != pos:
-            b.add(LINE, (pos[0], pos[1], end[0], end[1]), ln)
+        if end == pos:
+            return
+        b.add(LINE, (pos[0], pos[1], end[0], end[1]), ln)
     else:
         prim = _arc(pos, end, w.axes, rd.unit, rd.arc_abs, rd.offset, rd.motion == 2.0,
                     rd.name, ln)
         b.add(ARC, prim, ln)
+    stroke = len(b.stroke_source) - 1
+    if stroke != rd.last_stroke:  # the stroke's first primitive: it starts here
+        b.dwells += [replace(d, stroke=stroke, after=False) for d, _ in rd.pending]
+        rd.pending.clear()
+    rd.last_stroke = stroke
+    rd.at_stroke_end = True
+
+
+def _dwell(rd: _Reader, w: _Words, ln: int) -> None:
+    """`G4 P<seconds>`: a dwell with the tool as it is now (module doc), placed after the
+    stroke that ends here, or kept until the next stroke starts or the tool travels away."""
+    if 4.0 not in w.gs:
+        raise InputError("P word without G4 (P is the dwell time of G4)", rd.name, ln)
+    if "P" not in w.axes:
+        raise InputError("G4 needs P, the dwell time in seconds (GRBL 1.1; S is the laser "
+                         "power here, not a time)", rd.name, ln)
+    if w.has("X", "Y", "I", "J", "R") or any(g in _MOTIONS for g in w.gs):
+        raise InputError("G4 and a move on the same line", rd.name, ln)
+    seconds = w.axes["P"]
+    if seconds < 0:
+        raise InputError(f"dwell P{seconds:g} must not be negative", rd.name, ln)
+    if seconds == 0:
+        return
+    laser = rd.laser_on and not rd.laser_m4 and rd.power_s > 0
+    tool_on = rd.motion in (1.0, 2.0, 3.0) and (laser if rd.has_laser else True)
+    power = (rd.power_s if rd.has_laser else 1.0) if tool_on else 0.0
+    d = Dwell(rd.last_stroke, True, seconds, tool_on, power, ln)
+    if rd.at_stroke_end:
+        rd.builder.dwells.append(d)
+        rd.stroke_open = False  # a dwell ends the stroke: the next cut starts a new one
+    else:
+        rd.pending.append((d, ln))
+
+
+def _leave(rd: _Reader) -> None:
+    """The tool travels away: dwells read here with the tool off wait at the end of the
+    stroke before them (or before the next stroke when none was drawn yet); one with the
+    tool on has no cut to burn at and is refused."""
+    rd.at_stroke_end = False
+    for d, ln in rd.pending:
+        if d.tool_on:
+            raise InputError("G4 with the tool on (laser burning, pen down) where no cut "
+                             "starts or ends: fivebar plans its own travel and has no such "
+                             "point; turn the laser off (M5) or dwell at a cut's end",
+                             rd.name, ln)
+    if rd.last_stroke >= 0:
+        rd.builder.dwells += [d for d, _ in rd.pending]
+        rd.pending.clear()
 
 
 def _finish(rd: _Reader) -> Drawing:
     """The drawing, with stroke powers as fractions of the file's largest S (the profile's
     power is full scale); an error when nothing cuts."""
+    if rd.pending:
+        _leave(rd)
     drawing = rd.builder.build()
     if drawing.kind.shape[0] == 0:
         raise InputError("no cutting moves to draw (G1/G2/G3 with the laser on, M3/M4 S>0)",
                          rd.name)
+    scale = 1.0 / rd.max_s if rd.max_s > 0 else 0.0
     if rd.max_s > 0:
         drawing.stroke_power[:] = drawing.stroke_power / rd.max_s
     else:
         drawing.stroke_power[:] = 1.0
+    drawing.dwells = [replace(d, power=d.power * scale if rd.has_laser else d.power)
+                      for d in drawing.dwells]
     return drawing
 
 

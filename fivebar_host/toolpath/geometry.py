@@ -15,6 +15,9 @@ the drawing before flattening so the flattening tolerance is in machine millimet
 
 Primitives are grouped into *strokes* (pen-down runs; an SVG subpath or a G-code cutting run):
 `stroke` is non-decreasing and a stroke's primitives are contiguous and chained end to start.
+
+A G-code dwell (`G4`) is a `Dwell` attached to a stroke: at its start (before it is drawn) or
+at its end (after it). A dwell ends a stroke, so its place is always a stroke's end point.
 """
 
 from __future__ import annotations
@@ -49,6 +52,21 @@ class SourceInfo:
     layer: str | None = None
 
 
+@dataclass(frozen=True)
+class Dwell:
+    """A pause (G-code `G4`) at the start (`after` False) or the end (`after` True) of stroke
+    `stroke`: `seconds` long, with the tool on (`tool_on`: laser at `power`, a fraction of
+    the profile's power like `Drawing.stroke_power`; pen down) or off, from file line
+    `line`."""
+
+    stroke: int
+    after: bool
+    seconds: float
+    tool_on: bool
+    power: float
+    line: int
+
+
 @dataclass
 class Drawing:
     """Primitives of a whole drawing plus per-stroke and per-source metadata (see module doc).
@@ -56,7 +74,8 @@ class Drawing:
     Arrays: `kind` (N,) int8, `params` (N, 8) float64 mm, `stroke` (N,) int64, `line` (N,)
     int64 (source line, 0 if unknown). Per stroke: `stroke_source` (S,) index into `sources`,
     `stroke_power` (S,) laser power as a fraction 0..1 of the profile's power, `stroke_feed_mm_s`
-    (S,) requested feed (NaN: the profile's draw feed).
+    (S,) requested feed (NaN: the profile's draw feed). `dwells`: the G-code dwells, in file
+    order (none for an SVG).
     """
 
     file: str
@@ -71,6 +90,7 @@ class Drawing:
     page_height_mm: float | None = None  # SVG: to map back to page coords (y down)
     page_size_mm: tuple[float, float] | None = None
     warnings: list[str] = field(default_factory=list)
+    dwells: list[Dwell] = field(default_factory=list)
 
     @property
     def n_strokes(self) -> int:
@@ -88,7 +108,7 @@ class Drawing:
         return Drawing(self.file, self.kind, transform(self.kind, self.params, a, b),
                        self.stroke, self.line, self.stroke_source, self.stroke_power,
                        self.stroke_feed_mm_s, self.sources, self.page_height_mm,
-                       self.page_size_mm, self.warnings)
+                       self.page_size_mm, self.warnings, self.dwells)
 
 
 class DrawingBuilder:
@@ -113,6 +133,7 @@ class DrawingBuilder:
         self.stroke_feed: list[float] = []
         self.sources: list[SourceInfo] = []
         self.warnings: list[str] = []
+        self.dwells: list[Dwell] = []
         self.matrices: list[NDArray[np.float64]] = []
         self.matrix_ids = array("q")
         self._open = False
@@ -184,6 +205,7 @@ class DrawingBuilder:
             page_height_mm=page_height_mm,
             page_size_mm=page_size_mm,
             warnings=self.warnings,
+            dwells=self.dwells,
         )
 
 
