@@ -714,7 +714,7 @@ static uint32_t since_last_rx(void)
  */
 static void laser_watchdog(void)
 {
-	if ((mo_laser() || mo_pen_down()) && !held &&
+	if (!held && (mo_laser() || mo_pen_down()) &&
 	    since_last_rx() > (uint32_t)settings[SET_LASER_TIMEOUT]) {
 		uint8_t sreg = board_irq_save();
 		if (mo_running() || mo_queue_count()) {
@@ -731,7 +731,10 @@ static void laser_watchdog(void)
 /* After a '~' that lowered a parked pen: resume once it has had its time. */
 static void resume_when_settled(void)
 {
-	if (!resume_at)  /* a torn read is re-checked below, interrupts off */
+	/* resume_at is set only while held: the byte keeps this cheap on every
+	 * pass of a running job (the main loop's cycles are scarce at high step
+	 * rates); a torn read is re-checked below, interrupts off */
+	if (!held || !resume_at)
 		return;
 	uint8_t sreg = board_irq_save();
 	if (resume_at && (int32_t)(board_ms() - resume_at) >= 0) {
