@@ -4,7 +4,7 @@ checks → plan → steps → validate → encode (docs/architecture.md, "Data f
 The public API, for the CLI, the sender, the server, the previews, the benchmarks and tests:
 
 - `model`: `CompileOptions`, `Job`, `PathStats`, `ModeChange` (the data model);
-- `job`: `compile_job`, `compile_drawing`, `read_drawing` (the pipeline);
+- `job`: `compile_job`, `compile_drawing`, `read_drawing`, `gcode_tool` (the pipeline);
 - `validate`: `deviations`, `validate`, `nbar_opinion`, `distance_to_request`;
 - `encode`: `encode_lines`, `mode_sequence`, `write_atomic` (firmware lines).
 """
@@ -17,7 +17,13 @@ from fivebar_host.compile.encode import (
     pen_switch_lines,
     write_atomic,
 )
-from fivebar_host.compile.job import GCODE_SUFFIXES, compile_drawing, compile_job, read_drawing
+from fivebar_host.compile.job import (
+    GCODE_SUFFIXES,
+    compile_drawing,
+    compile_job,
+    gcode_tool,
+    read_drawing,
+)
 from fivebar_host.compile.model import (
     AUTO_ORDER,
     MAX_STEP_RAD,
@@ -51,6 +57,7 @@ __all__ = [
     "deviations",
     "distance_to_request",
     "encode_lines",
+    "gcode_tool",
     "mode_sequence",
     "nbar_opinion",
     "pen_setup_lines",

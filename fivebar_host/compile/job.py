@@ -45,6 +45,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -67,10 +68,20 @@ from kinematics.fivebar import WORKING_MODES
 GCODE_SUFFIXES = {".gcode", ".nc", ".ngc", ".gc", ".g", ".tap", ".cnc"}
 
 
+def gcode_tool(profile: Profile | None) -> dict[str, Any]:
+    """The G-code reader's tool arguments from a profile (what Z words mean: the `[tool]
+    kind` and `[pen] z_threshold_mm`); none without a profile (Z words refused)."""
+    if profile is None:
+        return {}
+    z = profile.pen.z_threshold_mm if profile.pen is not None else 0.0
+    return {"tool": profile.tool, "z_threshold_mm": z}
+
+
 def read_drawing(path: str | Path, layers: tuple[str, ...] = (),
-                 max_segments: float | None = None) -> Drawing:
+                 max_segments: float | None = None, profile: Profile | None = None) -> Drawing:
     """Read an SVG or G-code file, chosen by suffix (or by content when unknown); an SVG
-    with more than `max_segments` path segments (None: the reader's default) is refused."""
+    with more than `max_segments` path segments (None: the reader's default) is refused.
+    `profile` gives G-code Z words their meaning (`gcode_tool`)."""
     p = Path(path)
     suffix = p.suffix.lower()
     limit = DEFAULT_MAX_SEGMENTS if max_segments is None else int(max_segments)
@@ -79,14 +90,14 @@ def read_drawing(path: str | Path, layers: tuple[str, ...] = (),
     if suffix in GCODE_SUFFIXES:
         if layers:
             raise InputError("--layer applies to SVG files only", str(p))
-        return read_gcode(p)
+        return read_gcode(p, **gcode_tool(profile))
     try:
         head = p.read_bytes()[:512].lstrip()
     except OSError as e:
         raise InputError(f"cannot read file: {e.strerror or e}", str(p)) from e
     if head.startswith((b"<?xml", b"<svg", b"<!--", b"<!DOCTYPE")):
         return read_svg(p, layers or None, max_segments=limit)
-    return read_gcode(p)
+    return read_gcode(p, **gcode_tool(profile))
 
 
 def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
@@ -181,5 +192,5 @@ def _compile_with_mode_changes(drawing: Drawing, profile: Profile,
 def compile_job(path: str | Path, profile: Profile, opts: CompileOptions | None = None) -> Job:
     """Read and compile a drawing file (see module doc). Raises `InputError` or `JobError`."""
     o = opts or CompileOptions()
-    drawing = read_drawing(path, o.layers, o.max_segments)
+    drawing = read_drawing(path, o.layers, o.max_segments, profile)
     return compile_drawing(drawing, profile, o)

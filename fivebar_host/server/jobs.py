@@ -17,7 +17,7 @@ from collections import OrderedDict
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
-from fivebar_host.compile import GCODE_SUFFIXES, CompileOptions, Job, compile_drawing
+from fivebar_host.compile import GCODE_SUFFIXES, CompileOptions, Job, compile_drawing, gcode_tool
 from fivebar_host.config import Profile, require_tool
 from fivebar_host.errors import FivebarError, InputError, JobError, OptionError
 from fivebar_host.options import PEN_NAMES, check_values
@@ -101,8 +101,10 @@ def _suffix(name: str) -> str:
     return name[dot:].lower() if dot > 0 else ""
 
 
-def read_upload(data: bytes, name: str, layers: tuple[str, ...]) -> Any:
-    """Parse an uploaded drawing in memory, by suffix or else by content (like the CLI)."""
+def read_upload(data: bytes, name: str, layers: tuple[str, ...],
+                profile: Profile | None = None) -> Any:
+    """Parse an uploaded drawing in memory, by suffix or else by content (like the CLI);
+    `profile` gives G-code Z words their meaning (`compile.gcode_tool`)."""
     if not data.strip():
         raise SubmitError("empty_upload", f"{name}: the upload is empty", status=400)
     suffix = _suffix(name)
@@ -112,7 +114,7 @@ def read_upload(data: bytes, name: str, layers: tuple[str, ...]) -> Any:
             (b"<?xml", b"<svg", b"<!--", b"<!DOCTYPE")):
         if layers:
             raise InputError("--layer applies to SVG files only", name)
-        return read_gcode(data, file=name)
+        return read_gcode(data, file=name, **gcode_tool(profile))
     return read_svg(data, layers or None, file=name)
 
 
@@ -134,7 +136,7 @@ def compile_upload(data: bytes, name: str, opts: JobOptions, profile: Profile) -
                           "the daemon; set them in its profile's [pen] table")
     try:
         require_tool(profile, opts.laser)
-        drawing = read_upload(data, name, opts.layers)
+        drawing = read_upload(data, name, opts.layers, profile)
         job = compile_drawing(drawing, profile, opts.compile_options())
     except SubmitError:
         raise

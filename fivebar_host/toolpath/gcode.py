@@ -23,8 +23,25 @@ of the stroke that begins where it was read); one with the tool off between stro
 the end of the stroke before it. A dwell with the tool on where no cut starts or ends is
 refused: fivebar plans its own travel, so it has no such point to burn.
 
-Anything else (Z or other axes, G18/G19, G28, tool changes, unknown words, a bad number)
-is an `InputError` naming the file, the line and the word: it is refused, never ignored.
+Z words need the machine's tool (`read_gcode(..., tool=, z_threshold_mm=)`, from the
+profile's `[tool] kind` and `[pen] z_threshold_mm`; without a tool they are refused):
+
+- pen: Z sets the pen state. Z above the threshold is pen up (later moves are travel), Z at
+  or below it pen down (later G1/G2/G3 moves draw), as pen-plotter G-code (vpype-gcode,
+  Inkscape gcodetools: `G0 Z5` / `G1 Z0`) gives it. Before the first Z the pen follows the
+  rules above alone. Combined with M3/M5: in a file with M3/M4 a move draws when the pen is
+  down *and* M3/M4 is on (an `M3` with no S word yet counts as on: gcodetools' header); a
+  file without M3/M4 follows Z alone. A Z word on a line with X/Y: the pen state changes at
+  the start of that move (`G1 X10 Z0` draws to X10; `G0 X10 Z5` travels pen up).
+- laser: Z cannot be followed. A Z word that changes nothing (the same Z, or a move with the
+  laser off or a G0) is accepted and ignored, with one warning for the file; a Z change on a
+  move that burns (G1/G2/G3 with the laser on, `M3` S > 0) is refused with its line. The
+  first Z word sets the reference height.
+
+Z follows G20/G21 and G90/G91 like X and Y; `G92 Z` is refused.
+
+Anything else (other axes, G18/G19, G28, tool changes, unknown words, a bad number) is an
+`InputError` naming the file, the line and the word: it is refused, never ignored.
 """
 
 from __future__ import annotations
@@ -101,6 +118,12 @@ class _Reader:
     last_stroke: int = -1  # the stroke that got the last primitive
     at_stroke_end: bool = False  # the position is that stroke's end
     pending: list[tuple[Dwell, int]] = field(default_factory=list)  # not yet placed, line
+    tool: str | None = None  # "pen", "laser", or None: Z words refused
+    z_threshold_mm: float = 0.0  # pen: Z above this is pen up
+    z_mm: float | None = None  # the last Z, mm (None until a Z word)
+    pen_down: bool | None = None  # pen: from Z (None until a Z word: Z does not decide)
+    s_given: bool = False  # an S word was read
+    z_warned: bool = False  # the laser's "Z ignored" warning was given
 
 
 def _strip(raw: str, file: str, ln: int) -> str:
@@ -117,8 +140,15 @@ def _strip(raw: str, file: str, ln: int) -> str:
     return s.strip()
 
 
-def read_gcode(source: str | Path | bytes, file: str | None = None) -> Drawing:
-    """Read a G-code file (path or bytes) into a `Drawing` in mm (frame as written, y up)."""
+def read_gcode(source: str | Path | bytes, file: str | None = None, tool: str | None = None,
+               z_threshold_mm: float = 0.0) -> Drawing:
+    """Read a G-code file (path or bytes) into a `Drawing` in mm (frame as written, y up).
+
+    `tool` ("pen" or "laser", the profile's `[tool] kind`) and `z_threshold_mm` (the
+    profile's `[pen] z_threshold_mm`) decide what Z words mean (module doc); with no tool a Z
+    word is refused."""
+    if tool not in (None, "pen", "laser"):
+        raise ValueError(f"tool must be 'pen', 'laser' or None; got {tool!r}")
     data, name = read_source(source, file, "<gcode>")
     try:
         text = data.decode("utf-8")
@@ -126,7 +156,8 @@ def read_gcode(source: str | Path | bytes, file: str | None = None) -> Drawing:
         raise InputError(f"not a text file (byte {e.start} is not UTF-8)", name) from e
     lines = text.splitlines()
     has_laser = any(_LASER_ON.search(_strip_soft(s)) for s in lines)
-    rd = _Reader(DrawingBuilder(name), name, has_laser)
+    rd = _Reader(DrawingBuilder(name), name, has_laser, tool=tool,
+                 z_threshold_mm=z_threshold_mm)
     for ln, raw in enumerate(lines, start=1):
         if _read_line(rd, raw, ln):
             break
@@ -138,15 +169,19 @@ def _read_line(rd: _Reader, raw: str, ln: int) -> bool:
     s = _strip(raw, rd.name, ln)
     if not s or s == "%":
         return False
-    w = _classify(_tokens(s, rd.name, ln), rd.name, ln)
+    w = _classify(_tokens(s, rd.name, ln), rd.name, ln, rd.tool is not None)
     end_program = _apply_modal(rd, w, ln)
     if 92.0 in w.gs:
         _apply_g92(rd, w, ln)
         return False
     _select_motion(rd, w, ln)
     if 4.0 in w.gs or "P" in w.axes:
+        if "Z" in w.axes:
+            raise InputError("G4 and a Z move on the same line", rd.name, ln)
         _dwell(rd, w, ln)
         return end_program
+    if "Z" in w.axes:
+        _z_move(rd, w, ln)
     if not w.has("X", "Y", "I", "J", "R"):
         return end_program
     if rd.motion < 0:
@@ -172,9 +207,10 @@ def _tokens(s: str, file: str, ln: int) -> list[tuple[str, float, str]]:
     return words
 
 
-def _classify(words: list[tuple[str, float, str]], file: str, ln: int) -> _Words:
+def _classify(words: list[tuple[str, float, str]], file: str, ln: int,
+              z_ok: bool = False) -> _Words:
     """Sort a line's words into G codes, M codes and value words, refusing what this reader
-    does not honour (in the order the words appear)."""
+    does not honour (in the order the words appear; Z only with `z_ok`)."""
     w = _Words()
     for letter, value, tok in words:
         if not math.isfinite(value):
@@ -185,7 +221,7 @@ def _classify(words: list[tuple[str, float, str]], file: str, ln: int) -> _Words
             w.gs.append(_g_code(value, tok, file, ln))
         elif letter == "M":
             w.ms.append(_m_code(value, tok, file, ln))
-        elif letter in _VALUE_WORDS:
+        elif letter in _VALUE_WORDS or (letter == "Z" and z_ok):
             if letter in w.axes:
                 raise InputError(f"word {letter} appears twice", file, ln)
             w.axes[letter] = value
@@ -226,6 +262,7 @@ def _apply_modal(rd: _Reader, w: _Words, ln: int) -> bool:
         if w.axes["S"] < 0:
             raise InputError(f"power S{w.axes['S']:g} must not be negative", rd.name, ln)
         rd.power_s = w.axes["S"]
+        rd.s_given = True
         rd.max_s = max(rd.max_s, rd.power_s)
     end_program = False
     for mcode in w.ms:
@@ -263,8 +300,8 @@ def _apply_g92(rd: _Reader, w: _Words, ln: int) -> None:
     fx = w.axes.get("X", (pos[0] - offset[0]) / unit) * unit
     fy = w.axes.get("Y", (pos[1] - offset[1]) / unit) * unit
     rd.offset = (pos[0] - fx, pos[1] - fy)
-    if w.has("I", "J", "R"):
-        raise InputError("G92 with I, J or R", rd.name, ln)
+    if w.has("I", "J", "R", "Z"):
+        raise InputError("G92 with I, J, R or Z", rd.name, ln)
     if any(g in _MOTIONS for g in w.gs):
         raise InputError("G92 and a motion command on the same line", rd.name, ln)
 
@@ -287,7 +324,7 @@ def _move(rd: _Reader, w: _Words, ln: int) -> None:
         raise InputError(f"coordinate ({x:g}, {y:g}) mm is larger than {MAX_COORD_MM:g} "
                          "mm", rd.name, ln)
     motion = rd.motion
-    cutting = motion != 0.0 and (rd.laser_on and rd.power_s > 0 if rd.has_laser else True)
+    cutting = motion != 0.0 and _tool_on(rd)
     if motion in (0.0, 1.0) and w.has("I", "J", "R"):
         raise InputError(f"I, J or R on a G{int(motion)} move", rd.name, ln)
     if cutting:
@@ -326,6 +363,40 @@ def _draw(rd: _Reader, w: _Words, end: tuple[float, float], ln: int) -> None:
     rd.at_stroke_end = True
 
 
+def _tool_on(rd: _Reader, dwell: bool = False) -> bool:
+    """Whether a G1/G2/G3 move (or a dwell: M4 is off at rest) would cut now: M3/M4 with
+    S > 0 in a file with M3/M4 (on a pen whose Z was read, an M3 before any S word counts),
+    and the pen down by Z once Z was read (module doc)."""
+    on = True
+    if rd.has_laser:
+        powered = rd.power_s > 0 or (rd.pen_down is not None and not rd.s_given)
+        on = rd.laser_on and powered and not (dwell and rd.laser_m4)
+    return on and rd.pen_down is not False
+
+
+def _z_move(rd: _Reader, w: _Words, ln: int) -> None:
+    """A Z word, before the line's X/Y move (if any): the pen state on a pen machine; on a
+    laser machine ignored (one warning) unless it changes Z during a cut (module doc)."""
+    if rd.motion < 0:
+        raise InputError("Z before any G0/G1/G2/G3", rd.name, ln)
+    v = w.axes["Z"] * rd.unit
+    z = v if rd.absolute or rd.z_mm is None else rd.z_mm + v
+    if rd.tool == "pen":
+        down = z <= rd.z_threshold_mm
+        if not down:
+            rd.stroke_open = False  # a lift ends the stroke, even where it started again
+        rd.pen_down = down
+    elif rd.z_mm is not None and z != rd.z_mm and rd.motion != 0.0 and _tool_on(rd):
+        raise InputError(f"Z{w.axes['Z']:g} changes Z during a cut with the laser on: a "
+                         "laser cannot follow Z (turn it off with M5 before moving Z, or "
+                         "remove the Z words)", rd.name, ln)
+    elif not rd.z_warned:
+        rd.z_warned = True
+        rd.builder.warnings.append(f"{rd.name}:{ln}: Z words ignored: a laser machine has "
+                                   "no Z axis (Z may change only while the laser is off)")
+    rd.z_mm = z
+
+
 def _dwell(rd: _Reader, w: _Words, ln: int) -> None:
     """`G4 P<seconds>`: a dwell with the tool as it is now (module doc), placed after the
     stroke that ends here, or kept until the next stroke starts or the tool travels away."""
@@ -341,8 +412,7 @@ def _dwell(rd: _Reader, w: _Words, ln: int) -> None:
         raise InputError(f"dwell P{seconds:g} must not be negative", rd.name, ln)
     if seconds == 0:
         return
-    laser = rd.laser_on and not rd.laser_m4 and rd.power_s > 0
-    tool_on = rd.motion in (1.0, 2.0, 3.0) and (laser if rd.has_laser else True)
+    tool_on = rd.motion in (1.0, 2.0, 3.0) and _tool_on(rd, dwell=True)
     power = (rd.power_s if rd.has_laser else 1.0) if tool_on else 0.0
     d = Dwell(rd.last_stroke, True, seconds, tool_on, power, ln)
     if rd.at_stroke_end:
@@ -382,8 +452,8 @@ def _finish(rd: _Reader) -> Drawing:
         drawing.stroke_power[:] = drawing.stroke_power / rd.max_s
     else:
         drawing.stroke_power[:] = 1.0
-    drawing.dwells = [replace(d, power=d.power * scale if rd.has_laser else d.power)
-                      for d in drawing.dwells]
+    drawing.dwells = [replace(d, power=d.power * scale if rd.max_s > 0 and rd.has_laser
+                              else float(d.tool_on)) for d in drawing.dwells]
     return drawing
 
 
