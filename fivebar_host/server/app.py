@@ -139,6 +139,13 @@ class ResumeOut(BaseModel):
     reason: str
 
 
+class OverridesOut(BaseModel):
+    """The running job's live overrides (POST /api/jobs/{id}/overrides)."""
+
+    feed_pct: int = Field(description="Feed, % of the planned speed (10..100, slower only).")
+    power_pct: int = Field(description="Laser power, % of the planned power (0..100).")
+
+
 class JobOut(BaseModel):
     """A job in the queue or in the history."""
 
@@ -163,6 +170,8 @@ class JobOut(BaseModel):
     underruns: int | None = Field(description="done: times the firmware queue ran empty "
                                   "mid-job (0 is the goal); null if unknown.")
     resume: ResumeOut | None
+    overrides: OverridesOut | None = Field(None, description="Running or paused: the live "
+                                           "feed and laser-power overrides; else null.")
 
 
 class MachineOut(BaseModel):
@@ -205,9 +214,12 @@ class StatusOut(BaseModel):
 def job_out(rec: JobRecord, worker: Worker) -> JobOut:
     """The API view of a job, with live progress for the running one."""
     done, remaining, elapsed = rec.segments_done, rec.remaining_s, rec.run_s
-    live = worker.live
+    live, ov = worker.live, None
     if live is not None and live.job_id == rec.id:
         done, remaining, elapsed = live.segments_done, live.remaining_s, live.elapsed_s
+        if rec.state in (st_.RUNNING, st_.PAUSED):
+            feed, power = live.overrides.values()
+            ov = OverridesOut(feed_pct=feed, power_pct=power)
     if rec.state == st_.QUEUED and rec.resume is None:
         remaining = rec.estimated_s
     o = JobOptions.from_json(rec.options).to_json()
@@ -219,7 +231,7 @@ def job_out(rec: JobRecord, worker: Worker) -> JobOut:
         segments_done=done,
         progress=round(done / rec.segments_total, 6) if rec.segments_total else 1.0,
         estimated_s=rec.estimated_s, remaining_s=remaining, elapsed_s=round(elapsed, 3),
-        underruns=rec.underruns,
+        underruns=rec.underruns, overrides=ov,
         resume=None if rec.resume is None else ResumeOut(
             next_segment=rec.resume.next_segment,
             position=list(rec.resume.position) if rec.resume.position else None,

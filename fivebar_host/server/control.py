@@ -2,11 +2,13 @@
 
 HTTP handlers and the daemon call the public methods (any thread): they only set a request
 under the worker's condition variable, or queue an action for the machine thread to run
-between jobs. The machine thread reads the requests through the stop-kind methods, which
-`Link.stream` calls while a job streams: `should_stop` makes it hold the machine (`!`,
-laser off at once); `on_interrupt` then waits while paused (polling `?`), resumes (`~`),
-or gives up. Cancel gives up at once; a stop (SIGTERM) first lets the firmware run out of
-queued lines, so the machine stops at the end of a segment (server.worker has the story).
+between jobs; `set_overrides` changes the running job's live `Overrides`, which its stream
+reads for every line it writes. The machine thread reads the requests through the stop-kind
+methods, which `Link.stream` calls while a job streams: `should_stop` makes it hold the
+machine (`!`, laser off at once); `on_interrupt` then waits while paused (polling `?`),
+resumes (`~`), or gives up. Cancel gives up at once; a stop (SIGTERM) first lets the
+firmware run out of queued lines, so the machine stops at the end of a segment
+(server.worker has the story).
 """
 
 from __future__ import annotations
@@ -70,6 +72,22 @@ class Control(MachineState):
             self._confirm_once[job_id] = confirm
             self.store.set_state(job_id, st_.QUEUED, message="resume requested")
             self._cv.notify_all()
+
+    def set_overrides(self, job_id: int, feed_pct: int | None = None,
+                      power_pct: int | None = None) -> tuple[int, int]:
+        """Set the running (or paused) job's live feed and laser-power overrides; the
+        factors now in force, (feed %, power %). They change the lines not yet written
+        (`run.overrides`): a power change at the next line, a feed change at the next rest."""
+        with self._cv:
+            live = self.live
+            if self.current != job_id or live is None or live.job_id != job_id:
+                raise JobStateError(f"job {job_id} is not running: overrides apply to the "
+                                    "running job only")
+            live.overrides.set(feed_pct, power_pct)
+            values = live.overrides.values()
+        log.info("job %d: overrides %s", job_id, live.overrides.text())
+        self.on_change()
+        return values
 
     def cancel(self, job_id: int) -> None:
         """Cancel a job: the running one stops at once (laser off); others leave the queue."""

@@ -9,9 +9,9 @@ at most once per `MIN_INTERVAL_S`:
 
 - `status`: the machine as last reported (the `/api/status` machine fields), the pen's
   point and the linkage pose in mm, the running job's live progress (segment n of m,
-  elapsed, remaining, paused), queue counts; with `changed_at`, the wall-clock time the
-  daemon received the status report shown (so the page can measure status-to-page latency),
-  and `trail`: the positions reported since the stream last sent them.
+  elapsed, remaining, paused, feed and power overrides), queue counts; with `changed_at`,
+  the wall-clock time the daemon received the status report shown (so the page can measure
+  status-to-page latency), and `trail`: the positions reported since the stream last sent them.
 - `trail`: on connecting and when a new job starts, the whole path the machine has drawn so
   far for the running job, from its reported positions (mm, and whether the segment there
   draws).
@@ -159,7 +159,9 @@ class EventHub:
             "live": None if live is None else {
                 "job_id": live.job_id, "segments_done": live.segments_done,
                 "segments_total": live.segments_total, "elapsed_s": round(live.elapsed_s, 2),
-                "remaining_s": round(live.remaining_s, 2), "paused": live.paused},
+                "remaining_s": round(live.remaining_s, 2), "paused": live.paused,
+                "overrides": {"feed_pct": live.overrides.feed_pct,
+                              "power_pct": live.overrides.power_pct}},
             "changed_at": changed_at}
 
     def trail_since(self, serial: int, start: int

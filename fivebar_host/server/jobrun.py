@@ -16,13 +16,14 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
 
 from fivebar_host import protocol
 from fivebar_host.compile import Job
 from fivebar_host.run.errors import FaultKind, LinkError, LinkFaultError, SendError
+from fivebar_host.run.overrides import Overrides
 from fivebar_host.run.program import Program, build_program
 from fivebar_host.run.resume import ResumePoint, resume_path
 from fivebar_host.run.sender import Progress, SendReport, run_job
@@ -54,6 +55,7 @@ class JobRun:
     program: tuple[Program, int] | None = None  # the program streamed, its first line
     underruns0: int | None = None  # the firmware's underrun count when the stream began
     progress_saved: float = 0.0  # monotonic time progress was last handed to the writer
+    overrides: Overrides = field(default_factory=Overrides)  # live feed/power, this run
 
 
 class JobRunner(Control):
@@ -91,14 +93,15 @@ class JobRunner(Control):
             self.current = rec.id
             self._question = None
             user_confirm = self._confirm_once.pop(rec.id, False)
+        overrides = Overrides()  # each run starts at 100 % (a resumed job too)
         self.live = Live(rec.id, start, job.n_segments, 0.0,
-                         float(job.duration_us[start:].sum()) * 1e-6)
+                         float(job.duration_us[start:].sum()) * 1e-6, overrides=overrides)
         self.store.update(rec.id, state=st_.RUNNING, message="", question=None,
                           started_at=rec.started_at or time.time())
         log.info("job %d (%s): %s at segment %d of %d", rec.id, rec.name,
                  "resuming" if rec.resume is not None else "starting", start, job.n_segments)
         return JobRun(link, rec, job, opts, start, base, rpath, rec.resume is not None,
-                      user_confirm, time.monotonic(), rec.run_s)
+                      user_confirm, time.monotonic(), rec.run_s, overrides=overrides)
 
     def _stream(self, run: JobRun) -> SendReport | None:
         """Park, then `run_job`; its report, or None once a stop or fault is recorded."""
@@ -117,6 +120,7 @@ class JobRunner(Control):
                                                           run.user_confirm),
                            resume=run.resume, on_progress=partial(self._on_progress, run),
                            should_stop=self._should_stop, on_interrupt=self._on_interrupt,
+                           overrides=run.overrides,
                            on_note=lambda text: log.warning("job %d: %s", rec.id, text))
         except SendError as e:
             self.progress.flush()  # before the final record, never after it

@@ -20,7 +20,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +30,7 @@ from fivebar_host.config import Profile
 from fivebar_host.errors import FivebarError
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import LinkError
+from fivebar_host.run.overrides import Overrides
 from fivebar_host.run.program import travel_lines
 from fivebar_host.server.jobs import CompiledCache, JobOptions, SubmitError, compile_upload
 from fivebar_host.server.journal import JournalLink, ProgressWriter
@@ -84,6 +85,9 @@ class Live:
     elapsed_s: float
     remaining_s: float
     paused: bool = False
+    #: The run's live feed and laser-power overrides (`run.overrides`), which `run_job`
+    #: reads for every line it writes; set through `Control.set_overrides`.
+    overrides: Overrides = field(default_factory=Overrides)
 
 
 class MachineState(threading.Thread):

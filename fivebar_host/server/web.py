@@ -1,5 +1,6 @@
 """The web page's routes: the page itself, option definitions, dry run, events, queue order,
-and the machine panel's actions (jog, motors off, clear alarm).
+the running job's live overrides, and the machine panel's actions (jog, motors off, clear
+alarm).
 
 The page (`GET /`, `GET /static/…`) is plain HTML, CSS and JavaScript shipped in the package
 (`fivebar_host/server/static/`, package data; found through `importlib.resources`, so it
@@ -34,6 +35,7 @@ from fivebar_host.compile import Job, nbar_opinion
 from fivebar_host.config import Profile
 from fivebar_host.dryrun import format_duration, report_lines
 from fivebar_host.options import JOB_OPTIONS, Option
+from fivebar_host.run.overrides import FEED_MAX_PCT, FEED_MIN_PCT, POWER_MAX_PCT, POWER_MIN_PCT
 from fivebar_host.server import store as st_
 from fivebar_host.server.app import (
     _SUBMIT_EXTRA,
@@ -41,6 +43,7 @@ from fivebar_host.server.app import (
     ApiError,
     ErrorOut,
     JobId,
+    JobOut,
     MachineOut,
     _Ctx,
     compile_request,
@@ -49,6 +52,7 @@ from fivebar_host.server.app import (
 )
 from fivebar_host.server.events import JOBS_SENT, EventHub
 from fivebar_host.server.jobs import SubmitError
+from fivebar_host.server.machine import JobStateError
 
 #: The page's files: name → media type. Only these are served.
 STATIC_TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=utf-8",
@@ -134,6 +138,7 @@ def add_web_routes(app: FastAPI, ctx: _Ctx) -> None:
     _page_routes(app, ctx)
     _dryrun_route(app, ctx)
     _queue_routes(app, ctx)
+    _override_route(app, ctx)
     _manual_routes(app, ctx)
 
 
@@ -235,6 +240,32 @@ def _queue_routes(app: FastAPI, ctx: _Ctx) -> None:
         draw = [True, *(bool(d) for d in job.draw[step - 1::step])]
         return {"job_id": job_id, "points": [[round(float(x), 2), round(float(y), 2), int(d)]
                                              for (x, y), d in zip(pts, draw, strict=False)]}
+
+
+def _override_route(app: FastAPI, ctx: _Ctx) -> None:
+    @app.post("/api/jobs/{job_id}/overrides", response_model=JobOut, tags=["jobs"],
+              responses={404: {"model": ErrorOut, "description": "No such job."},
+                         409: {"model": ErrorOut, "description": "The job is not running."}})
+    def overrides(job_id: JobId,
+                  feed: int | None = Query(None, ge=FEED_MIN_PCT, le=FEED_MAX_PCT,
+                                           description="Feed, % of the planned speed "
+                                           "(slower only)."),
+                  power: int | None = Query(None, ge=POWER_MIN_PCT, le=POWER_MAX_PCT,
+                                            description="Laser power, % of the planned "
+                                            "power.")) -> JobOut:
+        """Set the running (or paused) job's live feed and/or laser-power override; the job
+        with the overrides now in force. Lines already written to the controller (about 15
+        segments) keep their values; a power change applies from the next line written, a
+        feed change from the next point where the plan comes to rest (docs/serve.md)."""
+        if feed is None and power is None:
+            raise ApiError(422, "bad_option", "give feed and/or power (percent)")
+        rec = ctx.get_rec(job_id)
+        try:
+            ctx.worker.set_overrides(job_id, feed, power)
+        except JobStateError as e:
+            raise ApiError(409, "conflict", f"job {job_id} is {rec.state}: overrides apply "
+                           "to the running job only") from e
+        return job_out(ctx.get_rec(job_id), ctx.worker)
 
 
 def _manual_routes(app: FastAPI, ctx: _Ctx) -> None:

@@ -377,12 +377,24 @@ function renderLiveJob() {
         : button('Pause', () => act(lv.job_id, 'pause')), button('Cancel', () => act(lv.job_id, 'cancel')));
     }
   }
+  renderOverrides(lv, job);
   if (lv && job && ['running', 'paused'].includes(job.state)) {
     const row = document.querySelector('[data-job="' + lv.job_id + '"]');
     if (row) {
       row.querySelector('progress').value = lv.segments_total ? lv.segments_done / lv.segments_total : 0;
       row.querySelector('.eta').textContent = 'segment ' + lv.segments_done + ' of ' + lv.segments_total + ' · ' + dur(lv.remaining_s) + ' left';
     }
+  }
+}
+
+// Live overrides (POST /api/jobs/{id}/overrides), 10 % a click; the values are the daemon's.
+function renderOverrides(lv, job) {
+  const ov = lv && lv.overrides; $('#overrides').hidden = !ov;
+  for (const g of ov ? document.querySelectorAll('#overrides .ov') : []) {
+    const v = ov[g.dataset.ov + '_pct'];
+    g.hidden = g.dataset.ov === 'power' && !(job && job.options.laser);
+    g.querySelector('output').textContent = v + '%';
+    g.querySelector('[data-sign="-1"]').disabled = v <= Number(g.dataset.min); g.querySelector('[data-sign="1"]').disabled = v >= Number(g.dataset.max);
   }
 }
 
@@ -565,6 +577,13 @@ function setupMachine() {
   // Pen up/down: shown only when GET /api/options says the machine has a pen servo.
   for (const b of document.querySelectorAll('#pen button')) {
     b.onclick = () => machineAction(b.textContent, '/api/machine/pen?down=' + b.dataset.down);
+  }
+  for (const b of document.querySelectorAll('#overrides button')) {  // live overrides
+    b.onclick = () => {
+      const lv = S.status && S.status.live, g = b.closest('.ov'), k = g.dataset.ov;
+      if (lv && lv.overrides) act(lv.job_id, 'overrides', k + '=' + Math.min(Number(g.dataset.max),
+        Math.max(Number(g.dataset.min), lv.overrides[k + '_pct'] + 10 * Number(b.dataset.sign))));
+    };
   }
   window.addEventListener('resize', draw);
 }
