@@ -21,6 +21,7 @@ from fivebar_host.executed import executed_path
 from fivebar_host.run.grbl_link import GrblError, GrblLink
 from fivebar_host.run.grbl_run import run_grbl_job
 from fivebar_host.run.program import line_param
+from fivebar_host.run.resume import ResumePoint, resume_path
 
 ROOT = Path(__file__).resolve().parents[1]
 TEXT = ROOT / "examples" / "fivebar_text.svg"
@@ -146,7 +147,7 @@ def job_program_last(job: object, prof: object) -> str:
     return lines[-1].replace(" ", "")
 
 
-def test_ctrl_c_holds_and_names_the_exact_segment() -> None:
+def test_ctrl_c_holds_and_names_the_exact_segment(tmp_path: Path) -> None:
     _configure("hold")
     prof = load_profile()
     job = compile_job(TEXT, prof, CompileOptions())
@@ -160,7 +161,8 @@ def test_ctrl_c_holds_and_names_the_exact_segment() -> None:
     try:
         with pytest.raises(GrblError, match=r"in segment (\d+) of") as info:
             run_grbl_job(link, job, prof, laser=True, confirm=lambda q: True,
-                         should_stop=stop, on_interrupt=lambda: False)
+                         should_stop=stop, on_interrupt=lambda: False,
+                         drawing=tmp_path / "text.svg")
     finally:
         link.close()
     found = re.search(r"in segment (\d+) of", str(info.value))
@@ -196,3 +198,91 @@ def test_home_jog_frame_and_convert_on_grbl(tmp_path: Path) -> None:
     text = out_file.read_text().splitlines()
     assert text[0].startswith("G21 G90") and any(x.startswith("M4 S") for x in text)
     assert not any(" A" in x and x.startswith("G1") for x in text)
+
+
+def _abort(url: str, drawing: Path, at: int = 300) -> str:
+    """Run the job on `url` and abort it (Ctrl-C, then "abort") after `at` polls."""
+    prof = load_profile()
+    job = compile_job(TEXT, prof, CompileOptions())
+    calls = {"n": 0}
+
+    def stop() -> bool:
+        calls["n"] += 1
+        return calls["n"] == at
+
+    link = GrblLink.open(url)
+    try:
+        with pytest.raises(GrblError, match=r"in segment \d+ of") as info:
+            run_grbl_job(link, job, prof, laser=True, confirm=lambda q: True,
+                         should_stop=stop, on_interrupt=lambda: False, drawing=drawing)
+    finally:
+        link.close()
+    return str(info.value)
+
+
+def test_abort_then_resume_draws_the_plan_exactly_once(tmp_path: Path) -> None:
+    _configure("res")
+    url = "fivebar-grbl://res?speed=5&dtr=0"  # a board that keeps its count on open
+    drawing = tmp_path / "text.svg"
+    _abort(url, drawing)
+    rp = ResumePoint.load(resume_path(drawing))
+    prof = load_profile()
+    job = compile_job(TEXT, prof, CompileOptions())
+    assert rp.position is not None and 0 < rp.next_segment < job.n_segments
+    notes: list[str] = []
+    link = GrblLink.open(url.replace("speed=5", "speed=200"))
+    try:
+        rep = run_grbl_job(link, job, prof, laser=True, confirm=lambda q: False,
+                           confirm_placed=lambda q: False, drawing=drawing, resume=True,
+                           on_note=notes.append)
+    finally:
+        link.close()
+    assert "kept its position" in notes[0] and not resume_path(drawing).exists()
+    assert rep.final == tuple(int(v) for v in job.steps[-1])
+    blocks = grblmock.board("res").blocks
+    partial = [i for i, b in enumerate(blocks) if b.done < 1.0]
+    assert len(partial) == 1
+    cut = blocks[partial[0]]
+    stop = tuple(round(cut.start[i] + cut.done * (cut.end[i] - cut.start[i]))
+                 for i in range(2))
+    assert stop == rp.position and blocks[partial[0] + 1].start[:2] == stop
+    moving = [k for k in range(job.n_segments)
+              if not np.array_equal(job.steps[k], job.steps[k + 1])]
+    full = [b for b in blocks if b.done >= 1.0][-len(moving):]
+    for k, b in zip(moving, full, strict=True):  # every planned line ran once, in order
+        assert np.abs(np.subtract(b.end[:2], job.steps[k + 1])).max() <= 1, k
+        assert (b.laser > 0) == bool(job.draw[k] and job.power[k] > 0), k
+    assert (cut.laser > 0) == bool(job.draw[rp.next_segment] and job.power[rp.next_segment])
+
+
+def test_resume_refused_for_another_job_or_a_board_that_lost_its_count(tmp_path: Path
+                                                                        ) -> None:
+    _configure("lost")
+    drawing = tmp_path / "text.svg"
+    drawing.write_bytes(TEXT.read_bytes())
+    _abort("fivebar-grbl://lost?speed=5", drawing)
+    n = len(grblmock.board("lost").blocks)
+    url = "fivebar-grbl://lost?speed=50"  # opening the port reboots it: count lost
+    code, out = _cli("plot", str(drawing), "--controller", "grbl", "--laser", "--yes",
+                     "--resume", "--port", url)
+    assert code != 0 and "--yes does not answer" in out and "Nothing was sent" in out, out
+    code, out = _cli("plot", str(drawing), "--controller", "grbl", "--yes", "--resume",
+                     "--tolerance", "0.2", "--port", url)
+    assert code != 0 and "belongs to a different job" in out, out
+    assert len(grblmock.board("lost").blocks) == n  # nothing moved
+
+
+def test_a_stop_where_the_path_crosses_itself_is_not_resumable() -> None:
+    from types import SimpleNamespace
+
+    from fivebar_host.run.grbl_link import StreamState
+    from fivebar_host.run.grbl_program import GrblProgram
+    from fivebar_host.run.grbl_resume import identify
+
+    job = SimpleNamespace(steps=np.array([[0, 0], [100, 0], [0, 0], [100, 40]]),
+                          n_segments=3)
+    prog = GrblProgram(["G21", "a", "b", "c"], np.array([-1, 0, 1, 2]))
+    k, why = identify(prog, job, (50, 0), StreamState(sent=4, acked=4))  # type: ignore
+    assert k is None and "ambiguous" in why and "0, 1" in why
+    k, why = identify(prog, job, (50, 20), StreamState(sent=4, acked=4))  # type: ignore
+    assert k == 2 and why == ""

@@ -14,6 +14,7 @@ import click
 
 from fivebar_host.cli.common import (
     config_option,
+    confirm_placed,
     confirm_with,
     fail,
     handle_errors,
@@ -64,8 +65,10 @@ def grbl_convert(output: Path, prof: Profile, job: Any, laser: bool) -> None:
                f"degrees) for {job.n_segments} segments, ≈ {job.total_time_s:.1f} s planned")
 
 
-def grbl_plot(port: str, prof: Profile, job: Any, *, laser: bool, yes: bool) -> None:
-    """`plot --controller grbl`: check the board, stream, Ctrl-C holds (laser off)."""
+def grbl_plot(port: str, prof: Profile, job: Any, *, laser: bool, yes: bool,
+              drawing: Path | None = None, resume: bool = False) -> None:
+    """`plot --controller grbl`: check the board, stream, Ctrl-C holds (laser off); a
+    fault or an abort leaves a resume file, `--resume` continues from it."""
     from fivebar_host.cli.plot import _ask_resume
     from fivebar_host.run.grbl_run import angles_text, run_grbl_job
 
@@ -84,7 +87,9 @@ def grbl_plot(port: str, prof: Profile, job: Any, *, laser: bool, yes: bool) -> 
     previous = signal.signal(signal.SIGINT, on_sigint)
     try:
         rep = run_grbl_job(link, job, prof, laser=laser, confirm=confirm_with(yes),
-                           should_stop=lambda: flag["stop"], on_interrupt=on_interrupt)
+                           should_stop=lambda: flag["stop"], on_interrupt=on_interrupt,
+                           drawing=drawing, resume=resume, confirm_placed=confirm_placed(yes),
+                           on_note=click.echo)
     finally:
         signal.signal(signal.SIGINT, previous)
         link.close()

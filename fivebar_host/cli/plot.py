@@ -112,10 +112,7 @@ def plot(drawing: Path, dry_run: bool, preview_path: Path, port: str | None, res
     if controller == "grbl":
         from fivebar_host.cli.grbl import grbl_plot
 
-        if resume:
-            fail("--resume is not available with --controller grbl (GRBL reports no line "
-                 "numbers; a stopped GRBL job names the segment where the pen stopped)")
-        grbl_plot(port, prof, job, laser=laser, yes=yes)
+        grbl_plot(port, prof, job, laser=laser, yes=yes, drawing=drawing, resume=resume)
         return
     _stream_plot(drawing, port, prof, job, laser=laser, resume=resume, yes=yes,
                  preview_path=preview_path)

@@ -5,9 +5,11 @@ interface (gnea/grbl wiki: interface, commands, settings, laser mode), written f
 `--controller grbl` path and its tests, not a port of GRBL's code:
 
 - opening the port is a DTR reset: the banner ``Grbl 1.1h ['$' for help]``, the machine
-  position restarts at 0 (GRBL keeps no position across a reboot); `$` settings and the G54
-  offset live in "EEPROM" and survive (per board NAME, for the life of the process); with
-  ``$22=1`` the board boots in Alarm (``[MSG:'$H'|'$X' to unlock]``);
+  position restarts at 0 (GRBL keeps no position across a reboot); ``?dtr=0`` models a
+  board whose auto-reset is disabled (or a network link): it still prints its banner (as
+  after a Ctrl-X) but keeps the position it had when the port was last closed; `$`
+  settings and the G54 offset live in "EEPROM" and survive (per board NAME, for the life
+  of the process); with ``$22=1`` the board boots in Alarm (``[MSG:'$H'|'$X' to unlock]``);
 - a 128-byte receive ring (127 usable bytes, as GRBL's): bytes beyond it are dropped and
   counted in ``Board.overflow`` — the damaged line then gets GRBL's error, so a sender that
   does not count characters is caught;
@@ -89,6 +91,7 @@ class Board:
     blocks: list[Block] = field(default_factory=list)
     overflow: int = 0  # bytes dropped on a full receive ring
     received: list[str] = field(default_factory=list)  # every line processed
+    kept: list[int] | None = None  # machine steps when the port closed (for ``dtr=0``)
 
 
 _BOARDS: dict[str, Board] = {}
@@ -155,18 +158,26 @@ class GrblMock(serial.SerialBase):
             raise serial.SerialException(f"{url}: not a {SCHEME}:// URL")
         rest = url[len(SCHEME) + 3:]
         name, _, query = rest.partition("?")
+        dtr_reset = True
         for item in filter(None, query.split("&")):
             key, _, value = item.partition("=")
-            if key != "speed":
-                raise serial.SerialException(f"{url}: unknown option {key!r} (speed=)")
-            self.speed = float(value)
+            if key not in ("speed", "dtr"):
+                raise serial.SerialException(f"{url}: unknown option {key!r} (speed=, dtr=)")
+            if key == "speed":
+                self.speed = float(value)
+            else:
+                dtr_reset = value != "0"
         self.board = board(name or "default") if name else Board("")
         self._boot()
+        if not dtr_reset and self.board.kept is not None:
+            self._pos = list(self.board.kept)
         self.is_open = True
         GrblMock.opened.append(self)
 
     def close(self) -> None:
-        """Close the port (the board keeps its record)."""
+        """Close the port (the board keeps its record and, for ``dtr=0``, its position)."""
+        if hasattr(self, "_pos"):
+            self.board.kept = list(self._pos)
         self.is_open = False
 
     def _reconfigure_port(self, force_update: bool = False) -> None:

@@ -172,16 +172,43 @@ class GrblProgram:
                 return k + 1 if t >= 1.0 else k
         return last + 1
 
+    def candidates(self, steps: tuple[int, int], job: Job, lo: int, hi: int) -> list[int]:
+        """Every first-unfinished segment the lines `lo` … `hi − 1` allow for a machine
+        standing at `steps`: segment k when `steps` lies on k's joint-space line (k + 1 at
+        its end), moved past zero-length segments (they have no line). One candidate: the
+        stop is identified exactly; several: the path passes the same angles twice there."""
+        found: set[int] = set()
+        for k in self.segment[max(lo, 0): max(hi, 0)]:
+            if k < 0:
+                continue
+            t = line_param(job.steps[k], job.steps[k + 1], steps)
+            if t is None:
+                continue
+            nxt = int(k) + 1 if t >= 1.0 else int(k)
+            while (nxt < job.n_segments
+                   and np.array_equal(job.steps[nxt], job.steps[nxt + 1])):
+                nxt += 1
+            found.add(nxt)
+        return sorted(found)
 
-def job_program(job: Job, profile: Profile, laser: bool) -> GrblProgram:
+
+def job_program(job: Job, profile: Profile, laser: bool, start: int = 0,
+                start_position: tuple[int, int] | None = None) -> GrblProgram:
     """The job as GRBL lines: G21 G90 G94, then one G1 per moving segment (feed from its
     planned duration), the laser (M4 S, dynamic: power follows GRBL's own ramps) on
-    drawing runs only, or a servo pen (M3 S down / up with a G4 settle) — see module doc."""
+    drawing runs only, or a servo pen (M3 S down / up with a G4 settle) — see module doc.
+
+    A resume starts at segment `start` from `start_position` (steps on that segment's line):
+    its first G1 goes to the segment's end at the segment's own feed, i.e. in the remaining
+    share of its planned duration; the tool is set as planned for it."""
     deg = angles_deg(profile, job.steps)
+    if start_position is not None:
+        deg = deg.copy()
+        deg[start] = angles_deg(profile, np.asarray(start_position))
     lines = ["G21 G90 G94 M5 S0"]
     seg = [-1]
     tool_on = False
-    for k in range(job.n_segments):
+    for k in range(start, job.n_segments):
         draw = bool(job.draw[k])
         want = draw and (profile.pen is not None or (laser and int(job.power[k]) > 0))
         if want != tool_on:
@@ -193,7 +220,8 @@ def job_program(job: Job, profile: Profile, laser: bool) -> GrblProgram:
         length = float(np.hypot(d[0], d[1]))
         if length == 0.0:
             continue
-        feed = 60.0 * length / (float(job.duration_us[k]) * 1e-6)
+        full = deg[k + 1] - angles_deg(profile, job.steps[k]) if k == start else d
+        feed = 60.0 * float(np.hypot(full[0], full[1])) / (float(job.duration_us[k]) * 1e-6)
         word = ""
         if tool_on and profile.pen is None:
             word = f" S{_num(int(job.power[k]) * S_MAX / 255.0, 5)}"

@@ -15,7 +15,8 @@ of `ok`s bounds progress from above only. On an `error:N`, an alarm or the user'
 host holds (`!`: GRBL decelerates, and in laser mode turns the laser off while held), resets
 (Ctrl-X: queue cleared, laser off; the position is kept because motion had stopped) and
 reads MPos: the position is exact, and the segment it lies on is found by searching the
-program's joint-space lines back from the last acknowledged one (`GrblProgram.segment_at`).
+program's joint-space lines around the last acknowledged one, and the resume file is
+written; `--resume` continues from it (`run.grbl_resume`: what is exact and what is not).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -44,6 +46,8 @@ from fivebar_host.run.grbl_program import (
     steps_per_degree,
     work_offset_line,
 )
+from fivebar_host.run.grbl_resume import fault_point, load_point, resume_pose
+from fivebar_host.run.resume import RESUME_SUFFIX, resume_path
 
 
 def check_settings(link: GrblLink, profile: Profile) -> None:
@@ -110,50 +114,72 @@ def run_grbl_job(link: GrblLink, job: Job, profile: Profile, *, laser: bool,
                  confirm: Callable[[str], bool],
                  on_progress: Callable[[int], None] | None = None,
                  should_stop: Callable[[], bool] | None = None,
-                 on_interrupt: Callable[[], bool] | None = None) -> GrblReport:
+                 on_interrupt: Callable[[], bool] | None = None,
+                 drawing: str | Path | None = None, resume: bool = False,
+                 confirm_placed: Callable[[str], bool] | None = None,
+                 on_note: Callable[[str], None] | None = None) -> GrblReport:
     """Check the settings, make sure of the pose (travel to the job's start if the arms are
     elsewhere, laser off), stream the job and wait for idle. `on_progress` gets the job
-    segments acknowledged (planned by GRBL; up to 15 blocks ahead of the pen)."""
+    segments acknowledged (planned by GRBL; up to 15 blocks ahead of the pen).
+
+    A fault or an abort writes the resume file beside `drawing` (`run.grbl_resume`);
+    `resume` continues from it: the half-done segment from the stop position, then the
+    rest. `confirm_placed` answers where the arms are when GRBL lost its count (never
+    `--yes`; `confirm` when not given)."""
+    rpath = resume_path(drawing if drawing is not None else job.file)
     check_settings(link, profile)
-    pos = ensure_pose(link, profile, confirm)
-    first = (int(job.steps[0, 0]), int(job.steps[0, 1]))
-    if pos != first:
-        _travel(link, profile, job.assembly, pos, first)
-    prog = job_program(job, profile, laser)
+    start, at = 0, None
+    if resume:
+        rp = load_point(rpath, job)
+        start, at = rp.next_segment, resume_pose(
+            link, job, profile, rp, confirm_placed or confirm, on_note or (lambda _: None),
+            lambda p, q: _travel(link, profile, job.assembly, p, q))
+    else:
+        pos = ensure_pose(link, profile, confirm)
+        first = (int(job.steps[0, 0]), int(job.steps[0, 1]))
+        if pos != first:
+            _travel(link, profile, job.assembly, pos, first)
+    prog = job_program(job, profile, laser, start, at)
 
     def progress(s: StreamState) -> None:
         if on_progress is not None:
             seg = prog.segment[: s.acked]
-            on_progress(int(seg.max()) + 1 if seg.size and seg.max() >= 0 else 0)
+            on_progress(int(seg.max()) + 1 if seg.size and seg.max() >= 0 else start)
 
     try:
         res = link.stream(prog.lines, on_progress=progress, should_stop=should_stop,
                           on_interrupt=on_interrupt)
         st = link.wait_idle(max(30.0, 3.0 * job.total_time_s))
     except GrblStreamError as e:
-        raise _after_fault(link, job, profile, prog, e) from e
-    return GrblReport(job.n_segments, len(prog.lines), res.bytes_sent,
+        raise _after_fault(link, job, profile, prog, e, rpath) from e
+    if rpath.exists():
+        rpath.unlink()
+    return GrblReport(job.n_segments - start, len(prog.lines), res.bytes_sent,
                       position_steps(link, profile, st))
 
 
 def _after_fault(link: GrblLink, job: Job, profile: Profile, prog: GrblProgram,
-                 e: GrblStreamError) -> GrblError:
-    """Hold, reset (laser off, queue cleared, position kept), read where the pen stopped."""
+                 e: GrblStreamError, rpath: Path) -> GrblError:
+    """Hold, reset (laser off, queue cleared, position kept), read where the pen stopped,
+    write the resume file. After an alarm or a reboot GRBL's position is not trusted."""
+    pos: tuple[int, int] | None = None
+    reason = f"{e.code or 'fault'}: {e}"
     try:
         if not e.code.startswith(("ALARM", "Grbl")):
             link.hold()
             link.reset()
         st = link.status()
         pos = position_steps(link, profile, st)
+        if e.code.startswith(("ALARM", "Grbl")):
+            reason += f" (GRBL may have lost its position; it reports A = {pos[0]}, " \
+                      f"B = {pos[1]} steps)"
+            pos = None
     except GrblError as again:
-        return GrblError(f"{e}; then the board could not be read ({again}): reset it and "
-                         "home before another job")
-    k = prog.segment_at(pos, job, e.state.acked)
-    return GrblError(
-        f"{e}. Laser off, queue cleared. The pen stopped at A = {pos[0]}, B = {pos[1]} "
-        f"steps (exact, from MPos), in segment {k} of {job.n_segments} (found from the "
-        f"{e.state.acked} lines GRBL acknowledged and that position; GRBL reports no line "
-        "numbers). Segments before it are drawn.")
+        reason += f"; then the board could not be read ({again})"
+    drawing = rpath.with_name(rpath.name[: -len(RESUME_SUFFIX)])
+    rp, where = fault_point(job, prog, drawing, e.state, pos, reason)
+    rp.save(rpath)
+    return GrblError(f"{e}. Laser off, queue cleared. {where}.\nresume file: {rpath}")
 
 
 def _travel(link: GrblLink, profile: Profile, assembly: int, start: tuple[int, int],
