@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -27,3 +28,13 @@ def sim_build() -> sim.BuildPaths:
     if reason is not None:
         pytest.skip(f"emulator unavailable: {reason}")
     return sim.ensure_built()
+
+
+@pytest.fixture
+def clean_mock() -> Iterator[None]:
+    """No named `fivebar-mock://?machine=NAME` machine before or after the test."""
+    from fivebar_host.devices import mock
+
+    mock.forget_machines()
+    yield
+    mock.forget_machines()

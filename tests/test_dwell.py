@@ -3,7 +3,6 @@ without motion, and run by the mock device as a block of zero steps for exactly 
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -37,10 +36,8 @@ G4 P0.25
 
 
 @pytest.fixture(autouse=True)
-def _clean_machines() -> Iterator[None]:
-    mock.forget_machines()
-    yield
-    mock.forget_machines()
+def _clean_machines(clean_mock: None) -> None:
+    """Every test here starts and ends with no named mock machine left over."""
 
 
 @pytest.fixture

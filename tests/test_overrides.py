@@ -7,7 +7,6 @@ from __future__ import annotations
 import io
 import os
 import shutil
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -29,10 +28,8 @@ EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
 
 @pytest.fixture(autouse=True)
-def _clean_machines() -> Iterator[None]:
-    mock.forget_machines()
-    yield
-    mock.forget_machines()
+def _clean_machines(clean_mock: None) -> None:
+    """Every test here starts and ends with no named mock machine left over."""
 
 
 def test_scale_body_slows_moves_scales_power_and_keeps_the_rest() -> None:

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import shutil
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -30,10 +29,8 @@ EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
 
 @pytest.fixture(autouse=True)
-def _clean_machines() -> Iterator[None]:
-    mock.forget_machines()
-    yield
-    mock.forget_machines()
+def _clean_machines(clean_mock: None) -> None:
+    """Every test here starts and ends with no named mock machine left over."""
 
 
 @pytest.fixture

@@ -183,15 +183,18 @@ def position_text(prof: Profile, a_steps: int, b_steps: int, homed: bool = True)
     return f"{text} (x {x:.1f} mm, y {y:.1f} mm)"
 
 
-def open_link(port: str | None, prof: Profile) -> Any:
-    """Open the machine at --port (required for machine commands)."""
-    from fivebar_host.run.link import Link
-
+def open_link(port: str | None, prof: Profile, controller: str = "fivebar") -> Any:
+    """Open the machine at --port (required for machine commands): fivebar's firmware, or
+    a stock GRBL board (`--controller grbl`)."""
     if port is None:
         fail("give --port PORT")
-    return Link.open(str(port), baud=prof.serial.baud,
-                     banner_timeout_s=prof.serial.banner_timeout_s,
-                     reply_timeout_s=prof.serial.reply_timeout_s)
+    from fivebar_host.run.grbl_link import GrblLink
+    from fivebar_host.run.link import Link
+
+    cls: Any = GrblLink if controller == "grbl" else Link
+    return cls.open(str(port), baud=prof.serial.baud,
+                    banner_timeout_s=prof.serial.banner_timeout_s,
+                    reply_timeout_s=prof.serial.reply_timeout_s)
 
 
 def page_size(text: str, landscape: bool = False) -> tuple[float, float]:

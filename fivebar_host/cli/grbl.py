@@ -16,10 +16,10 @@ from fivebar_host.cli.common import (
     config_option,
     confirm_placed,
     confirm_with,
-    fail,
     handle_errors,
     load,
     main,
+    open_link,
 )
 from fivebar_host.config import Profile
 
@@ -45,13 +45,7 @@ def grbl_settings(config_path: Path | None) -> None:
 
 def open_grbl(port: str | None, prof: Profile) -> Any:
     """Open the GRBL board at --port."""
-    from fivebar_host.run.grbl_link import GrblLink
-
-    if port is None:
-        fail("give --port PORT")
-    return GrblLink.open(str(port), baud=prof.serial.baud,
-                         banner_timeout_s=prof.serial.banner_timeout_s,
-                         reply_timeout_s=prof.serial.reply_timeout_s)
+    return open_link(port, prof, controller="grbl")
 
 
 def grbl_convert(output: Path, prof: Profile, job: Any, laser: bool) -> None:
