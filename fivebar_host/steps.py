@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 from kinematics.arrays import FloatArray, IntArray
+from kinematics.fivebar import FiveBar
 
 
 def absolute_steps(angles_rad: FloatArray, home_rad: tuple[float, float],
@@ -48,3 +49,16 @@ def step_quantum_mm(jacobian: FloatArray, rad_per_step: float) -> FloatArray:
     j = np.asarray(jacobian, dtype=np.float64)
     return (np.hypot(j[:, 0, 0], j[:, 1, 0]) + np.hypot(j[:, 0, 1], j[:, 1, 1])) * (
         rad_per_step / 2.0)
+
+
+def pen_position_mm(geometry: FiveBar, assembly: str, home_rad: tuple[float, float],
+                    steps_per_rev: float, a_steps: int, b_steps: int
+                    ) -> tuple[float, float] | None:
+    """Where the pen is at motor steps (A, B) from the homed pose: forward kinematics of the
+    machine's assembly (None where the links cannot close). Positions are shown in mm
+    beside the steps everywhere (CLI, daemon, page)."""
+    th = step_angles(np.array([[a_steps, b_steps]]), home_rad, steps_per_rev)
+    fwd = geometry.forward_batch(th, assembly)
+    if not fwd.valid[0]:
+        return None
+    return float(fwd.points[0, 0]), float(fwd.points[0, 1])

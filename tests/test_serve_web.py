@@ -188,8 +188,14 @@ def test_jog_and_motors_off(tmp_path: Path) -> None:
         assert out["position"] != {"a": 0, "b": 0} and out["pose_known"]
         bad = send(d.url, "POST", "/api/machine/jog?dx=500")
         assert bad.status == 422 and _json(bad)["error"] == "bad_option"
+        home = c.home(at_home=True)
+        prof = load_profile(None)
+        want = prof.geometry.forward(prof.motors.home_rad, prof.kinematics.assembly)
+        assert home["position"] == {"a": 0, "b": 0}
+        assert abs(home["position_mm"]["x"] - want[0]) < 1e-3
+        assert abs(home["position_mm"]["y"] - want[1]) < 1e-3
         off = c.request("POST", "/api/machine/motors_off")
-        assert off["motors_off"] and not off["pose_known"]
+        assert off["motors_off"] and not off["pose_known"] and off["position_mm"] is None
         led = mock.machine("w-jog").ledger
         assert led[-1].kind == "M18"
         out = c.request("POST", "/api/machine/jog", query={"motor": "B", "steps": "-40"})

@@ -170,16 +170,13 @@ def position_text(prof: Profile, a_steps: int, b_steps: int, homed: bool = True)
     text = f"A = {a_steps} steps, B = {b_steps} steps"
     if not homed:
         return text + " (position unknown: not homed)"
-    import numpy as np
+    from fivebar_host.steps import pen_position_mm
 
-    from fivebar_host.steps import step_angles
-
-    th = step_angles(np.array([[a_steps, b_steps]]), prof.motors.home_rad,
-                     prof.motors.steps_per_rev)
-    fwd = prof.geometry.forward_batch(th, prof.kinematics.assembly)
-    if not fwd.valid[0]:
+    xy = pen_position_mm(prof.geometry, prof.kinematics.assembly, prof.motors.home_rad,
+                         prof.motors.steps_per_rev, a_steps, b_steps)
+    if xy is None:
         return text + " (no pen position: the links cannot close there)"
-    x, y = fwd.points[0]
+    x, y = xy
     return f"{text} (x {x:.1f} mm, y {y:.1f} mm)"
 
 

@@ -185,6 +185,8 @@ class MachineOut(BaseModel):
     state: str | None = Field(description="Idle, Run, Hold, Home or Alarm.")
     detail: int | None = Field(description="Hold reason or alarm code.")
     position: dict[str, int] | None = Field(description="Firmware steps {a, b}.")
+    position_mm: dict[str, float] | None = Field(None, description="The pen {x, y} in machine "
+                                                 "mm (forward kinematics), when pose_known.")
     laser: int | None = Field(description="Laser output now (0 = off).")
     queued_blocks: int | None = Field(description="Blocks waiting in the firmware queue.")
     done_line: int | None

@@ -35,6 +35,7 @@ from fivebar_host.run.program import travel_lines
 from fivebar_host.server.jobs import CompiledCache, JobOptions, SubmitError, compile_upload
 from fivebar_host.server.journal import JournalLink, ProgressWriter
 from fivebar_host.server.store import JobRecord, JobStore
+from fivebar_host.steps import pen_position_mm
 
 log = logging.getLogger("fivebar.serve")
 
@@ -135,6 +136,7 @@ class MachineState(threading.Thread):
             "state": None if st is None else st.state,
             "detail": None if st is None else st.detail,
             "position": None if st is None else {"a": st.a, "b": st.b},
+            "position_mm": self._position_mm(st),
             "laser": None if st is None else st.laser,
             "queued_blocks": None if st is None else st.queued,
             "done_line": None if st is None else st.done_line,
@@ -146,6 +148,15 @@ class MachineState(threading.Thread):
             "status_age_s": None if link is None or st is None
             else round(time.monotonic() - link.status_at, 3),
         }
+
+    def _position_mm(self, st: StatusReport | None) -> dict[str, float] | None:
+        """The pen in machine mm (forward kinematics), when the position is trusted."""
+        if st is None or not self.pose_known:
+            return None
+        prof = self.cfg.profile
+        xy = pen_position_mm(prof.geometry, prof.kinematics.assembly, prof.motors.home_rad,
+                             prof.motors.steps_per_rev, st.a, st.b)
+        return None if xy is None else {"x": round(xy[0], 3), "y": round(xy[1], 3)}
 
     # ------------------------------------------------------------------ link
     def _connect(self) -> bool:
