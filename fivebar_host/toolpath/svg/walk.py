@@ -21,7 +21,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from shapely.geometry.base import BaseGeometry
-from svgpathtools.parser import parse_transform
 
 from fivebar_host.errors import InputError
 from fivebar_host.toolpath.geometry import DrawingBuilder
@@ -104,6 +103,10 @@ class Walker:
             stack.extend(reversed(node.children))
 
     def transform(self, text: str, node: Node) -> np.ndarray:
+        # imported on first use: svgpathtools pulls in scipy (about 55 MiB and 0.4 s), which
+        # a drawing without transforms never needs
+        from svgpathtools.parser import parse_transform
+
         try:
             m = np.asarray(parse_transform(text, strict=True), dtype=np.float64)
         except (ValueError, TypeError, IndexError, OverflowError) as e:
