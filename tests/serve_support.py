@@ -5,7 +5,8 @@ headers and body exactly as answered."""
 from __future__ import annotations
 
 import http.client
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -55,3 +56,14 @@ def send(url: str, method: str, target: str, body: bytes | None = None,
         return Raw(resp.status, {k.lower(): v for k, v in resp.getheaders()}, resp.read())
     finally:
         conn.close()
+
+
+def wait_for(pred: Callable[[], Any], timeout_s: float = 20.0, what: str = "") -> Any:
+    """Poll `pred` until it returns something true (returned), or fail after `timeout_s`."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        v = pred()
+        if v:
+            return v
+        time.sleep(0.02)
+    raise AssertionError(f"timed out waiting for {what or pred}")

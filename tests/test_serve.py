@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from serve_support import wait_for
 
 from fivebar_host.cli import main
 from fivebar_host.compile import CompileOptions, compile_job
@@ -60,16 +61,6 @@ def executed_steps(machine: str) -> np.ndarray:
     led = mock.machine(machine).ledger
     return np.array([sum(abs(e.steps[0]) for e in led if e.kind == "G1"),
                      sum(abs(e.steps[1]) for e in led if e.kind == "G1")])
-
-
-def wait_for(pred: Callable[[], Any], timeout_s: float = 20.0, what: str = "") -> Any:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        v = pred()
-        if v:
-            return v
-        time.sleep(0.02)
-    raise AssertionError(f"timed out waiting for {what or pred}")
 
 
 def raw(url: str, method: str, path: str, body: bytes | None = None,

@@ -6,13 +6,12 @@ controls."""
 from __future__ import annotations
 
 import json
-import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from serve_support import send
+from serve_support import send, wait_for
 
 from fivebar_host.config import load_profile
 from fivebar_host.devices import mock
@@ -36,16 +35,6 @@ def slow_daemon(state_dir: Path, machine: str, speed: float = 2.0) -> Iterator[D
         mock.forget_machines()
 
 
-def wait_for(pred: Callable[[], Any], timeout_s: float = 30.0, what: str = "") -> Any:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        v = pred()
-        if v:
-            return v
-        time.sleep(0.02)
-    raise AssertionError(f"timed out waiting for {what or pred}")
-
-
 def post(url: str, target: str) -> tuple[int, dict[str, Any]]:
     r = send(url, "POST", target)
     return r.status, json.loads(r.body)
@@ -59,7 +48,7 @@ def test_power_override_reaches_later_lines_only(tmp_path: Path) -> None:
         jid = j["id"]
         assert j["overrides"] is None  # queued
         wait_for(lambda: c.job(jid)["state"] == "running" and c.job(jid)["segments_done"] >= 30,
-                 what="job running")
+                 timeout_s=30.0, what="job running")
         assert c.job(jid)["overrides"] == {"feed_pct": 100, "power_pct": 100}
         status, body = post(d.url, f"/api/jobs/{jid}/overrides?power=50")
         assert status == 200, body
@@ -75,7 +64,7 @@ def test_power_override_reaches_later_lines_only(tmp_path: Path) -> None:
         status, body = post(d.url, "/api/jobs/9999/overrides?power=50")
         assert status == 404 and body["error"] == "not_found"
 
-        wait_for(lambda: c.job(jid)["state"] == "done", what="job done")
+        wait_for(lambda: c.job(jid)["state"] == "done", timeout_s=30.0, what="job done")
         done = c.job(jid)
         assert done["overrides"] is None
         status, body = post(d.url, f"/api/jobs/{jid}/overrides?power=50")
