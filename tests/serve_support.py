@@ -17,11 +17,12 @@ from fivebar_host.server.daemon import Daemon, ServeConfig
 
 
 @contextmanager
-def running_daemon(state_dir: Path, machine: str, **kw: Any) -> Iterator[Daemon]:
-    """A daemon on 127.0.0.1 (OS-chosen port) over the mock machine `machine`; stopped and
-    the mock forgotten afterwards."""
+def running_daemon(state_dir: Path, machine: str, speed: float = 10.0,
+                   **kw: Any) -> Iterator[Daemon]:
+    """A daemon on 127.0.0.1 (OS-chosen port) over the mock machine `machine` running
+    `speed` times real time; stopped and the mock forgotten afterwards."""
     kw.setdefault("banner_timeout_s", 1.0)
-    d = Daemon(ServeConfig(port_url=f"fivebar-mock://?speed=10&machine={machine}",
+    d = Daemon(ServeConfig(port_url=f"fivebar-mock://?speed={speed:g}&machine={machine}",
                            listen="127.0.0.1:0", state_dir=state_dir, **kw))
     d.start()
     try:

@@ -6,33 +6,16 @@ controls."""
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from serve_support import send, wait_for
+from serve_support import running_daemon, send, wait_for
 
 from fivebar_host.config import load_profile
 from fivebar_host.devices import mock
 from fivebar_host.server.client import ServerClient, plot_options
-from fivebar_host.server.daemon import Daemon, ServeConfig
 
 SIMPLE = Path(__file__).resolve().parent.parent / "examples" / "simple.svg"
-
-
-@contextmanager
-def slow_daemon(state_dir: Path, machine: str, speed: float = 2.0) -> Iterator[Daemon]:
-    """A daemon over a mock running `speed` times real time (simple.svg takes ~5 s), so a
-    request lands while the job runs."""
-    d = Daemon(ServeConfig(port_url=f"fivebar-mock://?speed={speed}&machine={machine}",
-                           listen="127.0.0.1:0", state_dir=state_dir, banner_timeout_s=1.0))
-    d.start()
-    try:
-        yield d
-    finally:
-        d.stop(hurry=True, timeout_s=15.0)
-        mock.forget_machines()
 
 
 def post(url: str, target: str) -> tuple[int, dict[str, Any]]:
@@ -42,7 +25,7 @@ def post(url: str, target: str) -> tuple[int, dict[str, Any]]:
 
 def test_power_override_reaches_later_lines_only(tmp_path: Path) -> None:
     full = load_profile(None).laser.power
-    with slow_daemon(tmp_path, "ov-api") as d:
+    with running_daemon(tmp_path, "ov-api", speed=2.0) as d:
         c = ServerClient(d.url)
         j = c.submit(SIMPLE.read_bytes(), "simple.svg", plot_options(laser=True, confirm=True))
         jid = j["id"]
@@ -81,7 +64,7 @@ def test_power_override_reaches_later_lines_only(tmp_path: Path) -> None:
 
 
 def test_page_has_the_override_controls(tmp_path: Path) -> None:
-    with slow_daemon(tmp_path, "ov-page") as d:
+    with running_daemon(tmp_path, "ov-page", speed=2.0) as d:
         page = send(d.url, "GET", "/").body.decode()
         js = send(d.url, "GET", "/static/app.js").body.decode()
     assert 'id="overrides"' in page and 'data-ov="feed"' in page and 'data-ov="power"' in page
