@@ -13,6 +13,7 @@ import numpy as np
 
 from fivebar_host.compile import Job, NbarOpinion
 from fivebar_host.config import Profile
+from fivebar_host.run.stops import Copies, plan_text
 
 
 def mode_sequence(job: Job) -> str:
@@ -58,11 +59,19 @@ def tool_line(job: Job, laser: bool, profile: Profile | None = None) -> str:
             "moves and delays (in the time below)")
 
 
+def pause_lines(job: Job) -> list[str]:
+    """One line per pen-change stop of a copy (`Job.pauses`)."""
+    return [f"pen change    before {p.describe()}"
+            + (" (before anything moves)" if p.segment == 0 else f" at segment {p.segment}")
+            + ": pen up, machine idle, waits for you" for p in job.pauses]
+
+
 def report_lines(job: Job, nbar: NbarOpinion | None = None, laser: bool = False,
-                 profile: Profile | None = None) -> list[str]:
+                 profile: Profile | None = None, copies: Copies | None = None) -> list[str]:
     """The dry-run report: paths, segments, lengths, time, deviation, margins, mode, tool (pen,
     or laser with `laser`: the power the job would send; a servo pen's moves with
-    `profile`) and the n-bar solver's second opinion on the deviation when given."""
+    `profile`) and the n-bar solver's second opinion on the deviation when given. The time
+    covers `copies` (`--copies`, `--page-delay`) and counts the pen-change stops."""
     deg = math.degrees
     mm = job.min_margin_rad
     pl = job.placement
@@ -85,8 +94,8 @@ def report_lines(job: Job, nbar: NbarOpinion | None = None, laser: bool = False,
         f"travel        {job.travel_length_mm:.1f} mm (pen-up straight-line estimate "
         f"{job.travel_before_mm:.1f} mm in file order → {job.travel_after_mm:.1f} mm "
         "reordered)",
-        f"time          ≈ {format_duration(job.total_time_s)} (planned durations"
-        + (f", pen {job.tool_time_s:.1f} s)" if job.tool_time_s else ")"),
+        f"time          {plan_text(job, copies or Copies(), format_duration)}; planned "
+        "durations" + (f", pen {job.tool_time_s:.1f} s a copy" if job.tool_time_s else ""),
         f"tolerance     {job.tolerance_mm:g} mm (curves flattened to "
         f"{job.flatten_tol_mm:g} mm, the rest for joint-space interpolation)",
         f"deviation     max {job.max_dev_mm:.4f} mm, mean {job.mean_dev_mm:.4f} mm "
@@ -102,6 +111,7 @@ def report_lines(job: Job, nbar: NbarOpinion | None = None, laser: bool = False,
     lines.append(f"margins       smallest type 1: {deg(min(mm[0], mm[1])):.1f}° "
                  f"(arm 1 {deg(mm[0]):.1f}°, arm 2 {deg(mm[1]):.1f}°), type 2: "
                  f"{deg(mm[2]):.1f}°")
+    lines.extend(pause_lines(job))
     lines.extend(f"mode change {k:<2d}{mc.describe(job.n_paths)}"
                  for k, mc in enumerate(job.mode_changes, start=1))
     lines.extend(f"note          {n}" for n in job.notes)

@@ -114,9 +114,9 @@ class Option:
 
     `name` is the field of `CompileOptions`/`JobOptions` it sets; `flag` the command line's
     spelling; `query` the daemon's query parameter. `kind` is one of "float", "bool",
-    "choice", "xy" (two numbers "X,Y") and "text". `repeat` options take several values (a
+    "choice", "xy" (two numbers "X,Y"), "int" and "text". `repeat` options take several values (a
     tuple). `cli=False` options exist only on the API (the CLI asks on the terminal
-    instead)."""
+    instead). "int" is a whole number within [lo, hi] (`--copies`)."""
 
     name: str
     flag: str
@@ -148,6 +148,12 @@ class Option:
             if text not in self.choices:
                 return self._fail(f"must be one of {', '.join(self.choices)}; got {text!r}")
             return text
+        if self.kind == "int":
+            try:
+                n = int(text)
+            except ValueError:
+                return self._fail(f"must be a whole number; got {text!r}")
+            return self.check(n)
         if self.kind == "float":
             try:
                 v = self._number(text)
@@ -185,6 +191,16 @@ class Option:
                 self._fail(f"must be finite; got {value!r}")
             self._check_range(v)
             return v
+        if self.kind == "int":
+            try:
+                n = int(value)
+                whole = not isinstance(value, bool) and float(value) == n
+            except (TypeError, ValueError, OverflowError):
+                whole = False
+            if not whole:
+                self._fail(f"must be a whole number; got {value!r}")
+            self._check_range(n)
+            return n
         if self.kind == "xy":
             x, y = (float(c) for c in value)
             if not (math.isfinite(x) and math.isfinite(y)):
@@ -242,10 +258,11 @@ class Option:
         """The OpenAPI 3 parameter object of this option (query, optional)."""
         schemas: dict[str, dict[str, Any]] = {
             "bool": {"type": "boolean"}, "float": {"type": "number"},
+            "int": {"type": "integer"},
             "choice": {"type": "string", "enum": list(self.choices)},
             "xy": {"type": "string", "pattern": r"^[^,]+,[^,]+$"}, "text": {"type": "string"}}
         schema = schemas[self.kind]
-        if self.kind == "float":
+        if self.kind in ("float", "int"):
             if self.lo is not None:
                 schema["exclusiveMinimum" if self.lo_open else "minimum"] = self.lo
             if self.hi is not None:
@@ -322,6 +339,20 @@ JOB_OPTIONS: tuple[Option, ...] = (
            hi=10_000.0, help="Wait after raising the pen before the arms move, ms."),
     Option("pen_down_delay_ms", "--pen-delay-down", "pen_delay_down", "float", unit="ms",
            lo=0.0, hi=10_000.0, help="Wait after lowering the pen before the arms move, ms."),
+    # layers, pen changes and copies (AxiDraw's names)
+    Option("layer_pause", "--layer-pause", "layer_pause", "bool", default=False,
+           help="Stop between the drawing's Inkscape layers for a pen change: the pen goes "
+           "up, the machine waits until you continue (a layer whose name starts with '!' "
+           "pauses before it even without this). Layers are drawn in document order, "
+           "each ordered on its own."),
+    Option("no_pause", "--no-pause", "no_pause", "bool", default=False,
+           help="Never stop for a pen change, not even before '!' layers (needed to plot "
+           "such a drawing without a terminal to answer)."),
+    Option("copies", "--copies", "copies", "int", lo=1, hi=9999, default=1, metavar="N",
+           help="Plot the whole job N times, the pen up and the arms parked between copies."),
+    Option("page_delay_s", "--page-delay", "page_delay", "float", unit="s", lo=0.0,
+           hi=3600.0, default=15.0, metavar="SECONDS",
+           help="Wait between copies, seconds (time to change the paper; Ctrl-C holds)."),
     Option("confirm", "--yes", "confirm", "bool", default=False, cli=False,
            help="Answer yes if the daemon must ask whether the arms are at the home pose "
            "(first job after power-up)."),
@@ -333,9 +364,12 @@ BY_NAME: dict[str, Option] = {o.name: o for o in JOB_OPTIONS}
 BY_QUERY: dict[str, Option] = {o.query: o for o in JOB_OPTIONS}
 #: The pen servo overrides (applied to the profile: config.with_pen_overrides).
 PEN_NAMES: tuple[str, ...] = tuple(o.name for o in JOB_OPTIONS if o.name.startswith("pen_"))
-#: The options that shape the compiled job (everything but laser, confirm and the pen's).
-COMPILE_NAMES: tuple[str, ...] = tuple(o.name for o in JOB_OPTIONS
-                                       if o.name not in ("laser", "confirm", *PEN_NAMES))
+#: The options of the run, not of the compiled job: how often and how long between copies.
+RUN_NAMES: tuple[str, ...] = ("copies", "page_delay_s")
+#: The options that shape the compiled job (everything but laser, confirm, the pen's and
+#: the run's).
+COMPILE_NAMES: tuple[str, ...] = tuple(
+    o.name for o in JOB_OPTIONS if o.name not in ("laser", "confirm", *PEN_NAMES, *RUN_NAMES))
 
 
 def defaults() -> dict[str, Any]:
@@ -411,5 +445,9 @@ def to_query(values: Mapping[str, Any]) -> dict[str, str | list[str]]:
 
 
 def compile_values(values: Mapping[str, Any]) -> dict[str, Any]:
-    """The subset of option values that shapes the compiled job (`CompileOptions(**…)`)."""
+    """The subset of option values that shapes the compiled job (`CompileOptions(**…)`);
+    OptionError when they contradict each other (--layer-pause with --no-pause)."""
+    if values.get("layer_pause") and values.get("no_pause"):
+        raise OptionError("no_pause", "--layer-pause and --no-pause contradict each other; "
+                          "give one of them")
     return {k: values[k] for k in COMPILE_NAMES if k in values}

@@ -31,7 +31,8 @@ def test_query_round_trip_of_every_option() -> None:
               "laser": True, "confirm": True, "no_simplify": True,
               "max_segments": 3e6, "pen_up_position": 70.0,
               "pen_down_position": 20.5, "pen_up_rate": 300.0, "pen_down_rate": 150.0,
-              "pen_up_delay_ms": 80.0, "pen_down_delay_ms": 120.0}
+              "pen_up_delay_ms": 80.0, "pen_down_delay_ms": 120.0, "layer_pause": True,
+              "no_pause": False, "copies": 3, "page_delay_s": 2.5}
     assert set(values) == {o.name for o in JOB_OPTIONS}
     q = to_query(values)
     pairs = [(k, v) for k, vs in q.items() for v in (vs if isinstance(vs, list) else [vs])]
@@ -57,6 +58,12 @@ def test_query_round_trip_of_every_option() -> None:
     ("mode", "+++", "one of"),
     ("fit", "maybe", "true or false"),
     ("scael", "2", "did you mean 'scale'"),
+    ("copies", "0", "within 1..9999"),
+    ("copies", "10000", "within 1..9999"),
+    ("copies", "2.5", "whole number"),
+    ("page_delay", "-1", "within 0..3600 s"),
+    ("page_delay", "3601", "within 0..3600 s"),
+    ("layer_pause", "sometimes", "true or false"),
 ])
 def test_bad_query_values_are_named(key: str, text: str, why: str) -> None:
     with pytest.raises(OptionError) as e:
@@ -79,7 +86,10 @@ def test_client_refuses_unknown_and_out_of_range_before_sending() -> None:
     assert plot_options(scale=40.0, laser=True) == {"scale": "40.0", "rotate": "0.0",
                                                      "fit": "false", "keep_order": "false",
                                                      "laser": "true", "confirm": "false",
-                                                     "no_simplify": "false"}
+                                                     "no_simplify": "false",
+                                                     "layer_pause": "false",
+                                                     "no_pause": "false", "copies": "1",
+                                                     "page_delay": "15.0"}
 
 
 def _cli_params(command: str) -> dict[str, click.Parameter]:
@@ -97,6 +107,17 @@ def test_cli_options_are_the_definitions(command: str) -> None:
         p = params[opt.name]
         assert opt.flag in p.opts
         assert p.help is not None and opt.help in p.help
+
+
+@pytest.mark.parametrize(("args", "why"), [
+    (["--copies", "0"], "--copies"), (["--copies", "x"], "whole number"),
+    (["--page-delay", "-1"], "--page-delay"),
+    (["--layer-pause", "--no-pause"], "contradict"),
+])
+def test_cli_refuses_bad_copies_and_pauses_naming_the_option(args: list[str], why: str
+                                                             ) -> None:
+    r = CliRunner().invoke(main, ["plot", str(EXAMPLES / "simple.svg"), "--dry-run", *args])
+    assert r.exit_code == 2 and why in r.output, r.output
 
 
 def test_cli_and_api_refuse_the_same_value_with_the_same_reason() -> None:

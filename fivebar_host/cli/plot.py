@@ -32,9 +32,12 @@ from fivebar_host.cli.common import (
 from fivebar_host.cli.grbl import controller_option
 from fivebar_host.cli.keys import HELP, override_keys
 from fivebar_host.cli.remote import server_option
+from fivebar_host.cli.stops import ask_pen_change, check_stops, countdown
+from fivebar_host.compile.model import LayerPause
 from fivebar_host.config import Profile
 from fivebar_host.run.overrides import FEED_MAX_PCT, Overrides
 from fivebar_host.run.sender import Progress
+from fivebar_host.run.stops import Copies, plan_text, planned_time_s
 
 
 @main.command("convert")
@@ -66,9 +69,12 @@ def convert(drawing: Path, output: Path, relative: bool, controller: str,
     tool = (f"laser (power up to S{int(job.power.max(initial=0))})" if laser
             else "pen (S0, no laser power)")
     changes = f" ({len(job.mode_changes)} pen-up mode changes)" if job.mode_changes else ""
+    pauses = ("; the file runs through its pen-change stops (`fivebar plot` stops there): "
+              + ", ".join(f"segment {p.segment} before {p.describe()}" for p in job.pauses)
+              if job.pauses else "")
     click.echo(f"wrote {output}: {job.n_segments} segments, mode {mode_sequence(job)}{changes}, "
                f"{tool}, "
-               f"≈ {job.total_time_s:.1f} s, max deviation {job.max_dev_mm:.4f} mm")
+               f"≈ {job.total_time_s:.1f} s, max deviation {job.max_dev_mm:.4f} mm{pauses}")
 
 
 @main.command("plot")
@@ -101,21 +107,24 @@ def plot(drawing: Path, dry_run: bool, preview_path: Path, port: str | None, res
     from fivebar_host.report.preview import draw_preview
 
     laser = bool(job_values["laser"])
+    copies = Copies(int(job_values["copies"]), float(job_values["page_delay_s"]))
     prof, job = compile_from_cli(drawing, config_path, job_values)
     if dry_run:
-        for line in report_lines(job, nbar_opinion(job, prof), laser=laser, profile=prof):
+        for line in report_lines(job, nbar_opinion(job, prof), laser=laser, profile=prof,
+                                 copies=copies):
             click.echo(line)
         draw_preview(job, prof, preview_path)
         click.echo(f"preview       {preview_path}")
         return
     assert port is not None
+    check_stops(job, copies, controller)
     if controller == "grbl":
         from fivebar_host.cli.grbl import grbl_plot
 
         grbl_plot(port, prof, job, laser=laser, yes=yes, drawing=drawing, resume=resume)
         return
     _stream_plot(drawing, port, prof, job, laser=laser, resume=resume, yes=yes,
-                 preview_path=preview_path)
+                 preview_path=preview_path, copies=copies)
 
 
 def _ask_resume() -> bool:
@@ -127,12 +136,15 @@ def _ask_resume() -> bool:
 
 
 def _stream_plot(drawing: Path, port: str, prof: Profile, job: Any, *, laser: bool,
-                 resume: bool, yes: bool, preview_path: Path) -> None:
-    """Stream a compiled job with a progress bar, Ctrl-C hold/resume/abort, final report."""
+                 resume: bool, yes: bool, preview_path: Path, copies: Copies) -> None:
+    """Stream a compiled job with a progress bar, Ctrl-C hold/resume/abort, pen changes,
+    copies with their countdown, final report."""
+    from fivebar_host.dryrun import format_duration
     from fivebar_host.run.sender import run_job
 
     click.echo(f"job: {job.n_segments} segments, {job.n_paths} paths, mode {job.mode}, "
-               f"≈ {job.total_time_s:.1f} s, max deviation {job.max_dev_mm:.4f} mm")
+               f"{plan_text(job, copies, format_duration)}, max deviation "
+               f"{job.max_dev_mm:.4f} mm")
     if prof.pen is not None:
         click.echo("pen plot: the servo lifts the pen (M280) between strokes; laser output "
                    "stays at 0")
@@ -164,23 +176,32 @@ def _stream_plot(drawing: Path, port: str, prof: Profile, job: Any, *, laser: bo
                 with keys.paused():
                     return _ask_resume()
 
+            def on_pause(pause: LayerPause) -> bool:
+                interrupted["flag"] = False
+                if keys is None:
+                    return ask_pen_change(pause)
+                with keys.paused():
+                    return ask_pen_change(pause)
+
             shown = overrides if keys is not None else None
-            with _progress_display(job.n_segments, shown, laser) as on_progress:
+            with _progress_display(job.n_segments, shown, laser, copies.count) as on_progress:
                 report = run_job(link, job, prof, drawing=drawing, laser=laser,
                                  confirm=confirm_with(yes), resume=resume,
                                  confirm_placed=confirm_placed(yes),
                                  on_progress=on_progress, should_stop=should_stop,
                                  on_interrupt=on_interrupt, on_note=click.echo,
-                                 overrides=overrides)
+                                 overrides=overrides, on_pause=on_pause, copies=copies,
+                                 on_wait=countdown(copies))
     finally:
         signal.signal(signal.SIGINT, previous)
         link.close()
+    planned = planned_time_s(job, copies)
     click.echo(f"done: {report.segments} segments in {report.elapsed_s:.1f} s "
-               f"(planned {job.total_time_s:.1f} s), {report.bytes_sent} bytes sent, "
+               f"(planned {planned:.1f} s), {report.bytes_sent} bytes sent, "
                f"{report.resends} resends; machine at "
                f"{position_text(prof, report.final.a, report.final.b)}")
     trace = getattr(link.port, "trace_path", None)
-    if trace is not None and Path(trace).exists():
+    if trace is not None and Path(trace).exists() and copies.count == 1:
         _write_executed(job, prof, Path(trace), preview_path, report.start_segment,
                         report.start_position,
                         getattr(getattr(link.port, "options", None), "true", None))
@@ -194,25 +215,31 @@ PROGRESS_EVERY_SHARE = 0.1
 
 @contextmanager
 def _progress_display(total: int, overrides: Overrides | None = None,
-                      laser: bool = False) -> Iterator[Callable[[Progress], None]]:
+                      laser: bool = False, copies: int = 1
+                      ) -> Iterator[Callable[[Progress], None]]:
     """The progress hook: a progress bar on a terminal; otherwise one line at a steady pace
     ("plotting: 40% (segment 110/275), 4 s elapsed, ≈ 6 s left"), so a log shows that the
     job advances and when it will end. With `overrides` (keys on a terminal) the bar shows
-    the requested feed (and, with `laser`, power) and the time left at that feed."""
+    the requested feed (and, with `laser`, power) and the time left at that feed. With
+    `copies` > 1 the share is of all copies and the text names the copy."""
     def text(p: Progress) -> str:
+        of = f"copy {p.copy}/{p.copies}, " if p.copies > 1 else ""
         if overrides is None:
-            return (f"segment {p.segments_done}/{p.segments_total}, {p.elapsed_s:.0f} s "
+            return (f"{of}segment {p.segments_done}/{p.segments_total}, {p.elapsed_s:.0f} s "
                     f"elapsed, ≈ {p.remaining_s:.0f} s left")
         feed, power = overrides.values()
         left = p.remaining_s * FEED_MAX_PCT / feed
-        return (f"segment {p.segments_done}/{p.segments_total}, ≈ {left:.0f} s left, "
+        return (f"{of}segment {p.segments_done}/{p.segments_total}, ≈ {left:.0f} s left, "
                 f"feed {feed}%" + (f" power {power}%" if laser else ""))
+
+    def overall(p: Progress) -> int:
+        return (p.copy - 1) * p.segments_total + p.segments_done
 
     if not sys.stdout.isatty():
         last = {"t": time.monotonic(), "share": 0.0}
 
         def log_line(p: Progress) -> None:
-            share = p.segments_done / max(1, p.segments_total)
+            share = overall(p) / max(1, p.segments_total * p.copies)
             now = time.monotonic()
             if (share >= last["share"] + PROGRESS_EVERY_SHARE and share < 1.0) or (
                     now - last["t"] >= PROGRESS_EVERY_S and share > last["share"]):
@@ -222,14 +249,14 @@ def _progress_display(total: int, overrides: Overrides | None = None,
         click.echo("plotting")
         yield log_line
         return
-    with click.progressbar(length=total, label="plotting", show_eta=False, show_percent=True,
-                           item_show_func=lambda s: s) as bar:
+    with click.progressbar(length=total * copies, label="plotting", show_eta=False,
+                           show_percent=True, item_show_func=lambda s: s) as bar:
         state = {"done": 0}
 
         def on_progress(p: Progress) -> None:
-            if p.segments_done > state["done"]:
-                bar.update(p.segments_done - state["done"], text(p))
-                state["done"] = p.segments_done
+            if overall(p) > state["done"]:
+                bar.update(overall(p) - state["done"], text(p))
+                state["done"] = overall(p)
 
         yield on_progress
 

@@ -12,6 +12,9 @@ switched off with `--no-simplify`): a chord that replaces several input lines is
 ε = tol_f of them, so its budget is tol − ε, and it records the range of primitives it
 covers (`prim_first` … `prim`) so validation measures against the original lines.
 
+With pen-change stops (`compile.layers`) each section of the drawing is ordered on its own,
+the sections in document order, and no path joins across a section boundary.
+
 A drawing with dwells (G-code `G4`, `geometry.Dwell`) keeps its file order and directions
 (a dwell happens at a stroke's start or end, at its time in the file), and a path never
 joins across a dwell, so every dwell stays at its path's start or end.
@@ -54,12 +57,41 @@ class _Chords:
     simplified: int = 0  # input vertices removed by the simplification
     #: the drawing's dwells with `stroke` replaced by the job path they start or end
     dwells: tuple[Dwell, ...] = field(default_factory=tuple)
+    #: (P,) the section of each path (`compile.layers`; all 0 without pen-change stops)
+    path_section: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))
+
+
+def _order(starts: FloatArray, ends: FloatArray, start: FloatArray, keep_order: bool,
+           path_sec: IntArray | None) -> order.Order:
+    """`order.order_paths` over the whole drawing, or section by section in section order
+    (each from where the previous one ended; the last returns to `start`)."""
+    if path_sec is None:
+        return order.order_paths(starts, ends, start, start, keep_order=keep_order)
+    idx_all: list[IntArray] = []
+    rev_all: list[np.ndarray] = []
+    before = after = 0.0
+    pen = start
+    secs = np.unique(path_sec)
+    for i, s in enumerate(secs.tolist()):
+        idx = np.flatnonzero(path_sec == s)
+        last = i == secs.shape[0] - 1
+        od = order.order_paths(starts[idx], ends[idx], pen, start if last else None,
+                               keep_order=keep_order)
+        idx_all.append(idx[od.order])
+        rev_all.append(od.reverse)
+        before += od.travel_before_mm
+        after += od.travel_after_mm
+        k = int(idx[od.order[-1]])
+        pen = starts[k] if od.reverse[-1] else ends[k]
+    return order.Order(np.concatenate(idx_all), np.concatenate(rev_all), before, after)
 
 
 def _prepare_chords(drawing: Drawing, poly: Polylines, tol: float, tol_f: float,
-                    start: FloatArray, keep_order: bool, simplify: bool = True) -> _Chords:
+                    start: FloatArray, keep_order: bool, simplify: bool = True,
+                    stroke_section: IntArray | None = None) -> _Chords:
     """Simplify runs of lines (ε = tol_f), order, reverse and join the flattened strokes;
-    per-chord provenance and budgets."""
+    per-chord provenance and budgets. `stroke_section` (per drawing stroke, `compile.layers`)
+    keeps the sections apart."""
     simp = simplify_polylines(poly, drawing.kind, tol_f if simplify else 0.0)
     poly = simp.poly
     pts0 = poly.points
@@ -67,8 +99,8 @@ def _prepare_chords(drawing: Drawing, poly: Polylines, tol: float, tol_f: float,
     npath = offs.shape[0] - 1
     starts = pts0[offs[:-1]]
     ends = pts0[offs[1:] - 1]
-    od = order.order_paths(starts, ends, start, start,
-                           keep_order=keep_order or bool(drawing.dwells))
+    path_sec0 = None if stroke_section is None else stroke_section[poly.stroke]
+    od = _order(starts, ends, start, keep_order or bool(drawing.dwells), path_sec0)
     lens = np.diff(offs)
     ordered_lens = lens[od.order]
     # Vertex index map in the new order (reversed paths walk their vertices backwards).
@@ -99,7 +131,10 @@ def _prepare_chords(drawing: Drawing, poly: Polylines, tol: float, tol_f: float,
     gap = np.hypot(*(pts[new_offs[1:-1]] - pts[new_offs[1:-1] - 1]).T)
     same = (power[1:] == power[:-1]) & ((feed[1:] == feed[:-1])
                                         | (np.isnan(feed[1:]) & np.isnan(feed[:-1])))
-    join = (gap < tol) & same & ~_dwell_between(drawing, stroke)
+    path_sec = (np.zeros(stroke.shape[0], dtype=np.int64) if path_sec0 is None
+                else path_sec0[od.order])
+    join = (gap < tol) & same & ~_dwell_between(drawing, stroke) & (
+        path_sec[1:] == path_sec[:-1])
     bridge_tol = np.full(m, np.nan)
     bridge_at = new_offs[1:-1][join] - 1  # vertex that ends path p and starts the bridge
     is_end[bridge_at] = False
@@ -129,7 +164,8 @@ def _prepare_chords(drawing: Drawing, poly: Polylines, tol: float, tol_f: float,
                    power=power[keep_path], feed=feed[keep_path], joined=int(join.sum()),
                    travel_before=od.travel_before_mm, travel_after=od.travel_after_mm,
                    simplified=simp.removed,
-                   dwells=_path_dwells(drawing, stroke, new_path_of_old))
+                   dwells=_path_dwells(drawing, stroke, new_path_of_old),
+                   path_section=path_sec[keep_path])
 
 
 def _dwell_between(drawing: Drawing, stroke: IntArray) -> BoolArray:

@@ -10,6 +10,7 @@ import math
 import numpy as np
 
 from fivebar_host import steps
+from fivebar_host.compile.layers import break_switches, layer_pauses
 from fivebar_host.compile.model import (
     CompileOptions,
     Job,
@@ -147,6 +148,8 @@ def finish(su: Setup, placed: Placed, home: Home, routed: Routed, solved: Solved
     mode_changes = _executed_mode_changes(su, file, home, routed, tr, pd)
     notes = [_mode_note(su, home, routed, len(mode_changes)), *tr.notes,
              *placed.drawing.warnings, *_dwell_notes(routed)]
+    pauses = layer_pauses(routed.sections, ch.path_section, pd.path)
+    tool_on = seg_draw | (pd.dwell & (pd.power > 0))
     job = Job(
         file=file, mode=str(routed.path_mode[0]), assembly=su.assembly, tolerance_mm=su.tol,
         flatten_tol_mm=su.tol_f,
@@ -167,8 +170,8 @@ def finish(su: Setup, placed: Placed, home: Home, routed: Routed, solved: Solved
         ideal_max_dev_mm=float(iv.dev_mm.max()) if iv.dev_mm.size else 0.0,
         path_modes=tuple(routed.path_mode.tolist()), home_mode=home.mode,
         mode_changes=tuple(mode_changes),
-        tool_time_s=tool_time_s(seg_draw | (pd.dwell & (pd.power > 0)), su.profile),
-        dwell=pd.dwell,
+        tool_time_s=tool_time_s(tool_on, su.profile, break_switches(tool_on, pauses)),
+        dwell=pd.dwell, pauses=pauses,
     )
     if opts.validate:
         job = validate(job, su.profile, opts.validation_samples)

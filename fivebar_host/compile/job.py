@@ -50,6 +50,7 @@ from typing import Any
 import numpy as np
 
 from fivebar_host.compile.finish import finish
+from fivebar_host.compile.layers import sections
 from fivebar_host.compile.model import AUTO_ORDER, CompileOptions, Job
 from fivebar_host.compile.place import find_home, place, setup
 from fivebar_host.compile.segments import assemble, drop_zero_moves
@@ -110,7 +111,8 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
     su = setup(profile, opts, mode)
     placed = place(su, drawing, opts)
     home = find_home(su, drawing.file)
-    routed = route(su, placed, home, opts.keep_order, plan_modes, not opts.no_simplify)
+    secs = sections(drawing, placed.poly.stroke, opts.layer_pause, opts.no_pause)
+    routed = route(su, placed, home, opts.keep_order, plan_modes, not opts.no_simplify, secs)
     solved = solve(su, placed, routed)
     tr = plan_travel(su, placed, home, routed, solved, plan_modes)
     segments = assemble(placed, home, routed, solved, tr)

@@ -46,6 +46,8 @@ class CompileOptions:
     validation_samples: int = 4
     no_simplify: bool = False  # keep every vertex of dense straight-line input
     max_segments: float | None = None  # None: `toolpath.svg.reader.DEFAULT_MAX_SEGMENTS`
+    layer_pause: bool = False  # stop for a pen change between Inkscape layers
+    no_pause: bool = False  # never stop for a pen change (not even before "!" layers)
 
 
 @dataclass(frozen=True)
@@ -58,6 +60,23 @@ class PathStats:
     end_seg: IntArray  # (P,) one past the last draw segment
     max_dev_mm: FloatArray  # (P,) from the quantised steps (validation), NaN if not validated
     mean_dev_mm: FloatArray
+
+
+@dataclass(frozen=True)
+class LayerPause:
+    """A stop for a pen change before segment `segment` (the first segment of the travel
+    into the layer, or of its drawing; 0: before anything moves): the layer's `name` and
+    its place `number` (1-based) among the job's `of` layers in document order
+    (`compile.layers`)."""
+
+    segment: int
+    name: str
+    number: int
+    of: int
+
+    def describe(self) -> str:
+        """"layer 2/3 'red'" for prompts, reports and the daemon's pause reason."""
+        return f"layer {self.number}/{self.of} {self.name!r}"
 
 
 @dataclass(frozen=True)
@@ -151,6 +170,8 @@ class Job:
     # pen servo moves and settle delays between the segments (0 without a pen), s
     tool_time_s: float = 0.0
     dwell: BoolArray = field(default_factory=lambda: np.zeros(0, bool))
+    #: pen-change stops, by segment (`compile.layers`; empty: the job runs through)
+    pauses: tuple[LayerPause, ...] = ()
 
     # ------------------------------------------------------------------ derived
     @property
@@ -188,6 +209,10 @@ class Job:
         """Runs of drawing segments: each is one pen down and one pen up on a pen machine."""
         d = self.draw
         return int(d[0]) + int((d[1:] & ~d[:-1]).sum()) if d.size else 0
+
+    def pause_at(self, segment: int) -> LayerPause | None:
+        """The pen-change stop before `segment`, if there is one."""
+        return next((p for p in self.pauses if p.segment == segment), None)
 
     @property
     def draw_length_mm(self) -> float:

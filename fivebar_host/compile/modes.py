@@ -159,7 +159,7 @@ def _break_paths(ch: _Chords, brk_chord: IntArray, brk_frac: FloatArray) -> _Cho
                    tol_i=ch.tol_i[c],
                    path_of_chord=np.searchsorted(offsets, cf, side="right") - 1,
                    path_source=ch.path_source[po], path_reversed=ch.path_reversed[po],
-                   power=ch.power[po], feed=ch.feed[po],
+                   power=ch.power[po], feed=ch.feed[po], path_section=ch.path_section[po],
                    dwells=tuple(replace(d, stroke=int(np.flatnonzero(po == d.stroke)[
                        -1 if d.after else 0])) for d in ch.dwells))
 

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fivebar_host.compile.chords import _Chords, _prepare_chords
+from fivebar_host.compile.layers import Sections
 from fivebar_host.compile.model import MAX_STEP_RAD
 from fivebar_host.compile.modes import _merge_intervals, _plan_modes
 from fivebar_host.compile.place import Home, Placed, Setup, _where, fail
@@ -34,6 +35,7 @@ class Routed:
     ch: _Chords
     path_mode: NDArray[np.str_]
     changes: Mapping[int, FloatArray]
+    sections: Sections | None = None  # pen-change stops (`compile.layers`)
 
     @property
     def npath(self) -> int:
@@ -56,11 +58,12 @@ class Solved:
 
 
 def route(su: Setup, placed: Placed, home: Home, keep_order: bool,
-          plan_modes: bool, simplify: bool = True) -> Routed:
-    """Order and join the paths from the homed pen position; without `plan_modes` every path
-    is drawn in `su.mode`, with it the modes (and changes) come from `_plan_modes`."""
+          plan_modes: bool, simplify: bool = True, sections: Sections | None = None) -> Routed:
+    """Order and join the paths from the homed pen position (section by section with
+    pen-change stops); without `plan_modes` every path is drawn in `su.mode`, with it the
+    modes (and changes) come from `_plan_modes`."""
     ch = _prepare_chords(placed.drawing, placed.poly, su.tol, su.tol_f, home.pt, keep_order,
-                         simplify)
+                         simplify, None if sections is None else sections.of_stroke)
     changes: dict[int, FloatArray] = {}
     if plan_modes:
         first = ch
@@ -74,7 +77,7 @@ def route(su: Setup, placed: Placed, home: Home, keep_order: bool,
                                              su.min1, su.min2, su.limits, where_of)
     else:
         path_mode = np.full(ch.offsets.shape[0] - 1, su.mode)
-    return Routed(ch=ch, path_mode=path_mode, changes=changes)
+    return Routed(ch=ch, path_mode=path_mode, changes=changes, sections=sections)
 
 
 def solve(su: Setup, placed: Placed, routed: Routed) -> Solved:

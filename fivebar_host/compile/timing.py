@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 
 from fivebar_host import planner, protocol, steps
 from fivebar_host.compile.dwell import dwell_stops, insert_dwells
+from fivebar_host.compile.layers import section_stops
 from fivebar_host.compile.place import Setup
 from fivebar_host.compile.segments import Stepped
 from fivebar_host.compile.solve import Routed, Solved
@@ -100,6 +101,8 @@ def plan_timing(su: Setup, routed: Routed, solved: Solved, sp: Stepped) -> Plann
     dwells = routed.ch.dwells
     if dwells:
         stop = stop | dwell_stops(dwells, sp)
+    if routed.sections is not None:  # at rest where a pen-change stop may come
+        stop = stop | section_stops(routed.ch.path_section, sp.path)
     pd = time_stepped(su.profile, solved.checker, sp, power, feed, stop)
     return insert_dwells(dwells, su.profile, pd)
 
@@ -138,7 +141,7 @@ def time_stepped(profile: Profile, checker: PoseChecker, sp: Stepped,
                    duration_us=duration_us, dwell=np.zeros(seg_of.shape[0], dtype=bool))
 
 
-def tool_time_s(draw: BoolArray, profile: Profile) -> float:
+def tool_time_s(draw: BoolArray, profile: Profile, extra_switches: int = 0) -> float:
     """Time the arms wait for the pen, s: every run of segments with the tool on (`draw`:
     drawing segments and dwells with the pen down, `Job.tool_on`) is bracketed by a pen
     down and a pen up (run.program), each a servo move plus its settle delay, during which
@@ -146,5 +149,5 @@ def tool_time_s(draw: BoolArray, profile: Profile) -> float:
     pen = profile.pen
     if pen is None or not draw.size:
         return 0.0
-    runs = int(draw[0]) + int((draw[1:] & ~draw[:-1]).sum())
+    runs = int(draw[0]) + int((draw[1:] & ~draw[:-1]).sum()) + extra_switches
     return runs * (pen.time_s(True) + pen.time_s(False))

@@ -33,6 +33,8 @@ class StreamRun:
     start: int
     start_position: tuple[int, int]
     laser: bool
+    end: int | None = None  # segment the stream ends before (None: the job's end)
+    copy: int = 1  # the copy running (`--copies`)
 
     def done_segments(self, done_line: int) -> int:
         """First segment not finished when `done_line` is the last line executed."""
@@ -139,7 +141,7 @@ class FaultRecord:
 
     def _point(self, fingerprint: str, position: tuple[int, int] | None) -> ResumePoint:
         return ResumePoint(str(self.job.file), fingerprint, self.next_segment, position,
-                           f"{self.fault.kind}: {self.fault}", self.n)
+                           f"{self.fault.kind}: {self.fault}", self.n, copy=self.stream.copy)
 
     def _exact(self, fingerprint: str, position: tuple[int, int]) -> tuple[ResumePoint, str]:
         nxt, n = self.next_segment, self.n
@@ -169,7 +171,7 @@ class FaultRecord:
         rp = replace(self._point(fingerprint, None), first_line=s.first_line,
                      last_line=s.first_line + len(s.prog.bodies) - 1, stream_start=s.start,
                      start_position=s.start_position, laser=s.laser,
-                     sent_segment=self.sent_segment)
+                     sent_segment=self.sent_segment, stream_end=s.end)
         cause = ("the link broke while the controller was running"
                  if self.fault.kind is FaultKind.DISCONNECT
                  else f"the controller could not be read ({self.kept_why})")

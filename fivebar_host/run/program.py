@@ -185,8 +185,11 @@ def travel_lines(profile: Profile, job_assembly: int, start: ArrayLike,
 
 
 def job_bodies(job: Job, profile: Profile, laser: bool, first: int,
-               first_line: str | None = None) -> tuple[list[str], list[int]]:
-    """Firmware lines for segments `first`… of `job` and the segment of each (−1: none).
+               first_line: str | None = None, end: int | None = None
+               ) -> tuple[list[str], list[int]]:
+    """Firmware lines for segments `first`… `end` − 1 (None: to the job's end) of `job` and
+    the segment of each (−1: none). The pen goes up after the last one (a pen-change stop
+    may cut a run of drawing segments: `Job.pauses`).
 
     Laser job (`laser`): `M3 S0` once, then drawing segments carry the profile's power.
     Pen job: S0 everywhere, pen down before and pen up after each run of drawing segments
@@ -194,7 +197,7 @@ def job_bodies(job: Job, profile: Profile, laser: bool, first: int,
     `M280` with its move and settle time on a pen profile, else `M3 S0` / `M5`). A dwell is
     `G1 P<µs> S<power>` without A/B (`compile.dwell`). `first_line` replaces the first
     segment's G1 (a partial segment). The same encoding as `fivebar convert` (job.encode_lines)."""
-    n = job.n_segments
+    n = job.n_segments if end is None else end
     power = job.power if laser else np.zeros_like(job.power)
     draw = job.tool_on.tolist()
     dwell = job.is_dwell.tolist()
@@ -226,8 +229,9 @@ def job_bodies(job: Job, profile: Profile, laser: bool, first: int,
 
 
 def build_program(job: Job, profile: Profile, laser: bool, start_segment: int,
-                  position: ArrayLike) -> Program:
-    """The lines that run segments `start_segment`… of `job` from firmware steps `position`.
+                  position: ArrayLike, end_segment: int | None = None) -> Program:
+    """The lines that run segments `start_segment`… `end_segment` − 1 (None: to the job's
+    end; a pen-change stop ends a program early) of `job` from firmware steps `position`.
 
     If `position` lies inside segment `start_segment` (on its joint-space line, within one
     step) the first move finishes that segment with the remaining share of its duration;
@@ -254,7 +258,7 @@ def build_program(job: Job, profile: Profile, laser: bool, start_segment: int,
                                 f"travel back to segment {k + 1}")
             bodies += back
             seg += [-1] * len(back)
-    more, mseg = job_bodies(job, profile, laser, k, partial)
+    more, mseg = job_bodies(job, profile, laser, k, partial, end_segment)
     return Program(bodies + more, np.asarray(seg + mseg, dtype=np.int64))
 
 

@@ -48,7 +48,9 @@ class ResumePoint:
     which stream that was: its first and last firmware line numbers and `build_program`'s
     inputs (start segment, start position, laser), so a later run rebuilds the very program
     sent and maps the controller's `Ln` done back to the exact segment. Files written before
-    these fields existed read with them None: no stream information.
+    these fields existed read with them None: no stream information. `stream_end` is the
+    segment the stream ended before (None: the job's end; a pen-change stop ends a stream
+    early, `run.stops`); `copy` the copy (1-based, `--copies`) that was running (None: 1).
     """
 
     drawing: str
@@ -63,6 +65,8 @@ class ResumePoint:
     start_position: tuple[int, int] | None = None  # firmware steps the stream started from
     laser: bool | None = None  # the stream's laser flag (its lines depend on it)
     sent_segment: int | None = None  # first segment none of whose lines was sent
+    stream_end: int | None = None  # segment the stream ended before (None: the job's end)
+    copy: int | None = None  # the copy that was running (None: the first)
 
     @property
     def has_stream(self) -> bool:
@@ -95,7 +99,8 @@ class ResumePoint:
                                str(d["reason"]), int(d["segments"]),
                                opt_int("first_line"), opt_int("last_line"),
                                opt_int("stream_start"), _pair(d.get("start_position")), laser,
-                               opt_int("sent_segment"))
+                               opt_int("sent_segment"), opt_int("stream_end"),
+                               opt_int("copy"))
         except FileNotFoundError:
             raise SendError(f"{path}: no resume file (nothing was interrupted?)") from None
         except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
@@ -113,6 +118,8 @@ def fingerprint(job: Job) -> str:
     h = hashlib.sha256()
     for arr in (job.steps, job.duration_us, job.power, job.draw):
         h.update(np.ascontiguousarray(arr).tobytes())
+    if job.pauses:  # where the pen-change stops are (jobs without any hash as before)
+        h.update(repr([(p.segment, p.name) for p in job.pauses]).encode())
     return h.hexdigest()[:16]
 
 
@@ -164,7 +171,8 @@ def kept_stream_segment(job: Job, profile: Profile, rp: ResumePoint, st: StatusR
             and rp.stream_start is not None and rp.start_position is not None
             and rp.laser is not None)
     try:
-        prog = build_program(job, profile, rp.laser, rp.stream_start, rp.start_position)
+        prog = build_program(job, profile, rp.laser, rp.stream_start, rp.start_position,
+                             rp.stream_end)
     except SendError as e:
         return None, f"the interrupted stream cannot be rebuilt: {e}"
     if len(prog.bodies) != rp.last_line - rp.first_line + 1:

@@ -33,6 +33,7 @@ import numpy as np
 
 from fivebar_host import protocol
 from fivebar_host.compile import Job
+from fivebar_host.compile.model import LayerPause
 from fivebar_host.config import Profile
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import LinkFaultError, PowerLossError, SendError
@@ -47,6 +48,7 @@ from fivebar_host.run.resume import (
     redraw_text,
     resume_path,
 )
+from fivebar_host.run.stops import Copies, pieces, stopped, wait_between_copies
 from fivebar_host.run.stream import StreamProgress, StreamResult
 
 
@@ -107,12 +109,35 @@ class SendReport:
 
 @dataclass(frozen=True)
 class Progress:
-    """Progress in job terms, for progress bars."""
+    """Progress in job terms, for progress bars (`copy` of `copies`, 1-based)."""
 
     segments_done: int
     segments_total: int
     elapsed_s: float
     remaining_s: float
+    copy: int = 1
+    copies: int = 1
+
+
+@dataclass
+class _Run:
+    """What the pieces of one run share (`run_job`)."""
+
+    link: Link
+    job: Job
+    profile: Profile
+    laser: bool
+    rpath: Path
+    fingerprint: str
+    copies: Copies
+    t0: float
+    on_progress: Callable[[Progress], None] | None
+    should_stop: Callable[[], bool] | None
+    on_interrupt: Callable[[], bool] | None
+    overrides: Overrides | None
+    copy: int = 1
+    bytes_sent: int = 0
+    resends: int = 0
 
 
 def run_job(link: Link, job: Job, profile: Profile, *, drawing: str | Path, laser: bool,
@@ -122,7 +147,10 @@ def run_job(link: Link, job: Job, profile: Profile, *, drawing: str | Path, lase
             on_interrupt: Callable[[], bool] | None = None,
             on_note: Callable[[str], None] | None = None,
             confirm_placed: Callable[[str], bool] | None = None,
-            overrides: Overrides | None = None) -> SendReport:
+            overrides: Overrides | None = None,
+            on_pause: Callable[[LayerPause], bool] | None = None,
+            copies: Copies | None = None,
+            on_wait: Callable[[float], None] | None = None) -> SendReport:
     """Stream `job` (or its remainder with `resume`) and wait until the machine is idle.
 
     `confirm` answers the first-start question "are the arms at the home pose?" (the CLI's
@@ -138,51 +166,97 @@ def run_job(link: Link, job: Job, profile: Profile, *, drawing: str | Path, lase
     whether segments may be drawn twice). `overrides` (live feed and laser power,
     `run.overrides`) change the lines not yet written; the resume file maps lines to segments
     by number, so a resume after an override stays exact.
+
+    Planned stops (`run.stops`): at each pen-change stop of `job.pauses` the machine is left
+    idle with the pen up and `on_pause` decides (True: go on; False: quit with an exact
+    resume file) — a job with stops needs it; `copies` runs the job several times with
+    `on_wait` told the seconds left of the page delay between them.
     """
-    rpath = resume_path(drawing)
-    fp = fingerprint(job)
+    if job.pauses and on_pause is None:
+        raise SendError(f"{job.file}: the job stops for {len(job.pauses)} pen change(s) "
+                        f"({', '.join(p.describe() for p in job.pauses)}) and nobody is "
+                        "there to answer: plot it with --no-pause, or where a person can")
+    run = _Run(link, job, profile, laser, resume_path(drawing), fingerprint(job),
+               copies or Copies(), time.monotonic(), on_progress, should_stop, on_interrupt,
+               overrides)
     start = 0
     if resume:
-        rp = ResumePoint.load(rpath)
-        if rp.fingerprint != fp:
-            raise SendError(f"{rpath}: the resume file belongs to a different job (drawing or "
-                            "options changed); run the same command as before with --resume")
+        rp = ResumePoint.load(run.rpath)
+        if rp.fingerprint != run.fingerprint:
+            raise SendError(f"{run.rpath}: the resume file belongs to a different job "
+                            "(drawing or options changed); run the same command as before "
+                            "with --resume")
+        run.copy = rp.copy or 1
+        if run.copy > run.copies.count:
+            raise SendError(f"{run.rpath}: the job stopped in copy {run.copy}, but only "
+                            f"{run.copies.count} copies are asked for now (--copies)")
         start, st = _resume_start(link, job, profile, rp, confirm_placed or confirm,
                                   on_note or (lambda _: None))
     else:
         st = ensure_known_pose(link, profile, confirm)
+    first = (start, (st.a, st.b))
+    while True:
+        for pc in pieces(job, start, resume):
+            if pc.pause is not None:
+                assert on_pause is not None
+                if not on_pause(pc.pause):
+                    raise stopped(link, job, run.rpath, run.fingerprint, pc.begin, st,
+                                  run.copy, f"stopped at the pen change before "
+                                  f"{pc.pause.describe()}")
+            if pc.end > pc.begin:
+                st = _stream_piece(run, pc.begin, pc.end, st)
+        if run.copy >= run.copies.count:
+            break
+        if not wait_between_copies(link, run.copies.page_delay_s, should_stop, on_interrupt,
+                                   on_wait):
+            raise stopped(link, job, run.rpath, run.fingerprint, 0, st, run.copy + 1,
+                          f"stopped before copy {run.copy + 1} of {run.copies.count}")
+        run.copy += 1
+        start, resume = 0, False
+    if run.rpath.exists():
+        run.rpath.unlink()
+    return SendReport(job.n_segments - first[0] + (run.copy - 1) * job.n_segments, first[0],
+                      time.monotonic() - run.t0, run.bytes_sent, run.resends, st, first[1])
+
+
+def _stream_piece(run: _Run, start: int, end: int, st: StatusReport) -> StatusReport:
+    """Stream segments `start` … `end` − 1 from the machine's state `st` and wait until it
+    is idle; the final status. A fault writes the resume file (`after_fault`)."""
+    link, job = run.link, run.job
     start_position = (st.a, st.b)
-    prog = build_program(job, profile, laser, start, start_position)
+    prog = build_program(job, run.profile, run.laser, start, start_position,
+                         None if end >= job.n_segments else end)
     durations = job.duration_us.astype(np.float64) * 1e-6
-    remaining_after = np.concatenate((np.cumsum(durations[::-1])[::-1], [0.0]))
-    t0 = time.monotonic()
+    later = (run.copies.count - run.copy) * (job.total_time_s + run.copies.page_delay_s)
+    remaining_after = np.concatenate((np.cumsum(durations[::-1])[::-1], [0.0])) + later
     first_line = link.next_line
     last_line = first_line + len(prog.bodies) - 1
 
     def progress(p: StreamProgress) -> None:
-        if on_progress is None:
+        if run.on_progress is None:
             return
         done = prog.finished_segments(first_line, p.done_line, start)
-        on_progress(Progress(done, job.n_segments, time.monotonic() - t0,
-                             float(remaining_after[min(done, job.n_segments)])))
+        run.on_progress(Progress(done, job.n_segments, time.monotonic() - run.t0,
+                                 float(remaining_after[min(done, job.n_segments)]),
+                                 run.copy, run.copies.count))
 
     try:
         res: StreamResult = link.stream(prog.bodies, on_progress=progress,
-                                        should_stop=should_stop, on_interrupt=on_interrupt,
-                                        overrides=overrides)
-        slowest = FEED_MAX_PCT / FEED_MIN_PCT if overrides is not None else 1.0
+                                        should_stop=run.should_stop,
+                                        on_interrupt=run.on_interrupt,
+                                        overrides=run.overrides)
+        slowest = FEED_MAX_PCT / FEED_MIN_PCT if run.overrides is not None else 1.0
         final = link.wait_idle(max(30.0, 3.0 * slowest * job.total_time_s), last_line=last_line,
                                on_status=lambda s: progress(StreamProgress(
                                    len(prog.bodies), len(prog.bodies), len(prog.bodies),
                                    s.done_line, s, 0)))
     except LinkFaultError as fault:
-        stream = StreamRun(prog, first_line, start, start_position, laser)
-        raise after_fault(link, job, stream, fault, rpath, fp) from fault
-    if rpath.exists():
-        rpath.unlink()
-    return SendReport(job.n_segments - start, start, time.monotonic() - t0, res.bytes_sent,
-                      res.resends, final, start_position)
-
+        stream = StreamRun(prog, first_line, start, start_position, run.laser,
+                           None if end >= job.n_segments else end, run.copy)
+        raise after_fault(link, job, stream, fault, run.rpath, run.fingerprint) from fault
+    run.bytes_sent += res.bytes_sent
+    run.resends += res.resends
+    return final
 
 
 def _resume_start(link: Link, job: Job, profile: Profile, rp: ResumePoint,

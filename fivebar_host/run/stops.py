@@ -1,0 +1,141 @@
+"""Planned stops of a run: pen changes between layers, copies and the page delay between them.
+
+A job with pen-change stops (`Job.pauses`, `compile.layers`) is streamed in pieces: the
+segments up to a stop run as one program that ends with the pen up (laser off), the host
+waits until the machine is idle (queue drained, no motion) and asks (`on_pause`: the CLI on
+the terminal, the daemon through its pause state); then the next piece streams from exactly
+where the machine stands. `--copies N` runs the whole job N times; between copies the arms
+are parked at the homed pose (the job's last move), the pen is up, and the host waits
+`--page-delay` seconds, polling the machine and honouring a stop request like a stream does.
+
+Quitting at a stop writes the same resume file a fault writes (`run.resume`), exact: the
+next segment is the stop's segment, the position the machine's, the copy the one running.
+A `--resume` that starts exactly at a pen-change stop does not stop there again (the person
+who resumed has changed the pen).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from fivebar_host.compile import Job
+from fivebar_host.compile.model import LayerPause
+from fivebar_host.protocol import StatusReport
+from fivebar_host.run.errors import FaultKind, LinkFaultError, SendError
+from fivebar_host.run.resume import ResumePoint
+
+if TYPE_CHECKING:  # the reports use this module without the serial link
+    from fivebar_host.run.link import Link
+
+#: How often the page delay polls the machine and the stop request, s.
+WAIT_POLL_S = 0.05
+#: ... and reads a status report (keeps the link and the daemon's live view fresh), s.
+WAIT_STATUS_S = 0.5
+
+
+@dataclass(frozen=True)
+class Copies:
+    """How many times the job runs (`--copies`) and the wait between copies, s."""
+
+    count: int = 1
+    page_delay_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.count < 1 or self.page_delay_s < 0.0:
+            raise ValueError(f"bad copies {self.count} / page delay {self.page_delay_s}")
+
+
+@dataclass(frozen=True)
+class Piece:
+    """Segments `begin` … `end` − 1 streamed as one program; `pause` the stop before it."""
+
+    begin: int
+    end: int
+    pause: LayerPause | None
+
+
+def pieces(job: Job, start: int, resumed: bool) -> list[Piece]:
+    """The programs a run from segment `start` streams, split at the pen-change stops. A
+    stop at `start` itself is kept unless the run is `resumed` there (module doc)."""
+    cuts = [p for p in job.pauses if p.segment > start or (p.segment == start and not resumed)]
+    out: list[Piece] = []
+    begin, pause = start, None
+    for p in cuts:
+        if p.segment > begin:
+            out.append(Piece(begin, p.segment, pause))
+            begin = p.segment
+        pause = p
+    out.append(Piece(begin, job.n_segments, pause))
+    return [pc for pc in out if pc.end > pc.begin or pc.pause is not None]
+
+
+def pause_count(job: Job, copies: Copies) -> int:
+    """How many times the run stops for a pen change, over all copies."""
+    return len(job.pauses) * copies.count
+
+
+def planned_time_s(job: Job, copies: Copies) -> float:
+    """The run's planned time: every copy and the page delays between them (the pen
+    changes wait for a person and are not counted)."""
+    return copies.count * job.total_time_s + (copies.count - 1) * copies.page_delay_s
+
+
+def plan_text(job: Job, copies: Copies, fmt: Callable[[float], str]) -> str:
+    """The run's planned time for people, with copies, page delays and pen changes:
+    "≈ 1 min 2 s (2 copies of ≈ 25.0 s + 1 page delay of 15 s) + 2 pen changes (wait for
+    you)"; just "≈ 25.0 s" for one copy without stops. `fmt` formats a duration."""
+    text = f"≈ {fmt(planned_time_s(job, copies))}"
+    n = copies.count
+    if n > 1:
+        text += (f" ({n} copies of ≈ {fmt(job.total_time_s)} + {n - 1} page "
+                 f"delay{'s' if n > 2 else ''} of {copies.page_delay_s:g} s)")
+    changes = pause_count(job, copies)
+    if changes:
+        text += f" + {changes} pen change{'s' if changes > 1 else ''} (wait for you)"
+    return text
+
+
+def stopped(link: Link, job: Job, rpath: Path, fingerprint: str, segment: int,
+            st: StatusReport, copy: int, why: str) -> SendError:
+    """Quit at a planned stop: save the exact resume point and the error that says so (its
+    cause an interrupt fault, as a Ctrl-C abort, so the daemon records it the same way)."""
+    ResumePoint(str(job.file), fingerprint, segment, (st.a, st.b), f"interrupt: {why}",
+                job.n_segments, copy=copy).save(rpath)
+    fault = LinkFaultError(FaultKind.INTERRUPT, f"{link.url}: {why}", -1, status=st)
+    err = SendError(f"{why}: the machine is idle at A = {st.a}, B = {st.b} steps, pen up "
+                    f"(laser off); {segment} of {job.n_segments} segments of copy {copy} "
+                    f"done.\nresume file: {rpath} — continue with the same command and "
+                    "--resume")
+    err.__cause__ = fault
+    return err
+
+
+def wait_between_copies(link: Link, delay_s: float,
+                        should_stop: Callable[[], bool] | None,
+                        on_interrupt: Callable[[], bool] | None,
+                        on_wait: Callable[[float], None] | None) -> bool:
+    """Wait `delay_s` with the machine idle, telling `on_wait` the seconds left (about 10
+    times a second). A stop request (`should_stop`, Ctrl-C) asks `on_interrupt` as a stream
+    does: True goes on waiting, False (or no one to ask) gives up → False."""
+    deadline = time.monotonic() + delay_s
+    next_status = 0.0
+    while True:
+        now = time.monotonic()
+        left = deadline - now
+        if on_wait is not None:
+            on_wait(max(0.0, left))
+        if left <= 0.0:
+            return True
+        if should_stop is not None and should_stop():
+            paused_at = time.monotonic()
+            if on_interrupt is None or not on_interrupt():
+                return False
+            deadline += time.monotonic() - paused_at  # the countdown goes on from there
+        if now >= next_status:
+            link.status()
+            next_status = now + WAIT_STATUS_S
+        time.sleep(min(WAIT_POLL_S, max(0.0, left)))
