@@ -73,6 +73,12 @@ def pieces(job: Job, start: int, resumed: bool) -> list[Piece]:
     return [pc for pc in out if pc.end > pc.begin or pc.pause is not None]
 
 
+def piece_end(job: Job, start: int) -> int | None:
+    """The segment a program streamed from `start` ends before: the next pen-change stop
+    after it (None: the job's end). Rebuilding a stream needs only its start (`pieces`)."""
+    return next((p.segment for p in job.pauses if p.segment > start), None)
+
+
 def pause_count(job: Job, copies: Copies) -> int:
     """How many times the run stops for a pen change, over all copies."""
     return len(job.pauses) * copies.count

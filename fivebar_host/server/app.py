@@ -41,6 +41,7 @@ from fivebar_host import __version__
 from fivebar_host.config import Profile
 from fivebar_host.errors import FivebarError, OptionError
 from fivebar_host.options import JOB_OPTIONS, parse_query, unknown_option
+from fivebar_host.run.stops import planned_time_s
 from fivebar_host.server import store as st_
 from fivebar_host.server.jobs import (
     Compiled,
@@ -475,7 +476,8 @@ def _queue(ctx: _Ctx, name: str, opts: JobOptions, body: bytes, compiled: Compil
                             fingerprint=compiled.fingerprint, mode=job.mode,
                             max_dev_mm=None if job.max_dev_mm != job.max_dev_mm
                             else float(job.max_dev_mm),
-                            segments_total=job.n_segments, estimated_s=job.total_time_s)
+                            segments_total=job.n_segments,
+                            estimated_s=planned_time_s(job, opts.copies_plan()))
     ctx.cache.put(rec.id, job)
     ctx.worker.notify()
     return job_out(rec, ctx.worker)

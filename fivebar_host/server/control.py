@@ -165,12 +165,14 @@ class Control(MachineState):
         assert current is not None
         return self._wait_paused(link, current)
 
-    def _wait_paused(self, link: JournalLink, job_id: int) -> bool:
-        """Stay held until resume (True), cancel or stop (False); keeps polling `?`."""
+    def _wait_paused(self, link: JournalLink, job_id: int,
+                     message: str = "paused: held, laser off") -> bool:
+        """Stay held (or idle at a pen change) until resume (True), cancel or stop (False);
+        keeps polling `?`. `message` is the paused job's reason."""
         if self.live is not None:
             self.live.paused = True
-        self.store.set_state(job_id, st_.PAUSED, message="paused: held, laser off")
-        log.info("job %d paused", job_id)
+        self.store.set_state(job_id, st_.PAUSED, message=message)
+        log.info("job %d %s", job_id, message)
         try:
             while True:
                 kind = self._stop_kind()

@@ -22,11 +22,13 @@ from pathlib import Path
 
 from fivebar_host import protocol
 from fivebar_host.compile import Job
+from fivebar_host.compile.model import LayerPause
 from fivebar_host.run.errors import FaultKind, LinkError, LinkFaultError, SendError
 from fivebar_host.run.overrides import Overrides
 from fivebar_host.run.program import Program, build_program
 from fivebar_host.run.resume import ResumePoint, resume_path
 from fivebar_host.run.sender import Progress, SendReport, run_job
+from fivebar_host.run.stops import piece_end, planned_time_s
 from fivebar_host.server import store as st_
 from fivebar_host.server.control import Control
 from fivebar_host.server.jobs import JobOptions, SubmitError
@@ -86,7 +88,7 @@ class JobRunner(Control):
         start = rec.resume.next_segment if rec.resume is not None else 0
         if rec.resume is not None:
             ResumePoint(job.file, rec.fingerprint, rec.resume.next_segment, rec.resume.position,
-                        rec.resume.reason, job.n_segments).save(rpath)
+                        rec.resume.reason, job.n_segments, copy=rec.resume.copy).save(rpath)
         else:
             rpath.unlink(missing_ok=True)
         with self._cv:
@@ -121,7 +123,9 @@ class JobRunner(Control):
                            resume=run.resume, on_progress=partial(self._on_progress, run),
                            should_stop=self._should_stop, on_interrupt=self._on_interrupt,
                            overrides=run.overrides,
-                           on_note=lambda text: log.warning("job %d: %s", rec.id, text))
+                           on_note=lambda text: log.warning("job %d: %s", rec.id, text),
+                           on_pause=partial(self._on_pen_change, run),
+                           copies=run.opts.copies_plan(), on_wait=partial(self._on_wait, run))
         except SendError as e:
             self.progress.flush()  # before the final record, never after it
             self._after_error(run, e)
@@ -147,9 +151,10 @@ class JobRunner(Control):
                      if run.underruns0 is not None else None)
         self.store.update(rec.id, segments_done=job.n_segments, remaining_s=0.0,
                           run_s=run.base_run + report.elapsed_s, underruns=underruns)
+        planned = planned_time_s(job, run.opts.copies_plan())
         self.store.set_state(rec.id, st_.DONE, message=(
             f"done: {report.segments} segments in {report.elapsed_s:.1f} s (planned "
-            f"{job.total_time_s:.1f} s), {report.bytes_sent} bytes sent, {report.resends} "
+            f"{planned:.1f} s), {report.bytes_sent} bytes sent, {report.resends} "
             f"resends; machine at A = {report.final.a}, B = {report.final.b}"))
         self.cache.drop(rec.id)
         self._set_pose(True, report.final)
@@ -158,21 +163,45 @@ class JobRunner(Control):
 
     # ------------------------------------------------------------------ run_job's hooks
     def _on_stream_start(self, run: JobRun, bodies: Sequence[str], first_line: int) -> None:
-        """Commit the stream record, once the stream is checked to be the job's program."""
+        """Commit the stream record, once the stream is checked to be one of the job's
+        programs: from the run's start segment, or — after a pen-change stop or for a
+        later copy (`run.stops`) — from a stop's segment or segment 0, each ending at the
+        next stop (`piece_end`)."""
         st = run.link.last_status
-        if st is None or run.program is not None:
+        if st is None:
             return
-        try:
-            prog = build_program(run.job, self.cfg.profile, run.opts.laser, run.start,
-                                 (st.a, st.b))
-        except SendError:
-            return
-        if prog.bodies != list(bodies):
+        starts = dict.fromkeys([run.start, 0, *(p.segment for p in run.job.pauses)])
+        for start in starts:
+            try:
+                prog = build_program(run.job, self.cfg.profile, run.opts.laser, start,
+                                     (st.a, st.b), piece_end(run.job, start))
+            except SendError:
+                continue
+            if prog.bodies == list(bodies):
+                break
+        else:
             log.debug("job %d: a stream that is not the job's program", run.rec.id)
             return
-        self.store.set_stream(run.rec.id, StreamRecord(first_line, run.start, (st.a, st.b),
+        self.store.set_stream(run.rec.id, StreamRecord(first_line, start, (st.a, st.b),
                                                        len(bodies)))
         run.program = (prog, first_line)
+        run.underruns0 = None
+
+    def _on_pen_change(self, run: JobRun, pause: LayerPause) -> bool:
+        """A pen-change stop (`run.stops`): the machine is idle with the pen up; the job
+        waits in the paused state, its reason naming the layer, until the resume request
+        (True) or a cancel or stop (False: `run_job` records the exact resume point)."""
+        self.store.set_stream(run.rec.id, None)  # the stream before the stop is over
+        return self._wait_paused(run.link, run.rec.id, f"pen change: {pause.describe()}; "
+                                 "the pen is up and the machine idle. Change the pen, then "
+                                 "resume the job")
+
+    def _on_wait(self, run: JobRun, left_s: float) -> None:
+        """The page delay between copies: the live view's time left counts it down."""
+        live = self.live
+        if live is not None:
+            live.remaining_s = max(live.remaining_s, left_s)
+            self.on_change()
 
     def _on_progress(self, run: JobRun, p: Progress) -> None:
         """Keep the live snapshot and the recorded progress; stop a drained stream on request."""
@@ -232,7 +261,8 @@ class JobRunner(Control):
                       "queued lines and stopped at a segment boundary",
                       "pause": "paused", "cancel": "cancelled"}.get(
                           req or "", rp.reason) if kind is FaultKind.INTERRUPT else rp.reason
-            self.store.set_resume(rec.id, ResumeRecord(rp.next_segment, rp.position, reason))
+            self.store.set_resume(rec.id, ResumeRecord(rp.next_segment, rp.position, reason,
+                                                       rp.copy or 1))
             if kind is not FaultKind.DISCONNECT:
                 # run_job reset the firmware (queue cleared, counter back to 0): the line
                 # numbers of this stream mean nothing any more; the resume point is exact.

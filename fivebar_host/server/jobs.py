@@ -20,8 +20,9 @@ from typing import Any
 from fivebar_host.compile import GCODE_SUFFIXES, CompileOptions, Job, compile_drawing, gcode_tool
 from fivebar_host.config import Profile, require_tool
 from fivebar_host.errors import FivebarError, InputError, JobError, OptionError
-from fivebar_host.options import PEN_NAMES, check_values
+from fivebar_host.options import PEN_NAMES, check_values, compile_values
 from fivebar_host.run.resume import fingerprint
+from fivebar_host.run.stops import Copies
 from fivebar_host.toolpath.gcode import read_gcode
 from fivebar_host.toolpath.svg import read_svg
 
@@ -62,10 +63,19 @@ class JobOptions(CompileOptions):
     pen_down_rate: float | None = None
     pen_up_delay_ms: float | None = None
     pen_down_delay_ms: float | None = None
+    #: The run's copies and the wait between them, s (`run.stops`; not compiled).
+    copies: int = 1
+    page_delay_s: float = 15.0
+
+    def copies_plan(self) -> Copies:
+        """The copies and page delay as the sender takes them."""
+        return Copies(self.copies, self.page_delay_s)
 
     def compile_options(self) -> CompileOptions:
         """The compiler's options (everything but laser and confirm)."""
-        return CompileOptions(**{f.name: getattr(self, f.name) for f in fields(CompileOptions)})
+        values = {f.name: getattr(self, f.name) for f in fields(CompileOptions)}
+        compile_values(values)  # options that contradict each other (OptionError)
+        return CompileOptions(**values)
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-friendly dict (stored with the job)."""

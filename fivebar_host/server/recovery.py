@@ -28,6 +28,7 @@ from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import SendError
 from fivebar_host.run.program import Program, build_program
 from fivebar_host.run.resume import kept_resume_segment
+from fivebar_host.run.stops import piece_end
 from fivebar_host.server import store as st_
 from fivebar_host.server.jobs import JobOptions, SubmitError
 from fivebar_host.server.journal import JournalLink
@@ -102,7 +103,7 @@ class Recovery(MachineState):
             return None
         try:
             prog = build_program(job, self.cfg.profile, opts.laser, stream.start_segment,
-                                 stream.start_position)
+                                 stream.start_position, piece_end(job, stream.start_segment))
         except SendError as e:  # the profile's limits changed: no exact mapping
             log.warning("job %d: cannot rebuild its program (%s)", rec.id, e)
             return None

@@ -49,7 +49,7 @@ FINAL_STATES = frozenset({DONE, FAILED, CANCELLED})
 #: States that keep later jobs from starting (the paper holds a half-drawn job).
 BLOCKING_STATES = frozenset({RUNNING, PAUSED, HELD})
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 #: Job ids SQLite can hold (a signed 64-bit INTEGER PRIMARY KEY; AUTOINCREMENT starts at 1).
 #: A number outside is no job: looked up it is "not found", never an OverflowError.
 MIN_JOB_ID, MAX_JOB_ID = 1, 2**63 - 1
@@ -90,7 +90,8 @@ CREATE TABLE IF NOT EXISTS jobs (
     stream_start_a INTEGER,
     stream_start_b INTEGER,
     stream_lines INTEGER,
-    queue_key REAL
+    queue_key REAL,
+    resume_copy INTEGER
 );
 CREATE INDEX IF NOT EXISTS jobs_state ON jobs(state);
 CREATE TABLE IF NOT EXISTS machine (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -108,6 +109,7 @@ class ResumeRecord:
     next_segment: int
     position: tuple[int, int] | None
     reason: str
+    copy: int = 1  # the copy (`copies` option) it stopped in
 
 
 @dataclass(frozen=True)
@@ -154,14 +156,15 @@ _COLUMNS = ("id, name, options, upload_sha256, state, message, question, submitt
             "started_at, finished_at, fingerprint, mode, max_dev_mm, segments_total, "
             "estimated_s, segments_done, remaining_s, run_s, underruns, resume_next, resume_a, "
             "resume_b, resume_reason, stream_first_line, stream_start_segment, stream_start_a, "
-            "stream_start_b, stream_lines")
+            "stream_start_b, stream_lines, resume_copy")
 
 
 def _record(row: sqlite3.Row) -> JobRecord:
     resume = None
     if row["resume_next"] is not None:
         pos = None if row["resume_a"] is None else (int(row["resume_a"]), int(row["resume_b"]))
-        resume = ResumeRecord(int(row["resume_next"]), pos, str(row["resume_reason"] or ""))
+        resume = ResumeRecord(int(row["resume_next"]), pos, str(row["resume_reason"] or ""),
+                              int(row["resume_copy"] or 1))
     stream = None
     if row["stream_first_line"] is not None:
         stream = StreamRecord(int(row["stream_first_line"]), int(row["stream_start_segment"]),
@@ -212,6 +215,8 @@ class JobStore:
                 cols = {str(r[1]) for r in self._db.execute("PRAGMA table_info(jobs)")}
                 if "queue_key" not in cols:  # schema 1: the queue ran in id order
                     self._db.execute("ALTER TABLE jobs ADD COLUMN queue_key REAL")
+                if "resume_copy" not in cols:  # schema 2: one copy a job
+                    self._db.execute("ALTER TABLE jobs ADD COLUMN resume_copy INTEGER")
                 self._db.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
         except sqlite3.Error as e:
             raise StoreError(f"{path}: not a usable fivebar database: {e}") from e
@@ -368,13 +373,15 @@ class JobStore:
         with self._tx() as db:
             if resume is None:
                 db.execute("UPDATE jobs SET resume_next = NULL, resume_a = NULL, "
-                           "resume_b = NULL, resume_reason = NULL WHERE id = ?", (job_id,))
+                           "resume_b = NULL, resume_reason = NULL, resume_copy = NULL "
+                           "WHERE id = ?", (job_id,))
             else:
                 a, b = resume.position if resume.position is not None else (None, None)
                 db.execute("UPDATE jobs SET resume_next = ?, resume_a = ?, resume_b = ?, "
-                           "resume_reason = ?, segments_done = ? WHERE id = ?",
+                           "resume_reason = ?, segments_done = ?, resume_copy = ? "
+                           "WHERE id = ?",
                            (resume.next_segment, a, b, resume.reason, resume.next_segment,
-                            job_id))
+                            resume.copy, job_id))
 
     def set_stream(self, job_id: int, stream: StreamRecord | None) -> None:
         """Record where a stream began (before its first line is written), or clear it."""

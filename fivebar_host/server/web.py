@@ -36,6 +36,7 @@ from fivebar_host.config import Profile
 from fivebar_host.dryrun import format_duration, report_lines
 from fivebar_host.options import JOB_OPTIONS, Option
 from fivebar_host.run.overrides import FEED_MAX_PCT, FEED_MIN_PCT, POWER_MAX_PCT, POWER_MIN_PCT
+from fivebar_host.run.stops import Copies, planned_time_s
 from fivebar_host.server import store as st_
 from fivebar_host.server.app import (
     _SUBMIT_EXTRA,
@@ -123,11 +124,14 @@ class DryRunOut(BaseModel):
     preview_png: str = Field(description="The preview picture, PNG, base64.")
 
 
-def _dry_run(job: Job, profile: Profile, laser: bool) -> tuple[list[str], bytes]:
-    """The CLI's report lines and preview picture (PNG bytes) of a compiled job."""
+def _dry_run(job: Job, profile: Profile, laser: bool,
+             copies: Copies | None = None) -> tuple[list[str], bytes]:
+    """The CLI's report lines and preview picture (PNG bytes) of a compiled job (`copies`:
+    the run's copies and page delay, in the time line)."""
     from fivebar_host.report.preview import draw_preview  # matplotlib only in report/
 
-    lines = report_lines(job, nbar_opinion(job, profile), laser=laser)
+    lines = report_lines(job, nbar_opinion(job, profile), laser=laser, profile=profile,
+                         copies=copies)
     with tempfile.TemporaryDirectory(prefix="fivebar-preview-") as d, _PREVIEW_LOCK:
         out = draw_preview(job, profile, Path(d) / "preview.png", dpi=PREVIEW_DPI)
         return lines, out.read_bytes()
@@ -178,10 +182,12 @@ def _dryrun_route(app: FastAPI, ctx: _Ctx) -> None:
         A job that cannot run is refused as a submission is (422 with the CLI's message)."""
         opts, _, compiled = await compile_request(ctx, request, name)
         job = compiled.job
-        lines, png = await run_in_threadpool(_dry_run, job, ctx.profile, opts.laser)
+        copies = opts.copies_plan()
+        lines, png = await run_in_threadpool(_dry_run, job, ctx.profile, opts.laser, copies)
         dev = None if job.max_dev_mm != job.max_dev_mm else float(job.max_dev_mm)
-        return DryRunOut(name=name, report=lines, estimated_s=round(job.total_time_s, 3),
-                         estimate=format_duration(job.total_time_s), max_dev_mm=dev,
+        total_s = planned_time_s(job, copies)
+        return DryRunOut(name=name, report=lines, estimated_s=round(total_s, 3),
+                         estimate=format_duration(total_s), max_dev_mm=dev,
                          tolerance_mm=job.tolerance_mm, segments=job.n_segments,
                          paths=job.n_paths, mode=job.mode, warnings=list(job.notes),
                          preview_png=base64.b64encode(png).decode("ascii"))

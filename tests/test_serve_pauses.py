@@ -1,0 +1,121 @@
+"""`fivebar serve` with pen-change stops and copies (mock device, pen-servo profile): a stop
+puts the job into the paused state with a reason naming the layer, with the machine idle and
+the pen up; the resume request goes on and the job ends exactly on plan; a cancel at the stop
+cancels; copies with a page delay run the job twice."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from serve_support import wait_for
+
+from fivebar_host.compile import CompileOptions, Job, compile_job
+from fivebar_host.config import load_profile
+from fivebar_host.devices import mock
+from fivebar_host.server.client import ServerClient, follow, plot_options
+from fivebar_host.server.daemon import Daemon, ServeConfig
+
+PEN = Path(__file__).resolve().parent.parent / "configs" / "pen-servo.toml"
+SVG = b"""<svg xmlns="http://www.w3.org/2000/svg"
+ xmlns:inkscape="http://www.inkscape.org/namespaces/inkscape"
+ width="30mm" height="20mm" viewBox="0 0 30 20">
+<g inkscape:groupmode="layer" inkscape:label="black" id="layer1">
+<line x1="2" y1="2" x2="12" y2="2" stroke="black"/>
+<line x1="18" y1="18" x2="28" y2="18" stroke="black"/>
+</g>
+<g inkscape:groupmode="layer" inkscape:label="red" id="layer2">
+<line x1="18" y1="2" x2="28" y2="2" stroke="red"/>
+<line x1="2" y1="18" x2="12" y2="18" stroke="red"/>
+</g>
+</svg>
+"""
+
+
+@pytest.fixture
+def daemon(tmp_path: Path) -> Iterator[Callable[[str], Daemon]]:
+    """A daemon over the named mock machine with the pen-servo profile."""
+    started: list[Daemon] = []
+
+    def start(machine: str, **kw: Any) -> Daemon:
+        d = Daemon(ServeConfig(port_url=f"fivebar-mock://?speed=0&machine={machine}",
+                               listen="127.0.0.1:0", state_dir=tmp_path / machine,
+                               banner_timeout_s=1.0, profile_path=PEN, **kw))
+        d.start()
+        started.append(d)
+        return d
+
+    yield start
+    for d in started:
+        d.stop(hurry=True, timeout_s=15.0)
+    mock.forget_machines()
+
+
+def compiled(tmp_path: Path, **opts: bool) -> Job:
+    p = tmp_path / "layers.svg"
+    p.write_bytes(SVG)
+    return compile_job(p, load_profile(PEN), CompileOptions(**opts))
+
+
+def moved_steps(machine: str) -> np.ndarray:
+    tot = np.zeros(2, dtype=np.int64)
+    for e in mock.machine(machine).ledger:
+        if e.kind == "G1":
+            tot += np.abs(np.asarray(e.steps))
+    return tot
+
+
+def plan_steps(job: Job) -> np.ndarray:
+    return np.asarray(np.abs(np.diff(job.steps, axis=0)).sum(axis=0))
+
+
+def test_pen_change_pauses_the_job_naming_the_layer_then_resumes_exactly(
+        daemon: Callable[..., Daemon], tmp_path: Path) -> None:
+    c = ServerClient(daemon("pc").url)
+    job = compiled(tmp_path, layer_pause=True)
+    j = c.submit(SVG, "layers.svg", plot_options(layer_pause=True, confirm=True))
+    paused = wait_for(lambda: (x := c.job(j["id"]))["state"] == "paused" and x,
+                      what="the pen-change pause")
+    assert paused["message"].startswith("pen change: layer 2/2 'red'")
+    m = mock.machine("pc")
+    n = len(m.ledger)
+    time.sleep(0.3)
+    st = c.status()["machine"]
+    assert st["state"] == "Idle" and not m.pen.down and len(m.ledger) == n
+    assert m.phys == job.steps[job.pauses[0].segment].tolist()
+    c.resume(j["id"])
+    done = follow(c, j["id"], lambda x: None, max_s=60)
+    assert done["state"] == "done", done
+    assert np.array_equal(moved_steps("pc"), plan_steps(job))
+    assert m.phys == [0, 0]
+
+
+def test_cancel_at_the_pen_change_cancels(daemon: Callable[..., Daemon],
+                                          tmp_path: Path) -> None:
+    c = ServerClient(daemon("cx").url)
+    job = compiled(tmp_path, layer_pause=True)
+    j = c.submit(SVG, "layers.svg", plot_options(layer_pause=True, confirm=True))
+    wait_for(lambda: c.job(j["id"])["state"] == "paused", what="the pen-change pause")
+    c.cancel(j["id"])
+    done = wait_for(lambda: (x := c.job(j["id"]))["state"] == "cancelled" and x,
+                    what="cancelled")
+    assert f"segment {job.pauses[0].segment} of {job.n_segments}" in done["message"]
+    k = job.pauses[0].segment
+    assert np.array_equal(moved_steps("cx"),
+                          np.abs(np.diff(job.steps[:k + 1], axis=0)).sum(axis=0))
+
+
+def test_copies_with_a_page_delay_run_the_job_twice(daemon: Callable[..., Daemon],
+                                                    tmp_path: Path) -> None:
+    c = ServerClient(daemon("cp").url)
+    job = compiled(tmp_path)
+    j = c.submit(SVG, "layers.svg", plot_options(copies=2, page_delay_s=0.2, confirm=True))
+    assert j["estimated_s"] == pytest.approx(2 * job.total_time_s + 0.2, rel=1e-6)
+    done = follow(c, j["id"], lambda x: None, max_s=60)
+    assert done["state"] == "done", done
+    assert np.array_equal(moved_steps("cp"), 2 * plan_steps(job))
+    assert mock.machine("cp").phys == [0, 0]
