@@ -119,3 +119,21 @@ def test_copies_with_a_page_delay_run_the_job_twice(daemon: Callable[..., Daemon
     assert done["state"] == "done", done
     assert np.array_equal(moved_steps("cp"), 2 * plan_steps(job))
     assert mock.machine("cp").phys == [0, 0]
+
+
+def test_plot_server_asks_for_the_pen_change_on_a_terminal(
+        daemon: Callable[..., Daemon], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from click.testing import CliRunner
+
+    from fivebar_host.cli import main
+
+    d = daemon("rm")
+    svg = tmp_path / "layers.svg"
+    svg.write_bytes(SVG)
+    monkeypatch.setattr("fivebar_host.cli.remote.terminal", lambda: True)
+    res = CliRunner().invoke(main, ["plot", str(svg), "--server", d.url, "--layer-pause",
+                                    "--yes"], input="\n", catch_exceptions=False)
+    assert res.exit_code == 0, res.output
+    assert "pen change: layer 2/2 'red'" in res.output
+    job = compiled(tmp_path, layer_pause=True)
+    assert np.array_equal(moved_steps("rm"), plan_steps(job))

@@ -20,6 +20,7 @@ from typing import Any, TypeVar
 import click
 
 from fivebar_host.cli.common import fail
+from fivebar_host.cli.stops import terminal
 from fivebar_host.options import JOB_OPTIONS
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -108,18 +109,58 @@ def _follow_with_bar(client: Any, job: dict[str, Any]) -> dict[str, Any]:
         with click.progressbar(length=int(job["segments_total"]), label="plotting",
                                show_eta=False, show_percent=True,
                                item_show_func=lambda s: s) as bar:
-            on_update = _bar_updater(bar)
+            bar_update = _bar_updater(bar)
+            seen: dict[str, Any] = {}
+            #: the pen change last answered, until the daemon shows the job running again
+            answered = {"message": ""}
+
+            def on_update(j: dict[str, Any]) -> None:
+                seen.update(j)
+                if j.get("state") != "paused":
+                    answered["message"] = ""
+                bar_update(j)
+
+            def pen_change() -> bool:  # asked on a terminal; otherwise the page resumes it
+                msg = str(seen.get("message", ""))
+                return (terminal() and seen.get("state") == "paused"
+                        and msg.startswith("pen change:") and msg != answered["message"])
+
             while True:
-                job = follow(client, jid, on_update, should_stop=lambda: interrupted["flag"])
+                job = follow(client, jid, on_update,
+                             should_stop=lambda: interrupted["flag"] or pen_change())
                 if interrupted["flag"]:
                     interrupted["flag"] = False
                     _after_ctrl_c(client, job)
                     continue
+                if pen_change():
+                    if _ask_pen_change(client, job):
+                        answered["message"] = str(job.get("message", ""))
+                        continue
+                    return client.job(jid)
                 if job["state"] == "held" and sys.stdin.isatty() and _ask_held(client, job):
                     continue
                 return job
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+def _ask_pen_change(client: Any, job: dict[str, Any]) -> bool:
+    """A pen-change stop on the daemon, followed on a terminal: Enter resumes the job (True),
+    q (or Ctrl-C) leaves it paused there — the page's resume button goes on later."""
+    click.echo(f"\n{job['message']}", err=True)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        answer = click.prompt("change the pen, then press Enter (q to stop following; the "
+                              "job stays paused on the daemon)", default="",
+                              show_default=False, err=True)
+    except (KeyboardInterrupt, click.Abort, EOFError):
+        answer = "q"
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if str(answer).strip().lower() in ("q", "quit", "stop"):
+        return False
+    client.resume(int(job["id"]))
+    return True
 
 
 def _bar_updater(bar: Any) -> Callable[[dict[str, Any]], None]:
