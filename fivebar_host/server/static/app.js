@@ -153,9 +153,10 @@ function optionField(o) {
     for (const c of o.choices) input.append(new Option(c, c));
   } else {
     input = el('input');
-    input.type = o.kind === 'float' ? 'number' : 'text';
-    if (o.kind === 'float') {
-      input.step = 'any';
+    const numeric = o.kind === 'float' || o.kind === 'int';
+    input.type = numeric ? 'number' : 'text';
+    if (numeric) {
+      input.step = o.kind === 'int' ? '1' : 'any';
       if (o.min !== null) input.min = o.min;
       if (o.max !== null) input.max = o.max;
     }
