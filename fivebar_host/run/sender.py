@@ -194,7 +194,7 @@ def run_job(link: Link, job: Job, profile: Profile, *, drawing: str | Path, lase
                                   on_note or (lambda _: None))
     else:
         st = ensure_known_pose(link, profile, confirm)
-    first = (start, (st.a, st.b))
+    first = (start, (st.a, st.b), run.copy)
     while True:
         for pc in pieces(job, start, resume):
             if pc.pause is not None:
@@ -215,8 +215,9 @@ def run_job(link: Link, job: Job, profile: Profile, *, drawing: str | Path, lase
         start, resume = 0, False
     if run.rpath.exists():
         run.rpath.unlink()
-    return SendReport(job.n_segments - first[0] + (run.copy - 1) * job.n_segments, first[0],
-                      time.monotonic() - run.t0, run.bytes_sent, run.resends, st, first[1])
+    done = job.n_segments - first[0] + (run.copy - first[2]) * job.n_segments
+    return SendReport(done, first[0], time.monotonic() - run.t0, run.bytes_sent, run.resends,
+                      st, first[1])
 
 
 def _stream_piece(run: _Run, start: int, end: int, st: StatusReport) -> StatusReport:
