@@ -259,8 +259,9 @@ def test_stop_during_the_page_delay_resumes_at_the_next_copy(tmp_path: Path) -> 
         assert "resume file" in str(e.value)
         rp = ResumePoint.load(resume_path(svg))
         assert (rp.copy, rp.next_segment, rp.position) == (2, 0, (0, 0))
-        run_job(link, job, prof, drawing=svg, laser=False, confirm=lambda q: True,
-                resume=True, copies=Copies(2, 5.0))
+        rep = run_job(link, job, prof, drawing=svg, laser=False, confirm=lambda q: True,
+                      resume=True, copies=Copies(2, 5.0))
+        assert rep.segments == job.n_segments  # the second copy only
     finally:
         link.close()
     m = mock.machine("cd")
