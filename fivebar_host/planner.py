@@ -33,15 +33,52 @@ first and out of the last segment of every run between stops (start, pen/laser s
 
 — the second is the average acceleration between the segments' midpoints: a velocity that
 changes at most at rate α has segment averages that differ by at most that much. The job
-(`fivebar_host.compile`) gets there in four steps: (1) the continuous profile above with a share of
-α and of J (and a corner cap for direction changes between short segments, and the firmware's
-shortest P as a speed cap); (2) `ramp_fractions` cuts the speed-up and slow-down parts of every
-segment into pieces short enough in time that the planned speed changes by a fraction of J
-from one piece to the next — new targets on the same joint-space line, so the path does not
-change; (3) the profile again on the pieces; (4) `enforce_staircase` measures the staircase of
-the rounded steps and integer durations and slows (never speeds up) the few segments that
-still break a limit (step rounding makes short pieces' rates uneven) until none does.
-`staircase_ratios` reports the result.
+(`fivebar_host.compile`) gets there in four steps: (1) the continuous profile above (with a
+share of α, a corner cap for direction changes between short segments, and the firmware's
+shortest P as a speed cap) — it only decides where to cut; (2) `ramp_fractions` cuts the
+speed-up and slow-down parts of every segment into pieces short enough in time that the
+planned speed changes by a fraction of J from one piece to the next — new targets on the
+same joint-space line, so the path does not change; (3) every piece's own shortest duration
+(`cap_durations_us`: bound (1) below); (4) `enforce_staircase` raises those to the least
+integer durations that meet every staircase limit on the rounded steps. `staircase_ratios`
+measures the result.
+
+The repair (issue 20). With D = max_j |Δθ_j| (whole steps, rad) and L the pen path (mm):
+
+    caps     P_k ≥ P_min,  P_k ≥ D_k / ω_max,  P_k ≥ L_k / F_k                     (1)
+    rest     P_k ≥ D_k / J,  P_k ≥ √(2·D_k/α)  (first and last segment of every run)   (2)
+
+and at the boundary between p = P_{k−1} and q = P_k, per joint j with b = |Δθ_{k−1,j}|,
+a = |Δθ_kj|: where the joint keeps its direction (or stands in one of the two segments),
+speeding up needs
+
+    a/q − b/p ≤ J                      ⇔  q ≥ a / (J + b/p)                            (3)
+    a/q − αq/2 ≤ c(p̂),  c(p) = b/p + αp/2,  p̂ = min(p, √(2b/α))
+                                       ⇔  q ≥ 2a / (c + √(c² + 2αa))                    (4)
+
+and slowing down the same with (a, q) and (b, p) swapped. (4) is the accel limit with p̂
+for p — c is smallest at p̂ = √(2b/α), so (4) is a little stricter than the limit, only where
+the segment before is slower than a start from rest through it would be — and in exchange
+every bound is a *nondecreasing* function of the neighbour's duration. Where the joint
+reverses, a/q + b/p ≤ J and ≤ α(p + q)/2 are met by the separate bounds
+
+    q, p ≥ (a + b)/J   and   q ≥ √(2a/α),  p ≥ √(2b/α)                                  (5)
+
+So every limit is a lower bound on one duration, a constant or a nondecreasing function of a
+neighbour's: the integer durations meeting them all are closed under the element-wise
+minimum and have a least element, the shortest plan of every segment at once, which
+`enforce_staircase` reaches by Kleene's iteration from (1). Raising ω_max, a feed, α or J
+lowers every bound (for (4), c(p̂) grows with α), so on given pieces no segment's duration
+ever grows when a limit is raised — exactly, to the µs.
+
+Why the plan used to grow with the limits (issue 20: 5 × 1000 chords of 0.1 mm planned 7.8 s
+at 100 mm/s, 15 rad/s, 600 rad/s² and 11.1 s at 200 / 30 / 1200; 6.2 s and 29.6 s with the
+chords simplified). The old repair slowed *both* segments of a broken
+boundary by one factor; that breaks the boundaries next to them (a slowed segment next to a
+fast one is a new jump), the next round slows those, and factors multiplied along the chain —
+up to 20× on single segments, and after 60 rounds one factor for the whole job. Higher
+limits gave a taller sawtooth to repair (more pieces of a few steps, whose step rounding
+makes their rates uneven) and so a longer plan. The least durations above replace it.
 """
 
 from __future__ import annotations
@@ -54,6 +91,9 @@ from kinematics.arrays import BoolArray, FloatArray, IntArray
 
 #: Default largest instantaneous joint-speed change at a junction, rad/s.
 JUNCTION_JUMP_RAD_S = 0.5
+#: Durations are raised to ⌈bound − this⌉ µs, so that a bound computed a few ulp above an
+#: integer does not add a µs (keeps the least durations exactly monotone in the limits).
+_CEIL_SLACK_US = 1e-9
 
 
 @dataclass(frozen=True)
@@ -155,6 +195,22 @@ def check_plan(pl: Plan, dtheta_rad: FloatArray, length_mm: FloatArray,
     return float(js.max()), float(ps.max()) if ps.size else 0.0
 
 
+def cap_durations_us(dtheta_rad: FloatArray, length_mm: FloatArray, feed_mm_s: FloatArray,
+                     max_joint_rad_s: float, min_duration_us: int = 1) -> IntArray:
+    """Shortest integer durations (µs) each segment allows on its own — bound (1) of the
+    module doc: the firmware's shortest P, the joint speed limit on the Chebyshev distance,
+    the pen feed on the path length. 0 for a segment without motion. Nonincreasing in
+    `feed_mm_s` and `max_joint_rad_s`; `enforce_staircase` raises them to a staircase."""
+    dth = np.asarray(dtheta_rad, dtype=np.float64).reshape(-1, 2)
+    dist = np.abs(dth).max(axis=1)
+    length = np.asarray(length_mm, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lo = np.maximum.reduce([np.full(dist.shape[0], float(min_duration_us)),
+                                dist / (max_joint_rad_s * 1e-6),
+                                np.where(length > 0, length / (feed_mm_s * 1e-6), 0.0)])
+    return np.where(dist > 0, np.ceil(lo - _CEIL_SLACK_US), 0.0).astype(np.int64)
+
+
 # ----------------------------------------------------------------------------- the staircase
 def ramp_fractions(pl: Plan, dist: FloatArray, alpha: float, piece_s: float,
                    min_piece_rad: float = 0.0) -> tuple[IntArray, FloatArray]:
@@ -241,51 +297,91 @@ def staircase_ratios(dtheta_rad: FloatArray, duration_us: IntArray,
     return jump, np.nan_to_num(acc, nan=0.0)
 
 
+def _bound_after(a: FloatArray, b: FloatArray, p: FloatArray, jump: float,
+                 acc: float) -> FloatArray:
+    """Shortest duration q (µs) of the segment on one side of a boundary whose other side
+    lasts p (µs): the largest over the joints (columns) of bounds (3) and (4) of the module
+    doc ("The repair"), with a = |Δθ| on q's side and b on p's side (a joint that reverses
+    there has a = b = 0 here: bound (5) covers it). Nondecreasing in p, nonincreasing in
+    `jump` and `acc` (per µs and per µs²)."""
+    pc = p[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q_jump = a / (jump + b / pc)  # (3)
+        p_star = np.sqrt(2.0 * b / acc)
+        c = np.where(pc >= p_star, np.sqrt(2.0 * acc * b), b / pc + 0.5 * acc * pc)  # c(p̂)
+        q_acc = 2.0 * a / (c + np.sqrt(c * c + 2.0 * acc * a))  # (4)
+    return np.nan_to_num(np.maximum(q_jump, q_acc), nan=0.0).max(axis=1)
+
+
+def _static_bounds(dth: FloatArray, lo: FloatArray, rest: BoolArray, act: IntArray,
+                   jump: float, acc: float) -> tuple[FloatArray, FloatArray]:
+    """Raise `lo` (µs, in place) to the rest bounds (2) on the segments next to a stop and to
+    the reversal bounds (5). Returns per boundary in `act` (between segments act and act + 1)
+    the joints' |Δθ| after (a) and before (b) it, zeroed where the joint reverses."""
+    dist = np.abs(dth).max(axis=1)
+    lo[rest] = np.maximum.reduce([lo[rest], dist[rest] / jump, np.sqrt(2 * dist[rest] / acc)])
+    a, b = np.abs(dth[act + 1]), np.abs(dth[act])
+    rev = dth[act + 1] * dth[act] < 0
+    r = rev.any(axis=1)
+    if r.any():
+        both = np.where(rev, a + b, 0.0).max(axis=1)[r] / jump
+        np.maximum.at(lo, act[r] + 1,
+                      np.maximum(both, np.sqrt(2 * np.where(rev, a, 0.0).max(axis=1)[r] / acc)))
+        np.maximum.at(lo, act[r],
+                      np.maximum(both, np.sqrt(2 * np.where(rev, b, 0.0).max(axis=1)[r] / acc)))
+    return np.where(rev, 0.0, a), np.where(rev, 0.0, b)
+
+
 def enforce_staircase(dtheta_rad: FloatArray, duration_us: IntArray,
                       stop_after: BoolArray | None, max_joint_rad_s2: float,
-                      junction_jump_rad_s: float = JUNCTION_JUMP_RAD_S,
-                      max_rounds: int = 60) -> IntArray:
-    """Lengthen segment durations (integer µs, never shorten) until `staircase_ratios` are all
-    ≤ 1. At a boundary that breaks a limit, both segments are slowed by the same factor f:
-    that scales |Δω| by f and the midpoint spacing by 1/f, so f = min(J/|Δω|,
-    √(α·T̄/|Δω|)) honours it exactly (from rest: T̄ = P/2). A segment takes the smallest
-    factor of its boundaries; rounds repeat while a neighbour's change breaks another
-    boundary. Slowing only lowers speeds, so the feed and joint-speed limits stay honoured.
-    After `max_rounds` (never seen on real jobs) one factor for the whole job finishes it."""
+                      junction_jump_rad_s: float = JUNCTION_JUMP_RAD_S) -> IntArray:
+    """The least integer durations (µs) at least `duration_us` that meet bounds (2)–(5) of
+    the module doc ("The repair") — so `staircase_ratios` are all ≤ 1 — found by raising
+    durations from below until no bound moves one (Kleene's iteration: every bound is a
+    nondecreasing function of a neighbour's duration, so the least fixed point exists and is
+    what the iteration reaches; each round revisits only the boundaries next to a segment
+    that changed). Never shortens a segment, so the feed and joint-speed limits stay
+    honoured; nonincreasing in `duration_us`, `max_joint_rad_s2` and `junction_jump_rad_s`
+    (raising a limit never lengthens a segment). Segments without motion keep their
+    duration and count as stops on both sides."""
     dth = np.asarray(dtheta_rad, dtype=np.float64).reshape(-1, 2)
-    us = np.asarray(duration_us, dtype=np.int64).copy()
+    p = np.asarray(duration_us, dtype=np.float64).copy()
     k = dth.shape[0]
     if k == 0:
-        return us
-    a, j = float(max_joint_rad_s2), float(junction_jump_rad_s)
-    starts, ends = _rest_sides(k, stop_after)
-    sides = np.concatenate((starts, ends))
-    for rnd in range(max_rounds + 20):
-        t = us * 1e-6
-        with np.errstate(divide="ignore", invalid="ignore"):
-            w = np.where(t[:, None] > 0, dth / t[:, None], 0.0)
-        dw = np.abs(np.diff(w, axis=0)).max(axis=1)
-        tb = 0.5 * (t[1:] + t[:-1])
-        wn = np.abs(w[sides]).max(axis=1)
-        ts = 0.5 * t[sides]
-        # Rounding up to whole µs slows the two sides by slightly different factors, which
-        # can undo a small correction; two µs more on the shorter side absorb that.
-        with np.errstate(divide="ignore", invalid="ignore"):
-            fi = np.where(dw > np.minimum(j, a * tb),
-                          np.minimum(j / dw, np.sqrt(a * tb / dw))
-                          * (1.0 - 2.0 / np.minimum(us[1:], us[:-1])), 1.0)
-            fs = np.where(wn > np.minimum(j, a * ts),
-                          np.minimum(j / wn, np.sqrt(a * ts / wn)) * (1.0 - 2.0 / us[sides]),
-                          1.0)
-        if (fi >= 1.0).all() and (fs >= 1.0).all():
-            return us
-        f = np.ones(k)
-        if rnd >= max_rounds:  # one factor for everything: exact, since all scale alike
-            f[:] = min(float(fi.min(initial=1.0)), float(fs.min(initial=1.0)))
-        else:
-            np.minimum.at(f, np.arange(k - 1), fi)
-            np.minimum.at(f, np.arange(1, k), fi)
-            np.minimum.at(f, sides, fs)
-        slow = f < 1.0
-        us[slow] = np.ceil(us[slow] / f[slow]).astype(np.int64)
-    raise RuntimeError("staircase limits could not be met")  # pragma: no cover
+        return p.astype(np.int64)
+    acc, jump = float(max_joint_rad_s2) * 1e-12, float(junction_jump_rad_s) * 1e-6  # per µs
+    moving = np.abs(dth).max(axis=1) > 0
+    st = np.zeros(k, bool) if stop_after is None else np.asarray(stop_after, bool).copy()
+    st[-1] = True
+    st |= ~moving
+    st[:-1] |= ~moving[1:]
+    rest = (st | np.concatenate(([True], st[:-1]))) & moving
+    # boundary n sits between segments act[n] and act[n] + 1 — across a stop too, as
+    # `staircase_ratios` measures the step from ω_{k−1} straight to ω_k there as well
+    act = np.flatnonzero(moving[:-1] & moving[1:])
+    lo = p.copy()
+    a, b = _static_bounds(dth, lo, rest, act, jump, acc)
+    p = np.where(moving, np.maximum(p, np.ceil(lo - _CEIL_SLACK_US)), p)
+    _raise_to_least(p, act, a, b, jump, acc)
+    return p.astype(np.int64)
+
+
+def _raise_to_least(p: FloatArray, act: IntArray, a: FloatArray, b: FloatArray, jump: float,
+                    acc: float) -> None:
+    """Kleene's iteration (`enforce_staircase`): raise durations `p` (µs, in place) by the
+    bounds (3), (4) across the boundaries `act` until none changes; each round revisits only
+    the boundaries next to a segment that changed."""
+    by_left = np.full(p.shape[0] + 1, -1, dtype=np.int64)  # boundary index by its left segment
+    by_left[act] = np.arange(act.shape[0])
+    todo = np.arange(act.shape[0])
+    while todo.size:
+        left = act[todo]
+        q_new = np.ceil(_bound_after(a[todo], b[todo], p[left], jump, acc) - _CEIL_SLACK_US)
+        p_new = np.ceil(_bound_after(b[todo], a[todo], p[left + 1], jump, acc)
+                        - _CEIL_SLACK_US)
+        up_q, up_p = q_new > p[left + 1], p_new > p[left]
+        p[left[up_q] + 1] = q_new[up_q]  # each boundary has its own right segment...
+        p[left[up_p]] = np.maximum(p[left[up_p]], p_new[up_p])  # ...and its own left one
+        changed = np.concatenate((left[up_q] + 1, left[up_p]))
+        near = np.concatenate((by_left[changed], by_left[changed - 1]))
+        todo = np.unique(near[near >= 0])

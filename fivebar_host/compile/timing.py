@@ -4,8 +4,9 @@
 1. a continuous speed profile (junction passes) with part of the limits (`PLAN_*_SHARE`);
 2. its speed-up and slow-down parts cut into short pieces (new targets on the same
    joint-space lines, so the path does not change), rounded to whole steps once;
-3. the profile again on the pieces;
-4. every boundary of the staircase the firmware runs (constant rate per G1) made exact.
+3. every piece's own shortest duration (feed, joint speed, the firmware's shortest P);
+4. raised to the least durations that meet every limit on the staircase the firmware runs
+   (constant rate per G1) — exact, and never longer when a limit is raised on given pieces.
 """
 
 from __future__ import annotations
@@ -131,10 +132,9 @@ def time_stepped(profile: Profile, checker: PoseChecker, sp: Stepped,
     length = np.where(seg_draw, sp.length[seg_of] * (f1 - f0),
                       np.hypot(*np.diff(pts_all, axis=0).T))
     dq = np.diff(steps.step_angles(st, mot.home_rad, mot.steps_per_rev), axis=0)
-    pln = planner.plan(dq, length, feed, motion.max_joint_rad_s, a_c, stop_after=stop,
-                       **prof_kw)
-    duration_us = planner.enforce_staircase(dq, pln.duration_us, stop,
-                                            motion.max_joint_rad_s2, j_lim)
+    floor_us = planner.cap_durations_us(dq, length, feed, motion.max_joint_rad_s,
+                                        protocol.P_MIN_US)
+    duration_us = planner.enforce_staircase(dq, floor_us, stop, motion.max_joint_rad_s2, j_lim)
     return Planned(th=th_all, pts=pts_all, draw=seg_draw, path=sp.path[seg_of],
                    source=sp.source[seg_of], line=sp.line[seg_of], length=length,
                    perm=sp.perm[seg_of], steps=st, power=power, f0=f0, f1=f1,
