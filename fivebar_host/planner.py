@@ -73,12 +73,22 @@ ever grows when a limit is raised — exactly, to the µs.
 
 Why the plan used to grow with the limits (issue 20: 5 × 1000 chords of 0.1 mm planned 7.8 s
 at 100 mm/s, 15 rad/s, 600 rad/s² and 11.1 s at 200 / 30 / 1200; 6.2 s and 29.6 s with the
-chords simplified). The old repair slowed *both* segments of a broken
+chords simplified). Two causes. (a) The old repair slowed *both* segments of a broken
 boundary by one factor; that breaks the boundaries next to them (a slowed segment next to a
 fast one is a new jump), the next round slows those, and factors multiplied along the chain —
 up to 20× on single segments, and after 60 rounds one factor for the whole job. Higher
 limits gave a taller sawtooth to repair (more pieces of a few steps, whose step rounding
 makes their rates uneven) and so a longer plan. The least durations above replace it.
+(b) The cut, which the continuous profile decides. It planned with half of J and a corner
+cap, so on a polygon it saw a sawtooth (junctions capped at J/2δ, a speed-up in between)
+that the staircase does not need, and cut every chord into pieces of a few steps (1135 for
+the circle job's 480 segments at 200 mm/s); and at a high α a ramp became too short to cut
+(`ramp_fractions` joins pieces under 3 steps), so the segment next to a stop or a sharp
+corner kept a long first piece that the staircase must start at about J — a zigzag planned
+×1.65 longer at 3.4× the acceleration. `compile.timing` now plans the cut with all of J, no
+corner cap, and α at most J²/(4·D_min) (`compile.timing.cut_accel`), so above that the cut no
+longer depends on α; a raised feed or joint speed can still move a cut (whole jobs are
+tested to 0.5 %, tests/test_plan_monotone.py).
 """
 
 from __future__ import annotations

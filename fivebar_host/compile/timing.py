@@ -1,12 +1,12 @@
 """Timing a stepped job: per-segment laser power, feed and stops, then durations from
 `fivebar_host.planner`, in four steps (the reasons are in the planner's module doc):
 
-1. a continuous speed profile (junction passes) with part of the limits (`PLAN_*_SHARE`);
+1. a continuous speed profile (junction passes), which only decides where to cut;
 2. its speed-up and slow-down parts cut into short pieces (new targets on the same
    joint-space lines, so the path does not change), rounded to whole steps once;
 3. every piece's own shortest duration (feed, joint speed, the firmware's shortest P);
 4. raised to the least durations that meet every limit on the staircase the firmware runs
-   (constant rate per G1) — exact, and never longer when a limit is raised on given pieces.
+   (constant rate per G1) — exact, and never longer when a limit is raised.
 """
 
 from __future__ import annotations
@@ -26,11 +26,14 @@ from fivebar_host.config import Motors, Profile
 from fivebar_host.toolpath.segment import PoseChecker
 from kinematics.arrays import BoolArray, FloatArray, IntArray
 
-#: Timing (see `fivebar_host.planner`): the continuous profile plans with this share of the
-#: joint acceleration limit and of the junction jump for direction changes; the rest (and a
-#: corner cap from the remaining acceleration) absorbs the staircase the firmware runs.
+#: Timing (see `fivebar_host.planner`): the continuous profile that decides the cut plans
+#: with this share of the joint acceleration limit (`cut_accel`), with the whole junction
+#: jump and without a corner cap — the durations come from the staircase itself (step 4),
+#: so the cut needs no reserve: at half the jump (and a corner cap) the profile saw a
+#: sawtooth on polygons the staircase runs at full speed (junction caps at J/2δ, a speed-up
+#: in between) and cut every chord into pieces (issue 20: 1135 pieces for the 480 segments
+#: of the circle job at 200 mm/s).
 PLAN_ACCEL_SHARE = 0.75
-PLAN_JUMP_SHARE = 0.5
 #: Speed-up and slow-down parts are cut into pieces whose planned speed changes by at most
 #: this share of the junction jump from one piece to the next, and of at least this many
 #: steps (rounding a shorter piece to whole steps would shake its rate too much).
@@ -49,6 +52,25 @@ class Planned(Stepped):
     f1: FloatArray
     duration_us: IntArray
     dwell: BoolArray
+
+
+def cut_accel(profile: Profile) -> float:
+    """Acceleration (rad/s²) of the continuous profile that decides the cut: the share
+    `PLAN_ACCEL_SHARE` of the limit, but at most J²/(4·D_min) (J the junction jump, D_min
+    the smallest piece, `PLAN_MIN_PIECE_STEPS` steps; 42.5 rad/s² at 12800 steps/rev).
+
+    Why a cap (issue 20): `ramp_fractions` cuts a ramp at equal speed steps of
+    `PLAN_PIECE_JUMP_SHARE`·J and joins pieces shorter than D_min. Planned steeper, a ramp's
+    first pieces are shorter than D_min and are joined, so the segment next to a stop or a
+    sharp corner keeps a long first piece that the staircase must run at about J: a larger α
+    planned a longer job (a zigzag ×1.65 at 3.4× the acceleration). The staircase durations
+    (step 4) use the profile's whole α; only where to cut stops depending on α above the
+    cap. The factor 1/4 is measured: it keeps all 440 seeded random jobs and limit pairs of
+    tests/test_plan_monotone.py monotone, where 0.35 left one ×1.002 and 1 left ×1.65."""
+    d_min_rad = PLAN_MIN_PIECE_STEPS * profile.motors.rad_per_step
+    j_lim = planner.JUNCTION_JUMP_RAD_S
+    return min(PLAN_ACCEL_SHARE * profile.motion.max_joint_rad_s2,
+               0.25 * j_lim * j_lim / d_min_rad)
 
 
 def _settings(profile: Profile, routed: Routed,
@@ -114,11 +136,9 @@ def time_stepped(profile: Profile, checker: PoseChecker, sp: Stepped,
     (mm/s) and stops given per segment (also used by the GRBL bridge's online compiler,
     `fivebar_host.grbl.online`, on small batches of moves)."""
     mot, motion = profile.motors, profile.motion
-    a_c = PLAN_ACCEL_SHARE * motion.max_joint_rad_s2
+    a_c = cut_accel(profile)
     j_lim = planner.JUNCTION_JUMP_RAD_S
-    prof_kw = {"junction_jump_rad_s": PLAN_JUMP_SHARE * j_lim,
-               "min_duration_s": protocol.P_MIN_US * 1e-6,
-               "corner_accel_rad_s2": (1.0 - PLAN_ACCEL_SHARE) * motion.max_joint_rad_s2}
+    prof_kw = {"junction_jump_rad_s": j_lim, "min_duration_s": protocol.P_MIN_US * 1e-6}
     dq = np.diff(steps.step_angles(sp.steps, mot.home_rad, mot.steps_per_rev), axis=0)
     pln = planner.plan(dq, sp.length, feed, motion.max_joint_rad_s, a_c, stop_after=stop,
                        **prof_kw)
