@@ -23,7 +23,7 @@ from fivebar_host.errors import FivebarError
 #: The protocol version this module implements: docs/protocol.md, the banner's ``proto:``.
 #: Version 2 replaced the CRC-8 line checksum with a CRC-16 and the body's length
 #: (docs/protocol.md 5.1 and 14).
-PROTOCOL_VERSION: Final = 2
+PROTOCOL_VERSION: Final = 3
 
 #: The longest body a checksummed line can have: the length in its checksum field has at
 #: most 2 digits (the banner's ``line`` limit, 80 bytes for the whole line, is lower).

@@ -18,7 +18,7 @@ from fivebar_host.devices import mock, urls
 from fivebar_host.devices.mock import MockSerial, MockURLError, parse_mock_url
 from fivebar_host.protocol import Banner, ErrorReply, Message, Ok, StatusReport
 
-BANNER = "fivebar 1.0.0 proto:2 rx:128 queue:16 line:80"
+BANNER = "fivebar 1.0.0 proto:3 rx:128 queue:16 line:80"
 
 
 def open_mock(options: str = "", timeout: float | None = 0.2) -> MockSerial:
