@@ -373,7 +373,8 @@ static uint8_t parse_body(const char *s, uint8_t i, uint8_t end, fb_cmd_t *cmd)
 		if (i >= end)
 			break;
 		char w = upper(s[i]);
-		if (cmd->kind == CMD_G6 && (w == '+' || w == '-')) {
+		/* a G6's items start at a sign, or at a second P */
+		if (cmd->kind == CMD_G6 && (w == '+' || w == '-' || (w == 'P' && (cmd->has & W_P)))) {
 			st = g6_items(s, i, end, cmd);
 			if (st != FB_OK)
 				return st;

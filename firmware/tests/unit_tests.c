@@ -68,6 +68,8 @@ static void test_parse_g6(void)
 		{ "G6 P1000 +1-1P+9+0+0", FB_ERR_BAD_NUMBER, 0 },
 		{ "G6 P1000 +1-1P500", FB_ERR_BAD_WORD, 0 },
 		{ "G6 P1000 +1-1 A5", FB_ERR_BAD_WORD, 0 },
+		{ "G6 A1 P1000 S0 P200+1-1", FB_OK, 1 },       /* a second P starts the items */
+		{ "G6 A1 P1000 P200", FB_ERR_BAD_WORD, 0 },
 		{ "G6 P1000 +100000001+0", FB_ERR_OUT_OF_RANGE, 0 },
 		{ "G6 P1000 +1.5+0", FB_ERR_BAD_NUMBER, 0 },
 		{ "G6 P1000 +-1+0", FB_ERR_BAD_NUMBER, 0 },

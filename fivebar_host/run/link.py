@@ -292,7 +292,7 @@ class Link:
                timeout_s: float | None = None,
                should_stop: Callable[[], bool] | None = None,
                on_interrupt: Callable[[], bool] | None = None,
-               overrides: Overrides | None = None) -> StreamResult:
+               overrides: Overrides | None = None, pack_lines: bool = True) -> StreamResult:
         """Send `bodies` as numbered, checksummed lines; return when every line is `ok`.
 
         Character counting keeps the unanswered bytes within the banner's `rx:`; with
@@ -306,8 +306,11 @@ class Link:
         When `should_stop()` turns true the machine is held at once (`!`, laser off) and
         `on_interrupt()` decides: True resumes (`~`) and streaming goes on, False (or no
         callback) raises `LinkFaultError(FaultKind.INTERRUPT)`. `overrides` (live feed and
-        power, `run.overrides`) apply to the lines not yet written. See `run.stream.Streamer`.
+        power, `run.overrides`) apply to the lines not yet written. With `pack_lines` runs of
+        G1 bodies after a `G90` go out as G6 lines (`run.pack`, protocol 6.3), one line
+        number per body as before. See `run.stream.Streamer`.
         """
         return Streamer(self, bodies, counting=counting, on_progress=on_progress,
                         timeout_s=timeout_s, should_stop=should_stop,
-                        on_interrupt=on_interrupt, overrides=overrides).run()
+                        on_interrupt=on_interrupt, overrides=overrides,
+                        pack_lines=pack_lines).run()
