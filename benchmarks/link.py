@@ -9,7 +9,13 @@ baud rate binds as on hardware):
 Capacity is quoted two ways: nominal 8N1 (11 520 B/s) and simavr's UART model, which counts
 11 bits per byte (1496 cycles at 16 MHz = 10 695 B/s), the real bound in the emulator.
 
-Run: python benchmarks/link.py [--segments 600] [--repeat 3]
+3. the issue-20 job: 1000 segments of 1–2 steps per motor (a 0.1 mm chord on the default
+   profile) at P = 1000 µs, so the plan asks for 1000 segments/s, laser off (S0) as a
+   drawing: segments/s, mid-path underruns and bytes per segment with the protocol-2
+   encoding (one `N… G1 A… B… P… S…*crc/len` line per segment) and with G6 packing, and the
+   host's CPU time per segment (packing alone, and the whole stream loop, process time).
+
+Run: python benchmarks/link.py [--segments 600] [--repeat 3] [--issue-only]
 """
 
 from __future__ import annotations
@@ -20,6 +26,7 @@ import time
 
 from fivebar_host import protocol
 from fivebar_host.devices.sim import toolchain_missing
+from fivebar_host.run import pack
 from fivebar_host.run.link import Link
 
 NOMINAL_BPS = 115200 / 10
@@ -52,14 +59,73 @@ def run(bodies: list[str]) -> tuple[float, int, int, float]:
     return res.bytes_sent / (t1 - t0), res.bytes_sent, mid, t1 - t0
 
 
+def issue_job(n: int = 1000, p_us: int = 1000) -> list[str]:
+    """`n` short segments (1–2 steps per motor, the size of a 0.1 mm chord), P µs each."""
+    out = ["G90"]
+    a = b = 0
+    for k in range(n):
+        a += 1 + (k % 3 == 0)
+        b -= 1 + (k % 2)
+        out.append(protocol.g1(a, b, p_us, 0))
+    return out
+
+
+def run_issue(bodies: list[str], packed: bool) -> tuple[float, int, float, float]:
+    """(segments/s, mid-path underruns, bytes/segment, host CPU µs/segment) on a fresh
+    emulator in real time."""
+    link = Link.open("fivebar-sim://?realtime=1")
+    try:
+        link.command("G92 A0 B0")
+        u0 = link.wait_idle(10.0).underruns
+        c0, t0 = time.process_time(), time.monotonic()
+        res = link.stream(bodies, pack_lines=packed)
+        final = link.wait_idle(60.0)
+        t1, c1 = time.monotonic(), time.process_time()
+    finally:
+        link.close()
+    n = len(bodies) - 1
+    return n / (t1 - t0), final.underruns - u0 - 1, res.bytes_sent / n, (c1 - c0) / n * 1e6
+
+
+def pack_cost_us(bodies: list[str], repeat: int = 5) -> float:
+    """Host CPU µs per segment to pack the job's bodies into wire lines (run.pack)."""
+    best = float("inf")
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        j = 0
+        while j < len(bodies):
+            j += pack.pack_line(bodies.__getitem__, j, len(bodies), 1 + j, True, 64)[1]
+        best = min(best, time.perf_counter() - t0)
+    return best / len(bodies) * 1e6
+
+
+def issue(repeat: int) -> None:
+    """The issue-20 table at 115200 baud (simavr's UART model)."""
+    bodies = issue_job()
+    print("issue 20 job: 1000 segments, P = 1000 µs (the plan asks 1000 segments/s), "
+          f"115200 baud, median of {repeat} runs")
+    print(f"{'encoding':28s} {'seg/s':>7s} {'underruns':>10s} {'B/seg':>6s} {'CPU µs/seg':>11s}")
+    for name, packed in (("protocol 2 (G1 per line)", False), ("protocol 3 (G6 packing)", True)):
+        runs = [run_issue(bodies, packed) for _ in range(repeat)]
+        print(f"{name:28s} {statistics.median(r[0] for r in runs):7.0f} "
+              f"{max(r[1] for r in runs):10d} {statistics.median(r[2] for r in runs):6.1f} "
+              f"{statistics.median(r[3] for r in runs):11.0f}")
+    print(f"packing alone: {pack_cost_us(bodies):.1f} µs per segment (run.pack.pack_line)")
+    print("targets: ≥ 750 segments/s, 0 mid-path underruns")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--segments", type=int, default=600)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--issue-only", action="store_true")
     args = ap.parse_args()
     why = toolchain_missing()
     if why:
         raise SystemExit(f"emulator unavailable: {why}")
+    issue(args.repeat)
+    if args.issue_only:
+        return
     n = args.segments
     line_len = len(protocol.encode_line(job(2, 1000)[1], 12345))
     # Segment duration that needs 85 % of the emulated line: bytes per second needed =

@@ -85,7 +85,7 @@ def test_only_what_has_a_known_absolute_target_is_packed() -> None:
               "G1 A4 B4 P1000 S6", "G1 A5 B5 P1000 S6", "M5", "G1 A6 B6 P1000 S6"]
     counts = [c for _, c in _packed(bodies, 1)]
     assert counts == [2, 1, 2, 1, 1]
-    assert [line for line, _ in _packed(bodies[:2], 7)][0].startswith(b"N7G6A1B1P1000S5 +1+1")
+    assert _packed(bodies[:2], 7)[0][0].startswith(b"N7G6A1B1P1000S5 +1+1")
     assert pack.modes(["G1 A1 P100", "G90", "G1 A1 P100", "G91", "G1 A1 P100"]) == [
         False, False, True, True, False]
 
@@ -99,9 +99,11 @@ def _numbered_outcome(last: int, noisy: bytes, want_last: int) -> str:
     return f"error:{r.status} last {r.last}"
 
 
-SAMPLES = [line[:-1] for line, count in _packed(_bodies(random.Random(2), 40, 0.5), 1207)
-           if count > 1][:3] + [
-    b"N9G6A0B0P100 +0+0*" + str(protocol.crc16(b"N9G6A0B0P100 +0+0")).encode() + b"/17",
+_SHORT = b"N9G6A0B0P100 +0+0"
+SAMPLES = [
+    *[line[:-1] for line, count in _packed(_bodies(random.Random(2), 40, 0.5), 1207)
+      if count > 1][:3],
+    _SHORT + protocol.checksum_field(_SHORT),
 ]
 
 
