@@ -44,7 +44,7 @@ from fivebar_host.protocol import (
 )
 from fivebar_host.run import pack
 from fivebar_host.run.errors import FaultKind, LinkError, LinkFaultError
-from fivebar_host.run.overrides import OverrideEncoder, Overrides
+from fivebar_host.run.overrides import FEED_MAX_PCT, OverrideEncoder, Overrides
 
 if TYPE_CHECKING:
     from fivebar_host.run.link import Link
@@ -160,6 +160,7 @@ class Streamer:
         self.first = link.next_line
         self.encoder = None if overrides is None else OverrideEncoder(bodies, overrides)
         self.sent_bodies: list[str] = []  # the bodies as sent (overrides applied), in order
+        self.feed_after: list[int] = []  # the encoder's feed factor after each of them
         self.wire: dict[int, tuple[bytes, int]] = {}  # job index → (wire line, lines covered)
         self.absolute = pack.modes(list(bodies)) if pack_lines else None
         # two packed lines fit the receive buffer, so one is always on its way while the
@@ -249,6 +250,8 @@ class Streamer:
         while self.nxt < self.total:
             line, count = self._wire(self.nxt)
             if not self.inflight.fits(len(line), self.budget):
+                if self.encoder is not None and self.nxt >= self.sent_max:
+                    self._unbuild(self.nxt)  # built again when it fits, overrides then
                 break
             self.link._write(line)
             self.inflight.push(self.nxt, count, len(line))
@@ -259,16 +262,30 @@ class Streamer:
 
     def _body(self, index: int) -> str:
         """Job line `index` as sent: the bodies up to it are encoded now if they were not
-        yet (with the overrides in force), and never again."""
+        yet (with the overrides in force); kept once written (`_unbuild` drops the rest)."""
         while len(self.sent_bodies) <= index:
             j = len(self.sent_bodies)
-            self.sent_bodies.append(self.bodies[j] if self.encoder is None
-                                    else self.encoder.body(j))
+            if self.encoder is None:
+                self.sent_bodies.append(self.bodies[j])
+            else:
+                self.sent_bodies.append(self.encoder.body(j))
+                self.feed_after.append(self.encoder.feed_pct)
         return self.sent_bodies[index]
+
+    def _unbuild(self, index: int) -> None:
+        """Forget the bodies from job line `index` on, none of them written yet, and the
+        wire line starting there: the overrides in force when they are built again apply
+        (an override takes effect at the next line written, never changes one written)."""
+        assert self.encoder is not None
+        del self.sent_bodies[index:]
+        del self.feed_after[index:]
+        self.encoder.feed_pct = self.feed_after[-1] if self.feed_after else FEED_MAX_PCT
+        self.wire.pop(index, None)
 
     def _wire(self, index: int) -> tuple[bytes, int]:
         """The wire line that starts at job line `index` and how many job lines it covers
-        (a G6 several, `run.pack`); built once, so a resend sends the same bytes."""
+        (a G6 several, `run.pack`); kept once built, so a resend sends the same bytes. The
+        body after a G6 (read to see whether it joins) stays unbuilt."""
         got = self.wire.get(index)
         if got is None:
             if self.absolute is None:
@@ -276,6 +293,8 @@ class Streamer:
             else:
                 got = pack.pack_line(self._body, index, self.total, self.first + index,
                                      self.absolute[index], self.limit)
+                if self.encoder is not None and len(self.sent_bodies) > index + got[1]:
+                    self._unbuild(index + got[1])
             self.wire[index] = got
         return got
 
