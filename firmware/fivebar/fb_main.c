@@ -11,6 +11,7 @@
 #include "fb_proto.h"
 #include "fb_motion.h"
 #include "board.h"
+#include "board_uart.h"
 #include "config.h"
 #include "status.h"
 
@@ -46,6 +47,14 @@ static uint8_t pending;
  * 1: its head), where its next item starts, its current duration */
 static uint8_t g6_checked, g6_queued, g6_at;
 static int32_t g6_p;
+
+/* $B (protocol section 1.1): the rate to switch to once its ok has left,
+ * the rate in force, and when a switched rate began its trial (it falls back
+ * to FB_BAUD unless a valid line arrives within BAUD_TRIAL_MS) */
+#define BAUD_TRIAL_MS 1000u
+static uint32_t baud_next, baud_now;
+static uint32_t baud_since_ms;
+static uint8_t baud_trial;
 
 static int32_t settings[SET_COUNT];
 static uint32_t min_interval;
@@ -265,6 +274,12 @@ static void do_reset(void)
 	motors_on = 1;
 	board_enable_motors(1);
 	sync_plan();
+	baud_next = 0;
+	baud_trial = 0;
+	if (baud_now != FB_BAUD) {  /* a reset or Ctrl-X speaks at the base rate */
+		board_uart_baud(FB_BAUD);
+		baud_now = FB_BAUD;
+	}
 	banner();
 }
 
@@ -636,6 +651,40 @@ static uint8_t exec_set(const fb_cmd_t *c)
 	return FB_OK;
 }
 
+/* $B=<baud>: one of the rates the Uno's 16 MHz makes (115200 within 0.8 %,
+ * the others exactly); the switch waits for the ok (switch_baud). */
+static uint8_t exec_baud(const fb_cmd_t *c)
+{
+	switch (c->value) {
+	case 115200L: case 250000L: case 500000L: case 1000000L:
+		baud_next = (uint32_t)c->value;
+		return FB_OK;
+	default:
+		return FB_ERR_OUT_OF_RANGE;
+	}
+}
+
+/* After $B's ok: the new rate, on trial until a valid line arrives. */
+static void switch_baud(void)
+{
+	board_uart_baud(baud_next);
+	baud_now = baud_next;
+	baud_next = 0;
+	baud_trial = baud_now != FB_BAUD;
+	baud_since_ms = board_ms();
+}
+
+/* No valid line within BAUD_TRIAL_MS of a switch: the host cannot speak at
+ * that rate, back to the base rate (the host falls back too). */
+static void baud_fallback(void)
+{
+	if (baud_trial && board_ms() - baud_since_ms > BAUD_TRIAL_MS) {
+		baud_trial = 0;
+		board_uart_baud(FB_BAUD);
+		baud_now = FB_BAUD;
+	}
+}
+
 static void list_settings(void)
 {
 	for (uint8_t i = 0; i < SET_COUNT; i++) {
@@ -710,6 +759,8 @@ static uint8_t execute(const fb_cmd_t *c)
 		return FB_OK;
 	case CMD_SET:
 		return exec_set(c);
+	case CMD_BAUD:
+		return exec_baud(c);
 	default:
 		return FB_OK;
 	}
@@ -748,6 +799,8 @@ static void try_execute(void)
 	g6_checked = 0;
 	g6_queued = 0;
 	finish(st);
+	if (baud_next)
+		switch_baud();
 }
 
 static void handle_line(void)
@@ -769,6 +822,8 @@ static void handle_line(void)
 		return;
 	}
 	uint8_t st = fb_parse_line(&lines, line, len, &cmd);
+	if (st == FB_OK)
+		baud_trial = 0;  /* the host speaks at this rate */
 	if (st != FB_OK) {
 		finish(st);
 		return;
@@ -886,6 +941,7 @@ void fb_poll(void)
 		status_report();
 	}
 	laser_watchdog();
+	baud_fallback();
 	resume_when_settled();
 	maybe_start();
 	if (pending)

@@ -189,6 +189,19 @@ static uint8_t parse_dollar(const char *s, uint8_t i, uint8_t end, fb_cmd_t *cmd
 		cmd->value = v;
 		return FB_OK;
 	}
+	if (c == 'B' && i + 1u < end && s[i + 1u] == '=') {
+		/* $B=<baud> (protocol section 1.1): the value is checked on execution */
+		uint8_t j = (uint8_t)(i + 2u);
+		int32_t v = 0;
+		uint8_t st = parse_int(s, &j, end, &v);
+		if (st != FB_OK)
+			return st;
+		if (skip_ws(s, j, end) < end)
+			return FB_ERR_BAD_WORD;
+		cmd->kind = CMD_BAUD;
+		cmd->value = v;
+		return FB_OK;
+	}
 	switch (c) {
 	case 'I': cmd->kind = CMD_INFO; break;
 	case '$': cmd->kind = CMD_LIST; break;

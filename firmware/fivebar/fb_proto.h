@@ -27,7 +27,8 @@ enum fb_cmd_kind {
 	CMD_UNLOCK,     /* $X */
 	CMD_SET,        /* $<n>=<v> */
 	CMD_M280,       /* pen servo: S<us> [R<ms>] [D<ms>] (queued) */
-	CMD_G6          /* several segments: a G1 head, then relative +a+b [P] items */
+	CMD_G6,         /* several segments: a G1 head, then relative +a+b [P] items */
+	CMD_BAUD        /* $B=<baud>: the link's rate after this line's ok */
 };
 
 /* Word presence bits in fb_cmd_t.has */

@@ -861,6 +861,41 @@ static void test_g6_app(void)
 	expect("?", "<Idle|A:41,B:-2|Q:0|Ln:42,42|L:0|U:3|H:0|P:0>\r\n");
 }
 
+/* $B (protocol 1.1): ok at the old rate, then the switch; a rate kept once a
+ * valid line arrives, back to 115200 after 1 s without one, on Ctrl-X, and
+ * never to a rate the Uno cannot make. */
+static void test_baud(void)
+{
+	int32_t zero[2] = { 0, 0 };
+	fake_reset();
+	mo_set_pos(zero);
+	fb_setup();
+	fake_tx_len = 0;
+	expect("\x18", BANNER);
+	CHECK(fake_baud == 115200, "boots at 115200: %u", (unsigned)fake_baud);
+	expect("$B=9600\n", "error:7\r\n");
+	expect("$B=230400\n", "error:7\r\n");
+	expect("$B\n", "error:4\r\n");
+	expect("$B=5x\n", "error:5\r\n");
+	CHECK(fake_baud == 115200, "refused rates keep 115200: %u", (unsigned)fake_baud);
+	expect("$B=500000\n", "ok\r\n");
+	CHECK(fake_baud == 500000, "switched after the ok: %u", (unsigned)fake_baud);
+	fake_ms += 900;
+	expect("$I\n", BANNER "ok\r\n");
+	fake_ms += 5000;
+	poll_out(3);
+	CHECK(fake_baud == 500000, "a valid line keeps the rate: %u", (unsigned)fake_baud);
+	expect("$B=1000000\n", "ok\r\n");
+	expect("G1 A1 P1000\x01\n", "error:1\r\n");  /* not a valid line */
+	fake_ms += 1001;
+	poll_out(3);
+	CHECK(fake_baud == 115200, "no valid line in 1 s: back to 115200: %u", (unsigned)fake_baud);
+	expect("$B=250000\n", "ok\r\n");
+	expect("$I\n", BANNER "ok\r\n");
+	expect("\x18", BANNER);
+	CHECK(fake_baud == 115200, "Ctrl-X: back to 115200: %u", (unsigned)fake_baud);
+}
+
 static void test_reset_while_a_line_waits(void)
 {
 	int fired = 1, k;
@@ -1343,6 +1378,7 @@ int main(void)
 	test_homed_flag();
 	test_strict_framing();
 	test_g6_app();
+	test_baud();
 	test_kept_record();
 	test_reset_during_homing();
 	test_watchdog_feeding();
