@@ -29,6 +29,14 @@ PROTOCOL_VERSION: Final = 3
 #: most 2 digits (the banner's ``line`` limit, 80 bytes for the whole line, is lower).
 CHECKSUM_BODY_MAX: Final = 99
 
+#: The link's rate at every boot, reset and Ctrl-X (docs/protocol.md 1).
+BASE_BAUD: Final = 115200
+#: The rates `$B=<baud>` accepts: the ones the Uno's 16 MHz makes (U2X, UBRR 16/7/3/1).
+BAUD_RATES: Final = (115200, 250000, 500000, 1000000)
+#: After a `$B` switch the firmware returns to BASE_BAUD unless a valid line arrives
+#: within this many seconds (fb_main.c BAUD_TRIAL_MS).
+BAUD_TRIAL_S: Final = 1.0
+
 #: Real-time bytes: acted on by the firmware at once, never buffered, never
 #: answered with ``ok`` and not counted against the receive buffer.
 RT_STATUS: Final = b"?"

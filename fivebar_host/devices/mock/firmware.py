@@ -17,6 +17,7 @@ from __future__ import annotations
 from collections import deque
 
 from fivebar_host import protocol
+from fivebar_host.devices.mock.baud import UartRate
 from fivebar_host.devices.mock.codes import (
     A_ENDSTOP,
     CYCLES_PER_US,
@@ -74,6 +75,7 @@ class MockFirmware(MotionCore):
         self.disconnected = False
         self.rebooted = False  # set by a reboot; MockSerial drops the rest of the write
         self._faults_fired: set[str] = set()
+        self.uart = UartRate()  # $B (mock/baud.py); the port sets its host_baud
         self._boot(now, kept)
 
     # ----------------------------------------------------------------- boot and reset
@@ -132,6 +134,7 @@ class MockFirmware(MotionCore):
         self.plan = list(self.pos)
         self.first_queued = self.t
         self.last_rx = self.t
+        self.uart.reset()
         self._emit(self.banner_text())
 
     def banner_text(self) -> str:
@@ -169,7 +172,7 @@ class MockFirmware(MotionCore):
     # ----------------------------------------------------------------- output
 
     def _emit(self, text: str) -> None:
-        if not self.stalled:
+        if not self.stalled and self.uart.matches():  # else lost on the wire
             self.out += (text + EOL).encode("ascii")
 
     def status_text(self) -> str:
@@ -242,6 +245,7 @@ class MockFirmware(MotionCore):
 
     def advance(self, now: float) -> None:
         """Run the device up to clock time ``now``, event by event."""
+        self.uart.fallback(now)
         if self.stalled:
             wd = self.watchdog_at()
             if wd is None or now < wd:
@@ -358,6 +362,8 @@ class MockFirmware(MotionCore):
             before = self.last, self.numbered
             parsed = parse_line(self.last, data, self.numbered)
             self.last, self.numbered = parsed.last, parsed.numbered
+            if parsed.status == OK:
+                self.uart.valid_line()
             st = parsed.status
             if self.opt.error_on == k and st == OK:
                 st = self.opt.error_code  # the injected refusal
@@ -404,6 +410,7 @@ class MockFirmware(MotionCore):
         self.pending = None
         self.g6_queued = 0
         self._finish(st)
+        self.uart.after_reply(self.t)
         return True
 
     def _execute(self, c: Command) -> int:
@@ -457,6 +464,8 @@ class MockFirmware(MotionCore):
             return OK
         if k == "$=":
             return self._exec_set(c)
+        if k == "$B":
+            return self.uart.request(c.value)
         return OK  # empty line, M110
 
     def _queue_full(self) -> bool:

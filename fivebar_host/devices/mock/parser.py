@@ -34,7 +34,7 @@ from fivebar_host.protocol import POS_LIMIT, crc16
 class Command:
     """One parsed line: command kind (``""`` for an empty line), words, line number."""
 
-    kind: str = ""  # "", G1 G6 G90 G91 G92 M3 M5 M17 M18 M110 M280 $I $$ $H $X $=
+    kind: str = ""  # "", G1 G6 G90 G91 G92 M3 M5 M17 M18 M110 M280 $I $$ $H $X $= $B
     words: dict[str, int] = field(default_factory=dict)
     #: G6: the segments after its head, (ΔA, ΔB, P µs) each; one line number each
     items: list[tuple[int, int, int]] = field(default_factory=list)
@@ -119,6 +119,14 @@ def _parse_dollar(s: bytes, i: int, end: int, cmd: Command) -> int:
         if _skip_ws(s, j, end) < end:
             return E_BAD_WORD
         cmd.kind, cmd.setting, cmd.value = "$=", n, v
+        return OK
+    if c == ord("B") and i + 1 < end and s[i + 1] == ord("="):  # $B=<baud>, checked later
+        st, v, j = _parse_int(s, i + 2, end)
+        if st != OK:
+            return st
+        if _skip_ws(s, j, end) < end:
+            return E_BAD_WORD
+        cmd.kind, cmd.value = "$B", v
         return OK
     kinds = {ord("I"): "$I", ord("$"): "$$", ord("H"): "$H", ord("X"): "$X"}
     if c not in kinds:
