@@ -64,6 +64,22 @@ def test_a_port_that_cannot_follow_falls_back_with_a_warning(
         assert link.wait_idle(10.0).a == 20
 
 
+def test_a_firmware_without_b_leaves_the_link_at_115200(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """An older firmware answers `$B` with `error:4`: the link opens, warns, stays at
+    115200, and its line counter follows the refused line (the next command runs)."""
+    from fivebar_host.devices.mock.baud import UartRate
+    from fivebar_host.devices.mock.codes import E_UNKNOWN_COMMAND
+
+    urls.register()
+    monkeypatch.setattr(UartRate, "request", lambda self, value: E_UNKNOWN_COMMAND)
+    with Link.open("fivebar-mock://?speed=0", link_baud=250000) as link:
+        assert link.port.baudrate == protocol.BASE_BAUD
+        assert link.baud_warning is not None and "refused $B (error:4" in link.baud_warning
+        link.command("G91")
+        assert link.port.firmware.absolute is False
+
+
 def test_a_rate_the_firmware_cannot_make_is_refused() -> None:
     urls.register()
     with Link.open("fivebar-mock://?speed=0") as link:

@@ -290,12 +290,24 @@ class Link:
         probe (`$I`, numbered) must bring the banner and `ok` back. If it does not, the
         firmware returns to the base rate by itself `BAUD_TRIAL_S` after its switch: the
         port does too, the probe is repeated there, `baud_warning` says what happened and
-        False is returned. A refusal (`error:7`, a rate the firmware cannot make) raises.
+        False is returned. A rate that is not a link rate raises LinkError before anything is
+        sent; a firmware that refuses `$B` (one without it: `error:4`) leaves the link at
+        the base rate, with the warning, and False.
         """
         if baud not in protocol.BAUD_RATES:
             raise LinkError(f"{self.url}: {baud} baud is not one of "
                             f"{', '.join(map(str, protocol.BAUD_RATES))}")
-        self.command(f"$B={baud}")
+        try:
+            self.command(f"$B={baud}")
+        except LinkFaultError as e:
+            if e.kind is not FaultKind.ERROR:
+                raise
+            # the refused line used its number: the firmware's counter says where it is
+            self.next_line = self.status().accepted_line + 1
+            why = e.message.rsplit(": ", 1)[-1]
+            self.baud_warning = (f"{self.url}: the firmware refused $B ({why}); the link "
+                                 f"stays at {protocol.BASE_BAUD} baud")
+            return False
         switched = time.monotonic()
         self._set_port_baud(baud)
         if self._probe(probe_timeout_s):
