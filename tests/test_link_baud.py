@@ -103,3 +103,30 @@ def test_the_profile_key_takes_only_link_rates(value: Any) -> None:
     with pytest.raises(ConfigError, match=r"p.toml: \[serial\] link_baud: must be one of "
                                           r"115200, 250000, 500000, 1000000"):
         parse_profile(doc, "p.toml")
+
+
+def test_plot_switches_to_the_profile_rate(tmp_path: Any, clean_mock: None) -> None:
+    """`fivebar plot` with `[serial] link_baud`: the job runs at that rate, all of it."""
+    import shutil
+    from pathlib import Path
+
+    from click.testing import CliRunner
+
+    from fivebar_host.cli import main
+    from fivebar_host.config import DEFAULT_PROFILE
+    from fivebar_host.devices import mock
+
+    root = Path(__file__).resolve().parent.parent
+    drawing = tmp_path / "simple.svg"
+    shutil.copy(root / "examples" / "simple.svg", drawing)
+    prof = tmp_path / "fast.toml"
+    prof.write_text(DEFAULT_PROFILE.read_text().replace(
+        "baud = 115200\n", "baud = 115200\nlink_baud = 1000000\n"))
+    res = CliRunner().invoke(main, ["plot", str(drawing), "--port",
+                                    "fivebar-mock://?machine=fast&speed=0", "--laser",
+                                    "--yes", "--config", str(prof)], catch_exceptions=False)
+    assert res.exit_code == 0, res.output
+    assert "warning" not in res.output
+    m = mock.machine("fast")
+    assert m.firmware is not None and m.firmware.uart.baud == 1000000
+    assert m.phys == [0, 0] and sum(e.kind == "G1" for e in m.ledger) > 200
