@@ -121,7 +121,7 @@ def test_plot_switches_to_the_profile_rate(tmp_path: Any, clean_mock: None) -> N
     shutil.copy(root / "examples" / "simple.svg", drawing)
     prof = tmp_path / "fast.toml"
     prof.write_text(DEFAULT_PROFILE.read_text().replace(
-        "baud = 115200\n", "baud = 115200\nlink_baud = 1000000\n"))
+        "[serial]\n", "[serial]\nlink_baud = 1000000\n"))
     res = CliRunner().invoke(main, ["plot", str(drawing), "--port",
                                     "fivebar-mock://?machine=fast&speed=0", "--laser",
                                     "--yes", "--config", str(prof)], catch_exceptions=False)
