@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from fivebar_host.errors import FivebarError
+from fivebar_host.protocol import BASE_BAUD, BAUD_RATES
 from kinematics.fivebar import WORKING_MODES, FiveBar
 
 #: Assembly modes: "+" iff the pen lies left of the directed line R1→R2 (elbow to elbow).
@@ -140,6 +141,9 @@ class SerialCfg:
     baud: int
     banner_timeout_s: float
     reply_timeout_s: float
+    #: the rate `$B` switches the fivebar link to once connected (docs/protocol.md 1.1);
+    #: the port opens at `baud`, the firmware's boot rate, 115200
+    link_baud: int = 115200
 
 
 @dataclass(frozen=True)
@@ -202,6 +206,16 @@ class _Table:
             raise ConfigError(f"{self.where(key)}: must be an integer; got {v!r}")
         if not lo <= v <= hi:
             raise ConfigError(f"{self.where(key)}: must be in [{lo}, {hi}]; got {v}")
+        return v
+
+    def optional_rate(self, key: str, rates: tuple[int, ...], default: int) -> int:
+        """An optional integer that must be one of `rates` (`default` when absent)."""
+        if key not in self.raw:
+            return default
+        v = self.get(key)
+        if isinstance(v, bool) or not isinstance(v, int) or v not in rates:
+            raise ConfigError(f"{self.where(key)}: must be one of "
+                              f"{', '.join(map(str, rates))} (baud); got {v!r}")
         return v
 
     def boolean(self, key: str) -> bool:
@@ -395,6 +409,8 @@ def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
         se.integer("baud", 300, 4_000_000),
         se.number("banner_timeout_s", 0.0, 600.0, lo_open=True),
         se.number("reply_timeout_s", 0.0, 600.0, lo_open=True),
+        # the rates the Uno's 16 MHz makes: 115200 (-0.8 %), 250000, 500000, 1000000 (exact)
+        se.optional_rate("link_baud", BAUD_RATES, BASE_BAUD),
     )
     se.done()
     tool, pen = _parse_pen(doc, source)

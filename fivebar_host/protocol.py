@@ -23,11 +23,19 @@ from fivebar_host.errors import FivebarError
 #: The protocol version this module implements: docs/protocol.md, the banner's ``proto:``.
 #: Version 2 replaced the CRC-8 line checksum with a CRC-16 and the body's length
 #: (docs/protocol.md 5.1 and 14).
-PROTOCOL_VERSION: Final = 2
+PROTOCOL_VERSION: Final = 3
 
 #: The longest body a checksummed line can have: the length in its checksum field has at
 #: most 2 digits (the banner's ``line`` limit, 80 bytes for the whole line, is lower).
 CHECKSUM_BODY_MAX: Final = 99
+
+#: The link's rate at every boot, reset and Ctrl-X (docs/protocol.md 1).
+BASE_BAUD: Final = 115200
+#: The rates `$B=<baud>` accepts: the ones the Uno's 16 MHz makes (U2X, UBRR 16/7/3/1).
+BAUD_RATES: Final = (115200, 250000, 500000, 1000000)
+#: After a `$B` switch the firmware returns to BASE_BAUD unless a valid line arrives
+#: within this many seconds (fb_main.c BAUD_TRIAL_MS).
+BAUD_TRIAL_S: Final = 1.0
 
 #: Real-time bytes: acted on by the firmware at once, never buffered, never
 #: answered with ``ok`` and not counted against the receive buffer.

@@ -60,7 +60,7 @@ def test_hardware_reset_revives_a_hung_controller_and_restarts_the_numbering() -
         port.close()
 
 
-@pytest.mark.parametrize("proto", [1, 3])
+@pytest.mark.parametrize("proto", [2, 4])
 def test_the_host_accepts_only_the_protocol_it_speaks(proto: int) -> None:
     urls.register()
     with pytest.raises(FirmwareMismatchError) as e:

@@ -68,7 +68,8 @@ def settled_trace(machine: simport.SimMachine, timeout: float = 10.0) -> Trace:
     ("disconnect_after=80", ("device gone", "position not known yet")),
     ("reset_after=90", ("the firmware restarted", "stopped at A = ")),
     # the firmware hangs; its watchdog resets it (docs/protocol.md 9), the host sees the banner
-    ("stall_after=100", ("the firmware restarted", "stopped at A = ")),
+    # (wire lines are counted: G6 packs about 5 segments in one, so it comes early)
+    ("stall_after=30", ("the firmware restarted", "stopped at A = ")),
 ])
 def test_fault_then_resume_draws_every_step_once(tmp_path: Path, quick_profile: Path,
                                                  monkeypatch: pytest.MonkeyPatch, fault: str,

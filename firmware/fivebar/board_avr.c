@@ -8,7 +8,8 @@
  *          Timer1  free-running at F_CPU; OCR1A schedules step events
  *          Timer2  8-bit fast PWM at F_CPU/8/256 = 7.8 kHz on OC2A (laser)
  * UART0 115200 8N1 with U2X (set before UBRR: simavr latches the baud rate
- * when UBRR0L is written), interrupt-driven receive and transmit.
+ * when UBRR0L is written), interrupt-driven receive and transmit;
+ * board_uart_baud() switches it to 250000/500000/1000000 ($B).
  */
 #ifdef __AVR__
 
@@ -17,6 +18,7 @@
 #include <avr/eeprom.h>
 #include <avr/wdt.h>
 #include "board.h"
+#include "board_uart.h"
 #include "config.h"
 #include "fb_main.h"
 #include "fb_motion.h"
@@ -290,6 +292,23 @@ ISR(USART_UDRE_vect)
 	}
 	if (tx_tail == tx_head)
 		UCSR0B &= (uint8_t)~(1u << UDRIE0);
+}
+
+void board_uart_baud(uint32_t baud)
+{
+	while (tx_head != tx_tail)
+		;
+	while (!(UCSR0A & (1u << UDRE0)))
+		;
+	/* the last byte leaves the shift register: 11 bit times at 115200 are
+	 * 1528 cycles (Timer1 runs free at F_CPU) */
+	uint16_t t0 = TCNT1;
+	while ((uint16_t)(TCNT1 - t0) < 1600u)
+		;
+	uint16_t ubrr = (uint16_t)((FB_F_CPU + 4UL * baud) / (8UL * baud) - 1UL);
+	UCSR0A = (uint8_t)(1u << U2X0);  /* U2X before UBRR, as in board_init */
+	UBRR0H = (uint8_t)(ubrr >> 8);
+	UBRR0L = (uint8_t)ubrr;
 }
 
 void board_tx(uint8_t c)

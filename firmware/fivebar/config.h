@@ -11,7 +11,7 @@
 #define FB_CONFIG_H
 
 #define FB_VERSION        "1.0.0"
-#define FB_PROTOCOL       2
+#define FB_PROTOCOL       3
 
 #define FB_F_CPU          16000000UL
 #define FB_BAUD           115200UL

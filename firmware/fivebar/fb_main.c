@@ -11,6 +11,7 @@
 #include "fb_proto.h"
 #include "fb_motion.h"
 #include "board.h"
+#include "board_uart.h"
 #include "config.h"
 #include "status.h"
 
@@ -42,6 +43,18 @@ static uint8_t line_len, line_over;
 static fb_lines_t lines;
 static fb_cmd_t cmd;
 static uint8_t pending;
+/* the pending G6 line: checked as a whole, segments queued so far (0: none,
+ * 1: its head), where its next item starts, its current duration */
+static uint8_t g6_checked, g6_queued, g6_at;
+static int32_t g6_p;
+
+/* $B (protocol section 1.1): the rate to switch to once its ok has left,
+ * the rate in force, and when a switched rate began its trial (it falls back
+ * to FB_BAUD unless a valid line arrives within BAUD_TRIAL_MS) */
+#define BAUD_TRIAL_MS 1000u
+static uint32_t baud_next, baud_now;
+static uint32_t baud_since_ms;
+static uint8_t baud_trial;
 
 static int32_t settings[SET_COUNT];
 static uint32_t min_interval;
@@ -251,6 +264,8 @@ static void do_reset(void)
 	line_len = 0;
 	line_over = 0;
 	pending = 0;
+	g6_checked = 0;
+	g6_queued = 0;
 	lines.last = 0;
 	lines.numbered = 0;
 	absolute = 1;
@@ -259,6 +274,12 @@ static void do_reset(void)
 	motors_on = 1;
 	board_enable_motors(1);
 	sync_plan();
+	baud_next = 0;
+	baud_trial = 0;
+	if (baud_now != FB_BAUD) {  /* a reset or Ctrl-X speaks at the base rate */
+		board_uart_baud(FB_BAUD);
+		baud_now = FB_BAUD;
+	}
 	banner();
 }
 
@@ -397,12 +418,101 @@ static uint8_t exec_g1(const fb_cmd_t *c)
 		return st;
 	uint8_t s = (c->has & W_S) ? (uint8_t)c->s : laser_s;
 	blk->power = laser_on ? s : 0;
-	blk->line = lines.last;
+	blk->line = lines.last - c->g6_count;  /* a G6 head: its first number */
 	if (!commit_block())
 		return ST_WAIT;
 	laser_s = s;
 	plan[0] = t[0];
 	plan[1] = t[1];
+	return FB_OK;
+}
+
+/* Whether target t may be reached from `from` in a segment of p_us (the G1
+ * checks of protocol section 6, in order, with mo_prepare's step rate test:
+ * floor(C / n) >= min_interval <=> n <= floor(C / min_interval)). */
+static uint8_t check_target(const int32_t from[2], const int32_t t[2], int32_t p_us)
+{
+	for (uint8_t i = 0; i < 2; i++)
+		if (t[i] > CFG_POS_LIMIT || t[i] < -CFG_POS_LIMIT)
+			return FB_ERR_OUT_OF_RANGE;
+	if (settings[SET_SOFT_LIMITS] &&
+	    (t[0] < settings[SET_A_MIN] || t[0] > settings[SET_A_MAX] ||
+	     t[1] < settings[SET_B_MIN] || t[1] > settings[SET_B_MAX]))
+		return FB_ERR_SOFT_LIMIT;
+	if (!motors_on && (t[0] != from[0] || t[1] != from[1]))
+		return FB_ERR_MOTORS_OFF;
+	uint32_t lim = (uint32_t)p_us * (FB_F_CPU / 1000000UL) / min_interval;
+	for (uint8_t i = 0; i < 2; i++) {
+		int32_t d = t[i] - from[i];
+		if ((uint32_t)(d < 0 ? -d : d) > lim)
+			return FB_ERR_TOO_FAST;
+	}
+	return FB_OK;
+}
+
+/* Every segment of a G6 line against the checks of a G1, before any is
+ * queued: a line is queued whole or not at all (docs/protocol.md 6.3). */
+static uint8_t g6_check(const fb_cmd_t *c)
+{
+	int32_t from[2] = { plan[0], plan[1] }, t[2] = { plan[0], plan[1] }, d[2];
+	if (c->has & W_A)
+		t[0] = absolute ? c->a : plan[0] + c->a;
+	if (c->has & W_B)
+		t[1] = absolute ? c->b : plan[1] + c->b;
+	int32_t p = c->p;
+	uint8_t at = c->g6_at;
+	uint8_t st = check_target(from, t, p);
+	while (st == FB_OK && fb_g6_next(line, &at, c->g6_end, &p, d)) {
+		from[0] = t[0];
+		from[1] = t[1];
+		t[0] += d[0];
+		t[1] += d[1];
+		st = check_target(from, t, p);
+	}
+	return st;
+}
+
+/* G6: the head as a G1, then one block per item, each as its slot frees
+ * (ST_WAIT in between keeps the line pending); blocks get the numbers
+ * first..first+count. */
+static uint8_t exec_g6(const fb_cmd_t *c)
+{
+	if (!g6_checked) {
+		uint8_t st = g6_check(c);
+		if (st != FB_OK)
+			return st;
+		g6_checked = 1;
+	}
+	if (!g6_queued) {
+		uint8_t st = exec_g1(c);
+		if (st != FB_OK)
+			return st;
+		g6_queued = 1;
+		g6_at = c->g6_at;
+		g6_p = c->p;
+	}
+	uint32_t first = lines.last - c->g6_count;
+	while (g6_queued <= c->g6_count) {
+		if (!slot_free())
+			return ST_WAIT;
+		uint8_t at = g6_at;
+		int32_t p = g6_p, d[2];
+		if (!fb_g6_next(line, &at, c->g6_end, &p, d))
+			return FB_ERR_BAD_WORD;  /* not reached: the line was checked */
+		fb_block_t *blk = mo_slot();
+		uint8_t st = mo_prepare(blk, d[0], d[1], (uint32_t)p, min_interval);
+		if (st != FB_OK)
+			return st;  /* not reached: g6_check ran the same test */
+		blk->power = laser_on ? laser_s : 0;
+		blk->line = first + g6_queued;
+		if (!commit_block())
+			return ST_WAIT;
+		g6_at = at;
+		g6_p = p;
+		plan[0] += d[0];
+		plan[1] += d[1];
+		g6_queued++;
+	}
 	return FB_OK;
 }
 
@@ -541,6 +651,40 @@ static uint8_t exec_set(const fb_cmd_t *c)
 	return FB_OK;
 }
 
+/* $B=<baud>: one of the rates the Uno's 16 MHz makes (115200 within 0.8 %,
+ * the others exactly); the switch waits for the ok (switch_baud). */
+static uint8_t exec_baud(const fb_cmd_t *c)
+{
+	switch (c->value) {
+	case 115200L: case 250000L: case 500000L: case 1000000L:
+		baud_next = (uint32_t)c->value;
+		return FB_OK;
+	default:
+		return FB_ERR_OUT_OF_RANGE;
+	}
+}
+
+/* After $B's ok: the new rate, on trial until a valid line arrives. */
+static void switch_baud(void)
+{
+	board_uart_baud(baud_next);
+	baud_now = baud_next;
+	baud_next = 0;
+	baud_trial = baud_now != FB_BAUD;
+	baud_since_ms = board_ms();
+}
+
+/* No valid line within BAUD_TRIAL_MS of a switch: the host cannot speak at
+ * that rate, back to the base rate (the host falls back too). */
+static void baud_fallback(void)
+{
+	if (baud_trial && board_ms() - baud_since_ms > BAUD_TRIAL_MS) {
+		baud_trial = 0;
+		board_uart_baud(FB_BAUD);
+		baud_now = FB_BAUD;
+	}
+}
+
 static void list_settings(void)
 {
 	for (uint8_t i = 0; i < SET_COUNT; i++) {
@@ -566,6 +710,8 @@ static uint8_t execute(const fb_cmd_t *c)
 	switch (c->kind) {
 	case CMD_G1:
 		return exec_g1(c);
+	case CMD_G6:
+		return exec_g6(c);
 	case CMD_G90:
 		absolute = 1;
 		return FB_OK;
@@ -613,6 +759,8 @@ static uint8_t execute(const fb_cmd_t *c)
 		return FB_OK;
 	case CMD_SET:
 		return exec_set(c);
+	case CMD_BAUD:
+		return exec_baud(c);
 	default:
 		return FB_OK;
 	}
@@ -648,7 +796,11 @@ static void try_execute(void)
 	if (st == ST_WAIT)
 		return;
 	pending = 0;
+	g6_checked = 0;
+	g6_queued = 0;
 	finish(st);
+	if (baud_next)
+		switch_baud();
 }
 
 static void handle_line(void)
@@ -670,6 +822,8 @@ static void handle_line(void)
 		return;
 	}
 	uint8_t st = fb_parse_line(&lines, line, len, &cmd);
+	if (st == FB_OK)
+		baud_trial = 0;  /* the host speaks at this rate */
 	if (st != FB_OK) {
 		finish(st);
 		return;
@@ -787,6 +941,7 @@ void fb_poll(void)
 		status_report();
 	}
 	laser_watchdog();
+	baud_fallback();
 	resume_when_settled();
 	maybe_start();
 	if (pending)

@@ -2,6 +2,8 @@
  * fb_proto.c - line framing and command parsing (pure, portable C).
  *
  * A line is: [N<n>] <command> [words] [;comment] [*<crc16>/<len>]
+ * G6 (protocol 3) carries several segments: a G1 head, then relative items
+ * "[P<us>]<+|-><a><+|-><b>", each one more segment and one more line number.
  * The checksum field covers every byte before the last '*' (the body): its
  * CRC-16 and its length in bytes.  Numbers are decimal integers; there are no
  * floats anywhere in the firmware.
@@ -145,7 +147,7 @@ static uint8_t parse_int(const char *s, uint8_t *pi, uint8_t end, int32_t *out)
 static uint8_t allowed_words(uint8_t kind)
 {
 	switch (kind) {
-	case CMD_G1: return W_A | W_B | W_P | W_S;
+	case CMD_G1: case CMD_G6: return W_A | W_B | W_P | W_S;
 	case CMD_G92: return W_A | W_B;
 	case CMD_M3: return W_S;
 	case CMD_M280: return W_S | W_R | W_D;
@@ -187,6 +189,19 @@ static uint8_t parse_dollar(const char *s, uint8_t i, uint8_t end, fb_cmd_t *cmd
 		cmd->value = v;
 		return FB_OK;
 	}
+	if (c == 'B' && i + 1u < end && s[i + 1u] == '=') {
+		/* $B=<baud> (protocol section 1.1): the value is checked on execution */
+		uint8_t j = (uint8_t)(i + 2u);
+		int32_t v = 0;
+		uint8_t st = parse_int(s, &j, end, &v);
+		if (st != FB_OK)
+			return st;
+		if (skip_ws(s, j, end) < end)
+			return FB_ERR_BAD_WORD;
+		cmd->kind = CMD_BAUD;
+		cmd->value = v;
+		return FB_OK;
+	}
 	switch (c) {
 	case 'I': cmd->kind = CMD_INFO; break;
 	case '$': cmd->kind = CMD_LIST; break;
@@ -204,6 +219,7 @@ static uint8_t command_kind(char letter, uint32_t code)
 	if (letter == 'G') {
 		switch (code) {
 		case 1: return CMD_G1;
+		case 6: return CMD_G6;
 		case 90: return CMD_G90;
 		case 91: return CMD_G91;
 		case 92: return CMD_G92;
@@ -219,6 +235,88 @@ static uint8_t command_kind(char letter, uint32_t code)
 	case 280: return CMD_M280;
 	default: return CMD_NONE;
 	}
+}
+
+/*
+ * A G6 item number: an optional sign and decimal digits, ending at the end,
+ * whitespace, a letter or the next item's sign; |value| <= CFG_POS_LIMIT.
+ */
+static uint8_t item_num(const char *s, uint8_t *pi, uint8_t end, int32_t *out)
+{
+	uint8_t i = *pi, neg = 0, digits = 0;
+	if (i < end && (s[i] == '-' || s[i] == '+')) {
+		neg = s[i] == '-';
+		i++;
+	}
+	int32_t v = 0;
+	uint8_t over = 0;
+	while (i < end && is_digit(s[i])) {
+		if (v > CFG_POS_LIMIT)
+			over = 1;
+		else
+			v = v * 10 + (int32_t)(s[i] - '0');
+		i++;
+		digits++;
+	}
+	if (!digits || !(number_ends(s, i, end) || s[i] == '+' || s[i] == '-'))
+		return FB_ERR_BAD_NUMBER;
+	*pi = i;
+	if (over || v > CFG_POS_LIMIT)
+		return FB_ERR_OUT_OF_RANGE;
+	*out = neg ? -v : v;
+	return FB_OK;
+}
+
+/* One G6 item from s[*pi]: [P<us>] then <+|-><a><+|-><b> (docs/protocol.md 6.3). */
+static uint8_t g6_item(const char *s, uint8_t *pi, uint8_t end, int32_t *p, int32_t d[2])
+{
+	uint8_t i = skip_ws(s, *pi, end);
+	if (i < end && upper(s[i]) == 'P') {
+		i++;
+		int32_t v = 0;
+		if (i < end && (s[i] == '+' || s[i] == '-'))
+			return FB_ERR_BAD_NUMBER;
+		uint8_t st = item_num(s, &i, end, &v);
+		if (st != FB_OK)
+			return st;
+		if (v < CFG_P_MIN_US || v > CFG_P_MAX_US)
+			return FB_ERR_OUT_OF_RANGE;
+		*p = v;
+		i = skip_ws(s, i, end);
+	}
+	for (uint8_t k = 0; k < 2; k++) {
+		if (i >= end || (s[i] != '+' && s[i] != '-'))
+			return FB_ERR_BAD_WORD;
+		uint8_t st = item_num(s, &i, end, &d[k]);
+		if (st != FB_OK)
+			return st;
+	}
+	*pi = i;
+	return FB_OK;
+}
+
+uint8_t fb_g6_next(const char *line, uint8_t *at, uint8_t end, int32_t *p, int32_t d[2])
+{
+	uint8_t i = skip_ws(line, *at, end);
+	if (i >= end || g6_item(line, &i, end, p, d) != FB_OK)
+		return 0;
+	*at = i;
+	return 1;
+}
+
+/* The items of a G6 line from s[i]: each must parse; counted in cmd. */
+static uint8_t g6_items(const char *s, uint8_t i, uint8_t end, fb_cmd_t *cmd)
+{
+	int32_t p = cmd->p, d[2];
+	cmd->g6_at = i;
+	cmd->g6_end = end;
+	while ((i = skip_ws(s, i, end)) < end) {
+		uint8_t st = g6_item(s, &i, end, &p, d);
+		if (st != FB_OK)
+			return st;
+		cmd->g6_count++;
+	}
+	return FB_OK;
 }
 
 static uint8_t check_ranges(fb_cmd_t *cmd)
@@ -242,7 +340,7 @@ static uint8_t check_ranges(fb_cmd_t *cmd)
 	}
 	if ((cmd->has & W_P) && (cmd->p < CFG_P_MIN_US || cmd->p > CFG_P_MAX_US))
 		return FB_ERR_OUT_OF_RANGE;
-	if (cmd->kind == CMD_G1 && !(cmd->has & W_P))
+	if ((cmd->kind == CMD_G1 || cmd->kind == CMD_G6) && !(cmd->has & W_P))
 		return FB_ERR_MISSING_WORD;
 	if (cmd->kind == CMD_G92 && !(cmd->has & (W_A | W_B)))
 		return FB_ERR_MISSING_WORD;
@@ -288,6 +386,13 @@ static uint8_t parse_body(const char *s, uint8_t i, uint8_t end, fb_cmd_t *cmd)
 		if (i >= end)
 			break;
 		char w = upper(s[i]);
+		/* a G6's items start at a sign, or at a second P */
+		if (cmd->kind == CMD_G6 && (w == '+' || w == '-' || (w == 'P' && (cmd->has & W_P)))) {
+			st = g6_items(s, i, end, cmd);
+			if (st != FB_OK)
+				return st;
+			break;
+		}
 		uint8_t bit;
 		int32_t *dst;
 		switch (w) {
@@ -365,6 +470,10 @@ uint8_t fb_parse_line(fb_lines_t *lines, const char *line, uint8_t len, fb_cmd_t
 	}
 
 	uint8_t st = parse_body(line, i, end, cmd);
+	/* a G6 uses one line number per segment; a line refused by its parse
+	 * error (held back, so accepted) uses one */
+	if (st != FB_OK)
+		cmd->g6_count = 0;
 	if (st == FB_OK && cmd->kind == CMD_M110) {
 		lines->last = cmd->has_n ? cmd->n : 0;
 		lines->numbered = cmd->has_n;
@@ -373,14 +482,14 @@ uint8_t fb_parse_line(fb_lines_t *lines, const char *line, uint8_t len, fb_cmd_t
 	if (cmd->has_n) {
 		if (cmd->n != lines->last + 1u)
 			return FB_ERR_LINE_NUMBER;
-		lines->last = cmd->n;
+		lines->last = cmd->n + cmd->g6_count;
 		lines->numbered = 1;
 	} else {
 		/* strict framing: a numbered host's line that lost its N and its
 		 * checksum must not run as an unnumbered one */
 		if (lines->numbered)
 			return FB_ERR_NO_CHECKSUM;
-		lines->last++;
+		lines->last += 1u + cmd->g6_count;
 	}
 	return st;
 }

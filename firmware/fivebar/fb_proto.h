@@ -26,7 +26,9 @@ enum fb_cmd_kind {
 	CMD_HOME,       /* $H */
 	CMD_UNLOCK,     /* $X */
 	CMD_SET,        /* $<n>=<v> */
-	CMD_M280        /* pen servo: S<us> [R<ms>] [D<ms>] (queued) */
+	CMD_M280,       /* pen servo: S<us> [R<ms>] [D<ms>] (queued) */
+	CMD_G6,         /* several segments: a G1 head, then relative +a+b [P] items */
+	CMD_BAUD        /* $B=<baud>: the link's rate after this line's ok */
 };
 
 /* Word presence bits in fb_cmd_t.has */
@@ -46,6 +48,10 @@ typedef struct {
 	int32_t a, b, p, s; /* word values */
 	int32_t r, d;       /* M280: move and settle time, ms */
 	int32_t value;      /* CMD_SET: value */
+	uint8_t g6_count;   /* CMD_G6: segments after the head (the line uses
+			     * 1 + g6_count line numbers) */
+	uint8_t g6_at;      /* CMD_G6: index of its first item in the line */
+	uint8_t g6_end;     /* CMD_G6: end of its items (the '*', ';' or line end) */
 } fb_cmd_t;
 
 /* Line-number state shared by consecutive lines. */
@@ -80,6 +86,15 @@ uint16_t fb_crc16(const char *s, uint8_t len);
  * that lost both (the first one, before strict framing begins, included).
  */
 uint8_t fb_parse_line(fb_lines_t *lines, const char *line, uint8_t len, fb_cmd_t *cmd);
+
+/*
+ * The next segment of a G6 line already checked by fb_parse_line: from
+ * line[*at] up to end, an optional P<us> (the new duration, into *p) and the
+ * relative move "<+|-><a><+|-><b>" (into d).  Advances *at past them.
+ * Returns 0 at the end of the items (or on a malformed item, which
+ * fb_parse_line has refused before), else 1.
+ */
+uint8_t fb_g6_next(const char *line, uint8_t *at, uint8_t end, int32_t *p, int32_t d[2]);
 
 /* True when a reply code asks the host to resend. */
 static inline uint8_t fb_is_resend(uint8_t code)

@@ -26,6 +26,16 @@
  * Single-threaded: the pty and stdin are pumped from a simavr cycle timer
  * every simulated millisecond.
  *
+ * Baud rate: simavr's UART times each byte from UBRR0 and U2X0 (11 bit times
+ * a byte), and the harness never re-paces bytes: it hands them to simavr's
+ * input FIFO under its XON/XOFF, so a faster UBRR really is faster.  The
+ * client's rate is the pty's (the speed it set with tcsetattr, read through
+ * TCGETS2 on the master): while it differs from the UART's by more than 5 %,
+ * every byte is lost both ways, as a UART sampling at the wrong rate sees
+ * only framing errors ($B, docs/protocol.md 1.1).  A pty speed that is not a
+ * link rate (250000, 500000, 1000000) counts as 115200: clients that never
+ * set one (pyserial's default is 9600) talk at the boot rate.
+ *
  * Control commands (-C):
  *   reset    a reset that leaves the RAM powered (the Uno's DTR reset, a
  *            watchdog or brown-out reset): the CPU and its I/O restart, the
@@ -207,6 +217,36 @@ static void ring_put(ring_t *r, uint8_t c)
 	r->len++;
 }
 
+/* struct termios2 of <asm/termbits.h>, which clashes with <termios.h> */
+struct pty_termios2 {
+	tcflag_t c_iflag, c_oflag, c_cflag, c_lflag;
+	cc_t c_line;
+	cc_t c_cc[19];
+	speed_t c_ispeed, c_ospeed;
+};
+#define PTY_TCGETS2 _IOR('T', 0x2A, struct pty_termios2)
+#define REG_UCSR0A 0xC0
+#define REG_UBRR0L 0xC4
+#define REG_UBRR0H 0xC5
+static unsigned long long bytes_lost;
+
+/* Whether the client's pty speed and the UART's rate (UBRR0, U2X0) agree
+ * within 5 %; an unreadable pty speed counts as agreeing. */
+static int rates_agree(void)
+{
+	struct pty_termios2 t;
+	if (master_fd < 0 || ioctl(master_fd, PTY_TCGETS2, &t) < 0)
+		return 1;
+	double host = t.c_ospeed;
+	if (t.c_ospeed != 250000 && t.c_ospeed != 500000 && t.c_ospeed != 1000000)
+		host = 115200;  /* not a link rate (a client that never set one): the base rate */
+	unsigned ubrr = avr->data[REG_UBRR0L] | (unsigned)(avr->data[REG_UBRR0H] & 0x0F) << 8;
+	double avr_baud = (double)avr->frequency /
+			  ((avr->data[REG_UCSR0A] & 0x02 ? 8.0 : 16.0) * (ubrr + 1));
+	double d = (host - avr_baud) / avr_baud;
+	return d < 0.05 && d > -0.05;
+}
+
 static void feed_uart(void)
 {
 	while (uart_xon && to_avr.len) {
@@ -222,6 +262,10 @@ static void uart_out_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 {
 	(void)irq;
 	(void)param;
+	if (!rates_agree()) {
+		bytes_lost++;
+		return;
+	}
 	ring_put(&to_host, (uint8_t)value);
 	bytes_out++;
 }
@@ -263,8 +307,11 @@ static void pump_io(void)
 			/* no client has the pty open: what the AVR sent is lost */
 			to_host.len = 0;
 		}
+		int agree = n > 0 ? rates_agree() : 1;
 		for (ssize_t i = 0; i < n; i++)
-			if (!frozen)
+			if (frozen || !agree)
+				bytes_lost++;
+			else
 				ring_put(&to_avr, buf[i]);
 	}
 	feed_uart();
@@ -784,8 +831,9 @@ int main(int argc, char **argv)
 	if (dbg)
 		fclose(dbg);
 	double wall = wall_seconds();
-	fprintf(stderr, "fbsim: %llu cycles in %.3f s = %.1f MHz emulated, %llu bytes in, %llu out%s\n",
+	fprintf(stderr, "fbsim: %llu cycles in %.3f s = %.1f MHz emulated, %llu bytes in, %llu out, "
+		"%llu lost%s\n",
 		(unsigned long long)avr->cycle, wall, wall > 0 ? (double)avr->cycle / wall / 1e6 : 0.0,
-		bytes_in, bytes_out, state == cpu_Crashed ? ", CPU crashed" : "");
+		bytes_in, bytes_out, bytes_lost, state == cpu_Crashed ? ", CPU crashed" : "");
 	return state == cpu_Crashed ? 1 : 0;
 }

@@ -4,10 +4,12 @@
 #include <string.h>
 #include "fake_board.h"
 #include "board.h"
+#include "board_uart.h"
 #include "fb_motion.h"
 
 uint64_t fake_now;
 uint32_t fake_ms;
+uint32_t fake_baud = 115200;
 uint8_t fake_endstops, fake_laser, fake_dirs, fake_enabled;
 int fake_timer_on, fake_timer_paused;
 uint16_t fake_timer_delay;
@@ -85,6 +87,7 @@ const char *fake_take_tx(void)
 }
 
 uint32_t board_ms(void) { return fake_ms; }
+void board_uart_baud(uint32_t baud) { fake_baud = baud; }
 
 void board_timer_start(uint16_t delay_cycles)
 {

@@ -19,6 +19,7 @@ typedef struct {
 } fake_step_t;
 
 extern uint64_t fake_now;            /* simulated cycle counter */
+extern uint32_t fake_baud;            /* the rate board_uart_baud() set last */
 extern uint32_t fake_ms;             /* value of board_ms() */
 extern uint8_t fake_endstops;        /* pressed switches */
 extern uint8_t fake_laser;           /* last laser power */

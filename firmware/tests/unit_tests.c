@@ -20,7 +20,7 @@
 
 static int failures, checks;
 
-#define BANNER "fivebar " FB_VERSION " proto:2 rx:128 queue:16 line:80\r\n"
+#define BANNER "fivebar " FB_VERSION " proto:3 rx:128 queue:16 line:80\r\n"
 
 #define CHECK(cond, ...) do { checks++; if (!(cond)) { failures++; \
 	printf("FAIL %s:%d: ", __FILE__, __LINE__); printf(__VA_ARGS__); printf("\n"); } } while (0)
@@ -49,6 +49,53 @@ static void test_crc(void)
 	CHECK(fb_crc16("N201 G1 A-706 B-507 P16795 S255", 31) == 49724, "a G1 line");
 	/* the line that lost two bytes and kept its CRC-8 (32) under protocol 1 */
 	CHECK(fb_crc16("N201 G1 A-76 B-07 P16795 S255", 29) == 45618, "that line, two bytes lost");
+}
+
+/* G6 (protocol 3): a G1 head and relative items, one line number each. */
+static void test_parse_g6(void)
+{
+	static const struct { const char *line; uint8_t status; uint8_t count; } cases[] = {
+		{ "G6 A1 B2 P1000 S0 +1-2+0+0", FB_OK, 2 },
+		{ "g6a1p1000 +1-2 p200 -3+4", FB_OK, 2 },
+		{ "G6 P1000", FB_OK, 0 },
+		{ "G6 P1000 +1-1 ; comment", FB_OK, 1 },
+		{ "G6 P1000+1-1", FB_ERR_BAD_NUMBER, 0 },   /* a head number ends at a blank */
+		{ "G6 A1 +1-1", FB_ERR_MISSING_WORD, 0 },
+		{ "G6 P1000 +1", FB_ERR_BAD_WORD, 0 },
+		{ "G6 P1000 +1 -1", FB_ERR_BAD_WORD, 0 },
+		{ "G6 P1000 1-1", FB_ERR_BAD_WORD, 0 },
+		{ "G6 P1000 +1-1P99+0+0", FB_ERR_OUT_OF_RANGE, 0 },
+		{ "G6 P1000 +1-1P+9+0+0", FB_ERR_BAD_NUMBER, 0 },
+		{ "G6 P1000 +1-1P500", FB_ERR_BAD_WORD, 0 },
+		{ "G6 P1000 +1-1 A5", FB_ERR_BAD_WORD, 0 },
+		{ "G6 A1 P1000 S0 P200+1-1", FB_OK, 1 },       /* a second P starts the items */
+		{ "G6 A1 P1000 P200", FB_ERR_BAD_WORD, 0 },
+		{ "G6 P1000 +100000001+0", FB_ERR_OUT_OF_RANGE, 0 },
+		{ "G6 P1000 +1.5+0", FB_ERR_BAD_NUMBER, 0 },
+		{ "G6 P1000 +-1+0", FB_ERR_BAD_NUMBER, 0 },
+	};
+	for (size_t i = 0; i < sizeof(cases) / sizeof(cases[0]); i++) {
+		fb_lines_t ln = { 0 };
+		fb_cmd_t c;
+		uint8_t st = parse(&ln, cases[i].line, &c);
+		CHECK(st == cases[i].status, "'%s': status %u, want %u", cases[i].line, st, cases[i].status);
+		CHECK(c.kind == CMD_G6, "'%s': kind %u", cases[i].line, c.kind);
+		CHECK(ln.last == 1u + cases[i].count, "'%s': last %u", cases[i].line, ln.last);
+	}
+	fb_lines_t ln = { 40, 1 };
+	fb_cmd_t c;
+	char buf[96];
+	framed(buf, sizeof buf, "N41 G6 P1000 +1-1+2+2");
+	CHECK(parse(&ln, buf, &c) == FB_OK && ln.last == 43, "a numbered G6 uses 3 numbers");
+	CHECK(parse(&ln, buf, &c) == FB_ERR_LINE_NUMBER && ln.last == 43, "and is not repeated");
+	int32_t p = 7, d[2];
+	uint8_t at = 0;
+	const char *items = "P250+3-4 -5+0";
+	CHECK(fb_g6_next(items, &at, (uint8_t)strlen(items), &p, d) && p == 250 && d[0] == 3 &&
+	      d[1] == -4, "first item");
+	CHECK(fb_g6_next(items, &at, (uint8_t)strlen(items), &p, d) && p == 250 && d[0] == -5 &&
+	      d[1] == 0, "second item keeps P");
+	CHECK(!fb_g6_next(items, &at, (uint8_t)strlen(items), &p, d), "end of the items");
 }
 
 static void test_parse_table(void)
@@ -127,6 +174,7 @@ static void test_parse_table(void)
 	      c.s == 3 && c.has == (W_A | W_B | W_P | W_S), "G1 values");
 	CHECK(parse(&ln, "$13=-3", &c) == FB_OK && c.setting == 13 && c.value == -3, "setting values");
 	CHECK(parse(&ln, "G1 A-100000000 P100", &c) == FB_OK && c.a == -100000000, "lowest A");
+	test_parse_g6();
 }
 
 static void test_framing(void)
@@ -237,6 +285,10 @@ static const char *const noise_lines[] = {
 	"N1 G1 P100",                                    /* length 10: "1" and "0" */
 	"N1 G1 A10 P1000",          /* lost N and '*': 1 G1 A10 P100013217/15 */
 	"N4294967295 G1 A-100000000 B-100000000 P100000000 S255", /* the longest G1 */
+	/* G6 lines (protocol 3): several segments, one line number each */
+	"N1207G6A-1234B567P1333S0 +1-2+0+1+1-1P1400+2+0-1+1",
+	"N9G6P100 +0+0",
+	"N33G6A5B-5P2000S255 +10-10P100000000+0+1P150-3+3+1+1+1+1+1+1+1+1+1+1",
 };
 
 /* A byte noise may put into a line: any but the newline, which ends it, and
@@ -251,6 +303,7 @@ static uint8_t noise_byte(int b)
  * resend and the counter stays, 2 when it is accepted as line n without error,
  * 0 otherwise. */
 static uint8_t noise_mode;
+static uint32_t noise_last;  /* the counter after the undamaged line (a G6 uses several) */
 static int noisy_outcome(uint32_t n, const char *s, size_t len)
 {
 	fb_lines_t ln = { n - 1u, noise_mode };
@@ -258,7 +311,7 @@ static int noisy_outcome(uint32_t n, const char *s, size_t len)
 	uint8_t st = fb_parse_line(&ln, s, (uint8_t)len, &c);
 	if (fb_is_resend(st))
 		return ln.last == n - 1u ? 1 : 0;
-	return st == FB_OK && ln.last == n ? 2 : 0;
+	return st == FB_OK && ln.last == noise_last ? 2 : 0;
 }
 
 static void test_line_noise(void)
@@ -269,7 +322,7 @@ static void test_line_noise(void)
 	 * byte inserted changes the length, and any two replaced are within the
 	 * CRC's burst guarantee.  These are the ones that could make a field look
 	 * right. */
-	static const char pair_bytes[] = "0123456789*/ \t-A";
+	static const char pair_bytes[] = "0123456789*/ \t-A+P";
 	const size_t npair = sizeof pair_bytes - 1;
 	for (size_t k = 0; k < sizeof noise_lines / sizeof noise_lines[0]; k++) {
 		char valid[128], noisy[130];
@@ -277,6 +330,10 @@ static void test_line_noise(void)
 		const size_t len = strlen(valid);
 		const uint32_t n = (uint32_t)strtoul(noise_lines[k] + 1, NULL, 10);
 		int bad = 0;
+		fb_lines_t first = { n - 1u, noise_mode };
+		fb_cmd_t fc;
+		CHECK(fb_parse_line(&first, valid, (uint8_t)len, &fc) == FB_OK, "%s parses", valid);
+		noise_last = first.last;
 		CHECK(noisy_outcome(n, valid, len) == 2, "%s accepted", valid);
 		/* drops: one byte, and every pair of bytes */
 		for (size_t i = 0; i < len; i++) {
@@ -615,8 +672,8 @@ static void test_app(void)
 	fake_reset();
 	mo_set_pos(zero);
 	fb_setup();
-	expect("", "fivebar " FB_VERSION " proto:2 rx:128 queue:16 line:80\r\n");
-	expect("$I\n", "fivebar " FB_VERSION " proto:2 rx:128 queue:16 line:80\r\nok\r\n");
+	expect("", "fivebar " FB_VERSION " proto:3 rx:128 queue:16 line:80\r\n");
+	expect("$I\n", "fivebar " FB_VERSION " proto:3 rx:128 queue:16 line:80\r\nok\r\n");
 	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,1|L:0|U:0|H:0|P:0>\r\n");
 	expect("G1 A10 B-4 P1000\n", "ok\r\n");
 	tick(100);
@@ -684,7 +741,7 @@ static void test_app(void)
 	/* reset: banner, queue dropped, position kept */
 	send("\x18");
 	CHECK(fake_laser == 0 && !fake_timer_on, "reset stops at once");
-	expect("", "fivebar " FB_VERSION " proto:2 rx:128 queue:16 line:80\r\n");
+	expect("", "fivebar " FB_VERSION " proto:3 rx:128 queue:16 line:80\r\n");
 	expect("?", "<Idle|A:90,B:0|Q:0|Ln:0,0|L:0|U:0|H:0|P:0>\r\n");
 
 	/* the laser watchdog */
@@ -698,14 +755,14 @@ static void test_app(void)
 	CHECK(fake_laser == 0, "laser off after host silence");
 	expect("?", "<Hold:1|A:90,B:0|Q:0|Ln:0,2|L:0|U:0|H:0|P:0>\r\n");
 	send("\x18");
-	expect("", "fivebar " FB_VERSION " proto:2 rx:128 queue:16 line:80\r\n");
+	expect("", "fivebar " FB_VERSION " proto:3 rx:128 queue:16 line:80\r\n");
 
 	/* settings */
 	expect("$0=50000\n", "error:7\r\n");
 	expect("$77=1\n", "error:17\r\n");
 	expect("$5=0\nG1 A200000 P10000000\n", "ok\r\nok\r\n");
 	send("\x18");
-	expect("", "fivebar " FB_VERSION " proto:2 rx:128 queue:16 line:80\r\n");
+	expect("", "fivebar " FB_VERSION " proto:3 rx:128 queue:16 line:80\r\n");
 	expect("$5=1\n$H\n", "ok\r\nerror:16\r\n");
 	expect("M18\nG1 A0 P1000\n", "ok\r\nerror:15\r\n");
 	send("\x18");
@@ -729,7 +786,7 @@ static void test_app(void)
 	CHECK(poll_out(5)[0] == 0, "no reply before the newline");
 	send("\n");
 	CHECK(strncmp(poll_out(50), "error:18", 8) == 0, "overflow reported");
-	expect("$I\n", "fivebar " FB_VERSION " proto:2 rx:128 queue:16 line:80\r\nok\r\n");
+	expect("$I\n", "fivebar " FB_VERSION " proto:3 rx:128 queue:16 line:80\r\nok\r\n");
 }
 
 static int count_of(const char *hay, const char *needle)
@@ -760,6 +817,85 @@ static void boot_at_zero(void)
  * slot: the waiting line must not take it and get an "ok" before the banner,
  * and the queue must not start again (the laser would flash).
  */
+/* G6 runs as the G1 lines it stands for: one block per segment, numbered
+ * from its N; checked whole before any block is queued; more segments than
+ * free slots wait for the queue like a G1. */
+static void test_g6_app(void)
+{
+	char buf[128];
+	int32_t zero[2] = { 0, 0 };
+	fake_reset();
+	mo_set_pos(zero);
+	fb_setup();
+	fake_tx_len = 0;
+	expect("\x18", BANNER);
+	expect("M110\n", "ok\r\n");
+	expect("M3 S5\n", "ok\r\n");
+	framed(buf, sizeof buf, "N2 G6 A10 B-4 P1000 S9 +1+1+2-2P2000+0+3");
+	strcat(buf, "\n");
+	expect(buf, "ok\r\n");
+	tick(100);
+	expect("?", "<Idle|A:13,B:-2|Q:0|Ln:5,5|L:0|U:1|H:0|P:0>\r\n");
+	CHECK(fake_nsteps > 0 && fake_steps[fake_nsteps - 1].laser == 9, "S applies to every segment");
+	/* one bad segment: nothing queued, the line counts whole, the error held back */
+	framed(buf, sizeof buf, "N6 G6 P1000 +1+1+200000+0+1+1");
+	strcat(buf, "\n");
+	expect(buf, "error:11\r\n");
+	expect("?", "<Idle|A:13,B:-2|Q:0|Ln:5,9|L:0|U:1|H:0|P:0>\r\n");
+	framed(buf, sizeof buf, "N10 G6 P1000 +1+1+30+0");
+	strcat(buf, "\n");
+	expect(buf, "error:12\r\n");
+	/* 30 segments for a 16-block queue: the second line's reply waits */
+	expect("!", "");
+	framed(buf, sizeof buf, "N13 G6 P1000 +1+0+1+0+1+0+1+0+1+0+1+0+1+0+1+0+1+0+1+0+1+0+1+0+1+0+1+0");
+	strcat(buf, "\n");
+	expect(buf, "ok\r\n");
+	framed(buf, sizeof buf, "N28 G6 P1000 +1+0+1+0+1+0+1+0+1+0+1+0+1+0+1+0+1+0+1+0+1+0+1+0+1+0+1+0");
+	strcat(buf, "\n");
+	expect(buf, "");
+	expect("?", "<Hold:0|A:13,B:-2|Q:16|Ln:5,42|L:0|U:1|H:0|P:0>\r\n");
+	/* (the fake runs the 16 blocks without a main-loop pass in between: the
+	 * queue runs dry once before the last 14 are queued, U:3) */
+	expect("~", "ok\r\n");
+	tick(100);
+	expect("?", "<Idle|A:41,B:-2|Q:0|Ln:42,42|L:0|U:3|H:0|P:0>\r\n");
+}
+
+/* $B (protocol 1.1): ok at the old rate, then the switch; a rate kept once a
+ * valid line arrives, back to 115200 after 1 s without one, on Ctrl-X, and
+ * never to a rate the Uno cannot make. */
+static void test_baud(void)
+{
+	int32_t zero[2] = { 0, 0 };
+	fake_reset();
+	mo_set_pos(zero);
+	fb_setup();
+	fake_tx_len = 0;
+	expect("\x18", BANNER);
+	CHECK(fake_baud == 115200, "boots at 115200: %u", (unsigned)fake_baud);
+	expect("$B=9600\n", "error:7\r\n");
+	expect("$B=230400\n", "error:7\r\n");
+	expect("$B\n", "error:4\r\n");
+	expect("$B=5x\n", "error:5\r\n");
+	CHECK(fake_baud == 115200, "refused rates keep 115200: %u", (unsigned)fake_baud);
+	expect("$B=500000\n", "ok\r\n");
+	CHECK(fake_baud == 500000, "switched after the ok: %u", (unsigned)fake_baud);
+	fake_ms += 900;
+	expect("$I\n", BANNER "ok\r\n");
+	fake_ms += 5000;
+	poll_out(3);
+	CHECK(fake_baud == 500000, "a valid line keeps the rate: %u", (unsigned)fake_baud);
+	expect("$B=1000000\n", "ok\r\n");
+	expect("G1 A1 P1000\x01\n", "error:1\r\n");  /* not a valid line */
+	fake_ms += 1001;
+	poll_out(3);
+	CHECK(fake_baud == 115200, "no valid line in 1 s: back to 115200: %u", (unsigned)fake_baud);
+	expect("$B=250000\n", "ok\r\n");
+	expect("$I\n", BANNER "ok\r\n");
+	expect("\x18", BANNER);
+	CHECK(fake_baud == 115200, "Ctrl-X: back to 115200: %u", (unsigned)fake_baud);
+}
+
 static void test_reset_while_a_line_waits(void)
 {
 	int fired = 1, k;
@@ -1241,6 +1377,8 @@ int main(void)
 	test_reset_while_a_line_waits();
 	test_homed_flag();
 	test_strict_framing();
+	test_g6_app();
+	test_baud();
 	test_kept_record();
 	test_reset_during_homing();
 	test_watchdog_feeding();

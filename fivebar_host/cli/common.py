@@ -188,10 +188,15 @@ def open_link(port: str | None, prof: Profile, controller: str = "fivebar") -> A
     from fivebar_host.run.grbl_link import GrblLink
     from fivebar_host.run.link import Link
 
-    cls: Any = GrblLink if controller == "grbl" else Link
-    return cls.open(str(port), baud=prof.serial.baud,
-                    banner_timeout_s=prof.serial.banner_timeout_s,
-                    reply_timeout_s=prof.serial.reply_timeout_s)
+    ser = prof.serial
+    if controller == "grbl":
+        return GrblLink.open(str(port), baud=ser.baud, banner_timeout_s=ser.banner_timeout_s,
+                             reply_timeout_s=ser.reply_timeout_s)
+    link = Link.open(str(port), baud=ser.baud, banner_timeout_s=ser.banner_timeout_s,
+                     reply_timeout_s=ser.reply_timeout_s, link_baud=ser.link_baud)
+    if link.baud_warning:
+        click.echo(f"warning: {link.baud_warning}", err=True)
+    return link
 
 
 def page_size(text: str, landscape: bool = False) -> tuple[float, float]:

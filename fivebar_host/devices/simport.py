@@ -358,7 +358,10 @@ class Serial(serial.SerialBase):
         return emu
 
     def _reconfigure_port(self, force_update: bool = False) -> None:
+        """Timeouts, and the baud rate: the pty's speed, which the harness compares with
+        the UART's (firmware/sim/fbsim.c: at another rate every byte is lost)."""
         if self._inner is not None:
+            self._inner.baudrate = self._baudrate
             self._inner.timeout = self._timeout
             self._inner.write_timeout = self._write_timeout
 

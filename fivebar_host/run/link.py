@@ -21,7 +21,7 @@ from typing import Any
 import serial
 
 from fivebar_host import protocol
-from fivebar_host.protocol import Banner, ErrorReply, Message, ProtocolError, StatusReport
+from fivebar_host.protocol import Banner, ErrorReply, Message, Ok, ProtocolError, StatusReport
 from fivebar_host.run.errors import (
     FaultKind,
     FirmwareMismatchError,
@@ -55,12 +55,17 @@ class Link:
         self.bytes_sent = 0
         self._buf = b""
         self._pending: deque[Message] = deque()
+        self.baud_warning: str | None = None  # set_baud fell back to the base rate: why
 
     # ------------------------------------------------------------------ opening
     @classmethod
     def open(cls, url: str, *, baud: int = 115200, banner_timeout_s: float = 5.0,
-             reply_timeout_s: float = 10.0) -> Link:
-        """Open `url` (a device path, COM port or pyserial URL) and wait for the banner."""
+             reply_timeout_s: float = 10.0, link_baud: int | None = None) -> Link:
+        """Open `url` (a device path, COM port or pyserial URL) and wait for the banner.
+
+        `link_baud` (the profile's `[serial] link_baud`): a faster rate to switch to with
+        `set_baud` once connected; if the switch fails the link stays at the base rate and
+        `baud_warning` says why."""
         register_url_handlers()
         try:
             port = serial.serial_for_url(url, baudrate=baud, timeout=0.02, write_timeout=5.0)
@@ -71,6 +76,8 @@ class Link:
         link = cls(port, url=url, reply_timeout_s=reply_timeout_s)
         try:
             link.handshake(banner_timeout_s)
+            if link_baud is not None and link_baud != link.port.baudrate:
+                link.set_baud(link_baud)
         except BaseException:
             link.close()
             raise
@@ -224,13 +231,24 @@ class Link:
         self.stream([body], counting=False, timeout_s=timeout_s)
 
     def reset(self, timeout_s: float = 5.0) -> Banner:
-        """Ctrl-X: the firmware clears its queue, turns the laser off and reboots its state."""
+        """Ctrl-X: the firmware clears its queue, turns the laser off and reboots its state.
+
+        It also returns to the base rate (protocol 1): so does the port, and if the banner
+        was lost in the switch it is asked for with `$I` (the reset ended numbering)."""
         self._write(protocol.RT_RESET)
+        want_ask = self._to_base_baud()
+        asked = not want_ask
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
+            if not asked and time.monotonic() > deadline - timeout_s + 0.25:
+                self._write(b"\n$I\n")
+                asked = True
             for msg in self._messages(0.05):
                 if isinstance(msg, Banner):
                     self.banner = msg
+                    if want_ask and asked:
+                        time.sleep(0.1)  # the replies to the `$I` asked for
+                        self._drain_input()
                     self._pending.clear()
                     st = self.status()
                     self.next_line = st.accepted_line + 1
@@ -245,6 +263,7 @@ class Link:
         The reboot restarts the line counter (the next line is 1) and keeps the RAM powered:
         the controller keeps its position, `H` and `Ln` done (docs/protocol.md 7)."""
         try:
+            self._to_base_baud()  # the rebooted firmware speaks at the base rate
             self.port.dtr = False
             time.sleep(0.05)
             self.port.dtr = True
@@ -262,6 +281,84 @@ class Link:
                     self._pending.clear()
                     self.next_line = 1
                     return True
+        return False
+
+    def set_baud(self, baud: int, probe_timeout_s: float = 0.5) -> bool:
+        """Switch the link to `baud` (`$B`, docs/protocol.md 1.1); True if it runs there.
+
+        The firmware answers `ok` at the old rate and switches; the port follows and a
+        probe (`$I`, numbered) must bring the banner and `ok` back. If it does not, the
+        firmware returns to the base rate by itself `BAUD_TRIAL_S` after its switch: the
+        port does too, the probe is repeated there, `baud_warning` says what happened and
+        False is returned. A rate that is not a link rate raises LinkError before anything is
+        sent; a firmware that refuses `$B` (one without it: `error:4`) leaves the link at
+        the base rate, with the warning, and False.
+        """
+        if baud not in protocol.BAUD_RATES:
+            raise LinkError(f"{self.url}: {baud} baud is not one of "
+                            f"{', '.join(map(str, protocol.BAUD_RATES))}")
+        try:
+            self.command(f"$B={baud}")
+        except LinkFaultError as e:
+            if e.kind is not FaultKind.ERROR:
+                raise
+            # the refused line used its number: the firmware's counter says where it is
+            self.next_line = self.status().accepted_line + 1
+            why = e.message.rsplit(": ", 1)[-1]
+            self.baud_warning = (f"{self.url}: the firmware refused $B ({why}); the link "
+                                 f"stays at {protocol.BASE_BAUD} baud")
+            return False
+        switched = time.monotonic()
+        self._set_port_baud(baud)
+        if self._probe(probe_timeout_s):
+            self.baud_warning = None
+            return True
+        self._set_port_baud(protocol.BASE_BAUD)
+        time.sleep(max(0.0, switched + protocol.BAUD_TRIAL_S + 0.2 - time.monotonic()))
+        if not self._probe(self.reply_timeout_s):
+            raise LinkFaultError(FaultKind.TIMEOUT, f"{self.url}: no answer at {baud} baud "
+                                 f"nor back at {protocol.BASE_BAUD} after $B", -1)
+        self.baud_warning = (f"{self.url}: no answer at {baud} baud (cable, adapter?); "
+                             f"the link stays at {protocol.BASE_BAUD} baud")
+        return False
+
+    def _set_port_baud(self, baud: int) -> None:
+        """The port's own rate, once what was written has left at the old one."""
+        try:
+            self.port.flush()
+            self.port.baudrate = baud
+        except (serial.SerialException, OSError, ValueError) as e:
+            raise LinkError(f"{self.url}: cannot set {baud} baud: {e}") from e
+        self._buf = b""
+
+    def _to_base_baud(self) -> bool:
+        """After a reset of the firmware: back to the base rate; whether the rate changed."""
+        if getattr(self.port, "baudrate", protocol.BASE_BAUD) == protocol.BASE_BAUD:
+            return False
+        with contextlib.suppress(serial.SerialException, OSError):
+            self.port.flush()
+        time.sleep(0.02)  # what was just written (Ctrl-X) leaves at the old rate
+        self._set_port_baud(protocol.BASE_BAUD)
+        return True
+
+    def _probe(self, timeout_s: float) -> bool:
+        """`$I` as the next numbered line: True once its banner and `ok` are back."""
+        self._write(protocol.encode_line("$I", self.next_line))
+        deadline = time.monotonic() + timeout_s
+        banner = False
+        while time.monotonic() < deadline:
+            for raw in self._read_raw_lines(0.05):
+                try:
+                    msg = self._parse(raw)
+                except ProtocolError:
+                    continue  # bytes garbled by a rate mismatch
+                if isinstance(msg, Banner):
+                    banner = True
+                elif isinstance(msg, Ok) and banner:
+                    self.next_line += 1
+                    return True
+                elif isinstance(msg, ErrorReply) and msg.resend == self.next_line:
+                    self._write(protocol.encode_line("$I", self.next_line))  # garbled: again
         return False
 
     def wait_idle(self, timeout_s: float, on_status: Callable[[StatusReport], None] | None = None,
@@ -292,7 +389,7 @@ class Link:
                timeout_s: float | None = None,
                should_stop: Callable[[], bool] | None = None,
                on_interrupt: Callable[[], bool] | None = None,
-               overrides: Overrides | None = None) -> StreamResult:
+               overrides: Overrides | None = None, pack_lines: bool = True) -> StreamResult:
         """Send `bodies` as numbered, checksummed lines; return when every line is `ok`.
 
         Character counting keeps the unanswered bytes within the banner's `rx:`; with
@@ -306,8 +403,11 @@ class Link:
         When `should_stop()` turns true the machine is held at once (`!`, laser off) and
         `on_interrupt()` decides: True resumes (`~`) and streaming goes on, False (or no
         callback) raises `LinkFaultError(FaultKind.INTERRUPT)`. `overrides` (live feed and
-        power, `run.overrides`) apply to the lines not yet written. See `run.stream.Streamer`.
+        power, `run.overrides`) apply to the lines not yet written. With `pack_lines` runs of
+        G1 bodies after a `G90` go out as G6 lines (`run.pack`, protocol 6.3), one line
+        number per body as before. See `run.stream.Streamer`.
         """
         return Streamer(self, bodies, counting=counting, on_progress=on_progress,
                         timeout_s=timeout_s, should_stop=should_stop,
-                        on_interrupt=on_interrupt, overrides=overrides).run()
+                        on_interrupt=on_interrupt, overrides=overrides,
+                        pack_lines=pack_lines).run()

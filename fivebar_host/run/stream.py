@@ -42,8 +42,9 @@ from fivebar_host.protocol import (
     SettingLine,
     StatusReport,
 )
+from fivebar_host.run import pack
 from fivebar_host.run.errors import FaultKind, LinkError, LinkFaultError
-from fivebar_host.run.overrides import OverrideEncoder, Overrides
+from fivebar_host.run.overrides import FEED_MAX_PCT, OverrideEncoder, Overrides
 
 if TYPE_CHECKING:
     from fivebar_host.run.link import Link
@@ -99,12 +100,13 @@ TRANSITIONS: dict[Phase, frozenset[Phase]] = {
 
 
 class InFlight:
-    """The lines written and not yet answered: (job index, bytes, time written), oldest first.
+    """The lines written and not yet answered: (job index, job lines covered, bytes, time
+    written), oldest first; a G6 wire line covers several job lines (`run.pack`).
 
     Replies come in the order the lines were written, so each reply answers the oldest."""
 
     def __init__(self) -> None:
-        self.lines: deque[tuple[int, int, float]] = deque()
+        self.lines: deque[tuple[int, int, int, float]] = deque()
         self.bytes = 0
 
     def __bool__(self) -> bool:
@@ -114,19 +116,19 @@ class InFlight:
         """Whether a line of `nbytes` may be written (one line always may, alone)."""
         return not self.lines or self.bytes + nbytes <= budget
 
-    def push(self, index: int, nbytes: int) -> None:
-        self.lines.append((index, nbytes, time.monotonic()))
+    def push(self, index: int, count: int, nbytes: int) -> None:
+        self.lines.append((index, count, nbytes, time.monotonic()))
         self.bytes += nbytes
 
-    def pop(self) -> int:
-        """Remove the oldest line; its job index."""
-        index, nbytes, _ = self.lines.popleft()
+    def pop(self) -> tuple[int, int]:
+        """Remove the oldest line; its first job index and how many job lines it covers."""
+        index, count, nbytes, _ = self.lines.popleft()
         self.bytes -= nbytes
-        return index
+        return index, count
 
     def oldest(self) -> tuple[int, float]:
         """Job index of the oldest line and when it was written."""
-        index, _, at = self.lines[0]
+        index, _, _, at = self.lines[0]
         return index, at
 
     def clear(self) -> None:
@@ -145,7 +147,7 @@ class Streamer:
                  timeout_s: float | None = None,
                  should_stop: Callable[[], bool] | None = None,
                  on_interrupt: Callable[[], bool] | None = None,
-                 overrides: Overrides | None = None) -> None:
+                 overrides: Overrides | None = None, pack_lines: bool = True) -> None:
         if link.banner is None:
             raise LinkError(f"{link.url}: no handshake yet")
         self.link = link
@@ -157,10 +159,18 @@ class Streamer:
         self.budget = link.banner.rx if counting else 1
         self.first = link.next_line
         self.encoder = None if overrides is None else OverrideEncoder(bodies, overrides)
-        self.encoded: list[bytes] = []  # the lines as written (or to be), job index order
+        self.sent_bodies: list[str] = []  # the bodies as sent (overrides applied), in order
+        self.feed_after: list[int] = []  # the encoder's feed factor after each of them
+        self.wire: dict[int, tuple[bytes, int]] = {}  # job index → (wire line, lines covered)
+        self.absolute = pack.modes(list(bodies)) if pack_lines else None
+        # two packed lines fit the receive buffer, so one is always on its way while the
+        # firmware works on the other
+        self.limit = min(link.banner.line_max + 1, link.banner.rx // 2)
         self.total = len(bodies)
-        if self.encoder is None and self.total:
-            self._line(self.total - 1)
+        if self.encoder is None:
+            j = 0
+            while j < self.total:
+                j += self._wire(j)[1]
         self.inflight = InFlight()
         self.nxt = 0  # next job index to write
         self.acked = 0
@@ -237,24 +247,56 @@ class Streamer:
 
     def _send_what_fits(self) -> None:
         """Write lines while their bytes fit the budget; WAITING once all are written."""
-        while self.nxt < self.total and self.inflight.fits(len(self._line(self.nxt)),
-                                                           self.budget):
-            line = self.encoded[self.nxt]
+        while self.nxt < self.total:
+            line, count = self._wire(self.nxt)
+            if not self.inflight.fits(len(line), self.budget):
+                if self.encoder is not None and self.nxt >= self.sent_max:
+                    self._unbuild(self.nxt)  # built again when it fits, overrides then
+                break
             self.link._write(line)
-            self.inflight.push(self.nxt, len(line))
-            self.nxt += 1
+            self.inflight.push(self.nxt, count, len(line))
+            self.nxt += count
             self.sent_max = max(self.sent_max, self.nxt)
         if self.nxt == self.total:
             self._enter(Phase.WAITING)
 
-    def _line(self, index: int) -> bytes:
-        """Job line `index` encoded: the lines up to it are encoded now if they were not
-        yet (with the overrides in force), and never again."""
-        while len(self.encoded) <= index:
-            j = len(self.encoded)
-            body = self.bodies[j] if self.encoder is None else self.encoder.body(j)
-            self.encoded.append(protocol.encode_line(body, self.first + j))
-        return self.encoded[index]
+    def _body(self, index: int) -> str:
+        """Job line `index` as sent: the bodies up to it are encoded now if they were not
+        yet (with the overrides in force); kept once written (`_unbuild` drops the rest)."""
+        while len(self.sent_bodies) <= index:
+            j = len(self.sent_bodies)
+            if self.encoder is None:
+                self.sent_bodies.append(self.bodies[j])
+            else:
+                self.sent_bodies.append(self.encoder.body(j))
+                self.feed_after.append(self.encoder.feed_pct)
+        return self.sent_bodies[index]
+
+    def _unbuild(self, index: int) -> None:
+        """Forget the bodies from job line `index` on, none of them written yet, and the
+        wire line starting there: the overrides in force when they are built again apply
+        (an override takes effect at the next line written, never changes one written)."""
+        assert self.encoder is not None
+        del self.sent_bodies[index:]
+        del self.feed_after[index:]
+        self.encoder.feed_pct = self.feed_after[-1] if self.feed_after else FEED_MAX_PCT
+        self.wire.pop(index, None)
+
+    def _wire(self, index: int) -> tuple[bytes, int]:
+        """The wire line that starts at job line `index` and how many job lines it covers
+        (a G6 several, `run.pack`); kept once built, so a resend sends the same bytes. The
+        body after a G6 (read to see whether it joins) stays unbuilt."""
+        got = self.wire.get(index)
+        if got is None:
+            if self.absolute is None:
+                got = protocol.encode_line(self._body(index), self.first + index), 1
+            else:
+                got = pack.pack_line(self._body, index, self.total, self.first + index,
+                                     self.absolute[index], self.limit)
+                if self.encoder is not None and len(self.sent_bodies) > index + got[1]:
+                    self._unbuild(index + got[1])
+            self.wire[index] = got
+        return got
 
     def _poll_status(self) -> None:
         now = time.monotonic()
@@ -327,10 +369,10 @@ class Streamer:
         self.last_reply = self.last_activity
         if not self.inflight:
             raise self._fault(FaultKind.ERROR, f"unexpected reply {msg} with no line in flight")
-        index = self.inflight.pop()
+        index, count = self.inflight.pop()
         if isinstance(msg, Ok):
             if index == self.acked:
-                self.acked += 1
+                self.acked += count
             self._progress()
         elif msg.resend is not None:
             self._on_resend_request(msg.resend)

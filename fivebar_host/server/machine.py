@@ -164,7 +164,8 @@ class MachineState(threading.Thread):
         try:
             opened = JournalLink.open(cfg.port_url, baud=cfg.baud,
                                       banner_timeout_s=cfg.banner_timeout_s,
-                                      reply_timeout_s=cfg.reply_timeout_s)
+                                      reply_timeout_s=cfg.reply_timeout_s,
+                                      link_baud=cfg.profile.serial.link_baud)
         except (LinkError, OSError) as e:
             if self.error != str(e):
                 log.warning("cannot open %s: %s (retrying every %g s)", cfg.port_url, e,
@@ -173,6 +174,8 @@ class MachineState(threading.Thread):
             return False
         assert isinstance(opened, JournalLink)
         link = opened
+        if link.baud_warning:
+            log.warning("%s", link.baud_warning)
         link.on_status = lambda: self.on_change()
         self.link = link
         self.error = None

@@ -126,7 +126,8 @@ def _merge(windows: list[tuple[int, int]]) -> list[tuple[int, int]]:
 def test_boot_banner_and_info(device: Device) -> None:
     banner = device.session.banner
     assert banner is not None
-    assert (banner.proto, banner.rx, banner.queue, banner.line_max) == (2, 128, 16, 80)
+    assert (banner.proto, banner.rx, banner.queue, banner.line_max) == (
+        protocol.PROTOCOL_VERSION, 128, 16, 80)
     device.port.write(b"$I\n")
     assert device.session.read_message() == banner
     assert device.session.read_reply() == Ok()

@@ -17,6 +17,7 @@ from __future__ import annotations
 from collections import deque
 
 from fivebar_host import protocol
+from fivebar_host.devices.mock.baud import UartRate
 from fivebar_host.devices.mock.codes import (
     A_ENDSTOP,
     CYCLES_PER_US,
@@ -74,6 +75,7 @@ class MockFirmware(MotionCore):
         self.disconnected = False
         self.rebooted = False  # set by a reboot; MockSerial drops the rest of the write
         self._faults_fired: set[str] = set()
+        self.uart = UartRate()  # $B (mock/baud.py); the port sets its host_baud
         self._boot(now, kept)
 
     # ----------------------------------------------------------------- boot and reset
@@ -115,6 +117,7 @@ class MockFirmware(MotionCore):
         self.line = bytearray()
         self.line_over = False
         self.pending: Command | None = None
+        self.g6_queued = 0  # segments of the pending G6 queued so far (1: its head)
         self.held = False
         self.hold_reason = 0
         self.resume_at = None
@@ -131,6 +134,7 @@ class MockFirmware(MotionCore):
         self.plan = list(self.pos)
         self.first_queued = self.t
         self.last_rx = self.t
+        self.uart.reset()
         self._emit(self.banner_text())
 
     def banner_text(self) -> str:
@@ -168,7 +172,7 @@ class MockFirmware(MotionCore):
     # ----------------------------------------------------------------- output
 
     def _emit(self, text: str) -> None:
-        if not self.stalled:
+        if not self.stalled and self.uart.matches():  # else lost on the wire
             self.out += (text + EOL).encode("ascii")
 
     def status_text(self) -> str:
@@ -241,6 +245,7 @@ class MockFirmware(MotionCore):
 
     def advance(self, now: float) -> None:
         """Run the device up to clock time ``now``, event by event."""
+        self.uart.fallback(now)
         if self.stalled:
             wd = self.watchdog_at()
             if wd is None or now < wd:
@@ -357,6 +362,8 @@ class MockFirmware(MotionCore):
             before = self.last, self.numbered
             parsed = parse_line(self.last, data, self.numbered)
             self.last, self.numbered = parsed.last, parsed.numbered
+            if parsed.status == OK:
+                self.uart.valid_line()
             st = parsed.status
             if self.opt.error_on == k and st == OK:
                 st = self.opt.error_code  # the injected refusal
@@ -401,7 +408,9 @@ class MockFirmware(MotionCore):
         if st == WAIT:
             return False
         self.pending = None
+        self.g6_queued = 0
         self._finish(st)
+        self.uart.after_reply(self.t)
         return True
 
     def _execute(self, c: Command) -> int:
@@ -412,6 +421,8 @@ class MockFirmware(MotionCore):
         k = c.kind
         if k == "G1":
             return self._exec_g1(c)
+        if k == "G6":
+            return self._exec_g6(c)
         if k in ("G90", "G91"):
             self.absolute = k == "G90"
             return OK
@@ -453,6 +464,8 @@ class MockFirmware(MotionCore):
             return OK
         if k == "$=":
             return self._exec_set(c)
+        if k == "$B":
+            return self.uart.request(c.value)
         return OK  # empty line, M110
 
     def _queue_full(self) -> bool:
@@ -464,34 +477,81 @@ class MockFirmware(MotionCore):
             self.first_queued = self.t
         self.queue.append(blk)
 
-    def _exec_g1(self, c: Command) -> int:
-        if self._queue_full():
-            return WAIT
-        w = c.words
-        t = list(self.plan)
-        for i, axis in enumerate("AB"):
-            if axis in w:
-                t[i] = w[axis] if self.absolute else self.plan[i] + w[axis]
+    def _check_segment(self, frm: list[int], t: list[int], p: int) -> int:
+        """The G1 checks of a segment from ``frm`` to ``t`` in ``p`` µs, in the firmware's
+        order (protocol section 6): range, soft limits, motors off, step rate."""
         if any(abs(v) > POS_LIMIT for v in t):
             return E_OUT_OF_RANGE
         s = self.settings
         if s[S_SOFT] and not (s[S_A_MIN] <= t[0] <= s[S_A_MAX]
                               and s[S_B_MIN] <= t[1] <= s[S_B_MAX]):
             return E_SOFT_LIMIT
-        if not self.motors_on and t != self.plan:
+        if not self.motors_on and t != frm:
             return E_MOTORS_OFF
-        p = w["P"]
         cycles = p * CYCLES_PER_US
-        delta = (t[0] - self.plan[0], t[1] - self.plan[1])
         min_interval = step_interval(s[S_MAX_RATE])
-        for d in delta:
+        for d in (t[0] - frm[0], t[1] - frm[1]):
             if d and cycles // abs(d) < min_interval:
                 return E_TOO_FAST
+        return OK
+
+    def _head_target(self, c: Command) -> list[int]:
+        w = c.words
+        t = list(self.plan)
+        for i, axis in enumerate("AB"):
+            if axis in w:
+                t[i] = w[axis] if self.absolute else self.plan[i] + w[axis]
+        return t
+
+    def _exec_g1(self, c: Command, line: int | None = None) -> int:
+        """G1 (and a G6's head, numbered `line`): one block, checked first."""
+        if self._queue_full():
+            return WAIT
+        w = c.words
+        t = self._head_target(c)
+        p = w["P"]
+        st = self._check_segment(self.plan, t, p)
+        if st != OK:
+            return st
+        cycles = p * CYCLES_PER_US
+        delta = (t[0] - self.plan[0], t[1] - self.plan[1])
         if "S" in w:
             self.laser_s = w["S"]
         power = self.laser_s if self.laser_on else 0
-        self._push(Block("G1", self.last, delta, (cycles, cycles), float(p), power, p))
+        self._push(Block("G1", self.last if line is None else line, delta, (cycles, cycles),
+                         float(p), power, p))
         self.plan = t
+        return OK
+
+    def _exec_g6(self, c: Command) -> int:
+        """G6 (fb_main.c exec_g6): every segment checked before any is queued, then the head
+        as a G1 and one block per item as slots free, numbered from the line's N."""
+        first = (self.last - len(c.items)) & 0xFFFFFFFF
+        if not self.g6_queued:
+            frm, t, p = list(self.plan), self._head_target(c), c.words["P"]
+            st = self._check_segment(frm, t, p)
+            for da, db, p in c.items:
+                if st != OK:
+                    break
+                frm, t = t, [t[0] + da, t[1] + db]
+                st = self._check_segment(frm, t, p)
+            if st != OK:
+                return st
+            st = self._exec_g1(c, first)
+            if st != OK:
+                return st
+            self.g6_queued = 1
+        while self.g6_queued <= len(c.items):
+            if self._queue_full():
+                return WAIT
+            da, db, p = c.items[self.g6_queued - 1]
+            cycles = p * CYCLES_PER_US
+            power = self.laser_s if self.laser_on else 0
+            self._push(Block("G1", (first + self.g6_queued) & 0xFFFFFFFF, (da, db),
+                             (cycles, cycles), float(p), power, p))
+            self.plan = [self.plan[0] + da, self.plan[1] + db]
+            self.g6_queued += 1
+        self.g6_queued = 0
         return OK
 
     def _exec_pen(self, c: Command) -> int:

@@ -34,8 +34,10 @@ from fivebar_host.protocol import POS_LIMIT, crc16
 class Command:
     """One parsed line: command kind (``""`` for an empty line), words, line number."""
 
-    kind: str = ""  # "", G1 G90 G91 G92 M3 M5 M17 M18 M110 M280 $I $$ $H $X $=
+    kind: str = ""  # "", G1 G6 G90 G91 G92 M3 M5 M17 M18 M110 M280 $I $$ $H $X $= $B
     words: dict[str, int] = field(default_factory=dict)
+    #: G6: the segments after its head, (ΔA, ΔB, P µs) each; one line number each
+    items: list[tuple[int, int, int]] = field(default_factory=list)
     n: int | None = None
     setting: int = 0
     value: int = 0
@@ -91,8 +93,8 @@ def _parse_int(s: bytes, i: int, end: int) -> tuple[int, int, int]:
     return st, -v if neg else v, i
 
 
-_ALLOWED = {"G1": "ABPS", "G92": "AB", "M3": "S", "M280": "SRD"}
-_G_CODES = {1: "G1", 90: "G90", 91: "G91", 92: "G92"}
+_ALLOWED = {"G1": "ABPS", "G6": "ABPS", "G92": "AB", "M3": "S", "M280": "SRD"}
+_G_CODES = {1: "G1", 6: "G6", 90: "G90", 91: "G91", 92: "G92"}
 _M_CODES = {3: "M3", 5: "M5", 17: "M17", 18: "M18", 110: "M110", 280: "M280"}
 
 
@@ -118,6 +120,14 @@ def _parse_dollar(s: bytes, i: int, end: int, cmd: Command) -> int:
             return E_BAD_WORD
         cmd.kind, cmd.setting, cmd.value = "$=", n, v
         return OK
+    if c == ord("B") and i + 1 < end and s[i + 1] == ord("="):  # $B=<baud>, checked later
+        st, v, j = _parse_int(s, i + 2, end)
+        if st != OK:
+            return st
+        if _skip_ws(s, j, end) < end:
+            return E_BAD_WORD
+        cmd.kind, cmd.value = "$B", v
+        return OK
     kinds = {ord("I"): "$I", ord("$"): "$$", ord("H"): "$H", ord("X"): "$X"}
     if c not in kinds:
         return E_UNKNOWN_COMMAND
@@ -141,7 +151,7 @@ def _check_ranges(cmd: Command) -> int:
         return E_OUT_OF_RANGE
     if "P" in w and not P_MIN_US <= w["P"] <= P_MAX_US:
         return E_OUT_OF_RANGE
-    if cmd.kind == "G1" and "P" not in w:
+    if cmd.kind in ("G1", "G6") and "P" not in w:
         return E_MISSING_WORD
     if cmd.kind == "G92" and "A" not in w and "B" not in w:
         return E_MISSING_WORD
@@ -181,6 +191,9 @@ def _parse_words(s: bytes, i: int, end: int, cmd: Command) -> int:
         i = _skip_ws(s, i, end)
         if i >= end:
             return OK
+        # a G6's items start at a sign, or at a second P
+        if cmd.kind == "G6" and (s[i] in b"+-" or (_upper(s[i]) == ord("P") and "P" in cmd.words)):
+            return _g6_items(s, i, end, cmd)
         w = chr(_upper(s[i]))
         if w not in "ABPSRD" or w not in allowed or w in cmd.words:
             return E_BAD_WORD
@@ -188,6 +201,64 @@ def _parse_words(s: bytes, i: int, end: int, cmd: Command) -> int:
         if st != OK:
             return st
         cmd.words[w] = v
+
+
+def _item_num(s: bytes, i: int, end: int) -> tuple[int, int, int]:
+    """A G6 item number (fb_proto.c item_num): optional sign, digits, ending at the end,
+    a blank, a letter or the next item's sign; |value| ≤ POS_LIMIT."""
+    neg = False
+    if i < end and s[i] in b"+-":
+        neg = s[i] == ord("-")
+        i += 1
+    v = digits = 0
+    over = False
+    while i < end and _is_digit(s[i]):
+        if v > POS_LIMIT:
+            over = True
+        else:
+            v = v * 10 + s[i] - 0x30
+        i += 1
+        digits += 1
+    if not digits or not (i >= end or _is_ws(s[i]) or _is_letter(s[i]) or s[i] in b"+-"):
+        return E_BAD_NUMBER, 0, i
+    if over or v > POS_LIMIT:
+        return E_OUT_OF_RANGE, 0, i
+    return OK, -v if neg else v, i
+
+
+def _g6_item(s: bytes, i: int, end: int, p: int) -> tuple[int, tuple[int, int, int], int]:
+    """One G6 item (fb_proto.c g6_item): ``[P<µs>]<±a><±b>``; (status, (ΔA, ΔB, P), index)."""
+    i = _skip_ws(s, i, end)
+    if i < end and _upper(s[i]) == ord("P"):
+        i += 1
+        if i < end and s[i] in b"+-":
+            return E_BAD_NUMBER, (0, 0, p), i
+        st, p, i = _item_num(s, i, end)
+        if st != OK:
+            return st, (0, 0, p), i
+        if not P_MIN_US <= p <= P_MAX_US:
+            return E_OUT_OF_RANGE, (0, 0, p), i
+        i = _skip_ws(s, i, end)
+    d = [0, 0]
+    for k in range(2):
+        if i >= end or s[i] not in b"+-":
+            return E_BAD_WORD, (0, 0, p), i
+        st, d[k], i = _item_num(s, i, end)
+        if st != OK:
+            return st, (0, 0, p), i
+    return OK, (d[0], d[1], p), i
+
+
+def _g6_items(s: bytes, i: int, end: int, cmd: Command) -> int:
+    """The items of a G6 line from ``s[i]`` (fb_proto.c g6_items), into ``cmd.items``."""
+    p = cmd.words.get("P", 0)
+    while (i := _skip_ws(s, i, end)) < end:
+        st, item, i = _g6_item(s, i, end, p)
+        if st != OK:
+            return st
+        cmd.items.append(item)
+        p = item[2]
+    return OK
 
 
 @dataclass(frozen=True)
@@ -276,13 +347,16 @@ def parse_line(last: int, line: bytes, numbered: bool = False) -> Parsed:
     elif _lost_number(line, i, end, star):
         return Parsed(E_NO_CHECKSUM, last, False, cmd, numbered)
     st = _parse_body(line, i, end, cmd)
+    if st != OK:  # a line accepted with its parse error uses one line number
+        cmd.items.clear()
+    extra = len(cmd.items)  # a G6 uses one line number per segment
     if st == OK and cmd.kind == "M110":
         return Parsed(OK, cmd.n if cmd.n is not None else 0, True, cmd, cmd.n is not None)
     if cmd.n is not None:
         if cmd.n != (last + 1) & 0xFFFFFFFF:
             return Parsed(E_LINE_NUMBER, last, False, cmd, numbered)
-        return Parsed(st, cmd.n, True, cmd, True)
+        return Parsed(st, (cmd.n + extra) & 0xFFFFFFFF, True, cmd, True)
     if numbered:  # strict framing: a numbered host's line that lost its N and checksum
         return Parsed(E_NO_CHECKSUM, last, False, cmd, numbered)
-    return Parsed(st, (last + 1) & 0xFFFFFFFF, True, cmd, False)
+    return Parsed(st, (last + 1 + extra) & 0xFFFFFFFF, True, cmd, False)
 

@@ -80,6 +80,7 @@ class MockSerial(serial.SerialBase):
             self._rng = random.Random(self.options.seed)
             self.firmware = MockFirmware(self.options, m, now, kept)
             m.firmware = self.firmware
+            self.firmware.uart.host_baud = self._baudrate
             m.port = self
             self.firmware.check_startup_faults()
             self._dtr_last = self._dtr_state
@@ -93,9 +94,13 @@ class MockSerial(serial.SerialBase):
             self._cond.notify_all()
 
     def _reconfigure_port(self, force_update: bool = False) -> None:
-        """Nothing to configure; the baud rate is checked like pyserial's loop://."""
+        """The baud rate is checked like pyserial's loop://, and the firmware learns it: at
+        another rate than its own every byte is lost both ways (mock/baud.py)."""
         if not isinstance(self._baudrate, int) or not 0 < self._baudrate < 2**32:
             raise ValueError(f"invalid baudrate: {self._baudrate!r}")
+        if self.firmware is not None:
+            with self._cond:
+                self.firmware.uart.host_baud = self._baudrate
 
     def _update_dtr_state(self) -> None:
         """DTR going active resets the firmware, like the Uno's auto-reset circuit."""
@@ -199,6 +204,8 @@ class MockSerial(serial.SerialBase):
             now = self._clock()
             fw.rebooted = False
             for c in raw:
+                if not fw.uart.matches():
+                    continue  # sent at another rate: framing errors, nothing arrives
                 if c not in protocol.REALTIME_BYTES:
                     if opt.drop and self._rng.random() < opt.drop:
                         continue
