@@ -137,3 +137,29 @@ def test_a_banner_glued_to_a_cut_status_report_answers_a_reset() -> None:
         assert (st.a, st.b, st.homed, st.accepted_line) == (5, 6, True, 0)
     finally:
         port.close()
+
+
+@pytest.mark.parametrize("url", ["fivebar-mock://?speed=0", "fivebar-sim://"])
+def test_a_command_after_a_refused_one_runs(url: str) -> None:
+    """A line refused with a plain error used its number (protocol 5.2, step 9): the next
+    command goes out with the following number and runs — it is neither refused as a
+    repeat nor skipped as a resend outside the stream."""
+    if url.startswith("fivebar-sim"):
+        from fivebar_host.devices.sim import toolchain_missing
+        if toolchain_missing():
+            pytest.skip("emulator unavailable")
+    link = Link.open(url)
+    try:
+        with pytest.raises(LinkFaultError) as e:
+            link.command("$99=1")
+        assert e.value.kind is FaultKind.ERROR
+        line = link.next_line
+        assert link.status().accepted_line == line - 1
+        link.command("G91")
+        link.command("G1 A7 B-3 P2000")
+        link.command("G1 A7 B-3 P2000")  # relative: two moves of 7 and −3
+        st = link.wait_idle(10.0)
+        assert (st.a, st.b) == (14, -6)
+        assert st.accepted_line == line + 2
+    finally:
+        link.close()

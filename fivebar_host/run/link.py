@@ -40,6 +40,11 @@ def register_url_handlers() -> None:
     urls.register()
 
 
+#: How long the link waits for the replies of lines still in flight before it reads the
+#: firmware's line counter after a refused line (`Link.resync_numbering`), s.
+RESYNC_SETTLE_S = 0.2
+
+
 class Link:
     """A protocol session on one open port (anything with pyserial's Serial interface)."""
 
@@ -52,6 +57,8 @@ class Link:
         self.banner: Banner | None = None
         self.last_status: StatusReport | None = None
         self.next_line = 1  # the number the firmware expects next
+        # a refused line left later lines in flight: read the counter before the next stream
+        self.resync_numbering = False
         self.bytes_sent = 0
         self._buf = b""
         self._pending: deque[Message] = deque()
@@ -302,8 +309,6 @@ class Link:
         except LinkFaultError as e:
             if e.kind is not FaultKind.ERROR:
                 raise
-            # the refused line used its number: the firmware's counter says where it is
-            self.next_line = self.status().accepted_line + 1
             why = e.message.rsplit(": ", 1)[-1]
             self.baud_warning = (f"{self.url}: the firmware refused $B ({why}); the link "
                                  f"stays at {protocol.BASE_BAUD} baud")
@@ -407,6 +412,11 @@ class Link:
         G1 bodies after a `G90` go out as G6 lines (`run.pack`, protocol 6.3), one line
         number per body as before. See `run.stream.Streamer`.
         """
+        if self.resync_numbering:
+            self.resync_numbering = False
+            time.sleep(RESYNC_SETTLE_S)  # the replies of the lines still in flight
+            self._drain_input()
+            self.next_line = self.status().accepted_line + 1
         return Streamer(self, bodies, counting=counting, on_progress=on_progress,
                         timeout_s=timeout_s, should_stop=should_stop,
                         on_interrupt=on_interrupt, overrides=overrides,

@@ -379,8 +379,17 @@ class Streamer:
         else:
             info = protocol.CODES.get(msg.code)
             why = info.description if info else "unknown error code"
-            raise self._fault(FaultKind.ERROR, f"job line {index + 1} ({self.bodies[index]!r}) "
-                              f"refused: error:{msg.code} {why}", msg.code)
+            fault = self._fault(FaultKind.ERROR, f"job line {index + 1} "
+                                f"({self.bodies[index]!r}) refused: error:{msg.code} {why}",
+                                msg.code)
+            # A line refused with a plain error was accepted first (protocol 5.2, step 9): its
+            # numbers are used. Alone in flight, the next number is known; with later lines on
+            # their way, the firmware's own counter says it before the link's next stream.
+            if self.inflight:
+                self.link.resync_numbering = True
+            else:
+                self.link.next_line = self.first + index + count
+            raise fault
 
     def _on_resend_request(self, line: int) -> None:
         """DRAINING until the lines in flight are answered, then resend from `line`."""
