@@ -4,7 +4,7 @@ The trace holds one ``<cycle> <pin> <level>`` line per change of a step,
 direction, enable or laser pin (plus ``esA``/``esB`` for simulated endstops),
 with the emulated CPU cycle of the change.  This module turns it into what
 tests and benchmarks check: motor step positions over time (rising step
-edges signed by the direction pin), step pulse widths, direction set-up
+edges signed by the direction pin), step pulse high and low times, direction set-up
 times and the intervals during which the laser was on (PWM pulses merged).
 Pure Python, no I/O beyond reading the file.
 """
@@ -93,6 +93,25 @@ class Trace:
             elif rise is not None:
                 widths.append(cycle - rise)
                 rise = None
+        return widths
+
+    def low_widths(self, axis: str) -> list[int]:
+        """Low time in cycles between each fall and the next rise of ``axis``'s step pin.
+
+        The drivers' minimum step low time (A4988 1 us, DRV8825 1.9 us) is
+        checked against these.
+        """
+        widths = []
+        fall: int | None = None
+        risen = False  # the trace's first 0 is the pin's initial level, not a fall
+        for cycle, level in self.pin("step" + axis):
+            if level == 0 and risen:
+                fall = cycle
+            elif level == 1:
+                risen = True
+                if fall is not None:
+                    widths.append(cycle - fall)
+                    fall = None
         return widths
 
     def dir_setup(self, axis: str) -> list[int]:

@@ -35,6 +35,7 @@ def test_steps_positions_and_timing() -> None:
     assert trace.position_at("A", 299) == 1
     assert trace.position_at("A", 300, start=10) == 12
     assert trace.pulse_widths("A") == [50, 40, 60]
+    assert trace.low_widths("A") == [150, 360]
     assert trace.dir_setup("A") == [90, 80, 300]
     assert trace.steps("B") == []
 
