@@ -1,26 +1,36 @@
-"""Benchmark the firmware in simavr: step rate, jitter, memory, segment rate.
+"""Benchmark the firmware in simavr: step rate, jitter, pulse timing, memory, segment rate.
 
 Prints, all measured in emulated CPU cycles of the 16 MHz ATmega328P:
 - flash and RAM use of the build;
-- the highest sustained two-motor aggregate step rate the firmware executes
-  exactly (every commanded step, each within 1 % of its segment's duration of
-  the ideal DDA time, no queue underrun), streamed over the emulated link as
-  10 ms segments, for equal motor rates and for a 1 : 0.73 ratio;
-- step timing jitter (deviation of each rising step edge from the ideal
-  schedule floor((2k-1)C/2n)), max and RMS, at the highest passing rate;
+- for the motor rate ratios 1:1, 1:0.73, 1:0.5 and 1:0.1, the highest per-motor
+  step rate of the faster motor the firmware executes exactly (every
+  commanded step, each within 1 % of its segment's duration of the ideal DDA
+  time floor((2k-1)C/2n), no queue underrun), streamed over the emulated link
+  as 10 ms segments whose direction alternates (so every segment start
+  changes both direction pins), with the reason the next rate failed;
+- step timing jitter at that rate (deviation of each rising step edge from
+  the ideal schedule, less the median), max and RMS;
+- from the same trace the shortest step pulse high time, low time and
+  direction-change-to-step-edge set-up time in ns, against the datasheet
+  minima of the common step/dir drivers (DRIVERS below);
 - the most segments per second streamed over 115200 baud (line numbers and
   checksums on) without the queue ever running empty.
 
 The harness runs throttled to real time (-R) so the Python host streams at
-the link's real pace.  Run: python benchmarks/firmware.py [--pen]
+the link's real pace.  A busy host machine can starve the stream ("queue ran
+empty") although the firmware keeps up, so a failing rate is tried up to
+ATTEMPTS times; a pass cannot come from luck (every step is checked).
+
+Run: python benchmarks/firmware.py [--pen | --both] [--ratios 1,0.73]
 
 With --pen every run first sets up the pen servo ($14=1800, then M280 S1000:
 pen down) so its pulses (Timer0 compare B on D12) run all through the
-measurement: the figures show what the servo costs the step generator.
+measurement; --both runs every ratio without and with it.
 """
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import math
 import re
@@ -37,29 +47,71 @@ from fivebar_host.devices import sim
 from fivebar_host.devices.simtrace import Trace
 
 F_CPU = 16_000_000
-#: --pen: lines that start the pen servo's pulses before each measurement.
-PEN_LINES = ("$14=1800", "M280 S1000") if "--pen" in sys.argv[1:] else ()
+NS_PER_CYCLE = 1e9 / F_CPU
+#: Lines that start the pen servo's pulses before a measurement (--pen).
+PEN_LINES = ("$14=1800", "M280 S1000")
+#: Motor rate ratios of the rate search (slower motor / faster motor).
+RATIOS = (1.0, 0.73, 0.5, 0.1)
+#: Per-motor rates of the faster motor tried, steps/s, in order, up to the
+#: firmware's cap ($0's limit, CFG_MAX_RATE_LIMIT in config.h); the search
+#: stops at the first that fails.
+RATES = (20_000, 25_000, 30_000, 35_000, 40_000, 45_000, 50_000, 55_000, 60_000)
+CONFIG_H = Path(__file__).resolve().parents[1] / "firmware" / "fivebar" / "config.h"
+ATTEMPTS = 3
+SEGMENTS = 30
+SEGMENT_US = 10_000
 
-
-def start_pen(s: sim.FirmwareSession) -> int:
-    """Send PEN_LINES and wait for them; the queue stops it caused (0 without --pen)."""
-    for line in PEN_LINES:
-        if s.send(line) != protocol.Ok():
-            raise sim.EmulatorError(f"{line} refused")
-    return s.wait_idle().underruns if PEN_LINES else 0
+#: Datasheet minima, ns: (step high, step low, direction set-up before the
+#: step edge).  A4988: Allegro A4988 datasheet, "Timing Requirements" (Figure 1:
+#: STEP high/low 1 us, setup 200 ns); DRV8825: TI SLVSA73, "Timing
+#: Requirements" (tWH(STEP), tWL(STEP) 1.9 us, tSU(STEP) 650 ns); TMC2208:
+#: Trinamic TMC220x datasheet, STEP/DIR timing (tSH, tSL about 100 ns, tDSU
+#: 20 ns).
+DRIVERS = {
+    "A4988": (1000.0, 1000.0, 200.0),
+    "DRV8825": (1900.0, 1900.0, 650.0),
+    "TMC2208": (100.0, 100.0, 20.0),
+}
 
 
 @dataclass(frozen=True)
 class RateResult:
-    """Outcome of one streamed job at a given rate."""
+    """Outcome of one streamed job at a given pair of motor rates."""
 
     ok: bool
     reason: str
-    max_dev: int  # cycles
-    rms_dev: float  # cycles
-    underruns: int
-    min_pulse: int = 0  # shortest step pulse, cycles
-    min_dir_setup: int = 0  # shortest direction-to-step time, cycles
+    max_dev: int = 0  # cycles
+    rms_dev: float = 0.0  # cycles
+    min_high: int = 0  # shortest step pulse high time, cycles
+    min_low: int = 0  # shortest step low time between pulses, cycles
+    min_dir_setup: int = 0  # shortest direction change to step edge, cycles
+    attempts: int = 1
+
+
+def start_pen(s: sim.FirmwareSession, pen: bool) -> int:
+    """Send PEN_LINES when ``pen`` and wait for them; the queue stops they caused."""
+    if not pen:
+        return 0
+    for line in PEN_LINES:
+        if s.send(line) != protocol.Ok():
+            raise sim.EmulatorError(f"{line} refused")
+    return s.wait_idle().underruns
+
+
+def rate_cap() -> int:
+    """CFG_MAX_RATE_LIMIT from config.h: the highest $0, steps/s per motor."""
+    m = re.search(r"#define\s+CFG_MAX_RATE_LIMIT\s+(\d+)", CONFIG_H.read_text())
+    if not m:
+        raise sim.EmulatorError(f"{CONFIG_H}: no CFG_MAX_RATE_LIMIT")
+    return int(m.group(1))
+
+
+def job(rate_a: int, rate_b: int) -> list[tuple[int, int, int]]:
+    """SEGMENTS segments (a, b, p_us) at the given rates, directions alternating."""
+    n_a = rate_a * SEGMENT_US // 1_000_000
+    n_b = rate_b * SEGMENT_US // 1_000_000
+    return [(n_a if k % 2 == 0 else -n_a, -n_b if k % 2 == 0 else n_b, SEGMENT_US)
+            for k in range(SEGMENTS)]
 
 
 def deviations(trace: Trace, segs: list[tuple[int, int, int]]) -> tuple[list[int], str]:
@@ -70,33 +122,36 @@ def deviations(trace: Trace, segs: list[tuple[int, int, int]]) -> tuple[list[int
     raw: list[int] = []
     for axis, name in enumerate(("A", "B")):
         steps = trace.steps(name)
-        ideal: list[int] = []
+        ideal: list[tuple[int, int]] = []
         for j, seg in enumerate(segs):
             n = abs(seg[axis])
             c = seg[2] * F_CPU // 1_000_000
-            ideal += [starts[j] + ((2 * k - 1) * c) // (2 * n) for k in range(1, n + 1)]
+            sign = 1 if seg[axis] > 0 else -1
+            ideal += [(starts[j] + ((2 * k - 1) * c) // (2 * n), sign) for k in range(1, n + 1)]
         if len(steps) != len(ideal):
             return [], f"motor {name}: {len(steps)} steps for {len(ideal)} commanded"
-        raw += [s.cycle - t for s, t in zip(steps, ideal, strict=True)]
+        if any(s.direction != d for s, (_, d) in zip(steps, ideal, strict=True)):
+            return [], f"motor {name}: a step in the wrong direction"
+        raw += [s.cycle - t for s, (t, _) in zip(steps, ideal, strict=True)]
     origin = int(statistics.median(raw))
     return [d - origin for d in raw], ""
 
 
-def run_rate(build: sim.BuildPaths, rate_a: int, rate_b: int, tmp: Path) -> RateResult:
-    """Stream 30 segments of 10 ms at the given per-motor rates and check them."""
-    p_us = 10_000
-    segs = [(rate_a * p_us // 1_000_000, rate_b * p_us // 1_000_000, p_us) for _ in range(30)]
+def run_rate(build: sim.BuildPaths, rate_a: int, rate_b: int, tmp: Path, pen: bool) -> RateResult:
+    """Stream one job at the given per-motor rates and check it."""
+    segs = job(rate_a, rate_b)
     dev = sim.start_device(build, tmp / "rate.trace", realtime=True)
     try:
         s = dev.session
-        base = start_pen(s)
-        for line in ("$0=40000", "G91"):
+        base = start_pen(s, pen)
+        for line in (f"$0={rate_cap()}", "G91"):
             if s.send(line) != protocol.Ok():
-                return RateResult(False, f"{line} refused", 0, 0.0, 0)
-        replies = s.stream([protocol.g1(a, b, p) for a, b, p in segs],
-                           numbered_from=3 + len(PEN_LINES))
+                return RateResult(False, f"{line} refused")
+        first = 3 + (len(PEN_LINES) if pen else 0)
+        replies = s.stream([protocol.g1(a, b, p) for a, b, p in segs], numbered_from=first)
         if any(r != protocol.Ok() for r in replies):
-            return RateResult(False, f"refused: {replies}", 0, 0.0, 0)
+            bad = next(r for r in replies if r != protocol.Ok())
+            return RateResult(False, f"refused: {bad}")
         report = s.wait_idle()
         trace = dev.finish()
     finally:
@@ -104,33 +159,116 @@ def run_rate(build: sim.BuildPaths, rate_a: int, rate_b: int, tmp: Path) -> Rate
     report = dataclasses.replace(report, underruns=report.underruns - base)
     devs, why = deviations(trace, segs)
     if why:
-        return RateResult(False, why, 0, 0.0, report.underruns)
+        return RateResult(False, why)
     worst = max(abs(d) for d in devs)
     rms = math.sqrt(sum(d * d for d in devs) / len(devs))
     if report.underruns != 1:
-        return RateResult(False, f"queue ran empty {report.underruns - 1}x", worst, rms, 0)
-    if worst > p_us * 16 // 100:
-        return RateResult(False, f"step {worst} cycles off schedule", worst, rms, 1)
-    pulse = min(trace.pulse_widths("A") + trace.pulse_widths("B"))
-    setup = min(trace.dir_setup("A") + trace.dir_setup("B"), default=0)
-    return RateResult(True, "exact", worst, rms, 1, pulse, setup)
+        return RateResult(False, f"queue ran empty {report.underruns - 1}x", worst, rms)
+    if worst > SEGMENT_US * 16 // 100:
+        return RateResult(False, f"step {worst} cycles off schedule", worst, rms)
+    return RateResult(
+        True, "exact", worst, rms,
+        min(trace.pulse_widths("A") + trace.pulse_widths("B")),
+        min(trace.low_widths("A") + trace.low_widths("B")),
+        min(trace.dir_setup("A") + trace.dir_setup("B"), default=0),
+    )
 
 
-def run_segments(build: sim.BuildPaths, p_us: int, tmp: Path, count: int = 1000) -> int:
+def run_rate_tries(build: sim.BuildPaths, rate_a: int, rate_b: int, tmp: Path,
+                   pen: bool) -> RateResult:
+    """run_rate up to ATTEMPTS times; the first pass, else the last failure."""
+    res = RateResult(False, "not run")
+    for attempt in range(1, ATTEMPTS + 1):
+        res = dataclasses.replace(run_rate(build, rate_a, rate_b, tmp, pen), attempts=attempt)
+        if res.ok:
+            break
+    return res
+
+
+def rate_search(build: sim.BuildPaths, ratio: float, tmp: Path,
+                pen: bool) -> tuple[int, RateResult | None, str]:
+    """(highest passing rate of the faster motor, its result, why the next failed)."""
+    best, best_res, failed = 0, None, f"the cap, {rate_cap() / 1000:g} kHz ($0), reached"
+    # 10 ms segments: the cap's interval ceil(F_CPU / cap) bounds the steps
+    cap = rate_cap()
+    top = F_CPU // -(-F_CPU // cap) // 100 * 100
+    for rate in [r for r in RATES if r < top] + [top]:
+        res = run_rate_tries(build, rate, round(rate * ratio), tmp, pen)
+        tries = f" (attempt {res.attempts})" if res.attempts > 1 else ""
+        print(f"    1:{ratio:g} at {rate / 1000:4.1f} kHz -> {res.reason}{tries}", flush=True)
+        if not res.ok:
+            failed = f"{rate / 1000:.1f} kHz: {res.reason}"
+            break
+        best, best_res = rate, res
+    return best, best_res, failed
+
+
+def ns(cycles: int) -> float:
+    """Cycles to ns at F_CPU."""
+    return cycles * NS_PER_CYCLE
+
+
+def print_timing(res: RateResult) -> None:
+    """The shortest high, low and set-up times against each driver's minima."""
+    high, low, setup = ns(res.min_high), ns(res.min_low), ns(res.min_dir_setup)
+    print(f"      step high >= {high:.0f} ns, step low >= {low:.0f} ns, "
+          f"dir set-up >= {setup:.0f} ns")
+    for name, (h_min, l_min, s_min) in DRIVERS.items():
+        ok = high >= h_min and low >= l_min and setup >= s_min
+        print(f"      {name:8s} needs high {h_min:.0f} / low {l_min:.0f} / set-up {s_min:.0f} ns:"
+              f" {'met' if ok else 'NOT met'}")
+
+
+def rate_table(build: sim.BuildPaths, ratios: tuple[float, ...], tmp: Path, pen: bool) -> None:
+    """Print the rate search, jitter and pulse timing for every ratio."""
+    label = "with the pen servo running" if pen else "without the pen servo"
+    print(f"  step rate, {label} ({', '.join(PEN_LINES) if pen else 'no M280'}):")
+    rows = []
+    for ratio in ratios:
+        best, res, failed = rate_search(build, ratio, tmp, pen)
+        rows.append((ratio, best, res, failed))
+        if res is None:
+            print(f"  1:{ratio:g}: no rate passed ({failed})")
+            continue
+        print(f"  1:{ratio:g}: {best / 1000:.1f} kHz per motor (faster motor) exact; "
+              f"jitter max {res.max_dev} cycles ({res.max_dev / 16:.1f} us), "
+              f"RMS {res.rms_dev:.1f} cycles; next: {failed}")
+        print_timing(res)
+    print(f"  summary {label}: ratio, highest exact kHz per motor, jitter max/RMS cycles")
+    for ratio, best, res, failed in rows:
+        jit = f"{res.max_dev} / {res.rms_dev:.1f}" if res else "-"
+        print(f"    1:{ratio:<5g} {best / 1000:5.1f} kHz   {jit:>14s}   (next {failed})")
+
+
+def run_segments(build: sim.BuildPaths, p_us: int, tmp: Path, pen: bool, count: int = 1000) -> int:
     """Stream short numbered segments; return how often the queue ran dry mid-job."""
     dev = sim.start_device(build, tmp / "seg.trace", realtime=True)
     try:
         s = dev.session
-        base = start_pen(s)
+        base = start_pen(s, pen)
         s.send("G91")
         lines = [protocol.g1(3 if i % 2 else -3, 2, p_us) for i in range(count)]
-        replies = s.stream(lines, numbered_from=2 + len(PEN_LINES))
+        replies = s.stream(lines, numbered_from=2 + (len(PEN_LINES) if pen else 0))
         if any(r != protocol.Ok() for r in replies):
             raise sim.EmulatorError(f"segments refused: {replies[:3]}")
         report = s.wait_idle()
     finally:
         dev.close()
     return report.underruns - base - 1
+
+
+def segment_rate(build: sim.BuildPaths, tmp: Path, pen: bool) -> None:
+    """Print the highest sustained segment rate over the link."""
+    passed = None
+    for p_us in (5_000, *range(3_000, 1_999, -100)):
+        dry = run_segments(build, p_us, tmp, pen)
+        print(f"    segments of {p_us} us ({1e6 / p_us:.0f}/s): queue ran dry {dry}x")
+        if dry:
+            break
+        passed = p_us
+    if passed:
+        print(f"  sustained segment rate over 115200 baud (N + checksum lines): "
+              f"{1e6 / passed:.0f} segments/s without underrun")
 
 
 def memory(build: sim.BuildPaths) -> tuple[str, str]:
@@ -140,8 +278,21 @@ def memory(build: sim.BuildPaths) -> tuple[str, str]:
     return (flash.group(1) if flash else "?", ram.group(1) if ram else "?")
 
 
-def main() -> int:
+def parse_args(argv: list[str]) -> argparse.Namespace:
+    """Command-line options."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    mode = ap.add_mutually_exclusive_group()
+    mode.add_argument("--pen", action="store_true", help="with the pen servo running")
+    mode.add_argument("--both", action="store_true", help="without, then with the pen servo")
+    ap.add_argument("--ratios", default=",".join(f"{r:g}" for r in RATIOS),
+                    help="comma-separated rate ratios (slower / faster motor)")
+    ap.add_argument("--no-segments", action="store_true", help="skip the segment-rate search")
+    return ap.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
     """Run every measurement and print the figures."""
+    args = parse_args(sys.argv[1:] if argv is None else argv)
     reason = sim.toolchain_missing()
     if reason:
         print(f"cannot benchmark: {reason}")
@@ -150,45 +301,14 @@ def main() -> int:
     flash, ram = memory(build)
     print("fivebar firmware benchmark (simavr, ATmega328P @ 16 MHz, emulated cycles)")
     print(f"  flash: {flash}   RAM (static): {ram}")
-    if PEN_LINES:
-        print("  pen servo running all through (--pen): " + ", ".join(PEN_LINES))
+    ratios = tuple(float(r) for r in args.ratios.split(","))
+    modes = (False, True) if args.both else ((True,) if args.pen else (False,))
     with tempfile.TemporaryDirectory() as tmpdir:
         tmp = Path(tmpdir)
-        for label, ratio in (("equal rates", 1.0), ("ratio 1:0.73", 0.73)):
-            best: tuple[int, RateResult] | None = None
-            for total in range(20_000, 80_001, 5_000):
-                rate_a = round(total / (1 + ratio))
-                rate_b = total - rate_a
-                if max(rate_a, rate_b) > 40_000:
-                    break
-                res = run_rate(build, rate_a, rate_b, tmp)
-                print(f"    {label}: {total / 1000:5.1f} kHz aggregate -> {res.reason}")
-                if not res.ok:
-                    break
-                best = (total, res)
-            if best is None:
-                print(f"  {label}: no rate passed")
-                continue
-            total, res = best
-            print(
-                f"  {label}: highest exact sustained aggregate step rate {total / 1000:.1f} kHz; "
-                f"jitter max {res.max_dev} cycles ({res.max_dev / 16:.1f} us), "
-                f"RMS {res.rms_dev:.0f} cycles ({res.rms_dev / 16:.1f} us); "
-                f"shortest step pulse {res.min_pulse / 16:.1f} us, "
-                f"shortest dir set-up {res.min_dir_setup / 16:.1f} us"
-            )
-        passed = None
-        for p_us in (5_000, *range(3_000, 1_999, -100)):
-            dry = run_segments(build, p_us, tmp)
-            print(f"    segments of {p_us} us ({1e6 / p_us:.0f}/s): queue ran dry {dry}x")
-            if dry:
-                break
-            passed = p_us
-        if passed:
-            print(
-                f"  sustained segment rate over 115200 baud (N + checksum lines): "
-                f"{1e6 / passed:.0f} segments/s without underrun"
-            )
+        for pen in modes:
+            rate_table(build, ratios, tmp, pen)
+        if not args.no_segments:
+            segment_rate(build, tmp, modes[-1])
     return 0
 
 
