@@ -34,7 +34,7 @@ BASE_BAUD: Final = 115200
 #: The rates `$B=<baud>` accepts: the ones the Uno's 16 MHz makes (U2X, UBRR 16/7/3/1).
 BAUD_RATES: Final = (115200, 250000, 500000, 1000000)
 #: After a `$B` switch the firmware returns to BASE_BAUD unless a valid line arrives
-#: within this many seconds (fb_main.c BAUD_TRIAL_MS).
+#: within this many seconds (fb_baud.c BAUD_TRIAL_MS).
 BAUD_TRIAL_S: Final = 1.0
 
 #: Real-time bytes: acted on by the firmware at once, never buffered, never

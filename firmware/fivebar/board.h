@@ -1,10 +1,11 @@
 /*
  * board.h - the seam between the portable core and the hardware.
  *
- * The core (fb_proto.c, fb_motion.c, fb_main.c) only talks to the machine
- * through these functions.  board_avr.c implements them for the ATmega328P;
- * firmware/tests/fake_board.c implements them for the host unit tests.  The
- * few calls on the step interrupt's hot path are static inline on AVR.
+ * The core (fb_proto.c, fb_motion.c, fb_main.c and the fb_*.c it calls)
+ * only talks to the machine through these functions.  board_avr.c implements
+ * them for the ATmega328P; firmware/tests/fake_board.c implements them for
+ * the host unit tests.  The few calls on the step interrupt's hot path are
+ * static inline on AVR.
  *
  * Axis masks: bit 0 = motor A, bit 1 = motor B.
  */

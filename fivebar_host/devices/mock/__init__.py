@@ -1,7 +1,7 @@
 """``fivebar-mock://`` — a pyserial port that is a fivebar controller written in Python.
 
-The mock implements docs/protocol.md the way the firmware (firmware/fivebar/fb_main.c,
-fb_proto.c, fb_motion.c) does, so host code and tests can run without hardware and without
+The mock implements docs/protocol.md the way the firmware (firmware/fivebar/fb_main.c and
+the fb_*.c beside it) does, so host code and tests can run without hardware and without
 the AVR toolchain: the boot banner on open (as the Uno's DTR reset sends it), a receive
 buffer of the banner's size whose excess bytes are lost (``error:18``), line framing with
 line numbers, the checksum field (CRC-16 and length), strict framing and resend requests,

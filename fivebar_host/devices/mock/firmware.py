@@ -176,7 +176,7 @@ class MockFirmware(MotionCore):
             self.out += (text + EOL).encode("ascii")
 
     def status_text(self) -> str:
-        """The status report line the firmware would send now (fb_main.c status_report)."""
+        """The status report line the firmware would send now (fb_report.c status_report)."""
         if self.alarm:
             state = f"Alarm:{self.alarm}"
         elif self.homing is not None:
@@ -524,7 +524,7 @@ class MockFirmware(MotionCore):
         return OK
 
     def _exec_g6(self, c: Command) -> int:
-        """G6 (fb_main.c exec_g6): every segment checked before any is queued, then the head
+        """G6 (fb_exec.c exec_g6): every segment checked before any is queued, then the head
         as a G1 and one block per item as slots free, numbered from the line's N."""
         first = (self.last - len(c.items)) & 0xFFFFFFFF
         if not self.g6_queued:
@@ -555,7 +555,7 @@ class MockFirmware(MotionCore):
         return OK
 
     def _exec_pen(self, c: Command) -> int:
-        """M280: a queued pen block, a dwell of its move + settle time (fb_main.c)."""
+        """M280: a queued pen block, a dwell of its move + settle time (fb_exec.c)."""
         if not self.settings[S_PEN_PARK]:
             return E_NO_PEN
         if self._queue_full():
@@ -589,7 +589,7 @@ class MockFirmware(MotionCore):
             return E_BUSY
         if not self.motors_on:
             return E_MOTORS_OFF
-        # the position is unknown until homed: the seek counts from 0 (fb_main.c exec_home)
+        # the position is unknown until homed: the seek counts from 0 (fb_home.c exec_home)
         self.pos = [0, 0]
         self.plan = [0, 0]
         self.homed = False

@@ -1,0 +1,335 @@
+/*
+ * fb_exec.c - executing parsed commands: G1 and G6 moves (checked against
+ * the position limits, the soft limits and the step rate), G90/G91/G92,
+ * M3/M5, M280 pen blocks, M17/M18, and the $ commands, onto the block queue
+ * of fb_motion; an alarm locks out all but the $ commands.  It also keeps
+ * the plan (where the queue will leave the machine) and starts the queue.
+ */
+#include <string.h>
+#include "fb_exec.h"
+#include "fb_baud.h"
+#include "fb_home.h"
+#include "fb_report.h"
+#include "fb_settings.h"
+#include "fb_state.h"
+#include "fb_motion.h"
+#include "board.h"
+#include "config.h"
+#include "status.h"
+
+uint8_t motors_on;
+static uint8_t absolute, laser_on, laser_s;
+static int32_t plan[2];
+static uint16_t pen_plan;  /* pen pulse after the queued M280 blocks */
+static uint32_t first_queued_ms;
+/* the pending G6 line: checked as a whole, segments queued so far (0: none,
+ * 1: its head), where its next item starts, its current duration */
+static uint8_t g6_checked, g6_queued, g6_at;
+static int32_t g6_p;
+
+uint8_t is_idle(void)
+{
+	return !mo_running() && mo_queue_count() == 0 && !homing;
+}
+
+void sync_plan(void)
+{
+	mo_get_pos(plan);
+	pen_plan = mo_pen_target();
+}
+
+void exec_reset(void)
+{
+	g6_checked = 0;
+	g6_queued = 0;
+	absolute = 1;
+	laser_on = 0;
+	laser_s = 0;
+	motors_on = 1;
+	board_enable_motors(1);
+	sync_plan();
+}
+
+
+/*
+ * A Ctrl-X is acted on in the receive interrupt, and its mo_stop() frees the
+ * slot of the block it drops.  The line waiting for a slot was received before
+ * the Ctrl-X, so it must be discarded by do_reset() without a reply, never
+ * queued into that slot.  The main loop notices f_reset only at the top of
+ * fb_poll(), so every step that would act on a freed slot checks f_reset with
+ * interrupts off, in the same critical section as what it acts on.
+ */
+static uint8_t slot_free(void)
+{
+	uint8_t sreg = board_irq_save();
+	uint8_t ok = !f_reset && mo_queue_free();
+	board_irq_restore(sreg);
+	return ok;
+}
+
+/* Queue the block prepared in mo_slot(); 0 (nothing queued) once a Ctrl-X came. */
+static uint8_t commit_block(void)
+{
+	uint8_t sreg = board_irq_save();
+	uint8_t ok = !f_reset;
+	if (ok) {
+		if (!mo_running() && mo_queue_count() == 0)
+			first_queued_ms = board_ms();
+		mo_push();
+	}
+	board_irq_restore(sreg);
+	return ok;
+}
+
+/* mo_start() unless *cancel (f_reset, f_home_abort) was set by an interrupt. */
+void start_unless(volatile uint8_t *cancel)
+{
+	uint8_t sreg = board_irq_save();
+	if (!*cancel)
+		mo_start();
+	board_irq_restore(sreg);
+}
+
+static uint8_t queue_sync_block(uint8_t type, int32_t a, int32_t b)
+{
+	if (!slot_free())
+		return ST_WAIT;
+	fb_block_t *blk = mo_slot();
+	memset(blk, 0, sizeof(*blk));
+	blk->type = type;
+	blk->q[0] = (uint32_t)a;
+	blk->q[1] = (uint32_t)b;
+	blk->line = lines.last;
+	return commit_block() ? FB_OK : ST_WAIT;
+}
+
+static uint8_t exec_g1(const fb_cmd_t *c)
+{
+	if (!slot_free())
+		return ST_WAIT;
+	int32_t t[2] = { plan[0], plan[1] };
+	if (c->has & W_A)
+		t[0] = absolute ? c->a : plan[0] + c->a;
+	if (c->has & W_B)
+		t[1] = absolute ? c->b : plan[1] + c->b;
+	for (uint8_t i = 0; i < 2; i++)
+		if (t[i] > CFG_POS_LIMIT || t[i] < -CFG_POS_LIMIT)
+			return FB_ERR_OUT_OF_RANGE;
+	if (settings[SET_SOFT_LIMITS] &&
+	    (t[0] < settings[SET_A_MIN] || t[0] > settings[SET_A_MAX] ||
+	     t[1] < settings[SET_B_MIN] || t[1] > settings[SET_B_MAX]))
+		return FB_ERR_SOFT_LIMIT;
+	if (!motors_on && (t[0] != plan[0] || t[1] != plan[1]))
+		return FB_ERR_MOTORS_OFF;
+	fb_block_t *blk = mo_slot();
+	uint8_t st = mo_prepare(blk, t[0] - plan[0], t[1] - plan[1], (uint32_t)c->p, min_interval);
+	if (st != FB_OK)
+		return st;
+	uint8_t s = (c->has & W_S) ? (uint8_t)c->s : laser_s;
+	blk->power = laser_on ? s : 0;
+	blk->line = lines.last - c->g6_count;  /* a G6 head: its first number */
+	if (!commit_block())
+		return ST_WAIT;
+	laser_s = s;
+	plan[0] = t[0];
+	plan[1] = t[1];
+	return FB_OK;
+}
+
+/* Whether target t may be reached from `from` in a segment of p_us (the G1
+ * checks of protocol section 6, in order, with mo_prepare's step rate test:
+ * floor(C / n) >= min_interval <=> n <= floor(C / min_interval)). */
+static uint8_t check_target(const int32_t from[2], const int32_t t[2], int32_t p_us)
+{
+	for (uint8_t i = 0; i < 2; i++)
+		if (t[i] > CFG_POS_LIMIT || t[i] < -CFG_POS_LIMIT)
+			return FB_ERR_OUT_OF_RANGE;
+	if (settings[SET_SOFT_LIMITS] &&
+	    (t[0] < settings[SET_A_MIN] || t[0] > settings[SET_A_MAX] ||
+	     t[1] < settings[SET_B_MIN] || t[1] > settings[SET_B_MAX]))
+		return FB_ERR_SOFT_LIMIT;
+	if (!motors_on && (t[0] != from[0] || t[1] != from[1]))
+		return FB_ERR_MOTORS_OFF;
+	uint32_t lim = (uint32_t)p_us * (FB_F_CPU / 1000000UL) / min_interval;
+	for (uint8_t i = 0; i < 2; i++) {
+		int32_t d = t[i] - from[i];
+		if ((uint32_t)(d < 0 ? -d : d) > lim)
+			return FB_ERR_TOO_FAST;
+	}
+	return FB_OK;
+}
+
+/* Every segment of a G6 line against the checks of a G1, before any is
+ * queued: a line is queued whole or not at all (docs/protocol.md 6.3). */
+static uint8_t g6_check(const fb_cmd_t *c)
+{
+	int32_t from[2] = { plan[0], plan[1] }, t[2] = { plan[0], plan[1] }, d[2];
+	if (c->has & W_A)
+		t[0] = absolute ? c->a : plan[0] + c->a;
+	if (c->has & W_B)
+		t[1] = absolute ? c->b : plan[1] + c->b;
+	int32_t p = c->p;
+	uint8_t at = c->g6_at;
+	uint8_t st = check_target(from, t, p);
+	while (st == FB_OK && fb_g6_next(line, &at, c->g6_end, &p, d)) {
+		from[0] = t[0];
+		from[1] = t[1];
+		t[0] += d[0];
+		t[1] += d[1];
+		st = check_target(from, t, p);
+	}
+	return st;
+}
+
+/* G6: the head as a G1, then one block per item, each as its slot frees
+ * (ST_WAIT in between keeps the line pending); blocks get the numbers
+ * first..first+count. */
+static uint8_t exec_g6(const fb_cmd_t *c)
+{
+	if (!g6_checked) {
+		uint8_t st = g6_check(c);
+		if (st != FB_OK)
+			return st;
+		g6_checked = 1;
+	}
+	if (!g6_queued) {
+		uint8_t st = exec_g1(c);
+		if (st != FB_OK)
+			return st;
+		g6_queued = 1;
+		g6_at = c->g6_at;
+		g6_p = c->p;
+	}
+	uint32_t first = lines.last - c->g6_count;
+	while (g6_queued <= c->g6_count) {
+		if (!slot_free())
+			return ST_WAIT;
+		uint8_t at = g6_at;
+		int32_t p = g6_p, d[2];
+		if (!fb_g6_next(line, &at, c->g6_end, &p, d))
+			return FB_ERR_BAD_WORD;  /* not reached: the line was checked */
+		fb_block_t *blk = mo_slot();
+		uint8_t st = mo_prepare(blk, d[0], d[1], (uint32_t)p, min_interval);
+		if (st != FB_OK)
+			return st;  /* not reached: g6_check ran the same test */
+		blk->power = laser_on ? laser_s : 0;
+		blk->line = first + g6_queued;
+		if (!commit_block())
+			return ST_WAIT;
+		g6_at = at;
+		g6_p = p;
+		plan[0] += d[0];
+		plan[1] += d[1];
+		g6_queued++;
+	}
+	return FB_OK;
+}
+
+/* M280: a queued pen block (protocol section 6.2). */
+static uint8_t exec_pen(const fb_cmd_t *c)
+{
+	if (!settings[SET_PEN_PARK])
+		return FB_ERR_NO_PEN;
+	if (!slot_free())
+		return ST_WAIT;
+	uint16_t to = (uint16_t)c->s;
+	fb_block_t *blk = mo_slot();
+	mo_prepare_pen(blk, pen_plan, to, (uint16_t)c->r, (uint16_t)c->d);
+	blk->line = lines.last;
+	if (!commit_block())
+		return ST_WAIT;
+	pen_plan = to;
+	return FB_OK;
+}
+
+static uint8_t execute(const fb_cmd_t *c)
+{
+	if (alarm_code) {
+		switch (c->kind) {
+		case CMD_NONE: case CMD_M110: case CMD_INFO: case CMD_LIST:
+		case CMD_SET: case CMD_HOME: case CMD_UNLOCK:
+			break;
+		default:
+			return FB_ERR_ALARM_LOCK;
+		}
+	}
+	switch (c->kind) {
+	case CMD_G1:
+		return exec_g1(c);
+	case CMD_G6:
+		return exec_g6(c);
+	case CMD_G90:
+		absolute = 1;
+		return FB_OK;
+	case CMD_G91:
+		absolute = 0;
+		return FB_OK;
+	case CMD_G92: {
+		int32_t a = (c->has & W_A) ? c->a : plan[0];
+		int32_t b = (c->has & W_B) ? c->b : plan[1];
+		uint8_t st = queue_sync_block(BLK_SETPOS, a, b);
+		if (st == FB_OK) {
+			plan[0] = a;
+			plan[1] = b;
+		}
+		return st;
+	}
+	case CMD_M3:
+		laser_on = 1;
+		if (c->has & W_S)
+			laser_s = (uint8_t)c->s;
+		return FB_OK;
+	case CMD_M5:
+		laser_on = 0;
+		return FB_OK;
+	case CMD_M280:
+		return exec_pen(c);
+	case CMD_M17:
+	case CMD_M18: {
+		uint8_t st = queue_sync_block(c->kind == CMD_M17 ? BLK_ENABLE : BLK_DISABLE, 0, 0);
+		if (st == FB_OK)
+			motors_on = c->kind == CMD_M17;
+		return st;
+	}
+	case CMD_INFO:
+		banner();
+		return FB_OK;
+	case CMD_LIST:
+		list_settings();
+		return FB_OK;
+	case CMD_HOME:
+		return exec_home();
+	case CMD_UNLOCK:
+		alarm_code = 0;
+		sync_plan();
+		return FB_OK;
+	case CMD_SET:
+		return exec_set(c);
+	case CMD_BAUD:
+		return exec_baud(c);
+	default:
+		return FB_OK;
+	}
+}
+
+uint8_t exec_command(const fb_cmd_t *c)
+{
+	uint8_t st = execute(c);
+	if (st != ST_WAIT) {
+		g6_checked = 0;
+		g6_queued = 0;
+	}
+	return st;
+}
+
+void maybe_start(void)
+{
+	if (held || alarm_code || homing || mo_running())
+		return;
+	uint8_t n = mo_queue_count();
+	if (!n)
+		return;
+	if (n >= CFG_START_BLOCKS || !mo_queue_free() ||
+	    board_ms() - first_queued_ms >= CFG_START_DELAY_MS)
+		start_unless(&f_reset);
+}

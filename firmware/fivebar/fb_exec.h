@@ -1,0 +1,30 @@
+/*
+ * fb_exec.h - executing a parsed line: motion, pen, laser and motor
+ * commands onto the block queue, the alarm lock, and starting the queue.
+ */
+#ifndef FB_EXEC_H
+#define FB_EXEC_H
+
+#include <stdint.h>
+#include "fb_proto.h"
+
+#define ST_WAIT 0xffu   /* queue full: try again later */
+
+/* M17 / M18 state, which homing needs on */
+extern uint8_t motors_on;
+
+/* Nothing running, nothing queued, not homing. */
+uint8_t is_idle(void);
+/* The planned position and pen after the queue := where the machine is. */
+void sync_plan(void);
+/* Reset / Ctrl-X: absolute mode, laser off, motors on, plan synced. */
+void exec_reset(void);
+/* Execute c: FB_OK, an error code, or ST_WAIT (call again with the same c
+ * once the queue has room; a G6 line keeps its progress in between). */
+uint8_t exec_command(const fb_cmd_t *c);
+/* mo_start() unless *cancel (f_reset, f_home_abort) was set by an interrupt. */
+void start_unless(volatile uint8_t *cancel);
+/* Start the queued blocks once enough are queued or the first has waited. */
+void maybe_start(void);
+
+#endif

@@ -1,0 +1,97 @@
+/*
+ * fb_home.c - the homing cycle ($H): seek the switches in chunks of at most
+ * $12 steps in all, pull off by $9, then set the position to ($10, $11).
+ * It runs inside the main loop's call, so it serves '?' and feeds the
+ * watchdog itself while it waits for each move.
+ */
+#include "fb_home.h"
+#include "fb_exec.h"
+#include "fb_report.h"
+#include "fb_settings.h"
+#include "fb_state.h"
+#include "fb_motion.h"
+#include "board.h"
+#include "status.h"
+
+/* Wait for the generator to stop, serving status requests; 0 if aborted. */
+static uint8_t home_wait(void)
+{
+	while (mo_running()) {
+		feed_watchdog();
+		board_idle();
+		if (f_status) {
+			f_status = 0;
+			status_report();
+		}
+		if (f_home_abort)
+			return 0;
+	}
+	return !f_home_abort;
+}
+
+static uint8_t home_move(uint8_t type, uint8_t axes, uint8_t neg, uint32_t steps, uint32_t interval)
+{
+	fb_block_t *blk = mo_slot();
+	int32_t d[2];
+	for (uint8_t i = 0; i < 2; i++)
+		d[i] = (axes & (1u << i)) ? ((neg & (1u << i)) ? -(int32_t)steps : (int32_t)steps) : 0;
+	mo_prepare_cycles(blk, d[0], d[1], steps * interval, 0);
+	blk->type = type;
+	blk->power = 0;
+	blk->line = lines.last;
+	mo_push();
+	start_unless(&f_home_abort);
+	return home_wait();
+}
+
+uint8_t exec_home(void)
+{
+	if (!settings[SET_HOMING])
+		return FB_ERR_HOMING_DISABLED;
+	if (!is_idle() || held)
+		return FB_ERR_BUSY;
+	if (!motors_on)
+		return FB_ERR_MOTORS_OFF;
+	homing = 1;
+	f_home_abort = 0;
+	mo_reset_home_hits();
+	/* the position is unknown until homed: count the seek from 0, which
+	 * also keeps repeated failed homings from running the counter away.  H
+	 * goes first, so a reset in between never keeps H:1 with position 0. */
+	int32_t zero[2] = { 0, 0 };
+	mo_set_homed(0);
+	mo_set_pos(zero);
+	sync_plan();
+	uint32_t interval = interval_for(settings[SET_HOMING_RATE]);
+	uint32_t chunk_max = 0x7fffffffUL / interval;
+	uint8_t seek_neg = seek_neg_mask();
+	uint32_t left = (uint32_t)settings[SET_TRAVEL];
+	uint8_t result = FB_OK;
+	while (left && (mo_home_hits() & 3u) != 3u) {
+		uint32_t chunk = left < chunk_max ? left : chunk_max;
+		if (!home_move(BLK_HOME, (uint8_t)(~mo_home_hits() & 3u), seek_neg, chunk, interval)) {
+			result = FB_ALARM_HOMING_ABORT;
+			break;
+		}
+		left -= chunk;
+	}
+	if (result == FB_OK && (mo_home_hits() & 3u) != 3u)
+		result = FB_ALARM_HOMING_FAIL;
+	if (result == FB_OK && settings[SET_PULLOFF] > 0 &&
+	    !home_move(BLK_MOVE, 3u, (uint8_t)(~seek_neg & 3u),
+		       (uint32_t)settings[SET_PULLOFF], interval))
+		result = FB_ALARM_HOMING_ABORT;
+	if (result == FB_OK && board_endstops())
+		result = FB_ALARM_HOMING_FAIL;
+	homing = 0;
+	if (result != FB_OK) {
+		raise_alarm(result);
+		return result;
+	}
+	int32_t home[2] = { settings[SET_HOME_A], settings[SET_HOME_B] };
+	mo_set_pos(home);
+	mo_set_homed(1);
+	sync_plan();
+	alarm_code = 0;
+	return FB_OK;
+}
