@@ -1,6 +1,6 @@
 """Fixtures of the protocol contract suite: one device interface over two implementations.
 
-Every test of test_contract.py runs twice: against the Python mock
+Every test of this folder runs twice: against the Python mock
 (``fivebar-mock://``, fivebar_host/devices/mock/) and against the real firmware running
 in simavr (fivebar_host/devices/sim.py).  A test sees a ``Device``: the open port, a
 ``FirmwareSession`` on it, and ``executed()`` — what the motors and the laser really did,

@@ -11,7 +11,7 @@ from __future__ import annotations
 import time
 
 from contract_devices import Device
-from test_contract import dtr_reset, idle, poll
+from contract_helpers import dtr_reset, idle, poll
 
 from fivebar_host import protocol
 from fivebar_host.protocol import ErrorReply, Ok
