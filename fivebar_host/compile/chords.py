@@ -60,6 +60,14 @@ class _Chords:
     #: (P,) the section of each path (`compile.layers`; all 0 without pen-change stops)
     path_section: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))
 
+    def per_path(self) -> _Chords:
+        """The per-path arrays only (vertices and chords emptied, `offsets` kept so the
+        number of paths stays): what timing and finishing read."""
+        zi, zf = np.zeros(0, np.int64), np.zeros(0)
+        return replace(self, pts=np.zeros((0, 2)), vert_prim=zi, chord_from=zi, prim=zi,
+                       prim_first=zi, tlo=zf, thi=zf, rev=np.zeros(0, bool), tol_i=zf,
+                       path_of_chord=zi)
+
 
 def _order(starts: FloatArray, ends: FloatArray, start: FloatArray, keep_order: bool,
            path_sec: IntArray | None) -> order.Order:

@@ -49,7 +49,7 @@ from typing import Any
 
 import numpy as np
 
-from fivebar_host.compile.finish import finish
+from fivebar_host.compile.finish import draw_geometry, finish, requested_rows
 from fivebar_host.compile.layers import sections
 from fivebar_host.compile.model import AUTO_ORDER, CompileOptions, Job
 from fivebar_host.compile.place import find_home, place, setup
@@ -102,24 +102,37 @@ def read_drawing(path: str | Path, layers: tuple[str, ...] = (),
 
 
 def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
-                  mode: str, plan_modes: bool = False) -> Job:
+                  mode: str, plan_modes: bool = False, consume: bool = False) -> Job:
     """Compile `drawing`, placed for working mode `mode`. Without `plan_modes` every path is
     drawn in `mode`. With it (`--mode auto` when no single mode clears every check), the
     modes come from `_plan_modes` and every change of mode becomes a checked pen-up
     joint-space move (`ModeChange`). The stages hand their results on as frozen dataclasses
-    (module doc: the pipeline)."""
+    (module doc: the pipeline); each is slimmed to what the later stages read as soon as the
+    next stage has its part, so a large drawing's intermediate arrays do not pile up
+    (`consume`: the drawing is placed in place, `place.place`)."""
     su = setup(profile, opts, mode)
-    placed = place(su, drawing, opts)
-    home = find_home(su, drawing.file)
-    secs = sections(drawing, placed.poly.stroke, opts.layer_pause, opts.no_pause)
+    placed = place(su, drawing, opts, consume)
+    del drawing
+    home = find_home(su, placed.drawing.file)
+    secs = sections(placed.drawing, placed.poly.stroke, opts.layer_pause, opts.no_pause)
     routed = route(su, placed, home, opts.keep_order, plan_modes, not opts.no_simplify, secs)
+    placed = placed.without_strokes()
     solved = solve(su, placed, routed)
     tr = plan_travel(su, placed, home, routed, solved, plan_modes)
     segments = assemble(placed, home, routed, solved, tr)
     stepped = drop_zero_moves(profile.motors, segments)
-    del segments  # the stepped copy replaces it (memory on large drawings)
+    del segments  # the stepped copy replaces it
+    rows = requested_rows(routed, solved)
+    routed, solved = routed.per_path(), solved.summarised()
     planned = plan_timing(su, routed, solved, stepped)
-    return finish(su, placed, home, routed, solved, tr, planned, opts)
+    del stepped
+    geometry = draw_geometry(rows, planned)  # consumes `rows`
+    planned = replace(planned, perm=_NO_INTS, f0=_NO_FLOATS, f1=_NO_FLOATS)
+    return finish(su, placed, home, routed, solved, tr, planned, geometry, opts)
+
+
+_NO_INTS = np.zeros(0, dtype=np.int64)
+_NO_FLOATS = np.zeros(0)
 
 
 def with_job_motion(profile: Profile, opts: CompileOptions) -> Profile:
@@ -132,15 +145,18 @@ def with_job_motion(profile: Profile, opts: CompileOptions) -> Profile:
     return profile if new == mo else replace(profile, motion=new)
 
 
-def compile_drawing(drawing: Drawing, profile: Profile, opts: CompileOptions) -> Job:
-    """Compile an already-read drawing; `opts.mode` "auto" tries every working mode."""
+def compile_drawing(drawing: Drawing, profile: Profile, opts: CompileOptions,
+                    consume: bool = False) -> Job:
+    """Compile an already-read drawing; `opts.mode` "auto" tries every working mode.
+    `consume`: the caller no longer needs `drawing`, which may then be placed in place (its
+    primitives become the job's, in machine mm) to save memory on large drawings."""
     profile = with_job_motion(profile, opts)
     mode = opts.mode or profile.kinematics.working_mode
     if mode != "auto":
         if mode not in WORKING_MODES:
             raise OptionError("mode", f"must be one of {', '.join(WORKING_MODES)} or auto; "
                               f"got {mode!r}")
-        return _compile_mode(drawing, profile, opts, mode)
+        return _compile_mode(drawing, profile, opts, mode, consume=consume)
     results: list[Job] = []
     failures: list[tuple[str, JobError]] = []
     for m in AUTO_ORDER:
@@ -195,4 +211,4 @@ def compile_job(path: str | Path, profile: Profile, opts: CompileOptions | None 
     """Read and compile a drawing file (see module doc). Raises `InputError` or `JobError`."""
     o = opts or CompileOptions()
     drawing = read_drawing(path, o.layers, o.max_segments, profile)
-    return compile_drawing(drawing, profile, o)
+    return compile_drawing(drawing, profile, o, consume=True)

@@ -27,6 +27,15 @@ AUTO_ORDER = ("+-", "-+", "++", "--")
 MAX_STEP_RAD = 0.05
 
 
+def compact_ints(a: IntArray) -> IntArray:
+    """`a` as int32 when every value fits (the same values in half the memory on large
+    drawings), else unchanged."""
+    i32 = np.iinfo(np.int32)
+    if a.size and (a.min() < i32.min or a.max() > i32.max):
+        return a
+    return a.astype(np.int32, copy=False)
+
+
 @dataclass(frozen=True)
 class CompileOptions:
     """What the command line can change (None: the profile's value)."""
@@ -115,12 +124,14 @@ class ModeChange:
 @dataclass(frozen=True)
 class Job:
     """A compiled job (see module doc). Per target (T+1 rows; row 0 = homed pose):
-    `points_mm`, `angles_rad`, `steps` (absolute, int64). Per segment (T rows, target k →
-    k+1): `draw`, `power` (0–255, 0 on travel), `path` (job path the segment draws or travels
+    `points_mm`, `angles_rad`, `steps` (absolute). Per segment (T rows, target k → k+1):
+    `draw`, `power` (0–255, 0 on travel), `path` (job path the segment draws or travels
     to; P for the final park move), `source` (source element index, −1 on travel),
-    `source_line` (0 if unknown), `duration_us` (int64), `length_mm` (requested pen path),
+    `source_line` (0 if unknown), `duration_us`, `length_mm` (requested pen path),
     `dwell` (a G-code dwell: no motion, not a drawing segment, `power` the laser power it
-    burns with; `compile.dwell`; empty: none)."""
+    burns with; `compile.dwell`; empty: none). The integer arrays (steps, indices,
+    durations) are int32 when every value fits, else int64 (`compact_ints`: half the memory
+    on large drawings; numpy sums them in int64)."""
 
     file: str
     mode: str

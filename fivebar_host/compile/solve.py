@@ -41,6 +41,11 @@ class Routed:
     def npath(self) -> int:
         return int(self.ch.offsets.shape[0] - 1)
 
+    def per_path(self) -> Routed:
+        """Only the per-path part (the vertices and chords are dropped: after the requested
+        geometry is taken, timing and finishing need the paths alone)."""
+        return replace(self, ch=self.ch.per_path())
+
 
 @dataclass(frozen=True)
 class Solved:
@@ -55,6 +60,17 @@ class Solved:
     def checker(self) -> PoseChecker:
         """For forward kinematics (the same in every working mode)."""
         return next(iter(self.checkers.values()))
+
+    def summarised(self) -> Solved:
+        """The checkers and the intervals' smallest margins and largest deviation only (one
+        row each; what finishing reads), without the per-vertex and per-interval arrays."""
+        iv = self.iv
+        z = np.zeros((0, 2))
+        margin = (iv.min_margin.min(axis=0, keepdims=True) if iv.min_margin.size
+                  else iv.min_margin)
+        dev = iv.dev_mm.max(keepdims=True) if iv.dev_mm.size else iv.dev_mm
+        return Solved(self.checkers, z, Intervals(np.zeros(0, np.int64), np.zeros(0),
+                                                  np.zeros(0), z, z, margin, dev))
 
 
 def route(su: Setup, placed: Placed, home: Home, keep_order: bool,

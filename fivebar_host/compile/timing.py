@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 from fivebar_host import planner, protocol, steps
 from fivebar_host.compile.dwell import dwell_stops, insert_dwells
 from fivebar_host.compile.layers import section_stops
+from fivebar_host.compile.model import compact_ints
 from fivebar_host.compile.place import Setup
 from fivebar_host.compile.segments import Stepped
 from fivebar_host.compile.solve import Routed, Solved
@@ -96,25 +97,33 @@ def _cut_ramps(mot: Motors, checker: PoseChecker, sp: Stepped, counts: IntArray,
                ) -> tuple[FloatArray, FloatArray, IntArray, IntArray, FloatArray, FloatArray]:
     """Step 2: segment k cut into `counts[k]` pieces ending at fractions `f1` of it. Returns
     the new targets (angles, points, absolute steps; pieces that round to no move dropped),
-    and per piece its segment and its part [f0, f1] of it."""
+    and per piece its segment and its part [f0, f1] of it. The targets are written in job
+    order straight away (target k, then the inner piece ends of segment k: their fractions
+    ascend), each array once."""
     th_all, pts_all = sp.th, sp.pts
     seg_of = np.repeat(np.arange(counts.shape[0]), counts)
-    inner = np.concatenate((seg_of[1:] == seg_of[:-1], [False]))  # not a segment's last piece
+    inner = np.ones(seg_of.shape[0], dtype=bool)  # not a segment's last piece
+    inner[np.cumsum(counts) - 1] = False
     # new targets on the ideal joint-space line of their segment, rounded once
     k_in = seg_of[inner]
-    th_in = th_all[k_in] + f1[inner, None] * (th_all[k_in + 1] - th_all[k_in])
-    order_t = np.argsort(np.concatenate((np.arange(th_all.shape[0]) * 1.0,
-                                         k_in + f1[inner])), kind="stable")
-    th_all = np.concatenate((th_all, th_in))[order_t]
-    pts_all = np.concatenate((pts_all, checker.forward(th_in)[0]))[order_t]
-    st = steps.absolute_steps(th_all, mot.home_rad, mot.steps_per_rev)
+    th = np.empty((seg_of.shape[0] + 1, 2))
+    th[0] = th_all[0]
+    th[1:][~inner] = th_all[1:]
+    th[1:][inner] = th_all[k_in] + f1[inner, None] * (th_all[k_in + 1] - th_all[k_in])
+    del k_in
+    st = compact_ints(steps.absolute_steps(th, mot.home_rad, mot.steps_per_rev))
     keep = np.concatenate(([True], (np.diff(st, axis=0) != 0).any(axis=1)))
-    st, th_all, pts_all = st[keep], th_all[keep], pts_all[keep]
+    st, th = st[keep], th[keep]
+    kept_inner = inner[keep[1:]]
+    pts = np.empty_like(th)
+    pts[0] = pts_all[0]
+    pts[1:][~kept_inner] = pts_all[1:][keep[1:][~inner]]
+    pts[1:][kept_inner] = checker.forward(th[1:][kept_inner])[0]
     seg_of, f1 = seg_of[keep[1:]], f1[keep[1:]]
     f1[np.concatenate((seg_of[1:] != seg_of[:-1], [True]))] = 1.0
     f0 = np.where(np.concatenate(([True], seg_of[1:] != seg_of[:-1])), 0.0,
                   np.concatenate(([0.0], f1[:-1])))
-    return th_all, pts_all, st, seg_of, f0, f1
+    return th, pts, st, seg_of, f0, f1
 
 
 def plan_timing(su: Setup, routed: Routed, solved: Solved, sp: Stepped) -> Planned:
@@ -146,6 +155,7 @@ def time_stepped(profile: Profile, checker: PoseChecker, sp: Stepped,
                                         PLAN_PIECE_JUMP_SHARE * j_lim / a_c,
                                         PLAN_MIN_PIECE_STEPS * mot.rad_per_step)
     th_all, pts_all, st, seg_of, f0, f1 = _cut_ramps(mot, checker, sp, counts, f1)
+    del counts, pln
     seg_draw = sp.draw[seg_of]
     power, feed = power[seg_of], feed[seg_of]
     stop = stop[seg_of] & np.concatenate((seg_of[1:] != seg_of[:-1], [True]))
@@ -154,10 +164,13 @@ def time_stepped(profile: Profile, checker: PoseChecker, sp: Stepped,
     dq = np.diff(steps.step_angles(st, mot.home_rad, mot.steps_per_rev), axis=0)
     floor_us = planner.cap_durations_us(dq, length, feed, motion.max_joint_rad_s,
                                         protocol.P_MIN_US)
-    duration_us = planner.enforce_staircase(dq, floor_us, stop, motion.max_joint_rad_s2, j_lim)
-    return Planned(th=th_all, pts=pts_all, draw=seg_draw, path=sp.path[seg_of],
-                   source=sp.source[seg_of], line=sp.line[seg_of], length=length,
-                   perm=sp.perm[seg_of], steps=st, power=power, f0=f0, f1=f1,
+    del feed
+    duration_us = compact_ints(planner.enforce_staircase(dq, floor_us, stop,
+                                                         motion.max_joint_rad_s2, j_lim))
+    del floor_us, dq, stop
+    return Planned(th=th_all, pts=pts_all, draw=seg_draw, path=compact_ints(sp.path[seg_of]),
+                   source=compact_ints(sp.source[seg_of]), line=compact_ints(sp.line[seg_of]),
+                   length=length, perm=sp.perm[seg_of], steps=st, power=power, f0=f0, f1=f1,
                    duration_us=duration_us, dwell=np.zeros(seg_of.shape[0], dtype=bool))
 
 
