@@ -154,13 +154,17 @@ def time_stepped(profile: Profile, checker: PoseChecker, sp: Stepped,
     counts, f1 = planner.ramp_fractions(pln, np.abs(dq).max(axis=1), a_c,
                                         PLAN_PIECE_JUMP_SHARE * j_lim / a_c,
                                         PLAN_MIN_PIECE_STEPS * mot.rad_per_step)
+    del pln, dq  # (memory: each array is freed as soon as it was last read)
     th_all, pts_all, st, seg_of, f0, f1 = _cut_ramps(mot, checker, sp, counts, f1)
-    del counts, pln
+    del counts
+    seg_of = compact_ints(seg_of)
     seg_draw = sp.draw[seg_of]
     power, feed = power[seg_of], feed[seg_of]
     stop = stop[seg_of] & np.concatenate((seg_of[1:] != seg_of[:-1], [True]))
-    length = np.where(seg_draw, sp.length[seg_of] * (f1 - f0),
-                      np.hypot(*np.diff(pts_all, axis=0).T))
+    length = sp.length[seg_of] * (f1 - f0)  # drawing: the piece's part of its segment
+    trav = np.flatnonzero(~seg_draw)  # travel: between its targets
+    length[trav] = np.hypot(*(pts_all[trav + 1] - pts_all[trav]).T)
+    del trav
     dq = np.diff(steps.step_angles(st, mot.home_rad, mot.steps_per_rev), axis=0)
     floor_us = planner.cap_durations_us(dq, length, feed, motion.max_joint_rad_s,
                                         protocol.P_MIN_US)
