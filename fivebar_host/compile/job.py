@@ -119,11 +119,12 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
     placed = placed.without_strokes()
     solved = solve(su, placed, routed)
     tr = plan_travel(su, placed, home, routed, solved, plan_modes)
+    solved = solved.summarised()
     segments = assemble(placed, home, routed, solved, tr)
+    rows = requested_rows(routed, solved)
+    routed, solved = routed.per_path(), solved.per_path()
     stepped = drop_zero_moves(profile.motors, segments)
     del segments  # the stepped copy replaces it
-    rows = requested_rows(routed, solved)
-    routed, solved = routed.per_path(), solved.summarised()
     planned = plan_timing(su, routed, solved, stepped)
     del stepped
     geometry = draw_geometry(rows, planned)  # consumes `rows`

@@ -62,15 +62,24 @@ class Solved:
         return next(iter(self.checkers.values()))
 
     def summarised(self) -> Solved:
-        """The checkers and the intervals' smallest margins and largest deviation only (one
-        row each; what finishing reads), without the per-vertex and per-interval arrays."""
+        """The checkers, the intervals' smallest margins and largest deviation as one row
+        each (what finishing reads) and what assembling the segments reads (each interval's
+        chord, part σ_a … σ_b of it and end angles), without the per-vertex angles: once the
+        travel is planned, the rest of the per-interval arrays can go."""
         iv = self.iv
-        z = np.zeros((0, 2))
         margin = (iv.min_margin.min(axis=0, keepdims=True) if iv.min_margin.size
                   else iv.min_margin)
         dev = iv.dev_mm.max(keepdims=True) if iv.dev_mm.size else iv.dev_mm
-        return Solved(self.checkers, z, Intervals(np.zeros(0, np.int64), np.zeros(0),
-                                                  np.zeros(0), z, z, margin, dev))
+        return Solved(self.checkers, np.zeros((0, 2)),
+                      Intervals(iv.chord, iv.sa, iv.sb, np.zeros((0, 2)), iv.thb, margin, dev))
+
+    def per_path(self) -> Solved:
+        """`summarised` without any per-interval array (after the segments are assembled
+        and the requested geometry is taken)."""
+        s = self.summarised()
+        z = np.zeros((0, 2))
+        return Solved(self.checkers, z, replace(s.iv, chord=np.zeros(0, np.int64),
+                                                sa=np.zeros(0), sb=np.zeros(0), thb=z))
 
 
 def route(su: Setup, placed: Placed, home: Home, keep_order: bool,
