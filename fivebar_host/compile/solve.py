@@ -157,5 +157,8 @@ def _refine_blocks(chk: PoseChecker, ch: _Chords, th_v: FloatArray,
         out.append(r if i == 0 else replace(r, chord=r.chord + i))
     if len(out) == 1:
         return out[0]
-    return Intervals(*(np.concatenate([getattr(r, f.name) for r in out])
+    # field by field, each block's part dropped once copied (not every field twice at once)
+    parts = [{f.name: getattr(r, f.name) for f in fields(Intervals)} for r in out]
+    del out
+    return Intervals(*(np.concatenate([p.pop(f.name) for p in parts])
                        for f in fields(Intervals)))
