@@ -113,7 +113,8 @@ def _cut_ramps(mot: Motors, checker: PoseChecker, sp: Stepped, counts: IntArray,
     del k_in
     st = compact_ints(steps.absolute_steps(th, mot.home_rad, mot.steps_per_rev))
     keep = np.concatenate(([True], (np.diff(st, axis=0) != 0).any(axis=1)))
-    st, th = st[keep], th[keep]
+    if not keep.all():
+        st, th = st[keep], th[keep]
     kept_inner = inner[keep[1:]]
     pts = np.empty_like(th)
     pts[0] = pts_all[0]
@@ -126,16 +127,21 @@ def _cut_ramps(mot: Motors, checker: PoseChecker, sp: Stepped, counts: IntArray,
     return th, pts, st, seg_of, f0, f1
 
 
-def plan_timing(su: Setup, routed: Routed, solved: Solved, sp: Stepped) -> Planned:
+def plan_timing(su: Setup, routed: Routed, solved: Solved, handed: list[Stepped]) -> Planned:
     """Durations for every segment (module doc: steps 1–4), then the dwells inserted as
-    segments without motion, each after a stop (`compile.dwell`)."""
+    segments without motion, each after a stop (`compile.dwell`). `handed` holds the
+    stepped job and is emptied: once the ramps are cut, nothing else keeps its arrays, so
+    they are freed while the pieces are timed (memory on large drawings)."""
+    sp = handed.pop()
     power, feed, stop = _settings(su.profile, routed, sp)
     dwells = routed.ch.dwells
     if dwells:
         stop = stop | dwell_stops(dwells, sp)
     if routed.sections is not None:  # at rest where a pen-change stop may come
         stop = stop | section_stops(routed.ch.path_section, sp.path)
-    pd = time_stepped(su.profile, solved.checker, sp, power, feed, stop)
+    box = [sp]
+    del sp
+    pd = _time(su.profile, solved.checker, box, power, feed, stop)
     return insert_dwells(dwells, su.profile, pd)
 
 
@@ -144,6 +150,14 @@ def time_stepped(profile: Profile, checker: PoseChecker, sp: Stepped,
     """Steps 1–4 of the module doc on stepped segments with their laser power, pen feed
     (mm/s) and stops given per segment (also used by the GRBL bridge's online compiler,
     `fivebar_host.grbl.online`, on small batches of moves)."""
+    return _time(profile, checker, [sp], power, feed, stop)
+
+
+def _time(profile: Profile, checker: PoseChecker, handed: list[Stepped],
+          power: NDArray[np.uint8], feed: FloatArray, stop: BoolArray) -> Planned:
+    """`time_stepped` on the stepped segments in `handed` (emptied, see `plan_timing`);
+    every array is freed as soon as it was last read."""
+    sp = handed.pop()
     mot, motion = profile.motors, profile.motion
     a_c = cut_accel(profile)
     j_lim = planner.JUNCTION_JUMP_RAD_S
@@ -151,17 +165,22 @@ def time_stepped(profile: Profile, checker: PoseChecker, sp: Stepped,
     dq = np.diff(steps.step_angles(sp.steps, mot.home_rad, mot.steps_per_rev), axis=0)
     pln = planner.plan(dq, sp.length, feed, motion.max_joint_rad_s, a_c, stop_after=stop,
                        **prof_kw)
-    counts, f1 = planner.ramp_fractions(pln, np.abs(dq).max(axis=1), a_c,
-                                        PLAN_PIECE_JUMP_SHARE * j_lim / a_c,
+    dist = np.maximum(np.abs(dq[:, 0]), np.abs(dq[:, 1]))  # Chebyshev joint distance
+    del dq
+    counts, f1 = planner.ramp_fractions(pln, dist, a_c, PLAN_PIECE_JUMP_SHARE * j_lim / a_c,
                                         PLAN_MIN_PIECE_STEPS * mot.rad_per_step)
-    del pln, dq  # (memory: each array is freed as soon as it was last read)
+    del pln, dist
     th_all, pts_all, st, seg_of, f0, f1 = _cut_ramps(mot, checker, sp, counts, f1)
     del counts
     seg_of = compact_ints(seg_of)
     seg_draw = sp.draw[seg_of]
+    length = sp.length[seg_of] * (f1 - f0)  # drawing: the piece's part of its segment
+    kept = {"path": compact_ints(sp.path[seg_of]), "source": compact_ints(sp.source[seg_of]),
+            "line": compact_ints(sp.line[seg_of]), "perm": sp.perm[seg_of]}
+    del sp  # the pieces have all they need of the stepped segments
     power, feed = power[seg_of], feed[seg_of]
     stop = stop[seg_of] & np.concatenate((seg_of[1:] != seg_of[:-1], [True]))
-    length = sp.length[seg_of] * (f1 - f0)  # drawing: the piece's part of its segment
+    del seg_of
     trav = np.flatnonzero(~seg_draw)  # travel: between its targets
     length[trav] = np.hypot(*(pts_all[trav + 1] - pts_all[trav]).T)
     del trav
@@ -172,10 +191,9 @@ def time_stepped(profile: Profile, checker: PoseChecker, sp: Stepped,
     duration_us = compact_ints(planner.enforce_staircase(dq, floor_us, stop,
                                                          motion.max_joint_rad_s2, j_lim))
     del floor_us, dq, stop
-    return Planned(th=th_all, pts=pts_all, draw=seg_draw, path=compact_ints(sp.path[seg_of]),
-                   source=compact_ints(sp.source[seg_of]), line=compact_ints(sp.line[seg_of]),
-                   length=length, perm=sp.perm[seg_of], steps=st, power=power, f0=f0, f1=f1,
-                   duration_us=duration_us, dwell=np.zeros(seg_of.shape[0], dtype=bool))
+    return Planned(th=th_all, pts=pts_all, draw=seg_draw, length=length, steps=st,
+                   power=power, f0=f0, f1=f1, duration_us=duration_us,
+                   dwell=np.zeros(seg_draw.shape[0], dtype=bool), **kept)
 
 
 def tool_time_s(draw: BoolArray, profile: Profile, extra_switches: int = 0) -> float:
