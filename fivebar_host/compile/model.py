@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -34,6 +35,24 @@ def compact_ints(a: IntArray) -> IntArray:
     if a.size and (a.min() < i32.min or a.max() > i32.max):
         return a
     return a.astype(np.int32, copy=False)
+
+
+#: Rows converted at a time by `compact_steps` (bounds the float temporaries).
+STEPS_BLOCK = 1 << 16
+
+
+def compact_steps(angles_rad: FloatArray, home_rad: tuple[float, float],
+                  steps_per_rev: float) -> IntArray:
+    """`steps.absolute_steps` of the angles (N, 2), computed in blocks straight into int32
+    (int64 when a value reaches 2^30, so that differences of steps fit too): the same steps
+    without the whole float and int64 temporaries."""
+    out = np.empty((angles_rad.shape[0], 2), dtype=np.int32)
+    for i in range(0, angles_rad.shape[0], STEPS_BLOCK):
+        st = steps.absolute_steps(angles_rad[i:i + STEPS_BLOCK], home_rad, steps_per_rev)
+        if st.size and np.abs(st).max() >= 1 << 30:
+            return steps.absolute_steps(angles_rad, home_rad, steps_per_rev)
+        out[i:i + STEPS_BLOCK] = st
+    return cast(IntArray, out)  # int32: the same values (IntArray names any int width here)
 
 
 @dataclass(frozen=True)

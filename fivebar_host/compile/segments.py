@@ -13,8 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fivebar_host import steps
-from fivebar_host.compile.model import compact_ints
+from fivebar_host.compile.model import compact_ints, compact_steps
 from fivebar_host.compile.place import Home, Placed
 from fivebar_host.compile.solve import Routed, Solved
 from fivebar_host.compile.travel import Travel
@@ -129,11 +128,11 @@ def assemble(placed: Placed, home: Home, routed: Routed, solved: Solved,
 def drop_zero_moves(mot: Motors, sg: Segments) -> Stepped:
     """Absolute steps of every target (rounded once); segments that round to no move go.
     The integer arrays are int32 where every value fits (`compact_ints`)."""
-    st = steps.absolute_steps(sg.th, mot.home_rad, mot.steps_per_rev)
+    st = compact_steps(sg.th, mot.home_rad, mot.steps_per_rev)
     rel = np.diff(st, axis=0)
     moving = (rel != 0).any(axis=1)
     keep_t = np.concatenate(([True], moving))
     return Stepped(th=sg.th[keep_t], pts=sg.pts[keep_t], draw=sg.draw[moving],
                    path=compact_ints(sg.path[moving]), source=compact_ints(sg.source[moving]),
                    line=compact_ints(sg.line[moving]), length=sg.length[moving],
-                   perm=compact_ints(sg.perm[moving]), steps=compact_ints(st[keep_t]))
+                   perm=compact_ints(sg.perm[moving]), steps=st[keep_t])

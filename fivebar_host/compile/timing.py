@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from fivebar_host import planner, protocol, steps
 from fivebar_host.compile.dwell import dwell_stops, insert_dwells
 from fivebar_host.compile.layers import section_stops
-from fivebar_host.compile.model import compact_ints
+from fivebar_host.compile.model import compact_ints, compact_steps
 from fivebar_host.compile.place import Setup
 from fivebar_host.compile.segments import Stepped
 from fivebar_host.compile.solve import Routed, Solved
@@ -111,20 +111,39 @@ def _cut_ramps(mot: Motors, checker: PoseChecker, sp: Stepped, counts: IntArray,
     th[1:][~inner] = th_all[1:]
     th[1:][inner] = th_all[k_in] + f1[inner, None] * (th_all[k_in + 1] - th_all[k_in])
     del k_in
-    st = compact_ints(steps.absolute_steps(th, mot.home_rad, mot.steps_per_rev))
+    st = compact_steps(th, mot.home_rad, mot.steps_per_rev)
     keep = np.concatenate(([True], (np.diff(st, axis=0) != 0).any(axis=1)))
-    if not keep.all():
+    every = bool(keep.all())
+    if not every:
         st, th = st[keep], th[keep]
     kept_inner = inner[keep[1:]]
     pts = np.empty_like(th)
     pts[0] = pts_all[0]
-    pts[1:][~kept_inner] = pts_all[1:][keep[1:][~inner]]
-    pts[1:][kept_inner] = checker.forward(th[1:][kept_inner])[0]
+    pts[1:][~kept_inner] = pts_all[1:] if every else pts_all[1:][keep[1:][~inner]]
+    rows = np.flatnonzero(kept_inner) + 1  # new targets: pen points by forward kinematics
+    for i in range(0, rows.shape[0], DELTA_BLOCK):
+        r = rows[i:i + DELTA_BLOCK]
+        pts[r] = checker.forward(th[r])[0]
+    del rows
     seg_of, f1 = seg_of[keep[1:]], f1[keep[1:]]
     f1[np.concatenate((seg_of[1:] != seg_of[:-1], [True]))] = 1.0
     f0 = np.where(np.concatenate(([True], seg_of[1:] != seg_of[:-1])), 0.0,
                   np.concatenate(([0.0], f1[:-1])))
     return th, pts, st, seg_of, f0, f1
+
+
+#: Targets converted at a time by `_step_deltas`.
+DELTA_BLOCK = 1 << 16
+
+
+def _step_deltas(st: IntArray, mot: Motors) -> FloatArray:
+    """The joint moves (T, 2) rad between consecutive absolute steps (T+1, 2), as the
+    differences of `steps.step_angles`, in blocks (no whole-job float copy of the steps)."""
+    dq = np.empty((max(st.shape[0] - 1, 0), 2))
+    for i in range(0, dq.shape[0], DELTA_BLOCK):
+        th = steps.step_angles(st[i:i + DELTA_BLOCK + 1], mot.home_rad, mot.steps_per_rev)
+        dq[i:i + DELTA_BLOCK] = np.diff(th, axis=0)
+    return dq
 
 
 def plan_timing(su: Setup, routed: Routed, solved: Solved, handed: list[Stepped]) -> Planned:
@@ -162,7 +181,7 @@ def _time(profile: Profile, checker: PoseChecker, handed: list[Stepped],
     a_c = cut_accel(profile)
     j_lim = planner.JUNCTION_JUMP_RAD_S
     prof_kw = {"junction_jump_rad_s": j_lim, "min_duration_s": protocol.P_MIN_US * 1e-6}
-    dq = np.diff(steps.step_angles(sp.steps, mot.home_rad, mot.steps_per_rev), axis=0)
+    dq = _step_deltas(sp.steps, mot)
     pln = planner.plan(dq, sp.length, feed, motion.max_joint_rad_s, a_c, stop_after=stop,
                        **prof_kw)
     dist = np.maximum(np.abs(dq[:, 0]), np.abs(dq[:, 1]))  # Chebyshev joint distance
@@ -184,7 +203,7 @@ def _time(profile: Profile, checker: PoseChecker, handed: list[Stepped],
     trav = np.flatnonzero(~seg_draw)  # travel: between its targets
     length[trav] = np.hypot(*(pts_all[trav + 1] - pts_all[trav]).T)
     del trav
-    dq = np.diff(steps.step_angles(st, mot.home_rad, mot.steps_per_rev), axis=0)
+    dq = _step_deltas(st, mot)
     floor_us = planner.cap_durations_us(dq, length, feed, motion.max_joint_rad_s,
                                         protocol.P_MIN_US)
     del feed
