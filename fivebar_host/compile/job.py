@@ -42,9 +42,6 @@ lines in `.encode`, `--mode auto`'s working-mode planning in `.modes`.
 
 from __future__ import annotations
 
-import ctypes
-import ctypes.util
-import functools
 import math
 from dataclasses import replace
 from pathlib import Path
@@ -210,31 +207,8 @@ def _compile_with_mode_changes(drawing: Drawing, profile: Profile,
     raise errors[0]
 
 
-#: glibc's `mallopt` parameter M_MMAP_THRESHOLD, and the size from which allocations get a
-#: memory mapping of their own (`map_large_allocations`).
-_M_MMAP_THRESHOLD = -3
-MMAP_THRESHOLD_BYTES = 1 << 20
-
-
-@functools.cache
-def map_large_allocations() -> bool:
-    """Have glibc serve every allocation of `MMAP_THRESHOLD_BYTES` or more (numpy's large
-    arrays) from a memory mapping of its own, returned to the system as soon as it is freed.
-    By default glibc raises that threshold after the first large free (up to 32 MiB), so the
-    arrays of a few MiB that one stage frees stay in the heap and the next stage's arrays,
-    of other sizes, do not fit in the holes: about 10 % more peak memory on large drawings.
-    Once per process; False (nothing changed) where the C library is not glibc."""
-    try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        return bool(libc.mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES))
-    except (OSError, AttributeError):
-        return False
-
-
 def compile_job(path: str | Path, profile: Profile, opts: CompileOptions | None = None) -> Job:
-    """Read and compile a drawing file (see module doc). Raises `InputError` or `JobError`.
-    Large arrays are given memory mappings of their own (`map_large_allocations`)."""
-    map_large_allocations()
+    """Read and compile a drawing file (see module doc). Raises `InputError` or `JobError`."""
     o = opts or CompileOptions()
     drawing = read_drawing(path, o.layers, o.max_segments, profile)
     return compile_drawing(drawing, profile, o, consume=True)
