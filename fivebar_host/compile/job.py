@@ -51,7 +51,7 @@ import numpy as np
 
 from fivebar_host.compile.finish import draw_geometry, finish, requested_rows
 from fivebar_host.compile.layers import sections
-from fivebar_host.compile.model import AUTO_ORDER, CompileOptions, Job
+from fivebar_host.compile.model import AUTO_ORDER, CompileOptions, Job, release_free_memory
 from fivebar_host.compile.place import find_home, place, setup
 from fivebar_host.compile.segments import assemble, drop_zero_moves
 from fivebar_host.compile.solve import route, solve
@@ -117,17 +117,21 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
     secs = sections(placed.drawing, placed.poly.stroke, opts.layer_pause, opts.no_pause)
     routed = route(su, placed, home, opts.keep_order, plan_modes, not opts.no_simplify, secs)
     placed = placed.without_strokes()
+    release_free_memory()
     solved = solve(su, placed, routed)
     tr = plan_travel(su, placed, home, routed, solved, plan_modes)
     solved = solved.summarised()
+    release_free_memory()
     segments = assemble(placed, home, routed, solved, tr)
     rows = requested_rows(routed, solved)
     routed, solved = routed.per_path(), solved.per_path()
     handed = [drop_zero_moves(profile.motors, segments)]  # timing empties it
     del segments  # the stepped copy replaces it
+    release_free_memory()
     planned = plan_timing(su, routed, solved, handed)
     geometry = draw_geometry(rows, planned)  # consumes `rows`
     planned = replace(planned, perm=_NO_INTS, f0=_NO_FLOATS, f1=_NO_FLOATS)
+    release_free_memory()
     return finish(su, placed, home, routed, solved, tr, planned, geometry, opts)
 
 

@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from fivebar_host import planner, protocol, steps
 from fivebar_host.compile.dwell import dwell_stops, insert_dwells
 from fivebar_host.compile.layers import section_stops
-from fivebar_host.compile.model import compact_ints, compact_steps
+from fivebar_host.compile.model import compact_ints, compact_steps, release_free_memory
 from fivebar_host.compile.place import Setup
 from fivebar_host.compile.segments import Stepped
 from fivebar_host.compile.solve import Routed, Solved
@@ -203,6 +203,7 @@ def _time(profile: Profile, checker: PoseChecker, handed: list[Stepped],
     trav = np.flatnonzero(~seg_draw)  # travel: between its targets
     length[trav] = np.hypot(*(pts_all[trav + 1] - pts_all[trav]).T)
     del trav
+    release_free_memory()  # the stepped segments' arrays
     dq = _step_deltas(st, mot)
     floor_us = planner.cap_durations_us(dq, length, feed, motion.max_joint_rad_s,
                                         protocol.P_MIN_US)
