@@ -205,12 +205,16 @@ def _time(profile: Profile, checker: PoseChecker, handed: list[Stepped],
     del trav
     release_free_memory()  # the stepped segments' arrays
     dq = _step_deltas(st, mot)
-    floor_us = planner.cap_durations_us(dq, length, feed, motion.max_joint_rad_s,
-                                        protocol.P_MIN_US)
+    # the pieces' feeds and the floor durations are held by no name, so each is freed as
+    # soon as it was read (the feeds once the floors exist, the floors once the staircase
+    # copied them)
+    feeds = [feed]
     del feed
-    duration_us = compact_ints(planner.enforce_staircase(dq, floor_us, stop,
-                                                         motion.max_joint_rad_s2, j_lim))
-    del floor_us, dq, stop
+    duration_us = compact_ints(planner.enforce_staircase(
+        dq, planner.cap_durations_us(dq, length, feeds.pop(), motion.max_joint_rad_s,
+                                     protocol.P_MIN_US),
+        stop, motion.max_joint_rad_s2, j_lim))
+    del dq, stop
     return Planned(th=th_all, pts=pts_all, draw=seg_draw, length=length, steps=st,
                    power=power, f0=f0, f1=f1, duration_us=duration_us,
                    dwell=np.zeros(seg_draw.shape[0], dtype=bool), **kept)
