@@ -147,49 +147,97 @@ def plan(dtheta_rad: FloatArray, length_mm: FloatArray, feed_mm_s: FloatArray,
     dist = np.abs(dth).max(axis=1)  # D_k
     moving = dist > 0
     with np.errstate(divide="ignore", invalid="ignore"):
-        u = np.where(moving[:, None], dth / np.where(moving, dist, 1.0)[:, None], 0.0)
         feed_cap = np.where(length_mm > 0, feed_mm_s * dist / length_mm, np.inf)
     vmax = np.minimum(max_joint_rad_s, feed_cap)
+    del feed_cap
     if min_duration_s > 0.0:
         vmax = np.minimum(vmax, dist / min_duration_s)
     vmax = np.where(moving, vmax, 0.0)
+    w_cap = _junction_caps(dth, dist, vmax, moving, stop_after, junction_jump_rad_s,
+                           corner_accel_rad_s2)
+    w = _passes(w_cap, 2.0 * alpha * dist)
+    w = np.minimum(w, w_cap)
+    del w_cap
+    v = np.sqrt(w)
+    del w
+    v0, v1 = v[:-1], v[1:]
+    vp = np.minimum(vmax, np.sqrt(0.5 * (v0 * v0 + v1 * v1) + alpha * dist))
+    del vmax
+    vp = np.maximum(vp, np.maximum(v0, v1))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (vp - v0) / alpha  # time speeding up
+        t += (vp - v1) / alpha  # + slowing down
+        d_ramp = (vp * vp - v0 * v0) / (2 * alpha) + (vp * vp - v1 * v1) / (2 * alpha)
+        t += np.where(vp > 0, np.maximum(dist - d_ramp, 0.0) / vp, 0.0)  # + cruising
+        del d_ramp
+    t = np.where(moving, t, 0.0)
+    us = np.ceil(np.round(t * 1e6, 6)).astype(np.int64)
+    us[moving & (us < 1)] = 1
+    return Plan(v0, v1, vp, t, us)
 
-    # Junction caps (K+1 junctions; junction n sits before segment n).
+
+def _junction_jumps(dth: FloatArray, dist: FloatArray, moving: BoolArray) -> FloatArray:
+    """δ_n = max_j |u_{n+1,j} − u_{n,j}| (K−1,) with u_k = Δθ_k / D_k (0 without motion),
+    in blocks of `JUMP_BLOCK` (each junction on its own: the values of one pass)."""
+    k = dist.shape[0]
+    jump = np.empty(max(k - 1, 0))
+    for b in range(0, k - 1, JUMP_BLOCK):
+        e = min(b + JUMP_BLOCK, k - 1) + 1  # segments b … e−1, junctions b … e−2
+        mv = moving[b:e]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = np.where(mv[:, None], dth[b:e] / np.where(mv, dist[b:e], 1.0)[:, None], 0.0)
+        jump[b:e - 1] = np.abs(u[1:] - u[:-1]).max(axis=1)
+    return jump
+
+
+#: Junctions measured at a time by `_junction_jumps`.
+JUMP_BLOCK = 1 << 16
+
+
+def _junction_caps(dth: FloatArray, dist: FloatArray, vmax: FloatArray, moving: BoolArray,
+                   stop_after: BoolArray | None, junction_jump_rad_s: float,
+                   corner_accel_rad_s2: float | None) -> FloatArray:
+    """`plan`'s squared speed caps w_cap (K+1,) at the junctions (junction n sits before
+    segment n; 0 at the ends, at stops and next to a zero-motion segment)."""
+    k = dist.shape[0]
     cap = np.zeros(k + 1)
-    jump = np.abs(u[1:] - u[:-1]).max(axis=1)
+    jump = _junction_jumps(dth, dist, moving)
     with np.errstate(divide="ignore"):
         jcap = np.where(jump > 0, junction_jump_rad_s / jump, np.inf)
         if corner_accel_rad_s2 is not None:
             ccap = np.sqrt(corner_accel_rad_s2 * 0.5 * (dist[:-1] + dist[1:]) / jump)
             jcap = np.minimum(jcap, np.where(jump > 0, ccap, np.inf))
+            del ccap
+    del jump
     cap[1:k] = np.minimum(np.minimum(vmax[:-1], vmax[1:]), jcap)
+    del jcap
     if stop_after is not None:
         st = np.asarray(stop_after, dtype=bool)
         cap[1:k][st[:-1]] = 0.0
     cap[1:k][~(moving[:-1] & moving[1:])] = 0.0
-    w_cap = cap * cap
+    cap *= cap
+    return cap
 
-    d2 = 2.0 * alpha * dist
+
+def _passes(w_cap: FloatArray, d2: FloatArray) -> FloatArray:
+    """`plan`'s forward and backward passes (module doc) on the squared junction caps
+    `w_cap` (K+1,) with d2_k = 2α·D_k: the squared junction speeds, clipped at 0."""
     s = np.concatenate(([0.0], np.cumsum(d2)))  # S_n
-    fwd = s + np.minimum.accumulate(w_cap - s)
+    del d2
+    fwd = w_cap - s
+    np.minimum.accumulate(fwd, out=fwd)
+    fwd += s
     # backward: R_n = Σ_{k ≥ n} d2_k = S_K − S_n
     r = s[-1] - s
-    bwd = r + np.minimum.accumulate((w_cap - r)[::-1])[::-1]
-    w = np.clip(np.minimum(fwd, bwd), 0.0, None)
-    w = np.minimum(w, w_cap)
-    v = np.sqrt(w)
-    v0, v1 = v[:-1], v[1:]
-    vp = np.minimum(vmax, np.sqrt(0.5 * (v0 * v0 + v1 * v1) + alpha * dist))
-    vp = np.maximum(vp, np.maximum(v0, v1))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t_acc = (vp - v0) / alpha
-        t_dec = (vp - v1) / alpha
-        d_ramp = (vp * vp - v0 * v0) / (2 * alpha) + (vp * vp - v1 * v1) / (2 * alpha)
-        t_cruise = np.where(vp > 0, np.maximum(dist - d_ramp, 0.0) / vp, 0.0)
-    t = np.where(moving, t_acc + t_dec + t_cruise, 0.0)
-    us = np.ceil(np.round(t * 1e6, 6)).astype(np.int64)
-    us[moving & (us < 1)] = 1
-    return Plan(v0, v1, vp, t, us)
+    del s
+    bwd = (w_cap - r)[::-1]
+    np.minimum.accumulate(bwd, out=bwd)
+    bwd = bwd[::-1]
+    bwd += r
+    del r
+    np.minimum(fwd, bwd, out=fwd)
+    del bwd
+    return np.clip(fwd, 0.0, None, out=fwd)
 
 
 def check_plan(pl: Plan, dtheta_rad: FloatArray, length_mm: FloatArray,
@@ -230,9 +278,33 @@ def ramp_fractions(pl: Plan, dist: FloatArray, alpha: float, piece_s: float,
     piece. A cruise part stays whole, and so does a ramp that fits in one piece (it joins
     its neighbour). No piece is made shorter than `min_piece_rad` (a shorter one joins the
     piece before it). Returns the number of pieces per segment (K,) and every piece's end as
-    a fraction of its segment's distance (ascending within a segment, the last exactly 1)."""
-    v0, v1, vp = pl.v_entry, pl.v_exit, pl.v_peak
+    a fraction of its segment's distance (ascending within a segment, the last exactly 1).
+    Every segment is cut on its own, so the segments are cut in blocks of `RAMP_BLOCK`
+    (bounded temporaries on large jobs; the same pieces as one pass)."""
+    k = pl.v_entry.shape[0]
     d = np.asarray(dist, dtype=np.float64)
+    counts: list[IntArray] = []
+    fracs: list[FloatArray] = []
+    for b in range(0, max(k, 1), RAMP_BLOCK):
+        sl = slice(b, b + RAMP_BLOCK)
+        n, f = _ramp_block(pl.v_entry[sl], pl.v_exit[sl], pl.v_peak[sl], d[sl], alpha,
+                           piece_s, min_piece_rad)
+        counts.append(n)
+        fracs.append(f)
+    if len(counts) == 1:
+        return counts[0], fracs[0]
+    return np.concatenate(counts), np.concatenate(fracs)
+
+
+#: Segments cut at a time by `ramp_fractions`.
+RAMP_BLOCK = 1 << 16
+
+
+def _ramp_block(v0: FloatArray, v1: FloatArray, vp: FloatArray, d: FloatArray, alpha: float,
+                piece_s: float, min_piece_rad: float) -> tuple[IntArray, FloatArray]:
+    """`ramp_fractions` on the segments with entry/exit/peak speeds v0, v1, vp and
+    distances d; each piece's position is computed only where it applies (ramp up, ramp
+    down, else the cruise's end)."""
     with np.errstate(invalid="ignore", divide="ignore"):
         ta = np.where(vp > v0, (vp - v0) / alpha, 0.0)
         td = np.where(vp > v1, (vp - v1) / alpha, 0.0)
@@ -246,22 +318,25 @@ def ramp_fractions(pl: Plan, dist: FloatArray, alpha: float, piece_s: float,
     seg = np.repeat(np.arange(d.shape[0]), n)
     i = np.arange(seg.shape[0]) - np.repeat(np.cumsum(n) - n, n) + 1  # 1-based piece number
     nas, nds, ncs = na[seg], nd[seg], nc[seg]
-    in_a = i <= nas
-    in_d = i > nas + ncs
-    t_a = np.where(in_a, i / np.maximum(nas, 1), 0.0) * ta[seg]
-    x_a = v0[seg] * t_a + 0.5 * alpha * t_a * t_a
-    t_d = np.where(in_d, (i - nas - ncs) / np.maximum(nds, 1), 0.0) * td[seg]
-    x_d = da[seg] + dc[seg] + vp[seg] * t_d - 0.5 * alpha * t_d * t_d
-    x = np.where(in_a, x_a, np.where(in_d, x_d, da[seg] + dc[seg]))
+    x = da[seg] + dc[seg]  # the cruise's end, unless the piece ends on a ramp
+    r = np.flatnonzero(i <= nas)  # on the ramp up
+    t_a = i[r] / np.maximum(nas[r], 1) * ta[seg[r]]
+    x[r] = v0[seg[r]] * t_a + 0.5 * alpha * t_a * t_a
+    r = np.flatnonzero(i > nas + ncs)  # on the ramp down
+    t_d = (i[r] - nas[r] - ncs[r]) / np.maximum(nds[r], 1) * td[seg[r]]
+    x[r] = da[seg[r]] + dc[seg[r]] + vp[seg[r]] * t_d - 0.5 * alpha * t_d * t_d
+    del r, t_a, t_d
     ds = d[seg]
     last = np.concatenate((seg[1:] != seg[:-1], [True])) if seg.size else np.zeros(0, bool)
     x[last] = ds[last]
     # Boundaries not needed: after a one-piece ramp up, before a one-piece ramp down.
     keep = last | ~(((i == nas) & (nas == 1)) | ((i == nas + ncs) & (nds == 1) & (ncs == 1)))
+    del i, nas, nds, ncs
     if min_piece_rad > 0.0:
         prev = np.concatenate(([0.0], x[:-1]))
         prev[np.concatenate(([True], seg[1:] != seg[:-1]))] = 0.0
         keep &= last | ((x - prev >= min_piece_rad) & (ds - x >= min_piece_rad))
+        del prev
     seg, x, ds = seg[keep], x[keep], ds[keep]
     with np.errstate(invalid="ignore", divide="ignore"):
         f = np.clip(np.where(ds > 0, x / ds, 1.0), 0.0, 1.0)
