@@ -144,7 +144,7 @@ def plan(dtheta_rad: FloatArray, length_mm: FloatArray, feed_mm_s: FloatArray,
         z = np.zeros(0)
         return Plan(z, z, z, z, np.zeros(0, dtype=np.int64))
     alpha = float(max_joint_rad_s2)
-    dist = np.abs(dth).max(axis=1)  # D_k
+    dist = np.maximum(np.abs(dth[:, 0]), np.abs(dth[:, 1]))  # D_k
     moving = dist > 0
     with np.errstate(divide="ignore", invalid="ignore"):
         feed_cap = np.where(length_mm > 0, feed_mm_s * dist / length_mm, np.inf)
@@ -155,7 +155,7 @@ def plan(dtheta_rad: FloatArray, length_mm: FloatArray, feed_mm_s: FloatArray,
     vmax = np.where(moving, vmax, 0.0)
     w_cap = _junction_caps(dth, dist, vmax, moving, stop_after, junction_jump_rad_s,
                            corner_accel_rad_s2)
-    w = _passes(w_cap, 2.0 * alpha * dist)
+    w = _passes(w_cap, dist, alpha)
     w = np.minimum(w, w_cap)
     del w_cap
     v = np.sqrt(w)
@@ -219,17 +219,17 @@ def _junction_caps(dth: FloatArray, dist: FloatArray, vmax: FloatArray, moving: 
     return cap
 
 
-def _passes(w_cap: FloatArray, d2: FloatArray) -> FloatArray:
+def _passes(w_cap: FloatArray, dist: FloatArray, alpha: float) -> FloatArray:
     """`plan`'s forward and backward passes (module doc) on the squared junction caps
     `w_cap` (K+1,) with d2_k = 2α·D_k: the squared junction speeds, clipped at 0."""
-    s = np.concatenate(([0.0], np.cumsum(d2)))  # S_n
-    del d2
+    s = np.empty(dist.shape[0] + 1)  # S_n
+    s[0] = 0.0
+    np.cumsum(2.0 * alpha * dist, out=s[1:])
     fwd = w_cap - s
     np.minimum.accumulate(fwd, out=fwd)
     fwd += s
-    # backward: R_n = Σ_{k ≥ n} d2_k = S_K − S_n
-    r = s[-1] - s
-    del s
+    # backward: R_n = Σ_{k ≥ n} d2_k = S_K − S_n (written over S)
+    r = np.subtract(s[-1], s, out=s)
     bwd = (w_cap - r)[::-1]
     np.minimum.accumulate(bwd, out=bwd)
     bwd = bwd[::-1]
