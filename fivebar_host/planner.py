@@ -156,67 +156,74 @@ def plan(dtheta_rad: FloatArray, length_mm: FloatArray, feed_mm_s: FloatArray,
     w_cap = _junction_caps(dth, dist, vmax, moving, stop_after, junction_jump_rad_s,
                            corner_accel_rad_s2)
     w = _passes(w_cap, dist, alpha)
-    w = np.minimum(w, w_cap)
+    np.minimum(w, w_cap, out=w)
     del w_cap
-    v = np.sqrt(w)
-    del w
-    v0, v1 = v[:-1], v[1:]
-    vp = np.minimum(vmax, np.sqrt(0.5 * (v0 * v0 + v1 * v1) + alpha * dist))
-    del vmax
-    vp = np.maximum(vp, np.maximum(v0, v1))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (vp - v0) / alpha  # time speeding up
-        t += (vp - v1) / alpha  # + slowing down
-        d_ramp = (vp * vp - v0 * v0) / (2 * alpha) + (vp * vp - v1 * v1) / (2 * alpha)
-        t += np.where(vp > 0, np.maximum(dist - d_ramp, 0.0) / vp, 0.0)  # + cruising
-        del d_ramp
-    t = np.where(moving, t, 0.0)
-    us = np.ceil(np.round(t * 1e6, 6)).astype(np.int64)
-    us[moving & (us < 1)] = 1
-    return Plan(v0, v1, vp, t, us)
+    v = np.sqrt(w, out=w)
+    vp, t, us = _trapezoids(v, vmax, dist, moving, alpha)
+    return Plan(v[:-1], v[1:], vp, t, us)
 
 
-def _junction_jumps(dth: FloatArray, dist: FloatArray, moving: BoolArray) -> FloatArray:
-    """δ_n = max_j |u_{n+1,j} − u_{n,j}| (K−1,) with u_k = Δθ_k / D_k (0 without motion),
-    in blocks of `JUMP_BLOCK` (each junction on its own: the values of one pass)."""
+#: Segments timed at a time by `_trapezoids`.
+TRAPEZOID_BLOCK = 1 << 16
+
+
+def _trapezoids(v: FloatArray, vmax: FloatArray, dist: FloatArray, moving: BoolArray,
+                alpha: float) -> tuple[FloatArray, FloatArray, IntArray]:
+    """Every segment's time-optimal trapezoid between its junction speeds v[k], v[k+1]
+    (module doc): peak speed, duration (s) and whole µs (rounded up, ≥ 1 when it moves),
+    in blocks of `TRAPEZOID_BLOCK` (each segment on its own: the values of one pass)."""
     k = dist.shape[0]
-    jump = np.empty(max(k - 1, 0))
-    for b in range(0, k - 1, JUMP_BLOCK):
-        e = min(b + JUMP_BLOCK, k - 1) + 1  # segments b … e−1, junctions b … e−2
-        mv = moving[b:e]
+    vp_all, t_all = np.empty(k), np.empty(k)
+    us_all = np.empty(k, dtype=np.int64)
+    for b in range(0, k, TRAPEZOID_BLOCK):
+        e = min(b + TRAPEZOID_BLOCK, k)
+        sl = slice(b, e)
+        v0, v1 = v[b:e], v[b + 1:e + 1]
+        d = dist[sl]
+        vp = np.minimum(vmax[sl], np.sqrt(0.5 * (v0 * v0 + v1 * v1) + alpha * d))
+        vp = np.maximum(vp, np.maximum(v0, v1))
         with np.errstate(divide="ignore", invalid="ignore"):
-            u = np.where(mv[:, None], dth[b:e] / np.where(mv, dist[b:e], 1.0)[:, None], 0.0)
-        jump[b:e - 1] = np.abs(u[1:] - u[:-1]).max(axis=1)
-    return jump
-
-
-#: Junctions measured at a time by `_junction_jumps`.
-JUMP_BLOCK = 1 << 16
+            t_acc = (vp - v0) / alpha
+            t_dec = (vp - v1) / alpha
+            d_ramp = (vp * vp - v0 * v0) / (2 * alpha) + (vp * vp - v1 * v1) / (2 * alpha)
+            t_cruise = np.where(vp > 0, np.maximum(d - d_ramp, 0.0) / vp, 0.0)
+        t = np.where(moving[sl], t_acc + t_dec + t_cruise, 0.0)
+        us = np.ceil(np.round(t * 1e6, 6)).astype(np.int64)
+        us[moving[sl] & (us < 1)] = 1
+        vp_all[sl], t_all[sl], us_all[sl] = vp, t, us
+    return vp_all, t_all, us_all
 
 
 def _junction_caps(dth: FloatArray, dist: FloatArray, vmax: FloatArray, moving: BoolArray,
                    stop_after: BoolArray | None, junction_jump_rad_s: float,
                    corner_accel_rad_s2: float | None) -> FloatArray:
     """`plan`'s squared speed caps w_cap (K+1,) at the junctions (junction n sits before
-    segment n; 0 at the ends, at stops and next to a zero-motion segment)."""
+    segment n; 0 at the ends, at stops and next to a zero-motion segment), in blocks of
+    `JUNCTION_BLOCK` junctions (each on its own: the values of one pass)."""
     k = dist.shape[0]
     cap = np.zeros(k + 1)
-    jump = _junction_jumps(dth, dist, moving)
-    with np.errstate(divide="ignore"):
-        jcap = np.where(jump > 0, junction_jump_rad_s / jump, np.inf)
-        if corner_accel_rad_s2 is not None:
-            ccap = np.sqrt(corner_accel_rad_s2 * 0.5 * (dist[:-1] + dist[1:]) / jump)
-            jcap = np.minimum(jcap, np.where(jump > 0, ccap, np.inf))
-            del ccap
-    del jump
-    cap[1:k] = np.minimum(np.minimum(vmax[:-1], vmax[1:]), jcap)
-    del jcap
+    for b in range(0, k - 1, JUNCTION_BLOCK):
+        e = min(b + JUNCTION_BLOCK, k - 1) + 1  # segments b … e−1, junctions b+1 … e−1
+        mv, d = moving[b:e], dist[b:e]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = np.where(mv[:, None], dth[b:e] / np.where(mv, d, 1.0)[:, None], 0.0)
+        jump = np.abs(u[1:] - u[:-1]).max(axis=1)  # δ = max_j |u_{n+1,j} − u_{n,j}|
+        with np.errstate(divide="ignore"):
+            jcap = np.where(jump > 0, junction_jump_rad_s / jump, np.inf)
+            if corner_accel_rad_s2 is not None:
+                ccap = np.sqrt(corner_accel_rad_s2 * 0.5 * (d[:-1] + d[1:]) / jump)
+                jcap = np.minimum(jcap, np.where(jump > 0, ccap, np.inf))
+        cap[b + 1:e] = np.minimum(np.minimum(vmax[b:e - 1], vmax[b + 1:e]), jcap)
     if stop_after is not None:
         st = np.asarray(stop_after, dtype=bool)
         cap[1:k][st[:-1]] = 0.0
     cap[1:k][~(moving[:-1] & moving[1:])] = 0.0
     cap *= cap
     return cap
+
+
+#: Junctions capped at a time by `_junction_caps`.
+JUNCTION_BLOCK = 1 << 16
 
 
 def _passes(w_cap: FloatArray, dist: FloatArray, alpha: float) -> FloatArray:
