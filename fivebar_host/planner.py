@@ -438,6 +438,7 @@ def enforce_staircase(dtheta_rad: FloatArray, duration_us: IntArray,
     duration and count as stops on both sides."""
     dth = np.asarray(dtheta_rad, dtype=np.float64).reshape(-1, 2)
     p = np.asarray(duration_us, dtype=np.float64).copy()
+    del duration_us  # (the caller may hold none: then it is freed here)
     k = dth.shape[0]
     if k == 0:
         return p.astype(np.int64)
