@@ -94,8 +94,10 @@ tested to 0.5 %, tests/test_plan_monotone.py).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from kinematics.arrays import BoolArray, FloatArray, IntArray
 
@@ -409,19 +411,27 @@ def _static_bounds(dth: FloatArray, lo: FloatArray, rest: BoolArray, act: IntArr
                    jump: float, acc: float) -> tuple[FloatArray, FloatArray]:
     """Raise `lo` (µs, in place) to the rest bounds (2) on the segments next to a stop and to
     the reversal bounds (5). Returns per boundary in `act` (between segments act and act + 1)
-    the joints' |Δθ| after (a) and before (b) it, zeroed where the joint reverses."""
+    the joints' |Δθ| after (a) and before (b) it, zeroed where the joint reverses. The
+    reversal bounds are worked out on the reversing boundaries only, and `a`, `b` are made
+    in place (memory on large jobs; the same values)."""
     dist = np.abs(dth).max(axis=1)
     lo[rest] = np.maximum.reduce([lo[rest], dist[rest] / jump, np.sqrt(2 * dist[rest] / acc)])
-    a, b = np.abs(dth[act + 1]), np.abs(dth[act])
-    rev = dth[act + 1] * dth[act] < 0
-    r = rev.any(axis=1)
-    if r.any():
-        both = np.where(rev, a + b, 0.0).max(axis=1)[r] / jump
+    del dist
+    a, b = dth[act + 1], dth[act]
+    rev = a * b < 0
+    np.abs(a, out=a)
+    np.abs(b, out=b)
+    r = np.flatnonzero(rev.any(axis=1))
+    if r.size:
+        rv, ar, br = rev[r], a[r], b[r]
+        both = np.where(rv, ar + br, 0.0).max(axis=1) / jump
         np.maximum.at(lo, act[r] + 1,
-                      np.maximum(both, np.sqrt(2 * np.where(rev, a, 0.0).max(axis=1)[r] / acc)))
+                      np.maximum(both, np.sqrt(2 * np.where(rv, ar, 0.0).max(axis=1) / acc)))
         np.maximum.at(lo, act[r],
-                      np.maximum(both, np.sqrt(2 * np.where(rev, b, 0.0).max(axis=1)[r] / acc)))
-    return np.where(rev, 0.0, a), np.where(rev, 0.0, b)
+                      np.maximum(both, np.sqrt(2 * np.where(rv, br, 0.0).max(axis=1) / acc)))
+    a[rev] = 0.0
+    b[rev] = 0.0
+    return a, b
 
 
 def enforce_staircase(dtheta_rad: FloatArray, duration_us: IntArray,
@@ -455,6 +465,7 @@ def enforce_staircase(dtheta_rad: FloatArray, duration_us: IntArray,
     lo = p.copy()
     a, b = _static_bounds(dth, lo, rest, act, jump, acc)
     p = np.where(moving, np.maximum(p, np.ceil(lo - _CEIL_SLACK_US)), p)
+    del lo, moving, st, rest
     _raise_to_least(p, act, a, b, jump, acc)
     return p.astype(np.int64)
 
@@ -463,18 +474,45 @@ def _raise_to_least(p: FloatArray, act: IntArray, a: FloatArray, b: FloatArray, 
                     acc: float) -> None:
     """Kleene's iteration (`enforce_staircase`): raise durations `p` (µs, in place) by the
     bounds (3), (4) across the boundaries `act` until none changes; each round revisits only
-    the boundaries next to a segment that changed."""
+    the boundaries next to a segment that changed. A round measures its boundaries in blocks
+    (`_round_raises`) from the durations at its start and then applies the raises."""
+    if not act.size:
+        return
     by_left = np.full(p.shape[0] + 1, -1, dtype=np.int64)  # boundary index by its left segment
     by_left[act] = np.arange(act.shape[0])
-    todo = np.arange(act.shape[0])
-    while todo.size:
-        left = act[todo]
-        q_new = np.ceil(_bound_after(a[todo], b[todo], p[left], jump, acc) - _CEIL_SLACK_US)
-        p_new = np.ceil(_bound_after(b[todo], a[todo], p[left + 1], jump, acc)
-                        - _CEIL_SLACK_US)
-        up_q, up_p = q_new > p[left + 1], p_new > p[left]
-        p[left[up_q] + 1] = q_new[up_q]  # each boundary has its own right segment...
-        p[left[up_p]] = np.maximum(p[left[up_p]], p_new[up_p])  # ...and its own left one
-        changed = np.concatenate((left[up_q] + 1, left[up_p]))
+    todo: IntArray | None = None  # None: every boundary
+    while todo is None or todo.size:
+        (right, q_new), (left, p_new) = _round_raises(p, act, todo, a, b, jump, acc)
+        p[right] = q_new  # each boundary has its own right segment...
+        p[left] = np.maximum(p[left], p_new)  # ...and its own left one
+        changed = np.concatenate((right, left))
+        del right, q_new, left, p_new
         near = np.concatenate((by_left[changed], by_left[changed - 1]))
         todo = np.unique(near[near >= 0])
+
+
+#: Boundaries measured at a time by `_round_raises` (bounded temporaries on large jobs;
+#: every boundary is measured on its own, so the bounds are those of one pass).
+STAIRCASE_BLOCK = 1 << 16
+
+_Raises = tuple[IntArray, FloatArray]
+
+
+def _round_raises(p: FloatArray, act: IntArray, todo: IntArray | None, a: FloatArray,
+                  b: FloatArray, jump: float, acc: float) -> tuple[_Raises, _Raises]:
+    """One round of `_raise_to_least` over the boundaries `todo` (None: all), from the
+    durations `p` (not changed here): the right segments whose least duration (µs, whole)
+    is above theirs, with that duration, and the same for the left segments; in blocks of
+    `STAIRCASE_BLOCK`, keeping only the raises."""
+    n = act.shape[0] if todo is None else todo.shape[0]
+    parts: list[list[NDArray[Any]]] = [[], [], [], []]
+    for i in range(0, n, STAIRCASE_BLOCK):
+        t = slice(i, i + STAIRCASE_BLOCK) if todo is None else todo[i:i + STAIRCASE_BLOCK]
+        lf = act[t]
+        q_new = np.ceil(_bound_after(a[t], b[t], p[lf], jump, acc) - _CEIL_SLACK_US)
+        p_new = np.ceil(_bound_after(b[t], a[t], p[lf + 1], jump, acc) - _CEIL_SLACK_US)
+        up_q, up_p = q_new > p[lf + 1], p_new > p[lf]
+        for part, x in zip(parts, (lf[up_q] + 1, q_new[up_q], lf[up_p], p_new[up_p]), strict=True):
+            part.append(x)
+    right, q, left, pl = (np.concatenate(x) if len(x) != 1 else x[0] for x in parts)
+    return (right, q), (left, pl)
