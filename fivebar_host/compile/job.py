@@ -42,6 +42,7 @@ lines in `.encode`, `--mode auto`'s working-mode planning in `.modes`.
 
 from __future__ import annotations
 
+import gc
 import math
 from dataclasses import replace
 from pathlib import Path
@@ -82,8 +83,27 @@ def read_drawing(path: str | Path, layers: tuple[str, ...] = (),
                  max_segments: float | None = None, profile: Profile | None = None) -> Drawing:
     """Read an SVG or G-code file, chosen by suffix (or by content when unknown); an SVG
     with more than `max_segments` path segments (None: the reader's default) is refused.
-    `profile` gives G-code Z words their meaning (`gcode_tool`)."""
-    p = Path(path)
+    `profile` gives G-code Z words their meaning (`gcode_tool`). The reader's own state
+    is freed before the drawing is returned (`_read_and_collect`)."""
+    return _read_and_collect(Path(path), layers, max_segments, profile)
+
+
+def _read_and_collect(p: Path, layers: tuple[str, ...], max_segments: float | None,
+                      profile: Profile | None) -> Drawing:
+    """`read_drawing`, then one full garbage collection: the SVG reader's walker, element
+    tree and drawing builder refer to each other, so their buffers (the builder's
+    per-primitive arrays, the parser's nodes: about 25 bytes per primitive and more) would
+    otherwise stay resident through the whole compile until Python's next full collection,
+    which a numpy-heavy compile may never trigger."""
+    try:
+        return _read(p, layers, max_segments, profile)
+    finally:
+        gc.collect()
+
+
+def _read(p: Path, layers: tuple[str, ...], max_segments: float | None,
+          profile: Profile | None) -> Drawing:
+    """`read_drawing` itself."""
     suffix = p.suffix.lower()
     limit = DEFAULT_MAX_SEGMENTS if max_segments is None else int(max_segments)
     if suffix == ".svg":
