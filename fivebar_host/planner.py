@@ -408,29 +408,37 @@ def _bound_after(a: FloatArray, b: FloatArray, p: FloatArray, jump: float,
 
 
 def _static_bounds(dth: FloatArray, lo: FloatArray, rest: BoolArray, act: IntArray,
-                   jump: float, acc: float) -> tuple[FloatArray, FloatArray]:
+                   jump: float, acc: float) -> NDArray[np.bool_]:
     """Raise `lo` (µs, in place) to the rest bounds (2) on the segments next to a stop and to
     the reversal bounds (5). Returns per boundary in `act` (between segments act and act + 1)
-    the joints' |Δθ| after (a) and before (b) it, zeroed where the joint reverses. The
-    reversal bounds are worked out on the reversing boundaries only, and `a`, `b` are made
-    in place (memory on large jobs; the same values)."""
+    and joint whether the joint reverses there (`_moves_at` zeroes its |Δθ|). The reversal
+    bounds are worked out on the reversing boundaries only (memory on large jobs)."""
     dist = np.abs(dth).max(axis=1)
     lo[rest] = np.maximum.reduce([lo[rest], dist[rest] / jump, np.sqrt(2 * dist[rest] / acc)])
     del dist
-    a, b = dth[act + 1], dth[act]
-    rev = a * b < 0
-    np.abs(a, out=a)
-    np.abs(b, out=b)
+    rev = np.empty((act.shape[0], 2), dtype=bool)
+    for i in range(0, act.shape[0], STAIRCASE_BLOCK):  # (no whole-job temporaries)
+        c = act[i:i + STAIRCASE_BLOCK]
+        np.less(dth[c + 1] * dth[c], 0, out=rev[i:i + STAIRCASE_BLOCK])
     r = np.flatnonzero(rev.any(axis=1))
     if r.size:
-        rv, ar, br = rev[r], a[r], b[r]
+        rv, (ar, br) = rev[r], _moves_at(dth, act[r])
         both = np.where(rv, ar + br, 0.0).max(axis=1) / jump
         np.maximum.at(lo, act[r] + 1,
                       np.maximum(both, np.sqrt(2 * np.where(rv, ar, 0.0).max(axis=1) / acc)))
         np.maximum.at(lo, act[r],
                       np.maximum(both, np.sqrt(2 * np.where(rv, br, 0.0).max(axis=1) / acc)))
-    a[rev] = 0.0
-    b[rev] = 0.0
+    return rev
+
+
+def _moves_at(dth: FloatArray, left: IntArray,
+              rev: NDArray[np.bool_] | None = None) -> tuple[FloatArray, FloatArray]:
+    """The joints' |Δθ| after (a) and before (b) the boundaries whose left segments are
+    `left`, zeroed where `rev` (the joint reverses there: bound (5) covers it)."""
+    a, b = np.abs(dth[left + 1]), np.abs(dth[left])
+    if rev is not None:
+        a[rev] = 0.0
+        b[rev] = 0.0
     return a, b
 
 
@@ -462,27 +470,29 @@ def enforce_staircase(dtheta_rad: FloatArray, duration_us: IntArray,
     # boundary n sits between segments act[n] and act[n] + 1 — across a stop too, as
     # `staircase_ratios` measures the step from ω_{k−1} straight to ω_k there as well
     act = np.flatnonzero(moving[:-1] & moving[1:])
+    if k < 1 << 31:  # int32 indices where they fit (memory on large jobs)
+        act = act.astype(np.int32)
     lo = p.copy()
-    a, b = _static_bounds(dth, lo, rest, act, jump, acc)
+    rev = _static_bounds(dth, lo, rest, act, jump, acc)
     p = np.where(moving, np.maximum(p, np.ceil(lo - _CEIL_SLACK_US)), p)
     del lo, moving, st, rest
-    _raise_to_least(p, act, a, b, jump, acc)
+    _raise_to_least(p, act, dth, rev, jump, acc)
     return p.astype(np.int64)
 
 
-def _raise_to_least(p: FloatArray, act: IntArray, a: FloatArray, b: FloatArray, jump: float,
-                    acc: float) -> None:
+def _raise_to_least(p: FloatArray, act: IntArray, dth: FloatArray, rev: NDArray[np.bool_],
+                    jump: float, acc: float) -> None:
     """Kleene's iteration (`enforce_staircase`): raise durations `p` (µs, in place) by the
     bounds (3), (4) across the boundaries `act` until none changes; each round revisits only
     the boundaries next to a segment that changed. A round measures its boundaries in blocks
     (`_round_raises`) from the durations at its start and then applies the raises."""
     if not act.size:
         return
-    by_left = np.full(p.shape[0] + 1, -1, dtype=np.int64)  # boundary index by its left segment
-    by_left[act] = np.arange(act.shape[0])
+    by_left = np.full(p.shape[0] + 1, -1, dtype=act.dtype)  # boundary by its left segment
+    by_left[act] = np.arange(act.shape[0], dtype=act.dtype)
     todo: IntArray | None = None  # None: every boundary
     while todo is None or todo.size:
-        (right, q_new), (left, p_new) = _round_raises(p, act, todo, a, b, jump, acc)
+        (right, q_new), (left, p_new) = _round_raises(p, act, todo, dth, rev, jump, acc)
         p[right] = q_new  # each boundary has its own right segment...
         p[left] = np.maximum(p[left], p_new)  # ...and its own left one
         changed = np.concatenate((right, left))
@@ -498,19 +508,21 @@ STAIRCASE_BLOCK = 1 << 16
 _Raises = tuple[IntArray, FloatArray]
 
 
-def _round_raises(p: FloatArray, act: IntArray, todo: IntArray | None, a: FloatArray,
-                  b: FloatArray, jump: float, acc: float) -> tuple[_Raises, _Raises]:
+def _round_raises(p: FloatArray, act: IntArray, todo: IntArray | None, dth: FloatArray,
+                  rev: NDArray[np.bool_], jump: float, acc: float) -> tuple[_Raises, _Raises]:
     """One round of `_raise_to_least` over the boundaries `todo` (None: all), from the
     durations `p` (not changed here): the right segments whose least duration (µs, whole)
     is above theirs, with that duration, and the same for the left segments; in blocks of
-    `STAIRCASE_BLOCK`, keeping only the raises."""
+    `STAIRCASE_BLOCK` (the joints' moves taken per block, `_moves_at`), keeping only the
+    raises."""
     n = act.shape[0] if todo is None else todo.shape[0]
     parts: list[list[NDArray[Any]]] = [[], [], [], []]
     for i in range(0, n, STAIRCASE_BLOCK):
         t = slice(i, i + STAIRCASE_BLOCK) if todo is None else todo[i:i + STAIRCASE_BLOCK]
         lf = act[t]
-        q_new = np.ceil(_bound_after(a[t], b[t], p[lf], jump, acc) - _CEIL_SLACK_US)
-        p_new = np.ceil(_bound_after(b[t], a[t], p[lf + 1], jump, acc) - _CEIL_SLACK_US)
+        a, b = _moves_at(dth, lf, rev[t])
+        q_new = np.ceil(_bound_after(a, b, p[lf], jump, acc) - _CEIL_SLACK_US)
+        p_new = np.ceil(_bound_after(b, a, p[lf + 1], jump, acc) - _CEIL_SLACK_US)
         up_q, up_p = q_new > p[lf + 1], p_new > p[lf]
         for part, x in zip(parts, (lf[up_q] + 1, q_new[up_q], lf[up_p], p_new[up_p]), strict=True):
             part.append(x)
