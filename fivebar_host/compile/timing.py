@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -160,7 +161,9 @@ def plan_timing(su: Setup, routed: Routed, solved: Solved, handed: list[Stepped]
         stop = stop | section_stops(routed.ch.path_section, sp.path)
     box = [sp]
     del sp
-    pd = _time(su.profile, solved.checker, box, power, feed, stop)
+    per_seg = [power, feed, stop]  # `_time` drops them once the pieces have theirs
+    del power, feed, stop
+    pd = _time(su.profile, solved.checker, box, per_seg)
     return insert_dwells(dwells, su.profile, pd)
 
 
@@ -169,14 +172,17 @@ def time_stepped(profile: Profile, checker: PoseChecker, sp: Stepped,
     """Steps 1–4 of the module doc on stepped segments with their laser power, pen feed
     (mm/s) and stops given per segment (also used by the GRBL bridge's online compiler,
     `fivebar_host.grbl.online`, on small batches of moves)."""
-    return _time(profile, checker, [sp], power, feed, stop)
+    return _time(profile, checker, [sp], [power, feed, stop])
 
 
 def _time(profile: Profile, checker: PoseChecker, handed: list[Stepped],
-          power: NDArray[np.uint8], feed: FloatArray, stop: BoolArray) -> Planned:
-    """`time_stepped` on the stepped segments in `handed` (emptied, see `plan_timing`);
-    every array is freed as soon as it was last read."""
+          per_seg: list[Any]) -> Planned:
+    """`time_stepped` on the stepped segments in `handed` with the power, feed and stops
+    in `per_seg` (both emptied, see `plan_timing`); every array is freed as soon as it was
+    last read."""
     sp = handed.pop()
+    power, feed, stop = per_seg
+    per_seg.clear()
     mot, motion = profile.motors, profile.motion
     a_c = cut_accel(profile)
     j_lim = planner.JUNCTION_JUMP_RAD_S
@@ -210,10 +216,10 @@ def _time(profile: Profile, checker: PoseChecker, handed: list[Stepped],
     # copied them)
     feeds = [feed]
     del feed
+    floor_us = [planner.cap_durations_us(dq, length, feeds.pop(), motion.max_joint_rad_s,
+                                         protocol.P_MIN_US)]
     duration_us = compact_ints(planner.enforce_staircase(
-        dq, planner.cap_durations_us(dq, length, feeds.pop(), motion.max_joint_rad_s,
-                                     protocol.P_MIN_US),
-        stop, motion.max_joint_rad_s2, j_lim))
+        dq, floor_us.pop(), stop, motion.max_joint_rad_s2, j_lim))
     del dq, stop
     return Planned(th=th_all, pts=pts_all, draw=seg_draw, length=length, steps=st,
                    power=power, f0=f0, f1=f1, duration_us=duration_us,
