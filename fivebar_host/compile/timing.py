@@ -218,6 +218,7 @@ def _time(profile: Profile, checker: PoseChecker, handed: list[Stepped],
     del feed
     floor_us = [planner.cap_durations_us(dq, length, feeds.pop(), motion.max_joint_rad_s,
                                          protocol.P_MIN_US)]
+    release_free_memory()  # the per-segment settings' and the floors' inputs' holes
     duration_us = compact_ints(planner.enforce_staircase(
         dq, floor_us.pop(), stop, motion.max_joint_rad_s2, j_lim))
     del dq, stop
