@@ -94,11 +94,17 @@ def _read_and_collect(p: Path, layers: tuple[str, ...], max_segments: float | No
     tree and drawing builder refer to each other, so their buffers (the builder's
     per-primitive arrays, the parser's nodes: about 25 bytes per primitive and more) would
     otherwise stay resident through the whole compile until Python's next full collection,
-    which a numpy-heavy compile may never trigger."""
-    try:
-        return _read(p, layers, max_segments, profile)
-    finally:
+    which a numpy-heavy compile may never trigger. Only for drawings of at least
+    `COLLECT_MIN_PRIMITIVES` primitives: a collection costs some 20–30 ms, more than a small
+    drawing's reader state is worth."""
+    drawing = _read(p, layers, max_segments, profile)
+    if drawing.kind.shape[0] >= COLLECT_MIN_PRIMITIVES:
         gc.collect()
+    return drawing
+
+
+#: Drawings from this many primitives on get `_read_and_collect`'s full collection.
+COLLECT_MIN_PRIMITIVES = 1 << 16
 
 
 def _read(p: Path, layers: tuple[str, ...], max_segments: float | None,
