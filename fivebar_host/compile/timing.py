@@ -163,7 +163,7 @@ def plan_timing(su: Setup, routed: Routed, solved: Solved, handed: list[Stepped]
     del sp
     per_seg = [power, feed, stop]  # `_time` drops them once the pieces have theirs
     del power, feed, stop
-    pd = _time(su.profile, solved.checker, box, per_seg)
+    pd = _time(su.profile, solved.checker, box, per_seg, trim=True)
     return insert_dwells(dwells, su.profile, pd)
 
 
@@ -176,10 +176,11 @@ def time_stepped(profile: Profile, checker: PoseChecker, sp: Stepped,
 
 
 def _time(profile: Profile, checker: PoseChecker, handed: list[Stepped],
-          per_seg: list[Any]) -> Planned:
+          per_seg: list[Any], trim: bool = False) -> Planned:
     """`time_stepped` on the stepped segments in `handed` with the power, feed and stops
     in `per_seg` (both emptied, see `plan_timing`); every array is freed as soon as it was
-    last read."""
+    last read. `trim`: the heap's free pages are given back on the way (a whole job; not for the
+    GRBL bridge's small batches, where the calls would only cost time)."""
     sp = handed.pop()
     power, feed, stop = per_seg
     per_seg.clear()
@@ -209,7 +210,8 @@ def _time(profile: Profile, checker: PoseChecker, handed: list[Stepped],
     trav = np.flatnonzero(~seg_draw)  # travel: between its targets
     length[trav] = np.hypot(*(pts_all[trav + 1] - pts_all[trav]).T)
     del trav
-    release_free_memory()  # the stepped segments' arrays
+    if trim:
+        release_free_memory()  # the stepped segments' arrays
     dq = _step_deltas(st, mot)
     # the pieces' feeds and the floor durations are held by no name, so each is freed as
     # soon as it was read (the feeds once the floors exist, the floors once the staircase
@@ -218,7 +220,8 @@ def _time(profile: Profile, checker: PoseChecker, handed: list[Stepped],
     del feed
     floor_us = [planner.cap_durations_us(dq, length, feeds.pop(), motion.max_joint_rad_s,
                                          protocol.P_MIN_US)]
-    release_free_memory()  # the per-segment settings' and the floors' inputs' holes
+    if trim:
+        release_free_memory()  # the per-segment settings' and the floors' inputs' holes
     duration_us = compact_ints(planner.enforce_staircase(
         dq, floor_us.pop(), stop, motion.max_joint_rad_s2, j_lim))
     del dq, stop
