@@ -94,8 +94,10 @@ tested to 0.5 %, tests/test_plan_monotone.py).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from kinematics.arrays import BoolArray, FloatArray, IntArray
 
@@ -144,52 +146,107 @@ def plan(dtheta_rad: FloatArray, length_mm: FloatArray, feed_mm_s: FloatArray,
         z = np.zeros(0)
         return Plan(z, z, z, z, np.zeros(0, dtype=np.int64))
     alpha = float(max_joint_rad_s2)
-    dist = np.abs(dth).max(axis=1)  # D_k
+    dist = np.maximum(np.abs(dth[:, 0]), np.abs(dth[:, 1]))  # D_k
     moving = dist > 0
     with np.errstate(divide="ignore", invalid="ignore"):
-        u = np.where(moving[:, None], dth / np.where(moving, dist, 1.0)[:, None], 0.0)
         feed_cap = np.where(length_mm > 0, feed_mm_s * dist / length_mm, np.inf)
     vmax = np.minimum(max_joint_rad_s, feed_cap)
+    del feed_cap
     if min_duration_s > 0.0:
         vmax = np.minimum(vmax, dist / min_duration_s)
     vmax = np.where(moving, vmax, 0.0)
+    w_cap = _junction_caps(dth, dist, vmax, moving, stop_after, junction_jump_rad_s,
+                           corner_accel_rad_s2)
+    w = _passes(w_cap, dist, alpha)
+    np.minimum(w, w_cap, out=w)
+    del w_cap
+    v = np.sqrt(w, out=w)
+    vp, t, us = _trapezoids(v, vmax, dist, moving, alpha)
+    return Plan(v[:-1], v[1:], vp, t, us)
 
-    # Junction caps (K+1 junctions; junction n sits before segment n).
+
+#: Segments timed at a time by `_trapezoids`.
+TRAPEZOID_BLOCK = 1 << 16
+
+
+def _trapezoids(v: FloatArray, vmax: FloatArray, dist: FloatArray, moving: BoolArray,
+                alpha: float) -> tuple[FloatArray, FloatArray, IntArray]:
+    """Every segment's time-optimal trapezoid between its junction speeds v[k], v[k+1]
+    (module doc): peak speed, duration (s) and whole µs (rounded up, ≥ 1 when it moves),
+    in blocks of `TRAPEZOID_BLOCK` (each segment on its own: the values of one pass)."""
+    k = dist.shape[0]
+    vp_all, t_all = np.empty(k), np.empty(k)
+    us_all = np.empty(k, dtype=np.int64)
+    for b in range(0, k, TRAPEZOID_BLOCK):
+        e = min(b + TRAPEZOID_BLOCK, k)
+        sl = slice(b, e)
+        v0, v1 = v[b:e], v[b + 1:e + 1]
+        d = dist[sl]
+        vp = np.minimum(vmax[sl], np.sqrt(0.5 * (v0 * v0 + v1 * v1) + alpha * d))
+        vp = np.maximum(vp, np.maximum(v0, v1))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t_acc = (vp - v0) / alpha
+            t_dec = (vp - v1) / alpha
+            d_ramp = (vp * vp - v0 * v0) / (2 * alpha) + (vp * vp - v1 * v1) / (2 * alpha)
+            t_cruise = np.where(vp > 0, np.maximum(d - d_ramp, 0.0) / vp, 0.0)
+        t = np.where(moving[sl], t_acc + t_dec + t_cruise, 0.0)
+        us = np.ceil(np.round(t * 1e6, 6)).astype(np.int64)
+        us[moving[sl] & (us < 1)] = 1
+        vp_all[sl], t_all[sl], us_all[sl] = vp, t, us
+    return vp_all, t_all, us_all
+
+
+def _junction_caps(dth: FloatArray, dist: FloatArray, vmax: FloatArray, moving: BoolArray,
+                   stop_after: BoolArray | None, junction_jump_rad_s: float,
+                   corner_accel_rad_s2: float | None) -> FloatArray:
+    """`plan`'s squared speed caps w_cap (K+1,) at the junctions (junction n sits before
+    segment n; 0 at the ends, at stops and next to a zero-motion segment), in blocks of
+    `JUNCTION_BLOCK` junctions (each on its own: the values of one pass)."""
+    k = dist.shape[0]
     cap = np.zeros(k + 1)
-    jump = np.abs(u[1:] - u[:-1]).max(axis=1)
-    with np.errstate(divide="ignore"):
-        jcap = np.where(jump > 0, junction_jump_rad_s / jump, np.inf)
-        if corner_accel_rad_s2 is not None:
-            ccap = np.sqrt(corner_accel_rad_s2 * 0.5 * (dist[:-1] + dist[1:]) / jump)
-            jcap = np.minimum(jcap, np.where(jump > 0, ccap, np.inf))
-    cap[1:k] = np.minimum(np.minimum(vmax[:-1], vmax[1:]), jcap)
+    for b in range(0, k - 1, JUNCTION_BLOCK):
+        e = min(b + JUNCTION_BLOCK, k - 1) + 1  # segments b … e−1, junctions b+1 … e−1
+        mv, d = moving[b:e], dist[b:e]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = np.where(mv[:, None], dth[b:e] / np.where(mv, d, 1.0)[:, None], 0.0)
+        jump = np.abs(u[1:] - u[:-1]).max(axis=1)  # δ = max_j |u_{n+1,j} − u_{n,j}|
+        with np.errstate(divide="ignore"):
+            jcap = np.where(jump > 0, junction_jump_rad_s / jump, np.inf)
+            if corner_accel_rad_s2 is not None:
+                ccap = np.sqrt(corner_accel_rad_s2 * 0.5 * (d[:-1] + d[1:]) / jump)
+                jcap = np.minimum(jcap, np.where(jump > 0, ccap, np.inf))
+        cap[b + 1:e] = np.minimum(np.minimum(vmax[b:e - 1], vmax[b + 1:e]), jcap)
     if stop_after is not None:
         st = np.asarray(stop_after, dtype=bool)
         cap[1:k][st[:-1]] = 0.0
     cap[1:k][~(moving[:-1] & moving[1:])] = 0.0
-    w_cap = cap * cap
+    cap *= cap
+    return cap
 
-    d2 = 2.0 * alpha * dist
-    s = np.concatenate(([0.0], np.cumsum(d2)))  # S_n
-    fwd = s + np.minimum.accumulate(w_cap - s)
-    # backward: R_n = Σ_{k ≥ n} d2_k = S_K − S_n
-    r = s[-1] - s
-    bwd = r + np.minimum.accumulate((w_cap - r)[::-1])[::-1]
-    w = np.clip(np.minimum(fwd, bwd), 0.0, None)
-    w = np.minimum(w, w_cap)
-    v = np.sqrt(w)
-    v0, v1 = v[:-1], v[1:]
-    vp = np.minimum(vmax, np.sqrt(0.5 * (v0 * v0 + v1 * v1) + alpha * dist))
-    vp = np.maximum(vp, np.maximum(v0, v1))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t_acc = (vp - v0) / alpha
-        t_dec = (vp - v1) / alpha
-        d_ramp = (vp * vp - v0 * v0) / (2 * alpha) + (vp * vp - v1 * v1) / (2 * alpha)
-        t_cruise = np.where(vp > 0, np.maximum(dist - d_ramp, 0.0) / vp, 0.0)
-    t = np.where(moving, t_acc + t_dec + t_cruise, 0.0)
-    us = np.ceil(np.round(t * 1e6, 6)).astype(np.int64)
-    us[moving & (us < 1)] = 1
-    return Plan(v0, v1, vp, t, us)
+
+#: Junctions capped at a time by `_junction_caps`.
+JUNCTION_BLOCK = 1 << 16
+
+
+def _passes(w_cap: FloatArray, dist: FloatArray, alpha: float) -> FloatArray:
+    """`plan`'s forward and backward passes (module doc) on the squared junction caps
+    `w_cap` (K+1,) with d2_k = 2α·D_k: the squared junction speeds, clipped at 0."""
+    s = np.empty(dist.shape[0] + 1)  # S_n
+    s[0] = 0.0
+    np.cumsum(2.0 * alpha * dist, out=s[1:])
+    fwd = w_cap - s
+    np.minimum.accumulate(fwd, out=fwd)
+    fwd += s
+    # backward: R_n = Σ_{k ≥ n} d2_k = S_K − S_n (written over S)
+    r = np.subtract(s[-1], s, out=s)
+    bwd = (w_cap - r)[::-1]
+    np.minimum.accumulate(bwd, out=bwd)
+    bwd = bwd[::-1]
+    bwd += r
+    del r
+    np.minimum(fwd, bwd, out=fwd)
+    del bwd
+    return np.clip(fwd, 0.0, None, out=fwd)
 
 
 def check_plan(pl: Plan, dtheta_rad: FloatArray, length_mm: FloatArray,
@@ -230,9 +287,33 @@ def ramp_fractions(pl: Plan, dist: FloatArray, alpha: float, piece_s: float,
     piece. A cruise part stays whole, and so does a ramp that fits in one piece (it joins
     its neighbour). No piece is made shorter than `min_piece_rad` (a shorter one joins the
     piece before it). Returns the number of pieces per segment (K,) and every piece's end as
-    a fraction of its segment's distance (ascending within a segment, the last exactly 1)."""
-    v0, v1, vp = pl.v_entry, pl.v_exit, pl.v_peak
+    a fraction of its segment's distance (ascending within a segment, the last exactly 1).
+    Every segment is cut on its own, so the segments are cut in blocks of `RAMP_BLOCK`
+    (bounded temporaries on large jobs; the same pieces as one pass)."""
+    k = pl.v_entry.shape[0]
     d = np.asarray(dist, dtype=np.float64)
+    counts: list[IntArray] = []
+    fracs: list[FloatArray] = []
+    for b in range(0, max(k, 1), RAMP_BLOCK):
+        sl = slice(b, b + RAMP_BLOCK)
+        n, f = _ramp_block(pl.v_entry[sl], pl.v_exit[sl], pl.v_peak[sl], d[sl], alpha,
+                           piece_s, min_piece_rad)
+        counts.append(n)
+        fracs.append(f)
+    if len(counts) == 1:
+        return counts[0], fracs[0]
+    return np.concatenate(counts), np.concatenate(fracs)
+
+
+#: Segments cut at a time by `ramp_fractions`.
+RAMP_BLOCK = 1 << 16
+
+
+def _ramp_block(v0: FloatArray, v1: FloatArray, vp: FloatArray, d: FloatArray, alpha: float,
+                piece_s: float, min_piece_rad: float) -> tuple[IntArray, FloatArray]:
+    """`ramp_fractions` on the segments with entry/exit/peak speeds v0, v1, vp and
+    distances d; each piece's position is computed only where it applies (ramp up, ramp
+    down, else the cruise's end)."""
     with np.errstate(invalid="ignore", divide="ignore"):
         ta = np.where(vp > v0, (vp - v0) / alpha, 0.0)
         td = np.where(vp > v1, (vp - v1) / alpha, 0.0)
@@ -246,22 +327,25 @@ def ramp_fractions(pl: Plan, dist: FloatArray, alpha: float, piece_s: float,
     seg = np.repeat(np.arange(d.shape[0]), n)
     i = np.arange(seg.shape[0]) - np.repeat(np.cumsum(n) - n, n) + 1  # 1-based piece number
     nas, nds, ncs = na[seg], nd[seg], nc[seg]
-    in_a = i <= nas
-    in_d = i > nas + ncs
-    t_a = np.where(in_a, i / np.maximum(nas, 1), 0.0) * ta[seg]
-    x_a = v0[seg] * t_a + 0.5 * alpha * t_a * t_a
-    t_d = np.where(in_d, (i - nas - ncs) / np.maximum(nds, 1), 0.0) * td[seg]
-    x_d = da[seg] + dc[seg] + vp[seg] * t_d - 0.5 * alpha * t_d * t_d
-    x = np.where(in_a, x_a, np.where(in_d, x_d, da[seg] + dc[seg]))
+    x = da[seg] + dc[seg]  # the cruise's end, unless the piece ends on a ramp
+    r = np.flatnonzero(i <= nas)  # on the ramp up
+    t_a = i[r] / np.maximum(nas[r], 1) * ta[seg[r]]
+    x[r] = v0[seg[r]] * t_a + 0.5 * alpha * t_a * t_a
+    r = np.flatnonzero(i > nas + ncs)  # on the ramp down
+    t_d = (i[r] - nas[r] - ncs[r]) / np.maximum(nds[r], 1) * td[seg[r]]
+    x[r] = da[seg[r]] + dc[seg[r]] + vp[seg[r]] * t_d - 0.5 * alpha * t_d * t_d
+    del r, t_a, t_d
     ds = d[seg]
     last = np.concatenate((seg[1:] != seg[:-1], [True])) if seg.size else np.zeros(0, bool)
     x[last] = ds[last]
     # Boundaries not needed: after a one-piece ramp up, before a one-piece ramp down.
     keep = last | ~(((i == nas) & (nas == 1)) | ((i == nas + ncs) & (nds == 1) & (ncs == 1)))
+    del i, nas, nds, ncs
     if min_piece_rad > 0.0:
         prev = np.concatenate(([0.0], x[:-1]))
         prev[np.concatenate(([True], seg[1:] != seg[:-1]))] = 0.0
         keep &= last | ((x - prev >= min_piece_rad) & (ds - x >= min_piece_rad))
+        del prev
     seg, x, ds = seg[keep], x[keep], ds[keep]
     with np.errstate(invalid="ignore", divide="ignore"):
         f = np.clip(np.where(ds > 0, x / ds, 1.0), 0.0, 1.0)
@@ -324,22 +408,38 @@ def _bound_after(a: FloatArray, b: FloatArray, p: FloatArray, jump: float,
 
 
 def _static_bounds(dth: FloatArray, lo: FloatArray, rest: BoolArray, act: IntArray,
-                   jump: float, acc: float) -> tuple[FloatArray, FloatArray]:
+                   jump: float, acc: float) -> NDArray[np.bool_]:
     """Raise `lo` (µs, in place) to the rest bounds (2) on the segments next to a stop and to
     the reversal bounds (5). Returns per boundary in `act` (between segments act and act + 1)
-    the joints' |Δθ| after (a) and before (b) it, zeroed where the joint reverses."""
+    and joint whether the joint reverses there (`_moves_at` zeroes its |Δθ|). The reversal
+    bounds are worked out on the reversing boundaries only (memory on large jobs)."""
     dist = np.abs(dth).max(axis=1)
     lo[rest] = np.maximum.reduce([lo[rest], dist[rest] / jump, np.sqrt(2 * dist[rest] / acc)])
-    a, b = np.abs(dth[act + 1]), np.abs(dth[act])
-    rev = dth[act + 1] * dth[act] < 0
-    r = rev.any(axis=1)
-    if r.any():
-        both = np.where(rev, a + b, 0.0).max(axis=1)[r] / jump
+    del dist
+    rev = np.empty((act.shape[0], 2), dtype=bool)
+    for i in range(0, act.shape[0], STAIRCASE_BLOCK):  # (no whole-job temporaries)
+        c = act[i:i + STAIRCASE_BLOCK]
+        np.less(dth[c + 1] * dth[c], 0, out=rev[i:i + STAIRCASE_BLOCK])
+    r = np.flatnonzero(rev.any(axis=1))
+    if r.size:
+        rv, (ar, br) = rev[r], _moves_at(dth, act[r])
+        both = np.where(rv, ar + br, 0.0).max(axis=1) / jump
         np.maximum.at(lo, act[r] + 1,
-                      np.maximum(both, np.sqrt(2 * np.where(rev, a, 0.0).max(axis=1)[r] / acc)))
+                      np.maximum(both, np.sqrt(2 * np.where(rv, ar, 0.0).max(axis=1) / acc)))
         np.maximum.at(lo, act[r],
-                      np.maximum(both, np.sqrt(2 * np.where(rev, b, 0.0).max(axis=1)[r] / acc)))
-    return np.where(rev, 0.0, a), np.where(rev, 0.0, b)
+                      np.maximum(both, np.sqrt(2 * np.where(rv, br, 0.0).max(axis=1) / acc)))
+    return rev
+
+
+def _moves_at(dth: FloatArray, left: IntArray,
+              rev: NDArray[np.bool_] | None = None) -> tuple[FloatArray, FloatArray]:
+    """The joints' |Δθ| after (a) and before (b) the boundaries whose left segments are
+    `left`, zeroed where `rev` (the joint reverses there: bound (5) covers it)."""
+    a, b = np.abs(dth[left + 1]), np.abs(dth[left])
+    if rev is not None:
+        a[rev] = 0.0
+        b[rev] = 0.0
+    return a, b
 
 
 def enforce_staircase(dtheta_rad: FloatArray, duration_us: IntArray,
@@ -356,6 +456,7 @@ def enforce_staircase(dtheta_rad: FloatArray, duration_us: IntArray,
     duration and count as stops on both sides."""
     dth = np.asarray(dtheta_rad, dtype=np.float64).reshape(-1, 2)
     p = np.asarray(duration_us, dtype=np.float64).copy()
+    del duration_us  # (the caller may hold none: then it is freed here)
     k = dth.shape[0]
     if k == 0:
         return p.astype(np.int64)
@@ -369,29 +470,61 @@ def enforce_staircase(dtheta_rad: FloatArray, duration_us: IntArray,
     # boundary n sits between segments act[n] and act[n] + 1 — across a stop too, as
     # `staircase_ratios` measures the step from ω_{k−1} straight to ω_k there as well
     act = np.flatnonzero(moving[:-1] & moving[1:])
+    if k < 1 << 31:  # int32 indices where they fit (memory on large jobs)
+        act = act.astype(np.int32)
     lo = p.copy()
-    a, b = _static_bounds(dth, lo, rest, act, jump, acc)
+    rev = _static_bounds(dth, lo, rest, act, jump, acc)
     p = np.where(moving, np.maximum(p, np.ceil(lo - _CEIL_SLACK_US)), p)
-    _raise_to_least(p, act, a, b, jump, acc)
+    del lo, moving, st, rest
+    _raise_to_least(p, act, dth, rev, jump, acc)
     return p.astype(np.int64)
 
 
-def _raise_to_least(p: FloatArray, act: IntArray, a: FloatArray, b: FloatArray, jump: float,
-                    acc: float) -> None:
+def _raise_to_least(p: FloatArray, act: IntArray, dth: FloatArray, rev: NDArray[np.bool_],
+                    jump: float, acc: float) -> None:
     """Kleene's iteration (`enforce_staircase`): raise durations `p` (µs, in place) by the
     bounds (3), (4) across the boundaries `act` until none changes; each round revisits only
-    the boundaries next to a segment that changed."""
-    by_left = np.full(p.shape[0] + 1, -1, dtype=np.int64)  # boundary index by its left segment
-    by_left[act] = np.arange(act.shape[0])
-    todo = np.arange(act.shape[0])
-    while todo.size:
-        left = act[todo]
-        q_new = np.ceil(_bound_after(a[todo], b[todo], p[left], jump, acc) - _CEIL_SLACK_US)
-        p_new = np.ceil(_bound_after(b[todo], a[todo], p[left + 1], jump, acc)
-                        - _CEIL_SLACK_US)
-        up_q, up_p = q_new > p[left + 1], p_new > p[left]
-        p[left[up_q] + 1] = q_new[up_q]  # each boundary has its own right segment...
-        p[left[up_p]] = np.maximum(p[left[up_p]], p_new[up_p])  # ...and its own left one
-        changed = np.concatenate((left[up_q] + 1, left[up_p]))
+    the boundaries next to a segment that changed. A round measures its boundaries in blocks
+    (`_round_raises`) from the durations at its start and then applies the raises."""
+    if not act.size:
+        return
+    by_left = np.full(p.shape[0] + 1, -1, dtype=act.dtype)  # boundary by its left segment
+    by_left[act] = np.arange(act.shape[0], dtype=act.dtype)
+    todo: IntArray | None = None  # None: every boundary
+    while todo is None or todo.size:
+        (right, q_new), (left, p_new) = _round_raises(p, act, todo, dth, rev, jump, acc)
+        p[right] = q_new  # each boundary has its own right segment...
+        p[left] = np.maximum(p[left], p_new)  # ...and its own left one
+        changed = np.concatenate((right, left))
+        del right, q_new, left, p_new
         near = np.concatenate((by_left[changed], by_left[changed - 1]))
         todo = np.unique(near[near >= 0])
+
+
+#: Boundaries measured at a time by `_round_raises` (bounded temporaries on large jobs;
+#: every boundary is measured on its own, so the bounds are those of one pass).
+STAIRCASE_BLOCK = 1 << 16
+
+_Raises = tuple[IntArray, FloatArray]
+
+
+def _round_raises(p: FloatArray, act: IntArray, todo: IntArray | None, dth: FloatArray,
+                  rev: NDArray[np.bool_], jump: float, acc: float) -> tuple[_Raises, _Raises]:
+    """One round of `_raise_to_least` over the boundaries `todo` (None: all), from the
+    durations `p` (not changed here): the right segments whose least duration (µs, whole)
+    is above theirs, with that duration, and the same for the left segments; in blocks of
+    `STAIRCASE_BLOCK` (the joints' moves taken per block, `_moves_at`), keeping only the
+    raises."""
+    n = act.shape[0] if todo is None else todo.shape[0]
+    parts: list[list[NDArray[Any]]] = [[], [], [], []]
+    for i in range(0, n, STAIRCASE_BLOCK):
+        t = slice(i, i + STAIRCASE_BLOCK) if todo is None else todo[i:i + STAIRCASE_BLOCK]
+        lf = act[t]
+        a, b = _moves_at(dth, lf, rev[t])
+        q_new = np.ceil(_bound_after(a, b, p[lf], jump, acc) - _CEIL_SLACK_US)
+        p_new = np.ceil(_bound_after(b, a, p[lf + 1], jump, acc) - _CEIL_SLACK_US)
+        up_q, up_p = q_new > p[lf + 1], p_new > p[lf]
+        for part, x in zip(parts, (lf[up_q] + 1, q_new[up_q], lf[up_p], p_new[up_p]), strict=True):
+            part.append(x)
+    right, q, left, pl = (np.concatenate(x) if len(x) != 1 else x[0] for x in parts)
+    return (right, q), (left, pl)

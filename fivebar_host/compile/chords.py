@@ -60,6 +60,14 @@ class _Chords:
     #: (P,) the section of each path (`compile.layers`; all 0 without pen-change stops)
     path_section: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))
 
+    def per_path(self) -> _Chords:
+        """The per-path arrays only (vertices and chords emptied, `offsets` kept so the
+        number of paths stays): what timing and finishing read."""
+        zi, zf = np.zeros(0, np.int64), np.zeros(0)
+        return replace(self, pts=np.zeros((0, 2)), vert_prim=zi, chord_from=zi, prim=zi,
+                       prim_first=zi, tlo=zf, thi=zf, rev=np.zeros(0, bool), tol_i=zf,
+                       path_of_chord=zi)
+
 
 def _order(starts: FloatArray, ends: FloatArray, start: FloatArray, keep_order: bool,
            path_sec: IntArray | None) -> order.Order:
@@ -96,7 +104,6 @@ def _prepare_chords(drawing: Drawing, poly: Polylines, tol: float, tol_f: float,
     poly = simp.poly
     pts0 = poly.points
     offs = poly.offsets
-    npath = offs.shape[0] - 1
     starts = pts0[offs[:-1]]
     ends = pts0[offs[1:] - 1]
     path_sec0 = None if stroke_section is None else stroke_section[poly.stroke]
@@ -104,25 +111,10 @@ def _prepare_chords(drawing: Drawing, poly: Polylines, tol: float, tol_f: float,
     lens = np.diff(offs)
     ordered_lens = lens[od.order]
     # Vertex index map in the new order (reversed paths walk their vertices backwards).
-    base = np.repeat(offs[:-1][od.order], ordered_lens)
-    k = np.arange(int(ordered_lens.sum())) - np.repeat(np.cumsum(ordered_lens) - ordered_lens,
-                                                       ordered_lens)
-    revv = np.repeat(od.reverse, ordered_lens)
-    idx = np.where(revv, base + np.repeat(ordered_lens, ordered_lens) - 1 - k, base + k)
+    idx = _vertex_order(offs, od.order, od.reverse, ordered_lens)
     pts = pts0[idx]
     new_offs = np.concatenate(([0], np.cumsum(ordered_lens))).astype(np.int64)
-    # Per-vertex chord metadata (chord v → v+1 in the new order).
-    # forward: chord lies on prim[idx[v+1]] over [t0, t] of idx[v+1]; reversed: on idx[v].
     m = pts.shape[0]
-    nxt = np.minimum(np.arange(m) + 1, m - 1)
-    owner = np.where(revv, idx, idx[nxt])
-    c_prim = poly.prim[owner]
-    c_first = simp.prim_first[owner]
-    c_tlo = poly.t0[owner]
-    c_thi = poly.t[owner]
-    is_end = np.zeros(m, dtype=bool)
-    is_end[new_offs[1:] - 1] = True
-    path_idx = np.repeat(np.arange(npath), ordered_lens)
     stroke = poly.stroke[od.order]
     power = drawing.stroke_power[stroke]
     feed = drawing.stroke_feed_mm_s[stroke]
@@ -135,37 +127,59 @@ def _prepare_chords(drawing: Drawing, poly: Polylines, tol: float, tol_f: float,
                 else path_sec0[od.order])
     join = (gap < tol) & same & ~_dwell_between(drawing, stroke) & (
         path_sec[1:] == path_sec[:-1])
-    bridge_tol = np.full(m, np.nan)
     bridge_at = new_offs[1:-1][join] - 1  # vertex that ends path p and starts the bridge
+    is_end = np.zeros(m, dtype=bool)
+    is_end[new_offs[1:] - 1] = True
     is_end[bridge_at] = False
-    bridge_tol[bridge_at] = tol - gap[join] / 2
-    c_prim = c_prim.copy()
-    c_prim[bridge_at] = -1
-    c_first = c_first.copy()
-    c_first[bridge_at] = -1
     keep_path = np.concatenate(([True], ~join))
     new_path_of_old = np.cumsum(keep_path) - 1
     joined_offs = np.concatenate((new_offs[:-1][keep_path], [m])).astype(np.int64)
     chord_from = np.flatnonzero(~is_end)
+    del is_end
+    # Per-chord metadata (chord v → v+1 in the new order): forward, the chord lies on
+    # prim[idx[v+1]] over [t0, t] of idx[v+1]; reversed, on idx[v]. Bridges: no primitive.
+    revv = np.repeat(od.reverse, ordered_lens)[chord_from]
+    owner = np.where(revv, idx[chord_from], idx[np.minimum(chord_from + 1, m - 1)])
+    cp = poly.prim[owner]
+    cf = simp.prim_first[owner]
+    c_tlo, c_thi = poly.t0[owner], poly.t[owner]
+    del owner
+    bridge = np.searchsorted(chord_from, bridge_at)  # bridges among the chords
+    cp[bridge] = -1
+    cf[bridge] = -1
+    bt = np.full(chord_from.shape[0], np.nan)
+    bt[bridge] = tol - gap[join] / 2
     # Drop zero-length chords by merging their vertices (keeps paths ≥ 1 chord if possible).
     kind = drawing.kind
     is_line = np.zeros(chord_from.shape[0], dtype=bool)
-    cp = c_prim[chord_from]
     is_line[cp >= 0] = kind[cp[cp >= 0]] == LINE
-    cf = c_first[chord_from]
     tol_i = np.where(is_line, np.where(cf < cp, tol - tol_f, tol), tol - tol_f)
-    bt = bridge_tol[chord_from]
     tol_i = np.where(np.isnan(bt), tol_i, bt)
+    path_of_chord = np.searchsorted(new_offs, chord_from, side="right") - 1
     return _Chords(pts=pts, offsets=joined_offs, vert_prim=poly.prim[idx],
-                   chord_from=chord_from, prim=cp, prim_first=cf, tlo=c_tlo[chord_from],
-                   thi=c_thi[chord_from], rev=revv[chord_from], tol_i=tol_i,
-                   path_of_chord=new_path_of_old[path_idx[chord_from]],
+                   chord_from=chord_from, prim=cp, prim_first=cf, tlo=c_tlo,
+                   thi=c_thi, rev=revv, tol_i=tol_i,
+                   path_of_chord=new_path_of_old[path_of_chord],
                    path_source=source[keep_path], path_reversed=od.reverse[keep_path],
                    power=power[keep_path], feed=feed[keep_path], joined=int(join.sum()),
                    travel_before=od.travel_before_mm, travel_after=od.travel_after_mm,
                    simplified=simp.removed,
                    dwells=_path_dwells(drawing, stroke, new_path_of_old),
                    path_section=path_sec[keep_path])
+
+
+def _vertex_order(offs: IntArray, path_order: IntArray, reverse: BoolArray,
+                  ordered_lens: IntArray) -> IntArray:
+    """The old index of every vertex of the ordered paths (`path_order`, each walked
+    backwards where `reverse`)."""
+    base = np.repeat(offs[:-1][path_order], ordered_lens)
+    k = np.arange(int(ordered_lens.sum())) - np.repeat(np.cumsum(ordered_lens) - ordered_lens,
+                                                       ordered_lens)
+    rev = np.repeat(reverse, ordered_lens)
+    back = np.repeat(ordered_lens, ordered_lens) - 1 - k
+    back += base  # base + len − 1 − k, as written out
+    k += base
+    return np.where(rev, back, k)
 
 
 def _dwell_between(drawing: Drawing, stroke: IntArray) -> BoolArray:

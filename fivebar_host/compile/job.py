@@ -42,6 +42,7 @@ lines in `.encode`, `--mode auto`'s working-mode planning in `.modes`.
 
 from __future__ import annotations
 
+import gc
 import math
 from dataclasses import replace
 from pathlib import Path
@@ -49,9 +50,9 @@ from typing import Any
 
 import numpy as np
 
-from fivebar_host.compile.finish import finish
+from fivebar_host.compile.finish import draw_geometry, finish, requested_rows
 from fivebar_host.compile.layers import sections
-from fivebar_host.compile.model import AUTO_ORDER, CompileOptions, Job
+from fivebar_host.compile.model import AUTO_ORDER, CompileOptions, Job, release_free_memory
 from fivebar_host.compile.place import find_home, place, setup
 from fivebar_host.compile.segments import assemble, drop_zero_moves
 from fivebar_host.compile.solve import route, solve
@@ -82,8 +83,33 @@ def read_drawing(path: str | Path, layers: tuple[str, ...] = (),
                  max_segments: float | None = None, profile: Profile | None = None) -> Drawing:
     """Read an SVG or G-code file, chosen by suffix (or by content when unknown); an SVG
     with more than `max_segments` path segments (None: the reader's default) is refused.
-    `profile` gives G-code Z words their meaning (`gcode_tool`)."""
-    p = Path(path)
+    `profile` gives G-code Z words their meaning (`gcode_tool`). The reader's own state
+    is freed before the drawing is returned (`_read_and_collect`)."""
+    return _read_and_collect(Path(path), layers, max_segments, profile)
+
+
+def _read_and_collect(p: Path, layers: tuple[str, ...], max_segments: float | None,
+                      profile: Profile | None) -> Drawing:
+    """`read_drawing`, then one full garbage collection: the SVG reader's walker, element
+    tree and drawing builder refer to each other, so their buffers (the builder's
+    per-primitive arrays, the parser's nodes: about 25 bytes per primitive and more) would
+    otherwise stay resident through the whole compile until Python's next full collection,
+    which a numpy-heavy compile may never trigger. Only for drawings of at least
+    `COLLECT_MIN_PRIMITIVES` primitives: a collection costs some 20–30 ms, more than a small
+    drawing's reader state is worth."""
+    drawing = _read(p, layers, max_segments, profile)
+    if drawing.kind.shape[0] >= COLLECT_MIN_PRIMITIVES:
+        gc.collect()
+    return drawing
+
+
+#: Drawings from this many primitives on get `_read_and_collect`'s full collection.
+COLLECT_MIN_PRIMITIVES = 1 << 16
+
+
+def _read(p: Path, layers: tuple[str, ...], max_segments: float | None,
+          profile: Profile | None) -> Drawing:
+    """`read_drawing` itself."""
     suffix = p.suffix.lower()
     limit = DEFAULT_MAX_SEGMENTS if max_segments is None else int(max_segments)
     if suffix == ".svg":
@@ -102,24 +128,41 @@ def read_drawing(path: str | Path, layers: tuple[str, ...] = (),
 
 
 def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
-                  mode: str, plan_modes: bool = False) -> Job:
+                  mode: str, plan_modes: bool = False, consume: bool = False) -> Job:
     """Compile `drawing`, placed for working mode `mode`. Without `plan_modes` every path is
     drawn in `mode`. With it (`--mode auto` when no single mode clears every check), the
     modes come from `_plan_modes` and every change of mode becomes a checked pen-up
     joint-space move (`ModeChange`). The stages hand their results on as frozen dataclasses
-    (module doc: the pipeline)."""
+    (module doc: the pipeline); each is slimmed to what the later stages read as soon as the
+    next stage has its part, so a large drawing's intermediate arrays do not pile up
+    (`consume`: the drawing is placed in place, `place.place`)."""
     su = setup(profile, opts, mode)
-    placed = place(su, drawing, opts)
-    home = find_home(su, drawing.file)
-    secs = sections(drawing, placed.poly.stroke, opts.layer_pause, opts.no_pause)
+    placed = place(su, drawing, opts, consume)
+    del drawing
+    home = find_home(su, placed.drawing.file)
+    secs = sections(placed.drawing, placed.poly.stroke, opts.layer_pause, opts.no_pause)
     routed = route(su, placed, home, opts.keep_order, plan_modes, not opts.no_simplify, secs)
+    placed = placed.without_strokes()
+    release_free_memory()
     solved = solve(su, placed, routed)
     tr = plan_travel(su, placed, home, routed, solved, plan_modes)
+    solved = solved.summarised()
+    release_free_memory()
     segments = assemble(placed, home, routed, solved, tr)
-    stepped = drop_zero_moves(profile.motors, segments)
-    del segments  # the stepped copy replaces it (memory on large drawings)
-    planned = plan_timing(su, routed, solved, stepped)
-    return finish(su, placed, home, routed, solved, tr, planned, opts)
+    rows = requested_rows(routed, solved)
+    routed, solved = routed.per_path(), solved.per_path()
+    handed = [drop_zero_moves(profile.motors, segments)]  # timing empties it
+    del segments  # the stepped copy replaces it
+    release_free_memory()
+    planned = plan_timing(su, routed, solved, handed)
+    geometry = draw_geometry(rows, planned)  # consumes `rows`
+    planned = replace(planned, perm=_NO_INTS, f0=_NO_FLOATS, f1=_NO_FLOATS)
+    release_free_memory()
+    return finish(su, placed, home, routed, solved, tr, planned, geometry, opts)
+
+
+_NO_INTS = np.zeros(0, dtype=np.int64)
+_NO_FLOATS = np.zeros(0)
 
 
 def with_job_motion(profile: Profile, opts: CompileOptions) -> Profile:
@@ -132,15 +175,18 @@ def with_job_motion(profile: Profile, opts: CompileOptions) -> Profile:
     return profile if new == mo else replace(profile, motion=new)
 
 
-def compile_drawing(drawing: Drawing, profile: Profile, opts: CompileOptions) -> Job:
-    """Compile an already-read drawing; `opts.mode` "auto" tries every working mode."""
+def compile_drawing(drawing: Drawing, profile: Profile, opts: CompileOptions,
+                    consume: bool = False) -> Job:
+    """Compile an already-read drawing; `opts.mode` "auto" tries every working mode.
+    `consume`: the caller no longer needs `drawing`, which may then be placed in place (its
+    primitives become the job's, in machine mm) to save memory on large drawings."""
     profile = with_job_motion(profile, opts)
     mode = opts.mode or profile.kinematics.working_mode
     if mode != "auto":
         if mode not in WORKING_MODES:
             raise OptionError("mode", f"must be one of {', '.join(WORKING_MODES)} or auto; "
                               f"got {mode!r}")
-        return _compile_mode(drawing, profile, opts, mode)
+        return _compile_mode(drawing, profile, opts, mode, consume=consume)
     results: list[Job] = []
     failures: list[tuple[str, JobError]] = []
     for m in AUTO_ORDER:
@@ -195,4 +241,4 @@ def compile_job(path: str | Path, profile: Profile, opts: CompileOptions | None 
     """Read and compile a drawing file (see module doc). Raises `InputError` or `JobError`."""
     o = opts or CompileOptions()
     drawing = read_drawing(path, o.layers, o.max_segments, profile)
-    return compile_drawing(drawing, profile, o)
+    return compile_drawing(drawing, profile, o, consume=True)

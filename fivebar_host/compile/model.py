@@ -9,8 +9,13 @@ the reports can use it without the compiler's stages.
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
+import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -25,6 +30,53 @@ from kinematics.fivebar import FiveBar
 AUTO_ORDER = ("+-", "-+", "++", "--")
 #: Joint-space step cap per segment (rad): keeps the planner's rate staircase fine.
 MAX_STEP_RAD = 0.05
+
+
+def compact_ints(a: IntArray) -> IntArray:
+    """`a` as int32 when every value fits (the same values in half the memory on large
+    drawings), else unchanged."""
+    i32 = np.iinfo(np.int32)
+    if a.size and (a.min() < i32.min or a.max() > i32.max):
+        return a
+    return a.astype(np.int32, copy=False)
+
+
+@functools.cache
+def _libc_trim() -> Callable[[int], int] | None:
+    """glibc's `malloc_trim`, or None where the C library has none."""
+    try:
+        return cast(Callable[[int], int],
+                    ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim)
+    except (OSError, AttributeError):
+        return None
+
+
+def release_free_memory() -> None:
+    """Give the heap's free pages back to the system (glibc `malloc_trim`; nothing
+    elsewhere). Called between the stages of a large job: the arrays a stage frees leave
+    holes in the heap that the next stage's arrays, of other sizes, do not fill, and
+    without this they stay resident and add to the peak (a few ms a call)."""
+    trim = _libc_trim()
+    if trim is not None:
+        trim(0)
+
+
+#: Rows converted at a time by `compact_steps` (bounds the float temporaries).
+STEPS_BLOCK = 1 << 16
+
+
+def compact_steps(angles_rad: FloatArray, home_rad: tuple[float, float],
+                  steps_per_rev: float) -> IntArray:
+    """`steps.absolute_steps` of the angles (N, 2), computed in blocks straight into int32
+    (int64 when a value reaches 2^30, so that differences of steps fit too): the same steps
+    without the whole float and int64 temporaries."""
+    out = np.empty((angles_rad.shape[0], 2), dtype=np.int32)
+    for i in range(0, angles_rad.shape[0], STEPS_BLOCK):
+        st = steps.absolute_steps(angles_rad[i:i + STEPS_BLOCK], home_rad, steps_per_rev)
+        if st.size and np.abs(st).max() >= 1 << 30:
+            return steps.absolute_steps(angles_rad, home_rad, steps_per_rev)
+        out[i:i + STEPS_BLOCK] = st
+    return cast(IntArray, out)  # int32: the same values (IntArray names any int width here)
 
 
 @dataclass(frozen=True)
@@ -115,12 +167,14 @@ class ModeChange:
 @dataclass(frozen=True)
 class Job:
     """A compiled job (see module doc). Per target (T+1 rows; row 0 = homed pose):
-    `points_mm`, `angles_rad`, `steps` (absolute, int64). Per segment (T rows, target k →
-    k+1): `draw`, `power` (0–255, 0 on travel), `path` (job path the segment draws or travels
+    `points_mm`, `angles_rad`, `steps` (absolute). Per segment (T rows, target k → k+1):
+    `draw`, `power` (0–255, 0 on travel), `path` (job path the segment draws or travels
     to; P for the final park move), `source` (source element index, −1 on travel),
-    `source_line` (0 if unknown), `duration_us` (int64), `length_mm` (requested pen path),
+    `source_line` (0 if unknown), `duration_us`, `length_mm` (requested pen path),
     `dwell` (a G-code dwell: no motion, not a drawing segment, `power` the laser power it
-    burns with; `compile.dwell`; empty: none)."""
+    burns with; `compile.dwell`; empty: none). The integer arrays (steps, indices,
+    durations) are int32 when every value fits, else int64 (`compact_ints`: half the memory
+    on large drawings; numpy sums them in int64)."""
 
     file: str
     mode: str

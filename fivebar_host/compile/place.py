@@ -10,7 +10,7 @@ Flattening uses tol_f = tol/2 of the one tolerance `tol` (the budget is explaine
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -60,6 +60,13 @@ class Placed:
     mdraw: Drawing
     poly: Polylines
 
+    def without_strokes(self) -> Placed:
+        """This placement without its flattened strokes (only `route` reads them): frees
+        their memory once the paths are ordered."""
+        z = np.zeros(0, dtype=np.int64)
+        return replace(self, poly=Polylines(np.zeros((0, 2)), np.zeros(1, dtype=np.int64), z,
+                                            np.zeros(0), np.zeros(0), z))
+
 
 @dataclass(frozen=True)
 class Home:
@@ -84,12 +91,17 @@ def setup(profile: Profile, opts: CompileOptions, mode: str) -> Setup:
                  limits=profile.motors.limits_rad, asm=asm, assembly=1 if asm == "+" else -1)
 
 
-def place(su: Setup, drawing: Drawing, opts: CompileOptions) -> Placed:
-    """Place the drawing for `su.mode` (`toolpath.layout`) and flatten it within tol_f."""
+def place(su: Setup, drawing: Drawing, opts: CompileOptions, consume: bool = False) -> Placed:
+    """Place the drawing for `su.mode` (`toolpath.layout`) and flatten it within tol_f.
+    `consume`: the caller gives the drawing up, so it is placed in place (its primitives
+    replaced by the placed ones; every other array is shared with the placed copy anyway)
+    and a large drawing's primitives are not held twice."""
     pl = layout.place(drawing, su.fb, su.mode, su.min1, su.min2, su.limits,
                       origin_mm=opts.origin_mm, scale=opts.scale, rotate_deg=opts.rotate_deg,
                       fit=opts.fit, assembly=su.asm)
     mdraw = drawing.transformed(pl.matrix, pl.offset)
+    if consume:
+        drawing.params = mdraw.params
     limit = DEFAULT_MAX_SEGMENTS if opts.max_segments is None else int(opts.max_segments)
     return Placed(drawing=drawing, pl=pl, mdraw=mdraw,
                   poly=flatten(mdraw, su.tol_f, POINTS_PER_SEGMENT * limit))

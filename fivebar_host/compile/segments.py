@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fivebar_host import steps
+from fivebar_host.compile.model import compact_ints, compact_steps
 from fivebar_host.compile.place import Home, Placed
 from fivebar_host.compile.solve import Routed, Solved
 from fivebar_host.compile.travel import Travel
@@ -66,51 +66,73 @@ def _travel_pieces(home: Home, routed: Routed, solved: Solved,
     return t_move, t_k, t_th, t_pts
 
 
+def _index_dtype(largest: int) -> type[np.signedinteger]:
+    """int32 for indices up to `largest` when they fit (as `compact_ints`), else int64."""
+    return np.int32 if largest <= np.iinfo(np.int32).max else np.int64
+
+
 def assemble(placed: Placed, home: Home, routed: Routed, solved: Solved,
              tr: Travel) -> Segments:
-    """Draw segments and travel pieces merged into job order, with their provenance."""
+    """Draw segments and travel pieces merged into job order, with their provenance. Each
+    output array is written once, the draw rows and the travel rows straight into their
+    merged positions (no concatenated copy is made; memory on large drawings)."""
     ch, iv, drawing = routed.ch, solved.iv, placed.drawing
     a = ch.chord_from
     # Draw segments, in order (intervals are sorted by chord, chords by job order).
     dc = iv.chord
     d_path = ch.path_of_chord[dc]
-    d_end_pts = ch.pts[a[dc]] + iv.sb[:, None] * (ch.pts[a[dc] + 1] - ch.pts[a[dc]])
     t_move, t_k, t_th, t_pts = _travel_pieces(home, routed, solved, tr)
     # Merge: key (path, part, sequence); travel into path j precedes its draw segments.
     n_d, n_t = dc.shape[0], t_move.shape[0]
     key_path = np.concatenate((d_path, t_move))
-    key_part = np.concatenate((np.ones(n_d, np.int64), np.zeros(n_t, np.int64)))
+    del d_path
+    key_part = np.concatenate((np.ones(n_d, np.int8), np.zeros(n_t, np.int8)))
     key_seq = np.concatenate((np.arange(n_d), t_k))
-    perm = np.lexsort((key_seq, key_part, key_path))
-    seg_draw = np.concatenate((np.ones(n_d, bool), np.zeros(n_t, bool)))[perm]
-    end_th = np.concatenate((iv.thb, t_th))[perm]
-    end_pts = np.concatenate((d_end_pts, t_pts))[perm]
-    seg_path = key_path[perm]
-    th_all = np.concatenate((home.th, end_th))
-    pts_all = np.concatenate((home.pt[None], end_pts))
+    perm = compact_ints(np.lexsort((key_seq, key_part, key_path)))
+    del key_seq, key_part
+    seg_path = compact_ints(key_path[perm])
+    del key_path
+    pos = np.empty(n_d + n_t, dtype=np.int64)  # merged position of every draw, travel row
+    pos[perm] = np.arange(n_d + n_t)
+    pd, pt = pos[:n_d], pos[n_d:]
+    seg_draw = np.zeros(n_d + n_t, bool)
+    seg_draw[pd] = True
+    th_all = np.empty((n_d + n_t + 1, 2))
+    th_all[0] = home.th[0]
+    th_all[1:][pd] = iv.thb
+    th_all[1:][pt] = t_th
+    pts_all = np.empty_like(th_all)
+    pts_all[0] = home.pt
+    ad = a[dc]
+    pts_all[1:][pd] = ch.pts[ad] + iv.sb[:, None] * (ch.pts[ad + 1] - ch.pts[ad])
+    pts_all[1:][pt] = t_pts
+    del t_th, t_pts
     # Per-segment provenance (draw only; −1 / 0 on travel).
     d_prim = ch.prim[dc]
-    d_vprim = np.where(d_prim >= 0, d_prim, ch.vert_prim[a[dc]])
-    d_src = drawing.stroke_source[drawing.stroke[d_vprim]]
-    d_line = drawing.line[d_vprim]
-    seg_source = np.concatenate((d_src, np.full(n_t, -1)))[perm]
-    seg_line = np.concatenate((d_line, np.zeros(n_t, np.int64)))[perm]
-    length = np.concatenate((
-        (iv.sb - iv.sa) * np.hypot(*(ch.pts[a[dc] + 1] - ch.pts[a[dc]]).T),
-        np.zeros(n_t)))[perm]
-    # Travel length: distance between consecutive target points.
-    tl = np.hypot(*np.diff(pts_all, axis=0).T)
-    length = np.where(seg_draw, length, tl)
+    d_vprim = np.where(d_prim >= 0, d_prim, ch.vert_prim[ad])
+    del d_prim
+    seg_source = np.full(n_d + n_t, -1, dtype=_index_dtype(len(drawing.sources)))
+    seg_source[pd] = drawing.stroke_source[drawing.stroke[d_vprim]]
+    seg_line = np.zeros(n_d + n_t, dtype=_index_dtype(
+        int(drawing.line.max()) if drawing.line.size else 0))
+    seg_line[pd] = drawing.line[d_vprim]
+    del d_vprim
+    # Draw length: the interval's part of its chord; travel: between consecutive targets.
+    length = np.empty(n_d + n_t)
+    length[pd] = (iv.sb - iv.sa) * np.hypot(*(ch.pts[ad + 1] - ch.pts[ad]).T)
+    length[pt] = np.hypot(*(pts_all[pt + 1] - pts_all[pt]).T)
     return Segments(th=th_all, pts=pts_all, draw=seg_draw, path=seg_path, source=seg_source,
                     line=seg_line, length=length, perm=perm)
 
 
 def drop_zero_moves(mot: Motors, sg: Segments) -> Stepped:
-    """Absolute steps of every target (rounded once); segments that round to no move go."""
-    st = steps.absolute_steps(sg.th, mot.home_rad, mot.steps_per_rev)
+    """Absolute steps of every target (rounded once); segments that round to no move go.
+    The integer arrays are int32 where every value fits (`compact_ints`)."""
+    st = compact_steps(sg.th, mot.home_rad, mot.steps_per_rev)
     rel = np.diff(st, axis=0)
     moving = (rel != 0).any(axis=1)
     keep_t = np.concatenate(([True], moving))
     return Stepped(th=sg.th[keep_t], pts=sg.pts[keep_t], draw=sg.draw[moving],
-                   path=sg.path[moving], source=sg.source[moving], line=sg.line[moving],
-                   length=sg.length[moving], perm=sg.perm[moving], steps=st[keep_t])
+                   path=compact_ints(sg.path[moving]), source=compact_ints(sg.source[moving]),
+                   line=compact_ints(sg.line[moving]), length=sg.length[moving],
+                   perm=compact_ints(sg.perm[moving]), steps=st[keep_t])

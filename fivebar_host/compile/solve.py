@@ -41,6 +41,11 @@ class Routed:
     def npath(self) -> int:
         return int(self.ch.offsets.shape[0] - 1)
 
+    def per_path(self) -> Routed:
+        """Only the per-path part (the vertices and chords are dropped: after the requested
+        geometry is taken, timing and finishing need the paths alone)."""
+        return replace(self, ch=self.ch.per_path())
+
 
 @dataclass(frozen=True)
 class Solved:
@@ -55,6 +60,26 @@ class Solved:
     def checker(self) -> PoseChecker:
         """For forward kinematics (the same in every working mode)."""
         return next(iter(self.checkers.values()))
+
+    def summarised(self) -> Solved:
+        """The checkers, the intervals' smallest margins and largest deviation as one row
+        each (what finishing reads) and what assembling the segments reads (each interval's
+        chord, part σ_a … σ_b of it and end angles), without the per-vertex angles: once the
+        travel is planned, the rest of the per-interval arrays can go."""
+        iv = self.iv
+        margin = (iv.min_margin.min(axis=0, keepdims=True) if iv.min_margin.size
+                  else iv.min_margin)
+        dev = iv.dev_mm.max(keepdims=True) if iv.dev_mm.size else iv.dev_mm
+        return Solved(self.checkers, np.zeros((0, 2)),
+                      Intervals(iv.chord, iv.sa, iv.sb, np.zeros((0, 2)), iv.thb, margin, dev))
+
+    def per_path(self) -> Solved:
+        """`summarised` without any per-interval array (after the segments are assembled
+        and the requested geometry is taken)."""
+        s = self.summarised()
+        z = np.zeros((0, 2))
+        return Solved(self.checkers, z, replace(s.iv, chord=np.zeros(0, np.int64),
+                                                sa=np.zeros(0), sb=np.zeros(0), thb=z))
 
 
 def route(su: Setup, placed: Placed, home: Home, keep_order: bool,
@@ -86,6 +111,32 @@ def solve(su: Setup, placed: Placed, routed: Routed) -> Solved:
     ch, path_mode = routed.ch, routed.path_mode
     checkers = {m: PoseChecker(su.fb, m, su.assembly, su.min1, su.min2, su.limits)
                 for m in dict.fromkeys(path_mode.tolist())}
+    th_v = _vertex_angles(su, placed, ch, path_mode, checkers)
+    a = ch.chord_from
+    chord_mode = path_mode[ch.path_of_chord]
+    parts: list[Intervals] = []
+    for m, chk in checkers.items():
+        cs = np.flatnonzero(chord_mode == m)
+        try:
+            r = _refine_blocks(chk, ch, th_v, cs, summarise=len(checkers) == 1)
+        except CheckFailedError as cf:
+            c = int(cs[cf.index])
+            raise fail(su, placed, cf, int(ch.prim[c]) if ch.prim[c] >= 0
+                       else int(ch.vert_prim[a[c]]), in_mode=m) from None
+        parts.append(r if len(checkers) == 1 else replace(r, chord=cs[r.chord]))
+    return Solved(checkers=checkers, th_v=th_v, iv=_merge_intervals(parts))
+
+
+def _vertex_angles(su: Setup, placed: Placed, ch: _Chords, path_mode: NDArray[np.str_],
+                   checkers: dict[str, PoseChecker]) -> FloatArray:
+    """Checked inverse kinematics of every vertex (M, 2) in its path's working mode (with one
+    mode, of all the vertices at once, without index copies)."""
+    if len(checkers) == 1:
+        ((m, chk),) = checkers.items()
+        try:
+            return chk.inverse(ch.pts)
+        except CheckFailedError as cf:
+            raise fail(su, placed, cf, int(ch.vert_prim[cf.index]), in_mode=m) from None
     vert_mode = np.repeat(path_mode, np.diff(ch.offsets))
     th_v = np.empty_like(ch.pts)
     for m, chk in checkers.items():
@@ -94,19 +145,16 @@ def solve(su: Setup, placed: Placed, routed: Routed) -> Solved:
             th_v[idx] = chk.inverse(ch.pts[idx], idx)
         except CheckFailedError as cf:
             raise fail(su, placed, cf, int(ch.vert_prim[cf.index]), in_mode=m) from None
-    a = ch.chord_from
-    chord_mode = path_mode[ch.path_of_chord]
-    parts: list[Intervals] = []
-    for m, chk in checkers.items():
-        cs = np.flatnonzero(chord_mode == m)
-        try:
-            r = _refine_blocks(chk, ch, th_v, cs)
-        except CheckFailedError as cf:
-            c = int(cs[cf.index])
-            raise fail(su, placed, cf, int(ch.prim[c]) if ch.prim[c] >= 0
-                       else int(ch.vert_prim[a[c]]), in_mode=m) from None
-        parts.append(r if len(checkers) == 1 else replace(r, chord=cs[r.chord]))
-    return Solved(checkers=checkers, th_v=th_v, iv=_merge_intervals(parts))
+    return th_v
+
+
+def _summary(iv: Intervals) -> Intervals:
+    """`iv` without its start angles, its margins and deviations reduced to their smallest
+    margins and largest deviation (one row each; empty stays empty), as `Solved.summarised`
+    reads them: the minimum of the blocks' minima is the minimum of all."""
+    margin = iv.min_margin.min(axis=0, keepdims=True) if iv.min_margin.size else iv.min_margin
+    dev = iv.dev_mm.max(keepdims=True) if iv.dev_mm.size else iv.dev_mm
+    return replace(iv, tha=np.zeros((0, 2)), min_margin=margin, dev_mm=dev)
 
 
 #: Chords refined at a time: every chord is refined on its own, so blocks give the same
@@ -116,9 +164,12 @@ REFINE_BLOCK = 1 << 16
 
 
 def _refine_blocks(chk: PoseChecker, ch: _Chords, th_v: FloatArray,
-                   cs: NDArray[np.int64]) -> Intervals:
+                   cs: NDArray[np.int64], summarise: bool = False) -> Intervals:
     """`refine` of chords `cs` in blocks of `REFINE_BLOCK`; chord ids (and a failure's
-    index) are positions in `cs`, as one call of `refine` would give."""
+    index) are positions in `cs`, as one call of `refine` would give. `summarise` (one
+    working mode, no merge follows): each block keeps only what `Solved.summarised` keeps
+    (no start angles, its smallest margins and largest deviation as one row), so the
+    per-interval arrays that nothing reads are never held for the whole job."""
     a = ch.chord_from
     out: list[Intervals] = []
     for i in range(0, max(cs.shape[0], 1), REFINE_BLOCK):
@@ -129,8 +180,13 @@ def _refine_blocks(chk: PoseChecker, ch: _Chords, th_v: FloatArray,
         except CheckFailedError as cf:
             cf.index += i
             raise
-        out.append(r if i == 0 else replace(r, chord=r.chord + i))
+        if i:
+            r = replace(r, chord=r.chord + i)
+        out.append(_summary(r) if summarise else r)
     if len(out) == 1:
         return out[0]
-    return Intervals(*(np.concatenate([getattr(r, f.name) for r in out])
+    # field by field, each block's part dropped once copied (not every field twice at once)
+    parts = [{f.name: getattr(r, f.name) for f in fields(Intervals)} for r in out]
+    del out
+    return Intervals(*(np.concatenate([p.pop(f.name) for p in parts])
                        for f in fields(Intervals)))

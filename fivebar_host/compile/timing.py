@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -19,6 +20,7 @@ from numpy.typing import NDArray
 from fivebar_host import planner, protocol, steps
 from fivebar_host.compile.dwell import dwell_stops, insert_dwells
 from fivebar_host.compile.layers import section_stops
+from fivebar_host.compile.model import compact_ints, compact_steps, release_free_memory
 from fivebar_host.compile.place import Setup
 from fivebar_host.compile.segments import Stepped
 from fivebar_host.compile.solve import Routed, Solved
@@ -96,37 +98,72 @@ def _cut_ramps(mot: Motors, checker: PoseChecker, sp: Stepped, counts: IntArray,
                ) -> tuple[FloatArray, FloatArray, IntArray, IntArray, FloatArray, FloatArray]:
     """Step 2: segment k cut into `counts[k]` pieces ending at fractions `f1` of it. Returns
     the new targets (angles, points, absolute steps; pieces that round to no move dropped),
-    and per piece its segment and its part [f0, f1] of it."""
+    and per piece its segment and its part [f0, f1] of it. The targets are written in job
+    order straight away (target k, then the inner piece ends of segment k: their fractions
+    ascend), each array once."""
     th_all, pts_all = sp.th, sp.pts
     seg_of = np.repeat(np.arange(counts.shape[0]), counts)
-    inner = np.concatenate((seg_of[1:] == seg_of[:-1], [False]))  # not a segment's last piece
+    inner = np.ones(seg_of.shape[0], dtype=bool)  # not a segment's last piece
+    inner[np.cumsum(counts) - 1] = False
     # new targets on the ideal joint-space line of their segment, rounded once
     k_in = seg_of[inner]
-    th_in = th_all[k_in] + f1[inner, None] * (th_all[k_in + 1] - th_all[k_in])
-    order_t = np.argsort(np.concatenate((np.arange(th_all.shape[0]) * 1.0,
-                                         k_in + f1[inner])), kind="stable")
-    th_all = np.concatenate((th_all, th_in))[order_t]
-    pts_all = np.concatenate((pts_all, checker.forward(th_in)[0]))[order_t]
-    st = steps.absolute_steps(th_all, mot.home_rad, mot.steps_per_rev)
+    th = np.empty((seg_of.shape[0] + 1, 2))
+    th[0] = th_all[0]
+    th[1:][~inner] = th_all[1:]
+    th[1:][inner] = th_all[k_in] + f1[inner, None] * (th_all[k_in + 1] - th_all[k_in])
+    del k_in
+    st = compact_steps(th, mot.home_rad, mot.steps_per_rev)
     keep = np.concatenate(([True], (np.diff(st, axis=0) != 0).any(axis=1)))
-    st, th_all, pts_all = st[keep], th_all[keep], pts_all[keep]
+    every = bool(keep.all())
+    if not every:
+        st, th = st[keep], th[keep]
+    kept_inner = inner[keep[1:]]
+    pts = np.empty_like(th)
+    pts[0] = pts_all[0]
+    pts[1:][~kept_inner] = pts_all[1:] if every else pts_all[1:][keep[1:][~inner]]
+    rows = np.flatnonzero(kept_inner) + 1  # new targets: pen points by forward kinematics
+    for i in range(0, rows.shape[0], DELTA_BLOCK):
+        r = rows[i:i + DELTA_BLOCK]
+        pts[r] = checker.forward(th[r])[0]
+    del rows
     seg_of, f1 = seg_of[keep[1:]], f1[keep[1:]]
     f1[np.concatenate((seg_of[1:] != seg_of[:-1], [True]))] = 1.0
     f0 = np.where(np.concatenate(([True], seg_of[1:] != seg_of[:-1])), 0.0,
                   np.concatenate(([0.0], f1[:-1])))
-    return th_all, pts_all, st, seg_of, f0, f1
+    return th, pts, st, seg_of, f0, f1
 
 
-def plan_timing(su: Setup, routed: Routed, solved: Solved, sp: Stepped) -> Planned:
+#: Targets converted at a time by `_step_deltas`.
+DELTA_BLOCK = 1 << 16
+
+
+def _step_deltas(st: IntArray, mot: Motors) -> FloatArray:
+    """The joint moves (T, 2) rad between consecutive absolute steps (T+1, 2), as the
+    differences of `steps.step_angles`, in blocks (no whole-job float copy of the steps)."""
+    dq = np.empty((max(st.shape[0] - 1, 0), 2))
+    for i in range(0, dq.shape[0], DELTA_BLOCK):
+        th = steps.step_angles(st[i:i + DELTA_BLOCK + 1], mot.home_rad, mot.steps_per_rev)
+        dq[i:i + DELTA_BLOCK] = np.diff(th, axis=0)
+    return dq
+
+
+def plan_timing(su: Setup, routed: Routed, solved: Solved, handed: list[Stepped]) -> Planned:
     """Durations for every segment (module doc: steps 1–4), then the dwells inserted as
-    segments without motion, each after a stop (`compile.dwell`)."""
+    segments without motion, each after a stop (`compile.dwell`). `handed` holds the
+    stepped job and is emptied: once the ramps are cut, nothing else keeps its arrays, so
+    they are freed while the pieces are timed (memory on large drawings)."""
+    sp = handed.pop()
     power, feed, stop = _settings(su.profile, routed, sp)
     dwells = routed.ch.dwells
     if dwells:
         stop = stop | dwell_stops(dwells, sp)
     if routed.sections is not None:  # at rest where a pen-change stop may come
         stop = stop | section_stops(routed.ch.path_section, sp.path)
-    pd = time_stepped(su.profile, solved.checker, sp, power, feed, stop)
+    box = [sp]
+    del sp
+    per_seg = [power, feed, stop]  # `_time` drops them once the pieces have theirs
+    del power, feed, stop
+    pd = _time(su.profile, solved.checker, box, per_seg, trim=True)
     return insert_dwells(dwells, su.profile, pd)
 
 
@@ -135,30 +172,62 @@ def time_stepped(profile: Profile, checker: PoseChecker, sp: Stepped,
     """Steps 1–4 of the module doc on stepped segments with their laser power, pen feed
     (mm/s) and stops given per segment (also used by the GRBL bridge's online compiler,
     `fivebar_host.grbl.online`, on small batches of moves)."""
+    return _time(profile, checker, [sp], [power, feed, stop])
+
+
+def _time(profile: Profile, checker: PoseChecker, handed: list[Stepped],
+          per_seg: list[Any], trim: bool = False) -> Planned:
+    """`time_stepped` on the stepped segments in `handed` with the power, feed and stops
+    in `per_seg` (both emptied, see `plan_timing`); every array is freed as soon as it was
+    last read. `trim`: the heap's free pages are given back on the way (a whole job; not for the
+    GRBL bridge's small batches, where the calls would only cost time)."""
+    sp = handed.pop()
+    power, feed, stop = per_seg
+    per_seg.clear()
     mot, motion = profile.motors, profile.motion
     a_c = cut_accel(profile)
     j_lim = planner.JUNCTION_JUMP_RAD_S
     prof_kw = {"junction_jump_rad_s": j_lim, "min_duration_s": protocol.P_MIN_US * 1e-6}
-    dq = np.diff(steps.step_angles(sp.steps, mot.home_rad, mot.steps_per_rev), axis=0)
+    dq = _step_deltas(sp.steps, mot)
     pln = planner.plan(dq, sp.length, feed, motion.max_joint_rad_s, a_c, stop_after=stop,
                        **prof_kw)
-    counts, f1 = planner.ramp_fractions(pln, np.abs(dq).max(axis=1), a_c,
-                                        PLAN_PIECE_JUMP_SHARE * j_lim / a_c,
+    dist = np.maximum(np.abs(dq[:, 0]), np.abs(dq[:, 1]))  # Chebyshev joint distance
+    del dq
+    counts, f1 = planner.ramp_fractions(pln, dist, a_c, PLAN_PIECE_JUMP_SHARE * j_lim / a_c,
                                         PLAN_MIN_PIECE_STEPS * mot.rad_per_step)
+    del pln, dist
     th_all, pts_all, st, seg_of, f0, f1 = _cut_ramps(mot, checker, sp, counts, f1)
+    del counts
+    seg_of = compact_ints(seg_of)
     seg_draw = sp.draw[seg_of]
+    length = sp.length[seg_of] * (f1 - f0)  # drawing: the piece's part of its segment
+    kept = {"path": compact_ints(sp.path[seg_of]), "source": compact_ints(sp.source[seg_of]),
+            "line": compact_ints(sp.line[seg_of]), "perm": sp.perm[seg_of]}
+    del sp  # the pieces have all they need of the stepped segments
     power, feed = power[seg_of], feed[seg_of]
     stop = stop[seg_of] & np.concatenate((seg_of[1:] != seg_of[:-1], [True]))
-    length = np.where(seg_draw, sp.length[seg_of] * (f1 - f0),
-                      np.hypot(*np.diff(pts_all, axis=0).T))
-    dq = np.diff(steps.step_angles(st, mot.home_rad, mot.steps_per_rev), axis=0)
-    floor_us = planner.cap_durations_us(dq, length, feed, motion.max_joint_rad_s,
-                                        protocol.P_MIN_US)
-    duration_us = planner.enforce_staircase(dq, floor_us, stop, motion.max_joint_rad_s2, j_lim)
-    return Planned(th=th_all, pts=pts_all, draw=seg_draw, path=sp.path[seg_of],
-                   source=sp.source[seg_of], line=sp.line[seg_of], length=length,
-                   perm=sp.perm[seg_of], steps=st, power=power, f0=f0, f1=f1,
-                   duration_us=duration_us, dwell=np.zeros(seg_of.shape[0], dtype=bool))
+    del seg_of
+    trav = np.flatnonzero(~seg_draw)  # travel: between its targets
+    length[trav] = np.hypot(*(pts_all[trav + 1] - pts_all[trav]).T)
+    del trav
+    if trim:
+        release_free_memory()  # the stepped segments' arrays
+    dq = _step_deltas(st, mot)
+    # the pieces' feeds and the floor durations are held by no name, so each is freed as
+    # soon as it was read (the feeds once the floors exist, the floors once the staircase
+    # copied them)
+    feeds = [feed]
+    del feed
+    floor_us = [planner.cap_durations_us(dq, length, feeds.pop(), motion.max_joint_rad_s,
+                                         protocol.P_MIN_US)]
+    if trim:
+        release_free_memory()  # the per-segment settings' and the floors' inputs' holes
+    duration_us = compact_ints(planner.enforce_staircase(
+        dq, floor_us.pop(), stop, motion.max_joint_rad_s2, j_lim))
+    del dq, stop
+    return Planned(th=th_all, pts=pts_all, draw=seg_draw, length=length, steps=st,
+                   power=power, f0=f0, f1=f1, duration_us=duration_us,
+                   dwell=np.zeros(seg_draw.shape[0], dtype=bool), **kept)
 
 
 def tool_time_s(draw: BoolArray, profile: Profile, extra_switches: int = 0) -> float:

@@ -10,6 +10,7 @@ its end points), `validate` fills the per-path and overall figures into the `Job
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -43,21 +44,32 @@ def deviations(job: Job, profile: Profile, samples: int = 4,
 def _sample_distances(job: Job, profile: Profile, samples: int, quantised: bool,
                       di: IntArray) -> FloatArray:
     """`deviations`' distances, draw segments `di`, in blocks of `VALIDATE_BLOCK`."""
-    th = (steps.step_angles(job.steps, job.home_rad, job.steps_per_rev) if quantised
-          else job.angles_rad)
-    s = np.arange(samples + 1) / samples
     out = np.empty(di.shape[0] * (samples + 1))
+    for i, d in _distance_blocks(job, profile, samples, quantised, di):
+        out[i * (samples + 1):i * (samples + 1) + d.shape[0]] = d
+    return out
+
+
+def _distance_blocks(job: Job, profile: Profile, samples: int, quantised: bool,
+                     di: IntArray) -> Iterator[tuple[int, FloatArray]]:
+    """The distances of `_sample_distances` block by block: (first position in `di`, the
+    distances of its `VALIDATE_BLOCK` segments × (samples + 1)). Only a block's angles are
+    converted from steps, so no whole-job float copy is made."""
+    def angles(rows: IntArray) -> FloatArray:
+        return (steps.step_angles(job.steps[rows], job.home_rad, job.steps_per_rev)
+                if quantised else job.angles_rad[rows])
+
+    s = np.arange(samples + 1) / samples
     asm = "+" if job.assembly > 0 else "-"
     for i in range(0, di.shape[0], VALIDATE_BLOCK):
         b = di[i:i + VALIDATE_BLOCK]
-        tha, thb = th[b], th[b + 1]
+        tha, thb = angles(b), angles(b + 1)
         q = (tha[:, None, :] + s[None, :, None] * (thb - tha)[:, None, :]).reshape(-1, 2)
         fk = profile.geometry.forward_batch(q, asm)
         rank = np.repeat(np.arange(i, i + b.shape[0]), samples + 1)
         d = distance_to_request(job, fk.points, rank, np.tile(s, b.shape[0]))
         d[~fk.valid] = np.inf
-        out[i * (samples + 1):(i + b.shape[0]) * (samples + 1)] = d
-    return out
+        yield i, d
 
 
 def _deviation_of(job: Job, e: FloatArray, valid: BoolArray, di: IntArray,
@@ -157,18 +169,31 @@ def nbar_opinion(job: Job, profile: Profile, samples: int = 4,
 
 
 def validate(job: Job, profile: Profile, samples: int = 4) -> Job:
-    """Fill the per-path and overall max/mean deviation from the quantised steps."""
+    """Fill the per-path and overall max/mean deviation from the quantised steps, block by
+    block (`_distance_blocks`: the distances of a large job are never held at once). Every
+    path's sum is accumulated sample by sample in order, carried from block to block, so the
+    per-path means are those of one `np.bincount` pass; the overall mean sums the blocks'
+    sums (equal to one pass's up to rounding in the last bits)."""
     if not job.draw.any():
         return job
     di = np.flatnonzero(job.draw)
-    dist = _sample_distances(job, profile, samples, True, di)
-    path = np.repeat(job.path[di], samples + 1)
-    n = job.n_paths
+    n, per_seg = job.n_paths, samples + 1
     mx = np.full(n, -np.inf)
-    np.maximum.at(mx, path, dist)
-    cnt = np.bincount(path, minlength=n)
-    mean = np.bincount(path, weights=dist, minlength=n) / np.maximum(cnt, 1)
+    cnt = np.zeros(n, dtype=np.int64)
+    total: FloatArray = np.zeros(n)
+    bins = np.arange(n)
+    overall_max, overall_sum = -np.inf, 0.0
+    for i, d in _distance_blocks(job, profile, samples, True, di):
+        path = np.repeat(job.path[di[i:i + VALIDATE_BLOCK]], per_seg)
+        np.maximum.at(mx, path, d)
+        cnt += np.bincount(path, minlength=n)
+        total = np.bincount(np.concatenate((bins, path)), minlength=n,
+                            weights=np.concatenate((total, d))).astype(np.float64, copy=False)
+        overall_max = max(overall_max, float(d.max()))
+        overall_sum += float(d.sum())
+    mean = total / np.maximum(cnt, 1)
     mx[cnt == 0] = np.nan
     mean[cnt == 0] = np.nan
     ps = replace(job.paths, max_dev_mm=mx, mean_dev_mm=mean)
-    return replace(job, paths=ps, max_dev_mm=float(dist.max()), mean_dev_mm=float(dist.mean()))
+    return replace(job, paths=ps, max_dev_mm=overall_max,
+                   mean_dev_mm=overall_sum / (di.shape[0] * per_seg))

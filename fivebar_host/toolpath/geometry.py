@@ -196,8 +196,8 @@ class DrawingBuilder:
             file=self.file,
             kind=kind.copy(),
             params=params,
-            stroke=np.array(self.strokes, dtype=np.int64),
-            line=np.array(self.lines, dtype=np.int64),
+            stroke=_compact(self.strokes),
+            line=_compact(self.lines),
             stroke_source=np.array(self.stroke_source, dtype=np.int64),
             stroke_power=np.array(self.stroke_power, dtype=np.float64),
             stroke_feed_mm_s=np.array(self.stroke_feed, dtype=np.float64),
@@ -207,6 +207,15 @@ class DrawingBuilder:
             warnings=self.warnings,
             dwells=self.dwells,
         )
+
+
+def _compact(values: array[int]) -> IntArray:
+    """The builder's per-primitive numbers (stroke, source line) as int32 when every value
+    fits, else int64 (4 bytes a primitive each on large drawings; the same values)."""
+    out = np.frombuffer(values, dtype=np.int64) if len(values) else np.zeros(0, np.int64)
+    if out.size and (out.max() >= 1 << 31 or out.min() < -(1 << 31)):
+        return out.copy()
+    return out.astype(np.int32)
 
 
 #: Primitives mapped per block by `_transform_by_matrix` (bounds its temporary arrays).

@@ -45,6 +45,8 @@ from kinematics.fivebar import FiveBar, UnreachableError
 SAFETY = 0.8
 SAMPLES = np.array([0.25, 0.5, 0.75])
 MAX_ROUNDS = 60
+#: Targets solved at a time by `PoseChecker.inverse`.
+INVERSE_BLOCK = 1 << 16
 
 # Check outcome codes (per pose).
 OK, REACH, LIMIT1, LIMIT2, T1_ARM1, T1_ARM2, T2, ASSEMBLY, FK_INVALID = range(9)
@@ -149,30 +151,42 @@ class PoseChecker:
     # ------------------------------------------------------------------ targets
     def inverse(self, points: FloatArray, index_base: IntArray | None = None) -> FloatArray:
         """Checked inverse kinematics of targets: angles (N, 2) wrapped into the limits, or
-        `CheckFailedError` for the first failing point (its index from `index_base`)."""
-        inv = self.fb.inverse_batch(points, self.mode)
-        if not inv.valid.all():
-            i = int(np.flatnonzero(~inv.valid)[0])
-            p = points[i]
-            try:
-                self.fb.inverse(p, self.mode)
-                msg = "is not reachable"
-            except (UnreachableError, ValueError) as e:
-                # "point (x, y) mm is beyond arm 1's reach: …" → "is beyond arm 1's reach: …"
-                text = str(e)
-                msg = text.split(" mm ", 1)[1] if text.startswith("point (") else text
-            idx = int(index_base[i]) if index_base is not None else i
-            raise CheckFailedError(idx, (float(p[0]), float(p[1])), "reach",
-                                   f"the point {msg}")
-        angles, _, _ = wrap_to_limits(inv.angles, self.limits_rad)
-        code, m = self.codes(angles, points)
-        if code.any():
-            i = int(np.flatnonzero(code)[0])
-            idx = int(index_base[i]) if index_base is not None else i
-            p = points[i]
-            raise CheckFailedError(idx, (float(p[0]), float(p[1])), REASON_KEY[int(code[i])],
-                               self.explain(int(code[i]), angles[i], p, m[i]))
+        `CheckFailedError` for the first failing point (its index from `index_base`): the
+        first unreachable one if any, else the first that fails a check. In blocks of
+        `INVERSE_BLOCK` points (every point is solved on its own: the same angles and the
+        same error as one pass; bounded temporaries on large drawings)."""
+        n = points.shape[0]
+        angles = np.empty((n, 2))
+        for i in range(0, n, INVERSE_BLOCK):  # every point's reach first, as one pass would
+            inv = self.fb.inverse_batch(points[i:i + INVERSE_BLOCK], self.mode)
+            if not inv.valid.all():
+                self._unreachable(points, index_base, i + int(np.flatnonzero(~inv.valid)[0]))
+            angles[i:i + INVERSE_BLOCK] = wrap_to_limits(inv.angles, self.limits_rad)[0]
+            del inv
+        for i in range(0, n, INVERSE_BLOCK):
+            sl = slice(i, i + INVERSE_BLOCK)
+            code, m = self.codes(angles[sl], points[sl])
+            if code.any():
+                j = int(np.flatnonzero(code)[0])
+                idx = int(index_base[i + j]) if index_base is not None else i + j
+                p = points[i + j]
+                raise CheckFailedError(idx, (float(p[0]), float(p[1])),
+                                       REASON_KEY[int(code[j])],
+                                       self.explain(int(code[j]), angles[i + j], p, m[j]))
         return angles
+
+    def _unreachable(self, points: FloatArray, index_base: IntArray | None, i: int) -> None:
+        """Raise `CheckFailedError` for the unreachable point `i` of `inverse`."""
+        p = points[i]
+        try:
+            self.fb.inverse(p, self.mode)
+            msg = "is not reachable"
+        except (UnreachableError, ValueError) as e:
+            # "point (x, y) mm is beyond arm 1's reach: …" → "is beyond arm 1's reach: …"
+            text = str(e)
+            msg = text.split(" mm ", 1)[1] if text.startswith("point (") else text
+        idx = int(index_base[i]) if index_base is not None else i
+        raise CheckFailedError(idx, (float(p[0]), float(p[1])), "reach", f"the point {msg}")
 
     def forward(self, angles: FloatArray) -> tuple[FloatArray, BoolArray]:
         res = self.fb.forward_batch(angles, "+" if self.assembly > 0 else "-")
