@@ -89,6 +89,7 @@ class Bridge:
         self.th = self.compiler.angles_of_steps(st.a, st.b)
         self._sync_position()
         self.pending: list[Item] = []
+        self.flushing = False  # `flush` is planning the look-ahead into batches
         self.plan_th = self.th
         self.plan_pt = self.modal.position[:2]
         self.alarm: int | None = None
@@ -175,7 +176,8 @@ class Bridge:
             return "Hold:0"
         if self.machine.jogging:
             return "Jog"
-        if (self.pending or self.machine.busy or not self.machine.batches.empty()
+        if (self.pending or self.flushing or self.machine.busy
+                or not self.machine.batches.empty()
                 or st.state == "Run" or st.queued):
             return "Run"
         return "Idle"
@@ -339,6 +341,13 @@ class Bridge:
     def flush(self) -> None:
         """Plan the look-ahead buffer into batches and hand them to the machine."""
         items, self.pending = self.pending, []
+        self.flushing = True  # planning: Run, not Idle, until the batches are queued
+        try:
+            self._flush(items)
+        finally:
+            self.flushing = False
+
+    def _flush(self, items: list[Item]) -> None:
         chunk: list[Solved] = []
         for item in [*items, None]:
             if isinstance(item, Solved) and (not chunk or chunk[0].jog == item.jog):
@@ -369,7 +378,7 @@ class Bridge:
         while time.monotonic() < deadline:
             if self._reset_req.is_set() or self.alarm is not None:
                 return False
-            if not self.pending and self.machine.idle:
+            if not self.pending and not self.flushing and self.machine.idle:
                 return True
             time.sleep(0.02)
         return False

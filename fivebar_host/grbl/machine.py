@@ -103,7 +103,14 @@ class MachineDriver:
                     continue
                 self._realtime()
                 if not self.hold_requested and not self.batches.empty():
-                    self._stream(self.batches.get_nowait())
+                    # busy before the batch leaves the queue, and until a status report
+                    # read after its stream: the GRBL side never sees Idle in between
+                    self.busy = True
+                    try:
+                        self._stream(self.batches.get_nowait())
+                        self.status = self.link.status()
+                    finally:
+                        self.busy = False
                     continue
                 if time.monotonic() - last_poll >= POLL_S:
                     self.status = self.link.status()
