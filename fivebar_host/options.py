@@ -319,7 +319,7 @@ JOB_OPTIONS: tuple[Option, ...] = (
     Option("max_segments", "--max-segments", "max_segments", "float", lo=1.0, hi=1e9,
            metavar="N", help="Refuse a drawing with more path segments than this, or whose "
            "flattened curves have more than 4 times as many points, before memory runs out "
-           "(default 2000000: about 1.6 GB of memory)."),
+           "(default 2000000: about 0.6 GB of memory)."),
     Option("laser", "--laser", "laser", "bool", default=False,
            help="Laser job: drawing segments carry the profile's power (S > 0). Without it "
            "every line says S0 (pen plotter: pen down/up = M3/M5 around drawing strokes)."),

@@ -54,7 +54,7 @@ def _page_size(r: Walker, root: Node, name: str) -> tuple[float, float, bool]:
 #: Path segments (lines, curves, arcs) read from one file before it is refused by default.
 DEFAULT_MAX_SEGMENTS = 2_000_000
 LIMIT_HINT = ("; raise it with --max-segments (job option max_segments) if the machine has "
-              "the memory: compiling takes about 0.8 GB per million segments")
+              "the memory: compiling takes about 0.3 GB per million segments")
 
 
 def read_svg(source: str | Path | bytes, layers: Sequence[str] | None = None,
