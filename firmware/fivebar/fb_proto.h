@@ -30,6 +30,9 @@ enum fb_cmd_kind {
 	CMD_G6,         /* several segments: a G1 head, then relative +a+b [P] items */
 	CMD_BAUD        /* $B=<baud>: the link's rate after this line's ok */
 };
+/* How many command kinds there are (keep CMD_BAUD last, or move this): the
+ * fuzz target's oracle refuses any other kind. */
+#define CMD_KINDS (CMD_BAUD + 1)
 
 /* Word presence bits in fb_cmd_t.has */
 #define W_A 0x01u

@@ -108,7 +108,7 @@ static void parse_pieces(const uint8_t *data, size_t size)
 		/* ... nor, in either mode, one that lost its N and its '*' */
 		if (lost && !cmd.has_n && (!fb_is_resend(st) || lines.last != before.last))
 			abort();
-		if (st == FB_OK && cmd.kind > CMD_SET)
+		if (st == FB_OK && cmd.kind >= CMD_KINDS)
 			abort();
 		if (!fb_is_resend(st) && !field_ok)
 			abort();
