@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from layers_support import PEN, layers_text
 
 from fivebar_host.cli import main
 from fivebar_host.compile import CompileOptions, Job, compile_job
@@ -27,21 +28,6 @@ from fivebar_host.run.resume import ResumePoint, resume_path
 from fivebar_host.run.sender import run_job
 from fivebar_host.run.stops import Copies, pieces
 
-PEN = Path(__file__).resolve().parent.parent / "configs" / "pen-servo.toml"
-LAYERS_SVG = """<svg xmlns="http://www.w3.org/2000/svg"
- xmlns:inkscape="http://www.inkscape.org/namespaces/inkscape"
- width="30mm" height="20mm" viewBox="0 0 30 20">
-<g inkscape:groupmode="layer" inkscape:label="{first}" id="layer1">
-<line x1="2" y1="2" x2="12" y2="2" stroke="black"/>
-<line x1="18" y1="18" x2="28" y2="18" stroke="black"/>
-</g>
-<g inkscape:groupmode="layer" inkscape:label="{second}" id="layer2">
-<line x1="18" y1="2" x2="28" y2="2" stroke="red"/>
-<line x1="2" y1="18" x2="12" y2="18" stroke="red"/>
-</g>
-</svg>
-"""
-
 
 @pytest.fixture(autouse=True)
 def _clean_machines(clean_mock: None) -> None:
@@ -50,7 +36,7 @@ def _clean_machines(clean_mock: None) -> None:
 
 def layers_svg(tmp_path: Path, first: str = "black", second: str = "red") -> Path:
     p = tmp_path / "layers.svg"
-    p.write_text(LAYERS_SVG.format(first=first, second=second), encoding="utf-8")
+    p.write_text(layers_text(first, second), encoding="utf-8")
     return p
 
 

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from layers_support import PEN, layers_text
 from sim_plot import all_steps, planned_steps
 
 from fivebar_host.compile import CompileOptions, compile_job
@@ -27,20 +28,7 @@ from fivebar_host.run.sender import run_job
 pytestmark = pytest.mark.skipif(toolchain_missing() is not None,
                                 reason=f"emulator unavailable: {toolchain_missing()}")
 
-PEN = Path(__file__).resolve().parent.parent / "configs" / "pen-servo.toml"
-SVG = """<svg xmlns="http://www.w3.org/2000/svg"
- xmlns:inkscape="http://www.inkscape.org/namespaces/inkscape"
- width="30mm" height="20mm" viewBox="0 0 30 20">
-<g inkscape:groupmode="layer" inkscape:label="black" id="layer1">
-<line x1="2" y1="2" x2="12" y2="2" stroke="black"/>
-<line x1="18" y1="18" x2="28" y2="18" stroke="black"/>
-</g>
-<g inkscape:groupmode="layer" inkscape:label="red" id="layer2">
-<line x1="18" y1="2" x2="28" y2="2" stroke="red"/>
-<path d="M 2 18 C 5 14 9 14 12 18" stroke="red" fill="none"/>
-</g>
-</svg>
-"""
+SVG = layers_text(curve=True)
 
 
 def test_pen_change_on_the_emulator_quit_and_resume_exactly(tmp_path: Path) -> None:

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from layers_support import PEN, layers_text
 from serve_support import wait_for
 
 from fivebar_host.compile import CompileOptions, Job, compile_job
@@ -20,20 +21,7 @@ from fivebar_host.devices import mock
 from fivebar_host.server.client import ServerClient, follow, plot_options
 from fivebar_host.server.daemon import Daemon, ServeConfig
 
-PEN = Path(__file__).resolve().parent.parent / "configs" / "pen-servo.toml"
-SVG = b"""<svg xmlns="http://www.w3.org/2000/svg"
- xmlns:inkscape="http://www.inkscape.org/namespaces/inkscape"
- width="30mm" height="20mm" viewBox="0 0 30 20">
-<g inkscape:groupmode="layer" inkscape:label="black" id="layer1">
-<line x1="2" y1="2" x2="12" y2="2" stroke="black"/>
-<line x1="18" y1="18" x2="28" y2="18" stroke="black"/>
-</g>
-<g inkscape:groupmode="layer" inkscape:label="red" id="layer2">
-<line x1="18" y1="2" x2="28" y2="2" stroke="red"/>
-<line x1="2" y1="18" x2="12" y2="18" stroke="red"/>
-</g>
-</svg>
-"""
+SVG = layers_text().encode()
 
 
 @pytest.fixture
