@@ -103,6 +103,22 @@ static uint8_t queue_sync_block(uint8_t type, int32_t a, int32_t b)
 	return commit_block() ? FB_OK : ST_WAIT;
 }
 
+/* The position checks of a G1 target t reached from `from` (protocol section
+ * 6, in order): range, soft limits, motors on. */
+static uint8_t check_position(const int32_t from[2], const int32_t t[2])
+{
+	for (uint8_t i = 0; i < 2; i++)
+		if (t[i] > CFG_POS_LIMIT || t[i] < -CFG_POS_LIMIT)
+			return FB_ERR_OUT_OF_RANGE;
+	if (settings[SET_SOFT_LIMITS] &&
+	    (t[0] < settings[SET_A_MIN] || t[0] > settings[SET_A_MAX] ||
+	     t[1] < settings[SET_B_MIN] || t[1] > settings[SET_B_MAX]))
+		return FB_ERR_SOFT_LIMIT;
+	if (!motors_on && (t[0] != from[0] || t[1] != from[1]))
+		return FB_ERR_MOTORS_OFF;
+	return FB_OK;
+}
+
 static uint8_t exec_g1(const fb_cmd_t *c)
 {
 	if (!slot_free())
@@ -112,17 +128,11 @@ static uint8_t exec_g1(const fb_cmd_t *c)
 		t[0] = absolute ? c->a : plan[0] + c->a;
 	if (c->has & W_B)
 		t[1] = absolute ? c->b : plan[1] + c->b;
-	for (uint8_t i = 0; i < 2; i++)
-		if (t[i] > CFG_POS_LIMIT || t[i] < -CFG_POS_LIMIT)
-			return FB_ERR_OUT_OF_RANGE;
-	if (settings[SET_SOFT_LIMITS] &&
-	    (t[0] < settings[SET_A_MIN] || t[0] > settings[SET_A_MAX] ||
-	     t[1] < settings[SET_B_MIN] || t[1] > settings[SET_B_MAX]))
-		return FB_ERR_SOFT_LIMIT;
-	if (!motors_on && (t[0] != plan[0] || t[1] != plan[1]))
-		return FB_ERR_MOTORS_OFF;
+	uint8_t st = check_position(plan, t);
+	if (st != FB_OK)
+		return st;
 	fb_block_t *blk = mo_slot();
-	uint8_t st = mo_prepare(blk, t[0] - plan[0], t[1] - plan[1], (uint32_t)c->p, min_interval);
+	st = mo_prepare(blk, t[0] - plan[0], t[1] - plan[1], (uint32_t)c->p, min_interval);
 	if (st != FB_OK)
 		return st;
 	uint8_t s = (c->has & W_S) ? (uint8_t)c->s : laser_s;
@@ -141,15 +151,9 @@ static uint8_t exec_g1(const fb_cmd_t *c)
  * floor(C / n) >= min_interval <=> n <= floor(C / min_interval)). */
 static uint8_t check_target(const int32_t from[2], const int32_t t[2], int32_t p_us)
 {
-	for (uint8_t i = 0; i < 2; i++)
-		if (t[i] > CFG_POS_LIMIT || t[i] < -CFG_POS_LIMIT)
-			return FB_ERR_OUT_OF_RANGE;
-	if (settings[SET_SOFT_LIMITS] &&
-	    (t[0] < settings[SET_A_MIN] || t[0] > settings[SET_A_MAX] ||
-	     t[1] < settings[SET_B_MIN] || t[1] > settings[SET_B_MAX]))
-		return FB_ERR_SOFT_LIMIT;
-	if (!motors_on && (t[0] != from[0] || t[1] != from[1]))
-		return FB_ERR_MOTORS_OFF;
+	uint8_t st = check_position(from, t);
+	if (st != FB_OK)
+		return st;
 	uint32_t lim = (uint32_t)p_us * (FB_F_CPU / 1000000UL) / min_interval;
 	for (uint8_t i = 0; i < 2; i++) {
 		int32_t d = t[i] - from[i];
