@@ -11,7 +11,8 @@ import math
 
 import numpy as np
 
-from fivebar_host.compile import Job, NbarOpinion
+from fivebar_host import protocol
+from fivebar_host.compile import Job, NbarOpinion, linkrate
 from fivebar_host.config import Profile
 from fivebar_host.run.stops import Copies, plan_text
 
@@ -66,6 +67,20 @@ def pause_lines(job: Job) -> list[str]:
             + ": pen up, machine idle, waits for you" for p in job.pauses]
 
 
+def link_lines(job: Job, profile: Profile) -> list[str]:
+    """A line when the serial link or the firmware sets the pace of some segments
+    (`compile.linkrate`): the plan is slowed there so the queue never runs empty."""
+    n = linkrate.bound_segments(job.steps, job.power, job.duration_us, profile)
+    if not n:
+        return []
+    baud = profile.serial.link_baud
+    faster = ("; a faster link ([serial] link_baud = 250000 or more) would carry more"
+              if baud == protocol.BASE_BAUD else "")
+    return [f"link          {n} of {job.n_segments} segments slowed to what {baud} baud and "
+            f"the firmware carry (≤ {1e6 / linkrate.FIRMWARE_SEGMENT_US:.0f} segments/s), so "
+            f"the queue never runs dry{faster}"]
+
+
 def report_lines(job: Job, nbar: NbarOpinion | None = None, laser: bool = False,
                  profile: Profile | None = None, copies: Copies | None = None) -> list[str]:
     """The dry-run report: paths, segments, lengths, time, deviation, margins, mode, tool (pen,
@@ -111,6 +126,8 @@ def report_lines(job: Job, nbar: NbarOpinion | None = None, laser: bool = False,
     lines.append(f"margins       smallest type 1: {deg(min(mm[0], mm[1])):.1f}° "
                  f"(arm 1 {deg(mm[0]):.1f}°, arm 2 {deg(mm[1]):.1f}°), type 2: "
                  f"{deg(mm[2]):.1f}°")
+    if profile is not None:
+        lines.extend(link_lines(job, profile))
     lines.extend(pause_lines(job))
     lines.extend(f"mode change {k:<2d}{mc.describe(job.n_paths)}"
                  for k, mc in enumerate(job.mode_changes, start=1))

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fivebar_host import planner, protocol, steps
+from fivebar_host.compile import linkrate
 from fivebar_host.compile.dwell import dwell_stops, insert_dwells
 from fivebar_host.compile.layers import section_stops
 from fivebar_host.compile.model import compact_ints, compact_steps, release_free_memory
@@ -222,12 +223,28 @@ def _time(profile: Profile, checker: PoseChecker, handed: list[Stepped],
                                          protocol.P_MIN_US)]
     if trim:
         release_free_memory()  # the per-segment settings' and the floors' inputs' holes
-    duration_us = compact_ints(planner.enforce_staircase(
-        dq, floor_us.pop(), stop, motion.max_joint_rad_s2, j_lim))
+    duration_us = compact_ints(_link_bound_staircase(profile, dq, floor_us.pop(), stop, st,
+                                                     power))
     del dq, stop
     return Planned(th=th_all, pts=pts_all, draw=seg_draw, length=length, steps=st,
                    power=power, f0=f0, f1=f1, duration_us=duration_us,
                    dwell=np.zeros(seg_draw.shape[0], dtype=bool), **kept)
+
+
+def _link_bound_staircase(profile: Profile, dq: FloatArray, floor_us: IntArray,
+                          stop: BoolArray, st: IntArray, power: NDArray[np.uint8]) -> IntArray:
+    """Step 4 with the link's floor (`compile.linkrate`): the staircase on the floors raised
+    to what the wire carries, repeated while a segment of its result is shorter than the
+    floor its own durations give (an item that needs a `P` costs more bytes)."""
+    j_lim = planner.JUNCTION_JUMP_RAD_S
+    acc = profile.motion.max_joint_rad_s2
+    linkrate.raise_to_link(floor_us, st, power, None, profile)
+    duration_us = planner.enforce_staircase(dq, floor_us.copy(), stop, acc, j_lim)
+    for _ in range(linkrate.LINK_PASSES - 1):
+        if not linkrate.raise_to_link(floor_us, st, power, duration_us, profile):
+            break
+        duration_us = planner.enforce_staircase(dq, floor_us.copy(), stop, acc, j_lim)
+    return duration_us
 
 
 def tool_time_s(draw: BoolArray, profile: Profile, extra_switches: int = 0) -> float:

@@ -1,0 +1,146 @@
+"""The serial link's floor under segment durations: a plan never asks more bytes a second
+than the line carries (issue 20).
+
+The firmware runs every segment for exactly its `P`; the only way a job falls behind its plan
+is an empty queue (an underrun), and an underrun stops the arms at once from whatever speed
+the plan had them at — a velocity jump the planner's limits were there to prevent, and a
+laser that switches off mid-path. Dense drawings at high limits can ask for segments faster
+than 115200 baud delivers them (`python benchmarks/link.py`: about 1400 short segments a
+second when consecutive durations repeat, about 800 when each carries its own `P`), or
+faster than the firmware takes them at any rate. So each
+segment gets a floor: the time its share of the wire takes at `LINK_SHARE` of the line's
+byte rate, and at least the firmware's own per-segment work (`FIRMWARE_SEGMENT_US`). Each
+segment meeting its floor keeps the bytes the firmware needs ahead of the bytes it runs.
+
+The bytes come from the G6 packing (`run.pack`, docs/protocol.md 6.3): a segment after the
+head of a line is an item `[P<µs>]±da±db`, with `P` only where its duration differs from the
+one before; a line of at most `LINE_BYTES` spends about `LINE_OVERHEAD_B` on its number,
+head segment and check field; a change of laser power starts a new line. Whether an item
+needs `P` depends on the durations the floor decides, so `compile.timing` runs the staircase,
+reads the floor off its durations, and repeats while a segment falls short
+(`LINK_PASSES` at most: the staircase is nondecreasing in its floors, so every pass only
+lengthens segments and the passes settle).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fivebar_host.config import Profile
+from kinematics.arrays import FloatArray, IntArray
+
+#: Share of the line's nominal byte rate (8N1: baud / 10) a plan may use: room for resends
+#: after line noise and the status polls, and simavr's 11-bit byte timing (10 695 B/s at
+#: 115200, docs/protocol.md 16).
+LINK_SHARE = 0.85
+#: The longest wire line the host builds (`Streamer.limit`: half the firmware's 128-byte
+#: receive buffer) and the bytes of such a line that are not items: `N<n>` with a 6-digit
+#: number, the head `G6A<a>B<b>P<p>S<s>` with 7-digit targets, the space, `*<crc>/<len>`
+#: and the newline.
+LINE_BYTES = 64
+LINE_OVERHEAD_B = 36
+#: The firmware's own floor, µs a segment: past 115200 baud the line is no longer the limit,
+#: the firmware's work per segment (receive, check, parse, prepare) is: 1000 segments at
+#: P = 1000 µs ran with 0-1 underruns at every rate, a planned job asking ~1020 segments/s
+#: with `P` on most items with 4-5 at 250000 and above, P = 250 µs with the queue empty
+#: once per line (`python benchmarks/link.py`). So a plan asks at most ~900 a second.
+FIRMWARE_SEGMENT_US = 1100
+#: Segments over which the wire's bytes are averaged (half the firmware's queue).
+WINDOW = 8
+#: Ratio between neighbouring floor levels (`floor_levels`).
+LEVEL_RATIO = 1.06
+#: Staircase passes at most (the first with the floor of items without `P`).
+LINK_PASSES = 4
+#: Segments per block (bounded temporaries on large jobs).
+BLOCK = 1 << 16
+
+
+def digits(x: IntArray) -> IntArray:
+    """Decimal digits of each nonnegative integer (1 for 0)."""
+    out = np.ones(x.shape, dtype=np.int64)
+    for t in (10, 100, 1_000, 10_000, 100_000, 1_000_000, 10_000_000, 100_000_000):
+        out += x >= t
+    return out
+
+
+def bytes_per_s(profile: Profile) -> float:
+    """The byte rate a plan may use: `LINK_SHARE` of the rate the link runs at
+    (`[serial] link_baud`, negotiated with `$B`; 8N1 is 10 bits a byte)."""
+    return profile.serial.link_baud / 10.0 * LINK_SHARE
+
+
+def segment_bytes(steps: IntArray, power: NDArray[np.integer[Any]], duration_us: IntArray | None,
+                  start: int, stop: int) -> IntArray:
+    """Wire bytes that segments start..stop-1 take as G6 items, their line's overhead shared
+    among the items that fit it (a line of n items of b bytes carries n = (LINE_BYTES −
+    LINE_OVERHEAD_B)/b of them besides its head, so each costs LINE_BYTES·b/(b + LINE_BYTES −
+    LINE_OVERHEAD_B)); a segment whose power differs from the one before starts a line and
+    costs LINE_OVERHEAD_B. `steps`: absolute targets (T+1, 2); `duration_us`: the planned
+    durations (T,), or None before there are any (then no item carries `P`)."""
+    d = np.abs(np.diff(steps[start:stop + 1], axis=0).astype(np.int64))
+    item = 2 + digits(d[:, 0]) + digits(d[:, 1])
+    if duration_us is not None:
+        lo = max(start - 1, 0)
+        dur = np.asarray(duration_us[lo:stop], dtype=np.int64)
+        prev = dur[:-1] if start > 0 else np.concatenate(([-1], dur[:-1]))
+        cur = dur[1:] if start > 0 else dur
+        item += np.where(cur != prev, 1 + digits(cur), 0)
+    free = LINE_BYTES - LINE_OVERHEAD_B
+    b = -(-LINE_BYTES * item // (item + free))
+    pw = np.asarray(power[max(start - 1, 0):stop], dtype=np.int64)
+    new_line = pw[1:] != pw[:-1] if start > 0 else np.concatenate(([True], pw[1:] != pw[:-1]))
+    return np.where(new_line, LINE_OVERHEAD_B, b)
+
+
+def window_mean(x: IntArray, width: int) -> FloatArray:
+    """Mean of `x` over a window of `width` centred on each element (shorter at the ends)."""
+    c = np.concatenate(([0], np.cumsum(x, dtype=np.int64)))
+    n = x.shape[0]
+    lo = np.clip(np.arange(n) - width // 2, 0, n)
+    hi = np.clip(lo + width, 0, n)
+    return (c[hi] - c[lo]) / np.maximum(hi - lo, 1)
+
+
+def floor_levels(us: FloatArray) -> IntArray:
+    """`us` rounded up to the grid of ratio `LEVEL_RATIO` from `FIRMWARE_SEGMENT_US`: the
+    floors of neighbouring segments coincide, so their durations repeat and their items
+    need no `P` (a smooth floor would give every item its own)."""
+    k = np.ceil(np.log(np.maximum(us, FIRMWARE_SEGMENT_US) / FIRMWARE_SEGMENT_US)
+                / np.log(LEVEL_RATIO) - 1e-9)
+    return np.ceil(FIRMWARE_SEGMENT_US * LEVEL_RATIO ** np.maximum(k, 0.0)).astype(np.int64)
+
+
+def raise_to_link(floor_us: IntArray, steps: IntArray, power: NDArray[np.integer[Any]],
+                  duration_us: IntArray | None, profile: Profile) -> bool:
+    """Raise `floor_us` (T,) in place to each moving segment's link floor: the mean bytes of
+    the `WINDOW` segments around it (the firmware's queue and receive buffer hold more
+    than that, so the wire only has to keep up on average over a window) at
+    `bytes_per_s`, at least `FIRMWARE_SEGMENT_US`, on the grid of `floor_levels`. Returns
+    whether `duration_us` (when given) has a moving segment shorter than its link floor —
+    another pass is needed."""
+    rate_us = bytes_per_s(profile) * 1e-6
+    short = False
+    n = floor_us.shape[0]
+    for i in range(0, n, BLOCK):
+        j = min(i + BLOCK, n)
+        lo, hi = max(i - WINDOW, 0), min(j + WINDOW, n)
+        mean = window_mean(segment_bytes(steps, power, duration_us, lo, hi), WINDOW)
+        need = floor_levels(mean[i - lo:j - lo] / rate_us)
+        need[floor_us[i:j] == 0] = 0  # no motion: a dwell's own duration, or nothing
+        if duration_us is not None:
+            short |= bool((np.asarray(duration_us[i:j]) < need).any())
+        np.maximum(floor_us[i:j], need, out=floor_us[i:j])
+    return short
+
+
+def bound_segments(steps: IntArray, power: NDArray[np.integer[Any]], duration_us: IntArray,
+                   profile: Profile) -> int:
+    """How many moving segments of a plan run at their link floor (within 1 µs): where the
+    wire or the firmware, not the machine's limits, sets the pace (the dry-run report)."""
+    dur = np.asarray(duration_us, dtype=np.int64)
+    floor = np.where(dur > 0, 1, 0).astype(np.int64)
+    raise_to_link(floor, steps, power, dur, profile)
+    return int(((dur > 0) & (dur <= floor + 1)).sum())
