@@ -12,7 +12,9 @@ UART times every byte from UBRR/U2X, so the baud rate binds as on hardware).
    115200 the protocol-2 encoding (one numbered G1 line per segment) beside G6 packing;
 2. the same kind of job built by the real planner: a 100 mm straight line given as 1000
    G-code moves of 0.1 mm, compiled with `compile_job` (no simplification, draw feed
-   100 mm/s) and streamed as `fivebar plot` does (`run.program.build_program`);
+   100 mm/s) and streamed as `fivebar plot` does (`run.program.build_program`), on the
+   default profile and at 1000 rad/s²; and the same line wobbling ±0.03 mm at 300 mm/s,
+   planned for each baud rate (the link's floor under durations, `compile.linkrate`);
 3. `--line-use`: bytes/s over the line's capacity, protocol-2 lines (nominal 8N1 11 520 B/s;
    simavr counts 11 bits a byte: 10 695 B/s), and whether the queue runs empty just below
    capacity;
@@ -25,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import statistics
 import sys
 import tempfile
@@ -44,6 +47,8 @@ from fivebar_host.run.link import Link  # noqa: E402
 from fivebar_host.run.program import build_program  # noqa: E402
 
 NOMINAL_BPS = 115200 / 10
+#: How far the wobbly planned job's points stray from its line, mm.
+WOBBLE_MM = 0.03
 SIMAVR_BPS = 16_000_000 / 1496
 
 
@@ -155,21 +160,27 @@ def issue(repeat: int) -> None:
     print("targets: ≥ 750 segments/s and 0 mid-path underruns at 115200 (P = 1000 µs)")
 
 
-def planned_job(max_joint_rad_s2: float | None) -> tuple[list[str], int, float, float]:
-    """A 100 mm line in 1000 G-code moves of 0.1 mm, compiled at a 100 mm/s draw feed (the
-    profile's joint acceleration, or `max_joint_rad_s2`): (bodies as `fivebar plot` sends
-    them, laser off; segments; segments/s the plan asks on the line; on the whole job,
-    travel from and back to the home pose included)."""
-    prof = load_profile()
+def planned_job(max_joint_rad_s2: float | None, feed_mm_s: float = 100.0,
+                wobble_mm: float = 0.0,
+                link_baud: int = protocol.BASE_BAUD) -> tuple[list[str], int, float, float]:
+    """A 100 mm line in 1000 G-code moves of 0.1 mm, compiled at `feed_mm_s` (the profile's
+    joint acceleration, or `max_joint_rad_s2`, and then a joint speed of 50 rad/s), each
+    point moved off the line by up to `wobble_mm` (chords of varied lengths: their
+    durations differ, so their G6 items carry `P`), planned for a link at `link_baud`:
+    (bodies as `fivebar plot` sends them, laser off; segments; segments/s the plan asks on
+    the line; on the whole job, travel from and back to the home pose included)."""
+    prof = dataclasses.replace(load_profile(), serial=dataclasses.replace(
+        load_profile().serial, link_baud=link_baud))
     if max_joint_rad_s2 is not None:
         prof = dataclasses.replace(prof, motion=dataclasses.replace(
-            prof.motion, max_joint_rad_s2=max_joint_rad_s2))
+            prof.motion, max_joint_rad_s2=max_joint_rad_s2, max_joint_rad_s=50.0))
     x0, y0 = -40.0, 101.6  # a horizontal line the default machine reaches in mode +-
     src = Path(tempfile.mkdtemp()) / "line.gcode"
-    moves = [f"G1 X{x0 + 0.1 * k:.3f} Y{y0:.3f}" for k in range(1, 1001)]
+    moves = [f"G1 X{x0 + 0.1 * k + wobble_mm * math.sin(k):.3f} "
+             f"Y{y0 + wobble_mm * math.cos(0.7 * k):.3f}" for k in range(1, 1001)]
     src.write_text("\n".join(["G21", "G90", f"G0 X{x0} Y{y0}", "M3 S255", *moves, "M5"])
                    + "\n")
-    job = compile_job(src, prof, CompileOptions(no_simplify=True, draw_feed_mm_s=100.0,
+    job = compile_job(src, prof, CompileOptions(no_simplify=True, draw_feed_mm_s=feed_mm_s,
                                                 validate=False))
     us = job.duration_us
     on_line = int(job.draw.sum()) / (float(us[job.draw].sum()) * 1e-6)
@@ -182,19 +193,31 @@ def planned(repeat: int) -> None:
     acceleration that lets the plan ask ≥ 750 segments/s on the line at every rate."""
     print("the same job from the planner: a 100 mm line as 1000 G-code moves of 0.1 mm, "
           "draw feed 100 mm/s, G6 packing; seg/s over the whole job (travel included)")
-    print(HEADER)
-    for acc, rates in ((None, (protocol.BASE_BAUD,)), (1000.0, protocol.BAUD_RATES)):
-        bodies, segments, on_line, whole = planned_job(acc)
+    print(HEADER + f" {'plan s':>7s} {'run s':>7s}")
+    for acc, rates, wobble in ((None, (protocol.BASE_BAUD,), 0.0),
+                               (1000.0, protocol.BAUD_RATES, 0.0),
+                               (2000.0, protocol.BAUD_RATES, WOBBLE_MM)):
         name = "profile" if acc is None else f"{acc:g} rad/s²"
-        print(f"{name}: the plan asks {on_line:.0f} segments/s on the line, {whole:.0f} on "
-              "the whole job")
+        if wobble:
+            name = f"wobbly, 300 mm/s, {name}"
+            print(f"{name}: chords of varied lengths (±{wobble} mm), so most items carry P; "
+                  "planned per baud rate (compile.linkrate)")
         for baud in rates:
+            bodies, segments, on_line, whole = planned_job(
+                acc, 300.0 if wobble else 100.0, wobble, baud if wobble else protocol.BASE_BAUD)
+            if wobble or baud == rates[0]:
+                print(f"{name}: the plan asks {on_line:.0f} segments/s on the line, "
+                      f"{whole:.0f} on the whole job" + (f" at {baud}" if wobble else ""))
             runs = [run_issue(bodies, True, baud, segments) for _ in range(repeat)]
-            print(_row(f"  {name} at {baud}", runs))
-    print("(the default max_joint_rad_s2 = 60 caps this line at ~250 segments/s: chords of")
-    print(" 2-3 steps zig-zag in joint space and each corner is taken within the corner")
-    print(" acceleration; at 1000 rad/s² the plan asks more than 750/s. Its durations change")
-    print(" from one segment to the next, so most G6 items carry their own P)")
+            run_s = segments / statistics.median(r.seg_s for r in runs)
+            print(_row(f"  {name[:22]} at {baud}", runs)
+                  + f" {segments / whole:7.3f} {run_s:7.3f}")
+    print("(run s: from the first byte sent until the machine is idle again, the start-up")
+    print(" delay of the firmware's queue included. The firmware runs every segment for its")
+    print(" exact P; only an empty queue (an underrun) makes a job fall behind its plan, so")
+    print(" with 0 underruns the line runs at the rate the plan asks. The default")
+    print(" max_joint_rad_s2 = 60 limits this line: its chords of 1-3 steps zig-zag in joint")
+    print(" space and each corner is taken within the corner acceleration)")
 
 
 def main() -> None:
