@@ -91,7 +91,9 @@ def test_the_wire_keeps_ahead_of_the_plan() -> None:
 
 
 def test_without_the_floor_the_plan_outruns_the_wire(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(linkrate, "raise_to_link", lambda *a, **k: False)
+    monkeypatch.setattr(linkrate, "raise_to_link", lambda *a, **k: None)
+    monkeypatch.setattr(linkrate, "link_floor_us",
+                        lambda steps, *a, **k: np.zeros(steps.shape[0] - 1, dtype=np.int64))
     bodies, _, on_line = dense()
     assert on_line > 900
     assert late_segments(bodies, SIMAVR_BPS) > 50

@@ -24,6 +24,7 @@ lengthens segments and the passes settle).
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -113,27 +114,47 @@ def floor_levels(us: FloatArray) -> IntArray:
     return np.ceil(FIRMWARE_SEGMENT_US * LEVEL_RATIO ** np.maximum(k, 0.0)).astype(np.int64)
 
 
-def raise_to_link(floor_us: IntArray, steps: IntArray, power: NDArray[np.integer[Any]],
-                  duration_us: IntArray | None, profile: Profile) -> bool:
-    """Raise `floor_us` (T,) in place to each moving segment's link floor: the mean bytes of
-    the `WINDOW` segments around it (the firmware's queue and receive buffer hold more
-    than that, so the wire only has to keep up on average over a window) at
-    `bytes_per_s`, at least `FIRMWARE_SEGMENT_US`, on the grid of `floor_levels`. Returns
-    whether `duration_us` (when given) has a moving segment shorter than its link floor —
-    another pass is needed."""
+def _blocks(steps: IntArray, power: NDArray[np.integer[Any]], duration_us: IntArray | None,
+            profile: Profile) -> Iterator[tuple[int, int, IntArray]]:
+    """(i, j, floor of segments i..j-1) block by block: the mean bytes of the `WINDOW`
+    segments around each (the firmware's queue and receive buffer hold more than that, so
+    the wire only has to keep up on average over a window) at `bytes_per_s`, at least
+    `FIRMWARE_SEGMENT_US`, on the grid of `floor_levels`; 0 for a segment without motion."""
     rate_us = bytes_per_s(profile) * 1e-6
-    short = False
-    n = floor_us.shape[0]
+    n = steps.shape[0] - 1
     for i in range(0, n, BLOCK):
         j = min(i + BLOCK, n)
         lo, hi = max(i - WINDOW, 0), min(j + WINDOW, n)
         mean = window_mean(segment_bytes(steps, power, duration_us, lo, hi), WINDOW)
         need = floor_levels(mean[i - lo:j - lo] / rate_us)
-        need[floor_us[i:j] == 0] = 0  # no motion: a dwell's own duration, or nothing
-        if duration_us is not None:
-            short |= bool((np.asarray(duration_us[i:j]) < need).any())
+        need[(steps[i + 1:j + 1] == steps[i:j]).all(axis=1)] = 0
+        yield i, j, need
+
+
+def raise_to_link(floor_us: IntArray, steps: IntArray, power: NDArray[np.integer[Any]],
+                  profile: Profile) -> None:
+    """Raise `floor_us` (T,) in place to each moving segment's link floor (`_blocks`),
+    before there are durations: no item is counted with a `P`."""
+    for i, j, need in _blocks(steps, power, None, profile):
         np.maximum(floor_us[i:j], need, out=floor_us[i:j])
-    return short
+
+
+def any_short(steps: IntArray, power: NDArray[np.integer[Any]], duration_us: IntArray,
+              profile: Profile) -> bool:
+    """Whether a segment of the plan is shorter than its link floor (`link_floor_us`),
+    block by block (no whole-job array)."""
+    return any(bool((np.asarray(duration_us[i:j]) < need).any())
+               for i, j, need in _blocks(steps, power, duration_us, profile))
+
+
+def link_floor_us(steps: IntArray, power: NDArray[np.integer[Any]], duration_us: IntArray,
+                  profile: Profile) -> IntArray:
+    """Every segment's link floor (`_blocks`) with the planned `duration_us` deciding which
+    items carry a `P`."""
+    out = np.zeros(steps.shape[0] - 1, dtype=np.int64)
+    for i, j, need in _blocks(steps, power, duration_us, profile):
+        out[i:j] = need
+    return out
 
 
 def bound_segments(steps: IntArray, power: NDArray[np.integer[Any]], duration_us: IntArray,
@@ -141,6 +162,5 @@ def bound_segments(steps: IntArray, power: NDArray[np.integer[Any]], duration_us
     """How many moving segments of a plan run at their link floor (within 1 µs): where the
     wire or the firmware, not the machine's limits, sets the pace (the dry-run report)."""
     dur = np.asarray(duration_us, dtype=np.int64)
-    floor = np.where(dur > 0, 1, 0).astype(np.int64)
-    raise_to_link(floor, steps, power, dur, profile)
-    return int(((dur > 0) & (dur <= floor + 1)).sum())
+    floor = link_floor_us(steps, power, dur, profile)
+    return int(((floor > 0) & (dur <= floor + 1)).sum())
