@@ -9,7 +9,10 @@ Prints, all measured in emulated CPU cycles of the 16 MHz ATmega328P:
   as 10 ms segments whose direction alternates (so every segment start
   changes both direction pins), with the reason the next rate failed;
 - step timing jitter at that rate (deviation of each rising step edge from
-  the ideal schedule, less the median), max and RMS;
+  the ideal schedule, less the median), max and RMS, both motors pooled: the
+  strict figure; and the interval jitter (RMS of each step interval's
+  deviation from its ideal interval, per motor, pooled), the figure GRBL-like
+  jitter measurements give;
 - from the same trace the shortest step pulse high time, low time and
   direction-change-to-step-edge set-up time in ns, against the datasheet
   minima of the common step/dir drivers (DRIVERS below);
@@ -32,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import itertools
 import math
 import re
 import statistics
@@ -82,6 +86,7 @@ class RateResult:
     reason: str
     max_dev: int = 0  # cycles
     rms_dev: float = 0.0  # cycles
+    interval_rms: float = 0.0  # cycles, RMS of interval deviations
     min_high: int = 0  # shortest step pulse high time, cycles
     min_low: int = 0  # shortest step low time between pulses, cycles
     min_dir_setup: int = 0  # shortest direction change to step edge, cycles
@@ -116,10 +121,33 @@ def job(rate_a: int, rate_b: int) -> list[tuple[int, int, int]]:
 
 def deviations(trace: Trace, segs: list[tuple[int, int, int]]) -> tuple[list[int], str]:
     """Step-edge deviations from the ideal schedule; '' or why the job was not exact."""
+    raw, _, why = raw_deviations(trace, segs)
+    if why:
+        return [], why
+    origin = int(statistics.median(raw))
+    return [d - origin for d in raw], ""
+
+
+def interval_jitter(trace: Trace, segs: list[tuple[int, int, int]]) -> float:
+    """RMS, cycles, of each step interval's deviation from its ideal interval.
+
+    Per motor (an interval joins two consecutive steps of one motor), both
+    motors pooled; 0.0 when the job was not exact.
+    """
+    _, intervals, why = raw_deviations(trace, segs)
+    if why or not intervals:
+        return 0.0
+    return math.sqrt(sum(d * d for d in intervals) / len(intervals))
+
+
+def raw_deviations(trace: Trace, segs: list[tuple[int, int, int]]
+                   ) -> tuple[list[int], list[int], str]:
+    """(edge - ideal per step, interval - ideal interval per step pair, why not exact)."""
     starts = [0]
     for _, _, p in segs:
         starts.append(starts[-1] + p * F_CPU // 1_000_000)
     raw: list[int] = []
+    intervals: list[int] = []
     for axis, name in enumerate(("A", "B")):
         steps = trace.steps(name)
         ideal: list[tuple[int, int]] = []
@@ -129,12 +157,13 @@ def deviations(trace: Trace, segs: list[tuple[int, int, int]]) -> tuple[list[int
             sign = 1 if seg[axis] > 0 else -1
             ideal += [(starts[j] + ((2 * k - 1) * c) // (2 * n), sign) for k in range(1, n + 1)]
         if len(steps) != len(ideal):
-            return [], f"motor {name}: {len(steps)} steps for {len(ideal)} commanded"
+            return [], [], f"motor {name}: {len(steps)} steps for {len(ideal)} commanded"
         if any(s.direction != d for s, (_, d) in zip(steps, ideal, strict=True)):
-            return [], f"motor {name}: a step in the wrong direction"
-        raw += [s.cycle - t for s, (t, _) in zip(steps, ideal, strict=True)]
-    origin = int(statistics.median(raw))
-    return [d - origin for d in raw], ""
+            return [], [], f"motor {name}: a step in the wrong direction"
+        dev = [s.cycle - t for s, (t, _) in zip(steps, ideal, strict=True)]
+        raw += dev
+        intervals += [b - a for a, b in itertools.pairwise(dev)]
+    return raw, intervals, ""
 
 
 def run_rate(build: sim.BuildPaths, rate_a: int, rate_b: int, tmp: Path, pen: bool) -> RateResult:
@@ -167,7 +196,7 @@ def run_rate(build: sim.BuildPaths, rate_a: int, rate_b: int, tmp: Path, pen: bo
     if worst > SEGMENT_US * 16 // 100:
         return RateResult(False, f"step {worst} cycles off schedule", worst, rms)
     return RateResult(
-        True, "exact", worst, rms,
+        True, "exact", worst, rms, interval_jitter(trace, segs),
         min(trace.pulse_widths("A") + trace.pulse_widths("B")),
         min(trace.low_widths("A") + trace.low_widths("B")),
         min(trace.dir_setup("A") + trace.dir_setup("B"), default=0),
@@ -232,12 +261,16 @@ def rate_table(build: sim.BuildPaths, ratios: tuple[float, ...], tmp: Path, pen:
             continue
         print(f"  1:{ratio:g}: {best / 1000:.1f} kHz per motor (faster motor) exact; "
               f"jitter max {res.max_dev} cycles ({res.max_dev / 16:.1f} us), "
-              f"RMS {res.rms_dev:.1f} cycles; next: {failed}")
+              f"RMS {res.rms_dev:.1f} cycles; interval jitter RMS {res.interval_rms:.1f} "
+              f"cycles; next: {failed}")
         print_timing(res)
-    print(f"  summary {label}: ratio, highest exact kHz per motor, jitter max/RMS cycles")
+    print(f"  summary {label}: ratio, highest exact kHz per motor, jitter max/RMS cycles,"
+          " interval jitter RMS cycles")
     for ratio, best, res, failed in rows:
         jit = f"{res.max_dev} / {res.rms_dev:.1f}" if res else "-"
-        print(f"    1:{ratio:<5g} {best / 1000:5.1f} kHz   {jit:>14s}   (next {failed})")
+        ivl = f"{res.interval_rms:.1f}" if res else "-"
+        print(f"    1:{ratio:<5g} {best / 1000:5.1f} kHz   {jit:>14s}   {ivl:>6s}"
+              f"   (next {failed})")
 
 
 def run_segments(build: sim.BuildPaths, p_us: int, tmp: Path, pen: bool, count: int = 1000) -> int:
