@@ -126,14 +126,14 @@ def _run(document: vp.Document, action: str, port: str | None, preview_path: Pat
         raise click.UsageError("fivebar plot needs --port PORT (e.g. /dev/ttyUSB0, or "
                                "fivebar-sim:// for the emulator); fivebar preview draws "
                                "the picture and the report without a machine")
-    from fivebar_host.cli.plot import _stream_plot
+    from fivebar_host.cli.plot import stream_plot
     from fivebar_host.cli.stops import check_stops
     from fivebar_host.run.stops import Copies
 
     copies = Copies(int(job_values.get("copies") or 1),
                     float(job_values.get("page_delay_s") or 0.0))
     check_stops(job, copies, "fivebar")
-    _stream_plot(Path(name), port, prof, job, laser=laser, resume=False, yes=yes,
+    stream_plot(Path(name), port, prof, job, laser=laser, resume=False, yes=yes,
                  preview_path=preview_path, copies=copies)
 
 

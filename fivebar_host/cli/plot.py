@@ -123,7 +123,7 @@ def plot(drawing: Path, dry_run: bool, preview_path: Path, port: str | None, res
 
         grbl_plot(port, prof, job, laser=laser, yes=yes, drawing=drawing, resume=resume)
         return
-    _stream_plot(drawing, port, prof, job, laser=laser, resume=resume, yes=yes,
+    stream_plot(drawing, port, prof, job, laser=laser, resume=resume, yes=yes,
                  preview_path=preview_path, copies=copies)
 
 
@@ -135,7 +135,7 @@ def _ask_resume() -> bool:
     return bool(choice == "resume")
 
 
-def _stream_plot(drawing: Path, port: str, prof: Profile, job: Any, *, laser: bool,
+def stream_plot(drawing: Path, port: str, prof: Profile, job: Any, *, laser: bool,
                  resume: bool, yes: bool, preview_path: Path, copies: Copies) -> None:
     """Stream a compiled job with a progress bar, Ctrl-C hold/resume/abort, pen changes,
     copies with their countdown, final report."""
