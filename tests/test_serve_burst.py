@@ -74,7 +74,7 @@ def test_past_the_upload_limit_the_refusal_is_json_busy_with_retry_after(
             gate.set()
         await real_busy(send_, message)
 
-    with running_daemon(tmp_path, "burst20", max_uploads=20) as d:
+    with running_daemon(tmp_path, "burst20", max_uploads=20, compile_processes=False) as d:
         first = queue_held_job(d)
         monkeypatch.setattr(app_module, "compile_upload", slow_compile)
         monkeypatch.setattr(security, "_busy", counting_busy)
@@ -94,7 +94,8 @@ def test_past_the_upload_limit_the_refusal_is_json_busy_with_retry_after(
 
 def hold_compilation(monkeypatch: pytest.MonkeyPatch) -> tuple[threading.Event,
                                                                 threading.Event]:
-    """Make every compilation wait for `gate` (set `entered` when one starts)."""
+    """Make every compilation wait for `gate` (set `entered` when one starts); the daemon
+    must compile in threads (`compile_processes=False`) for the replacement to apply."""
     gate, entered = threading.Event(), threading.Event()
     real_compile = app_module.compile_upload
 
@@ -111,7 +112,7 @@ def test_a_submission_that_waits_too_long_for_a_slot_is_refused_busy(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     gate, entered = hold_compilation(monkeypatch)
     monkeypatch.setattr(app_module, "SUBMIT_WAIT_S", 0.3)
-    with running_daemon(tmp_path, "wait", compile_slots=1) as d:
+    with running_daemon(tmp_path, "wait", compile_slots=1, compile_processes=False) as d:
         answers: list[Any] = []
         holder = threading.Thread(target=lambda: answers.append(
             send(d.url, "POST", "/api/jobs?name=a.gcode", SMALL_GCODE, GCODE)))
@@ -132,7 +133,7 @@ def test_the_client_submits_again_after_a_busy_refusal(
     """`ServerClient.submit` (and so `plot --server`) waits Retry-After and tries again: the
     refusal queued nothing, so the drawing is queued exactly once."""
     gate, entered = hold_compilation(monkeypatch)
-    with running_daemon(tmp_path, "retry", max_uploads=1) as d:
+    with running_daemon(tmp_path, "retry", max_uploads=1, compile_processes=False) as d:
         answers: list[Any] = []
         holder = threading.Thread(target=lambda: answers.append(
             send(d.url, "POST", "/api/jobs?name=a.gcode", SMALL_GCODE, GCODE)))

@@ -27,11 +27,11 @@ import re
 import threading
 import time
 import types
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Annotated, Any, Literal, Union, get_args, get_origin
+from typing import Annotated, Any, Literal, TypeVar, Union, get_args, get_origin
 
 from fastapi import Depends, FastAPI, Path, Query, Request
-from fastapi.concurrency import run_in_threadpool
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, Response
 from pydantic import BaseModel, BeforeValidator, Field
@@ -43,6 +43,7 @@ from fivebar_host.errors import FivebarError, OptionError
 from fivebar_host.options import JOB_OPTIONS, parse_query, unknown_option
 from fivebar_host.run.stops import planned_time_s
 from fivebar_host.server import store as st_
+from fivebar_host.server.compiler import Compiler
 from fivebar_host.server.jobs import (
     Compiled,
     CompiledCache,
@@ -54,6 +55,8 @@ from fivebar_host.server.machine import ActionError, JobStateError
 from fivebar_host.server.security import RETRY_AFTER_S
 from fivebar_host.server.store import JobRecord, JobStore
 from fivebar_host.server.worker import Worker
+
+T = TypeVar("T")
 
 #: Content types a web page can send without a CORS preflight; uploads must not use them.
 SIMPLE_CONTENT_TYPES = frozenset({"application/x-www-form-urlencoded", "multipart/form-data",
@@ -266,6 +269,7 @@ class _Ctx:
     stopping: threading.Event
     slots: asyncio.Semaphore
     started: float
+    compiler: Compiler
 
     def get_rec(self, job_id: int) -> JobRecord:
         """A job, or the 404 answer (also for numbers no job can have: negative, or beyond
@@ -325,8 +329,10 @@ async def reject_unknown_query(request: Request) -> None:
 
 
 def create_app(*, store: JobStore, worker: Worker, cache: CompiledCache, profile: Profile,
-               stopping: threading.Event, compile_slots: int = 2) -> FastAPI:
-    """The FastAPI application over a store and a running worker."""
+               stopping: threading.Event, compiler: Compiler,
+               compile_slots: int = 2) -> FastAPI:
+    """The FastAPI application over a store and a running worker; submissions compile with
+    `compiler` (the daemon closes it)."""
     app = FastAPI(
         title="fivebar daemon", version=__version__,
         description="Queue, run and follow plot jobs on a five-bar plotter or laser "
@@ -336,7 +342,7 @@ def create_app(*, store: JobStore, worker: Worker, cache: CompiledCache, profile
         "'Authorization: Bearer <token>'.",
         docs_url=None, redoc_url=None, dependencies=[Depends(reject_unknown_query)])
     ctx = _Ctx(store, worker, cache, profile, stopping, asyncio.Semaphore(compile_slots),
-               time.monotonic())
+               time.monotonic(), compiler)
     _error_handlers(app)
     _status_routes(app, ctx)
     _job_routes(app, ctx)
@@ -438,9 +444,17 @@ def _submit_route(app: FastAPI, ctx: _Ctx) -> None:
 
 async def compile_request(ctx: _Ctx, request: Request, name: str
                           ) -> tuple[JobOptions, bytes, Compiled]:
-    """A submission's options, bytes and compiled job (the submit and dry-run routes):
-    content type checked, options parsed from their definitions, compiled in one of the
-    compilation slots; `ApiError` with the CLI's message when it cannot run."""
+    """A submission's options, bytes and compiled job (the submit route): see
+    `read_submission` and `run_in_slot`."""
+    opts, body = await read_submission(ctx, request, name)
+    compiled = await run_in_slot(ctx, request, compile_upload, body, name, opts, ctx.profile)
+    return opts, body, compiled
+
+
+async def read_submission(ctx: _Ctx, request: Request, name: str
+                          ) -> tuple[JobOptions, bytes]:
+    """A submission's options (parsed from their definitions) and bytes, content type
+    checked; `ApiError` when the daemon is stopping or the request is malformed."""
     if ctx.stopping.is_set():
         raise ApiError(503, "stopping", "the daemon is stopping; submit again after it "
                        "restarts", headers={"Retry-After": "10"})
@@ -450,7 +464,13 @@ async def compile_request(ctx: _Ctx, request: Request, name: str
                        f"with Content-Type image/svg+xml, text/x-gcode or "
                        f"application/octet-stream (got {ctype or 'none'!r})")
     opts = JobOptions(**parse_query(request.query_params.multi_items(), extra=("name",)))
-    body = await request.body()
+    return opts, await request.body()
+
+
+async def run_in_slot(ctx: _Ctx, request: Request, fn: Callable[..., T], *args: Any) -> T:
+    """`fn(*args)` (a compilation: `compile_upload` or the dry run's) in one of the
+    compilation slots, in a compiling process (`server.compiler`); `ApiError` with the
+    CLI's message when it cannot run, `busy` when no slot comes free in time."""
     # Wait on the event loop (no thread held) for a compilation slot.
     try:
         await asyncio.wait_for(ctx.slots.acquire(), SUBMIT_WAIT_S)
@@ -460,12 +480,11 @@ async def compile_request(ctx: _Ctx, request: Request, name: str
     try:
         if await request.is_disconnected():
             raise ApiError(499, "client_gone", "the client went away; nothing was queued")
-        compiled = await run_in_threadpool(compile_upload, body, name, opts, ctx.profile)
+        return await ctx.compiler.run(fn, *args)
     except SubmitError as e:
         raise ApiError(e.status, e.code, str(e), e.detail) from e
     finally:
         ctx.slots.release()
-    return opts, body, compiled
 
 
 def _queue(ctx: _Ctx, name: str, opts: JobOptions, body: bytes, compiled: Compiled) -> JobOut:

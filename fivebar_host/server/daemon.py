@@ -25,6 +25,7 @@ import uvicorn
 from fivebar_host.config import Profile, load_profile
 from fivebar_host.errors import FivebarError
 from fivebar_host.server.app import create_app
+from fivebar_host.server.compiler import Compiler
 from fivebar_host.server.jobs import CompiledCache
 from fivebar_host.server.machine import WorkerConfig
 from fivebar_host.server.security import (
@@ -90,6 +91,9 @@ class ServeConfig:
     max_uploads: int = MAX_UPLOADS
     max_in_flight: int = MAX_IN_FLIGHT
     compile_slots: int = 2
+    #: Compile submissions in child processes (`server.compiler`), never in a thread of
+    #: the process that streams; False: in a thread (tests that replace the compiler).
+    compile_processes: bool = True
 
 
 def _bind(host: str, port: int) -> socket.socket:
@@ -123,6 +127,7 @@ class Daemon:
         self.token: str | None = None
         self._server: uvicorn.Server | None = None
         self._thread: threading.Thread | None = None
+        self.compiler: Compiler | None = None
         self.store: JobStore | None = None
         self.worker: Worker | None = None
 
@@ -152,9 +157,10 @@ class Daemon:
             baud=ser.baud, banner_timeout_s=self.cfg.banner_timeout_s or ser.banner_timeout_s,
             reply_timeout_s=ser.reply_timeout_s, auto_resume=self.cfg.auto_resume),
             self.store, cache)
+        self.compiler = Compiler(self.cfg.compile_slots, self.cfg.compile_processes)
         app = create_app(store=self.store, worker=self.worker, cache=cache,
                          profile=self.profile, stopping=self.stopping,
-                         compile_slots=self.cfg.compile_slots)
+                         compiler=self.compiler, compile_slots=self.cfg.compile_slots)
         guarded = Guard(app, Policy(token=self.token, loopback=loopback,
                                     upload_limit=self.cfg.max_upload_bytes,
                                     max_in_flight=self.cfg.max_in_flight,
@@ -211,6 +217,8 @@ class Daemon:
             self._server.should_exit = True
         if self._thread is not None:
             self._thread.join(10.0)
+        if self.compiler is not None:
+            self.compiler.close()
         if self.store is not None:
             self.store.close()
             self.store = None

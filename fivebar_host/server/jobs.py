@@ -41,6 +41,11 @@ class SubmitError(FivebarError, ValueError):
         self.status = status
         self.detail = detail or {}
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickled with all its fields (it crosses from a compiling process,
+        `server.compiler`)."""
+        return (type(self), (self.code, str(self), self.status, self.detail))
+
 
 #: CompileOptions fields a submission cannot set: the daemon always validates its jobs.
 _FIXED = frozenset({"validate", "validation_samples"})

@@ -47,12 +47,13 @@ from fivebar_host.server.app import (
     JobOut,
     MachineOut,
     _Ctx,
-    compile_request,
     job_out,
     machine_action,
+    read_submission,
+    run_in_slot,
 )
 from fivebar_host.server.events import JOBS_SENT, EventHub
-from fivebar_host.server.jobs import SubmitError
+from fivebar_host.server.jobs import JobOptions, SubmitError, compile_upload
 from fivebar_host.server.machine import JobStateError
 
 #: The page's files: name → media type. Only these are served.
@@ -137,6 +138,22 @@ def _dry_run(job: Job, profile: Profile, laser: bool,
         return lines, out.read_bytes()
 
 
+def dry_run_upload(data: bytes, name: str, opts: JobOptions, profile: Profile) -> DryRunOut:
+    """Compile a submission as `compile_upload` does and answer its dry run; all of it in
+    one compiling process (`server.compiler`), so neither the job nor the preview's
+    drawing runs in the daemon that streams."""
+    job = compile_upload(data, name, opts, profile).job
+    copies = opts.copies_plan()
+    lines, png = _dry_run(job, profile, opts.laser, copies)
+    dev = None if job.max_dev_mm != job.max_dev_mm else float(job.max_dev_mm)
+    total_s = planned_time_s(job, copies)
+    return DryRunOut(name=name, report=lines, estimated_s=round(total_s, 3),
+                     estimate=format_duration(total_s), max_dev_mm=dev,
+                     tolerance_mm=job.tolerance_mm, segments=job.n_segments,
+                     paths=job.n_paths, mode=job.mode, warnings=list(job.notes),
+                     preview_png=base64.b64encode(png).decode("ascii"))
+
+
 def add_web_routes(app: FastAPI, ctx: _Ctx) -> None:
     """Add the page, the dry run, events, queue order and the machine panel's actions."""
     _page_routes(app, ctx)
@@ -180,17 +197,8 @@ def _dryrun_route(app: FastAPI, ctx: _Ctx) -> None:
         """Compile and check a drawing exactly as a submission would, and answer the dry
         run (report, estimate, deviation, warnings, preview picture); nothing is queued.
         A job that cannot run is refused as a submission is (422 with the CLI's message)."""
-        opts, _, compiled = await compile_request(ctx, request, name)
-        job = compiled.job
-        copies = opts.copies_plan()
-        lines, png = await run_in_threadpool(_dry_run, job, ctx.profile, opts.laser, copies)
-        dev = None if job.max_dev_mm != job.max_dev_mm else float(job.max_dev_mm)
-        total_s = planned_time_s(job, copies)
-        return DryRunOut(name=name, report=lines, estimated_s=round(total_s, 3),
-                         estimate=format_duration(total_s), max_dev_mm=dev,
-                         tolerance_mm=job.tolerance_mm, segments=job.n_segments,
-                         paths=job.n_paths, mode=job.mode, warnings=list(job.notes),
-                         preview_png=base64.b64encode(png).decode("ascii"))
+        opts, body = await read_submission(ctx, request, name)
+        return await run_in_slot(ctx, request, dry_run_upload, body, name, opts, ctx.profile)
 
 
 def _jobs_view(ctx: _Ctx) -> dict[str, Any]:
