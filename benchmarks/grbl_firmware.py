@@ -430,6 +430,9 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     ap.add_argument("--rates", default=",".join(str(r) for r in RATES),
                     help="comma-separated faster-motor rates to try, steps/s, ascending")
     ap.add_argument("--pulse-us", type=int, default=10, help="GRBL $0, step pulse in us")
+    ap.add_argument("--fivebar", action="store_true",
+                    help="also fivebar's firmware at GRBL's highest rates (firmware.py's job, "
+                         "harness in real time: -R)")
     return ap.parse_args(argv)
 
 
@@ -465,7 +468,28 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 print_result(ratio, best, res, failed)
         print_summary(rows)
+        if args.fivebar:
+            print_fivebar(rows, tmp)
     return 0
+
+
+def print_fivebar(rows: list[tuple[float, int, MoveResult | None, str]], tmp: Path) -> None:
+    """fivebar's firmware at GRBL's highest rate of each ratio (benchmarks/firmware.py's job)."""
+    from benchmarks.fivebar_steptiming import fivebar_figures
+
+    print("  fivebar firmware at the same rates (firmware.py's job: 10 ms segments, directions "
+          "alternating; strict = firmware.py's figure, both motors):")
+    for ratio, best, _, _ in rows:
+        if best == 0:
+            continue
+        fig = fivebar_figures(best, round(best * ratio), tmp)
+        if not fig.ok:
+            print(f"    1:{ratio:<5g} {best / 1000:5.1f} kHz  {fig.reason}")
+            continue
+        inter = "   ".join(f"{name} {j.max_abs:.1f} / {j.rms:.2f}"
+                           for name, j in zip("AB", fig.intervals, strict=False))
+        print(f"    1:{ratio:<5g} {best / 1000:5.1f} kHz  strict {fig.strict.max_abs:.1f} / "
+              f"{fig.strict.rms:.2f}   interval {inter}")
 
 
 if __name__ == "__main__":
