@@ -11,7 +11,8 @@ definitions of benchmarks/steptiming.py, so both firmwares are measured alike:
   No GRBL code enters this repository (GPL).
 - The harness runs with -T (two simavr 1.6 timer corrections GRBL needs, see
   fbsim.c's header) and WITHOUT -R: steps are timed in emulated cycles, exact
-  at any emulation speed; the host only sends the settings and one long move.
+  at any emulation speed; the host only sends the settings and three moves.
+  Each run is capped at 5 s + 10x the moves' time emulated (fbsim -c).
 - GRBL's Uno pin map puts X step/dir on D2/D5 and Y on D3/D6, the pins fbsim
   traces as stepA/dirA and stepB/dirB; GRBL's direction pin is high for a
   negative step ($3=0).
@@ -19,22 +20,31 @@ definitions of benchmarks/steptiming.py, so both firmwares are measured alike:
   such that the ramp to the feed takes RAMP_S, $0 step pulse (10 us default),
   $1=255 (motors kept enabled), no homing, no limits.
 - Per rate ratio (slower / faster motor) the faster motor's rate is raised
-  through RATES until GRBL fails; one G1 per measurement (G91, X positive, Y
-  negative), CRUISE_S of constant feed, then ``G4 P0`` whose ``ok`` comes when
-  the motion is over.  Exact = every commanded step on each motor, each in
-  the right direction, and each motor's cruise rate (least-squares fit of its
-  edges) within 1 % of the commanded rate.
+  through RATES until GRBL fails, then in REFINE_HZ steps from the last pass
+  up to that failure.  One measured G1 per run (G91, X positive, Y negative,
+  CRUISE_S of constant feed), then REVERSAL_STEPS back and forth on both
+  motors (so each direction pin changes between steps), then ``G4 P0``, whose
+  ``ok`` comes when the motion is over.  Exact = every commanded step on each
+  motor, each in the right direction, and each motor's cruise rate in the
+  measured move (least-squares fit of its edges) within 1 % of the commanded
+  rate.  Failures seen: GRBL slows (its step interrupt skips ticks), hangs
+  (no end of motion) or the emulated CPU crashes (the step interrupt, which
+  re-enables interrupts, re-enters itself until the stack overflows).
 - Jitter over the cruise part only (the fast motor's step index past the
   ramp, RAMP_S * rate / 2 steps, and MARGIN_S of steps more at each end, so
   the GRBL segments that mix ramp and cruise are left out; the slower motor
   over the same time window): strict (each edge against an evenly spaced
   schedule at the motor's fitted cruise rate, less the median) and interval
   (each interval against the fitted interval), max and RMS in cycles.
-- Also the shortest step high time, low time and direction set-up (all steps
-  of the move), and GRBL's flash and RAM from avr-size.
+- Also the shortest step high time, low time and direction set-up (every
+  step and real direction change of the run; GRBL only reverses from a stop),
+  and GRBL's flash and RAM from avr-size.
+- --fivebar: fivebar's firmware beside GRBL, per ratio at GRBL's highest rate
+  or lower (5 kHz steps) until fivebar's job passes (benchmarks/
+  fivebar_steptiming.py, through firmware.py's own functions, with -R).
 
 Run: python benchmarks/grbl_firmware.py [--grbl-src DIR] [--ratios 1,0.73,0.5,0.1]
-     [--rates 20000,25000,...] [--pulse-us 10]
+     [--rates 20000,25000,...] [--pulse-us 10] [--fivebar]
 """
 
 from __future__ import annotations
