@@ -18,6 +18,15 @@
  *                 read (the step interrupt's entry) and write of OCR1A
  *     -C          control commands on stdin, one per line, each acknowledged
  *                 on stdout with "ok <command>" once done (see below)
+ *     -T          two timer corrections to simavr 1.6 for firmware that needs
+ *                 them (GRBL 1.1h: benchmarks/grbl_firmware.py), off by default:
+ *                 starting Timer0's clock (TCCR0B from no clock to a clock)
+ *                 keeps the TCNT0 written before, as the hardware does (simavr
+ *                 restarts it from 0, so GRBL's preloaded step pulse reset
+ *                 came 2048 cycles late); and OCR1A starts at 1, not 0, after
+ *                 every reset (in CTC mode with OCR1A = 0 the hardware matches
+ *                 on every timer tick, so a compare interrupt enabled before
+ *                 the first OCR1A write fires at once; simavr never fires it)
  *
  * stdout carries "PTY /dev/pts/N", then only the acknowledgements of -C;
  * simavr's own logging and the final statistics go to stderr.  SIGTERM or
@@ -149,6 +158,26 @@ static avr_run_t core_run;  /* avr->run as set up: another value is a watchdog r
 #define REG_TIMSK1 0x6F
 #define BIT_OCIE1A 1
 static int control, ctl_out = -1;
+
+/* simavr 1.6 timer corrections (-T) */
+static int timer_fix;
+#define REG_TCCR0B 0x45
+#define REG_TCNT0 0x46
+#define REG_OCR1AL 0x88
+static avr_io_write_t tccr0b_write_orig;
+static void *tccr0b_write_param;
+
+/* Timer0's clock started: put back the TCNT0 simavr's reconfiguration dropped. */
+static void tccr0b_write_hook(avr_t *a, avr_io_addr_t addr, uint8_t v, void *param)
+{
+	(void)param;
+	uint8_t was_clocked = a->data[REG_TCCR0B] & 0x07, tcnt = a->data[REG_TCNT0];
+	tccr0b_write_orig(a, addr, v, tccr0b_write_param);
+	if (!was_clocked && (v & 0x07)) {
+		avr_io_addr_t io = AVR_DATA_TO_IO(REG_TCNT0);
+		a->io[io].w.c(a, REG_TCNT0, tcnt, a->io[io].w.param);
+	}
+}
 static char ctl_line[128];
 static size_t ctl_len;
 static int pending_reset, pending_freeze, frozen, settled;
@@ -168,7 +197,6 @@ static FILE *dbg;
 static avr_io_write_t ocr_write_orig;
 static void *ocr_write_param;
 #define REG_TCNT1L 0x84
-#define REG_OCR1AL 0x88
 
 static unsigned tcnt1_now(void)
 {
@@ -549,6 +577,8 @@ static void setup_after_reset(void)
 			drive_endstop(i, CFG_ENDSTOP_ACTIVE_LOW ? 1 : 0);
 	}
 	avr_cycle_timer_register(avr, pump_period, pump_timer, NULL);
+	if (timer_fix)
+		avr->data[REG_OCR1AL] = 1;  /* OCR1AH stays 0: OCR1A = 1 (-T) */
 }
 
 static uint32_t rng_state = 0x2545F491u;
@@ -662,7 +692,7 @@ static void apply_pending(void)
 static void usage(void)
 {
 	fprintf(stderr, "usage: fbsim [-m mcu] [-f hz] [-t trace] [-w] [-g ms] [-c cycles] [-R] "
-			"[-a steps] [-b steps] [-D debug] firmware.elf\n");
+			"[-a steps] [-b steps] [-D debug] [-C] [-T] firmware.elf\n");
 	exit(2);
 }
 
@@ -677,7 +707,7 @@ int main(int argc, char **argv)
 	if (getppid() == 1)
 		return 1;
 
-	while ((opt = getopt(argc, argv, "m:f:t:wg:c:Ra:b:D:C")) != -1) {
+	while ((opt = getopt(argc, argv, "m:f:t:wg:c:Ra:b:D:CT")) != -1) {
 		switch (opt) {
 		case 'm': mcu = optarg; break;
 		case 'f': freq = strtoul(optarg, NULL, 10); break;
@@ -690,6 +720,7 @@ int main(int argc, char **argv)
 		case 'b': have_endstop[1] = 1; endstop_at[1] = strtol(optarg, NULL, 10); break;
 		case 'D': debug_path = optarg; break;
 		case 'C': control = 1; break;
+		case 'T': timer_fix = 1; break;
 		default: usage();
 		}
 	}
@@ -763,6 +794,11 @@ int main(int argc, char **argv)
 		ocr_write_param = avr->io[AVR_DATA_TO_IO(REG_OCR1AL)].w.param;
 		avr->io[AVR_DATA_TO_IO(REG_OCR1AL)].w.c = ocr_write_hook;
 		avr->io[AVR_DATA_TO_IO(REG_OCR1AL)].r.c = ocr_read_hook;
+	}
+	if (timer_fix) {
+		tccr0b_write_orig = avr->io[AVR_DATA_TO_IO(REG_TCCR0B)].w.c;
+		tccr0b_write_param = avr->io[AVR_DATA_TO_IO(REG_TCCR0B)].w.param;
+		avr->io[AVR_DATA_TO_IO(REG_TCCR0B)].w.c = tccr0b_write_hook;
 	}
 	endstop_irq[0] = pin_irq(PORT_CHAR(PIN_ENDSTOP_PORT), PIN_ENDSTOP_A_BIT);
 	endstop_irq[1] = pin_irq(PORT_CHAR(PIN_ENDSTOP_PORT), PIN_ENDSTOP_B_BIT);
