@@ -35,10 +35,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import itertools
-import math
 import re
-import statistics
 import sys
 import tempfile
 from dataclasses import dataclass
@@ -46,6 +43,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from benchmarks import steptiming
 from fivebar_host import protocol
 from fivebar_host.devices import sim
 from fivebar_host.devices.simtrace import Trace
@@ -120,79 +118,91 @@ def job(rate_a: int, rate_b: int) -> list[tuple[int, int, int]]:
 
 
 def deviations(trace: Trace, segs: list[tuple[int, int, int]]) -> tuple[list[int], str]:
-    """Step-edge deviations from the ideal schedule; '' or why the job was not exact."""
-    raw, _, why = raw_deviations(trace, segs)
+    """Step-edge deviations from the ideal schedule (`steptiming.strict_deviations`, both
+    motors, one median); '' or why the job was not exact."""
+    edges, ideal, why = edges_and_ideal(trace, segs)
     if why:
         return [], why
-    origin = int(statistics.median(raw))
-    return [d - origin for d in raw], ""
+    both_e = edges[0] + edges[1]
+    both_i = ideal[0] + ideal[1]
+    return [int(d) for d in steptiming.strict_deviations(both_e, both_i, whole_cycles=True)], ""
 
 
 def interval_jitter(trace: Trace, segs: list[tuple[int, int, int]]) -> float:
-    """RMS, cycles, of each step interval's deviation from its ideal interval.
-
-    Per motor (an interval joins two consecutive steps of one motor), both
-    motors pooled; 0.0 when the job was not exact.
-    """
-    _, intervals, why = raw_deviations(trace, segs)
-    if why or not intervals:
+    """RMS, cycles, of each step interval's deviation from its ideal interval
+    (`steptiming.interval_deviations`), per motor, both motors pooled; 0.0 when the job
+    was not exact."""
+    edges, ideal, why = edges_and_ideal(trace, segs)
+    if why:
         return 0.0
-    return math.sqrt(sum(d * d for d in intervals) / len(intervals))
+    devs = [d for e, i in zip(edges, ideal, strict=True)
+            for d in steptiming.interval_deviations(e, i)]
+    return steptiming.summarize(devs).rms
 
 
-def raw_deviations(trace: Trace, segs: list[tuple[int, int, int]]
-                   ) -> tuple[list[int], list[int], str]:
-    """(edge - ideal per step, interval - ideal interval per step pair, why not exact)."""
+def edges_and_ideal(trace: Trace, segs: list[tuple[int, int, int]]
+                    ) -> tuple[list[list[int]], list[list[int]], str]:
+    """Per motor, the rising-edge cycles and their ideal times (`steptiming.segment_schedule`
+    of every segment, the segments back to back from cycle 0), and '' or why the job was
+    not exact (a step missing or extra, or in the wrong direction)."""
     starts = [0]
     for _, _, p in segs:
         starts.append(starts[-1] + p * F_CPU // 1_000_000)
-    raw: list[int] = []
-    intervals: list[int] = []
+    edges: list[list[int]] = []
+    ideal: list[list[int]] = []
     for axis, name in enumerate(("A", "B")):
         steps = trace.steps(name)
-        ideal: list[tuple[int, int]] = []
+        times: list[int] = []
+        signs: list[int] = []
         for j, seg in enumerate(segs):
             n = abs(seg[axis])
-            c = seg[2] * F_CPU // 1_000_000
-            sign = 1 if seg[axis] > 0 else -1
-            ideal += [(starts[j] + ((2 * k - 1) * c) // (2 * n), sign) for k in range(1, n + 1)]
-        if len(steps) != len(ideal):
-            return [], [], f"motor {name}: {len(steps)} steps for {len(ideal)} commanded"
-        if any(s.direction != d for s, (_, d) in zip(steps, ideal, strict=True)):
+            times += steptiming.segment_schedule(starts[j], seg[2] * F_CPU // 1_000_000, n)
+            signs += [1 if seg[axis] > 0 else -1] * n
+        if len(steps) != len(times):
+            return [], [], f"motor {name}: {len(steps)} steps for {len(times)} commanded"
+        if any(s.direction != d for s, d in zip(steps, signs, strict=True)):
             return [], [], f"motor {name}: a step in the wrong direction"
-        dev = [s.cycle - t for s, (t, _) in zip(steps, ideal, strict=True)]
-        raw += dev
-        intervals += [b - a for a, b in itertools.pairwise(dev)]
-    return raw, intervals, ""
+        edges.append([s.cycle for s in steps])
+        ideal.append(times)
+    return edges, ideal, ""
 
 
-def run_rate(build: sim.BuildPaths, rate_a: int, rate_b: int, tmp: Path, pen: bool) -> RateResult:
-    """Stream one job at the given per-motor rates and check it."""
-    segs = job(rate_a, rate_b)
-    dev = sim.start_device(build, tmp / "rate.trace", realtime=True)
+def stream_job(build: sim.BuildPaths, segs: list[tuple[int, int, int]], trace_path: Path,
+               pen: bool) -> tuple[Trace | None, str]:
+    """Stream `segs` on a fresh emulator in real time ($0 at the cap, G91; the pen servo
+    first with `pen`); (trace, '') or (None, why: a refusal, or the queue ran empty)."""
+    dev = sim.start_device(build, trace_path, realtime=True)
     try:
         s = dev.session
         base = start_pen(s, pen)
         for line in (f"$0={rate_cap()}", "G91"):
             if s.send(line) != protocol.Ok():
-                return RateResult(False, f"{line} refused")
+                return None, f"{line} refused"
         first = 3 + (len(PEN_LINES) if pen else 0)
         replies = s.stream([protocol.g1(a, b, p) for a, b, p in segs], numbered_from=first)
         if any(r != protocol.Ok() for r in replies):
             bad = next(r for r in replies if r != protocol.Ok())
-            return RateResult(False, f"refused: {bad}")
+            return None, f"refused: {bad}"
         report = s.wait_idle()
         trace = dev.finish()
     finally:
         dev.close()
-    report = dataclasses.replace(report, underruns=report.underruns - base)
+    if report.underruns - base != 1:
+        return None, f"queue ran empty {report.underruns - base - 1}x"
+    return trace, ""
+
+
+def run_rate(build: sim.BuildPaths, rate_a: int, rate_b: int, tmp: Path, pen: bool) -> RateResult:
+    """Stream one job at the given per-motor rates and check it."""
+    segs = job(rate_a, rate_b)
+    trace, why = stream_job(build, segs, tmp / "rate.trace", pen)
+    if trace is None:
+        return RateResult(False, why)
     devs, why = deviations(trace, segs)
     if why:
         return RateResult(False, why)
     worst = max(abs(d) for d in devs)
-    rms = math.sqrt(sum(d * d for d in devs) / len(devs))
-    if report.underruns != 1:
-        return RateResult(False, f"queue ran empty {report.underruns - 1}x", worst, rms)
+    rms = steptiming.summarize(devs).rms
     if worst > SEGMENT_US * 16 // 100:
         return RateResult(False, f"step {worst} cycles off schedule", worst, rms)
     return RateResult(

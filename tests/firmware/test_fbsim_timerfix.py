@@ -75,10 +75,13 @@ def test_timer0_start_keeps_the_preloaded_count(build: sim.BuildPaths, program: 
 def test_without_t_simavr_restarts_timer0_from_zero(build: sim.BuildPaths, program: Path,
                                                      tmp_path: Path) -> None:
     # the fault -T corrects: the overflow comes a full 256 ticks (2048 cycles) after the
-    # start; should a newer simavr get this right, this test says -T is no longer needed
+    # start; a simavr that gets this right needs no -T (said, not failed: the harness's
+    # default must not depend on the simavr release the machine has)
     run(build, program, tmp_path / "t.trace")
     widths = read_trace(tmp_path / "t.trace").pulse_widths("A")
-    assert widths and all(w > 2000 for w in widths), widths
+    if not (widths and all(w > 2000 for w in widths)):
+        pytest.skip(f"this simavr keeps TCNT0 when Timer0 starts (widths {widths[:5]}): "
+                    "-T is not needed for it")
 
 
 def test_ctc_interrupt_enabled_with_ocr1a_zero_fires(build: sim.BuildPaths, program: Path,
@@ -90,4 +93,5 @@ def test_ctc_interrupt_enabled_with_ocr1a_zero_fires(build: sim.BuildPaths, prog
     gaps = {b - a for a, b in itertools.pairwise(edges[2:])}
     assert gaps == {400}, sorted(gaps)[:10]
     run(build, program, tmp_path / "plain.trace")
-    assert len(read_trace(tmp_path / "plain.trace").pin("stepB")) <= 1
+    if len(read_trace(tmp_path / "plain.trace").pin("stepB")) > 1:
+        pytest.skip("this simavr fires a CTC compare at OCR1A = 0: -T is not needed for it")
