@@ -127,6 +127,25 @@ def pct(values: list[float], q: float) -> float:
     return s[min(len(s) - 1, max(0, math.ceil(q / 100 * len(s)) - 1))]
 
 
+def wait_over(client: ServerClient, job_id: int, timeout_s: float) -> dict[str, Any]:
+    """The job once it is no longer queued or running, or as it is after `timeout_s`."""
+    deadline = time.monotonic() + timeout_s
+    while (job := client.job(job_id))["state"] in ("queued", "running"):
+        if time.monotonic() > deadline:
+            break
+        time.sleep(0.25)
+    return job
+
+
+def stop_daemon(proc: subprocess.Popen[Any]) -> None:
+    """SIGTERM (the daemon stops its job and exits), killed after 60 s."""
+    proc.send_signal(signal.SIGTERM)
+    try:
+        proc.wait(60)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--duration", type=float, default=30.0, help="seconds of load (30)")
@@ -184,17 +203,9 @@ def main(argv: list[str] | None = None) -> int:
             for t in threads:
                 t.join(args.duration + 60)
             wall = time.monotonic() - start
-            deadline = time.monotonic() + job.total_time_s + 60
-            while (final := client.job(jid))["state"] in ("queued", "running"):
-                if time.monotonic() > deadline:
-                    break
-                time.sleep(0.25)
+            final = wait_over(client, jid, job.total_time_s + 60)
         finally:
-            proc.send_signal(signal.SIGTERM)
-            try:
-                proc.wait(60)
-            except subprocess.TimeoutExpired:
-                proc.kill()
+            stop_daemon(proc)
             log.close()
     lat_ms = [x * 1000 for x in load.latencies]
     print(f"load: {total} GET /api/status over {wall:.1f} s ({len(load.latencies) / wall:.1f}/s "

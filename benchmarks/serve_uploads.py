@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import signal
 import subprocess
 import sys
 import tempfile
@@ -30,6 +29,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from benchmarks.pipeline import write_svg  # noqa: E402
+from benchmarks.serve_load import stop_daemon, wait_over  # noqa: E402
 from fivebar_host.devices import sim  # noqa: E402
 from fivebar_host.server.client import ServerClient, plot_options  # noqa: E402
 
@@ -103,17 +103,11 @@ def one_run(svg: bytes, uploads: int, threads: bool) -> None:
                 c.request("POST", "/api/dryrun", query={"name": "big.svg"}, body=svg,
                           content_type="image/svg+xml", timeout_s=300.0)
                 times.append(time.monotonic() - t0)
-            deadline = time.monotonic() + 120
-            while (job := c.job(jid))["state"] in ("queued", "running"):
-                if time.monotonic() > deadline:
-                    raise SystemExit("the job did not finish")
-                time.sleep(0.25)
+            job = wait_over(c, jid, 120.0)
+            if job["state"] in ("queued", "running"):
+                raise SystemExit("the job did not finish")
         finally:
-            proc.send_signal(signal.SIGTERM)
-            try:
-                proc.wait(60)
-            except subprocess.TimeoutExpired:
-                proc.kill()
+            stop_daemon(proc)
     where = "threads of the daemon" if threads else "child processes"
     print(f"compiling in {where}: {uploads} dry runs of {len(svg) / 1e6:.1f} MB, "
           f"{', '.join(f'{t:.1f}' for t in times)} s each; job {job['state']}, "

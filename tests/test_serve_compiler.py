@@ -27,7 +27,7 @@ def run(compiler: Compiler, fn: object, *args: object) -> object:
 
 def test_a_child_compiles_the_same_job_in_another_process() -> None:
     prof = load_profile()
-    c = Compiler(1)
+    c = Compiler()
     try:
         assert run(c, os.getpid) != os.getpid()
         child = run(c, compile_upload, SIMPLE, "simple.svg", JobOptions(), prof)
@@ -39,7 +39,7 @@ def test_a_child_compiles_the_same_job_in_another_process() -> None:
 
 
 def test_a_refusal_crosses_with_its_code_status_and_detail() -> None:
-    c = Compiler(1)
+    c = Compiler()
     try:
         with pytest.raises(SubmitError) as e:
             run(c, compile_upload, FAR, "far.gcode", JobOptions(), load_profile())
@@ -53,7 +53,7 @@ def test_a_refusal_crosses_with_its_code_status_and_detail() -> None:
 
 
 def test_a_child_that_dies_is_a_refusal_and_the_next_compiles() -> None:
-    c = Compiler(1)
+    c = Compiler()
     try:
         with pytest.raises(SubmitError) as e:
             run(c, os._exit, 3)

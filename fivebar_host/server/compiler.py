@@ -61,8 +61,7 @@ def _child(out: Connection, fn: Callable[..., Any], args: tuple[Any, ...]) -> No
 class Compiler:
     """Runs compile functions in child processes (or threads); see the module doc."""
 
-    def __init__(self, workers: int, processes: bool = True) -> None:
-        self.workers = max(1, workers)
+    def __init__(self, processes: bool = True) -> None:
         self.processes = processes
         self._running: set[BaseProcess] = set()
         self._lock = threading.Lock()

@@ -157,7 +157,7 @@ class Daemon:
             baud=ser.baud, banner_timeout_s=self.cfg.banner_timeout_s or ser.banner_timeout_s,
             reply_timeout_s=ser.reply_timeout_s, auto_resume=self.cfg.auto_resume),
             self.store, cache)
-        self.compiler = Compiler(self.cfg.compile_slots, self.cfg.compile_processes)
+        self.compiler = Compiler(self.cfg.compile_processes)
         app = create_app(store=self.store, worker=self.worker, cache=cache,
                          profile=self.profile, stopping=self.stopping,
                          compiler=self.compiler, compile_slots=self.cfg.compile_slots)
