@@ -112,7 +112,7 @@ HOLD_REASONS: Final[dict[int, str]] = {
 
 #: The $ settings: number -> (name, minimum, maximum).
 SETTINGS: Final[dict[int, tuple[str, int, int]]] = {
-    0: ("max_rate_steps_s", 1, 40_000),
+    0: ("max_rate_steps_s", 1, 60_000),
     1: ("a_min", -POS_LIMIT, POS_LIMIT),
     2: ("a_max", -POS_LIMIT, POS_LIMIT),
     3: ("b_min", -POS_LIMIT, POS_LIMIT),
@@ -120,7 +120,7 @@ SETTINGS: Final[dict[int, tuple[str, int, int]]] = {
     5: ("soft_limits", 0, 1),
     6: ("laser_timeout_ms", 100, 60_000),
     7: ("homing_enable", 0, 1),
-    8: ("homing_rate_steps_s", 1, 40_000),
+    8: ("homing_rate_steps_s", 1, 60_000),
     9: ("homing_pulloff", 0, 1_000_000),
     10: ("home_a", -POS_LIMIT, POS_LIMIT),
     11: ("home_b", -POS_LIMIT, POS_LIMIT),

@@ -41,7 +41,7 @@ typedef struct {
 	uint32_t done;    /* Ln done */
 	uint32_t check;
 	uint8_t homed;    /* H */
-	int8_t off[2];
+	int16_t off[2];   /* steps since base, folded into it now and then */
 	uint8_t busy;
 } fb_keep_t;
 
@@ -170,7 +170,9 @@ FB_ALWAYS_INLINE void board_steps_high(uint8_t mask)
 }
 
 /* Set the direction pins: bit set in neg_mask = that motor steps negative. */
-FB_ALWAYS_INLINE void board_set_dirs(uint8_t neg_mask)
+/* The direction pins' port bits for a neg_mask (bit set = motor steps
+ * negative). */
+FB_ALWAYS_INLINE uint8_t board_dir_bits(uint8_t neg_mask)
 {
 	uint8_t level = (uint8_t)((neg_mask ^ 3u ^ CFG_DIR_INVERT_MASK) & 3u);
 	uint8_t bits = 0;
@@ -178,7 +180,12 @@ FB_ALWAYS_INLINE void board_set_dirs(uint8_t neg_mask)
 		bits |= (uint8_t)(1u << PIN_DIR_A_BIT);
 	if (level & 2u)
 		bits |= (uint8_t)(1u << PIN_DIR_B_BIT);
-	FB_DIR_PORT = (uint8_t)((FB_DIR_PORT & (uint8_t)~FB_DIR_PINS) | bits);
+	return bits;
+}
+
+FB_ALWAYS_INLINE void board_set_dirs(uint8_t neg_mask)
+{
+	FB_DIR_PORT = (uint8_t)((FB_DIR_PORT & (uint8_t)~FB_DIR_PINS) | board_dir_bits(neg_mask));
 }
 
 #define FB_PSTR(s) PSTR(s)

@@ -29,12 +29,6 @@
 #define ENDSTOP_PINS ((uint8_t)((1u << PIN_ENDSTOP_A_BIT) | (1u << PIN_ENDSTOP_B_BIT)))
 #define UBRR_VALUE ((FB_F_CPU + 4UL * FB_BAUD) / (8UL * FB_BAUD) - 1UL)
 
-/* Step pulse: the pins go low at least this many cycles after the event
- * handler starts (>= 2.5 us high, measured in the simavr trace). */
-#define PULSE_CYCLES 56u
-/* Events closer than this are run in the same interrupt (busy-waiting until
- * their exact cycle) instead of leaving and re-entering it. */
-#define NEAR_CYCLES 160
 
 #if (CFG_TX_SIZE & (CFG_TX_SIZE - 1)) != 0 || CFG_TX_SIZE > 128
 #error "CFG_TX_SIZE must be a power of two up to 128"
@@ -93,9 +87,6 @@ static volatile union {
 	uint32_t v;
 	uint8_t b[4];
 } ms_ticks;
-static uint16_t sched;  /* exact timer value of the pending step event */
-static uint16_t paused_rem;
-static uint8_t paused;
 
 void board_init(void)
 {
@@ -195,7 +186,7 @@ static uint8_t sv_rise = SV_RISE_EARLY;
  * the low byte that was just stored: in all, fewer cycles than the plain
  * 32-bit increment the tick did before the servo (see benchmarks/firmware.py
  * --pen).  The low byte says when to arm compare B. */
-ISR(TIMER0_COMPA_vect)
+ISR(TIMER0_COMPA_vect, ISR_NOBLOCK)
 {
 	uint8_t lo = (uint8_t)(ms_ticks.b[0] + 1u);
 	ms_ticks.b[0] = lo;
@@ -225,7 +216,7 @@ static void servo_next_frame(void)
 	TIMSK0 &= (uint8_t)~(1u << OCIE0B);
 }
 
-ISR(TIMER0_COMPB_vect)
+ISR(TIMER0_COMPB_vect, ISR_NOBLOCK)
 {
 	if (sv_falling || !sv_width) {
 		/* a fall, or a frame without a pulse: one call site, so that the
@@ -277,22 +268,56 @@ uint32_t board_ms(void)
 	return v;
 }
 
-ISR(USART_RX_vect)
+/*
+ * The serial interrupts let the step interrupt in (board_avr_step.c): a
+ * naked stub masks the interrupt's own source in UCSR0B (so it cannot come
+ * again before its byte is handled, and bytes keep their order), then jumps
+ * to the handler, whose `interrupt` attribute enables interrupts first
+ * thing.  A step edge then waits for at most the stub's dozen cycles, not for
+ * a whole handler.  The handler masks interrupts again before it unmasks its
+ * source.
+ */
+#define UART_STUB(vect, handler, bit) \
+	ISR(vect, ISR_NAKED) \
+	{ \
+		__asm__ __volatile__( \
+			"push r24\n\t" \
+			"in r24, __SREG__\n\t" \
+			"push r24\n\t" \
+			"lds r24, %[ucsrb]\n\t" \
+			"andi r24, %[mask]\n\t" \
+			"sts %[ucsrb], r24\n\t" \
+			"pop r24\n\t" \
+			"out __SREG__, r24\n\t" \
+			"pop r24\n\t" \
+			"jmp " #handler "\n\t" \
+			:: [ucsrb] "n" (_SFR_MEM_ADDR(UCSR0B)), [mask] "n" (0xff & ~(1 << (bit)))); \
+	}
+
+#pragma GCC diagnostic ignored "-Wmisspelled-isr"
+void board_rx_nested(void) __attribute__((interrupt, used, externally_visible));
+void board_rx_nested(void)
 {
 	uint8_t c = UDR0;
 	fb_rx_isr(c);
+	cli();
+	UCSR0B |= (uint8_t)(1u << RXCIE0);
 }
+UART_STUB(USART_RX_vect, board_rx_nested, RXCIE0)
 
-ISR(USART_UDRE_vect)
+void board_udre_nested(void) __attribute__((interrupt, used, externally_visible));
+void board_udre_nested(void)
 {
 	uint8_t t = tx_tail;
 	if (t != tx_head) {
 		UDR0 = tx_buf[t & (CFG_TX_SIZE - 1u)];
 		tx_tail = (uint8_t)(t + 1u);
 	}
-	if (tx_tail == tx_head)
-		UCSR0B &= (uint8_t)~(1u << UDRIE0);
+	cli();
+	if (tx_tail != tx_head)
+		UCSR0B |= (uint8_t)(1u << UDRIE0);
 }
+UART_STUB(USART_UDRE_vect, board_udre_nested, UDRIE0)
 
 void board_uart_baud(uint32_t baud)
 {
@@ -322,92 +347,8 @@ void board_tx(uint8_t c)
 	board_irq_restore(s);
 }
 
-/* ---- step timer -------------------------------------------------------------- */
-
-/*
- * simavr 1.6 arms a compare at OCR1A < ~5 only if it handles the timer
- * overflow within that many cycles, and otherwise misses it by a whole
- * period (65536 cycles).  A match up to 7 cycles late costs nothing on
- * hardware, and the schedule keeps the exact time in `sched`.
- */
-static inline uint16_t ocr_value(uint16_t t)
-{
-	return t >= 8u ? t : 8u;
-}
-
-ISR(TIMER1_COMPA_vect)
-{
-	uint16_t t = sched;
-	for (;;) {
-		uint16_t t0 = TCNT1;
-		uint16_t d = mo_event();
-		while ((uint16_t)(TCNT1 - t0) < PULSE_CYCLES)
-			;
-		FB_STEP_PORT &= (uint8_t)~FB_STEP_PINS;
-		if (!d) {
-			TIMSK1 &= (uint8_t)~(1u << OCIE1A);
-			break;
-		}
-		t = (uint16_t)(t + d);
-		if ((int16_t)(t - TCNT1) > NEAR_CYCLES) {
-			sched = t;
-			OCR1A = ocr_value(t);
-			break;
-		}
-		while ((int16_t)(TCNT1 - t) < 0)
-			;
-	}
-}
-
 void board_idle(void)
 {
-}
-
-void board_timer_start(uint16_t delay_cycles)
-{
-	uint8_t s = board_irq_save();
-	paused = 0;
-	sched = (uint16_t)(TCNT1 + delay_cycles);
-	OCR1A = ocr_value(sched);
-	TIFR1 = (uint8_t)(1u << OCF1A);
-	TIMSK1 |= (uint8_t)(1u << OCIE1A);
-	board_irq_restore(s);
-}
-
-void board_timer_stop(void)
-{
-	uint8_t s = board_irq_save();
-	TIMSK1 &= (uint8_t)~(1u << OCIE1A);
-	paused = 0;
-	FB_STEP_PORT &= (uint8_t)~FB_STEP_PINS;
-	board_irq_restore(s);
-}
-
-void board_timer_pause(void)
-{
-	uint8_t s = board_irq_save();
-	if (!paused && (TIMSK1 & (1u << OCIE1A))) {
-		TIMSK1 &= (uint8_t)~(1u << OCIE1A);
-		uint16_t rem = (uint16_t)(sched - TCNT1);
-		if ((TIFR1 & (1u << OCF1A)) || (int16_t)rem < 0)
-			rem = 0;  /* due now (or matched already) */
-		paused_rem = rem;
-		paused = 1;
-	}
-	board_irq_restore(s);
-}
-
-void board_timer_resume(void)
-{
-	uint8_t s = board_irq_save();
-	if (paused) {
-		paused = 0;
-		sched = (uint16_t)(TCNT1 + paused_rem + 64u);
-		OCR1A = ocr_value(sched);
-		TIFR1 = (uint8_t)(1u << OCF1A);
-		TIMSK1 |= (uint8_t)(1u << OCIE1A);
-	}
-	board_irq_restore(s);
 }
 
 #endif

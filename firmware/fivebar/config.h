@@ -55,7 +55,7 @@
 #define CFG_QUEUE_SIZE    16    /* segment queue, blocks (power of two) */
 
 /* ---- motion ---------------------------------------------------------------- */
-#define CFG_MAX_RATE_LIMIT  40000L   /* hard cap of $0, steps/s per motor */
+#define CFG_MAX_RATE_LIMIT  60000L   /* hard cap of $0, steps/s per motor */
 #define CFG_P_MIN_US        100L     /* shortest G1 duration, µs */
 #define CFG_P_MAX_US        100000000L /* longest G1 duration, µs (100 s) */
 #define CFG_POS_LIMIT       100000000L /* |position| bound in steps, always enforced */

@@ -70,6 +70,7 @@ static uint8_t slot_free(void)
 /* Queue the block prepared in mo_slot(); 0 (nothing queued) once a Ctrl-X came. */
 static uint8_t commit_block(void)
 {
+	mo_seal(mo_slot());
 	uint8_t sreg = board_irq_save();
 	uint8_t ok = !f_reset;
 	if (ok) {

@@ -317,5 +317,6 @@ void fb_poll(void)
 		try_execute();
 	else
 		assemble();
+	mo_fold();
 	feed_watchdog();
 }

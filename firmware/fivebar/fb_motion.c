@@ -23,19 +23,20 @@
 #error "CFG_QUEUE_SIZE must be a power of two up to 128"
 #endif
 
-static fb_block_t queue[CFG_QUEUE_SIZE];
-static volatile uint8_t q_head; /* written by the main loop */
-static volatile uint8_t q_tail; /* written by the step interrupt */
+fb_block_t mo_queue[CFG_QUEUE_SIZE];
+volatile uint8_t mo_q_head; /* written by the main loop */
+volatile uint8_t mo_q_tail; /* written by the step interrupt */
 
 /* generator state, owned by the step interrupt while running */
-static fb_block_t *volatile cur; /* executing block (still in the queue), or 0 */
-static uint32_t s_now;           /* cycle of the pending event within cur */
+fb_block_t *volatile mo_cur; /* executing block (still in the queue), or 0 */
+static uint32_t s_now;           /* cycle of the pending event within mo_cur */
 static uint8_t s_due;            /* motors stepping at that event */
 static uint8_t s_home_axes, s_es_enabled, s_seek_neg;
 static volatile uint8_t s_running, s_alarm, s_home_hits, s_laser;
-/* s_beat: set by every mo_event() (the step interrupt is alive), consumed by
+/* mo_beat: set by every mo_event() (the step interrupt is alive), consumed by
  * mo_alive(); s_held: the generator's timer is paused by mo_hold() */
-static volatile uint8_t s_beat, s_held;
+volatile uint8_t mo_beat;
+static volatile uint8_t s_held;
 static volatile uint32_t s_underruns;
 
 /* pen servo: pulse now in 1/16 us, target and park in us, step per frame in
@@ -45,8 +46,12 @@ static volatile uint16_t p_now16, p_target, p_park, p_step16, p_saved, p_time;
 
 #define K board_keep
 #define FB_KEEP_MAGIC 0xFB5AFE17UL
-/* off is folded into base when a step takes it to +-OFF_FOLD */
+/* off is folded into base when a step of the C path takes it to +-OFF_FOLD,
+ * and by the main loop (mo_fold) from +-MAIN_FOLD (the fast interrupt only
+ * counts: at 60 kHz off needs half a second to go from MAIN_FOLD to the end
+ * of its range) */
 #define OFF_FOLD 127
+#define MAIN_FOLD 8192
 
 static uint32_t keep_sum(void)
 {
@@ -152,8 +157,8 @@ uint16_t mo_pen_frame(void)
 void mo_init(void)
 {
 	board_timer_stop();
-	q_head = q_tail = 0;
-	cur = 0;
+	mo_q_head = mo_q_tail = 0;
+	mo_cur = 0;
 	s_now = 0;
 	s_due = 0;
 	s_running = 0;
@@ -164,23 +169,28 @@ void mo_init(void)
 	pen_park_now(0);
 }
 
-uint8_t mo_queue_count(void) { return (uint8_t)((q_head - q_tail) & 0xffu); }
+uint8_t mo_queue_count(void) { return (uint8_t)((mo_q_head - mo_q_tail) & 0xffu); }
 
 uint8_t mo_queue_waiting(void)
 {
 	uint8_t sreg = board_irq_save();
-	uint8_t n = (uint8_t)(mo_queue_count() - (cur ? 1u : 0u));
+	uint8_t n = (uint8_t)(mo_queue_count() - (mo_cur ? 1u : 0u));
 	board_irq_restore(sreg);
 	return n;
 }
 
 uint8_t mo_queue_free(void) { return (uint8_t)(CFG_QUEUE_SIZE - mo_queue_count()); }
-fb_block_t *mo_slot(void) { return &queue[q_head & QMASK]; }
-void mo_push(void) { q_head = (uint8_t)(q_head + 1u); }
+fb_block_t *mo_slot(void)
+{
+	fb_block_t *b = &mo_queue[mo_q_head & QMASK];
+	b->fast = 0;  /* the C form until mo_seal() says otherwise */
+	return b;
+}
+void mo_push(void) { mo_q_head = (uint8_t)(mo_q_head + 1u); }
 
 void mo_clear_queue(void)
 {
-	q_tail = q_head;
+	mo_q_tail = mo_q_head;
 }
 
 static uint8_t prep_axis(fb_block_t *b, uint8_t i, int32_t d, uint32_t min_interval)
@@ -222,6 +232,66 @@ uint8_t mo_prepare_cycles(fb_block_t *b, int32_t da, int32_t db, uint32_t cycles
 	return st;
 }
 
+#ifdef __AVR__
+/* floor(m * 65536 / n) for m < n < 32768: 16 steps of long division, a
+ * fraction of __udivmodsi4's cycles (the main loop runs this per block). */
+static uint16_t frac16(uint16_t m, uint16_t n)
+{
+	uint16_t q = 0;
+	for (uint8_t i = 0; i < 16; i++) {
+		m = (uint16_t)(m << 1);
+		q = (uint16_t)(q << 1);
+		if (m >= n) {
+			m = (uint16_t)(m - n);
+			q |= 1u;
+		}
+	}
+	return q;
+}
+#endif
+
+void mo_seal(fb_block_t *b)
+{
+	b->fast = 0;
+#ifdef __AVR__
+	if (b->type != BLK_MOVE || s_es_enabled)
+		return;
+	uint32_t n[2], q[2], m[2];
+	uint16_t tail = 0xffffu;
+	for (uint8_t i = 0; i < 2; i++) {
+		n[i] = b->next[i] == MO_NEVER ? 0 : b->den[i] >> 1;
+		q[i] = b->q[i];
+		m[i] = b->r2[i] >> 1;
+		if (n[i] > MO_FAST_NMAX || (n[i] && q[i] > MO_FAST_QMAX))
+			return;
+	}
+	if (!n[0] && !n[1])
+		return;  /* a pure dwell: the C path's waits */
+	mo_fast_t f;
+	for (uint8_t i = 0; i < 2; i++) {
+		f.cnt[i] = (uint16_t)n[i];
+		if (!n[i]) {
+			f.t[i] = f.tf[i] = f.q[i] = f.qf[i] = 0;
+			continue;
+		}
+		uint16_t qf = frac16((uint16_t)m[i], (uint16_t)n[i]);
+		f.q[i] = (uint16_t)q[i];
+		f.qf[i] = qf;
+		/* step 1 at C/2n = (q + qf/65536) / 2 */
+		f.t[i] = (uint16_t)(q[i] >> 1);
+		f.tf[i] = (uint16_t)(((q[i] & 1u) << 15) | (qf >> 1));
+		/* C - floor((2n-1)C/2n) = ceil(C/2n), with C = qn + m, m < n */
+		uint16_t ti = (uint16_t)((q[i] & 1u) ? (q[i] + 1u) >> 1 : (q[i] >> 1) + (m[i] ? 1u : 0u));
+		if (ti < tail)
+			tail = ti;
+	}
+	f.tail = tail;
+	b->f = f;
+	b->pdirs = board_dir_bits(b->dirs);
+	b->fast = 1;
+#endif
+}
+
 void mo_prepare_pen(fb_block_t *b, uint16_t from_us, uint16_t to_us, uint16_t move_ms,
 		    uint16_t settle_ms)
 {
@@ -254,8 +324,8 @@ FB_ALWAYS_INLINE void set_laser(uint8_t p)
 void mo_start(void)
 {
 	uint8_t sreg = board_irq_save();
-	if (!s_running && q_head != q_tail) {
-		cur = 0;
+	if (!s_running && mo_q_head != mo_q_tail) {
+		mo_cur = 0;
 		s_now = 0;
 		s_due = 0;
 		s_running = 1;
@@ -271,10 +341,10 @@ void mo_stop(void)
 	board_timer_stop();
 	s_running = 0;
 	s_held = 0;
-	if (cur) {
+	if (mo_cur) {
 		/* the interrupted block is dropped */
-		q_tail = (uint8_t)(q_tail + 1u);
-		cur = 0;
+		mo_q_tail = (uint8_t)(mo_q_tail + 1u);
+		mo_cur = 0;
 	}
 	s_due = 0;
 	set_laser(0);
@@ -298,8 +368,8 @@ void mo_resume(void)
 {
 	uint8_t sreg = board_irq_save();
 	if (s_running) {
-		if (cur)
-			set_laser(cur->power);
+		if (mo_cur)
+			set_laser(mo_cur->power);
 		s_held = 0;
 		board_timer_resume();
 	}
@@ -312,21 +382,21 @@ void mo_resume(void)
  */
 FB_ALWAYS_INLINE fb_block_t *boundary(void)
 {
-	uint8_t t = q_tail;
-	if (cur) {
-		keep_done(cur->line);
+	uint8_t t = mo_q_tail;
+	if (mo_cur) {
+		keep_done(mo_cur->line);
 		t = (uint8_t)(t + 1u);
-		cur = 0;
+		mo_cur = 0;
 	}
 	for (;; t = (uint8_t)(t + 1u)) {
-		if (t == q_head) {
-			q_tail = t;
+		if (t == mo_q_head) {
+			mo_q_tail = t;
 			s_running = 0;
 			s_underruns++;
 			set_laser(0);
 			return 0;
 		}
-		fb_block_t *b = &queue[t & QMASK];
+		fb_block_t *b = &mo_queue[t & QMASK];
 		switch (b->type) {
 		case BLK_SETPOS:
 			keep_write((int32_t)b->q[0], (int32_t)b->q[1], b->line, 1);
@@ -350,12 +420,12 @@ FB_ALWAYS_INLINE fb_block_t *boundary(void)
 		default:
 			break;
 		}
-		q_tail = t;
+		mo_q_tail = t;
 		board_set_dirs(b->dirs);
 		s_home_axes = (uint8_t)((b->next[0] != MO_NEVER ? 1u : 0u) |
 					(b->next[1] != MO_NEVER ? 2u : 0u));
 		s_now = 0;
-		cur = b;
+		mo_cur = b;
 		set_laser(b->power);
 		return b;
 	}
@@ -380,8 +450,8 @@ FB_ALWAYS_INLINE uint8_t check_endstops(fb_block_t *b, uint8_t due)
 		/* pressed, and this motor just stepped towards its switch */
 		s_alarm = FB_ALARM_ENDSTOP;
 		s_running = 0;
-		q_tail = (uint8_t)(q_tail + 1u);
-		cur = 0;
+		mo_q_tail = (uint8_t)(mo_q_tail + 1u);
+		mo_cur = 0;
 		set_laser(0);
 		return 0;
 	}
@@ -394,9 +464,9 @@ FB_ALWAYS_INLINE uint8_t check_endstops(fb_block_t *b, uint8_t due)
  */
 FB_ALWAYS_INLINE void count_step(const fb_block_t *b, uint8_t i)
 {
-	int8_t o = K.off[i];
-	o = (int8_t)((b->dirs & (1u << i)) ? o - 1 : o + 1);
-	if (o == OFF_FOLD || o == -OFF_FOLD) {
+	int16_t o = K.off[i];
+	o = (int16_t)((b->dirs & (1u << i)) ? o - 1 : o + 1);
+	if (o >= OFF_FOLD || o <= -OFF_FOLD) {
 		K.base[i] += o;
 		K.check += (uint32_t)(int32_t)o;
 		o = 0;
@@ -423,9 +493,9 @@ FB_ALWAYS_INLINE void step_axis(fb_block_t *b, uint8_t i)
 
 uint16_t mo_event(void)
 {
-	fb_block_t *b = cur;
+	fb_block_t *b = mo_cur;
 	uint8_t due = s_due;
-	s_beat = 1;
+	mo_beat = 1;
 	if (due) {
 		/* a reset from here until busy = 0 finds the record invalid: a
 		 * boot cannot know whether the drivers saw the step */
@@ -446,6 +516,8 @@ uint16_t mo_event(void)
 		b = boundary();
 		if (!b)
 			return 0;
+		if (b->fast)
+			return MO_FAST;
 	}
 	uint32_t t = b->cycles;
 	uint8_t m = 0;
@@ -470,13 +542,81 @@ uint16_t mo_event(void)
 	return t ? (uint16_t)t : 1u;
 }
 
+/* Pick the next event of a fast block: the earlier of the live motors' next
+ * steps (both when equal), and the other one when it follows within
+ * MO_PAIR_CYCLES.  board_avr.c's fast interrupt does the same in assembly. */
+static void fast_pick(const mo_fast_t *f, uint16_t *t, uint8_t *bits, uint16_t *t2,
+		      uint8_t *bits2)
+{
+	*bits2 = 0;
+	if (!f->cnt[1]) {
+		*t = f->t[0];
+		*bits = 1;
+		return;
+	}
+	if (!f->cnt[0]) {
+		*t = f->t[1];
+		*bits = 2;
+		return;
+	}
+	int16_t d = (int16_t)(f->t[1] - f->t[0]);
+	uint8_t first = d < 0 ? 1u : 0u;
+	*t = f->t[first];
+	*bits = (uint8_t)(1u << first);
+	if (d == 0) {
+		*bits = 3;
+	} else if ((uint16_t)(d < 0 ? -d : d) < MO_PAIR_CYCLES) {
+		*t2 = f->t[first ^ 1u];
+		*bits2 = (uint8_t)(2u >> first);
+	}
+}
+
+void mo_fast_begin(uint16_t base, uint16_t *t, uint8_t *bits, uint16_t *t2, uint8_t *bits2)
+{
+	mo_fast_t *f = &mo_cur->f;
+	f->t[0] = (uint16_t)(f->t[0] + base);
+	f->t[1] = (uint16_t)(f->t[1] + base);
+	fast_pick(f, t, bits, t2, bits2);
+}
+
+void mo_fast_end(void)
+{
+	s_now = mo_cur->cycles;
+	s_due = 0;
+}
+
+void mo_fast_shift(uint16_t delta)
+{
+	fb_block_t *b = mo_cur;
+	if (b && b->fast) {
+		b->f.t[0] = (uint16_t)(b->f.t[0] + delta);
+		b->f.t[1] = (uint16_t)(b->f.t[1] + delta);
+	}
+}
+
+void mo_fold(void)
+{
+	for (uint8_t i = 0; i < 2; i++) {
+		uint8_t sreg = board_irq_save();
+		int16_t o = K.off[i];
+		if (o >= MAIN_FOLD || o <= -MAIN_FOLD) {
+			K.busy = 1;
+			K.base[i] += o;
+			K.check += (uint32_t)(int32_t)o;
+			K.off[i] = 0;
+			K.busy = 0;
+		}
+		board_irq_restore(sreg);
+	}
+}
+
 uint8_t mo_running(void) { return s_running; }
 
 uint8_t mo_alive(void)
 {
 	uint8_t sreg = board_irq_save();
-	uint8_t ok = s_beat || !s_running || s_held;
-	s_beat = 0;
+	uint8_t ok = mo_beat || !s_running || s_held;
+	mo_beat = 0;
 	board_irq_restore(sreg);
 	return ok;
 }

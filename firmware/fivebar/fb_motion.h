@@ -24,22 +24,56 @@ enum fb_block_type {
 };
 
 /*
+ * The fast form of a MOVE block (AVR builds, see board_avr.c): both motors on
+ * 16-bit times with a 16-bit fraction, stepped by the hand-written part of
+ * the step interrupt.  Step k of a motor is at t1 + (k-1) * (q + qf/65536)
+ * with t1 = (q + qf/65536) / 2: the DDA time floor((2k-1)C/2n) or one cycle
+ * before it (the fraction is cut, never rounded up: at most k/65536 cycle
+ * early in all, < 1/4 cycle for the n <= MO_FAST_NMAX allowed).  t[] are
+ * cycles from the block start until the block starts, timer times after.
+ * tail = cycles from the block's last step to its end.
+ */
+typedef struct {
+	uint16_t t[2];     /* next step of motor i */
+	uint16_t tf[2];    /* its fraction, 1/65536 cycle */
+	uint16_t q[2];     /* whole cycles between steps */
+	uint16_t qf[2];    /* fraction of a cycle between steps, 1/65536 */
+	uint16_t cnt[2];   /* steps left, the next one included; 0 = done */
+	uint16_t tail;
+} mo_fast_t;
+
+/* A block takes the fast form when each moving motor has n <= MO_FAST_NMAX
+ * steps at intervals q <= MO_FAST_QMAX cycles (so every time difference the
+ * interrupt compares stays below 32768), endstop supervision ($7) is off and
+ * the block is a plain MOVE. */
+#define MO_FAST_NMAX 16383u
+#define MO_FAST_QMAX 16383u
+
+/*
  * One queue entry.  The main loop fills every field (all divisions happen
  * there); while the block executes, the step interrupt updates next[] and
- * err[] in place, so starting a segment copies nothing.
+ * err[] (or the fast form's t, tf, cnt) in place, so starting a segment
+ * copies nothing.
  * For BLK_SETPOS the new position is in q[] (as int32).
  */
 typedef struct {
-	uint32_t next[2];  /* cycle of the motor's next step within the segment */
-	uint32_t err[2];   /* Bresenham remainder of that time, < den */
-	uint32_t q[2];     /* cycles / n: whole cycles between steps */
-	uint32_t r2[2];    /* 2 * (cycles % n) */
-	uint32_t den[2];   /* 2 * n */
+	union {
+		struct {
+			uint32_t next[2];  /* cycle of the motor's next step within the segment */
+			uint32_t err[2];   /* Bresenham remainder of that time, < den */
+			uint32_t q[2];     /* cycles / n: whole cycles between steps */
+			uint32_t r2[2];    /* 2 * (cycles % n) */
+			uint32_t den[2];   /* 2 * n */
+		};
+		mo_fast_t f;       /* when fast is 1 */
+	};
 	uint32_t cycles;   /* segment duration in CPU cycles */
 	uint32_t line;     /* line number of the command */
 	uint8_t type;      /* enum fb_block_type */
 	uint8_t dirs;      /* bit set = motor steps negative */
 	uint8_t power;     /* laser power during the segment */
+	uint8_t fast;      /* 1 = the fast form above is filled, not next..den */
+	uint8_t pdirs;     /* fast form: the direction pins' port bits */
 } fb_block_t;
 
 #define MO_NEVER 0xffffffffUL
@@ -60,6 +94,9 @@ uint8_t mo_queue_waiting(void);
 uint8_t mo_queue_free(void);
 fb_block_t *mo_slot(void);
 void mo_push(void);
+/* Give a filled MOVE block its fast form when it qualifies (AVR builds; main
+ * loop, before mo_push, with interrupts on: a few hundred cycles). */
+void mo_seal(fb_block_t *b);
 /* Drop every queued block; only while the generator is stopped. */
 void mo_clear_queue(void);
 
@@ -116,6 +153,34 @@ void mo_start(void);
 #define MO_MAX_DELAY 0x6000u
 #define MO_WAIT 0x4000u
 uint16_t mo_event(void);
+/* mo_event() returns this when the block it just started has the fast form:
+ * the board then starts it with mo_fast_begin() and its own fast interrupt. */
+#define MO_FAST 0xffffu
+
+/*
+ * The fast path's side of the queue (AVR builds; board_avr.c).  The first
+ * event of a fast block that mo_event() started at timer time base: the
+ * block's times become timer times, *t and *bits = the first event and the
+ * motors stepping at it (bit 0 = A, 1 = B); when the other motor's first
+ * step follows within MO_PAIR_CYCLES, *t2 and *bits2 are it (else *bits2 = 0).
+ */
+#define MO_PAIR_CYCLES 180
+void mo_fast_begin(uint16_t base, uint16_t *t, uint8_t *bits, uint16_t *t2, uint8_t *bits2);
+/* The fast interrupt stepped the running block to its end (its boundary is
+ * the pending event): the next mo_event() call handles that boundary. */
+void mo_fast_end(void);
+/* The timer's timeline moved by delta cycles (a resumed hold): the running
+ * fast block's stored times move with it. */
+void mo_fast_shift(uint16_t delta);
+/* The running block, the queue's read index and the interrupt's beat, for
+ * the fast interrupt (read and written only with interrupts off). */
+extern fb_block_t *volatile mo_cur;
+extern volatile uint8_t mo_q_tail, mo_q_head;
+extern volatile uint8_t mo_beat;
+extern fb_block_t mo_queue[CFG_QUEUE_SIZE];
+/* Fold the kept position's step counts into its base (main loop): the fast
+ * interrupt counts its steps in the 16-bit off[] without folding. */
+void mo_fold(void);
 /* Stop at once: no further steps, laser off, pen parked (and no way back:
  * a reset or an alarm forgets where it was), the current block is dropped. */
 void mo_stop(void);

@@ -758,7 +758,7 @@ static void test_app(void)
 	expect("", "fivebar " FB_VERSION " proto:3 rx:128 queue:16 line:80\r\n");
 
 	/* settings */
-	expect("$0=50000\n", "error:7\r\n");
+	expect("$0=70000\n", "error:7\r\n");
 	expect("$77=1\n", "error:17\r\n");
 	expect("$5=0\nG1 A200000 P10000000\n", "ok\r\nok\r\n");
 	send("\x18");
