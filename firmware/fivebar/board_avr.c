@@ -294,19 +294,20 @@ uint32_t board_ms(void)
 			:: [ucsrb] "n" (_SFR_MEM_ADDR(UCSR0B)), [mask] "n" (0xff & ~(1 << (bit)))); \
 	}
 
-#pragma GCC diagnostic ignored "-Wmisspelled-isr"
-void board_rx_nested(void) __attribute__((interrupt, used, externally_visible));
-void board_rx_nested(void)
+/* named __vector_* so that avr-gcc (its LTO link too) takes the handler
+ * attributes without a misspelled-ISR warning */
+void __vector_fb_rx_nested(void) __attribute__((interrupt, used, externally_visible));
+void __vector_fb_rx_nested(void)
 {
 	uint8_t c = UDR0;
 	fb_rx_isr(c);
 	cli();
 	UCSR0B |= (uint8_t)(1u << RXCIE0);
 }
-UART_STUB(USART_RX_vect, board_rx_nested, RXCIE0)
+UART_STUB(USART_RX_vect, __vector_fb_rx_nested, RXCIE0)
 
-void board_udre_nested(void) __attribute__((interrupt, used, externally_visible));
-void board_udre_nested(void)
+void __vector_fb_udre_nested(void) __attribute__((interrupt, used, externally_visible));
+void __vector_fb_udre_nested(void)
 {
 	uint8_t t = tx_tail;
 	if (t != tx_head) {
@@ -317,7 +318,7 @@ void board_udre_nested(void)
 	if (tx_tail != tx_head)
 		UCSR0B |= (uint8_t)(1u << UDRIE0);
 }
-UART_STUB(USART_UDRE_vect, board_udre_nested, UDRIE0)
+UART_STUB(USART_UDRE_vect, __vector_fb_udre_nested, UDRIE0)
 
 void board_uart_baud(uint32_t baud)
 {

@@ -18,7 +18,7 @@
  *    in board_t2, its pins in GPIOR2) and the same interrupt waits for it;
  *    anything closer than LEAVE_CYCLES when the interrupt ends is waited for
  *    too.  About 130 cycles an event of one motor, all in.
- *  - the C path (board_step_slow, mo_event() in fb_motion.c) for everything
+ *  - the C path (__vector_fb_step_slow, mo_event() in fb_motion.c) for everything
  *    else: block boundaries the fast path does not take (an empty queue, a
  *    laser power change, a C-form block, a G92/M17/M18/M280), homing,
  *    endstop supervision, slow motors, long waits.  It starts a fast block
@@ -109,8 +109,12 @@ _Static_assert(MO_PAIR_CYCLES < 200, "the waits of a pair stay below 128 cycles"
  * board_gap = gap - CLOSE_OVH puts it within a cycle of the gap.  Gaps below
  * PAIR_TINY are one edge at the later time (the first motor <= 7 cycles late). */
 #define CLOSE_OVH 13
-/* The first event of a block the C path starts is at least this far. */
+/* fast_start() arms the first event of a block no closer than START_MARGIN
+ * cycles after it reads the timer (its writes of OCR1A take about 20); a
+ * start from a stop that close moves to START_SHIFT cycles after the read
+ * (the shift takes about 60 more). */
 #define START_MARGIN 48
+#define START_SHIFT 128
 #define PAIR_TINY 8
 
 #define S_(x) #x
@@ -173,13 +177,13 @@ _Static_assert(MO_PAIR_CYCLES < 200, "the waits of a pair stay below 128 cycles"
 	"brmi " L "_w\n" \
 	L "_go:\n\t"
 
-/* The fast path; jumps to board_step_slow (before saving anything) when the
+/* The fast path; jumps to __vector_fb_step_slow (before saving anything) when the
  * pending event is the C path's. */
 ISR(TIMER1_COMPA_vect, ISR_NAKED)
 {
 	__asm__ __volatile__(
 		"sbic %[gp0], " S(FL_SLOW) "\n\t"
-		"jmp board_step_slow\n\t"
+		"jmp __vector_fb_step_slow\n\t"
 		"push r24\n\t"
 		"in r24, %[gp1]\n\t"
 		"sts %[keep]+" S(K_BUSY) ", r24\n\t"
@@ -549,44 +553,54 @@ static void fast_start(uint16_t base)
 {
 	uint16_t t, t2;
 	uint8_t bits, bits2;
-	mo_fast_begin(base, &t, &bits, &t2, &bits2);
-	/* a C path that ran past the block's first step (a start: boundary()
-	 * and the first block's setup take longer than half a step interval at
-	 * high rates) starts the whole block that much later, so no step of it
-	 * is late and the pins stay low >= 2.5 us */
-	uint16_t now = TCNT1;
-	if ((int16_t)(t - now) < START_MARGIN) {
-		uint16_t delta = (uint16_t)(now + START_MARGIN - t);
-		mo_fast_shift(delta);
-		t = (uint16_t)(t + delta);
-		t2 = (uint16_t)(t2 + delta);
-	}
-	GPIOR1 = step_pins(bits);
+	uint8_t rest = mo_fast_begin(base, &t, &bits, &t2, &bits2);
+	uint8_t pins = step_pins(bits), flags = 0;
 	GPIOR2 = step_pins(bits2);
-	board_t2 = t2;
-	GPIOR0 = 0;
 	if (bits2) {
 		/* as the assembly's fp_pair_set */
 		uint16_t gap = (uint16_t)(t2 - t);
 		if (gap < PAIR_TINY) {
-			GPIOR1 = step_pins((uint8_t)(bits | bits2));
+			pins = step_pins((uint8_t)(bits | bits2));
 			t = t2;
 		} else if (gap < PAIR_CLOSE) {
 			board_gap = (uint8_t)(gap > CLOSE_OVH ? gap - CLOSE_OVH : 0u);
-			GPIOR0 = (uint8_t)(1u << FL_CLOSE);
+			flags = (uint8_t)(1u << FL_CLOSE);
 		} else {
-			GPIOR0 = (uint8_t)(1u << FL_PAIR);
+			flags = (uint8_t)(1u << FL_PAIR);
 		}
 	}
+	GPIOR1 = pins;
+	GPIOR0 = flags;
+	/* A start from a stop whose first step the C path has (nearly) run
+	 * past (boundary() and the first block's setup take longer than half a
+	 * step interval at high rates) starts the whole block later: no step of
+	 * it is late and the motors are at rest until then.  Mid-job the
+	 * schedule stays exact: the interrupt comes as soon as it can and the
+	 * fast path catches up (an overdue step waits >= 2 us low).  TCNT1 is
+	 * read last, just before OCR1A is written: a compare armed in the past
+	 * would wait a whole timer period. */
+	uint16_t now = TCNT1, arm = t;
+	if ((int16_t)(t - now) < START_MARGIN) {
+		arm = (uint16_t)(now + START_MARGIN);
+		if (rest) {
+			uint16_t delta = (uint16_t)(now + START_SHIFT - t);
+			mo_fast_shift(delta);
+			t = (uint16_t)(t + delta);
+			t2 = (uint16_t)(t2 + delta);
+			arm = t;
+		}
+	}
+	board_t2 = t2;
 	board_sched = t;
-	OCR1A = ocr_value(t);
+	OCR1A = ocr_value(arm);
 }
 
 /* The C path: a complete interrupt of its own, entered by a jump from the
  * vector before anything was saved. */
-#pragma GCC diagnostic ignored "-Wmisspelled-isr"
-void board_step_slow(void) __attribute__((signal, used, externally_visible));
-void board_step_slow(void)
+/* named __vector_* so that avr-gcc (its LTO link too) takes the handler
+ * attributes without a misspelled-ISR warning */
+void __vector_fb_step_slow(void) __attribute__((signal, used, externally_visible));
+void __vector_fb_step_slow(void)
 {
 	if (GPIOR0 & (1u << FL_ENDED))
 		mo_fast_end();

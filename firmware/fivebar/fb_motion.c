@@ -32,6 +32,7 @@ fb_block_t *volatile mo_cur; /* executing block (still in the queue), or 0 */
 static uint32_t s_now;           /* cycle of the pending event within mo_cur */
 static uint8_t s_due;            /* motors stepping at that event */
 static uint8_t s_home_axes, s_es_enabled, s_seek_neg;
+static uint8_t s_rest;           /* the block boundary() last started follows a stop */
 static volatile uint8_t s_running, s_alarm, s_home_hits, s_laser;
 /* mo_beat: set by every mo_event() (the step interrupt is alive), consumed by
  * mo_alive(); s_held: the generator's timer is paused by mo_hold() */
@@ -513,6 +514,7 @@ uint16_t mo_event(void)
 		if ((s_es_enabled || b->type == BLK_HOME) && !check_endstops(b, due))
 			return 0;
 	} else if (!b || s_now == b->cycles) {
+		s_rest = !b;
 		b = boundary();
 		if (!b)
 			return 0;
@@ -571,12 +573,13 @@ static void fast_pick(const mo_fast_t *f, uint16_t *t, uint8_t *bits, uint16_t *
 	}
 }
 
-void mo_fast_begin(uint16_t base, uint16_t *t, uint8_t *bits, uint16_t *t2, uint8_t *bits2)
+uint8_t mo_fast_begin(uint16_t base, uint16_t *t, uint8_t *bits, uint16_t *t2, uint8_t *bits2)
 {
 	mo_fast_t *f = &mo_cur->f;
 	f->t[0] = (uint16_t)(f->t[0] + base);
 	f->t[1] = (uint16_t)(f->t[1] + base);
 	fast_pick(f, t, bits, t2, bits2);
+	return s_rest;
 }
 
 void mo_fast_end(void)

@@ -163,9 +163,11 @@ uint16_t mo_event(void);
  * block's times become timer times, *t and *bits = the first event and the
  * motors stepping at it (bit 0 = A, 1 = B); when the other motor's first
  * step follows within MO_PAIR_CYCLES, *t2 and *bits2 are it (else *bits2 = 0).
+ * Returns 1 when the block starts from a stop (the first after mo_start()):
+ * only then may the board start its whole timeline later.
  */
 #define MO_PAIR_CYCLES 180
-void mo_fast_begin(uint16_t base, uint16_t *t, uint8_t *bits, uint16_t *t2, uint8_t *bits2);
+uint8_t mo_fast_begin(uint16_t base, uint16_t *t, uint8_t *bits, uint16_t *t2, uint8_t *bits2);
 /* The fast interrupt stepped the running block to its end (its boundary is
  * the pending event): the next mo_event() call handles that boundary. */
 void mo_fast_end(void);
