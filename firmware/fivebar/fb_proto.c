@@ -111,7 +111,10 @@ static uint8_t parse_uint(const char *s, uint8_t *pi, uint8_t end, uint32_t max,
 	uint32_t v = 0;
 	while (i < end && is_digit(s[i])) {
 		uint8_t d = (uint8_t)(s[i] - '0');
-		if (v > (max - d) / 10u)
+		/* over when v * 10 + d > max; no division (a 32-bit one per digit
+		 * was most of a line's parse time): v * 10 + d fits 32 bits up to
+		 * v = 429496729 with d <= 5 */
+		if (v > 429496729u || (v == 429496729u && d > 5u) || v * 10u + d > max)
 			over = 1;
 		else
 			v = v * 10u + d;

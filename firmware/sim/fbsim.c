@@ -192,6 +192,25 @@ enum { PIN_STEPA, PIN_STEPB, PIN_DIRA, PIN_DIRB, PIN_ENABLE, PIN_LASER, PIN_PEN,
 static const char *const pin_names[PIN_COUNT] = { "stepA", "stepB", "dirA", "dirB", "enable", "laser", "pen" };
 static int pin_level[PIN_COUNT];
 
+/* cycle profile (-P): emulated cycles spent at each flash byte address,
+ * written as "address cycles" lines at exit (map them with avr-nm) */
+#define PROFILE_WORDS (32768u / 2u)
+static unsigned long long *profile;
+static const char *profile_path;
+
+static void profile_write(void)
+{
+	FILE *f = fopen(profile_path, "w");
+	if (!f) {
+		fprintf(stderr, "fbsim: cannot write %s: %s\n", profile_path, strerror(errno));
+		return;
+	}
+	for (unsigned i = 0; i < PROFILE_WORDS; i++)
+		if (profile[i])
+			fprintf(f, "%u %llu\n", i * 2u, profile[i]);
+	fclose(f);
+}
+
 /* Timer1 debug log (-D) */
 static FILE *dbg;
 static avr_io_write_t ocr_write_orig;
@@ -692,7 +711,7 @@ static void apply_pending(void)
 static void usage(void)
 {
 	fprintf(stderr, "usage: fbsim [-m mcu] [-f hz] [-t trace] [-w] [-g ms] [-c cycles] [-R] "
-			"[-a steps] [-b steps] [-D debug] [-C] [-T] firmware.elf\n");
+			"[-a steps] [-b steps] [-D debug] [-P profile] [-C] [-T] firmware.elf\n");
 	exit(2);
 }
 
@@ -707,7 +726,7 @@ int main(int argc, char **argv)
 	if (getppid() == 1)
 		return 1;
 
-	while ((opt = getopt(argc, argv, "m:f:t:wg:c:Ra:b:D:CT")) != -1) {
+	while ((opt = getopt(argc, argv, "m:f:t:wg:c:Ra:b:D:P:CT")) != -1) {
 		switch (opt) {
 		case 'm': mcu = optarg; break;
 		case 'f': freq = strtoul(optarg, NULL, 10); break;
@@ -719,6 +738,7 @@ int main(int argc, char **argv)
 		case 'a': have_endstop[0] = 1; endstop_at[0] = strtol(optarg, NULL, 10); break;
 		case 'b': have_endstop[1] = 1; endstop_at[1] = strtol(optarg, NULL, 10); break;
 		case 'D': debug_path = optarg; break;
+		case 'P': profile_path = optarg; break;
 		case 'C': control = 1; break;
 		case 'T': timer_fix = 1; break;
 		default: usage();
@@ -840,6 +860,10 @@ int main(int argc, char **argv)
 	setup_after_reset();
 	clock_gettime(CLOCK_MONOTONIC, &wall_start);
 
+	if (profile_path && !(profile = calloc(PROFILE_WORDS, sizeof(*profile)))) {
+		perror("fbsim: profile");
+		return 1;
+	}
 	int state = cpu_Running;
 	while (!stop_req) {
 		if (frozen) {
@@ -851,7 +875,15 @@ int main(int argc, char **argv)
 				usleep(1000);
 			continue;
 		}
-		state = avr_run(avr);
+		if (profile) {
+			/* one instruction (or one sleeping cycle batch) per avr_run */
+			avr_flashaddr_t pc = avr->pc;
+			avr_cycle_count_t c0 = avr->cycle;
+			state = avr_run(avr);
+			profile[(pc / 2u) % PROFILE_WORDS] += avr->cycle - c0;
+		} else {
+			state = avr_run(avr);
+		}
 		if (state == cpu_Done || state == cpu_Crashed)
 			break;
 		if (max_cycles && avr->cycle >= max_cycles)
@@ -862,6 +894,8 @@ int main(int argc, char **argv)
 			apply_pending();
 	}
 	pump_io();
+	if (profile)
+		profile_write();
 	if (trace)
 		fclose(trace);
 	if (dbg)

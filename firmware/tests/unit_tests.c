@@ -51,6 +51,37 @@ static void test_crc(void)
 	CHECK(fb_crc16("N201 G1 A-76 B-07 P16795 S255", 29) == 45618, "that line, two bytes lost");
 }
 
+/* Decimal overflow at the edges of 32 bits (the parser checks v * 10 + d
+ * against the limit without dividing): line numbers up to 2^32 - 1. */
+static void test_number_bounds(void)
+{
+	static const struct { const char *body; uint8_t status; uint32_t n; } cases[] = {
+		{ "N4294967295 G90", FB_OK, 4294967295UL },
+		{ "N4294967294 G90", FB_OK, 4294967294UL },
+		{ "N4294967290 G90", FB_OK, 4294967290UL },
+		{ "N429496729 G90", FB_OK, 429496729UL },
+		{ "N4294967296 G90", FB_ERR_BAD_NUMBER, 0 },
+		{ "N4294967299 G90", FB_ERR_BAD_NUMBER, 0 },
+		{ "N4294967300 G90", FB_ERR_BAD_NUMBER, 0 },
+		{ "N4294967305 G90", FB_ERR_BAD_NUMBER, 0 },
+		{ "N42949672950 G90", FB_ERR_BAD_NUMBER, 0 },
+		{ "N99999999999 G90", FB_ERR_BAD_NUMBER, 0 },
+	};
+	char buf[64];
+	for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
+		fb_lines_t ln = { cases[k].n - 1u, 1 };
+		fb_cmd_t c;
+		framed(buf, sizeof buf, cases[k].body);
+		uint8_t st = parse(&ln, buf, &c);
+		CHECK(st == cases[k].status && (st != FB_OK || c.n == cases[k].n), cases[k].body);
+	}
+	fb_cmd_t c;
+	fb_lines_t ln = { 0 };
+	CHECK(parse(&ln, "G1 A2147483647 P1000", &c) == FB_ERR_OUT_OF_RANGE, "A 2^31 - 1: beyond the limit");
+	CHECK(parse(&ln, "G1 A2147483648 P1000", &c) == FB_ERR_OUT_OF_RANGE, "A 2^31: over");
+	CHECK(parse(&ln, "G1 A100000000 P1000", &c) == FB_OK && c.a == 100000000L, "A at the limit");
+}
+
 /* G6 (protocol 3): a G1 head and relative items, one line number each. */
 static void test_parse_g6(void)
 {
@@ -1364,6 +1395,7 @@ static void test_pen(void)
 int main(void)
 {
 	test_crc();
+	test_number_bounds();
 	test_parse_table();
 	test_framing();
 	test_line_noise();
