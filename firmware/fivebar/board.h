@@ -29,10 +29,15 @@ void board_init(void);
  * reset").  The board places it where the C start-up code does not clear it
  * (.noinit on the AVR), so a reset that leaves the RAM powered finds it as it
  * was; fb_motion.c owns its content:
- *   position = base + off: a step changes off by one (a one-byte store), and
- *              off is folded into base before it leaves -127..127;
- *   check    = FB_KEEP_MAGIC + base[0] + base[1] + done + homed: what the
- *              random RAM of a power-on almost never satisfies;
+ *   position = base + off - ahead: a step of the C path changes off by
+ *              one, and off is folded into base before it leaves
+ *              -127..127; a fast block adds all its steps to off when it
+ *              starts and its steps only count left[] down, so ahead =
+ *              left[i], negative when fdirs bit i is set, is what it has
+ *              not issued yet (off is folded into base by the main loop);
+ *   check    = FB_KEEP_MAGIC + base[0] + base[1] + homed, and ndone =
+ *              ~done: what the random RAM of a power-on almost never
+ *              satisfies;
  *   busy     = set around every update (a step included), so a reset that
  *              strikes in the middle of one finds the record invalid.
  */
@@ -43,6 +48,9 @@ typedef struct {
 	uint8_t homed;    /* H */
 	int16_t off[2];   /* steps since base, folded into it now and then */
 	uint8_t busy;
+	uint16_t left[2]; /* the running fast block's steps not yet issued */
+	uint8_t fdirs;    /* ... and its directions (bit set = negative) */
+	uint32_t ndone;   /* ~done */
 } fb_keep_t;
 
 extern volatile fb_keep_t board_keep;

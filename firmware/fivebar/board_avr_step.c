@@ -71,9 +71,11 @@ static uint8_t paused;
 #define O_PDIRS 52
 #define BLOCK_SIZE 53
 #define K_DONE 8
-#define K_CHECK 12
 #define K_OFF 17
 #define K_BUSY 21
+#define K_LEFT 22
+#define K_FDIRS 26
+#define K_NDONE 27
 _Static_assert(offsetof(fb_block_t, f.t) == O_T && offsetof(fb_block_t, f.tf) == O_TF &&
 	       offsetof(fb_block_t, f.q) == O_Q && offsetof(fb_block_t, f.qf) == O_QF &&
 	       offsetof(fb_block_t, f.cnt) == O_CNT && offsetof(fb_block_t, f.tail) == O_TAIL &&
@@ -81,8 +83,10 @@ _Static_assert(offsetof(fb_block_t, f.t) == O_T && offsetof(fb_block_t, f.tf) ==
 	       offsetof(fb_block_t, power) == O_POWER && offsetof(fb_block_t, fast) == O_FAST &&
 	       offsetof(fb_block_t, pdirs) == O_PDIRS && sizeof(fb_block_t) == BLOCK_SIZE,
 	       "fast path block offsets");
-_Static_assert(offsetof(fb_keep_t, done) == K_DONE && offsetof(fb_keep_t, check) == K_CHECK &&
-	       offsetof(fb_keep_t, off) == K_OFF && offsetof(fb_keep_t, busy) == K_BUSY,
+_Static_assert(offsetof(fb_keep_t, done) == K_DONE &&
+	       offsetof(fb_keep_t, off) == K_OFF && offsetof(fb_keep_t, busy) == K_BUSY &&
+	       offsetof(fb_keep_t, left) == K_LEFT && offsetof(fb_keep_t, fdirs) == K_FDIRS &&
+	       offsetof(fb_keep_t, ndone) == K_NDONE,
 	       "fast path keep offsets");
 _Static_assert(MO_PAIR_CYCLES < 200, "the waits of a pair stay below 128 cycles");
 /* the fast path writes PIND and PORTD */
@@ -121,26 +125,17 @@ _Static_assert(MO_PAIR_CYCLES < 200, "the waits of a pair stay below 128 cycles"
 #define S(x) S_(x)
 
 /*
- * One motor's step bookkeeping (i = 0 A, 1 B), Z = block: the kept
- * position's off[i] +-1, its steps left, and (unless that was the last) its
- * next time t.tf += q.qf.  Uses r18, r19, r26, r27.
+ * One motor's step bookkeeping (i = 0 A, 1 B), Z = block: its steps left
+ * (the kept record's left[i], which is the kept position's count too) and
+ * (unless that was the last) its next time t.tf += q.qf.  Uses r18, r19,
+ * r26, r27.
  */
 #define STEP_MOTOR(i, L) \
-	"lds r18, %[keep]+" S(K_OFF) "+2*" #i "\n\t" \
-	"lds r19, %[keep]+" S(K_OFF) "+2*" #i "+1\n\t" \
-	"ldd r26, Z+" S(O_DIRS) "\n\t" \
-	"subi r18, 0xff\n\tsbci r19, 0xff\n\t" \
-	"sbrs r26, " #i "\n\t" \
-	"rjmp " L "_p\n\t" \
-	"subi r18, 2\n\tsbci r19, 0\n" \
-	L "_p:\n\t" \
-	"sts %[keep]+" S(K_OFF) "+2*" #i ", r18\n\t" \
-	"sts %[keep]+" S(K_OFF) "+2*" #i "+1, r19\n\t" \
-	"ldd r26, Z+" S(O_CNT) "+2*" #i "\n\t" \
-	"ldd r27, Z+" S(O_CNT) "+2*" #i "+1\n\t" \
+	"lds r26, %[keep]+" S(K_LEFT) "+2*" #i "\n\t" \
+	"lds r27, %[keep]+" S(K_LEFT) "+2*" #i "+1\n\t" \
 	"sbiw r26, 1\n\t" \
-	"std Z+" S(O_CNT) "+2*" #i ", r26\n\t" \
-	"std Z+" S(O_CNT) "+2*" #i "+1, r27\n\t" \
+	"sts %[keep]+" S(K_LEFT) "+2*" #i ", r26\n\t" \
+	"sts %[keep]+" S(K_LEFT) "+2*" #i "+1, r27\n\t" \
 	"breq " L "_d\n\t" \
 	"ldd r18, Z+" S(O_TF) "+2*" #i "\n\t" \
 	"ldd r19, Z+" S(O_TF) "+2*" #i "+1\n\t" \
@@ -157,6 +152,28 @@ _Static_assert(MO_PAIR_CYCLES < 200, "the waits of a pair stay below 128 cycles"
 	"std Z+" S(O_T) "+2*" #i ", r18\n\t" \
 	"std Z+" S(O_T) "+2*" #i "+1, r19\n" \
 	L "_d:\n\t"
+
+/*
+ * Start of the next block's motor i in the kept record (busy set), Z = that
+ * block, r26 = its directions: all its steps go into off[i] (negative when
+ * direction bit i is set) and into left[i], the ones not issued yet.  Uses
+ * r24, r25, r27.
+ */
+#define AHEAD_MOTOR(i, L) \
+	"ldd r24, Z+" S(O_CNT) "+2*" #i "\n\t" \
+	"ldd r25, Z+" S(O_CNT) "+2*" #i "+1\n\t" \
+	"sts %[keep]+" S(K_LEFT) "+2*" #i ", r24\n\t" \
+	"sts %[keep]+" S(K_LEFT) "+2*" #i "+1, r25\n\t" \
+	"sbrs r26, " #i "\n\t" \
+	"rjmp " L "\n\t" \
+	"com r25\n\tneg r24\n\tsbci r25, 0xff\n" \
+	L ":\n\t" \
+	"lds r27, %[keep]+" S(K_OFF) "+2*" #i "\n\t" \
+	"add r24, r27\n\t" \
+	"lds r27, %[keep]+" S(K_OFF) "+2*" #i "+1\n\t" \
+	"adc r25, r27\n\t" \
+	"sts %[keep]+" S(K_OFF) "+2*" #i ", r24\n\t" \
+	"sts %[keep]+" S(K_OFF) "+2*" #i "+1, r25\n\t"
 
 /*
  * Wait until the timer reaches r18:r19 + SPIN_LAG (at once when past).  The
@@ -214,11 +231,11 @@ ISR(TIMER1_COMPA_vect, ISR_NAKED)
 		"sts %[keep]+" S(K_BUSY) ", r25\n"
 	/* ---- pick the next event (fast_pick() in fb_motion.c) ---- */
 	"fp_select:\n\t"
-		"ldd r18, Z+" S(O_CNT) "\n\t"
-		"ldd r19, Z+" S(O_CNT) "+1\n\t"
+		"lds r18, %[keep]+" S(K_LEFT) "\n\t"
+		"lds r19, %[keep]+" S(K_LEFT) "+1\n\t"
 		"or r18, r19\n\t"                      /* r18 != 0: A live */
-		"ldd r26, Z+" S(O_CNT) "+2\n\t"
-		"ldd r27, Z+" S(O_CNT) "+3\n\t"
+		"lds r26, %[keep]+" S(K_LEFT) "+2\n\t"
+		"lds r27, %[keep]+" S(K_LEFT) "+3\n\t"
 		"or r26, r27\n\t"
 		"brne fp_b_live\n\t"
 		"tst r18\n\t"
@@ -456,25 +473,17 @@ ISR(TIMER1_COMPA_vect, ISR_NAKED)
 		"sts %[cur]+1, r31\n\t"
 		"ldi r24, 1\n\t"
 		"sts %[keep]+" S(K_BUSY) ", r24\n\t"
-		/* Ln done := the ended block's line: check -= done, then check +=
-		 * line and done = line (lds/sts/ld keep the carry) */
-		"lds r24, %[keep]+" S(K_CHECK) "\n\tlds r25, %[keep]+" S(K_DONE) "\n\tsub r24, r25\n\t"
-		"sts %[keep]+" S(K_CHECK) ", r24\n\t"
-		"lds r24, %[keep]+" S(K_CHECK) "+1\n\tlds r25, %[keep]+" S(K_DONE) "+1\n\tsbc r24, r25\n\t"
-		"sts %[keep]+" S(K_CHECK) "+1, r24\n\t"
-		"lds r24, %[keep]+" S(K_CHECK) "+2\n\tlds r25, %[keep]+" S(K_DONE) "+2\n\tsbc r24, r25\n\t"
-		"sts %[keep]+" S(K_CHECK) "+2, r24\n\t"
-		"lds r24, %[keep]+" S(K_CHECK) "+3\n\tlds r25, %[keep]+" S(K_DONE) "+3\n\tsbc r24, r25\n\t"
-		"sts %[keep]+" S(K_CHECK) "+3, r24\n\t"
+		/* Ln done := the ended block's line, ndone := its complement */
 		"adiw r26, " S(O_LINE) "\n\t"
-		"lds r24, %[keep]+" S(K_CHECK) "\n\tld r25, X+\n\tadd r24, r25\n\t"
-		"sts %[keep]+" S(K_CHECK) ", r24\n\tsts %[keep]+" S(K_DONE) ", r25\n\t"
-		"lds r24, %[keep]+" S(K_CHECK) "+1\n\tld r25, X+\n\tadc r24, r25\n\t"
-		"sts %[keep]+" S(K_CHECK) "+1, r24\n\tsts %[keep]+" S(K_DONE) "+1, r25\n\t"
-		"lds r24, %[keep]+" S(K_CHECK) "+2\n\tld r25, X+\n\tadc r24, r25\n\t"
-		"sts %[keep]+" S(K_CHECK) "+2, r24\n\tsts %[keep]+" S(K_DONE) "+2, r25\n\t"
-		"lds r24, %[keep]+" S(K_CHECK) "+3\n\tld r25, X+\n\tadc r24, r25\n\t"
-		"sts %[keep]+" S(K_CHECK) "+3, r24\n\tsts %[keep]+" S(K_DONE) "+3, r25\n\t"
+		"ld r25, X+\n\tsts %[keep]+" S(K_DONE) ", r25\n\tcom r25\n\tsts %[keep]+" S(K_NDONE) ", r25\n\t"
+		"ld r25, X+\n\tsts %[keep]+" S(K_DONE) "+1, r25\n\tcom r25\n\tsts %[keep]+" S(K_NDONE) "+1, r25\n\t"
+		"ld r25, X+\n\tsts %[keep]+" S(K_DONE) "+2, r25\n\tcom r25\n\tsts %[keep]+" S(K_NDONE) "+2, r25\n\t"
+		"ld r25, X+\n\tsts %[keep]+" S(K_DONE) "+3, r25\n\tcom r25\n\tsts %[keep]+" S(K_NDONE) "+3, r25\n\t"
+		/* the next block's steps, ahead, into off and left */
+		"ldd r26, Z+" S(O_DIRS) "\n\t"
+		"sts %[keep]+" S(K_FDIRS) ", r26\n\t"
+		AHEAD_MOTOR(0, "ah0")
+		AHEAD_MOTOR(1, "ah1")
 		"clr r25\n\t"
 		"sts %[keep]+" S(K_BUSY) ", r25\n\t"
 		/* direction pins: toggle the ones that change */

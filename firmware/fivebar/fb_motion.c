@@ -48,15 +48,15 @@ static volatile uint16_t p_now16, p_target, p_park, p_step16, p_saved, p_time;
 #define K board_keep
 #define FB_KEEP_MAGIC 0xFB5AFE17UL
 /* off is folded into base when a step of the C path takes it to +-OFF_FOLD,
- * and by the main loop (mo_fold) from +-MAIN_FOLD (the fast interrupt only
- * counts: at 60 kHz off needs half a second to go from MAIN_FOLD to the end
- * of its range) */
+ * and by the main loop (mo_fold) from +-MAIN_FOLD (the fast interrupt adds a
+ * whole block, at most MO_FAST_NMAX steps, when one ends: at 60 kHz off needs
+ * 0.4 s to go from MAIN_FOLD past the end of its range) */
 #define OFF_FOLD 127
 #define MAIN_FOLD 8192
 
 static uint32_t keep_sum(void)
 {
-	return FB_KEEP_MAGIC + (uint32_t)K.base[0] + (uint32_t)K.base[1] + K.done + K.homed;
+	return FB_KEEP_MAGIC + (uint32_t)K.base[0] + (uint32_t)K.base[1] + K.homed;
 }
 
 /* Rewrite the whole record; interrupts off (or in the step interrupt). */
@@ -67,7 +67,10 @@ static void keep_write(int32_t a, int32_t b, uint32_t done, uint8_t homed)
 	K.base[1] = b;
 	K.off[0] = 0;
 	K.off[1] = 0;
+	K.left[0] = K.left[1] = 0;
+	K.fdirs = 0;
 	K.done = done;
+	K.ndone = ~done;
 	K.homed = homed;
 	K.check = keep_sum();
 	K.busy = 0;
@@ -77,25 +80,52 @@ static void keep_write(int32_t a, int32_t b, uint32_t done, uint8_t homed)
 FB_ALWAYS_INLINE void keep_done(uint32_t line)
 {
 	K.busy = 1;
-	K.check += line - K.done;
 	K.done = line;
+	K.ndone = ~line;
 	K.busy = 0;
+}
+
+/* The steps of motor i the running fast block added to off and has not
+ * issued yet, signed. */
+static int32_t fast_ahead(uint8_t i)
+{
+	int32_t d = (int32_t)K.left[i];
+	return (K.fdirs & (1u << i)) ? -d : d;
 }
 
 /* The position as the record holds it; interrupts off. */
 static int32_t keep_pos(uint8_t i)
 {
-	return K.base[i] + K.off[i];
+	return K.base[i] + K.off[i] - fast_ahead(i);
+}
+
+/* A fast block stops part-way: what it has not issued leaves the position
+ * (through base).  Interrupts off (or in the step interrupt). */
+static void fast_fold(void)
+{
+	K.busy = 1;
+	for (uint8_t i = 0; i < 2; i++) {
+		int32_t d = fast_ahead(i);
+		K.base[i] -= d;
+		K.check -= (uint32_t)d;
+		K.left[i] = 0;
+	}
+	K.fdirs = 0;
+	K.busy = 0;
 }
 
 uint8_t mo_boot(uint8_t power_on)
 {
 	uint8_t sreg = board_irq_save();
-	uint8_t kept = !power_on && K.busy == 0 && K.homed <= 1 && K.check == keep_sum();
+	uint8_t kept = !power_on && K.busy == 0 && K.homed <= 1 && K.check == keep_sum() &&
+		       K.ndone == ~K.done && K.fdirs <= 3u;
 	for (uint8_t i = 0; kept && i < 2; i++)
-		if (keep_pos(i) > CFG_POS_LIMIT || keep_pos(i) < -CFG_POS_LIMIT)
+		if (K.left[i] > MO_FAST_NMAX || keep_pos(i) > CFG_POS_LIMIT ||
+		    keep_pos(i) < -CFG_POS_LIMIT)
 			kept = 0;
-	if (!kept)
+	if (kept)
+		keep_write(keep_pos(0), keep_pos(1), K.done, K.homed);
+	else
 		keep_write(0, 0, 0, 0);
 	board_irq_restore(sreg);
 	return kept;
@@ -343,7 +373,10 @@ void mo_stop(void)
 	s_running = 0;
 	s_held = 0;
 	if (mo_cur) {
-		/* the interrupted block is dropped */
+		/* the interrupted block is dropped (a fast one's steps so far
+		 * stay in the position) */
+		if (mo_cur->fast)
+			fast_fold();
 		mo_q_tail = (uint8_t)(mo_q_tail + 1u);
 		mo_cur = 0;
 	}
@@ -578,12 +611,22 @@ uint8_t mo_fast_begin(uint16_t base, uint16_t *t, uint8_t *bits, uint16_t *t2, u
 	mo_fast_t *f = &mo_cur->f;
 	f->t[0] = (uint16_t)(f->t[0] + base);
 	f->t[1] = (uint16_t)(f->t[1] + base);
+	uint8_t dirs = mo_cur->dirs;
+	K.busy = 1;
+	for (uint8_t i = 0; i < 2; i++) {
+		int16_t n = (int16_t)f->cnt[i];
+		K.left[i] = f->cnt[i];
+		K.off[i] = (int16_t)(K.off[i] + ((dirs & (1u << i)) ? -n : n));
+	}
+	K.fdirs = dirs;
+	K.busy = 0;
 	fast_pick(f, t, bits, t2, bits2);
 	return s_rest;
 }
 
 void mo_fast_end(void)
 {
+	fast_fold();
 	s_now = mo_cur->cycles;
 	s_due = 0;
 }
@@ -626,10 +669,20 @@ uint8_t mo_alive(void)
 
 void mo_get_pos(int32_t pos[2])
 {
+	/* a copy with interrupts off, the sums after (they took 230 cycles) */
+	int32_t base[2];
+	int16_t off[2];
+	uint16_t left[2];
 	uint8_t sreg = board_irq_save();
-	pos[0] = keep_pos(0);
-	pos[1] = keep_pos(1);
+	for (uint8_t i = 0; i < 2; i++) {
+		base[i] = K.base[i];
+		off[i] = K.off[i];
+		left[i] = K.left[i];
+	}
+	uint8_t fdirs = K.fdirs;
 	board_irq_restore(sreg);
+	for (uint8_t i = 0; i < 2; i++)
+		pos[i] = base[i] + off[i] + ((fdirs & (1u << i)) ? (int32_t)left[i] : -(int32_t)left[i]);
 }
 
 void mo_set_pos(const int32_t pos[2])

@@ -1123,6 +1123,20 @@ static void test_kept_record(void)
 	expect("?", power_on);
 	run_lines("G92 A7 B8\n");
 	tick(100);
+	board_keep.done ^= 4u; /* Ln done has its complement beside it */
+	reboot(0);
+	expect("?", power_on);
+	run_lines("G92 A7 B8\n");
+	tick(100);
+	board_keep.left[1] = 3; /* a fast block's steps not issued: not in the position */
+	board_keep.fdirs = 2;
+	reboot(0);
+	expect("?", "<Idle|A:7,B:11|Q:0|Ln:1,0|L:0|U:0|H:1|P:0>\r\n");
+	board_keep.left[0] = MO_FAST_NMAX + 1u;
+	reboot(0);
+	expect("?", power_on);
+	run_lines("G92 A7 B8\n");
+	tick(100);
 	board_keep.busy = 1; /* a reset while a step or an update was being recorded */
 	reboot(0);
 	expect("?", power_on);
