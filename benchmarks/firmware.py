@@ -24,7 +24,8 @@ the link's real pace.  A busy host machine can starve the stream ("queue ran
 empty") although the firmware keeps up, so a failing rate is tried up to
 ATTEMPTS times; a pass cannot come from luck (every step is checked).
 
-Run: python benchmarks/firmware.py [--pen | --both] [--ratios 1,0.73]
+Run: python benchmarks/firmware.py [--pen | --both] [--ratios 1,0.73] [--at 55]
+(--at: the figures at that one rate of the faster motor instead of the search)
 
 With --pen every run first sets up the pen servo ($14=1800, then M280 S1000:
 pen down) so its pulses (Timer0 compare B on D12) run all through the
@@ -283,6 +284,17 @@ def rate_table(build: sim.BuildPaths, ratios: tuple[float, ...], tmp: Path, pen:
               f"   (next {failed})")
 
 
+def fixed_rate_table(build: sim.BuildPaths, ratios: tuple[float, ...], rate: int, tmp: Path,
+                     pen: bool) -> None:
+    """Print exactness and jitter at one rate of the faster motor for every ratio."""
+    print(f"  at {rate / 1000:g} kHz per motor (faster motor): ratio, result, jitter max/RMS "
+          "cycles, interval jitter RMS cycles")
+    for ratio in ratios:
+        res = run_rate_tries(build, rate, round(rate * ratio), tmp, pen)
+        jit = f"{res.max_dev} / {res.rms_dev:.1f}   {res.interval_rms:6.1f}" if res.ok else ""
+        print(f"    1:{ratio:<5g} {res.reason:>8s}   {jit}")
+
+
 def run_segments(build: sim.BuildPaths, p_us: int, tmp: Path, pen: bool, count: int = 1000) -> int:
     """Stream short numbered segments; return how often the queue ran dry mid-job."""
     dev = sim.start_device(build, tmp / "seg.trace", realtime=True)
@@ -330,6 +342,8 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     ap.add_argument("--ratios", default=",".join(f"{r:g}" for r in RATIOS),
                     help="comma-separated rate ratios (slower / faster motor)")
     ap.add_argument("--no-segments", action="store_true", help="skip the segment-rate search")
+    ap.add_argument("--at", type=float, metavar="KHZ",
+                    help="instead of the rate search: exactness and jitter at this rate")
     return ap.parse_args(argv)
 
 
@@ -349,7 +363,10 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmpdir:
         tmp = Path(tmpdir)
         for pen in modes:
-            rate_table(build, ratios, tmp, pen)
+            if args.at:
+                fixed_rate_table(build, ratios, round(args.at * 1000), tmp, pen)
+            else:
+                rate_table(build, ratios, tmp, pen)
         if not args.no_segments:
             segment_rate(build, tmp, modes[-1])
     return 0

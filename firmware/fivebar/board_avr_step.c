@@ -9,15 +9,17 @@
  *    (fb_motion.h mo_fast_t: plain moves of up to 16383 steps at >= 977
  *    steps/s per motor).  The pins of the pending event are in GPIOR1, so
  *    the rising edges leave ten cycles after the vector, whatever the
- *    bookkeeping: the kept position's off[], the steps left, the next time
+ *    bookkeeping: the steps left (the kept record's left[]: a block's steps
+ *    go into the kept position when it starts), the next time
  *    (16-bit time + 16-bit fraction, no division, no compare of remainders),
  *    the pick of the next event, and the switch to the next block when it is
- *    fast too and keeps the laser power (Ln done, direction pins, its times).
+ *    fast too and keeps the laser power (Ln done, its steps into the kept
+ *    position, direction pins, its times).
  *    When the other motor's step follows within MO_PAIR_CYCLES (too close
  *    to leave and come back) the pick marks a pair (GPIOR0 FL_PAIR, its time
  *    in board_t2, its pins in GPIOR2) and the same interrupt waits for it;
  *    anything closer than LEAVE_CYCLES when the interrupt ends is waited for
- *    too.  About 130 cycles an event of one motor, all in.
+ *    too.  About 160 cycles an event of one motor, all in (fbsim -P).
  *  - the C path (__vector_fb_step_slow, mo_event() in fb_motion.c) for everything
  *    else: block boundaries the fast path does not take (an empty queue, a
  *    laser power change, a C-form block, a G92/M17/M18/M280), homing,

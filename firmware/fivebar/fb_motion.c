@@ -10,8 +10,8 @@
  * The position, H and Ln done live in board_keep, the record a reset that
  * leaves the RAM powered keeps (see board.h).  Every update of it is bracketed
  * by busy = 1 ... busy = 0; a step sets busy before its pins rise and clears
- * it once off is stored, so a valid record never claims a step that was not
- * issued, nor misses one that was.
+ * it once off (the C path) or left (the fast path) is stored, so a valid
+ * record never claims a step that was not issued, nor misses one that was.
  */
 #include <string.h>
 #include "fb_motion.h"
@@ -48,9 +48,11 @@ static volatile uint16_t p_now16, p_target, p_park, p_step16, p_saved, p_time;
 #define K board_keep
 #define FB_KEEP_MAGIC 0xFB5AFE17UL
 /* off is folded into base when a step of the C path takes it to +-OFF_FOLD,
- * and by the main loop (mo_fold) from +-MAIN_FOLD (the fast interrupt adds a
- * whole block, at most MO_FAST_NMAX steps, when one ends: at 60 kHz off needs
- * 0.4 s to go from MAIN_FOLD past the end of its range) */
+ * and by the main loop (mo_fold) from +-MAIN_FOLD: a fast block adds all its
+ * steps (at most MO_FAST_NMAX) when it starts, so off stays in range as long
+ * as the main loop runs once while a block of that size executes (0.27 s at
+ * 60 kHz; one main loop pass takes tens of milliseconds at most, measured
+ * under the busiest step interrupt) */
 #define OFF_FOLD 127
 #define MAIN_FOLD 8192
 
