@@ -126,6 +126,17 @@ _Static_assert(MO_PAIR_CYCLES < 200, "the waits of a pair stay below 128 cycles"
 #define S_(x) #x
 #define S(x) S_(x)
 
+/* Z+dst[i] += Z+src[i], 16 bits, the low byte by op ("add", or "adc" to take
+ * the carry of the previous one in).  Uses r18, r19, r26, r27. */
+#define ADD16_Z(dst, src, i, op) \
+	"ldd r18, Z+" S(dst) "+2*" #i "\n\t" \
+	"ldd r19, Z+" S(dst) "+2*" #i "+1\n\t" \
+	"ldd r26, Z+" S(src) "+2*" #i "\n\t" \
+	"ldd r27, Z+" S(src) "+2*" #i "+1\n\t" \
+	op " r18, r26\n\tadc r19, r27\n\t" \
+	"std Z+" S(dst) "+2*" #i ", r18\n\t" \
+	"std Z+" S(dst) "+2*" #i "+1, r19\n\t"
+
 /*
  * One motor's step bookkeeping (i = 0 A, 1 B), Z = block: its steps left
  * (the kept record's left[i], which is the kept position's count too) and
@@ -139,20 +150,8 @@ _Static_assert(MO_PAIR_CYCLES < 200, "the waits of a pair stay below 128 cycles"
 	"sts %[keep]+" S(K_LEFT) "+2*" #i ", r26\n\t" \
 	"sts %[keep]+" S(K_LEFT) "+2*" #i "+1, r27\n\t" \
 	"breq " L "_d\n\t" \
-	"ldd r18, Z+" S(O_TF) "+2*" #i "\n\t" \
-	"ldd r19, Z+" S(O_TF) "+2*" #i "+1\n\t" \
-	"ldd r26, Z+" S(O_QF) "+2*" #i "\n\t" \
-	"ldd r27, Z+" S(O_QF) "+2*" #i "+1\n\t" \
-	"add r18, r26\n\tadc r19, r27\n\t" \
-	"std Z+" S(O_TF) "+2*" #i ", r18\n\t" \
-	"std Z+" S(O_TF) "+2*" #i "+1, r19\n\t" \
-	"ldd r18, Z+" S(O_T) "+2*" #i "\n\t" \
-	"ldd r19, Z+" S(O_T) "+2*" #i "+1\n\t" \
-	"ldd r26, Z+" S(O_Q) "+2*" #i "\n\t" \
-	"ldd r27, Z+" S(O_Q) "+2*" #i "+1\n\t" \
-	"adc r18, r26\n\tadc r19, r27\n\t" \
-	"std Z+" S(O_T) "+2*" #i ", r18\n\t" \
-	"std Z+" S(O_T) "+2*" #i "+1, r19\n" \
+	ADD16_Z(O_TF, O_QF, i, "add") \
+	ADD16_Z(O_T, O_Q, i, "adc") \
 	L "_d:\n\t"
 
 /*
