@@ -293,6 +293,8 @@ def fixed_rate_table(build: sim.BuildPaths, ratios: tuple[float, ...], rate: int
         res = run_rate_tries(build, rate, round(rate * ratio), tmp, pen)
         jit = f"{res.max_dev} / {res.rms_dev:.1f}   {res.interval_rms:6.1f}" if res.ok else ""
         print(f"    1:{ratio:<5g} {res.reason:>8s}   {jit}")
+        if res.ok:
+            print_timing(res)
 
 
 def run_segments(build: sim.BuildPaths, p_us: int, tmp: Path, pen: bool, count: int = 1000) -> int:

@@ -271,11 +271,14 @@ uint32_t board_ms(void)
 /*
  * The serial interrupts let the step interrupt in (board_avr_step.c): a
  * naked stub masks the interrupt's own source in UCSR0B (so it cannot come
- * again before its byte is handled, and bytes keep their order), then jumps
- * to the handler, whose `interrupt` attribute enables interrupts first
- * thing.  A step edge then waits for at most the stub's dozen cycles, not for
- * a whole handler.  The handler masks interrupts again before it unmasks its
- * source.
+ * again before its byte is handled, and bytes keep their order), enables
+ * interrupts, saves the registers a C call may change and calls the handler,
+ * a plain function that returns nonzero to unmask its source again.  Only
+ * the stub's entry, up to `sei`, and its last dozen cycles (the unmask and the
+ * return) hold interrupts off: a step edge waits for at most those, never
+ * for a handler or its register restore (the compiler's `interrupt`
+ * epilogue restores all registers after the `cli` the unmask needs: that
+ * held the step interrupt off for 36-41 cycles, the jitter's largest cause).
  */
 #define UART_STUB(vect, handler, bit) \
 	ISR(vect, ISR_NAKED) \
@@ -287,38 +290,55 @@ uint32_t board_ms(void)
 			"lds r24, %[ucsrb]\n\t" \
 			"andi r24, %[mask]\n\t" \
 			"sts %[ucsrb], r24\n\t" \
+			"sei\n\t" \
+			"push r0\n\tpush r1\n\tclr r1\n\t" \
+			"push r18\n\tpush r19\n\tpush r20\n\tpush r21\n\t" \
+			"push r22\n\tpush r23\n\tpush r25\n\tpush r26\n\t" \
+			"push r27\n\tpush r30\n\tpush r31\n\t" \
+			"call " #handler "\n\t" \
+			"pop r31\n\tpop r30\n\tpop r27\n\tpop r26\n\t" \
+			"pop r25\n\tpop r23\n\tpop r22\n\tpop r21\n\t" \
+			"pop r20\n\tpop r19\n\tpop r18\n\t" \
+			"pop r1\n\tpop r0\n\t" \
+			"cli\n\t" \
+			"tst r24\n\t" \
+			"breq 1f\n\t" \
+			"lds r24, %[ucsrb]\n\t" \
+			"ori r24, %[bitv]\n\t" \
+			"sts %[ucsrb], r24\n" \
+			"1:\n\t" \
 			"pop r24\n\t" \
 			"out __SREG__, r24\n\t" \
 			"pop r24\n\t" \
-			"jmp " #handler "\n\t" \
-			:: [ucsrb] "n" (_SFR_MEM_ADDR(UCSR0B)), [mask] "n" (0xff & ~(1 << (bit)))); \
+			"reti\n\t" \
+			:: [ucsrb] "n" (_SFR_MEM_ADDR(UCSR0B)), [mask] "n" (0xff & ~(1 << (bit))), \
+			   [bitv] "n" (1 << (bit))); \
 	}
 
-/* named __vector_* so that avr-gcc (its LTO link too) takes the handler
- * attributes without a misspelled-ISR warning */
-void __vector_fb_rx_nested(void) __attribute__((interrupt, used, externally_visible));
-void __vector_fb_rx_nested(void)
+/* The handlers: plain functions the stubs call (by name, so kept through
+ * the LTO link), with interrupts enabled and their own source masked. */
+uint8_t board_rx_handler(void) __attribute__((used, externally_visible));
+uint8_t board_rx_handler(void)
 {
 	uint8_t c = UDR0;
 	fb_rx_isr(c);
-	cli();
-	UCSR0B |= (uint8_t)(1u << RXCIE0);
+	return 1;
 }
-UART_STUB(USART_RX_vect, __vector_fb_rx_nested, RXCIE0)
+UART_STUB(USART_RX_vect, board_rx_handler, RXCIE0)
 
-void __vector_fb_udre_nested(void) __attribute__((interrupt, used, externally_visible));
-void __vector_fb_udre_nested(void)
+/* nonzero while bytes wait: only an interrupt could queue more, and none
+ * does (board_tx is the main loop's) */
+uint8_t board_udre_handler(void) __attribute__((used, externally_visible));
+uint8_t board_udre_handler(void)
 {
 	uint8_t t = tx_tail;
 	if (t != tx_head) {
 		UDR0 = tx_buf[t & (CFG_TX_SIZE - 1u)];
 		tx_tail = (uint8_t)(t + 1u);
 	}
-	cli();
-	if (tx_tail != tx_head)
-		UCSR0B |= (uint8_t)(1u << UDRIE0);
+	return (uint8_t)(tx_tail != tx_head);
 }
-UART_STUB(USART_UDRE_vect, __vector_fb_udre_nested, UDRIE0)
+UART_STUB(USART_UDRE_vect, board_udre_handler, UDRIE0)
 
 void board_uart_baud(uint32_t baud)
 {

@@ -354,7 +354,7 @@ ISR(TIMER1_COMPA_vect, ISR_NAKED)
 		"sub r26, r18\n\t"
 		"sbc r27, r19\n\t"
 		"brmi 2f\n\t"                         /* overdue (catching up): */
-		"ldi r25, 8\n"                         /* the pins stay low >= 2 us */
+		"ldi r25, 2\n"                         /* with the fall's path the pins stay low >= 2.3 us (the DRV8825 needs 1.9) */
 	"1:\n\t"
 		"dec r25\n\t"
 		"brne 1b\n"
