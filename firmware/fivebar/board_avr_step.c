@@ -140,18 +140,30 @@ _Static_assert(MO_PAIR_CYCLES < 200, "the waits of a pair stay below 128 cycles"
 /*
  * One motor's step bookkeeping (i = 0 A, 1 B), Z = block: its steps left
  * (the kept record's left[i], which is the kept position's count too) and
- * (unless that was the last) its next time t.tf += q.qf.  Uses r18, r19,
- * r26, r27.
+ * (unless that was the last) its next time t.tf += q.qf.  The count goes
+ * down by its low byte, the high byte only on a borrow or at a low 0 (two
+ * cycles fewer a step than a 16-bit load, subtract and store; the busy flag
+ * covers the two stores as it covered one).  Uses r18, r19, r26, r27.
  */
 #define STEP_MOTOR(i, L) \
 	"lds r26, %[keep]+" S(K_LEFT) "+2*" #i "\n\t" \
-	"lds r27, %[keep]+" S(K_LEFT) "+2*" #i "+1\n\t" \
-	"sbiw r26, 1\n\t" \
+	"subi r26, 1\n\t" \
 	"sts %[keep]+" S(K_LEFT) "+2*" #i ", r26\n\t" \
-	"sts %[keep]+" S(K_LEFT) "+2*" #i "+1, r27\n\t" \
-	"breq " L "_d\n\t" \
+	"brcs " L "_b\n\t"           /* the low byte was 0: borrow */ \
+	"breq " L "_z\n"              /* it is 0 now: the last step if the high byte is 0 */ \
+	L "_t:\n\t" \
 	ADD16_Z(O_TF, O_QF, i, "add") \
 	ADD16_Z(O_T, O_Q, i, "adc") \
+	"rjmp " L "_d\n" \
+	L "_b:\n\t" \
+	"lds r27, %[keep]+" S(K_LEFT) "+2*" #i "+1\n\t" \
+	"dec r27\n\t" \
+	"sts %[keep]+" S(K_LEFT) "+2*" #i "+1, r27\n\t" \
+	"rjmp " L "_t\n" \
+	L "_z:\n\t" \
+	"lds r27, %[keep]+" S(K_LEFT) "+2*" #i "+1\n\t" \
+	"tst r27\n\t" \
+	"brne " L "_t\n" \
 	L "_d:\n\t"
 
 /*
@@ -215,7 +227,6 @@ ISR(TIMER1_COMPA_vect, ISR_NAKED)
 		"lds r30, %[cur]\n\t"
 		"lds r31, %[cur]+1\n"
 	"fp_edge_done:\n\t"
-		"sts %[beat], r24\n\t"
 		"sbic %[gp0], " S(FL_PAIR) "\n\t"
 		"rjmp fp_pair\n"
 	/* ---- bookkeeping of the motors in r24 ---- */
@@ -398,7 +409,6 @@ ISR(TIMER1_COMPA_vect, ISR_NAKED)
 		"lds r19, %[t2]+1\n\t"
 		"sts %[sched], r18\n\t"
 		"sts %[sched]+1, r19\n\t"
-		"sts %[beat], r24\n\t"
 		"rjmp fp_steps\n"
 	/* ---- a pair: the second edge at board_t2 ---- */
 	"fp_pair:\n\t"
@@ -539,7 +549,7 @@ ISR(TIMER1_COMPA_vect, ISR_NAKED)
 		  [tl] "n" (_SFR_MEM_ADDR(TCNT1L)), [th] "n" (_SFR_MEM_ADDR(TCNT1H)),
 		  [ocrl] "n" (_SFR_MEM_ADDR(OCR1AL)), [ocrh] "n" (_SFR_MEM_ADDR(OCR1AH)),
 		  [keep] "i" (&board_keep), [cur] "i" (&mo_cur), [qtail] "i" (&mo_q_tail),
-		  [qhead] "i" (&mo_q_head), [queue] "i" (mo_queue), [beat] "i" (&mo_beat),
+		  [qhead] "i" (&mo_q_head), [queue] "i" (mo_queue),
 		  [sched] "i" (&board_sched), [t2] "i" (&board_t2), [gap] "i" (&board_gap));
 }
 

@@ -35,7 +35,7 @@ static uint8_t s_home_axes, s_es_enabled, s_seek_neg;
 static uint8_t s_rest;           /* the block boundary() last started follows a stop */
 static volatile uint8_t s_running, s_alarm, s_home_hits, s_laser;
 /* mo_beat: set by every mo_event() (the step interrupt is alive), consumed by
- * mo_alive(); s_held: the generator's timer is paused by mo_hold() */
+ * mo_alive() (the fast path's beat is its left[] counting down); s_held: the generator's timer is paused by mo_hold() */
 volatile uint8_t mo_beat;
 static volatile uint8_t s_held;
 static volatile uint32_t s_underruns;
@@ -645,6 +645,13 @@ void mo_fast_shift(uint16_t delta)
 void mo_fold(void)
 {
 	for (uint8_t i = 0; i < 2; i++) {
+		/* a look first with interrupts on (the main loop comes here all the
+		 * time, and each interrupts-off look delayed the step interrupts
+		 * landing in it by up to 14 cycles): a torn read is only a look,
+		 * the fold re-reads with them off */
+		int16_t seen = K.off[i];
+		if (seen < MAIN_FOLD && seen > -MAIN_FOLD)
+			continue;
 		uint8_t sreg = board_irq_save();
 		int16_t o = K.off[i];
 		if (o >= MAIN_FOLD || o <= -MAIN_FOLD) {
@@ -662,10 +669,19 @@ uint8_t mo_running(void) { return s_running; }
 
 uint8_t mo_alive(void)
 {
+	/* the fast path (board_avr_step.c) sets no beat: each of its steps
+	 * counts a kept left[] down, which changes its low byte, so a change of
+	 * a low byte since the last look is its beat (read outside the
+	 * interrupts-off section: one byte is read whole) */
+	static uint8_t seen[2];
+	uint8_t l0 = (uint8_t)K.left[0], l1 = (uint8_t)K.left[1];
 	uint8_t sreg = board_irq_save();
 	uint8_t ok = mo_beat || !s_running || s_held;
 	mo_beat = 0;
 	board_irq_restore(sreg);
+	ok = (uint8_t)(ok || l0 != seen[0] || l1 != seen[1]);
+	seen[0] = l0;
+	seen[1] = l1;
 	return ok;
 }
 
