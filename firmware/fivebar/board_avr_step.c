@@ -342,7 +342,8 @@ ISR(TIMER1_COMPA_vect, ISR_NAKED)
 		"sbc r27, r19\n\t"                     /* now - t */
 		"subi r26, lo8(-" S(LEAVE_CYCLES) ")\n\t"
 		"sbci r27, hi8(-" S(LEAVE_CYCLES) ")\n\t"
-		"brpl fp_cluster\n\t"
+		"brpl fp_cluster\n"
+	"fp_ocr:\n\t"                                /* OCR1A := r18:r19, then leave */
 		"tst r19\n\t"                          /* simavr: see ocr_value() */
 		"brne 1f\n\t"
 		"cpi r18, 8\n\t"
@@ -531,17 +532,7 @@ ISR(TIMER1_COMPA_vect, ISR_NAKED)
 		"brmi 1f\n\t"
 		"movw r18, r24\n"
 	"1:\n\t"
-		"rjmp fp_arm_c\n"
-	"fp_arm_c:\n\t"
-		"tst r19\n\t"
-		"brne 1f\n\t"
-		"cpi r18, 8\n\t"
-		"brsh 1f\n\t"
-		"ldi r18, 8\n"
-	"1:\n\t"
-		"sts %[ocrh], r19\n\t"
-		"sts %[ocrl], r18\n\t"
-		"rjmp fp_exit\n"
+		"rjmp fp_ocr\n"
 		:
 		: [gp0] "I" (_SFR_IO_ADDR(GPIOR0)), [gp1] "I" (_SFR_IO_ADDR(GPIOR1)),
 		  [gp2] "I" (_SFR_IO_ADDR(GPIOR2)), [pind] "I" (_SFR_IO_ADDR(PIND)),
