@@ -19,7 +19,7 @@
  *    to leave and come back) the pick marks a pair (GPIOR0 FL_PAIR, its time
  *    in board_t2, its pins in GPIOR2) and the same interrupt waits for it;
  *    anything closer than LEAVE_CYCLES when the interrupt ends is waited for
- *    too.  About 160 cycles an event of one motor, all in (fbsim -P).
+ *    too.  About 145 cycles an event of one motor, all in (fbsim -P).
  *  - the C path (__vector_fb_step_slow, mo_event() in fb_motion.c) for everything
  *    else: block boundaries the fast path does not take (an empty queue, a
  *    laser power change, a C-form block, a G92/M17/M18/M280), homing,
@@ -52,6 +52,8 @@
 #define FL_ENDED 1  /* ... and it is the end of a fast block */
 #define FL_PAIR 2   /* the pending fast event has a second edge at board_t2 */
 #define FL_CLOSE 3  /* ... within PAIR_CLOSE cycles: a counted wait of board_gap */
+#define FL_ADONE 4  /* the running fast block's motor A has no step left */
+#define FL_BDONE 5  /* ... and motor B (the fast path's pick reads these) */
 
 uint16_t board_sched;  /* exact timer value of the pending step event */
 uint16_t board_t2;     /* a pair's second edge */
@@ -91,6 +93,7 @@ _Static_assert(offsetof(fb_keep_t, done) == K_DONE &&
 	       offsetof(fb_keep_t, ndone) == K_NDONE,
 	       "fast path keep offsets");
 _Static_assert(MO_PAIR_CYCLES < 200, "the waits of a pair stay below 128 cycles");
+_Static_assert(MO_PAIR_CYCLES < 256, "the fast path compares -d's low byte");
 /* the fast path writes PIND and PORTD */
 #define FB_PORT_IS_D_D 1
 #if !FB_CAT(FB_PORT_IS_D_, PIN_STEP_PORT) || !FB_CAT(FB_PORT_IS_D_, PIN_DIR_PORT)
@@ -104,9 +107,15 @@ _Static_assert(MO_PAIR_CYCLES < 200, "the waits of a pair stay below 128 cycles"
 /* Leave the interrupt only when the next event is at least this far: else
  * it would come while the interrupt is still returning. */
 #define LEAVE_CYCLES 48
-/* A pair's second edge closer than this (after the first edge) is waited
- * for at once; farther, the first motor's bookkeeping runs first. */
+/* A pair's second edge closer than this (after the first edge) is a close
+ * pair: the entry path waits a counted board_gap for it. */
 #define PAIR_CLOSE 80
+/* A farther pair's first motor's bookkeeping runs before the second edge
+ * when that edge is at least this far when the interrupt looks (the
+ * bookkeeping and the wait's set-up take about 56); closer, it waits first
+ * (waiting first whenever the edge was within PAIR_CLOSE spent ~40 cycles of
+ * each pair at 90-110 cycles spinning). */
+#define PAIR_BK1 60
 /* The waits end this many cycles after the event time, so that an edge
  * placed by waiting leaves when an interrupt's would (measured). */
 #define SPIN_LAG 8
@@ -127,7 +136,8 @@ _Static_assert(MO_PAIR_CYCLES < 200, "the waits of a pair stay below 128 cycles"
 #define S(x) S_(x)
 
 /* Z+dst[i] += Z+src[i], 16 bits, the low byte by op ("add", or "adc" to take
- * the carry of the previous one in).  Uses r18, r19, r26, r27. */
+ * the carry of the previous one in).  Leaves the sum in r18:r19.  Uses r18,
+ * r19, r26, r27. */
 #define ADD16_Z(dst, src, i, op) \
 	"ldd r18, Z+" S(dst) "+2*" #i "\n\t" \
 	"ldd r19, Z+" S(dst) "+2*" #i "+1\n\t" \
@@ -138,12 +148,13 @@ _Static_assert(MO_PAIR_CYCLES < 200, "the waits of a pair stay below 128 cycles"
 	"std Z+" S(dst) "+2*" #i "+1, r19\n\t"
 
 /*
- * One motor's step bookkeeping (i = 0 A, 1 B), Z = block: its steps left
- * (the kept record's left[i], which is the kept position's count too) and
- * (unless that was the last) its next time t.tf += q.qf.  The count goes
- * down by its low byte, the high byte only on a borrow or at a low 0 (two
- * cycles fewer a step than a 16-bit load, subtract and store; the busy flag
- * covers the two stores as it covered one).  Uses r18, r19, r26, r27.
+ * One motor's step bookkeeping (i = 0 A, 1 B): its steps left (the kept
+ * record's left[i], which is the kept position's count too) and, unless
+ * that was the last, its next time t.tf += q.qf, left in r18:r19; after the
+ * last, GPIOR0's done bit of the motor is set instead.  The count goes down
+ * by its low byte, the high byte only on a borrow or at a low 0 (two cycles
+ * fewer a step than a 16-bit load, subtract and store; the busy flag covers
+ * the two stores as it covered one).  Uses r18, r19, r26, r27.
  */
 #define STEP_MOTOR(i, L) \
 	"lds r26, %[keep]+" S(K_LEFT) "+2*" #i "\n\t" \
@@ -163,20 +174,27 @@ _Static_assert(MO_PAIR_CYCLES < 200, "the waits of a pair stay below 128 cycles"
 	L "_z:\n\t" \
 	"lds r27, %[keep]+" S(K_LEFT) "+2*" #i "+1\n\t" \
 	"tst r27\n\t" \
-	"brne " L "_t\n" \
+	"brne " L "_t\n\t" \
+	"sbi %[gp0], " S(FL_ADONE) "+" #i "\n" \
 	L "_d:\n\t"
 
 /*
  * Start of the next block's motor i in the kept record (busy set), Z = that
  * block, r26 = its directions: all its steps go into off[i] (negative when
- * direction bit i is set) and into left[i], the ones not issued yet.  Uses
- * r24, r25, r27.
+ * direction bit i is set) and into left[i], the ones not issued yet; the
+ * motor's done bit in GPIOR0 is set when it has none.  Uses r24, r25, r27.
  */
 #define AHEAD_MOTOR(i, L) \
 	"ldd r24, Z+" S(O_CNT) "+2*" #i "\n\t" \
 	"ldd r25, Z+" S(O_CNT) "+2*" #i "+1\n\t" \
 	"sts %[keep]+" S(K_LEFT) "+2*" #i ", r24\n\t" \
 	"sts %[keep]+" S(K_LEFT) "+2*" #i "+1, r25\n\t" \
+	"cbi %[gp0], " S(FL_ADONE) "+" #i "\n\t" \
+	"mov r27, r24\n\t" \
+	"or r27, r25\n\t" \
+	"brne " L "_l\n\t" \
+	"sbi %[gp0], " S(FL_ADONE) "+" #i "\n" \
+	L "_l:\n\t" \
 	"sbrs r26, " #i "\n\t" \
 	"rjmp " L "\n\t" \
 	"com r25\n\tneg r24\n\tsbci r25, 0xff\n" \
@@ -234,42 +252,32 @@ ISR(TIMER1_COMPA_vect, ISR_NAKED)
 		"sbrs r24, " S(STEP_A_BIT) "\n\t"
 		"rjmp fp_steps_b\n\t"
 		STEP_MOTOR(0, "sa")
-	"fp_steps_b:\n\t"
 		"sbrs r24, " S(STEP_B_BIT) "\n\t"
-		"rjmp fp_stepped\n\t"
+		"rjmp fp_pick_a\n"
+	"fp_steps_b:\n\t"
 		STEP_MOTOR(1, "sb")
-	"fp_stepped:\n\t"
+	/* ---- pick the next event (fast_pick() in fb_motion.c); the motor
+	 * stepped last has its next time in r18:r19 unless it is done ---- */
 		"clr r25\n\t"
-		"sts %[keep]+" S(K_BUSY) ", r25\n"
-	/* ---- pick the next event (fast_pick() in fb_motion.c) ---- */
-	"fp_select:\n\t"
-		"lds r18, %[keep]+" S(K_LEFT) "\n\t"
-		"lds r19, %[keep]+" S(K_LEFT) "+1\n\t"
-		"or r18, r19\n\t"                      /* r18 != 0: A live */
-		"lds r26, %[keep]+" S(K_LEFT) "+2\n\t"
-		"lds r27, %[keep]+" S(K_LEFT) "+3\n\t"
-		"or r26, r27\n\t"
-		"brne fp_b_live\n\t"
-		"tst r18\n\t"
-		"brne 1f\n\t"
-		"rjmp fp_block_end\n"
-	"1:\n\t"                                       /* A alone */
+		"sts %[keep]+" S(K_BUSY) ", r25\n\t"
+		"sbic %[gp0], " S(FL_BDONE) "\n\t"
+		"rjmp fp_b_done\n\t"
+		"sbic %[gp0], " S(FL_ADONE) "\n\t"
+		"rjmp fp_arm_b\n\t"
+		"movw r26, r18\n\t"                    /* tB */
 		"ldd r18, Z+" S(O_T) "\n\t"
 		"ldd r19, Z+" S(O_T) "+1\n\t"
-		"ldi r24, " S(1 << STEP_A_BIT) "\n\t"
-		"rjmp fp_arm\n"
-	"fp_b_live:\n\t"
-		"tst r18\n\t"
-		"brne fp_both\n\t"
-		"ldd r18, Z+" S(O_T) "+2\n\t"                /* B alone */
-		"ldd r19, Z+" S(O_T) "+3\n\t"
-		"ldi r24, " S(1 << STEP_B_BIT) "\n\t"
-		"rjmp fp_arm\n"
-	"fp_both:\n\t"
-		"ldd r18, Z+" S(O_T) "\n\t"
-		"ldd r19, Z+" S(O_T) "+1\n\t"
+		"rjmp fp_both\n"
+	"fp_pick_a:\n\t"
+		"clr r25\n\t"
+		"sts %[keep]+" S(K_BUSY) ", r25\n\t"
+		"sbic %[gp0], " S(FL_ADONE) "\n\t"
+		"rjmp fp_a_done\n\t"
+		"sbic %[gp0], " S(FL_BDONE) "\n\t"
+		"rjmp fp_arm_a\n\t"
 		"ldd r26, Z+" S(O_T) "+2\n\t"
-		"ldd r27, Z+" S(O_T) "+3\n\t"
+		"ldd r27, Z+" S(O_T) "+3\n"
+	"fp_both:\n\t"                                 /* r18:r19 = tA, r26:r27 = tB */
 		"sub r26, r18\n\t"
 		"sbc r27, r19\n\t"                     /* d = tB - tA */
 		"brmi fp_b_first\n\t"
@@ -288,22 +296,20 @@ ISR(TIMER1_COMPA_vect, ISR_NAKED)
 		"adc r27, r19\n\t"
 		"ldi r25, " S(1 << STEP_B_BIT) "\n\t"
 		"rjmp fp_pair_set\n"
+	"fp_b_far:\n\t"
+		"ldi r24, " S(1 << STEP_B_BIT) "\n\t"
+		"rjmp fp_arm\n"
 	"fp_b_first:\n\t"                              /* B first, A -d later */
-		"movw r18, r26\n\t"
-		"ldd r26, Z+" S(O_T) "\n\t"
-		"ldd r27, Z+" S(O_T) "+1\n\t"
+		"movw r24, r18\n\t"                    /* tA */
 		"add r18, r26\n\t"
 		"adc r19, r27\n\t"                     /* r18:r19 = tB */
+		"com r27\n\tneg r26\n\tsbci r27, 0xff\n\t" /* -d */
+		"tst r27\n\t"
+		"brne fp_b_far\n\t"
+		"cpi r26, " S(MO_PAIR_CYCLES) "\n\t"
+		"brsh fp_b_far\n\t"
+		"movw r26, r24\n\t"
 		"ldi r24, " S(1 << STEP_B_BIT) "\n\t"
-		"movw r30, r26\n\t"                    /* (Z is reloaded below) */
-		"sub r30, r18\n\t"
-		"sbc r31, r19\n\t"                     /* -d */
-		"cpi r30, " S(MO_PAIR_CYCLES) "\n\t"
-		"ldi r25, 0\n\t"
-		"cpc r31, r25\n\t"
-		"lds r30, %[cur]\n\t"
-		"lds r31, %[cur]+1\n\t"
-		"brsh fp_arm\n\t"
 		"ldi r25, " S(1 << STEP_A_BIT) "\n"
 	"fp_pair_set:\n\t"                             /* second edge: r26:r27, pins r25 */
 		"sts %[t2], r26\n\t"
@@ -359,6 +365,33 @@ ISR(TIMER1_COMPA_vect, ISR_NAKED)
 		"pop r25\n\t"
 		"pop r24\n\t"
 		"reti\n"
+	"fp_a_done:\n\t"
+		"sbic %[gp0], " S(FL_BDONE) "\n\t"
+		"rjmp fp_block_end\n\t"
+		"ldd r18, Z+" S(O_T) "+2\n\t"     /* B alone */
+		"ldd r19, Z+" S(O_T) "+3\n"
+	"fp_arm_b:\n\t"
+		"ldi r24, " S(1 << STEP_B_BIT) "\n\t"
+		"rjmp fp_arm\n"
+	"fp_b_done:\n\t"
+		"sbic %[gp0], " S(FL_ADONE) "\n\t"
+		"rjmp fp_block_end\n\t"
+		"ldd r18, Z+" S(O_T) "\n\t"       /* A alone */
+		"ldd r19, Z+" S(O_T) "+1\n"
+	"fp_arm_a:\n\t"
+		"ldi r24, " S(1 << STEP_A_BIT) "\n\t"
+		"rjmp fp_arm\n"
+	/* the pick from nothing in registers (a new block) */
+	"fp_select:\n\t"
+		"sbic %[gp0], " S(FL_ADONE) "\n\t"
+		"rjmp fp_a_done\n\t"
+		"ldd r18, Z+" S(O_T) "\n\t"
+		"ldd r19, Z+" S(O_T) "+1\n\t"
+		"sbic %[gp0], " S(FL_BDONE) "\n\t"
+		"rjmp fp_arm_a\n\t"
+		"ldd r26, Z+" S(O_T) "+2\n\t"
+		"ldd r27, Z+" S(O_T) "+3\n\t"
+		"rjmp fp_both\n"
 	/* ---- the next event is too close to leave: wait for it here ---- */
 	"fp_cluster:\n\t"
 		"lds r26, %[tl]\n\t"
@@ -420,8 +453,8 @@ ISR(TIMER1_COMPA_vect, ISR_NAKED)
 		"lds r27, %[th]\n\t"
 		"sub r26, r18\n\t"
 		"sbc r27, r19\n\t"                     /* now - t2 */
-		"subi r26, lo8(-" S(PAIR_CLOSE) ")\n\t"
-		"sbci r27, hi8(-" S(PAIR_CLOSE) ")\n\t"
+		"subi r26, lo8(-" S(PAIR_BK1) ")\n\t"
+		"sbci r27, hi8(-" S(PAIR_BK1) ")\n\t"
 		"brmi 3f\n\t"
 		"rjmp fp_pair_close\n"
 	"3:\n\t"
@@ -581,6 +614,10 @@ static void fast_start(uint16_t base)
 		}
 	}
 	GPIOR1 = pins;
+	if (!mo_cur->f.cnt[0])
+		flags |= (uint8_t)(1u << FL_ADONE);
+	if (!mo_cur->f.cnt[1])
+		flags |= (uint8_t)(1u << FL_BDONE);
 	GPIOR0 = flags;
 	/* A start from a stop whose first step the C path has (nearly) run
 	 * past (boundary() and the first block's setup take longer than half a

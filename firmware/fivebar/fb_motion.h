@@ -166,7 +166,10 @@ uint16_t mo_event(void);
  * Returns 1 when the block starts from a stop (the first after mo_start()):
  * only then may the board start its whole timeline later.
  */
-#define MO_PAIR_CYCLES 180
+/* 120: a step farther behind the previous one than that gets an interrupt of
+ * its own (the waits for pairs at 120-180 took more of the CPU than the
+ * extra interrupts; measured with benchmarks/firmware.py --at 55) */
+#define MO_PAIR_CYCLES 120
 uint8_t mo_fast_begin(uint16_t base, uint16_t *t, uint8_t *bits, uint16_t *t2, uint8_t *bits2);
 /* The fast interrupt stepped the running block to its end (its boundary is
  * the pending event): the next mo_event() call handles that boundary. */
