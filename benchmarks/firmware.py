@@ -292,7 +292,8 @@ def fixed_rate_table(build: sim.BuildPaths, ratios: tuple[float, ...], rate: int
     for ratio in ratios:
         res = run_rate_tries(build, rate, round(rate * ratio), tmp, pen)
         jit = f"{res.max_dev} / {res.rms_dev:.1f}   {res.interval_rms:6.1f}" if res.ok else ""
-        print(f"    1:{ratio:<5g} {res.reason:>8s}   {jit}")
+        tries = f"   (attempt {res.attempts} of {ATTEMPTS})" if res.attempts > 1 else ""
+        print(f"    1:{ratio:<5g} {res.reason:>8s}   {jit}{tries}")
         if res.ok:
             print_timing(res)
 
