@@ -207,6 +207,21 @@ _Static_assert(MO_PAIR_CYCLES < 256, "the fast path compares -d's low byte");
 	"sts %[keep]+" S(K_OFF) "+2*" #i "+1, r25\n\t"
 
 /*
+ * The pick when the other motor is done (entered at Done): the block ends
+ * when motor i is done too, else motor i's next step is the event (entered
+ * at Arm with its time already in r18:r19).
+ */
+#define ALONE(i, Done, Arm) \
+	Done ":\n\t" \
+	"sbic %[gp0], " S(FL_ADONE) "+" #i "\n\t" \
+	"rjmp fp_block_end\n\t" \
+	"ldd r18, Z+" S(O_T) "+2*" #i "\n\t" \
+	"ldd r19, Z+" S(O_T) "+2*" #i "+1\n" \
+	Arm ":\n\t" \
+	"ldi r24, 1 << (" S(STEP_A_BIT) "+(" #i ")*(" S(STEP_B_BIT) "-" S(STEP_A_BIT) "))\n\t" \
+	"rjmp fp_arm\n"
+
+/*
  * Wait until the timer reaches r18:r19 + SPIN_LAG (at once when past).  The
  * remaining wait is below 128 cycles, so the loop compares low bytes only
  * (5 cycles a turn).  Uses r26, r27.
@@ -365,22 +380,8 @@ ISR(TIMER1_COMPA_vect, ISR_NAKED)
 		"pop r25\n\t"
 		"pop r24\n\t"
 		"reti\n"
-	"fp_a_done:\n\t"
-		"sbic %[gp0], " S(FL_BDONE) "\n\t"
-		"rjmp fp_block_end\n\t"
-		"ldd r18, Z+" S(O_T) "+2\n\t"     /* B alone */
-		"ldd r19, Z+" S(O_T) "+3\n"
-	"fp_arm_b:\n\t"
-		"ldi r24, " S(1 << STEP_B_BIT) "\n\t"
-		"rjmp fp_arm\n"
-	"fp_b_done:\n\t"
-		"sbic %[gp0], " S(FL_ADONE) "\n\t"
-		"rjmp fp_block_end\n\t"
-		"ldd r18, Z+" S(O_T) "\n\t"       /* A alone */
-		"ldd r19, Z+" S(O_T) "+1\n"
-	"fp_arm_a:\n\t"
-		"ldi r24, " S(1 << STEP_A_BIT) "\n\t"
-		"rjmp fp_arm\n"
+		ALONE(1, "fp_a_done", "fp_arm_b")
+		ALONE(0, "fp_b_done", "fp_arm_a")
 	/* the pick from nothing in registers (a new block) */
 	"fp_select:\n\t"
 		"sbic %[gp0], " S(FL_ADONE) "\n\t"
