@@ -173,7 +173,6 @@ uint16_t mo_pen_unpark(void)
 }
 
 uint8_t mo_pen_down(void) { return p_target != p_park; }
-uint16_t mo_pen(void) { return (uint16_t)(p_now16 >> 4); }
 uint16_t mo_pen_target(void) { return p_target; }
 
 uint16_t mo_pen_frame(void)
@@ -204,15 +203,8 @@ void mo_init(void)
 
 uint8_t mo_queue_count(void) { return (uint8_t)((mo_q_head - mo_q_tail) & 0xffu); }
 
-uint8_t mo_queue_waiting(void)
-{
-	uint8_t sreg = board_irq_save();
-	uint8_t n = (uint8_t)(mo_queue_count() - (mo_cur ? 1u : 0u));
-	board_irq_restore(sreg);
-	return n;
-}
-
 uint8_t mo_queue_free(void) { return (uint8_t)(CFG_QUEUE_SIZE - mo_queue_count()); }
+
 fb_block_t *mo_slot(void)
 {
 	fb_block_t *b = &mo_queue[mo_q_head & QMASK];
@@ -703,19 +695,33 @@ void mo_get_pos(int32_t pos[2])
 		pos[i] = base[i] + off[i] + ((fdirs & (1u << i)) ? (int32_t)left[i] : -(int32_t)left[i]);
 }
 
+void mo_status(mo_status_t *st)
+{
+	/* The position moves with every step: its own copy.  The rest changes
+	 * together at a block switch: one raw copy with interrupts off (every
+	 * cycle off delays a step edge), worked out after. */
+	mo_get_pos(st->pos);
+	uint8_t sreg = board_irq_save();
+	uint32_t done = K.done, underruns = s_underruns;
+	uint16_t pen16 = p_now16;
+	uint8_t head = mo_q_head, tail = mo_q_tail, laser = s_laser, running = s_running;
+	uint8_t cur = mo_cur != 0;
+	board_irq_restore(sreg);
+	uint8_t count = (uint8_t)(head - tail);
+	st->done = done;
+	st->underruns = underruns;
+	st->pen = (uint16_t)(pen16 >> 4);
+	st->waiting = (uint8_t)(count - cur);
+	st->busy = (uint8_t)(running || count);
+	st->laser = laser;
+	st->homed = K.homed;
+}
+
 void mo_set_pos(const int32_t pos[2])
 {
 	uint8_t sreg = board_irq_save();
 	keep_write(pos[0], pos[1], K.done, K.homed);
 	board_irq_restore(sreg);
-}
-
-uint32_t mo_done_line(void)
-{
-	uint8_t sreg = board_irq_save();
-	uint32_t v = K.done;
-	board_irq_restore(sreg);
-	return v;
 }
 
 void mo_clear_done(void)
@@ -725,16 +731,7 @@ void mo_clear_done(void)
 	board_irq_restore(sreg);
 }
 
-uint32_t mo_underruns(void)
-{
-	uint8_t sreg = board_irq_save();
-	uint32_t v = s_underruns;
-	board_irq_restore(sreg);
-	return v;
-}
-
 uint8_t mo_laser(void) { return s_laser; }
-uint8_t mo_homed(void) { return K.homed; }
 
 void mo_set_homed(uint8_t on)
 {

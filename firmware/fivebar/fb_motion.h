@@ -88,9 +88,8 @@ void mo_init(void);
 uint8_t mo_boot(uint8_t power_on);
 
 /* Queue: the main loop fills mo_slot() and then calls mo_push().  The count
- * includes the block executing now; mo_queue_waiting() does not. */
+ * includes the block executing now; mo_status_t.waiting does not. */
 uint8_t mo_queue_count(void);
-uint8_t mo_queue_waiting(void);
 uint8_t mo_queue_free(void);
 fb_block_t *mo_slot(void);
 void mo_push(void);
@@ -135,8 +134,6 @@ void mo_pen_park(void);
 uint16_t mo_pen_unpark(void);
 /* The pen is away from its park position (a lowered pen). */
 uint8_t mo_pen_down(void);
-/* The pulse width output now, us (0 = none). */
-uint16_t mo_pen(void);
 /* The target of the pen (where the last executed M280 or a park sent it). */
 uint16_t mo_pen_target(void);
 /* The servo frame's interrupt calls this every CFG_SERVO_FRAME_MS: one step
@@ -207,18 +204,34 @@ uint8_t mo_running(void);
  * a step interrupt that stopped while the generator runs stops the feeding.
  */
 uint8_t mo_alive(void);
+/*
+ * What a status report shows of the motion.  The fields a block switch
+ * changes (Ln done, queue, laser, underruns) are copied together with
+ * interrupts off so they belong to one instant: read one by one, a switch
+ * between two reads showed a block's Ln done with the next block's laser
+ * power.  The position is copied just before them.
+ */
+typedef struct {
+	int32_t pos[2];     /* steps */
+	uint32_t done;      /* Ln done */
+	uint32_t underruns;
+	uint16_t pen;       /* servo pulse output now, us (0 = none) */
+	uint8_t waiting;    /* blocks queued behind the one executing */
+	uint8_t busy;       /* running, or blocks queued */
+	uint8_t laser;      /* power now */
+	uint8_t homed;      /* see mo_set_homed */
+} mo_status_t;
+void mo_status(mo_status_t *st);
 void mo_get_pos(int32_t pos[2]);
 /* Only while stopped. */
 void mo_set_pos(const int32_t pos[2]);
-uint32_t mo_done_line(void);
 /* Ln done := 0 (Ctrl-X). */
 void mo_clear_done(void);
-uint32_t mo_underruns(void);
 uint8_t mo_laser(void);
-/* The position was set since power-on: a G92 block executed (set here, in the
- * step interrupt) or a homing completed (fb_main).  mo_init() keeps it, as a
- * Ctrl-X keeps the position, and so does a reset that keeps the record. */
-uint8_t mo_homed(void);
+/* mo_status_t.homed: the position was set since power-on: a G92 block
+ * executed (set here, in the step interrupt) or a homing completed (fb_main).
+ * mo_init() keeps it, as a Ctrl-X keeps the position, and so does a reset that
+ * keeps the record. */
 void mo_set_homed(uint8_t on);
 /* Endstop supervision outside homing (the $7 setting): a motor stepping
  * towards its switch (negative where seek_neg has its bit) while the switch

@@ -66,8 +66,8 @@ void reply_error(uint8_t code)
 
 void status_report(void)
 {
-	int32_t pos[2];
-	mo_get_pos(pos);
+	mo_status_t st;
+	mo_status(&st);
 	board_tx('<');
 	if (alarm_code) {
 		put_P(FB_PSTR("Alarm:"));
@@ -77,29 +77,29 @@ void status_report(void)
 	} else if (held) {
 		put_P(FB_PSTR("Hold:"));
 		put_u32(hold_reason);
-	} else if (mo_running() || mo_queue_count()) {
+	} else if (st.busy) {
 		put_P(FB_PSTR("Run"));
 	} else {
 		put_P(FB_PSTR("Idle"));
 	}
 	put_P(FB_PSTR("|A:"));
-	put_i32(pos[0]);
+	put_i32(st.pos[0]);
 	put_P(FB_PSTR(",B:"));
-	put_i32(pos[1]);
+	put_i32(st.pos[1]);
 	put_P(FB_PSTR("|Q:"));
-	put_u32(mo_queue_waiting());
+	put_u32(st.waiting);
 	put_P(FB_PSTR("|Ln:"));
-	put_u32(mo_done_line());
+	put_u32(st.done);
 	board_tx(',');
 	put_u32(lines.last);
 	put_P(FB_PSTR("|L:"));
-	put_u32(mo_laser());
+	put_u32(st.laser);
 	put_P(FB_PSTR("|U:"));
-	put_u32(mo_underruns());
+	put_u32(st.underruns);
 	put_P(FB_PSTR("|H:"));
-	board_tx(mo_homed() ? '1' : '0');
+	board_tx(st.homed ? '1' : '0');
 	put_P(FB_PSTR("|P:"));
-	put_u32(mo_pen());
+	put_u32(st.pen);
 	board_tx('>');
 	put_eol();
 }

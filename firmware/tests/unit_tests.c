@@ -25,6 +25,14 @@ static int failures, checks;
 #define CHECK(cond, ...) do { checks++; if (!(cond)) { failures++; \
 	printf("FAIL %s:%d: ", __FILE__, __LINE__); printf(__VA_ARGS__); printf("\n"); } } while (0)
 
+/* The motion's status fields, as one report would show them. */
+static mo_status_t motion(void)
+{
+	mo_status_t st;
+	mo_status(&st);
+	return st;
+}
+
 /* ---- parser ------------------------------------------------------------------ */
 
 static uint8_t parse(fb_lines_t *ln, const char *s, fb_cmd_t *c)
@@ -517,8 +525,8 @@ static void run_job(const seg_t *segs, size_t n, uint32_t min_interval)
 	mo_get_pos(pos);
 	CHECK(pos[0] == want[0] && pos[1] == want[1], "position %d,%d want %d,%d", pos[0], pos[1],
 	      want[0], want[1]);
-	CHECK(mo_done_line() == n, "last done line %u", mo_done_line());
-	CHECK(mo_underruns() == 1, "one stop at the end of the job");
+	CHECK(motion().done == n, "last done line %u", motion().done);
+	CHECK(motion().underruns == 1, "one stop at the end of the job");
 }
 
 static void test_dda_exact(void)
@@ -575,7 +583,7 @@ static void test_delays_bounded(void)
 		fake_timer_delay = d;
 	}
 	CHECK(max_delay <= MO_MAX_DELAY && MO_MAX_DELAY < 32768u - 1024u, "delay %u", max_delay);
-	CHECK(mo_done_line() == 3, "job finished");
+	CHECK(motion().done == 3, "job finished");
 }
 
 static void test_too_fast(void)
@@ -1159,7 +1167,7 @@ static void test_kept_record(void)
 		reboot(0);
 		int32_t pos[2];
 		mo_get_pos(pos);
-		CHECK(pos[0] == 0 && pos[1] == 0 && !mo_homed() && mo_done_line() == 0,
+		CHECK(pos[0] == 0 && pos[1] == 0 && !motion().homed && motion().done == 0,
 		      "round %d: random RAM taken for a record", round);
 	}
 }
@@ -1178,7 +1186,7 @@ static void test_reset_during_homing(void)
 		reboot(1);
 		expect("$7=1\n$12=10\n$8=40000\nG92 A5 B5\n", "ok\r\nok\r\nok\r\nok\r\n");
 		tick(100);
-		CHECK(mo_homed(), "k=%d: G92 set H", k);
+		CHECK(motion().homed, "k=%d: G92 set H", k);
 		send("$H\n");
 		snapped = 0;
 		fake_irq_hook = snapshot_isr;
@@ -1194,8 +1202,8 @@ static void test_reset_during_homing(void)
 		int32_t pos[2];
 		mo_get_pos(pos);
 		/* Ln done: the G92's line, or the $H's once a homing move ended */
-		CHECK(!mo_homed() && (mo_done_line() == 4 || mo_done_line() == 5),
-		      "k=%d: H %u, Ln done %u", k, mo_homed(), mo_done_line());
+		CHECK(!motion().homed && (motion().done == 4 || motion().done == 5),
+		      "k=%d: H %u, Ln done %u", k, motion().homed, motion().done);
 		CHECK(pos[0] == pos[1] && (pos[0] == 5 || (pos[0] <= 0 && pos[0] >= -10)),
 		      "k=%d: position %d,%d", k, pos[0], pos[1]);
 		if (pos[0] != last)
@@ -1331,7 +1339,7 @@ static void test_pen(void)
 	fake_nsteps = 0;
 	expect("M280 S1000 R200 D100\nG1 A10 P10000\n", "ok\r\nok\r\n");
 	run_ms(100);
-	CHECK(mo_pen() < 1800 && mo_pen() > 1000, "the pulse moves: %u", mo_pen());
+	CHECK(motion().pen < 1800 && motion().pen > 1000, "the pulse moves: %u", motion().pen);
 	CHECK(fake_nsteps == 0, "no step while the pen moves");
 	run_ms(1000);
 	CHECK(fake_nsteps == 10, "the segment ran: %zu steps", fake_nsteps);
@@ -1345,9 +1353,9 @@ static void test_pen(void)
 	run_ms(50);
 	size_t before = fake_nsteps;
 	expect("!", "");
-	CHECK(mo_pen() == 1800, "hold parks the pen: %u", mo_pen());
+	CHECK(motion().pen == 1800, "hold parks the pen: %u", motion().pen);
 	expect("~", "");
-	CHECK(mo_pen() == 1000, "'~' lowers it again");
+	CHECK(motion().pen == 1000, "'~' lowers it again");
 	run_ms(200);
 	CHECK(fake_nsteps == before, "no step before the pen's time is over");
 	expect("?", "<Hold:0|A:15,B:0|Q:0|Ln:5,6|L:0|U:1|H:0|P:1000>\r\n");
@@ -1360,7 +1368,7 @@ static void test_pen(void)
 	/* host silence with the pen down parks it, idle or not */
 	fake_ms += DEF_LASER_TIMEOUT + 1;
 	fb_poll();
-	CHECK(mo_pen() == 1800, "silence parks an idle pen: %u", mo_pen());
+	CHECK(motion().pen == 1800, "silence parks an idle pen: %u", motion().pen);
 	expect("M280 S1000\nG1 A30 P10000000\n", "ok\r\nok\r\n");
 	run_ms(100);
 	fake_ms += DEF_LASER_TIMEOUT + 1;
@@ -1370,10 +1378,10 @@ static void test_pen(void)
 	/* Ctrl-X parks and forgets: '~' has nothing to lower */
 	send("\x18");
 	expect("", BANNER);
-	CHECK(mo_pen() == 1800 && !mo_pen_down(), "reset parks");
+	CHECK(motion().pen == 1800 && !mo_pen_down(), "reset parks");
 	expect("M280 S900 D50\n", "ok\r\n");
 	run_ms(100);
-	CHECK(mo_pen() == 900, "down at once without R");
+	CHECK(motion().pen == 900, "down at once without R");
 	/* an alarm parks */
 	expect("$7=1\n", "ok\r\n");
 	fake_endstops = 1;
@@ -1381,7 +1389,7 @@ static void test_pen(void)
 	run_ms(200);
 	const char *out = poll_out(5);
 	CHECK(strstr(out, "ALARM:30") != 0 || mo_alarm() == 0, "alarm raised: '%s'", out);
-	CHECK(mo_pen() == 1800, "alarm parks: %u", mo_pen());
+	CHECK(motion().pen == 1800, "alarm parks: %u", motion().pen);
 	fake_endstops = 0;
 	expect("$X\n$7=0\n", "ok\r\nok\r\n");
 
@@ -1393,17 +1401,17 @@ static void test_pen(void)
 	fake_power_on = 0;
 	fb_setup();
 	fake_take_tx();
-	CHECK(mo_pen() == 1800, "a reset that keeps the RAM parks: %u", mo_pen());
+	CHECK(motion().pen == 1800, "a reset that keeps the RAM parks: %u", motion().pen);
 	uint16_t ee = fake_ee_park;
 	fake_reset();
 	fake_ee_park = ee;
 	fb_setup();
 	fake_take_tx();
-	CHECK(mo_pen() == 1800, "a power-on parks at the stored value: %u", mo_pen());
+	CHECK(motion().pen == 1800, "a power-on parks at the stored value: %u", motion().pen);
 	fake_reset();
 	fb_setup();
 	fake_take_tx();
-	CHECK(mo_pen() == DEF_PEN_PARK, "blank EEPROM: the default %u", mo_pen());
+	CHECK(motion().pen == DEF_PEN_PARK, "blank EEPROM: the default %u", motion().pen);
 }
 
 int main(void)

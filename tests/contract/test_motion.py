@@ -95,6 +95,31 @@ def test_laser_power_per_segment_in_status(device: Device) -> None:
     assert done.laser_periods == 2
 
 
+def test_status_fields_are_one_instant(device: Device) -> None:
+    """`Ln` done and `L` in one report are read at one instant (protocol section 7).
+
+    Rounds of short blocks, each with its own power, polled throughout: whenever the laser
+    is on, the power shown is that of the first block after the one `Ln` says is done.
+    Reading the fields one by one, a block switch between the two reads shows the next
+    block's power.
+    """
+    s = device.session
+    assert s.send("M3") == Ok()  # line 1
+    n, rounds, first = device.banner.queue, 50, 2
+    checked = 0
+    for _ in range(rounds):
+        power = {first + i: 1 + (first + i) % 250 for i in range(n)}
+        lines = [f"G1 P1000 S{power[k]}" for k in sorted(power)]
+        assert s.stream(lines, numbered_from=first) == [Ok()] * n
+        while (r := s.status()).state != "Idle" or r.queued:
+            if r.laser:
+                running = min(k for k in power if k > r.done_line)
+                assert r.laser == power[running], r
+                checked += 1
+        first += n
+    assert checked >= rounds // 4, checked  # the check really ran
+
+
 # --------------------------------------------------------------------------- real-time bytes
 
 
