@@ -184,9 +184,11 @@ class SimMachine:
             self.emulator.control("flush")
 
     def trace(self) -> Trace:
-        """The pin trace of every open so far (flushed first while the harness runs)."""
+        """The pin trace of every open so far (flushed first while the harness runs; it may
+        write on meanwhile, so a running harness's trace ends at its last complete line)."""
+        live = self.running
         self.flush()
-        return read_trace(self.trace_path)
+        return read_trace(self.trace_path, live=live)
 
     def power_cut(self) -> None:
         """Cut the controller's power and power it up: its RAM comes back random, so the

@@ -200,6 +200,14 @@ def parse_trace(text: str, dir_invert: tuple[bool, bool] = (False, False)) -> Tr
     return trace
 
 
-def read_trace(path: str | Path, dir_invert: tuple[bool, bool] = (False, False)) -> Trace:
-    """Read and parse a trace file written by ``fbsim -t``."""
-    return parse_trace(Path(path).read_text(encoding="ascii"), dir_invert)
+def read_trace(path: str | Path, dir_invert: tuple[bool, bool] = (False, False),
+               live: bool = False) -> Trace:
+    """Read and parse a trace file written by ``fbsim -t``.
+
+    ``live``: the harness is still writing it, so its buffer may have gone out in the middle
+    of a line; the trace then ends at the last complete line. A finished trace with a cut
+    line is an error."""
+    text = Path(path).read_text(encoding="ascii")
+    if live:
+        text = text[:text.rfind("\n") + 1]
+    return parse_trace(text, dir_invert)

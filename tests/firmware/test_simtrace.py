@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
-from fivebar_host.devices.simtrace import Step, TraceError, parse_trace
+from fivebar_host.devices.simtrace import Step, TraceError, parse_trace, read_trace
 
 TRACE = """\
 # fbsim trace v1 freq=16000000
@@ -56,3 +58,13 @@ def test_laser_pulses_merge_into_intervals() -> None:
 def test_malformed_trace_is_refused(bad: str) -> None:
     with pytest.raises(TraceError):
         parse_trace(bad)
+
+
+def test_a_live_trace_ends_at_its_last_complete_line(tmp_path: Path) -> None:
+    """A running harness's buffer can go out mid-line: a live read drops the cut line, a
+    finished trace with one is refused."""
+    path = tmp_path / "pins.trace"
+    path.write_text(TRACE + "9600 ste", encoding="ascii")
+    assert read_trace(path, live=True).changes == parse_trace(TRACE).changes
+    with pytest.raises(TraceError, match="9600 ste"):
+        read_trace(path)
