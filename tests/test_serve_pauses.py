@@ -103,10 +103,36 @@ def test_copies_with_a_page_delay_run_the_job_twice(daemon: Callable[..., Daemon
     job = compiled(tmp_path)
     j = c.submit(SVG, "layers.svg", plot_options(copies=2, page_delay_s=0.2, confirm=True))
     assert j["estimated_s"] == pytest.approx(2 * job.total_time_s + 0.2, rel=1e-6)
-    done = follow(c, j["id"], lambda x: None, max_s=60)
+    assert (j["options"]["copies"], j["options"]["page_delay_s"]) == (2, 0.2)  # every option
+    copy_seen: list[int] = []
+    done = follow(c, j["id"], lambda x: copy_seen.append(x["copy_number"]), poll_s=0.05,
+                  max_s=60)
     assert done["state"] == "done", done
+    assert copy_seen == sorted(copy_seen) and done["copy_number"] == 2, copy_seen
     assert np.array_equal(moved_steps("cp"), 2 * plan_steps(job))
     assert mock.machine("cp").phys == [0, 0]
+
+
+def test_plot_server_progress_counts_every_copy() -> None:
+    """`plot --server`'s bar runs over all copies, its text naming the copy (as `plot`)."""
+    from fivebar_host.cli.remote import _bar_updater
+
+    class Bar:
+        def __init__(self) -> None:
+            self.pos, self.text = 0, ""
+
+        def update(self, n: int, text: str) -> None:
+            self.pos, self.text = self.pos + n, text
+
+    bar = Bar()
+    update = _bar_updater(bar)
+    view = {"segments_total": 10, "elapsed_s": 1.0, "remaining_s": 5.0, "state": "running",
+            "options": {"copies": 3}}
+    update({**view, "copy_number": 1, "segments_done": 10})
+    update({**view, "copy_number": 2, "segments_done": 4})
+    assert bar.pos == 14 and bar.text.startswith("copy 2/3, segment 4/10"), bar.text
+    update({**view, "copy_number": 2, "segments_done": 3})  # never back
+    assert bar.pos == 14
 
 
 def test_plot_server_asks_for_the_pen_change_on_a_terminal(

@@ -102,14 +102,14 @@ def plan() -> tuple[Any, np.ndarray]:
     return job, np.abs(np.diff(job.steps, axis=0)).sum(axis=0)
 
 
-def wait_segments(client: ServerClient, job_id: int, n: int) -> dict[str, Any]:
+def wait_segments(client: ServerClient, job_id: int, n: int, copy: int = 1) -> dict[str, Any]:
     deadline = time.monotonic() + 30
     while time.monotonic() < deadline:
         j = client.job(job_id)
-        if j["segments_done"] >= n:
+        if j["copy_number"] > copy or (j["copy_number"] == copy and j["segments_done"] >= n):
             return j
         time.sleep(0.02)
-    raise AssertionError(f"job {job_id} never reached segment {n}")
+    raise AssertionError(f"job {job_id} never reached segment {n} of copy {copy}")
 
 
 def restart_and_finish(tmp_path: Path, device: Device, job_id: int) -> dict[str, Any]:
@@ -149,6 +149,41 @@ def test_sigkill_mid_job_then_restart_resumes_exactly(tmp_path: Path, device: De
     assert led["steps_net"] == [0, 0] and led["position"] == [0, 0]
     assert led["partial_blocks"] == 0  # no segment cut short, none drawn twice
     assert led["blocks"] == job.n_segments
+    assert led["boots"] == 1
+
+
+def kill(d: DaemonProc) -> None:
+    os.kill(d.proc.pid, signal.SIGKILL)
+    d.proc.wait(10)
+    d.log.close()
+
+
+@pytest.mark.parametrize("during", ["copy 2", "page delay"])
+def test_sigkill_in_a_later_copy_resumes_in_that_copy(tmp_path: Path, device: Device,
+                                                      during: str) -> None:
+    """Copies: a crash in the second copy, or in the page delay before it, resumes in the
+    second copy; nothing of the first is drawn again and no third copy follows."""
+    job, steps_plan = plan()
+    d = DaemonProc(tmp_path, device.link, "first")
+    j = d.client.submit(SQUARE.read_bytes(), "square.gcode",
+                        plot_options(confirm=True, copies=2, page_delay_s=3.0))
+    if during == "copy 2":
+        seen = wait_segments(d.client, j["id"], 40, copy=2)
+        assert (seen["copy_number"], seen["state"]) == (2, "running"), seen
+    else:
+        seen = wait_segments(d.client, j["id"], job.n_segments)
+        assert (seen["copy_number"], seen["state"]) == (1, "running"), seen
+    kill(d)
+    held = restart_and_finish(tmp_path, device, j["id"])
+    rp = held["resume"]
+    assert rp is not None and rp["position"] is not None and rp["copy_number"] == 2, held
+    assert "of copy 2 of 2" in held["message"], held
+    if during == "page delay":
+        assert rp["next_segment"] == 0 and "copy 1 of 2 was finished" in held["message"]
+    assert rp["position"] == job.steps[rp["next_segment"]].tolist()
+    led = device.ledger()
+    assert led["steps_abs"] == (2 * steps_plan).tolist(), (led, steps_plan)
+    assert led["partial_blocks"] == 0 and led["blocks"] == 2 * job.n_segments
     assert led["boots"] == 1
 
 

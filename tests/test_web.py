@@ -191,12 +191,14 @@ def test_pause_resume_reorder_cancel_delete(browser: Any, tmp_path: Path) -> Non
         open_page(d, dm.url)
         css(d, "#file").send_keys(str(SIMPLE))  # the file picker
         css(d, "#opt-confirm").click()
+        d.execute_script("document.getElementById('opt-copies').value = '2'")
         job1 = check_and_queue(d)
         wait(d, lambda d: d.execute_script("return fivebar.status && fivebar.status.live "
                                            "&& fivebar.status.live.segments_done > 10"),
              what="the job under way")
         css(d, "#live-buttons button").click()  # Pause
         wait(d, lambda d: job_state(d, job1) == "paused", what="paused")
+        assert text(d, "#seg").startswith("copy 1 of 2 · segment "), text(d, "#seg")
         c = ServerClient(dm.url)
         wait(d, lambda d: c.status()["machine"]["state"] == "Hold", what="the machine held")
         assert c.status()["machine"]["laser"] == 0

@@ -106,7 +106,8 @@ def _follow_with_bar(client: Any, job: dict[str, Any]) -> dict[str, Any]:
 
     previous = signal.signal(signal.SIGINT, on_sigint)
     try:
-        with click.progressbar(length=int(job["segments_total"]), label="plotting",
+        copies = int(job["options"].get("copies", 1))
+        with click.progressbar(length=int(job["segments_total"]) * copies, label="plotting",
                                show_eta=False, show_percent=True,
                                item_show_func=lambda s: s) as bar:
             bar_update = _bar_updater(bar)
@@ -164,14 +165,18 @@ def _ask_pen_change(client: Any, job: dict[str, Any]) -> bool:
 
 
 def _bar_updater(bar: Any) -> Callable[[dict[str, Any]], None]:
-    """A `follow` callback that advances the progress bar."""
+    """A `follow` callback that advances the progress bar (over all copies; the text names
+    the copy when there are several, as the local `plot` does)."""
     state = {"done": 0}
 
     def on_update(j: dict[str, Any]) -> None:
-        done = int(j["segments_done"])
+        total, copy = int(j["segments_total"]), int(j.get("copy_number", 1))
+        copies = int(j["options"].get("copies", 1))
+        done = (copy - 1) * total + int(j["segments_done"])
         if done > state["done"] or j["state"] != "running":
+            of = f"copy {copy}/{copies}, " if copies > 1 else ""
             bar.update(max(0, done - state["done"]),
-                       f"segment {done}/{j['segments_total']}, "
+                       f"{of}segment {j['segments_done']}/{total}, "
                        f"{j['elapsed_s']:.0f} s elapsed, "
                        f"≈ {j['remaining_s'] or 0:.0f} s left"
                        + ("" if j["state"] == "running" else f" ({j['state']})"))

@@ -150,7 +150,8 @@ def run_job(link: Link, job: Job, profile: Profile, *, drawing: str | Path, lase
             overrides: Overrides | None = None,
             on_pause: Callable[[LayerPause], bool] | None = None,
             copies: Copies | None = None,
-            on_wait: Callable[[float], None] | None = None) -> SendReport:
+            on_wait: Callable[[float], None] | None = None,
+            on_copy: Callable[[int], None] | None = None) -> SendReport:
     """Stream `job` (or its remainder with `resume`) and wait until the machine is idle.
 
     `confirm` answers the first-start question "are the arms at the home pose?" (the CLI's
@@ -170,7 +171,8 @@ def run_job(link: Link, job: Job, profile: Profile, *, drawing: str | Path, lase
     Planned stops (`run.stops`): at each pen-change stop of `job.pauses` the machine is left
     idle with the pen up and `on_pause` decides (True: go on; False: quit with an exact
     resume file) — a job with stops needs it; `copies` runs the job several times with
-    `on_wait` told the seconds left of the page delay between them.
+    `on_wait` told the seconds left of the page delay between them, and `on_copy` told the
+    copy (1-based) each time one starts, a resumed one included, before its first line.
     """
     if job.pauses and on_pause is None:
         raise SendError(f"{job.file}: the job stops for {len(job.pauses)} pen change(s) "
@@ -196,6 +198,8 @@ def run_job(link: Link, job: Job, profile: Profile, *, drawing: str | Path, lase
         st = ensure_known_pose(link, profile, confirm)
     first = (start, (st.a, st.b), run.copy)
     while True:
+        if on_copy is not None:
+            on_copy(run.copy)
         for pc in pieces(job, start, resume):
             if pc.pause is not None:
                 assert on_pause is not None

@@ -34,13 +34,13 @@ from typing import Annotated, Any, Literal, TypeVar, Union, get_args, get_origin
 from fastapi import Depends, FastAPI, Path, Query, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, Response
-from pydantic import BaseModel, BeforeValidator, Field
+from pydantic import BaseModel, BeforeValidator, Field, create_model
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from fivebar_host import __version__
 from fivebar_host.config import Profile
 from fivebar_host.errors import FivebarError, OptionError
-from fivebar_host.options import JOB_OPTIONS, parse_query, unknown_option
+from fivebar_host.options import JOB_OPTIONS, Option, parse_query, unknown_option
 from fivebar_host.run.stops import planned_time_s
 from fivebar_host.server import store as st_
 from fivebar_host.server.compiler import Compiler
@@ -119,19 +119,21 @@ class ErrorOut(BaseModel):
     where: dict[str, Any] | None = Field(None, description="job_error only: path and point.")
 
 
-class OptionsOut(BaseModel):
-    """The plot options a job was submitted with."""
+def _option_out(o: Option) -> tuple[Any, Any]:
+    """A job option as a field of `OptionsOut`: its stored JSON type, its default and help."""
+    kinds: dict[str, Any] = {"bool": bool, "float": float, "int": int, "choice": str,
+                             "xy": list[float], "text": str}
+    kind = list[str] if o.repeat else kinds[o.kind]
+    default = [] if o.repeat else o.default
+    return (kind if default is not None else kind | None,
+            Field(default, description=o.describe()))
 
-    laser: bool
-    mode: str | None
-    tolerance_mm: float | None
-    origin_mm: list[float] | None
-    scale: float | None
-    rotate_deg: float
-    fit: bool
-    layers: list[str]
-    keep_order: bool
-    confirm: bool
+
+#: The plot options a job was submitted with: every job option, generated from its one
+#: definition (`fivebar_host.options`), as the submission stored it.
+_OPTION_FIELDS: dict[str, Any] = {o.name: _option_out(o) for o in JOB_OPTIONS}
+OptionsOut = create_model("OptionsOut", __doc__="The plot options a job was submitted with.",
+                          **_OPTION_FIELDS)
 
 
 class ResumeOut(BaseModel):
@@ -141,6 +143,8 @@ class ResumeOut(BaseModel):
     position: list[int] | None = Field(description="Firmware steps [A, B] where the machine "
                                        "stopped; null when unknown (home before resuming).")
     reason: str
+    copy_number: int = Field(1, description="The copy (`copies` option, 1-based) it "
+                             "continues in.")
 
 
 class OverridesOut(BaseModel):
@@ -162,11 +166,13 @@ class JobOut(BaseModel):
     submitted_at: float = Field(description="Unix time.")
     started_at: float | None
     finished_at: float | None
-    options: OptionsOut
+    options: OptionsOut  # type: ignore[valid-type]  # a model made from the options
     mode: str = Field(description="Working mode the job was compiled in.")
     max_dev_mm: float | None = Field(description="Largest deviation from the drawing, mm.")
     segments_total: int
-    segments_done: int
+    segments_done: int = Field(description="Segments finished of the copy being drawn.")
+    copy_number: int = Field(1, description="The copy being drawn (or last drawn), "
+                             "1-based; options.copies is how many the job draws.")
     progress: float = Field(description="segments_done / segments_total.")
     estimated_s: float = Field(description="Planned duration of the whole job, s.")
     remaining_s: float | None = Field(description="Planned time left, s.")
@@ -220,9 +226,11 @@ class StatusOut(BaseModel):
 def job_out(rec: JobRecord, worker: Worker) -> JobOut:
     """The API view of a job, with live progress for the running one."""
     done, remaining, elapsed = rec.segments_done, rec.remaining_s, rec.run_s
+    copy = rec.resume.copy if rec.resume is not None else rec.copy
     live, ov = worker.live, None
     if live is not None and live.job_id == rec.id:
         done, remaining, elapsed = live.segments_done, live.remaining_s, live.elapsed_s
+        copy = live.copy
         if rec.state in (st_.RUNNING, st_.PAUSED):
             feed, power = live.overrides.values()
             ov = OverridesOut(feed_pct=feed, power_pct=power)
@@ -234,14 +242,14 @@ def job_out(rec: JobRecord, worker: Worker) -> JobOut:
         message=rec.message, question=rec.question, submitted_at=rec.submitted_at,
         started_at=rec.started_at, finished_at=rec.finished_at, options=OptionsOut(**o),
         mode=rec.mode, max_dev_mm=rec.max_dev_mm, segments_total=rec.segments_total,
-        segments_done=done,
+        segments_done=done, copy_number=copy,
         progress=round(done / rec.segments_total, 6) if rec.segments_total else 1.0,
         estimated_s=rec.estimated_s, remaining_s=remaining, elapsed_s=round(elapsed, 3),
         underruns=rec.underruns, overrides=ov,
         resume=None if rec.resume is None else ResumeOut(
             next_segment=rec.resume.next_segment,
             position=list(rec.resume.position) if rec.resume.position else None,
-            reason=rec.resume.reason))
+            reason=rec.resume.reason, copy_number=rec.resume.copy))
 
 
 def _error_response(status: int, error: str, message: str,

@@ -158,6 +158,7 @@ class EventHub:
                                                "mode": pose.mode},
             "live": None if live is None else {
                 "job_id": live.job_id, "segments_done": live.segments_done,
+                "copy_number": live.copy,
                 "segments_total": live.segments_total, "elapsed_s": round(live.elapsed_s, 2),
                 "remaining_s": round(live.remaining_s, 2), "paused": live.paused,
                 "overrides": {"feed_pct": live.overrides.feed_pct,

@@ -58,6 +58,7 @@ class JobRun:
     underruns0: int | None = None  # the firmware's underrun count when the stream began
     progress_saved: float = 0.0  # monotonic time progress was last handed to the writer
     overrides: Overrides = field(default_factory=Overrides)  # live feed/power, this run
+    copy: int = 1  # the copy (`copies` option) being drawn (`run_job`'s on_copy)
 
 
 class JobRunner(Control):
@@ -125,7 +126,8 @@ class JobRunner(Control):
                            overrides=run.overrides,
                            on_note=lambda text: log.warning("job %d: %s", rec.id, text),
                            on_pause=partial(self._on_pen_change, run),
-                           copies=run.opts.copies_plan(), on_wait=partial(self._on_wait, run))
+                           copies=run.opts.copies_plan(), on_wait=partial(self._on_wait, run),
+                           on_copy=partial(self._on_copy, run))
         except SendError as e:
             self.progress.flush()  # before the final record, never after it
             self._after_error(run, e)
@@ -183,7 +185,7 @@ class JobRunner(Control):
             log.debug("job %d: a stream that is not the job's program", run.rec.id)
             return
         self.store.set_stream(run.rec.id, StreamRecord(first_line, start, (st.a, st.b),
-                                                       len(bodies)))
+                                                       len(bodies), run.copy))
         run.program = (prog, first_line)
         run.underruns0 = None
 
@@ -195,6 +197,14 @@ class JobRunner(Control):
         return self._wait_paused(run.link, run.rec.id, f"pen change: {pause.describe()}; "
                                  "the pen is up and the machine idle. Change the pen, then "
                                  "resume the job")
+
+    def _on_copy(self, run: JobRun, copy: int) -> None:
+        """A copy starts: its streams are recorded as this copy's (crash recovery)."""
+        run.copy = copy
+        live = self.live
+        if live is not None:
+            live.copy = copy
+            self.on_change()
 
     def _on_wait(self, run: JobRun, left_s: float) -> None:
         """The page delay between copies: the live view's time left counts it down."""

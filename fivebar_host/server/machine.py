@@ -86,6 +86,7 @@ class Live:
     elapsed_s: float
     remaining_s: float
     paused: bool = False
+    copy: int = 1  # the copy (`copies` option) being drawn, 1-based
     #: The run's live feed and laser-power overrides (`run.overrides`), which `run_job`
     #: reads for every line it writes; set through `Control.set_overrides`.
     overrides: Overrides = field(default_factory=Overrides)

@@ -12,8 +12,11 @@ position, number of lines) and the controller's own record say where exactly eac
 - otherwise the last resume point recorded, or the last segment the daemon saw finish
   (position unknown), or — if the job never started drawing — back to the queue.
 
-A recovered job is held at its resume point (or done, if it finished while the daemon was
-away); `--auto-resume` queues the held jobs again that need no person's answer.
+Each stream record names the copy (`copies` option) it drew, and the record of the job the
+copy of its last stream, so a job recovers in the copy it was drawing. A recovered job is
+held at its resume point — the start of the next copy when a copy but not the last one had
+finished — or done, if it finished while the daemon was away; `--auto-resume` queues the
+held jobs again that need no person's answer.
 """
 
 from __future__ import annotations
@@ -75,7 +78,7 @@ class Recovery(MachineState):
             resume = exact
         elif rec.resume is not None:
             resume = rec.resume
-        elif rec.segments_done == 0 and rec.stream is None:
+        elif rec.segments_done == 0 and rec.stream is None and rec.copy == 1:
             self.store.set_state(rec.id, st_.QUEUED, message="requeued: the daemon stopped "
                                  "before the job started drawing")
             log.warning("job %d: requeued (the daemon stopped before it started drawing)",
@@ -85,7 +88,7 @@ class Recovery(MachineState):
             resume = ResumeRecord(rec.segments_done, None,
                                   "the daemon lost the machine mid-job and the controller was "
                                   "reset: position unknown; segments after the last one the "
-                                  "daemon saw finish may be drawn again")
+                                  "daemon saw finish may be drawn again", rec.copy)
         self.store.set_stream(rec.id, None)
         self._hold_recovered(rec, job, resume)
 
@@ -123,7 +126,7 @@ class Recovery(MachineState):
             return None
         exact = ResumeRecord(nxt, (st.a, st.b),
                              f"the daemon lost the machine mid-job; {why} (last "
-                             f"line executed {st.done_line})")
+                             f"line executed {st.done_line})", stream.copy)
         self._set_pose(True, link.last_status)
         return exact
 
@@ -142,6 +145,11 @@ class Recovery(MachineState):
 
     def _hold_recovered(self, rec: JobRecord, job: Job, resume: ResumeRecord) -> None:
         """Hold a recovered job at its resume point, or mark it done if it got to the end."""
+        opts = JobOptions.from_json(rec.options)
+        copies = opts.copies
+        if resume.next_segment >= job.n_segments and resume.copy < copies:
+            resume = ResumeRecord(0, resume.position, f"{resume.reason}; copy {resume.copy} "
+                                  f"of {copies} was finished", resume.copy + 1)
         if resume.next_segment >= job.n_segments:
             self.store.set_resume(rec.id, None)
             self.store.update(rec.id, segments_done=job.n_segments, remaining_s=0.0)
@@ -150,12 +158,15 @@ class Recovery(MachineState):
             log.info("job %d: finished while the daemon was away", rec.id)
             return
         self.store.set_resume(rec.id, resume)
-        remaining = float(np.asarray(job.duration_us[resume.next_segment:]).sum()) * 1e-6
+        remaining = (float(np.asarray(job.duration_us[resume.next_segment:]).sum()) * 1e-6
+                     + (copies - resume.copy) * (job.total_time_s + opts.page_delay_s))
         self.store.update(rec.id, remaining_s=remaining)
         where = (f"A = {resume.position[0]}, B = {resume.position[1]}" if resume.position
                  else "position unknown: home the machine (or confirm) before resuming")
+        of_copy = f" of copy {resume.copy} of {copies}" if copies > 1 else ""
         self.store.set_state(rec.id, st_.HELD, message=(
             f"interrupted ({resume.reason}); resume point: segment {resume.next_segment} of "
-            f"{job.n_segments}, {where}. Resume it with POST /api/jobs/{rec.id}/resume"))
-        log.warning("job %d recovered: next segment %d of %d (%s)", rec.id,
-                    resume.next_segment, job.n_segments, where)
+            f"{job.n_segments}{of_copy}, {where}. Resume it with POST "
+            f"/api/jobs/{rec.id}/resume"))
+        log.warning("job %d recovered: next segment %d of %d%s (%s)", rec.id,
+                    resume.next_segment, job.n_segments, of_copy, where)

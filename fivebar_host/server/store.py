@@ -49,7 +49,7 @@ FINAL_STATES = frozenset({DONE, FAILED, CANCELLED})
 #: States that keep later jobs from starting (the paper holds a half-drawn job).
 BLOCKING_STATES = frozenset({RUNNING, PAUSED, HELD})
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 #: Job ids SQLite can hold (a signed 64-bit INTEGER PRIMARY KEY; AUTOINCREMENT starts at 1).
 #: A number outside is no job: looked up it is "not found", never an OverflowError.
 MIN_JOB_ID, MAX_JOB_ID = 1, 2**63 - 1
@@ -91,7 +91,8 @@ CREATE TABLE IF NOT EXISTS jobs (
     stream_start_b INTEGER,
     stream_lines INTEGER,
     queue_key REAL,
-    resume_copy INTEGER
+    resume_copy INTEGER,
+    stream_copy INTEGER
 );
 CREATE INDEX IF NOT EXISTS jobs_state ON jobs(state);
 CREATE TABLE IF NOT EXISTS machine (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -120,6 +121,7 @@ class StreamRecord:
     start_segment: int
     start_position: tuple[int, int]
     lines: int
+    copy: int = 1  # the copy (`copies` option) the stream drew
 
 
 @dataclass
@@ -147,6 +149,9 @@ class JobRecord:
     underruns: int | None
     resume: ResumeRecord | None
     stream: StreamRecord | None
+    #: The copy of the last stream begun (1 before any); kept when its record is cleared,
+    #: so `segments_done` is known to count segments of this copy.
+    copy: int = 1
 
 
 #: The order queued jobs run in: those that started before (resumed) first, then by key.
@@ -156,7 +161,7 @@ _COLUMNS = ("id, name, options, upload_sha256, state, message, question, submitt
             "started_at, finished_at, fingerprint, mode, max_dev_mm, segments_total, "
             "estimated_s, segments_done, remaining_s, run_s, underruns, resume_next, resume_a, "
             "resume_b, resume_reason, stream_first_line, stream_start_segment, stream_start_a, "
-            "stream_start_b, stream_lines, resume_copy")
+            "stream_start_b, stream_lines, resume_copy, stream_copy")
 
 
 def _record(row: sqlite3.Row) -> JobRecord:
@@ -166,10 +171,11 @@ def _record(row: sqlite3.Row) -> JobRecord:
         resume = ResumeRecord(int(row["resume_next"]), pos, str(row["resume_reason"] or ""),
                               int(row["resume_copy"] or 1))
     stream = None
+    copy = int(row["stream_copy"] or 1)
     if row["stream_first_line"] is not None:
         stream = StreamRecord(int(row["stream_first_line"]), int(row["stream_start_segment"]),
                               (int(row["stream_start_a"]), int(row["stream_start_b"])),
-                              int(row["stream_lines"]))
+                              int(row["stream_lines"]), copy)
     return JobRecord(
         id=int(row["id"]), name=str(row["name"]), options=json.loads(row["options"]),
         upload_sha256=str(row["upload_sha256"]), state=str(row["state"]),
@@ -179,7 +185,8 @@ def _record(row: sqlite3.Row) -> JobRecord:
         mode=str(row["mode"]), max_dev_mm=row["max_dev_mm"],
         segments_total=int(row["segments_total"]), estimated_s=float(row["estimated_s"]),
         segments_done=int(row["segments_done"]), remaining_s=row["remaining_s"],
-        run_s=float(row["run_s"]), underruns=row["underruns"], resume=resume, stream=stream)
+        run_s=float(row["run_s"]), underruns=row["underruns"], resume=resume, stream=stream,
+        copy=copy)
 
 
 class JobStore:
@@ -217,6 +224,8 @@ class JobStore:
                     self._db.execute("ALTER TABLE jobs ADD COLUMN queue_key REAL")
                 if "resume_copy" not in cols:  # schema 2: one copy a job
                     self._db.execute("ALTER TABLE jobs ADD COLUMN resume_copy INTEGER")
+                if "stream_copy" not in cols:  # schema 3: a stream's copy not recorded
+                    self._db.execute("ALTER TABLE jobs ADD COLUMN stream_copy INTEGER")
                 self._db.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
         except sqlite3.Error as e:
             raise StoreError(f"{path}: not a usable fivebar database: {e}") from e
@@ -390,10 +399,10 @@ class JobStore:
                 db.execute("UPDATE jobs SET stream_first_line = NULL WHERE id = ?", (job_id,))
             else:
                 db.execute("UPDATE jobs SET stream_first_line = ?, stream_start_segment = ?, "
-                           "stream_start_a = ?, stream_start_b = ?, stream_lines = ? "
-                           "WHERE id = ?",
+                           "stream_start_a = ?, stream_start_b = ?, stream_lines = ?, "
+                           "stream_copy = ? WHERE id = ?",
                            (stream.first_line, stream.start_segment, stream.start_position[0],
-                            stream.start_position[1], stream.lines, job_id))
+                            stream.start_position[1], stream.lines, stream.copy, job_id))
 
     def delete(self, job_id: int) -> bool:
         """Remove a finished job from the history; False if it is not over (or unknown)."""

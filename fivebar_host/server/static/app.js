@@ -361,11 +361,16 @@ function renderStatus() {
   const p = st.pose;
   $('#pos').textContent = p ? 'x ' + p.pen[0].toFixed(2) + ' mm, y ' + p.pen[1].toFixed(2) + ' mm (mode ' + p.mode + ')' : '–';
 }
+// 'copy 2 of 3 · ' for a job that draws several copies (its options.copies), else ''
+function copyOf(n, job) {
+  const copies = (job && job.options && job.options.copies) || 1;
+  return copies > 1 ? 'copy ' + (n || 1) + ' of ' + copies + ' · ' : '';
+}
 function renderLiveJob() {
   const lv = S.status && S.status.live;
   const job = lv ? S.jobs.find((j) => j.id === lv.job_id) : null;
   $('#live-job').textContent = lv ? '· job ' + lv.job_id + (job ? ' ' + job.name : '') + (lv.paused ? ' (paused)' : '') : '';
-  $('#seg').textContent = lv ? 'segment ' + lv.segments_done + ' of ' + lv.segments_total : '–';
+  $('#seg').textContent = lv ? copyOf(lv.copy_number, job) + 'segment ' + lv.segments_done + ' of ' + lv.segments_total : '–';
   $('#elapsed').textContent = lv ? dur(lv.elapsed_s) : '–';
   $('#remaining').textContent = lv ? dur(lv.remaining_s) : '–';
   const box = $('#live-buttons');
@@ -382,8 +387,9 @@ function renderLiveJob() {
   if (lv && job && ['running', 'paused'].includes(job.state)) {
     const row = document.querySelector('[data-job="' + lv.job_id + '"]');
     if (row) {
-      row.querySelector('progress').value = lv.segments_total ? lv.segments_done / lv.segments_total : 0;
-      row.querySelector('.eta').textContent = 'segment ' + lv.segments_done + ' of ' + lv.segments_total + ' · ' + dur(lv.remaining_s) + ' left';
+      const copies = (job.options && job.options.copies) || 1;  // the share of every copy
+      row.querySelector('progress').value = lv.segments_total ? ((lv.copy_number || 1) - 1 + lv.segments_done / lv.segments_total) / copies : 0;
+      row.querySelector('.eta').textContent = copyOf(lv.copy_number, job) + 'segment ' + lv.segments_done + ' of ' + lv.segments_total + ' · ' + dur(lv.remaining_s) + ' left';
     }
   }
 }
@@ -440,7 +446,7 @@ function jobButtons(j, waitingIndex, waiting) {
 function jobInfo(j, eta) {
   if (j.state === 'queued') return 'starts in about ' + dur(eta) + ' · takes ' + dur(j.estimated_s);
   if (['running', 'paused', 'held'].includes(j.state)) {
-    return 'segment ' + j.segments_done + ' of ' + j.segments_total + ' · ' + dur(j.remaining_s) + ' left';
+    return copyOf(j.copy_number, j) + 'segment ' + j.segments_done + ' of ' + j.segments_total + ' · ' + dur(j.remaining_s) + ' left';
   }
   return j.segments_done + ' of ' + j.segments_total + ' segments · ran ' + dur(j.elapsed_s);
 }
