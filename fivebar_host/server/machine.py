@@ -32,7 +32,13 @@ from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import LinkError
 from fivebar_host.run.overrides import Overrides
 from fivebar_host.run.program import travel_lines
-from fivebar_host.server.jobs import CompiledCache, JobOptions, SubmitError, compile_upload
+from fivebar_host.server.jobs import (
+    Compiled,
+    CompiledCache,
+    JobOptions,
+    SubmitError,
+    compile_upload,
+)
 from fivebar_host.server.journal import JournalLink, ProgressWriter
 from fivebar_host.server.store import JobRecord, JobStore
 from fivebar_host.steps import pen_position_mm
@@ -290,11 +296,20 @@ class MachineState(threading.Thread):
         job = self.cache.get(rec.id)
         if job is not None:
             return job
+        return self.adopt(rec, compile_upload(self.upload(rec), rec.name,
+                                              JobOptions.from_json(rec.options),
+                                              self.cfg.profile))
+
+    def upload(self, rec: JobRecord) -> bytes:
+        """The stored drawing of a record, to compile it again."""
         data = self.store.upload(rec.id)
         if data is None:
             raise SubmitError("gone", f"job {rec.id}: its upload is no longer stored")
-        compiled = compile_upload(data, rec.name, JobOptions.from_json(rec.options),
-                                  self.cfg.profile)
+        return data
+
+    def adopt(self, rec: JobRecord, compiled: Compiled) -> Job:
+        """Cache a record's job compiled again (here or in a compiling process), once it
+        is checked to be the job that was submitted."""
         if compiled.fingerprint != rec.fingerprint:
             raise SubmitError("changed", f"job {rec.id}: compiling it again gives a different "
                               "job (the daemon's profile or program changed since it was "

@@ -27,7 +27,6 @@ from pathlib import Path
 from typing import Any
 
 from fastapi import FastAPI, Query, Request
-from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import Response, StreamingResponse
 from pydantic import BaseModel, Field
 
@@ -238,15 +237,22 @@ def _queue_routes(app: FastAPI, ctx: _Ctx) -> None:
 
     @app.get("/api/jobs/{job_id}/path", tags=["jobs"],
               responses={404: {"model": ErrorOut}, 409: {"model": ErrorOut}})
-    async def path(job_id: JobId) -> dict[str, Any]:
+    async def path(job_id: JobId, request: Request) -> dict[str, Any]:
         """The planned path of a job that is not over (machine mm, at most 4000 points,
-        each with whether the segment ending there draws): the live view's background."""
+        each with whether the segment ending there draws): the live view's background.
+        A job not in the cache (after a restart) is compiled again as a submission is, in
+        a compilation slot and a compiling process: never in the daemon that streams."""
         rec = ctx.get_rec(job_id)
         if rec.state in st_.FINAL_STATES:
             raise ApiError(409, "conflict", f"job {job_id} is {rec.state}: its drawing is "
                            "no longer stored")
+        job = ctx.cache.get(rec.id)
         try:
-            job = await run_in_threadpool(ctx.worker._job, rec)
+            if job is None:
+                compiled = await run_in_slot(ctx, request, compile_upload,
+                                             ctx.worker.upload(rec), rec.name,
+                                             JobOptions.from_json(rec.options), ctx.profile)
+                job = ctx.worker.adopt(rec, compiled)
         except SubmitError as e:
             raise ApiError(409, "conflict", str(e)) from e
         step = max(1, -(-job.n_segments // PATH_POINTS))
