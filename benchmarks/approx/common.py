@@ -124,6 +124,13 @@ def check_assembly(assembly: str) -> None:
         raise ValueError(f"assembly must be '+' or '-'; got {assembly!r}")
 
 
+def check_inverse_args(mode: str, assembly: str | None) -> None:
+    """The working mode and the optional assembly of an inverse approximation's build."""
+    check_mode(mode)
+    if assembly is not None:
+        check_assembly(assembly)
+
+
 
 
 # ----------------------------------------------------------------------------- grids

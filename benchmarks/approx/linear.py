@@ -26,6 +26,7 @@ from benchmarks.approx.common import (
     assemblable,
     check_assembly,
     check_box,
+    check_inverse_args,
     check_mode,
     closed_inverse,
     exact_values,
@@ -280,9 +281,7 @@ def inverse_tiles(fb: FiveBar, mode: str, box: Box, tiles: int | tuple[int, int]
     exceeds `max_error` mm, or if a sample is closer than `min_margins` = (type 1, type 2)
     rad to a singularity.
     """
-    check_mode(mode)
-    if assembly is not None:
-        check_assembly(assembly)
+    check_inverse_args(mode, assembly)
     return _tiles(fb, "inverse", mode, box, tiles, samples, form, max_error, assembly,
                   min_margins)
 

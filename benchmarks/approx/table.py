@@ -25,7 +25,7 @@ from benchmarks.approx.common import (
     assemblable,
     check_assembly,
     check_box,
-    check_mode,
+    check_inverse_args,
     closed_inverse,
     exact_values,
     pen_error,
@@ -214,9 +214,7 @@ def inverse_table(fb: FiveBar, mode: str, box: Box, n: int | tuple[int, int],
     interpolates across the type-2 curve). Cells whose build-time pen error exceeds
     `max_error` mm are refused, and so are cells with a node closer than `min_margins` =
     (type 1, type 2) rad to a singularity. `centre` (mm) places the angles' ±π seam."""
-    check_mode(mode)
-    if assembly is not None:
-        check_assembly(assembly)
+    check_inverse_args(mode, assembly)
     return _table(fb, "inverse", mode, box, n, order, max_error, assembly, centre,
                   min_margins)
 
