@@ -48,7 +48,7 @@ from fivebar_host.run.resume import (
     redraw_text,
     resume_path,
 )
-from fivebar_host.run.stops import Copies, pieces, stopped, wait_between_copies
+from fivebar_host.run.stops import Copies, later_copies_s, pieces, stopped, wait_between_copies
 from fivebar_host.run.stream import StreamProgress, StreamResult
 
 
@@ -232,7 +232,7 @@ def _stream_piece(run: _Run, start: int, end: int, st: StatusReport) -> StatusRe
     prog = build_program(job, run.profile, run.laser, start, start_position,
                          None if end >= job.n_segments else end)
     durations = job.duration_us.astype(np.float64) * 1e-6
-    later = (run.copies.count - run.copy) * (job.total_time_s + run.copies.page_delay_s)
+    later = later_copies_s(job, run.copies, run.copy)
     remaining_after = np.concatenate((np.cumsum(durations[::-1])[::-1], [0.0])) + later
     first_line = link.next_line
     last_line = first_line + len(prog.bodies) - 1

@@ -90,6 +90,11 @@ def planned_time_s(job: Job, copies: Copies) -> float:
     return copies.count * job.total_time_s + (copies.count - 1) * copies.page_delay_s
 
 
+def later_copies_s(job: Job, copies: Copies, copy: int) -> float:
+    """The planned time of the copies after copy `copy` (1-based), page delays included."""
+    return (copies.count - copy) * (job.total_time_s + copies.page_delay_s)
+
+
 def plan_text(job: Job, copies: Copies, fmt: Callable[[float], str]) -> str:
     """The run's planned time for people, with copies, page delays and pen changes:
     "≈ 1 min 2 s (2 copies of ≈ 25.0 s + 1 page delay of 15 s) + 2 pen changes (wait for

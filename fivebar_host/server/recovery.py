@@ -31,7 +31,7 @@ from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import SendError
 from fivebar_host.run.program import Program, build_program
 from fivebar_host.run.resume import kept_resume_segment
-from fivebar_host.run.stops import piece_end
+from fivebar_host.run.stops import later_copies_s, piece_end
 from fivebar_host.server import store as st_
 from fivebar_host.server.jobs import JobOptions, SubmitError
 from fivebar_host.server.journal import JournalLink
@@ -159,7 +159,7 @@ class Recovery(MachineState):
             return
         self.store.set_resume(rec.id, resume)
         remaining = (float(np.asarray(job.duration_us[resume.next_segment:]).sum()) * 1e-6
-                     + (copies - resume.copy) * (job.total_time_s + opts.page_delay_s))
+                     + later_copies_s(job, opts.copies_plan(), resume.copy))
         self.store.update(rec.id, remaining_s=remaining)
         where = (f"A = {resume.position[0]}, B = {resume.position[1]}" if resume.position
                  else "position unknown: home the machine (or confirm) before resuming")
