@@ -29,9 +29,9 @@ from fivebar_host.calibrate.pattern import (  # noqa: E402
     nominal_params,
     pattern_region,
 )
+from fivebar_host.compile.steps import absolute_steps  # noqa: E402
 from fivebar_host.config import load_profile  # noqa: E402
 from fivebar_host.report.calibration import draw_error_map, draw_sweep  # noqa: E402
-from fivebar_host.steps import absolute_steps  # noqa: E402
 from kinematics.calibration import MachineParams, MarkData, fit, rotation  # noqa: E402
 from kinematics.calibration_analysis import shape_errors  # noqa: E402
 

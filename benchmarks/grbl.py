@@ -29,11 +29,11 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path[:] = [str(ROOT)] + [p for p in sys.path
                              if Path(p or ".").resolve() != Path(__file__).parent.resolve()]
 
+from fivebar_host.bridge.controller import Bridge  # noqa: E402
+from fivebar_host.bridge.serve import Server  # noqa: E402
 from fivebar_host.config import load_profile  # noqa: E402
+from fivebar_host.controllers.fivebar.link import Link  # noqa: E402
 from fivebar_host.devices.sim import toolchain_missing  # noqa: E402
-from fivebar_host.grbl.controller import Bridge  # noqa: E402
-from fivebar_host.grbl.serve import Server  # noqa: E402
-from fivebar_host.run.link import Link  # noqa: E402
 
 DRAWING = ROOT / "tests" / "grbl" / "drawing.nc"
 ORIGIN = (5.0, 95.0)

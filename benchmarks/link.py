@@ -41,9 +41,9 @@ sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
 from fivebar_host import protocol  # noqa: E402
 from fivebar_host.compile import CompileOptions, compile_job  # noqa: E402
 from fivebar_host.config import load_profile  # noqa: E402
+from fivebar_host.controllers.fivebar import pack  # noqa: E402
+from fivebar_host.controllers.fivebar.link import Link  # noqa: E402
 from fivebar_host.devices.sim import toolchain_missing  # noqa: E402
-from fivebar_host.run import pack  # noqa: E402
-from fivebar_host.run.link import Link  # noqa: E402
 from fivebar_host.run.program import build_program  # noqa: E402
 
 NOMINAL_BPS = 115200 / 10

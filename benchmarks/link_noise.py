@@ -25,9 +25,9 @@ import random
 from collections import Counter
 
 from fivebar_host import protocol
+from fivebar_host.controllers.fivebar import pack
 from fivebar_host.devices.mock.codes import OK
 from fivebar_host.devices.mock.parser import parse_line
-from fivebar_host.run import pack
 
 #: What the mock's corruption puts in (fivebar_host/devices/mock/port.py).
 CORRUPT_BYTES = bytes(c for c in range(0x20, 0x7F) if c not in protocol.REALTIME_BYTES)

@@ -38,7 +38,7 @@ from scipy.optimize import fsolve, least_squares
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from fivebar_host.linkage import load_mechanism  # noqa: E402
+from fivebar_host.report.text.linkage import load_mechanism  # noqa: E402
 from kinematics.nbar import Mechanism, sweep  # noqa: E402
 
 #: The paper's MATLAB run times for 180 steps (Sec. 4), seconds.

@@ -114,8 +114,8 @@ def _run(document: vp.Document, action: str, port: str | None, preview_path: Pat
     drawing = document_to_drawing(document, tuple(job_values.get("layers") or ()), name)
     job = compile_drawing(drawing, prof, CompileOptions(**compile_values(job_values)))
     if action == "preview":
-        from fivebar_host.dryrun import report_lines
         from fivebar_host.report.preview import draw_preview
+        from fivebar_host.report.text.dryrun import report_lines
 
         for line in report_lines(job, nbar_opinion(job, prof), laser=laser):
             click.echo(line)

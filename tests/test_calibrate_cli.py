@@ -17,7 +17,7 @@ from fivebar_host.cli import main
 from fivebar_host.compile import CompileOptions, compile_job
 from fivebar_host.config import load_profile
 from fivebar_host.devices import mock
-from fivebar_host.executed import executed_path, ledger_track, true_params
+from fivebar_host.report.text.executed import executed_path, ledger_track, true_params
 from kinematics.calibration import rotation
 from kinematics.calibration_analysis import align
 

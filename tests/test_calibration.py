@@ -11,8 +11,8 @@ import pytest
 from scipy.optimize import least_squares
 
 from fivebar_host.calibrate.pattern import nominal_params, pattern_region
+from fivebar_host.compile.steps import absolute_steps
 from fivebar_host.config import load_profile
-from fivebar_host.steps import absolute_steps
 from kinematics.calibration import (
     CalibrationError,
     MachineParams,

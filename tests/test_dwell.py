@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from fivebar_host import planner, protocol
+from fivebar_host import protocol
 from fivebar_host.cli import main
-from fivebar_host.compile import CompileOptions, compile_job, encode_lines
+from fivebar_host.compile import CompileOptions, compile_job, encode_lines, planner
 from fivebar_host.compile.dwell import dwell_pieces
 from fivebar_host.config import load_profile
 from fivebar_host.devices import mock

@@ -14,10 +14,10 @@ from pathlib import Path
 import pytest
 from sim_plot import compiled_copy
 
+from fivebar_host.controllers.fivebar.link import Link
 from fivebar_host.devices.sim import toolchain_missing
 from fivebar_host.devices.simtrace import read_trace
-from fivebar_host.executed import executed_path, merge_axes
-from fivebar_host.run.link import Link
+from fivebar_host.report.text.executed import executed_path, merge_axes
 from fivebar_host.run.resume import ResumePoint, fingerprint, resume_path
 from fivebar_host.run.sender import run_job
 

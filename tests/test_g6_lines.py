@@ -17,11 +17,11 @@ from hypothesis import strategies as st
 from line_noise import GUARANTEED, NOISE_BYTES, add_noise, only_blanks_added
 
 from fivebar_host import protocol
+from fivebar_host.controllers.fivebar import pack
+from fivebar_host.controllers.fivebar.link import Link
 from fivebar_host.devices import urls
 from fivebar_host.devices.mock.codes import OK
 from fivebar_host.devices.mock.parser import parse_line
-from fivebar_host.run import pack
-from fivebar_host.run.link import Link
 
 
 def _bodies(rng: random.Random, n: int, p_change: float = 0.2) -> list[str]:

@@ -16,10 +16,10 @@ from click.testing import CliRunner
 from fivebar_host.cli import main
 from fivebar_host.compile import CompileOptions, compile_job
 from fivebar_host.config import load_profile
+from fivebar_host.controllers.grbl.link import GrblError, GrblLink
+from fivebar_host.controllers.grbl.run import run_grbl_job
 from fivebar_host.devices import grblmock, urls
-from fivebar_host.executed import executed_path
-from fivebar_host.run.grbl_link import GrblError, GrblLink
-from fivebar_host.run.grbl_run import run_grbl_job
+from fivebar_host.report.text.executed import executed_path
 from fivebar_host.run.program import line_param
 from fivebar_host.run.resume import ResumePoint, resume_path
 
@@ -140,7 +140,7 @@ def test_mock_answers_as_grbl_documents() -> None:
 
 def job_program_last(job: object, prof: object) -> str:
     """The job's last motion line as the board would log it."""
-    from fivebar_host.run.grbl_program import job_program
+    from fivebar_host.controllers.grbl.program import job_program
 
     lines = [x for x in job_program(job, prof, True).lines  # type: ignore[arg-type]
              if x.startswith("G1")]
@@ -275,9 +275,9 @@ def test_resume_refused_for_another_job_or_a_board_that_lost_its_count(tmp_path:
 def test_a_stop_where_the_path_crosses_itself_is_not_resumable() -> None:
     from types import SimpleNamespace
 
-    from fivebar_host.run.grbl_link import StreamState
-    from fivebar_host.run.grbl_program import GrblProgram
-    from fivebar_host.run.grbl_resume import identify
+    from fivebar_host.controllers.grbl.link import StreamState
+    from fivebar_host.controllers.grbl.program import GrblProgram
+    from fivebar_host.controllers.grbl.resume import identify
 
     job = SimpleNamespace(steps=np.array([[0, 0], [100, 0], [0, 0], [100, 40]]),
                           n_segments=3)

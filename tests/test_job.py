@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from fivebar_host.compile import CompileOptions, compile_job, deviations, encode_lines
+from fivebar_host.compile.steps import step_angles
 from fivebar_host.config import load_profile
 from fivebar_host.errors import JobError
-from fivebar_host.steps import step_angles
 from fivebar_host.toolpath.svg import read_svg
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"

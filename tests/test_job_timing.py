@@ -15,8 +15,8 @@ import pytest
 
 from fivebar_host import protocol
 from fivebar_host.compile import CompileOptions, compile_job, encode_lines
+from fivebar_host.compile.planner import JUNCTION_JUMP_RAD_S
 from fivebar_host.config import load_profile
-from fivebar_host.planner import JUNCTION_JUMP_RAD_S
 
 ROOT = Path(__file__).resolve().parent.parent
 PROF = load_profile()

@@ -7,10 +7,10 @@ import pytest
 import serial
 
 from fivebar_host import protocol
+from fivebar_host.controllers.fivebar.link import Link
 from fivebar_host.devices import mock, urls
 from fivebar_host.protocol import Banner
 from fivebar_host.run.errors import FaultKind, FirmwareMismatchError, LinkFaultError
-from fivebar_host.run.link import Link
 
 BANNER = Banner("1.0.0", protocol.PROTOCOL_VERSION, 128, 16, 80)
 

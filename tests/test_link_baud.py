@@ -11,10 +11,10 @@ import pytest
 
 from fivebar_host import protocol
 from fivebar_host.config import ConfigError, load_profile, parse_profile
+from fivebar_host.controllers.fivebar.link import Link
 from fivebar_host.devices import simport, urls
 from fivebar_host.devices.mock import MockSerial
 from fivebar_host.run.errors import LinkError
-from fivebar_host.run.link import Link
 
 URLS = ["fivebar-mock://?speed=1", pytest.param("fivebar-sim://?realtime=1",
                                                  marks=pytest.mark.sim)]

@@ -21,9 +21,9 @@ from benchmarks.link import SIMAVR_BPS, WOBBLE_MM, planned_job, run_issue
 from fivebar_host import protocol
 from fivebar_host.compile import CompileOptions, compile_job, linkrate
 from fivebar_host.config import load_profile
+from fivebar_host.controllers.fivebar import pack
 from fivebar_host.devices.sim import toolchain_missing
-from fivebar_host.dryrun import report_lines
-from fivebar_host.run import pack
+from fivebar_host.report.text.dryrun import report_lines
 
 #: The firmware starts moving once this many blocks are queued (config.h
 #: CFG_START_BLOCKS), or CFG_START_DELAY_MS after the first.

@@ -24,10 +24,10 @@ from fivebar_host.compile import (
 )
 from fivebar_host.compile.chords import _prepare_chords
 from fivebar_host.compile.modes import _break_paths
+from fivebar_host.compile.steps import step_angles
 from fivebar_host.config import load_profile
-from fivebar_host.dryrun import report_lines
 from fivebar_host.errors import JobError
-from fivebar_host.steps import step_angles
+from fivebar_host.report.text.dryrun import report_lines
 from fivebar_host.toolpath.geometry import LINE, evaluate, flatten
 from fivebar_host.toolpath.segment import wrap_to_limits
 from kinematics.fivebar import WORKING_MODES

@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fivebar_host.linkage import load_mechanism, summary, write_result
 from fivebar_host.report.linkage import plot_simulation
+from fivebar_host.report.text.linkage import load_mechanism, summary, write_result
 from kinematics.nbar import MechanismError, build_mechanism, simulate, sweep
 
 MECH = Path(__file__).resolve().parent.parent / "configs" / "mechanisms"

@@ -16,13 +16,13 @@ from fivebar_host import protocol
 from fivebar_host.cli.keys import KeyReader, apply_keys, override_keys
 from fivebar_host.compile import CompileOptions, compile_job
 from fivebar_host.config import load_profile
+from fivebar_host.controllers.fivebar.link import Link
+from fivebar_host.controllers.fivebar.stream import StreamProgress
 from fivebar_host.devices import mock
 from fivebar_host.run.errors import SendError
-from fivebar_host.run.link import Link
 from fivebar_host.run.overrides import Overrides, scale_body, starts_at_rest
 from fivebar_host.run.program import build_program
 from fivebar_host.run.sender import run_job
-from fivebar_host.run.stream import StreamProgress
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 

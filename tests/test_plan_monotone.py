@@ -30,7 +30,7 @@ from benchmarks.plan_jobs import (
     random_limits,
     with_limits,
 )
-from fivebar_host import planner
+from fivebar_host.compile import planner
 from fivebar_host.config import load_profile
 
 PROF = load_profile()

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fivebar_host.planner import (
+from fivebar_host.compile.planner import (
     check_plan,
     enforce_staircase,
     plan,

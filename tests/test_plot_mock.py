@@ -18,10 +18,10 @@ from click.testing import CliRunner
 from fivebar_host.cli import main
 from fivebar_host.compile import CompileOptions, Job, compile_job
 from fivebar_host.config import load_profile
+from fivebar_host.controllers.fivebar.link import Link
 from fivebar_host.devices import mock
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import SendError
-from fivebar_host.run.link import Link
 from fivebar_host.run.program import Program, build_program
 from fivebar_host.run.resume import ResumePoint, kept_resume_segment, resume_path
 

@@ -21,9 +21,9 @@ from fivebar_host.cli import main
 from fivebar_host.compile import CompileOptions, Job, compile_job
 from fivebar_host.compile.model import LayerPause
 from fivebar_host.config import load_profile
+from fivebar_host.controllers.fivebar.link import Link
 from fivebar_host.devices import mock
 from fivebar_host.run.errors import SendError
-from fivebar_host.run.link import Link
 from fivebar_host.run.resume import ResumePoint, resume_path
 from fivebar_host.run.sender import run_job
 from fivebar_host.run.stops import Copies, pieces

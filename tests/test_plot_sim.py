@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 from sim_plot import compiled_copy, laser_steps, planned_draw_steps
 
+from fivebar_host.controllers.fivebar.link import Link
 from fivebar_host.devices.sim import toolchain_missing
 from fivebar_host.devices.simtrace import read_trace
-from fivebar_host.executed import executed_path, merge_axes
+from fivebar_host.report.text.executed import executed_path, merge_axes
 from fivebar_host.run.errors import SendError
-from fivebar_host.run.link import Link
 from fivebar_host.run.resume import resume_path
 from fivebar_host.run.sender import Progress, run_job
 

@@ -17,11 +17,11 @@ from sim_plot import all_steps, planned_steps
 from fivebar_host.compile import CompileOptions, compile_job
 from fivebar_host.compile.model import LayerPause
 from fivebar_host.config import load_profile
+from fivebar_host.controllers.fivebar.link import Link
 from fivebar_host.devices.sim import toolchain_missing
 from fivebar_host.devices.simtrace import read_trace
-from fivebar_host.executed import executed_path, merge_axes, pen_report
+from fivebar_host.report.text.executed import executed_path, merge_axes, pen_report
 from fivebar_host.run.errors import SendError
-from fivebar_host.run.link import Link
 from fivebar_host.run.resume import ResumePoint, resume_path
 from fivebar_host.run.sender import run_job
 

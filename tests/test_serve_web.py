@@ -15,8 +15,8 @@ from typing import Any
 from fivebar_host.compile import nbar_opinion
 from fivebar_host.config import load_profile
 from fivebar_host.devices import mock
-from fivebar_host.dryrun import report_lines
 from fivebar_host.options import JOB_OPTIONS
+from fivebar_host.report.text.dryrun import report_lines
 from fivebar_host.server import store as st_
 from fivebar_host.server.client import ServerClient, ServerError, plot_options
 from fivebar_host.server.jobs import JobOptions, compile_upload

@@ -12,8 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fivebar_host import steps
-from fivebar_host.compile import CompileOptions, Job, compile_job
+from fivebar_host.compile import CompileOptions, Job, compile_job, steps
 from fivebar_host.config import load_profile
 from fivebar_host.toolpath.geometry import LINE, Polylines
 from fivebar_host.toolpath.simplify import simplify_polylines

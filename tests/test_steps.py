@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from fivebar_host.steps import absolute_steps, relative_steps, step_angles, step_quantum_mm
+from fivebar_host.compile.steps import absolute_steps, relative_steps, step_angles, step_quantum_mm
 
 SPR = 200 * 16 * 4.0
 HOME = (math.radians(120.0), math.radians(60.0))

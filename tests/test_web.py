@@ -22,8 +22,8 @@ import pytest
 from fivebar_host.compile import nbar_opinion
 from fivebar_host.config import load_profile
 from fivebar_host.devices import mock
-from fivebar_host.dryrun import format_duration, report_lines
 from fivebar_host.options import JOB_OPTIONS
+from fivebar_host.report.text.dryrun import format_duration, report_lines
 from fivebar_host.server.client import ServerClient, plot_options
 from fivebar_host.server.jobs import JobOptions, SubmitError, compile_upload
 from tests.web_support import (

@@ -19,7 +19,7 @@ from benchmarks.kinematics import median_time
 from benchmarks.speed_accuracy.config import ROOT, Config
 from benchmarks.speed_accuracy.plot import FLOOR_MM, save
 from benchmarks.speed_accuracy.timing import interleaved_medians
-from fivebar_host.linkage import load_mechanism
+from fivebar_host.report.text.linkage import load_mechanism
 from kinematics.arrays import FloatArray
 from kinematics.nbar import sweep
 

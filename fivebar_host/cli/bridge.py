@@ -34,8 +34,8 @@ def bridge(config_path: Path | None, port: str, link_path: Path | None, listen: 
            laser: bool, origin: str, tolerance: float | None, mode: str | None,
            verbose: bool) -> None:
     """Serve a GRBL 1.1 interface (pty and/or TCP) in front of the five-bar at --port."""
-    from fivebar_host.grbl.controller import Bridge
-    from fivebar_host.grbl.serve import Server, parse_listen
+    from fivebar_host.bridge.controller import Bridge
+    from fivebar_host.bridge.serve import Server, parse_listen
 
     if link_path is None and listen is None:
         fail("give --link PATH and/or --listen HOST:PORT")

@@ -170,7 +170,7 @@ def position_text(prof: Profile, a_steps: int, b_steps: int, homed: bool = True)
     text = f"A = {a_steps} steps, B = {b_steps} steps"
     if not homed:
         return text + " (position unknown: not homed)"
-    from fivebar_host.steps import pen_position_mm
+    from fivebar_host.compile.steps import pen_position_mm
 
     xy = pen_position_mm(prof.geometry, prof.kinematics.assembly, prof.motors.home_rad,
                          prof.motors.steps_per_rev, a_steps, b_steps)
@@ -185,8 +185,8 @@ def open_link(port: str | None, prof: Profile, controller: str = "fivebar") -> A
     a stock GRBL board (`--controller grbl`)."""
     if port is None:
         fail("give --port PORT")
-    from fivebar_host.run.grbl_link import GrblLink
-    from fivebar_host.run.link import Link
+    from fivebar_host.controllers.fivebar.link import Link
+    from fivebar_host.controllers.grbl.link import GrblLink
 
     ser = prof.serial
     if controller == "grbl":

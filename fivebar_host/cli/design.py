@@ -46,7 +46,7 @@ def workspace(config_path: Path | None, output: Path, no_plot: bool, mode: str |
               resolution: float | None, delta_deg: float) -> None:
     """Workspace per working mode, singularity curves, safe region, largest page rectangle,
     transmission-angle and error-sensitivity maps for the machine profile."""
-    from fivebar_host import workspace as ws
+    from fivebar_host.report.text import workspace as ws
     from fivebar_host.report.workspace import plot_workspace
     from kinematics.workspace import workspace_report
 
@@ -102,7 +102,7 @@ def design(page_text: str, landscape: bool, margin_deg: float | None, motor_spac
     (motors, motion, laser and serial settings are copied from --config)."""
     import time
 
-    from fivebar_host import workspace as ws
+    from fivebar_host.report.text import workspace as ws
     from kinematics.design import design_search
 
     prof = load(config_path)
@@ -163,8 +163,8 @@ def linkage_simulate(file: Path, steps: int | None, output: Path | None,
     Prints a summary; a motion limit is reported with its input value (exit 0), inconsistent
     constraints (nothing could move) exit with 1, an unusable file with 2.
     """
-    from fivebar_host.linkage import load_mechanism, summary, write_result
     from fivebar_host.report.linkage import plot_simulation
+    from fivebar_host.report.text.linkage import load_mechanism, summary, write_result
     from kinematics.nbar import sweep
 
     if output is not None and output.suffix.lower() not in (".csv", ".json"):

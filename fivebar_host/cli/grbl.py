@@ -36,7 +36,7 @@ controller_option = click.option(
 def grbl_settings(config_path: Path | None) -> None:
     """Print the $ settings a stock GRBL 1.1 board needs for this profile (send each line
     to the board once; `--controller grbl` checks them against `$$` before every job)."""
-    from fivebar_host.run.grbl_program import needed_settings
+    from fivebar_host.controllers.grbl.program import needed_settings
 
     prof = load(config_path)
     for s in needed_settings(prof):
@@ -51,7 +51,7 @@ def open_grbl(port: str | None, prof: Profile) -> Any:
 def grbl_convert(output: Path, prof: Profile, job: Any, laser: bool) -> None:
     """`convert --controller grbl`: the job as the G-code lines the board gets."""
     from fivebar_host.compile import write_atomic
-    from fivebar_host.run.grbl_program import job_program
+    from fivebar_host.controllers.grbl.program import job_program
 
     prog = job_program(job, prof, laser)
     write_atomic(output, "\n".join(prog.lines) + "\n")
@@ -64,7 +64,7 @@ def grbl_plot(port: str, prof: Profile, job: Any, *, laser: bool, yes: bool,
     """`plot --controller grbl`: check the board, stream, Ctrl-C holds (laser off); a
     fault or an abort leaves a resume file, `--resume` continues from it."""
     from fivebar_host.cli.plot import _ask_resume
-    from fivebar_host.run.grbl_run import angles_text, run_grbl_job
+    from fivebar_host.controllers.grbl.run import angles_text, run_grbl_job
 
     click.echo(f"job: {job.n_segments} segments, mode {job.mode}, ≈ {job.total_time_s:.1f} s "
                f"planned, max deviation {job.max_dev_mm:.4f} mm; GRBL in joint space")
@@ -93,7 +93,7 @@ def grbl_plot(port: str, prof: Profile, job: Any, *, laser: bool, yes: bool,
 
 def grbl_home(port: str | None, prof: Profile, yes: bool) -> None:
     """`home --controller grbl`."""
-    from fivebar_host.run.grbl_run import angles_text, home_grbl
+    from fivebar_host.controllers.grbl.run import angles_text, home_grbl
 
     link = open_grbl(port, prof)
     try:
@@ -106,7 +106,7 @@ def grbl_home(port: str | None, prof: Profile, yes: bool) -> None:
 def grbl_moves(port: str | None, prof: Profile, yes: bool, make: Any) -> tuple[int, int]:
     """`jog`/`frame --controller grbl`: settings, pose, then fivebar's checked laser-off
     lines `make(position)` on the board; the end position."""
-    from fivebar_host.run.grbl_run import check_settings, ensure_pose, stream_moves
+    from fivebar_host.controllers.grbl.run import check_settings, ensure_pose, stream_moves
 
     link = open_grbl(port, prof)
     try:

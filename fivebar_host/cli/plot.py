@@ -103,8 +103,8 @@ def plot(drawing: Path, dry_run: bool, preview_path: Path, port: str | None, res
         fail("give --port PORT to plot on a machine (e.g. /dev/ttyUSB0 or fivebar-sim:// "
              "for the emulator), or --dry-run for the preview and report")
     from fivebar_host.compile import nbar_opinion
-    from fivebar_host.dryrun import report_lines
     from fivebar_host.report.preview import draw_preview
+    from fivebar_host.report.text.dryrun import report_lines
 
     laser = bool(job_values["laser"])
     copies = Copies(int(job_values["copies"]), float(job_values["page_delay_s"]))
@@ -139,7 +139,7 @@ def stream_plot(drawing: Path, port: str, prof: Profile, job: Any, *, laser: boo
                  resume: bool, yes: bool, preview_path: Path, copies: Copies) -> None:
     """Stream a compiled job with a progress bar, Ctrl-C hold/resume/abort, pen changes,
     copies with their countdown, final report."""
-    from fivebar_host.dryrun import format_duration
+    from fivebar_host.report.text.dryrun import format_duration
     from fivebar_host.run.sender import run_job
 
     click.echo(f"job: {job.n_segments} segments, {job.n_paths} paths, mode {job.mode}, "
@@ -269,7 +269,7 @@ def _write_executed(job: Any, prof: Profile, trace: Path, preview_path: Path,
     emulator's `true=` geometry, the pen points are where that machine really draws."""
     from fivebar_host.compile import write_atomic
     from fivebar_host.devices.simtrace import read_trace
-    from fivebar_host.executed import executed_path, merge_axes, pen_report, true_params
+    from fivebar_host.report.text.executed import executed_path, merge_axes, pen_report, true_params
 
     tr = read_trace(trace)
     t, track = merge_axes(tr.positions("A"), tr.positions("B"))

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fivebar_host import steps
+from fivebar_host.compile import steps
 from fivebar_host.compile.layers import break_switches, layer_pauses
 from fivebar_host.compile.model import (
     CompileOptions,

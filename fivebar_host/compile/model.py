@@ -20,7 +20,7 @@ from typing import cast
 import numpy as np
 from numpy.typing import NDArray
 
-from fivebar_host import steps
+from fivebar_host.compile import steps
 from fivebar_host.toolpath import layout
 from fivebar_host.toolpath.geometry import Drawing
 from kinematics.arrays import BoolArray, FloatArray, IntArray

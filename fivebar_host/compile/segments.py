@@ -3,7 +3,7 @@
 `assemble` merges the refined draw intervals and the pen-up travel pieces into one chain of
 targets (row 0 = the homed pose; the travel into path j precedes its draw segments), with the
 provenance of every segment; `drop_zero_moves` quantises the targets to absolute steps once
-(`fivebar_host.steps`, docs/architecture.md "Steps") and drops the segments that round to no
+(`fivebar_host.compile.steps`, docs/architecture.md "Steps") and drops the segments that round to no
 move.
 """
 

@@ -1,5 +1,5 @@
 """Timing a stepped job: per-segment laser power, feed and stops, then durations from
-`fivebar_host.planner`, in four steps (the reasons are in the planner's module doc):
+`fivebar_host.compile.planner`, in four steps (the reasons are in the planner's module doc):
 
 1. a continuous speed profile (junction passes), which only decides where to cut;
 2. its speed-up and slow-down parts cut into short pieces (new targets on the same
@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fivebar_host import planner, protocol, steps
-from fivebar_host.compile import linkrate
+from fivebar_host import protocol
+from fivebar_host.compile import linkrate, planner, steps
 from fivebar_host.compile.dwell import dwell_stops, insert_dwells
 from fivebar_host.compile.layers import section_stops
 from fivebar_host.compile.model import compact_ints, compact_steps, release_free_memory
@@ -29,7 +29,7 @@ from fivebar_host.config import Motors, Profile
 from fivebar_host.toolpath.segment import PoseChecker
 from kinematics.arrays import BoolArray, FloatArray, IntArray
 
-#: Timing (see `fivebar_host.planner`): the continuous profile that decides the cut plans
+#: Timing (see `fivebar_host.compile.planner`): the continuous profile that decides the cut plans
 #: with this share of the joint acceleration limit (`cut_accel`), with the whole junction
 #: jump and without a corner cap — the durations come from the staircase itself (step 4),
 #: so the cut needs no reserve: at half the jump (and a corner cap) the profile saw a
@@ -172,7 +172,7 @@ def time_stepped(profile: Profile, checker: PoseChecker, sp: Stepped,
                  power: NDArray[np.uint8], feed: FloatArray, stop: BoolArray) -> Planned:
     """Steps 1–4 of the module doc on stepped segments with their laser power, pen feed
     (mm/s) and stops given per segment (also used by the GRBL bridge's online compiler,
-    `fivebar_host.grbl.online`, on small batches of moves)."""
+    `fivebar_host.bridge.online`, on small batches of moves)."""
     return _time(profile, checker, [sp], [power, feed, stop])
 
 

@@ -4,7 +4,7 @@ including the joint-space interpolation between them) lies from the requested cu
 `deviations` measures every draw segment (Newton's method on the primitive, a join bridge to
 its end points), `validate` fills the per-path and overall figures into the `Job`,
 `nbar_opinion` asks the general n-bar solver (`kinematics.nbar`) for a second opinion, and
-`distance_to_request` is shared with `fivebar_host.executed` (recorded runs).
+`distance_to_request` is shared with `fivebar_host.report.text.executed` (recorded runs).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from fivebar_host import steps
+from fivebar_host.compile import steps
 from fivebar_host.compile.model import Job
 from fivebar_host.config import Profile
 from fivebar_host.toolpath.geometry import nearest_distance

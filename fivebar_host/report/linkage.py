@@ -3,7 +3,7 @@
 The mechanism at its initial pose (bold) and a few later ones (faint) with the tracer curves:
 planar in 2-D, spherical on the unit sphere, spatial in 3-D. It uses matplotlib's object API
 with the Agg canvas, so it needs no display and leaves pyplot's global state alone. The
-simulation itself is `kinematics.nbar`; files and text are `fivebar_host.linkage`.
+simulation itself is `kinematics.nbar`; files and text are `fivebar_host.report.text.linkage`.
 """
 
 from __future__ import annotations

@@ -30,9 +30,9 @@ from matplotlib.patches import Circle, Patch
 from numpy.typing import NDArray
 
 from fivebar_host.compile import Job
+from fivebar_host.compile.steps import step_angles
 from fivebar_host.config import Profile
-from fivebar_host.dryrun import format_duration, mode_sequence
-from fivebar_host.steps import step_angles
+from fivebar_host.report.text.dryrun import format_duration, mode_sequence
 from fivebar_host.toolpath.geometry import flatten
 from kinematics.arrays import FloatArray
 from kinematics.fivebar import FiveBar

@@ -5,7 +5,7 @@ safe islands apart from it), singularity curves and the largest page. Bottom row
 analysed mode and zoomed on its safe region: the transmission-angle map (Eq. 23), the step
 quantum with the thesis' ±δ traces (Sec. 4.1, Fig. 18) and the Jacobian condition number.
 The numbers come from `kinematics.workspace.workspace_report`; the text and files from
-`fivebar_host.workspace`.
+`fivebar_host.report.text.workspace`.
 """
 
 from __future__ import annotations

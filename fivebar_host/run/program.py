@@ -20,9 +20,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from fivebar_host import protocol
 from fivebar_host.compile import Job, pen_setup_lines, pen_switch_lines
+from fivebar_host.compile.steps import absolute_steps, step_angles
 from fivebar_host.config import Profile
 from fivebar_host.run.errors import SendError
-from fivebar_host.steps import absolute_steps, step_angles
 
 #: Share of the joint speed and acceleration limits used by moves the host adds itself
 #: (travel back on resume, jogs, framing): they are not timed by the job planner.

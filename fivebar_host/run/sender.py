@@ -35,10 +35,11 @@ from fivebar_host import protocol
 from fivebar_host.compile import Job
 from fivebar_host.compile.model import LayerPause
 from fivebar_host.config import Profile
+from fivebar_host.controllers.fivebar.faults import StreamRun, after_fault
+from fivebar_host.controllers.fivebar.link import Link
+from fivebar_host.controllers.fivebar.stream import StreamProgress, StreamResult
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import LinkFaultError, PowerLossError, SendError
-from fivebar_host.run.faults import StreamRun, after_fault
-from fivebar_host.run.link import Link
 from fivebar_host.run.overrides import FEED_MAX_PCT, FEED_MIN_PCT, Overrides
 from fivebar_host.run.program import build_program
 from fivebar_host.run.resume import (
@@ -49,7 +50,6 @@ from fivebar_host.run.resume import (
     resume_path,
 )
 from fivebar_host.run.stops import Copies, later_copies_s, pieces, stopped, wait_between_copies
-from fivebar_host.run.stream import StreamProgress, StreamResult
 
 
 # ------------------------------------------------------------------ start pose

@@ -29,7 +29,7 @@ from fivebar_host.run.errors import FaultKind, LinkFaultError, SendError
 from fivebar_host.run.resume import ResumePoint
 
 if TYPE_CHECKING:  # the reports use this module without the serial link
-    from fivebar_host.run.link import Link
+    from fivebar_host.controllers.fivebar.link import Link
 
 #: How often the page delay polls the machine and the stop request, s.
 WAIT_POLL_S = 0.05

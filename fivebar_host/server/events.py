@@ -35,11 +35,11 @@ from typing import Any
 
 import numpy as np
 
+from fivebar_host.compile.steps import step_angles
 from fivebar_host.config import Profile
 from fivebar_host.server.manual import pose_mm
 from fivebar_host.server.store import JobStore
 from fivebar_host.server.worker import Worker
-from fivebar_host.steps import step_angles
 
 #: Shortest time between two `status` events of one stream, s (at most 25 a second).
 MIN_INTERVAL_S = 0.04

@@ -16,9 +16,9 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from fivebar_host.controllers.fivebar.link import Link
+from fivebar_host.controllers.fivebar.stream import StreamResult
 from fivebar_host.protocol import AlarmPush, StatusReport
-from fivebar_host.run.link import Link
-from fivebar_host.run.stream import StreamResult
 from fivebar_host.server.store import JobStore
 
 log = logging.getLogger("fivebar.serve")

@@ -26,6 +26,7 @@ from typing import Any
 
 from fivebar_host import protocol
 from fivebar_host.compile import Job
+from fivebar_host.compile.steps import pen_position_mm
 from fivebar_host.config import Profile
 from fivebar_host.errors import FivebarError
 from fivebar_host.protocol import StatusReport
@@ -41,7 +42,6 @@ from fivebar_host.server.jobs import (
 )
 from fivebar_host.server.journal import JournalLink, ProgressWriter
 from fivebar_host.server.store import JobRecord, JobStore
-from fivebar_host.steps import pen_position_mm
 
 log = logging.getLogger("fivebar.serve")
 

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fivebar_host.compile.steps import step_angles
 from fivebar_host.config import Profile
 from fivebar_host.errors import FivebarError
 from fivebar_host.protocol import StatusReport
@@ -29,7 +30,6 @@ from fivebar_host.run.program import jog_lines
 from fivebar_host.server.control import Control
 from fivebar_host.server.journal import JournalLink
 from fivebar_host.server.machine import ActionError
-from fivebar_host.steps import step_angles
 
 log = logging.getLogger("fivebar.serve")
 

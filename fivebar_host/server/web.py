@@ -32,8 +32,8 @@ from pydantic import BaseModel, Field
 
 from fivebar_host.compile import Job, nbar_opinion
 from fivebar_host.config import Profile
-from fivebar_host.dryrun import format_duration, report_lines
 from fivebar_host.options import JOB_OPTIONS, Option
+from fivebar_host.report.text.dryrun import format_duration, report_lines
 from fivebar_host.run.overrides import FEED_MAX_PCT, FEED_MIN_PCT, POWER_MAX_PCT, POWER_MIN_PCT
 from fivebar_host.run.stops import Copies, planned_time_s
 from fivebar_host.server import store as st_

@@ -3,7 +3,7 @@
 The page rectangle of every working mode, then for one mode the grid maps of transmission
 angle, step quantum, ±δ displacement, sensitivity and condition number, the type-2 traces and
 the figures over the page. Numbers only; the text and the picture are made by
-`fivebar_host.workspace` and `fivebar_host.report.workspace`.
+`fivebar_host.report.text.workspace` and `fivebar_host.report.workspace`.
 """
 
 from __future__ import annotations

@@ -8,10 +8,10 @@ from pathlib import Path
 
 from grbl_client import GrblClient
 
+from fivebar_host.bridge.controller import Bridge
+from fivebar_host.bridge.serve import Server
 from fivebar_host.config import load_profile
-from fivebar_host.grbl.controller import Bridge
-from fivebar_host.grbl.serve import Server
-from fivebar_host.run.link import Link
+from fivebar_host.controllers.fivebar.link import Link
 
 #: Work origin of the tests' drawings: G54 X0 Y0 at machine (5, 95) mm, inside the default
 #: profile's safe region (x 0…40, y 80…140).

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 from grbl_support import ORIGIN, start_bridge, stop_bridge
 
+from fivebar_host.compile.steps import step_angles, step_quantum_mm
 from fivebar_host.config import load_profile
 from fivebar_host.devices.simtrace import read_trace
-from fivebar_host.executed import merge_axes
-from fivebar_host.steps import step_angles, step_quantum_mm
+from fivebar_host.report.text.executed import merge_axes
 
 pygrbl = pytest.importorskip("pygrbl_streamer")
 DRAWING = Path(__file__).resolve().parent / "drawing.nc"

@@ -33,6 +33,7 @@ from enum import Enum
 from typing import TYPE_CHECKING
 
 from fivebar_host import protocol
+from fivebar_host.controllers.fivebar import pack
 from fivebar_host.protocol import (
     AlarmPush,
     Banner,
@@ -42,12 +43,11 @@ from fivebar_host.protocol import (
     SettingLine,
     StatusReport,
 )
-from fivebar_host.run import pack
 from fivebar_host.run.errors import FaultKind, LinkError, LinkFaultError
 from fivebar_host.run.overrides import FEED_MAX_PCT, OverrideEncoder, Overrides
 
 if TYPE_CHECKING:
-    from fivebar_host.run.link import Link
+    from fivebar_host.controllers.fivebar.link import Link
 
 #: A line in flight is suspected lost when no reply came for this long ...
 LOST_REPLY_S = 0.3

@@ -6,8 +6,8 @@ checksum field, its body's CRC-16 and length (docs/protocol.md 5.1), so a corrup
 line that lost or gained bytes, or a lost line is resent and no line runs twice.
 
 `Link.stream` sends many lines with flow control; its state machine lives in
-`fivebar_host.run.stream` (character counting, resends, fault detection). The errors are in
-`fivebar_host.run.errors`.
+`fivebar_host.controllers.fivebar.stream` (character counting, resends, fault detection).
+The errors are in `fivebar_host.run.errors`.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from typing import Any
 import serial
 
 from fivebar_host import protocol
+from fivebar_host.controllers.fivebar.stream import Streamer, StreamProgress, StreamResult
 from fivebar_host.protocol import Banner, ErrorReply, Message, Ok, ProtocolError, StatusReport
 from fivebar_host.run.errors import (
     FaultKind,
@@ -30,7 +31,6 @@ from fivebar_host.run.errors import (
     NoBannerError,
 )
 from fivebar_host.run.overrides import Overrides
-from fivebar_host.run.stream import Streamer, StreamProgress, StreamResult
 
 
 def register_url_handlers() -> None:

@@ -22,11 +22,11 @@ import time
 from collections.abc import Callable
 
 from fivebar_host import protocol
-from fivebar_host.grbl.online import Batch
+from fivebar_host.bridge.online import Batch
+from fivebar_host.controllers.fivebar.link import Link
+from fivebar_host.controllers.fivebar.stream import StreamProgress
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import FaultKind, LinkError, LinkFaultError
-from fivebar_host.run.link import Link
-from fivebar_host.run.stream import StreamProgress
 
 POLL_S = 0.1
 

@@ -15,9 +15,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
-from fivebar_host.grbl import codes
-from fivebar_host.grbl.codes import GrblError
-from fivebar_host.grbl.gcode import AXES, Block
+from fivebar_host.bridge import codes
+from fivebar_host.bridge.codes import GrblError
+from fivebar_host.bridge.gcode import AXES, Block
 
 MM_PER_INCH = 25.4
 WCS_NAMES = ("G54", "G55", "G56", "G57", "G58", "G59")

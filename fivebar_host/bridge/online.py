@@ -29,14 +29,15 @@ from typing import Protocol
 
 import numpy as np
 
-from fivebar_host import protocol, steps
+from fivebar_host import protocol
+from fivebar_host.bridge import codes
+from fivebar_host.bridge.codes import GrblAlarmError
+from fivebar_host.compile import steps
 from fivebar_host.compile.model import MAX_STEP_RAD
 from fivebar_host.compile.segments import Segments, drop_zero_moves
 from fivebar_host.compile.timing import time_stepped
 from fivebar_host.compile.travel import TRAVEL_TOL_MM
 from fivebar_host.config import Profile
-from fivebar_host.grbl import codes
-from fivebar_host.grbl.codes import GrblAlarmError
 from fivebar_host.toolpath.segment import (
     REASON_KEY,
     CheckFailedError,

@@ -7,13 +7,13 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from fivebar_host.grbl import codes, views
-from fivebar_host.grbl.codes import GrblError
-from fivebar_host.grbl.gcode import _NUMBER, parse
-from fivebar_host.grbl.interp import ModalState
+from fivebar_host.bridge import codes, views
+from fivebar_host.bridge.codes import GrblError
+from fivebar_host.bridge.gcode import _NUMBER, parse
+from fivebar_host.bridge.interp import ModalState
 
 if TYPE_CHECKING:
-    from fivebar_host.grbl.controller import Bridge
+    from fivebar_host.bridge.controller import Bridge
 
 
 def run_system(bridge: Bridge, line: str) -> None:

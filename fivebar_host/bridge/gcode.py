@@ -13,8 +13,8 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 
-from fivebar_host.grbl import codes
-from fivebar_host.grbl.codes import GrblError
+from fivebar_host.bridge import codes
+from fivebar_host.bridge.codes import GrblError
 
 #: GRBL's line buffer is 80 bytes: 79 characters after pre-parsing, then the terminator.
 LINE_MAX = 79

@@ -102,7 +102,7 @@ class GrblLink:
              reply_timeout_s: float = 10.0) -> GrblLink:
         """Open the port and wait for GRBL's banner (opening an Uno resets it); without one,
         a Ctrl-X asks for it. A board that never says `Grbl 1.1` is refused."""
-        from fivebar_host.run.link import register_url_handlers
+        from fivebar_host.controllers.fivebar.link import register_url_handlers
 
         register_url_handlers()
         try:

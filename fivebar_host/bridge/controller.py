@@ -1,6 +1,6 @@
 """The GRBL 1.1 controller a sender talks to, in front of a fivebar machine: `Bridge`.
 
-Bytes from the sender (any transport: `fivebar_host.grbl.serve`) go through
+Bytes from the sender (any transport: `fivebar_host.bridge.serve`) go through
 `realtime.InputBuffer`: real-time bytes are acted on at once on the transport's thread
 (`?` answered from the last machine status, `!`, `~`, Ctrl-X, jog cancel, overrides); lines
 wait for the bridge's own thread, which answers each with exactly one `ok` or `error:N`, in
@@ -25,15 +25,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from fivebar_host.config import Profile
-from fivebar_host.grbl import codes, views
-from fivebar_host.grbl.codes import GrblAlarmError, GrblError
-from fivebar_host.grbl.gcode import parse, preparse
-from fivebar_host.grbl.interp import Dwell, ModalState, Move, ProgramFlow, Vec, execute
-from fivebar_host.grbl.machine import MachineDriver
-from fivebar_host.grbl.online import LOOKAHEAD_MOVES, OnlineCompiler, Solved, dwell_lines
-from fivebar_host.grbl.online import Batch as _Batch
-from fivebar_host.grbl.realtime import (
+from fivebar_host.bridge import codes, views
+from fivebar_host.bridge.codes import GrblAlarmError, GrblError
+from fivebar_host.bridge.gcode import parse, preparse
+from fivebar_host.bridge.interp import Dwell, ModalState, Move, ProgramFlow, Vec, execute
+from fivebar_host.bridge.machine import MachineDriver
+from fivebar_host.bridge.online import LOOKAHEAD_MOVES, OnlineCompiler, Solved, dwell_lines
+from fivebar_host.bridge.online import Batch as _Batch
+from fivebar_host.bridge.realtime import (
     RT_CYCLE_START,
     RT_HOLD,
     RT_JOG_CANCEL,
@@ -42,8 +41,9 @@ from fivebar_host.grbl.realtime import (
     InputBuffer,
     Overrides,
 )
-from fivebar_host.grbl.system import run_system
-from fivebar_host.run.link import Link
+from fivebar_host.bridge.system import run_system
+from fivebar_host.config import Profile
+from fivebar_host.controllers.fivebar.link import Link
 
 FLUSH_IDLE_S = 0.05
 UNLOCK_MSG = "[MSG:'$H'|'$X' to unlock]"

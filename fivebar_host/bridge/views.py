@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from fivebar_host.grbl.interp import MM_PER_INCH, WCS_NAMES, ModalState, Vec
+from fivebar_host.bridge.interp import MM_PER_INCH, WCS_NAMES, ModalState, Vec
 
 VERSION = "1.1h"
 BANNER = f"Grbl {VERSION} ['$' for help]"

@@ -5,5 +5,6 @@ G-code → machine-frame moves), `online` (the online compiler: checks, joint-sp
 segmentation, timing, firmware lines), `realtime` (the sender's byte stream: real-time bytes,
 lines, overrides), `views` (status report, `$$`, `$G`, `$#`, `$I` as GRBL shows them),
 `system` (`$` commands), `controller` (the `Bridge` tying them together), `machine` (the thread
-that drives the fivebar firmware through `fivebar_host.run.link`), `serve` (pty and TCP).
+that drives the fivebar firmware through `fivebar_host.controllers.fivebar.link`), `serve`
+(pty and TCP).
 """

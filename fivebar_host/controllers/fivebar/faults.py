@@ -17,9 +17,9 @@ from pathlib import Path
 
 from fivebar_host import protocol
 from fivebar_host.compile import Job
+from fivebar_host.controllers.fivebar.link import Link
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import FaultKind, LinkError, LinkFaultError, SendError
-from fivebar_host.run.link import Link
 from fivebar_host.run.program import Program
 from fivebar_host.run.resume import ResumePoint, kept_resume_segment, redraw_text
 

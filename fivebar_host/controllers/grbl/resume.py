@@ -29,9 +29,9 @@ import numpy as np
 
 from fivebar_host.compile import Job
 from fivebar_host.config import Profile
+from fivebar_host.controllers.grbl.link import GrblError, GrblLink, StreamState
+from fivebar_host.controllers.grbl.program import GrblProgram
 from fivebar_host.run.errors import PowerLossError
-from fivebar_host.run.grbl_link import GrblError, GrblLink, StreamState
-from fivebar_host.run.grbl_program import GrblProgram
 from fivebar_host.run.program import line_param
 from fivebar_host.run.resume import ResumePoint, fingerprint
 
@@ -104,7 +104,7 @@ def resume_pose(link: GrblLink, job: Job, profile: Profile, rp: ResumePoint,
                 confirm_placed: Callable[[str], bool], note: Callable[[str], None],
                 travel: Callable[[tuple[int, int], tuple[int, int]], None]) -> tuple[int, int]:
     """Make the board's count agree with the stop position (module doc); returns it."""
-    from fivebar_host.run.grbl_run import position_steps
+    from fivebar_host.controllers.grbl.run import position_steps
 
     assert rp.position is not None
     stop = rp.position
@@ -117,7 +117,7 @@ def resume_pose(link: GrblLink, job: Job, profile: Profile, rp: ResumePoint,
              f"B = {stop[1]} steps: the board kept its position since the stop (exact)")
         return stop
     if profile.motors.endstops:
-        from fivebar_host.run.grbl_program import work_offset_line
+        from fivebar_host.controllers.grbl.program import work_offset_line
 
         link.command("$H", timeout_s=120.0)
         link.command(work_offset_line(profile))

@@ -30,7 +30,7 @@ import numpy as np
 
 from fivebar_host.compile import Job
 from fivebar_host.config import Profile
-from fivebar_host.run.grbl_link import (
+from fivebar_host.controllers.grbl.link import (
     GrblError,
     GrblLink,
     GrblSettingsError,
@@ -38,7 +38,7 @@ from fivebar_host.run.grbl_link import (
     GrblStreamError,
     StreamState,
 )
-from fivebar_host.run.grbl_program import (
+from fivebar_host.controllers.grbl.program import (
     GrblProgram,
     from_firmware_lines,
     job_program,
@@ -46,7 +46,7 @@ from fivebar_host.run.grbl_program import (
     steps_per_degree,
     work_offset_line,
 )
-from fivebar_host.run.grbl_resume import fault_point, load_point, resume_pose
+from fivebar_host.controllers.grbl.resume import fault_point, load_point, resume_pose
 from fivebar_host.run.resume import RESUME_SUFFIX, resume_path
 
 

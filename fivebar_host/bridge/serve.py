@@ -20,8 +20,8 @@ import tty
 from collections.abc import Callable
 from pathlib import Path
 
+from fivebar_host.bridge.controller import Bridge
 from fivebar_host.errors import UsageError
-from fivebar_host.grbl.controller import Bridge
 
 BUSY_MSG = b"[MSG:fivebar bridge busy: another sender is connected]\r\n"
 
