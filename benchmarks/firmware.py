@@ -45,7 +45,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks import steptiming
-from fivebar_host import protocol
+from fivebar_host import protocol, wire
 from fivebar_host.devices import sim
 from fivebar_host.devices.simtrace import Trace
 
@@ -180,7 +180,7 @@ def stream_job(build: sim.BuildPaths, segs: list[tuple[int, int, int]], trace_pa
             if s.send(line) != protocol.Ok():
                 return None, f"{line} refused"
         first = 3 + (len(PEN_LINES) if pen else 0)
-        replies = s.stream([protocol.g1(a, b, p) for a, b, p in segs], numbered_from=first)
+        replies = s.stream([wire.g1(a, b, p) for a, b, p in segs], numbered_from=first)
         if any(r != protocol.Ok() for r in replies):
             bad = next(r for r in replies if r != protocol.Ok())
             return None, f"refused: {bad}"
@@ -305,7 +305,7 @@ def run_segments(build: sim.BuildPaths, p_us: int, tmp: Path, pen: bool, count: 
         s = dev.session
         base = start_pen(s, pen)
         s.send("G91")
-        lines = [protocol.g1(3 if i % 2 else -3, 2, p_us) for i in range(count)]
+        lines = [wire.g1(3 if i % 2 else -3, 2, p_us) for i in range(count)]
         replies = s.stream(lines, numbered_from=2 + (len(PEN_LINES) if pen else 0))
         if any(r != protocol.Ok() for r in replies):
             raise sim.EmulatorError(f"segments refused: {replies[:3]}")

@@ -12,7 +12,7 @@ UART times every byte from UBRR/U2X, so the baud rate binds as on hardware).
    115200 the protocol-2 encoding (one numbered G1 line per segment) beside G6 packing;
 2. the same kind of job built by the real planner: a 100 mm straight line given as 1000
    G-code moves of 0.1 mm, compiled with `compile_job` (no simplification, draw feed
-   100 mm/s) and streamed as `fivebar plot` does (`run.program.build_program`), on the
+   100 mm/s) and streamed as `fivebar plot` does (`run.moves.build_program`), on the
    default profile and at 1000 rad/s²; and the same line wobbling ±0.03 mm at 300 mm/s,
    planned for each baud rate (the link's floor under durations, `compile.linkrate`);
 3. `--line-use`: bytes/s over the line's capacity, protocol-2 lines (nominal 8N1 11 520 B/s;
@@ -38,13 +38,13 @@ from pathlib import Path
 # shadow the `kinematics` package: drop the folder before importing the project.
 _HERE = Path(__file__).resolve().parent
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
-from fivebar_host import protocol  # noqa: E402
+from fivebar_host import protocol, wire  # noqa: E402
 from fivebar_host.compile import CompileOptions, compile_job  # noqa: E402
 from fivebar_host.config import load_profile  # noqa: E402
-from fivebar_host.controllers.fivebar import pack  # noqa: E402
 from fivebar_host.controllers.fivebar.link import Link  # noqa: E402
 from fivebar_host.devices.sim import toolchain_missing  # noqa: E402
-from fivebar_host.run.program import build_program  # noqa: E402
+from fivebar_host.program import Program  # noqa: E402
+from fivebar_host.run.moves import build_program  # noqa: E402
 
 NOMINAL_BPS = 115200 / 10
 #: How far the wobbly planned job's points stray from its line, mm.
@@ -58,11 +58,11 @@ def job(n: int, p_us: int) -> list[str]:
     a = 0
     for k in range(n):
         a += 3 if (k // 50) % 2 == 0 else -3
-        out.append(protocol.g1(a, -a, p_us, 0))
+        out.append(wire.g1(a, -a, p_us, 0))
     return out
 
 
-def run(bodies: list[str]) -> tuple[float, int, int, float]:
+def run(bodies: Program | list[str]) -> tuple[float, int, int, float]:
     """Stream on a fresh emulator; (bytes/s, bytes, mid-path underruns, seconds)."""
     link = Link.open("fivebar-sim://?realtime=1")
     try:
@@ -85,7 +85,7 @@ def issue_job(n: int = 1000, p_us: int = 1000) -> list[str]:
     for k in range(n):
         a += 1 + (k % 3 == 0)
         b -= 1 + (k % 2)
-        out.append(protocol.g1(a, b, p_us, 0))
+        out.append(wire.g1(a, b, p_us, 0))
     return out
 
 
@@ -99,7 +99,7 @@ class Run:
     cpu_us_seg: float
 
 
-def run_issue(bodies: list[str], packed: bool, baud: int = protocol.BASE_BAUD,
+def run_issue(bodies: Program | list[str], packed: bool, baud: int = protocol.BASE_BAUD,
               segments: int | None = None) -> Run:
     """Stream `bodies` on a fresh emulator in real time at `baud` ($B after the banner).
     `segments`: how many of the bodies are segments (default: all but the first)."""
@@ -121,13 +121,14 @@ def run_issue(bodies: list[str], packed: bool, baud: int = protocol.BASE_BAUD,
 
 
 def pack_cost_us(bodies: list[str], repeat: int = 5) -> float:
-    """Host CPU µs per segment to pack the job's bodies into wire lines (run.pack)."""
+    """Host CPU µs per segment to pack the job's bodies into wire lines (wire.pack_line)."""
+    prog = wire.read_lines(bodies)
     best = float("inf")
     for _ in range(repeat):
         t0 = time.perf_counter()
         j = 0
-        while j < len(bodies):
-            j += pack.pack_line(bodies.__getitem__, j, len(bodies), 1 + j, True, 64)[1]
+        while j < len(prog):
+            j += wire.pack_line(prog, j, 1 + j, True, 64)[1]
         best = min(best, time.perf_counter() - t0)
     return best / len(bodies) * 1e6
 
@@ -156,18 +157,18 @@ def issue(repeat: int) -> None:
                 print(_row(f"{baud} protocol 2 (G1 per line)", runs))
             runs = [run_issue(bodies, True, baud) for _ in range(repeat)]
             print(_row(f"{baud} protocol 3 (G6 packing)", runs))
-    print(f"packing alone: {pack_cost_us(issue_job()):.1f} µs per segment (run.pack.pack_line)")
+    print(f"packing alone: {pack_cost_us(issue_job()):.1f} µs per segment (wire.pack_line)")
     print("targets: ≥ 750 segments/s and 0 mid-path underruns at 115200 (P = 1000 µs)")
 
 
 def planned_job(max_joint_rad_s2: float | None, feed_mm_s: float = 100.0,
                 wobble_mm: float = 0.0,
-                link_baud: int = protocol.BASE_BAUD) -> tuple[list[str], int, float, float]:
+                link_baud: int = protocol.BASE_BAUD) -> tuple[Program, int, float, float]:
     """A 100 mm line in 1000 G-code moves of 0.1 mm, compiled at `feed_mm_s` (the profile's
     joint acceleration, or `max_joint_rad_s2`, and then a joint speed of 50 rad/s), each
     point moved off the line by up to `wobble_mm` (chords of varied lengths: their
     durations differ, so their G6 items carry `P`), planned for a link at `link_baud`:
-    (bodies as `fivebar plot` sends them, laser off; segments; segments/s the plan asks on
+    (the program as `fivebar plot` sends it, laser off; segments; segments/s the plan asks on
     the line; on the whole job, travel from and back to the home pose included)."""
     prof = dataclasses.replace(load_profile(), serial=dataclasses.replace(
         load_profile().serial, link_baud=link_baud))
@@ -185,7 +186,7 @@ def planned_job(max_joint_rad_s2: float | None, feed_mm_s: float = 100.0,
     us = job.duration_us
     on_line = int(job.draw.sum()) / (float(us[job.draw].sum()) * 1e-6)
     prog = build_program(job, prof, False, 0, (0, 0))
-    return prog.bodies, len(us), on_line, len(us) / (float(us.sum()) * 1e-6)
+    return prog, len(us), on_line, len(us) / (float(us.sum()) * 1e-6)
 
 
 def planned(repeat: int) -> None:

@@ -24,8 +24,7 @@ from __future__ import annotations
 import random
 from collections import Counter
 
-from fivebar_host import protocol
-from fivebar_host.controllers.fivebar import pack
+from fivebar_host import protocol, wire
 from fivebar_host.devices.mock.codes import OK
 from fivebar_host.devices.mock.parser import parse_line
 
@@ -46,7 +45,7 @@ def job_bodies(rng: random.Random, n: int) -> list[str]:
         b += rng.randint(-3, 3)
         if rng.random() < 0.2:
             p = rng.randint(100, 100_000)
-        out.append(protocol.g1(a, b, p, s))
+        out.append(wire.g1(a, b, p, s))
     return out
 
 
@@ -55,12 +54,11 @@ def g6_lines(rng: random.Random, count: int) -> list[tuple[int, bytes]]:
     streamer uses with the firmware's 128-byte receive buffer."""
     out: list[tuple[int, bytes]] = []
     while len(out) < count:
-        bodies = job_bodies(rng, 40)
+        prog = wire.read_lines(job_bodies(rng, 40))
         number = rng.randint(1, 2**31)
         j = 0
-        while j < len(bodies) and len(out) < count:
-            line, used = pack.pack_line(bodies.__getitem__, j, len(bodies), number + j,
-                                        True, 64)
+        while j < len(prog) and len(out) < count:
+            line, used = wire.pack_line(prog, j, number + j, True, 64)
             if used > 1:
                 out.append((number + j, line[:-1]))
             j += used

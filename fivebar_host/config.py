@@ -121,14 +121,6 @@ class Pen:
         ms = abs(self.up_position - self.down_position) / rate * 1000.0
         return min(10_000, 20 * math.ceil(ms / 20.0 - 1e-9))
 
-    def command(self, down: bool) -> str:
-        """The firmware line that lowers (`down`) or raises the pen."""
-        from fivebar_host.protocol import m280
-
-        pos = self.down_position if down else self.up_position
-        return m280(self.pulse_us(pos), self.move_ms(down),
-                    self.down_delay_ms if down else self.up_delay_ms)
-
     def time_s(self, down: bool) -> float:
         """How long one lowering (`down`) or raising keeps the arms waiting, s."""
         return (self.move_ms(down) + (self.down_delay_ms if down else self.up_delay_ms)) / 1e3

@@ -191,41 +191,6 @@ def encode_line(body: str, line_number: int | None = None, checksum: bool = Fals
     return raw + b"\n"
 
 
-def g1(a: int | None, b: int | None, p_us: int, s: int | None = None) -> str:
-    """The body of a G1 segment; raises ProtocolError for out-of-range values."""
-    if not P_MIN_US <= p_us <= P_MAX_US:
-        raise ProtocolError(f"segment duration P{p_us} outside {P_MIN_US}..{P_MAX_US} us")
-    words = ["G1"]
-    for letter, value in (("A", a), ("B", b)):
-        if value is not None:
-            if not -POS_LIMIT <= value <= POS_LIMIT:
-                raise ProtocolError(f"{letter}{value} outside +-{POS_LIMIT} steps")
-            words.append(f"{letter}{value}")
-    words.append(f"P{p_us}")
-    if s is not None:
-        if not 0 <= s <= POWER_MAX:
-            raise ProtocolError(f"laser power S{s} outside 0..{POWER_MAX}")
-        words.append(f"S{s}")
-    return " ".join(words)
-
-
-def m280(pulse_us: int, move_ms: int = 0, settle_ms: int = 0) -> str:
-    """The body of a pen servo command (docs/protocol.md 6.2): a queued block that moves the
-    servo pulse to `pulse_us` over `move_ms`, then keeps the next segment waiting `settle_ms`
-    more. Raises ProtocolError for values the firmware refuses."""
-    if not SERVO_MIN_US <= pulse_us <= SERVO_MAX_US:
-        raise ProtocolError(f"pen pulse S{pulse_us} outside {SERVO_MIN_US}..{SERVO_MAX_US} us")
-    for letter, ms in (("R", move_ms), ("D", settle_ms)):
-        if not 0 <= ms <= PEN_MS_MAX:
-            raise ProtocolError(f"pen {letter}{ms} outside 0..{PEN_MS_MAX} ms")
-    words = [f"M280 S{pulse_us}"]
-    if move_ms:
-        words.append(f"R{move_ms}")
-    if settle_ms:
-        words.append(f"D{settle_ms}")
-    return " ".join(words)
-
-
 @dataclass(frozen=True)
 class Ok:
     """``ok``: the line was accepted (queued or done), not necessarily executed."""

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from fivebar_host import protocol
+from fivebar_host import protocol, wire
 
 #: Bytes noise may put into a line.
 NOISE_BYTES = bytes(b for b in range(256)
@@ -59,7 +59,7 @@ def valid_line(draw: DrawInt) -> tuple[int, bytes]:
     b = draw(-protocol.POS_LIMIT - 1, protocol.POS_LIMIT)
     p = draw(protocol.P_MIN_US, protocol.P_MAX_US)
     s = draw(-1, protocol.POWER_MAX)
-    body = protocol.g1(a if a >= -protocol.POS_LIMIT else None,
+    body = wire.g1(a if a >= -protocol.POS_LIMIT else None,
                        b if b >= -protocol.POS_LIMIT else None, p, s if s >= 0 else None)
     return n, protocol.encode_line(body, n)[:-1]
 

@@ -10,7 +10,9 @@ from typing import Any
 import pytest
 from click.testing import CliRunner
 
+from fivebar_host import wire
 from fivebar_host.cli import main
+from fivebar_host.compile.emit import pen_item
 from fivebar_host.config import DEFAULT_PROFILE, ConfigError, load_profile, parse_profile
 
 
@@ -206,8 +208,8 @@ def test_pen_profile_loads_with_its_pulses_and_times() -> None:
     assert (pen.pulse_us(pen.up_position), pen.pulse_us(pen.down_position)) == (1800, 1000)
     # 40 points at 200 %/s = 200 ms; at 400 %/s = 100 ms; whole 20 ms frames
     assert (pen.move_ms(True), pen.move_ms(False)) == (200, 100)
-    assert pen.command(True) == "M280 S1000 R200 D150"
-    assert pen.command(False) == "M280 S1800 R100 D100"
+    assert wire.bodies(pen_item(prof, True)) == ["M280 S1000 R200 D150"]
+    assert wire.bodies(pen_item(prof, False)) == ["M280 S1800 R100 D100"]
     assert load_profile().tool == "laser" and load_profile().pen is None
 
 
@@ -249,7 +251,8 @@ def test_laser_on_a_pen_profile_is_refused_and_overrides_are_checked() -> None:
     changed = with_pen_overrides(prof, {"pen_down_position": 10.0, "pen_down_delay_ms": 300.0,
                                         "pen_up_rate": None})
     # 55 points at 200 %/s: 275 ms, whole 20 ms frames
-    assert changed.pen is not None and changed.pen.command(True) == "M280 S700 R280 D300"
+    assert changed.pen is not None and wire.bodies(pen_item(changed, True)) == [
+        "M280 S700 R280 D300"]
     with pytest.raises(ConfigError, match="must differ"):
         with_pen_overrides(prof, {"pen_down_position": 65.0})
     with pytest.raises(ConfigError, match="no \\[pen\\] table"):

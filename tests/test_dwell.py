@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from fivebar_host import protocol
+from fivebar_host import protocol, wire
 from fivebar_host.cli import main
 from fivebar_host.compile import CompileOptions, compile_job, encode_lines, planner
 from fivebar_host.compile.dwell import dwell_pieces
 from fivebar_host.config import load_profile
 from fivebar_host.devices import mock
-from fivebar_host.run.program import build_program
+from fivebar_host.run.moves import build_program
 from fivebar_host.toolpath.gcode import read_gcode
 
 #: Two laser strokes with a dwell between them (laser on: a dot at the first stroke's end),
@@ -128,7 +128,7 @@ def test_resume_maps_a_dwell_like_any_segment(dwell_file: Path) -> None:
     k = int(np.flatnonzero(job.is_dwell)[0])
     prog = build_program(job, prof, True, k, job.steps[k])
     first = [i for i, s in enumerate(prog.segment.tolist()) if s == k]
-    assert first and prog.bodies[first[0]] == f"G1 P500000 S{prof.laser.power}"
+    assert first and wire.bodies(prog)[first[0]] == f"G1 P500000 S{prof.laser.power}"
     assert prog.finished_segments(1, 1 + first[0], k) == k + 1
 
 

@@ -16,8 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from line_noise import GUARANTEED, NOISE_BYTES, add_noise, only_blanks_added
 
-from fivebar_host import protocol
-from fivebar_host.controllers.fivebar import pack
+from fivebar_host import protocol, wire
 from fivebar_host.controllers.fivebar.link import Link
 from fivebar_host.devices import urls
 from fivebar_host.devices.mock.codes import OK
@@ -32,15 +31,15 @@ def _bodies(rng: random.Random, n: int, p_change: float = 0.2) -> list[str]:
         b += rng.randint(-3, 3)
         if rng.random() < p_change:
             p = rng.randint(100, 100_000)
-        out.append(protocol.g1(a, b, p, 0))
+        out.append(wire.g1(a, b, p, 0))
     return out
 
 
 def _packed(bodies: list[str], number: int, limit: int = 64) -> list[tuple[bytes, int]]:
     lines, j = [], 0
+    prog = wire.read_lines(bodies)
     while j < len(bodies):
-        line, count = pack.pack_line(bodies.__getitem__, j, len(bodies), number + j, True,
-                                     limit)
+        line, count = wire.pack_line(prog, j, number + j, True, limit)
         lines.append((line, count))
         j += count
     return lines
@@ -86,7 +85,8 @@ def test_only_what_has_a_known_absolute_target_is_packed() -> None:
     counts = [c for _, c in _packed(bodies, 1)]
     assert counts == [2, 1, 2, 1, 1]
     assert _packed(bodies[:2], 7)[0][0].startswith(b"N7G6A1B1P1000S5 +1+1")
-    assert pack.modes(["G1 A1 P100", "G90", "G1 A1 P100", "G91", "G1 A1 P100"]) == [
+    assert wire.absolute_known(wire.read_lines(
+        ["G1 A1 P100", "G90", "G1 A1 P100", "G91", "G1 A1 P100"])).tolist() == [
         False, False, True, True, False]
 
 
@@ -166,7 +166,7 @@ def test_guaranteed_noise_on_any_g6_line_is_refused(data: st.DataObject) -> None
 def test_a_stream_of_g6_lines_runs_every_segment_with_its_number() -> None:
     """Through the mock: the ledger has one block per G1 body, numbered as the bodies."""
     urls.register()
-    bodies = ["G90", "G92 A0 B0", *(protocol.g1(k // 3, -(k // 2), 2000 + 100 * (k // 40), 0)
+    bodies = ["G90", "G92 A0 B0", *(wire.g1(k // 3, -(k // 2), 2000 + 100 * (k // 40), 0)
                                     for k in range(1, 121))]
     link = Link.open("fivebar-mock://?speed=0&machine=g6test")
     try:

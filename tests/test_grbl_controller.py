@@ -19,8 +19,8 @@ from fivebar_host.config import load_profile
 from fivebar_host.controllers.grbl.link import GrblError, GrblLink
 from fivebar_host.controllers.grbl.run import run_grbl_job
 from fivebar_host.devices import grblmock, urls
+from fivebar_host.program import line_param
 from fivebar_host.report.text.executed import executed_path
-from fivebar_host.run.program import line_param
 from fivebar_host.run.resume import ResumePoint, resume_path
 
 ROOT = Path(__file__).resolve().parents[1]

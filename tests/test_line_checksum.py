@@ -27,7 +27,7 @@ from line_noise import (
     valid_line,
 )
 
-from fivebar_host import protocol
+from fivebar_host import protocol, wire
 from fivebar_host.devices import mock, urls
 from fivebar_host.protocol import ErrorReply, Message, Ok
 
@@ -147,7 +147,7 @@ def test_the_longest_g1_line_fits_the_line_limit() -> None:
     a 2-digit length)."""
     def widest(lo: int, hi: int) -> int:
         return max(lo, hi, key=lambda v: len(str(v)))
-    body = protocol.g1(widest(-protocol.POS_LIMIT, protocol.POS_LIMIT),
+    body = wire.g1(widest(-protocol.POS_LIMIT, protocol.POS_LIMIT),
                        widest(-protocol.POS_LIMIT, protocol.POS_LIMIT),
                        widest(protocol.P_MIN_US, protocol.P_MAX_US),
                        widest(0, protocol.POWER_MAX))

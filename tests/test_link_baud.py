@@ -9,7 +9,7 @@ from typing import Any
 
 import pytest
 
-from fivebar_host import protocol
+from fivebar_host import protocol, wire
 from fivebar_host.config import ConfigError, load_profile, parse_profile
 from fivebar_host.controllers.fivebar.link import Link
 from fivebar_host.devices import simport, urls
@@ -21,7 +21,7 @@ URLS = ["fivebar-mock://?speed=1", pytest.param("fivebar-sim://?realtime=1",
 
 
 def _job(n: int) -> list[str]:
-    return ["G90", "G92 A0 B0", *(protocol.g1(k, -k, 1000, 0) for k in range(1, n + 1))]
+    return ["G90", "G92 A0 B0", *(wire.g1(k, -k, 1000, 0) for k in range(1, n + 1))]
 
 
 @pytest.mark.parametrize("url", URLS)

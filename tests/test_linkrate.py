@@ -18,11 +18,11 @@ import numpy as np
 import pytest
 
 from benchmarks.link import SIMAVR_BPS, WOBBLE_MM, planned_job, run_issue
-from fivebar_host import protocol
+from fivebar_host import protocol, wire
 from fivebar_host.compile import CompileOptions, compile_job, linkrate
 from fivebar_host.config import load_profile
-from fivebar_host.controllers.fivebar import pack
 from fivebar_host.devices.sim import toolchain_missing
+from fivebar_host.program import Kind, Program
 from fivebar_host.report.text.dryrun import report_lines
 
 #: The firmware starts moving once this many blocks are queued (config.h
@@ -32,32 +32,32 @@ START_BLOCKS, START_DELAY_S = 4, 0.020
 QUEUE_BLOCKS, RX_BYTES = 16, 128
 
 
-def wire_lines(bodies: list[str]) -> list[tuple[int, int]]:
-    """(bytes, segments) of every wire line the streamer builds from `bodies`."""
-    absolute = pack.modes(bodies)
+def wire_lines(prog: Program) -> list[tuple[int, int]]:
+    """(bytes, segments) of every wire line the streamer builds from `prog`."""
+    absolute = wire.absolute_known(prog)
     out, j = [], 0
-    while j < len(bodies):
-        raw, n = pack.pack_line(bodies.__getitem__, j, len(bodies), 10_000 + j, absolute[j],
-                                64)
+    while j < len(prog):
+        raw, n = wire.pack_line(prog, j, 10_000 + j, bool(absolute[j]), 64)
         out.append((len(raw), n))
         j += n
     return out
 
 
-def late_segments(bodies: list[str], bytes_per_s: float) -> int:
+def late_segments(prog: Program, bytes_per_s: float) -> int:
     """Underruns of the plan on a model of the link: the host sends a line once the bytes
     it has sent and not yet seen taken fit the firmware's receive buffer (character
     counting, `RX_BYTES`), the line arrives at `bytes_per_s`, the firmware takes it once its
     queue of `QUEUE_BLOCKS` has room for its segments, and runs each segment for its `P`
     from when the one before ends, or from when it was taken if that is later — an
     underrun. Motion starts as the firmware starts it (`START_BLOCKS`, `START_DELAY_S`)."""
-    dur = [0.0 if (g := pack.parse_g1(b)) is None else g.p_us * 1e-6 for b in bodies]
+    timed = (prog.kind == Kind.MOVE) | (prog.kind == Kind.DWELL)
+    dur = np.where(timed, prog.p_us * 1e-6, 0.0).tolist()
     taken: list[float] = []  # per block: when the firmware took its line
     ends: list[float] = []  # per block: when it ended (known once motion started)
     sent: list[tuple[float, int]] = []  # (taken at, bytes) of every line sent
     wire, t0 = 0.0, float("inf")
     late = 0
-    for size, n in wire_lines(bodies):
+    for size, n in wire_lines(prog):
         while sum(b for t, b in sent if t > wire) + size > RX_BYTES:
             wire = min(t for t, b in sent if t > wire)  # wait for an answer
         wire += size / bytes_per_s
@@ -66,7 +66,7 @@ def late_segments(bodies: list[str], bytes_per_s: float) -> int:
             at = max(at, ends[len(taken) + n - QUEUE_BLOCKS - 1])
         sent.append((at, size))
         taken += [at] * n
-        if t0 == float("inf") and (len(taken) >= START_BLOCKS or len(taken) == len(bodies)
+        if t0 == float("inf") and (len(taken) >= START_BLOCKS or len(taken) == len(prog)
                                    or at >= taken[0] + START_DELAY_S):
             t0 = min(at, taken[0] + START_DELAY_S)
         while t0 < float("inf") and len(ends) < len(taken):
@@ -109,22 +109,20 @@ def test_faster_links_plan_faster_within_the_firmware_floor(baud: int) -> None:
 
 
 def test_the_byte_estimate_matches_the_packer() -> None:
-    """The floor's bytes against the bytes `run.pack` really builds (independent code)."""
+    """The floor's bytes against the bytes `wire.pack_line` really builds (its text, not
+    the model's arithmetic)."""
     for wobble, feed in ((0.0, 100.0), (WOBBLE_MM, 300.0), (0.2, 200.0)):
-        bodies, _, _, _ = planned_job(2000.0, feed, wobble)
-        packed = sum(size for size, _ in wire_lines(bodies))
+        prog, _, _, _ = planned_job(2000.0, feed, wobble)
+        packed = sum(size for size, _ in wire_lines(prog))
         steps, power, dur = [], [], []
         pos = (0, 0)
-        for b in bodies:
-            seg = pack.parse_g1(b)
-            if seg is None or seg.a is None or seg.b is None:
-                continue
+        for i in np.flatnonzero(prog.kind == Kind.MOVE):
             steps.append(pos)
-            pos = (seg.a, seg.b)
-            power.append(seg.s or 0)
-            dur.append(seg.p_us)
+            pos = (int(prog.a[i]), int(prog.b[i]))
+            power.append(int(prog.s[i]))
+            dur.append(int(prog.p_us[i]))
         steps.append(pos)
-        est = linkrate.segment_bytes(np.array(steps), np.array(power), np.array(dur), 0,
+        est = wire.segment_bytes(np.array(steps), np.array(power), np.array(dur), 0,
                                      len(dur))
         assert abs(float(est.sum()) / packed - 1.0) < 0.12, (wobble, est.sum(), packed)
 

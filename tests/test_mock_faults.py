@@ -13,7 +13,7 @@ import time
 import pytest
 import serial
 
-from fivebar_host import protocol
+from fivebar_host import protocol, wire
 from fivebar_host.devices import mock, urls
 from fivebar_host.devices.mock import MockSerial, MockURLError, parse_mock_url
 from fivebar_host.protocol import Banner, ErrorReply, Message, Ok, StatusReport
@@ -214,7 +214,7 @@ def send_reliably(port: MockSerial, body: str, n: int) -> int:
 def test_line_noise_is_absorbed_by_checksums_and_resend(fault: str) -> None:
     port = open_mock(f"{fault}&speed=0", timeout=0.02)
     moves = [(7 * i % 23 - 11, 5 * i % 17 - 8) for i in range(150)]
-    errors = sum(send_reliably(port, protocol.g1(a, b, 1000), n)
+    errors = sum(send_reliably(port, wire.g1(a, b, 1000), n)
                  for n, (a, b) in enumerate([(0, 0), *moves], start=1))
     assert errors >= 5, "the fault never fired"
     time.sleep(0.05)

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fivebar_host import protocol
+from fivebar_host import protocol, wire
 from fivebar_host.cli.keys import KeyReader, apply_keys, override_keys
 from fivebar_host.compile import CompileOptions, compile_job
 from fivebar_host.config import load_profile
@@ -20,8 +20,8 @@ from fivebar_host.controllers.fivebar.link import Link
 from fivebar_host.controllers.fivebar.stream import StreamProgress
 from fivebar_host.devices import mock
 from fivebar_host.run.errors import SendError
-from fivebar_host.run.overrides import Overrides, scale_body, starts_at_rest
-from fivebar_host.run.program import build_program
+from fivebar_host.run.moves import build_program
+from fivebar_host.run.overrides import Overrides, scaled
 from fivebar_host.run.sender import run_job
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
@@ -30,6 +30,17 @@ EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 @pytest.fixture(autouse=True)
 def _clean_machines(clean_mock: None) -> None:
     """Every test here starts and ends with no named mock machine left over."""
+
+
+def scale_body(body: str, feed_pct: int, power_pct: int) -> str:
+    """One line read into an item, scaled, and written again."""
+    prog = wire.read_lines([body])
+    p, s = scaled(prog, 0, feed_pct, power_pct)
+    return wire.body(prog, 0, p, s)
+
+
+def starts_at_rest(bodies: list[str], i: int) -> bool:
+    return bool(wire.read_lines(bodies).starts_at_rest()[i])
 
 
 def test_scale_body_slows_moves_scales_power_and_keeps_the_rest() -> None:
@@ -107,30 +118,31 @@ def test_stream_applies_overrides_to_later_lines_only() -> None:
 
     with Link.open("fivebar-mock://?machine=ov&speed=0") as link:
         first = link.next_line
-        link.stream(prog.bodies, on_progress=on_progress, overrides=ov)
+        link.stream(prog, on_progress=on_progress, overrides=ov)
         link.wait_idle(30.0)
     assert changed_at
+    bodies = wire.bodies(prog)
     seen = {e.line - first: e for e in mock.machine("ov").ledger if e.kind == "G1"}
     scaled_p, scaled_s = [], []
     for i, e in sorted(seen.items()):
-        w = _words(prog.bodies[i])
+        w = _words(bodies[i])
         moving = "A" in w or "B" in w
         scaled_p.append((i, e.duration_us != w["P"] if moving else None))
         scaled_s.append((i, e.power != w["S"] if w["S"] else None))
     # no line written before the change is altered
     assert not any(x for i, x in scaled_p + scaled_s if i < changed_at[0])
     # power: every later line with S > 0 at half power
-    later_s = [(i, seen[i].power, _words(prog.bodies[i])["S"]) for i, x in scaled_s
+    later_s = [(i, seen[i].power, _words(bodies[i])["S"]) for i, x in scaled_s
                if x is not None and i >= changed_at[0]]
     assert later_s and all(p == s // 2 for _, p, s in later_s)
     # feed: from the first rest after the change, every move takes twice as long
-    start = next(i for i in range(changed_at[0], len(prog.bodies))
-                 if starts_at_rest(prog.bodies, i))
+    start = next(i for i in range(changed_at[0], len(bodies))
+                 if starts_at_rest(bodies, i))
     slowed = 0
     for i, x in scaled_p:
         if x is None or i < changed_at[0]:
             continue
-        w = _words(prog.bodies[i])
+        w = _words(bodies[i])
         want = 2 * w["P"] if i >= start else w["P"]
         assert seen[i].duration_us == want, (i, start)
         slowed += i >= start

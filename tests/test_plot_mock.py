@@ -15,14 +15,16 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from fivebar_host import wire
 from fivebar_host.cli import main
 from fivebar_host.compile import CompileOptions, Job, compile_job
 from fivebar_host.config import load_profile
 from fivebar_host.controllers.fivebar.link import Link
 from fivebar_host.devices import mock
+from fivebar_host.program import Program
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import SendError
-from fivebar_host.run.program import Program, build_program
+from fivebar_host.run.moves import build_program
 from fivebar_host.run.resume import ResumePoint, kept_resume_segment, resume_path
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
@@ -380,7 +382,7 @@ def test_kept_record_maps_onto_the_stream_exactly() -> None:
     assert "fewer than the 50" in kept_resume_segment(prog, first, 0, start,
                                                       _status(line, *mid), 50)[1]
     assert "not one of the stream's lines" in kept_resume_segment(
-        prog, first, 0, start, _status(first + len(prog.bodies), *mid), 0)[1]
+        prog, first, 0, start, _status(first + len(prog), *mid), 0)[1]
 
 
 def test_a_segment_whose_steps_are_all_issued_is_not_drawn_again() -> None:
@@ -389,11 +391,12 @@ def test_a_segment_whose_steps_are_all_issued_is_not_drawn_again() -> None:
     job, _, _ = _stream()
     k = 40
     prog = build_program(job, load_profile(), True, k, job.steps[k + 1])
-    first_g1 = next(b for b in prog.bodies if b.startswith("G1"))
+    bodies = wire.bodies(prog)
+    first_g1 = next(b for b in bodies if b.startswith("G1"))
     a, b = job.steps[k + 1].tolist()
     assert first_g1 == f"G1 A{a} B{b} P100 S0"
-    assert prog.segment[prog.bodies.index(first_g1)] == k
-    assert sum(1 for x in prog.bodies if x.startswith("G1")) == job.n_segments - k
+    assert prog.segment[bodies.index(first_g1)] == k
+    assert sum(1 for x in bodies if x.startswith("G1")) == job.n_segments - k
 
 
 def test_positions_are_shown_in_steps_and_mm() -> None:

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from fivebar_host import protocol
+from fivebar_host import protocol, wire
 from fivebar_host.protocol import (
     AlarmPush,
     Banner,
@@ -100,13 +100,13 @@ def test_encode_refuses_reserved_characters(body: str) -> None:
 
 
 def test_g1_ranges() -> None:
-    assert protocol.g1(5, -3, 1000, 255) == "G1 A5 B-3 P1000 S255"
-    assert protocol.g1(None, 2, 100) == "G1 B2 P100"
+    assert wire.g1(5, -3, 1000, 255) == "G1 A5 B-3 P1000 S255"
+    assert wire.g1(None, 2, 100) == "G1 B2 P100"
     for args in [(0, 0, 99), (0, 0, 100_000_001), (100_000_001, 0, 1000)]:
         with pytest.raises(ProtocolError):
-            protocol.g1(*args)
+            wire.g1(*args)
     with pytest.raises(ProtocolError):
-        protocol.g1(0, 0, 1000, 256)
+        wire.g1(0, 0, 1000, 256)
 
 
 def test_parse_every_message_kind() -> None:

@@ -81,3 +81,10 @@ class GrblAlarmError(FivebarError, ValueError):
         super().__init__(f"ALARM:{code} {message}")
         self.code = code
         self.message = message
+
+
+def ascii_text(text: str) -> str:
+    """GRBL's messages are ASCII and hold no `|`, `[` or `]`: symbols spelt out or replaced."""
+    text = (text.replace("°", " deg").replace("→", "->").replace("−", "-")
+            .replace("|", "").replace("[", "(").replace("]", ")"))
+    return text.encode("ascii", "replace").decode()

@@ -7,7 +7,8 @@ wait for the bridge's own thread, which answers each with exactly one `ok` or `e
 order, as GRBL does, so a sender's character counting against 128 bytes holds.
 
 A G-code line is parsed (`gcode`), run on a copy of the modal state (`interp`), and its moves
-are solved at once (`online.OnlineCompiler.solve`: reach, joint limits, singularity margins,
+are solved at once (`compile.incremental.OnlineCompiler.solve`: reach, joint limits,
+singularity margins,
 joint-space segmentation). A refused move raises ALARM:2 with a `[MSG:…]` before anything of
 it moves: the machine is stopped (laser off), the look-ahead dropped, every later line gets
 `error:9` until `$X`. Accepted moves wait in the look-ahead buffer until `LOOKAHEAD_MOVES`
@@ -26,12 +27,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from fivebar_host.bridge import codes, views
-from fivebar_host.bridge.codes import GrblAlarmError, GrblError
+from fivebar_host.bridge.codes import GrblAlarmError, GrblError, ascii_text
 from fivebar_host.bridge.gcode import parse, preparse
 from fivebar_host.bridge.interp import Dwell, ModalState, Move, ProgramFlow, Vec, execute
 from fivebar_host.bridge.machine import MachineDriver
-from fivebar_host.bridge.online import LOOKAHEAD_MOVES, OnlineCompiler, Solved, dwell_lines
-from fivebar_host.bridge.online import Batch as _Batch
 from fivebar_host.bridge.realtime import (
     RT_CYCLE_START,
     RT_HOLD,
@@ -42,8 +41,17 @@ from fivebar_host.bridge.realtime import (
     Overrides,
 )
 from fivebar_host.bridge.system import run_system
+from fivebar_host.compile.incremental import (
+    LOOKAHEAD_MOVES,
+    Batch,
+    MoveRefusedError,
+    OnlineCompiler,
+    Solved,
+    dwell_program,
+)
 from fivebar_host.config import Profile
 from fivebar_host.controllers.fivebar.link import Link
+from fivebar_host.program import Program
 
 FLUSH_IDLE_S = 0.05
 UNLOCK_MSG = "[MSG:'$H'|'$X' to unlock]"
@@ -320,10 +328,13 @@ class Bridge:
         else:
             draw = self._pen_wanted(mv)
         dynamic = mv.spindle == 4 and bool(self.settings.values[32])
-        return self.compiler.solve(th, (mv.start[0], mv.start[1]), list(mv.points),
-                                   rapid=mv.rapid, draw=draw and not jog, feed_mm_s=feed,
-                                   power=self._power(mv.s) if self.laser else 0,
-                                   dynamic=dynamic, arc=len(mv.points) > 1, jog=jog)
+        try:
+            return self.compiler.solve(th, (mv.start[0], mv.start[1]), list(mv.points),
+                                       rapid=mv.rapid, draw=draw and not jog, feed_mm_s=feed,
+                                       power=self._power(mv.s) if self.laser else 0,
+                                       dynamic=dynamic, arc=len(mv.points) > 1, jog=jog)
+        except MoveRefusedError as e:  # a soft limit, GRBL's alarm 2
+            raise GrblAlarmError(codes.ALARM_SOFT_LIMIT, ascii_text(str(e))) from None
 
     def _program_flow(self, code: int) -> None:
         if code in (2, 30):
@@ -356,12 +367,12 @@ class Bridge:
             self._submit_chunk(chunk)
             chunk = [item] if isinstance(item, Solved) else []
             if isinstance(item, Dwell):
-                self.machine.submit(_Batch(dwell_lines(item.seconds), item.seconds,
-                                           (0, 0)))
+                self.machine.submit(Batch(dwell_program(item.seconds), item.seconds,
+                                          (0, 0)))
             elif isinstance(item, PenSync):
-                lines = self.compiler.pen_lines(item.down)
-                if lines:
-                    self.machine.submit(_Batch(lines, 0.0, (0, 0)))
+                pen = self.compiler.pen_program(item.down)
+                if len(pen):
+                    self.machine.submit(Batch(pen, 0.0, (0, 0)))
 
     def _submit_chunk(self, chunk: list[Solved]) -> None:
         if not chunk:
@@ -421,7 +432,7 @@ class Bridge:
         self.homing = True
         try:
             self.machine.reset()
-            self.machine.submit(_Batch(["$H"], 0.0, (0, 0)))
+            self.machine.submit(Batch(Program.text("$H"), 0.0, (0, 0)))
             self.wait_idle(180.0)
         finally:
             self.homing = False
@@ -435,7 +446,7 @@ class Bridge:
         if self.alarm is None and not self.locked:
             return
         if self.locked:
-            self.machine.submit(_Batch(["G92 A0 B0"], 0.0, (0, 0)))
+            self.machine.submit(Batch(Program.text("G92 A0 B0"), 0.0, (0, 0)))
             self.wait_idle(10.0)
         self.alarm = None
         self.locked = False

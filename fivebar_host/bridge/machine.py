@@ -22,7 +22,7 @@ import time
 from collections.abc import Callable
 
 from fivebar_host import protocol
-from fivebar_host.bridge.online import Batch
+from fivebar_host.compile.incremental import Batch
 from fivebar_host.controllers.fivebar.link import Link
 from fivebar_host.controllers.fivebar.stream import StreamProgress
 from fivebar_host.protocol import StatusReport
@@ -150,7 +150,7 @@ class MachineDriver:
             self._reset_done.set()
 
     def _stream(self, batch: Batch) -> None:
-        if not batch.bodies:
+        if not len(batch.program):
             return
         self.busy = True
         self.jogging = batch.jog
@@ -171,7 +171,7 @@ class MachineDriver:
             return False
 
         try:
-            self.link.stream(batch.bodies, on_progress=progress,
+            self.link.stream(batch.program, on_progress=progress,
                              should_stop=lambda: self.hold_requested or self._reset.is_set(),
                              on_interrupt=interrupt)
         except LinkFaultError as e:

@@ -112,6 +112,6 @@ def grbl_moves(port: str | None, prof: Profile, yes: bool, make: Any) -> tuple[i
     try:
         check_settings(link, prof)
         pos = ensure_pose(link, prof, confirm_with(yes))
-        return stream_moves(link, prof, list(make(pos)), pos)
+        return stream_moves(link, prof, make(pos), pos)
     finally:
         link.close()

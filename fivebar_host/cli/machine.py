@@ -34,6 +34,7 @@ def home_cmd(port: str | None, yes: bool, controller: str, config_path: Path | N
     """Give the firmware a known position: $H with endstops, else confirm the home pose."""
     from fivebar_host.run.sender import home
 
+
     prof = load(config_path)
     if controller == "grbl":
         from fivebar_host.cli.grbl import grbl_home
@@ -65,7 +66,7 @@ def jog(port: str | None, motor: str | None, steps: int, dx: float, dy: float, y
 
     A pen move needs a known position (homed) and is checked; a motor move before homing
     (to bring the arms to the home pose) is not checked, and says so."""
-    from fivebar_host.run.program import jog_lines
+    from fivebar_host.run.moves import jog_program
     from fivebar_host.run.sender import ensure_known_pose
 
     if (motor is None) == (dx == 0.0 and dy == 0.0):
@@ -76,7 +77,7 @@ def jog(port: str | None, motor: str | None, steps: int, dx: float, dy: float, y
     if controller == "grbl":
         from fivebar_host.cli.grbl import grbl_moves
 
-        pos = grbl_moves(port, prof, yes, lambda p: jog_lines(
+        pos = grbl_moves(port, prof, yes, lambda p: jog_program(
             prof, 1 if kin.assembly == "+" else -1, mode, p, motor=motor, steps=steps,
             dxy_mm=None if motor else (dx, dy), checked=True))
         click.echo(f"at {position_text(prof, *pos)}")
@@ -90,10 +91,10 @@ def jog(port: str | None, motor: str | None, steps: int, dx: float, dy: float, y
         else:
             click.echo("position unknown (not homed): the motor move is not checked against "
                        "limits or singularities", err=True)
-        lines = jog_lines(prof, 1 if kin.assembly == "+" else -1, mode, (st.a, st.b),
-                          motor=motor, steps=steps, dxy_mm=None if motor else (dx, dy),
-                          checked=checked)
-        link.stream(lines)
+        prog = jog_program(prof, 1 if kin.assembly == "+" else -1, mode, (st.a, st.b),
+                           motor=motor, steps=steps, dxy_mm=None if motor else (dx, dy),
+                           checked=checked)
+        link.stream(prog)
         st = link.wait_idle(60.0)
     finally:
         link.close()
@@ -110,21 +111,21 @@ def jog(port: str | None, motor: str | None, steps: int, dx: float, dy: float, y
 def frame(drawing: Path, port: str | None, yes: bool, controller: str,
           config_path: Path | None, **job_values: Any) -> None:
     """Trace the outline (bounding box) of DRAWING's job with the laser off, then go home."""
-    from fivebar_host.run.program import frame_program
+    from fivebar_host.run.moves import frame_program
     from fivebar_host.run.sender import ensure_known_pose
 
     prof, job = compile_from_cli(drawing, config_path, job_values)
     if controller == "grbl":
         from fivebar_host.cli.grbl import grbl_moves
 
-        pos = grbl_moves(port, prof, yes, lambda p: frame_program(job, prof, p).bodies)
+        pos = grbl_moves(port, prof, yes, lambda p: frame_program(job, prof, p))
         click.echo(f"framed; back at {position_text(prof, *pos)}")
         return
     link = open_link(port, prof)
     try:
         st = ensure_known_pose(link, prof, confirm_with(yes))
         prog = frame_program(job, prof, (st.a, st.b))
-        link.stream(prog.bodies)
+        link.stream(prog)
         st = link.wait_idle(120.0)
     finally:
         link.close()

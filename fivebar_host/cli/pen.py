@@ -24,6 +24,7 @@ from fivebar_host.cli.common import (
     open_link,
     port_option,
 )
+from fivebar_host.compile.emit import pen_move
 from fivebar_host.config import Profile, with_pen_overrides
 from fivebar_host.options import BY_NAME, PEN_NAMES
 
@@ -65,16 +66,13 @@ def pen_cmd(action: str, port: str | None, hold_s: float, config_path: Path | No
     prof = with_pen_overrides(load(config_path), pen_values)
     if prof.pen is None:
         fail(f"{prof.source}: no [pen] table: this profile's tool is a laser")
-    assert prof.pen is not None
-    pen = prof.pen
     link = open_link(port, prof)
     try:
         st = link.status()
         if st.state not in ("Idle", "Hold"):
             fail(f"the machine is {st.state}: the pen moves only when it is idle", 3)
         down = _wanted(action, prof, st.pen)
-        link.command(f"$14={pen.pulse_us(pen.up_position)}")
-        link.command(pen.command(down))
+        link.command(pen_move(prof, down))
         st = link.wait_idle(30.0)
         end = time.monotonic() + hold_s
         while time.monotonic() < end:

@@ -6,15 +6,14 @@ The public API, for the CLI, the sender, the server, the previews, the benchmark
 - `model`: `CompileOptions`, `Job`, `PathStats`, `ModeChange` (the data model);
 - `job`: `compile_job`, `compile_drawing`, `read_drawing`, `gcode_tool` (the pipeline);
 - `validate`: `deviations`, `validate`, `nbar_opinion`, `distance_to_request`;
-- `encode`: `encode_lines`, `mode_sequence`, `write_atomic` (firmware lines).
+- `program`: `Program`, `Kind`, `job_program`, `setup`, `pen_item` (the typed program);
+- `encode`: `encode_lines`, `mode_sequence`, `write_atomic` (the file of `fivebar convert`).
 """
 
 from fivebar_host.compile.encode import (
     MAX_LINE_BYTES,
     encode_lines,
     mode_sequence,
-    pen_setup_lines,
-    pen_switch_lines,
     write_atomic,
 )
 from fivebar_host.compile.job import (
@@ -60,8 +59,6 @@ __all__ = [
     "gcode_tool",
     "mode_sequence",
     "nbar_opinion",
-    "pen_setup_lines",
-    "pen_switch_lines",
     "read_drawing",
     "validate",
     "write_atomic",

@@ -1,6 +1,6 @@
-"""Encoding a compiled `Job` for the firmware (`fivebar convert`, the sender): the G90/G91
-`G1 A B P S` lines of docs/protocol.md with comment headers and pen/laser switching, plus
-`write_atomic` for writing them out safely.
+"""A compiled `Job` as a file for the firmware (`fivebar convert`): the job's program
+(`fivebar_host.program`) written by `fivebar_host.wire` under comment headers, plus `write_atomic`
+for writing it out safely.
 """
 
 from __future__ import annotations
@@ -8,11 +8,10 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import numpy as np
-
-from fivebar_host import protocol
+from fivebar_host.compile.emit import job_program, pen_item, setup
 from fivebar_host.compile.model import Job
 from fivebar_host.config import Profile
+from fivebar_host.program import Kind, Program
 
 #: Longest line the firmware accepts, bytes (docs/protocol.md section 5; the banner repeats it).
 MAX_LINE_BYTES = 80
@@ -34,28 +33,11 @@ def mode_sequence(job: Job, arrow: str = " → ") -> str:
     return arrow.join(seq)
 
 
-def pen_switch_lines(profile: Profile) -> tuple[str, str]:
-    """The lines that lower and raise the pen around a run of drawing segments: the servo's
-    `M280` (with its move and settle time, docs/protocol.md 6.2) on a pen profile, else the
-    laser-enable state at S0 (`M3 S0` / `M5`)."""
-    if profile.pen is not None:
-        return profile.pen.command(True), profile.pen.command(False)
-    return "M3 S0", "M5"
-
-
-def pen_setup_lines(profile: Profile) -> list[str]:
-    """On a pen profile: `$14=<up pulse>` (the firmware parks the pen there at once, and at
-    every boot, hold, alarm and silence, and keeps it in its EEPROM), then a pen up with its
-    move and settle time, since the pen may have been anywhere before its first pulse."""
-    if profile.pen is None:
-        return []
-    return [f"$14={profile.pen.pulse_us(profile.pen.up_position)}", profile.pen.command(False)]
-
-
 def encode_lines(job: Job, profile: Profile, relative: bool = False,
                  laser: bool = False) -> list[str]:
-    """Firmware-ready lines for a job (docs/protocol.md; each G1 body from
-    `protocol.g1`, which checks the word ranges):
+    """The lines of `fivebar convert`: comment headers, then the job's program
+    (`compile.emit.setup` and `job_program`, the very items `fivebar plot` streams)
+    written by `fivebar_host.wire` (docs/protocol.md):
 
         G90 | G91                      absolute or relative step coordinates
         G1 A<steps> B<steps> P<µs> S<0-255>   one per segment, in job order
@@ -66,17 +48,20 @@ def encode_lines(job: Job, profile: Profile, relative: bool = False,
     drawing segments carry the profile's power — `M3 S0` (or `M4 S0`, the profile's
     on_command) once at the start, `S<power>` on drawing segments and S0 on travel. Without
     it every line says S0 and the laser output never turns on; the job is a pen plot, and
-    pen down / pen up are signalled by `M3 S0` before and `M5` after each run of drawing
-    segments (the firmware's laser-enable state, which a pen-lift output can follow; at S0
-    it switches no power). The header lines are comments the firmware ignores.
+    pen down / pen up are the servo's `M280` or `M3 S0` before and `M5` after each run of
+    drawing segments (`compile.emit.pen_item`). The header lines are comments the
+    firmware ignores.
 
     The job starts at the homed pose (absolute steps 0, 0); the sender must make sure the
     firmware's position is that before streaming (e.g. after `fivebar home`)."""
-    st = job.rel_or_abs(relative)
-    power = job.power if laser else np.zeros_like(job.power)
-    if not laser and job.power.size and int(power.max()) != 0:  # pragma: no cover
-        raise AssertionError("pen mode must never send power")
+    from fivebar_host import wire
+
+    prog = Program.join([setup(profile, laser, stream=False),
+                         job_program(job, profile, laser)])
     h = job.home_rad
+    top = int(prog.s[prog.kind == Kind.MOVE].max(initial=0)) if laser else 0
+    switch = " / ".join(wire.bodies(Program.join([pen_item(profile, True),
+                                                  pen_item(profile, False)])))
     head = [
         _comment(f"fivebar job from {Path(job.file).name}"),
         _comment(f"working mode {mode_sequence(job, ' -> ')}, assembly "
@@ -88,30 +73,10 @@ def encode_lines(job: Job, profile: Profile, relative: bool = False,
         _comment(f"tolerance {job.tolerance_mm:g} mm, max deviation {job.max_dev_mm:.4f} mm"),
         _comment(f"steps count from the homed pose ({math.degrees(h[0]):g}, "
                  f"{math.degrees(h[1]):g}) deg"),
-        _comment(f"laser: power from the profile, S up to {int(power.max(initial=0))}"
-                 if laser else "pen: S0 on every line; pen down/up = "
-                 + " / ".join(pen_switch_lines(profile))),
-        "G91" if relative else "G90",
+        _comment(f"laser: power from the profile, S up to {top}" if laser
+                 else f"pen: S0 on every line; pen down/up = {switch}"),
     ]
-    body = [protocol.g1(None if w else int(a), None if w else int(b), int(p), int(s))
-            for a, b, p, s, w in zip(st[:, 0].tolist(), st[:, 1].tolist(),
-                                     job.duration_us.tolist(), power.tolist(),
-                                     job.is_dwell.tolist(), strict=True)]
-    if laser:
-        return [*head, f"{profile.laser.on_command} S0", *body, "M5"]
-    out = [*head, *pen_setup_lines(profile), "M5"]
-    down, up = pen_switch_lines(profile)
-    draw = job.tool_on.tolist()
-    n = len(draw)
-    for k, line in enumerate(body):
-        if draw[k] and (k == 0 or not draw[k - 1]):
-            out.append(down)
-        out.append(line)
-        if draw[k] and (k == n - 1 or not draw[k + 1]):
-            out.append(up)
-    if out[-1] != "M5":
-        out.append("M5")
-    return out
+    return head + wire.file_lines(prog, relative)
 
 
 def write_atomic(path: str | Path, text: str) -> None:

@@ -12,10 +12,11 @@ segment gets a floor: the time its share of the wire takes at `LINK_SHARE` of th
 byte rate, and at least the firmware's own per-segment work (`FIRMWARE_SEGMENT_US`). Each
 segment meeting its floor keeps the bytes the firmware needs ahead of the bytes it runs.
 
-The bytes come from the G6 packing (`run.pack`, docs/protocol.md 6.3): a segment after the
-head of a line is an item `[P<µs>]±da±db`, with `P` only where its duration differs from the
-one before; a line of at most `LINE_BYTES` spends about `LINE_OVERHEAD_B` on its number,
-head segment and check field; a change of laser power starts a new line. Whether an item
+The bytes come from the G6 packing (`wire.pack_line`, docs/protocol.md 6.3) through the wire's
+own byte model (`wire.segment_bytes`): a segment after the head of a line is an item
+`[P<µs>]±da±db`, with `P` only where its duration differs from the one before; a line of at
+most `wire.LINE_BYTES` spends about `wire.LINE_OVERHEAD_B` on its number, head segment and
+check field; a change of laser power starts a new line. Whether an item
 needs `P` depends on the durations the floor decides, so `compile.timing` runs the staircase,
 reads the floor off its durations, and repeats while a segment falls short
 (`LINK_PASSES` at most: the staircase is nondecreasing in its floors, so every pass only
@@ -31,18 +32,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fivebar_host.config import Profile
+from fivebar_host.wire import segment_bytes
 from kinematics.arrays import FloatArray, IntArray
 
 #: Share of the line's nominal byte rate (8N1: baud / 10) a plan may use: room for resends
 #: after line noise and the status polls, and simavr's 11-bit byte timing (10 695 B/s at
 #: 115200, docs/protocol.md 16).
 LINK_SHARE = 0.85
-#: The longest wire line the host builds (`Streamer.limit`: half the firmware's 128-byte
-#: receive buffer) and the bytes of such a line that are not items: `N<n>` with a 6-digit
-#: number, the head `G6A<a>B<b>P<p>S<s>` with 7-digit targets, the space, `*<crc>/<len>`
-#: and the newline.
-LINE_BYTES = 64
-LINE_OVERHEAD_B = 36
 #: The firmware's own floor, µs a segment: past 115200 baud the line is no longer the limit,
 #: the firmware's work per segment (receive, check, parse, prepare) is: 1000 segments at
 #: P = 1000 µs ran with 0-1 underruns at every rate, a planned job asking ~1020 segments/s
@@ -59,41 +55,10 @@ LINK_PASSES = 4
 BLOCK = 1 << 16
 
 
-def digits(x: IntArray) -> IntArray:
-    """Decimal digits of each nonnegative integer (1 for 0)."""
-    out = np.ones(x.shape, dtype=np.int64)
-    for t in (10, 100, 1_000, 10_000, 100_000, 1_000_000, 10_000_000, 100_000_000):
-        out += x >= t
-    return out
-
-
 def bytes_per_s(profile: Profile) -> float:
     """The byte rate a plan may use: `LINK_SHARE` of the rate the link runs at
     (`[serial] link_baud`, negotiated with `$B`; 8N1 is 10 bits a byte)."""
     return profile.serial.link_baud / 10.0 * LINK_SHARE
-
-
-def segment_bytes(steps: IntArray, power: NDArray[np.integer[Any]], duration_us: IntArray | None,
-                  start: int, stop: int) -> IntArray:
-    """Wire bytes that segments start..stop-1 take as G6 items, their line's overhead shared
-    among the items that fit it (a line of n items of b bytes carries n = (LINE_BYTES −
-    LINE_OVERHEAD_B)/b of them besides its head, so each costs LINE_BYTES·b/(b + LINE_BYTES −
-    LINE_OVERHEAD_B)); a segment whose power differs from the one before starts a line and
-    costs LINE_OVERHEAD_B. `steps`: absolute targets (T+1, 2); `duration_us`: the planned
-    durations (T,), or None before there are any (then no item carries `P`)."""
-    d = np.abs(np.diff(steps[start:stop + 1], axis=0).astype(np.int64))
-    item = 2 + digits(d[:, 0]) + digits(d[:, 1])
-    if duration_us is not None:
-        lo = max(start - 1, 0)
-        dur = np.asarray(duration_us[lo:stop], dtype=np.int64)
-        prev = dur[:-1] if start > 0 else np.concatenate(([-1], dur[:-1]))
-        cur = dur[1:] if start > 0 else dur
-        item += np.where(cur != prev, 1 + digits(cur), 0)
-    free = LINE_BYTES - LINE_OVERHEAD_B
-    b = -(-LINE_BYTES * item // (item + free))
-    pw = np.asarray(power[max(start - 1, 0):stop], dtype=np.int64)
-    new_line = pw[1:] != pw[:-1] if start > 0 else np.concatenate(([True], pw[1:] != pw[:-1]))
-    return np.where(new_line, LINE_OVERHEAD_B, b)
 
 
 def window_mean(x: IntArray, width: int) -> FloatArray:

@@ -172,7 +172,7 @@ def time_stepped(profile: Profile, checker: PoseChecker, sp: Stepped,
                  power: NDArray[np.uint8], feed: FloatArray, stop: BoolArray) -> Planned:
     """Steps 1–4 of the module doc on stepped segments with their laser power, pen feed
     (mm/s) and stops given per segment (also used by the GRBL bridge's online compiler,
-    `fivebar_host.bridge.online`, on small batches of moves)."""
+    `fivebar_host.compile.incremental`, on small batches of moves)."""
     return _time(profile, checker, [sp], [power, feed, stop])
 
 
@@ -263,7 +263,7 @@ def _link_bound_staircase(profile: Profile, dq: FloatArray, handed: list[IntArra
 def tool_time_s(draw: BoolArray, profile: Profile, extra_switches: int = 0) -> float:
     """Time the arms wait for the pen, s: every run of segments with the tool on (`draw`:
     drawing segments and dwells with the pen down, `Job.tool_on`) is bracketed by a pen
-    down and a pen up (run.program), each a servo move plus its settle delay, during which
+    down and a pen up (compile.emit), each a servo move plus its settle delay, during which
     the firmware issues no step (docs/protocol.md 6.2). 0 without a pen."""
     pen = profile.pen
     if pen is None or not draw.size:

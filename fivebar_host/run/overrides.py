@@ -1,7 +1,8 @@
 """Live feed and laser-power overrides while a job streams, done honestly in the host.
 
 The firmware has no real-time override bytes (docs/protocol.md section 2), so an override
-changes the lines the host has not sent yet: a moving `G1`'s P is stretched by 100/feed %
+changes the items of the program (`fivebar_host.program`) the host has not sent yet, as their
+lines are written: a moving `G1`'s P is stretched by 100/feed %
 (slower only: 10–100 %), every `G1`'s S is scaled by power % (0–100 % of the planned power).
 Lines already written — those in the firmware's receive buffer and queue, about 15 segments —
 keep their values, so an override takes effect after them; and once written, a line is
@@ -25,12 +26,11 @@ time (as GRBL's feed override leaves G4 alone) and take the power factor.
 from __future__ import annotations
 
 import math
-import re
 import threading
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from fivebar_host import protocol
+from fivebar_host.program import ABSENT, Kind, Program
 
 #: Feed override range and step, percent of the planned speed (slower only).
 FEED_MIN_PCT = 10
@@ -40,9 +40,6 @@ POWER_MIN_PCT = 0
 POWER_MAX_PCT = 100
 #: One key press changes a factor by this much, percent.
 STEP_PCT = 10
-
-_WORDS = re.compile(r"([ABPS])(-?\d+)")
-
 
 @dataclass
 class Overrides:
@@ -78,57 +75,36 @@ class Overrides:
         return f"feed {f}% power {p}%"
 
 
-def _words(body: str) -> dict[str, int] | None:
-    """The A/B/P/S words of a `G1` body (None for any other command)."""
-    if body.split(" ", 1)[0] != "G1":
-        return None
-    return {k: int(v) for k, v in _WORDS.findall(body)}
-
-
-def is_motion(body: str) -> bool:
-    """Whether a body is a `G1` that moves (has A or B; without them it is a dwell)."""
-    w = _words(body)
-    return w is not None and ("A" in w or "B" in w)
-
-
-def starts_at_rest(bodies: Sequence[str], i: int) -> bool:
-    """Whether line `i` of a job program starts with the machine at rest in the plan: the
-    first line, a line after anything but a moving `G1` (pen switches, setup lines, a
-    dwell), a line that does not move, or a `G1` whose S differs from the one before (the
-    planner stops at every power change)."""
-    if i == 0 or not is_motion(bodies[i - 1]) or not is_motion(bodies[i]):
-        return True
-    before, here = _words(bodies[i - 1]), _words(bodies[i])
-    assert before is not None and here is not None
-    return before.get("S") != here.get("S")
-
-
-def scale_body(body: str, feed_pct: int, power_pct: int) -> str:
-    """`body` with the override applied (module doc); other commands unchanged."""
-    w = _words(body)
-    if w is None or "P" not in w or (feed_pct == FEED_MAX_PCT and power_pct == POWER_MAX_PCT):
-        return body
-    p = w["P"]
-    if "A" in w or "B" in w:
+def scaled(prog: Program, i: int, feed_pct: int, power_pct: int) -> tuple[int, int]:
+    """Item `i`'s (P, S) with the override applied (module doc): a move's P stretched by
+    100/feed % (rounded up, at most the protocol's largest P), a move's or a dwell's S
+    scaled by power % (rounded down); other items unchanged."""
+    k, p, s = int(prog.kind[i]), int(prog.p_us[i]), int(prog.s[i])
+    if k not in (Kind.MOVE, Kind.DWELL) or (feed_pct == FEED_MAX_PCT
+                                            and power_pct == POWER_MAX_PCT):
+        return p, s
+    if k == Kind.MOVE:
         p = min(protocol.P_MAX_US, max(p, math.ceil(p * FEED_MAX_PCT / feed_pct)))
-    s = w.get("S")
-    if s is not None:
+    if s != ABSENT:
         s = s * power_pct // POWER_MAX_PCT
-    return protocol.g1(w.get("A"), w.get("B"), p, s)
+    return p, s
 
 
 class OverrideEncoder:
-    """Applies `Overrides` to a program's lines in the order they are first written: the
-    power factor at once, the feed factor from the next line that starts at rest."""
+    """Applies `Overrides` to a program's items in the order they are first written: the
+    power factor at once, the feed factor from the next item that starts at rest
+    (`Program.starts_at_rest`)."""
 
-    def __init__(self, bodies: Sequence[str], overrides: Overrides) -> None:
-        self.bodies = bodies
+    def __init__(self, program: Program, overrides: Overrides) -> None:
+        self.program = program
+        self.rest = program.starts_at_rest()
         self.overrides = overrides
         self.feed_pct = FEED_MAX_PCT  # the factor in force (changes only at a rest)
 
-    def body(self, i: int) -> str:
-        """Line `i` as it is to be written (lines are asked for once each, in order)."""
+    def values(self, i: int) -> tuple[int, int]:
+        """Item `i`'s (P, S) as it is to be written (items are asked for once each, in
+        order)."""
         feed, power = self.overrides.values()
-        if feed != self.feed_pct and starts_at_rest(self.bodies, i):
+        if feed != self.feed_pct and self.rest[i]:
             self.feed_pct = feed
-        return scale_body(self.bodies[i], self.feed_pct, power)
+        return scaled(self.program, i, self.feed_pct, power)

@@ -20,9 +20,10 @@ from numpy.typing import ArrayLike
 
 from fivebar_host.compile import Job
 from fivebar_host.config import Profile
+from fivebar_host.program import Program
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import SendError
-from fivebar_host.run.program import Program, build_program
+from fivebar_host.run.moves import build_program
 
 RESUME_SUFFIX = ".fivebar-resume.json"
 
@@ -144,7 +145,7 @@ def kept_resume_segment(prog: Program, first_line: int, start: int, start_positi
     lies on the stream's path just after that line. Returns (segment, "") or (None, why not):
     power was lost, or something else ran on the controller since.
     """
-    last = first_line + len(prog.bodies) - 1
+    last = first_line + len(prog) - 1
     if not st.homed:
         return None, "it reports H:0, its position is unknown: it lost power"
     if not first_line - 1 <= st.done_line <= last:
@@ -183,7 +184,7 @@ def kept_stream_segment(job: Job, profile: Profile, rp: ResumePoint, st: StatusR
                              rp.stream_end)
     except SendError as e:
         return None, f"the interrupted stream cannot be rebuilt: {e}"
-    if len(prog.bodies) != rp.last_line - rp.first_line + 1:
+    if len(prog) != rp.last_line - rp.first_line + 1:
         return None, "the interrupted stream cannot be rebuilt the same"
     return kept_resume_segment(prog, rp.first_line, rp.stream_start, rp.start_position, st,
                                rp.next_segment)

@@ -2,7 +2,7 @@
 
 Pure pipeline step over an open `Link` (no click, no pyserial): the CLI and the daemon call it.
 
-A job is a list of firmware lines (`run.program`), each mapped to the job segment it executes.
+A job is a list of firmware lines (`run.moves`), each mapped to the job segment it executes.
 While streaming, the firmware's status reports say which line (so which segment) finished
 last. On a fault the machine is held (laser off), its position read, the firmware reset (queue
 cleared, laser off) and a resume file written next to the drawing (`run.faults`,
@@ -40,8 +40,8 @@ from fivebar_host.controllers.fivebar.link import Link
 from fivebar_host.controllers.fivebar.stream import StreamProgress, StreamResult
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import LinkFaultError, PowerLossError, SendError
+from fivebar_host.run.moves import build_program
 from fivebar_host.run.overrides import FEED_MAX_PCT, FEED_MIN_PCT, Overrides
-from fivebar_host.run.program import build_program
 from fivebar_host.run.resume import (
     ResumePoint,
     fingerprint,
@@ -235,7 +235,7 @@ def _stream_piece(run: _Run, start: int, end: int, st: StatusReport) -> StatusRe
     later = later_copies_s(job, run.copies, run.copy)
     remaining_after = np.concatenate((np.cumsum(durations[::-1])[::-1], [0.0])) + later
     first_line = link.next_line
-    last_line = first_line + len(prog.bodies) - 1
+    last_line = first_line + len(prog) - 1
 
     def progress(p: StreamProgress) -> None:
         if run.on_progress is None:
@@ -246,14 +246,14 @@ def _stream_piece(run: _Run, start: int, end: int, st: StatusReport) -> StatusRe
                                  run.copy, run.copies.count))
 
     try:
-        res: StreamResult = link.stream(prog.bodies, on_progress=progress,
+        res: StreamResult = link.stream(prog, on_progress=progress,
                                         should_stop=run.should_stop,
                                         on_interrupt=run.on_interrupt,
                                         overrides=run.overrides)
         slowest = FEED_MAX_PCT / FEED_MIN_PCT if run.overrides is not None else 1.0
         final = link.wait_idle(max(30.0, 3.0 * slowest * job.total_time_s), last_line=last_line,
                                on_status=lambda s: progress(StreamProgress(
-                                   len(prog.bodies), len(prog.bodies), len(prog.bodies),
+                                   len(prog), len(prog), len(prog),
                                    s.done_line, s, 0)))
     except LinkFaultError as fault:
         stream = StreamRun(prog, first_line, start, start_position, run.laser,

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
@@ -23,9 +22,10 @@ from pathlib import Path
 from fivebar_host import protocol
 from fivebar_host.compile import Job
 from fivebar_host.compile.model import LayerPause
+from fivebar_host.program import Program
 from fivebar_host.run.errors import FaultKind, LinkError, LinkFaultError, SendError
+from fivebar_host.run.moves import build_program
 from fivebar_host.run.overrides import Overrides
-from fivebar_host.run.program import Program, build_program
 from fivebar_host.run.resume import ResumePoint, resume_path
 from fivebar_host.run.sender import Progress, SendReport, run_job
 from fivebar_host.run.stops import piece_end, planned_time_s
@@ -164,7 +164,7 @@ class JobRunner(Control):
                  report.elapsed_s, report.resends, "?" if underruns is None else underruns)
 
     # ------------------------------------------------------------------ run_job's hooks
-    def _on_stream_start(self, run: JobRun, bodies: Sequence[str], first_line: int) -> None:
+    def _on_stream_start(self, run: JobRun, program: Program, first_line: int) -> None:
         """Commit the stream record, once the stream is checked to be one of the job's
         programs: from the run's start segment, or — after a pen-change stop or for a
         later copy (`run.stops`) — from a stop's segment or segment 0, each ending at the
@@ -179,13 +179,13 @@ class JobRunner(Control):
                                      (st.a, st.b), piece_end(run.job, start))
             except SendError:
                 continue
-            if prog.bodies == list(bodies):
+            if prog == program:
                 break
         else:
             log.debug("job %d: a stream that is not the job's program", run.rec.id)
             return
         self.store.set_stream(run.rec.id, StreamRecord(first_line, start, (st.a, st.b),
-                                                       len(bodies), run.copy))
+                                                       len(program), run.copy))
         run.program = (prog, first_line)
         run.underruns0 = None
 

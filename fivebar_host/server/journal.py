@@ -16,8 +16,10 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from fivebar_host import wire
 from fivebar_host.controllers.fivebar.link import Link
 from fivebar_host.controllers.fivebar.stream import StreamResult
+from fivebar_host.program import Program
 from fivebar_host.protocol import AlarmPush, StatusReport
 from fivebar_host.server.store import JobStore
 
@@ -27,7 +29,7 @@ log = logging.getLogger("fivebar.serve")
 class JournalLink(Link):
     """A `Link` that reports when a stream starts and when it last heard a status report."""
 
-    on_stream_start: Callable[[Sequence[str], int], None] | None = None
+    on_stream_start: Callable[[Program, int], None] | None = None
     #: Called (on the machine thread) after every status report; must be quick.
     on_status: Callable[[], None] | None = None
     streaming = False
@@ -60,14 +62,16 @@ class JournalLink(Link):
             self._pending.extend(kept)
         return pushes
 
-    def stream(self, bodies: Sequence[str], **kwargs: Any) -> StreamResult:
+    def stream(self, program: Program | Sequence[str], **kwargs: Any) -> StreamResult:
         """`Link.stream`, after telling `on_stream_start` the first line number."""
+        if not isinstance(program, Program):
+            program = wire.read_lines(program)
         hook = self.on_stream_start
-        if hook is not None and len(bodies) > 1:
-            hook(bodies, self.next_line)
+        if hook is not None and len(program) > 1:
+            hook(program, self.next_line)
         self.streaming = True
         try:
-            return super().stream(bodies, **kwargs)
+            return super().stream(program, **kwargs)
         finally:
             self.streaming = False
 

@@ -29,10 +29,11 @@ from fivebar_host.compile import Job
 from fivebar_host.compile.steps import pen_position_mm
 from fivebar_host.config import Profile
 from fivebar_host.errors import FivebarError
+from fivebar_host.program import Kind, Program
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import LinkError
+from fivebar_host.run.moves import travel
 from fivebar_host.run.overrides import Overrides
-from fivebar_host.run.program import travel_lines
 from fivebar_host.server.jobs import (
     Compiled,
     CompiledCache,
@@ -284,10 +285,11 @@ class MachineState(threading.Thread):
         st = link.status()
         if not self.pose_known or (st.a, st.b) == (0, 0) or st.state != "Idle":
             return
-        lines = travel_lines(self.cfg.profile, job.assembly, (st.a, st.b), (0, 0),
-                             "park the arms at the home pose before the next job")
+        moves = travel(self.cfg.profile, job.assembly, (st.a, st.b), (0, 0),
+                       "park the arms at the home pose before the next job")
         log.info("parking: travel from A = %d, B = %d to the home pose", st.a, st.b)
-        res = link.stream(["G90", "M5", *lines])
+        res = link.stream(Program.join([Program.command(Kind.ABSOLUTE),
+                                        Program.command(Kind.TOOL_OFF), moves]))
         link.wait_idle(max(30.0, 3.0 * res.elapsed_s), last_line=res.last_line)
 
     # ------------------------------------------------------------------ job records

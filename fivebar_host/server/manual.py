@@ -3,7 +3,7 @@
 Like `home` (server.control), each action is queued with `run_action` and runs on the
 machine thread between jobs, so it never interleaves with a job's stream; a request while a
 job runs is refused at once (nothing is queued). The moves are the CLI's: `fivebar jog`'s
-`run.program.jog_lines` (laser off; a pen move is checked against reach, joint limits and
+`run.moves.jog_program` (laser off; a pen move is checked against reach, joint limits and
 singularity margins, and needs a known position; a motor move before homing is not checked,
 as `fivebar jog` says), `M18` for motors off and `$X` to clear an alarm.
 
@@ -21,12 +21,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fivebar_host.compile.emit import pen_move
 from fivebar_host.compile.steps import step_angles
 from fivebar_host.config import Profile
 from fivebar_host.errors import FivebarError
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import SendError
-from fivebar_host.run.program import jog_lines
+from fivebar_host.run.moves import jog_program
 from fivebar_host.server.control import Control
 from fivebar_host.server.journal import JournalLink
 from fivebar_host.server.machine import ActionError
@@ -100,12 +101,12 @@ class Manual(Control):
                 mode = pose.mode
             assembly = 1 if prof.kinematics.assembly == "+" else -1
             try:
-                lines = jog_lines(prof, assembly, mode, (st.a, st.b), motor=motor,
-                                  steps=steps, dxy_mm=dxy_mm, checked=checked)
+                prog = jog_program(prof, assembly, mode, (st.a, st.b), motor=motor,
+                                   steps=steps, dxy_mm=dxy_mm, checked=checked)
             except (SendError, FivebarError) as e:
                 raise ActionError(str(e)) from e
             self._motors_on(link)
-            res = link.stream(lines)
+            res = link.stream(prog)
             st = link.wait_idle(max(30.0, 3.0 * res.elapsed_s), last_line=res.last_line)
             if checked:
                 self._set_pose(True, st)
@@ -141,8 +142,7 @@ class Manual(Control):
         self._idle_machine("move the pen")
 
         def act(link: JournalLink) -> StatusReport:
-            link.command(f"$14={pen.pulse_us(pen.up_position)}")
-            link.command(pen.command(down))
+            link.command(pen_move(self.cfg.profile, down))
             st = link.wait_idle(30.0)
             log.info("pen %s (%d µs)", "down" if down else "up",
                      pen.pulse_us(pen.down_position if down else pen.up_position))

@@ -27,9 +27,10 @@ import time
 import numpy as np
 
 from fivebar_host.compile import Job
+from fivebar_host.program import Program
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import SendError
-from fivebar_host.run.program import Program, build_program
+from fivebar_host.run.moves import build_program
 from fivebar_host.run.resume import kept_resume_segment
 from fivebar_host.run.stops import later_copies_s, piece_end
 from fivebar_host.server import store as st_
@@ -110,7 +111,7 @@ class Recovery(MachineState):
         except SendError as e:  # the profile's limits changed: no exact mapping
             log.warning("job %d: cannot rebuild its program (%s)", rec.id, e)
             return None
-        if len(prog.bodies) != stream.lines or st.state == "Alarm":
+        if len(prog) != stream.lines or st.state == "Alarm":
             return None
         if not_reset:
             if st.state == "Hold" or st.queued:

@@ -10,7 +10,7 @@ Everything the daemon needs to carry on after a crash, a power loss or SIGKILL l
 - its *stream record*, written before the first line of a stream leaves the host: the
   firmware line number of the stream's first line, the segment it started at and the start
   position. The program streamed is a pure function of the job and those three values
-  (`run.program.build_program`), so after a crash the firmware's own `Ln` counter (the line of
+  (`run.moves.build_program`), so after a crash the firmware's own `Ln` counter (the line of
   the last block it executed) maps back to the exact segment the machine reached;
 - what the daemon knows about the machine: whether its position is trusted ("pose known")
   and the firmware's line counter when that was last recorded;

@@ -12,7 +12,7 @@ import time
 from contract_devices import Device
 from contract_helpers import fill_queue, idle, poll, replies_to
 
-from fivebar_host import protocol
+from fivebar_host import protocol, wire
 from fivebar_host.protocol import ErrorReply, Ok, StatusReport
 
 # ------------------------------------------------------------------ queue and receive buffer
@@ -117,7 +117,7 @@ def test_lines_merged_by_a_lost_newline_ask_for_resend_without_holding_the_job(
     assert s.send("M3 S255", line_number=1) == Ok()
     assert s.send("G1 A1000 P1000000", line_number=2) == Ok()
     poll(device, lambda r: r.a > 0, what="moving")
-    widest = protocol.encode_line(protocol.g1(-100_000_000, -100_000_000, 100_000_000, 255), 3)
+    widest = protocol.encode_line(wire.g1(-100_000_000, -100_000_000, 100_000_000, 255), 3)
     merged = widest[:-1] + protocol.encode_line("G1 A1010 P10000", 4)
     assert len(merged) - 1 > device.banner.line_max
     assert s.send_raw(merged) == ErrorReply(8, resend=3)

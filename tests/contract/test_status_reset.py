@@ -14,7 +14,7 @@ import pytest
 from contract_devices import Device
 from contract_helpers import dtr_reset, idle, poll, replies_to
 
-from fivebar_host import protocol
+from fivebar_host import protocol, wire
 from fivebar_host.protocol import Ok, SettingLine
 
 # --------------------------------------------------------------------------- status, streaming
@@ -120,7 +120,7 @@ def test_a_reset_during_homing_keeps_h_0(open_device: Callable[..., Device]) -> 
 def test_streamed_job_with_character_counting_is_exact(device: Device) -> None:
     segments = [(((i * 37) % 61) - 30, ((i * 53) % 41) - 20, 4000 + 100 * (i % 7), 255 * (i % 2))
                 for i in range(100)]
-    lines = ["G91", "M3 S0"] + [protocol.g1(a, b, p, sv) for a, b, p, sv in segments]
+    lines = ["G91", "M3 S0"] + [wire.g1(a, b, p, sv) for a, b, p, sv in segments]
     replies = device.session.stream(lines, rx_size=device.banner.rx, numbered_from=1)
     assert replies == [Ok()] * len(lines)
     r = idle(device)

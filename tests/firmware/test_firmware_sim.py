@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import pytest
 
-from fivebar_host import protocol
+from fivebar_host import protocol, wire
 from fivebar_host.devices.sim import SimDevice as Device
 from fivebar_host.devices.simtrace import Trace
 from fivebar_host.protocol import AlarmPush, ErrorReply, Ok
@@ -137,7 +137,7 @@ def test_streamed_job_executes_exactly(start_device: Callable[..., Device]) -> N
     device = start_device(realtime=True)
     session = device.session
     segs = job_segments()
-    lines = ["G91", "M3 S0"] + [protocol.g1(s.a, s.b, s.p_us, s.s) for s in segs] + ["G90"]
+    lines = ["G91", "M3 S0"] + [wire.g1(s.a, s.b, s.p_us, s.s) for s in segs] + ["G90"]
     replies = session.stream(lines, numbered_from=1)
     assert all(r == Ok() for r in replies), replies
     report = session.wait_idle()
@@ -154,7 +154,7 @@ def test_streamed_job_executes_exactly(start_device: Callable[..., Device]) -> N
 def test_hold_freezes_and_resume_completes(device: Device) -> None:
     session = device.session
     assert session.send("M3 S200") == Ok()
-    assert session.send(protocol.g1(2000, -1000, 400_000)) == Ok()
+    assert session.send(wire.g1(2000, -1000, 400_000)) == Ok()
     while session.status().a < 200:
         time.sleep(0.005)
     session.realtime(protocol.RT_HOLD)
@@ -181,7 +181,7 @@ def test_hold_freezes_and_resume_completes(device: Device) -> None:
 def test_reset_stops_at_once_and_keeps_position(device: Device) -> None:
     session = device.session
     assert session.send("M3 S255") == Ok()
-    replies = session.stream([protocol.g1(4000 * (i + 1), 0, 400_000) for i in range(4)])
+    replies = session.stream([wire.g1(4000 * (i + 1), 0, 400_000) for i in range(4)])
     assert all(r == Ok() for r in replies)
     while session.status().a < 300:
         time.sleep(0.005)
@@ -276,19 +276,19 @@ def test_endstop_outside_homing_raises_alarm(start_device: Callable[..., Device]
     session = dev.session
     for line in ("$7=1", "M3 S255"):
         assert session.send(line) == Ok()
-    assert session.send(protocol.g1(-500, 0, 100_000)) == Ok()
+    assert session.send(wire.g1(-500, 0, 100_000)) == Ok()
     report = session.wait_state({"Alarm"})
     assert (report.detail, report.laser, report.queued) == (30, 0, 0)
     assert AlarmPush(30) in session.messages
-    assert session.send(protocol.g1(0, 0, 1000)) == ErrorReply(14)
+    assert session.send(wire.g1(0, 0, 1000)) == ErrorReply(14)
     assert session.send("$X") == Ok()
     assert (session.status().state, session.status().laser) == ("Idle", 0)
     # moving away from the pressed switch is allowed ...
     assert session.send("M5") == Ok()
-    assert session.send(protocol.g1(0, 0, 100_000)) == Ok()
+    assert session.send(wire.g1(0, 0, 100_000)) == Ok()
     assert (session.wait_idle().a, session.status().state) == (0, "Idle")
     # ... moving into it again is not
-    assert session.send(protocol.g1(-300, 0, 100_000)) == Ok()
+    assert session.send(wire.g1(-300, 0, 100_000)) == Ok()
     assert session.wait_state({"Alarm"}).a == -100
     trace = dev.finish()
     assert [p for _, p in trace.positions("A")].count(-100) == 2
@@ -298,7 +298,7 @@ def test_endstop_outside_homing_raises_alarm(start_device: Callable[..., Device]
 
 def test_host_silence_turns_the_laser_off(device: Device) -> None:
     session = device.session
-    for line in ("$6=100", "M3 S255", protocol.g1(0, 0, 10_000_000)):
+    for line in ("$6=100", "M3 S255", wire.g1(0, 0, 10_000_000)):
         assert session.send(line) == Ok()
     deadline = time.monotonic() + 10
     report = session.status()
@@ -326,7 +326,7 @@ def test_harness_stops_cleanly_on_sigterm(device: Device) -> None:
 def test_refused_line_during_a_laser_job_holds_it(device: Device) -> None:
     session = device.session
     assert session.send("M3 S255") == Ok()
-    assert session.send(protocol.g1(1000, 0, 500_000)) == Ok()
+    assert session.send(wire.g1(1000, 0, 500_000)) == Ok()
     while session.status().a < 100:
         time.sleep(0.005)
     assert session.send("G5") == ErrorReply(4)
@@ -342,17 +342,17 @@ def test_refused_line_during_a_laser_job_holds_it(device: Device) -> None:
 def test_g92_and_motor_enable_are_queued_in_order(device: Device) -> None:
     session = device.session
     lines = [
-        protocol.g1(100, 50, 10_000),
+        wire.g1(100, 50, 10_000),
         "G92 A1000 B-5",
-        protocol.g1(1010, -5, 10_000),
+        wire.g1(1010, -5, 10_000),
         "M18",
     ]
     assert session.stream(lines) == [Ok()] * 4
     report = session.wait_idle()
     assert (report.a, report.b, report.done_line) == (1010, -5, 4)
-    assert session.send(protocol.g1(0, 0, 10_000)) == ErrorReply(15)
+    assert session.send(wire.g1(0, 0, 10_000)) == ErrorReply(15)
     assert session.send("M17") == Ok()
-    assert session.send(protocol.g1(1000, -5, 10_000)) == Ok()
+    assert session.send(wire.g1(1000, -5, 10_000)) == Ok()
     assert session.wait_idle().a == 1000
     trace = device.finish()
     assert len(trace.steps("A")) == 100 + 10 + 10
@@ -372,7 +372,7 @@ def test_slow_segments_keep_their_timing(device: Device) -> None:
         Seg(0, 0, 40_000, 0),
         Seg(1, 1, 5_000, 0),
     ]
-    lines = ["G91"] + [protocol.g1(s.a, s.b, s.p_us, s.s) for s in segs]
+    lines = ["G91"] + [wire.g1(s.a, s.b, s.p_us, s.s) for s in segs]
     assert device.session.stream(lines) == [Ok()] * len(lines)
     device.session.wait_idle()
     worst, _ = check_job(device.finish(), segs)

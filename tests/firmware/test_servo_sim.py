@@ -18,7 +18,7 @@ from collections.abc import Callable
 
 import pytest
 
-from fivebar_host import protocol
+from fivebar_host import wire
 from fivebar_host.devices.sim import SimDevice as Device
 from fivebar_host.protocol import Ok
 
@@ -42,7 +42,7 @@ def test_pulses_keep_width_and_frame_under_dense_steps(start_device: Callable[..
     base = s.status().underruns
     p_us = 10_000
     segs = [(RATE_A * p_us // 1_000_000, RATE_B * p_us // 1_000_000) for _ in range(60)]
-    lines = ["G91"] + [protocol.g1(a, b, p_us) for a, b in segs]
+    lines = ["G91"] + [wire.g1(a, b, p_us) for a, b in segs]
     assert s.stream(lines, numbered_from=4) == [Ok()] * len(lines)
     report = s.wait_idle()
     assert (report.a, report.b) == (sum(a for a, _ in segs), sum(b for _, b in segs))

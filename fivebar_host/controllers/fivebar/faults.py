@@ -18,9 +18,9 @@ from pathlib import Path
 from fivebar_host import protocol
 from fivebar_host.compile import Job
 from fivebar_host.controllers.fivebar.link import Link
+from fivebar_host.program import Program
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import FaultKind, LinkError, LinkFaultError, SendError
-from fivebar_host.run.program import Program
 from fivebar_host.run.resume import ResumePoint, kept_resume_segment, redraw_text
 
 
@@ -128,7 +128,7 @@ class FaultRecord:
                 self.next_segment)
             if exact is not None:
                 self.next_segment, self.position = exact, (kept.a, kept.b)
-        sent = fault.sent if fault.sent >= 0 else len(stream.prog.bodies)
+        sent = fault.sent if fault.sent >= 0 else len(stream.prog)
         self.sent_segment = stream.done_segments(stream.first_line + sent - 1)
 
     def resume_point(self, fingerprint: str) -> tuple[ResumePoint, str]:
@@ -169,7 +169,7 @@ class FaultRecord:
         """The stream is described so that `--resume` reads the controller's kept record."""
         s, nxt = self.stream, self.next_segment
         rp = replace(self._point(fingerprint, None), first_line=s.first_line,
-                     last_line=s.first_line + len(s.prog.bodies) - 1, stream_start=s.start,
+                     last_line=s.first_line + len(s.prog) - 1, stream_start=s.start,
                      start_position=s.start_position, laser=s.laser,
                      sent_segment=self.sent_segment, stream_end=s.end)
         cause = ("the link broke while the controller was running"

@@ -20,8 +20,9 @@ from typing import Any
 
 import serial
 
-from fivebar_host import protocol
+from fivebar_host import protocol, wire
 from fivebar_host.controllers.fivebar.stream import Streamer, StreamProgress, StreamResult
+from fivebar_host.program import Program
 from fivebar_host.protocol import Banner, ErrorReply, Message, Ok, ProtocolError, StatusReport
 from fivebar_host.run.errors import (
     FaultKind,
@@ -233,9 +234,11 @@ class Link:
         raise LinkFaultError(FaultKind.TIMEOUT, f"{self.url}: no status report within "
                              f"{timeout_s or self.reply_timeout_s:g} s", -1)
 
-    def command(self, body: str, timeout_s: float | None = None) -> None:
-        """Send one numbered line and wait for its `ok`; raise LinkFaultError on `error:`."""
-        self.stream([body], counting=False, timeout_s=timeout_s)
+    def command(self, body: str | Program, timeout_s: float | None = None) -> None:
+        """Send one numbered line (or a small program, a line at a time) and wait for its
+        `ok`; raise LinkFaultError on `error:`."""
+        self.stream([body] if isinstance(body, str) else body, counting=False,
+                    timeout_s=timeout_s)
 
     def reset(self, timeout_s: float = 5.0) -> Banner:
         """Ctrl-X: the firmware clears its queue, turns the laser off and reboots its state.
@@ -389,13 +392,16 @@ class Link:
             time.sleep(self.poll_interval_s)
 
     # ------------------------------------------------------------------ streaming
-    def stream(self, bodies: Sequence[str], *, counting: bool = True,
+    def stream(self, program: Program | Sequence[str], *, counting: bool = True,
                on_progress: Callable[[StreamProgress], None] | None = None,
                timeout_s: float | None = None,
                should_stop: Callable[[], bool] | None = None,
                on_interrupt: Callable[[], bool] | None = None,
                overrides: Overrides | None = None, pack_lines: bool = True) -> StreamResult:
-        """Send `bodies` as numbered, checksummed lines; return when every line is `ok`.
+        """Send `program` as numbered, checksummed lines; return when every line is `ok`.
+
+        A program is the typed one (`fivebar_host.program`); hand-written line bodies (commands,
+        tests) are read into one by `wire.read_lines`.
 
         Character counting keeps the unanswered bytes within the banner's `rx:`; with
         `counting=False` one line is in flight at a time. A resend request (error 8, 9, 10)
@@ -409,15 +415,17 @@ class Link:
         `on_interrupt()` decides: True resumes (`~`) and streaming goes on, False (or no
         callback) raises `LinkFaultError(FaultKind.INTERRUPT)`. `overrides` (live feed and
         power, `run.overrides`) apply to the lines not yet written. With `pack_lines` runs of
-        G1 bodies after a `G90` go out as G6 lines (`run.pack`, protocol 6.3), one line
-        number per body as before. See `run.stream.Streamer`.
+        moves after a `G90` go out as G6 lines (`wire.pack_line`, protocol 6.3), one line
+        number per item as before. See `controllers.fivebar.stream.Streamer`.
         """
+        if not isinstance(program, Program):
+            program = wire.read_lines(program)
         if self.resync_numbering:
             self.resync_numbering = False
             time.sleep(RESYNC_SETTLE_S)  # the replies of the lines still in flight
             self._drain_input()
             self.next_line = self.status().accepted_line + 1
-        return Streamer(self, bodies, counting=counting, on_progress=on_progress,
+        return Streamer(self, program, counting=counting, on_progress=on_progress,
                         timeout_s=timeout_s, should_stop=should_stop,
                         on_interrupt=on_interrupt, overrides=overrides,
                         pack_lines=pack_lines).run()

@@ -18,22 +18,24 @@ line) shows in a status report that has not accepted it while the firmware is fr
 rewinds to the line after the last one accepted. Error replies, alarms, a reset banner,
 silence and a disconnect fault the stream with the index of the first line not acknowledged.
 
-With `overrides` (`run.overrides`: live feed and laser power) each line is encoded when it is
-first written, with the factors in force then; once written it is never changed (a resend
-sends the same bytes). Without them every line is encoded up front.
+The stream is a typed `Program` (`fivebar_host.program`); `fivebar_host.wire` writes each wire line
+from its items (a G6 line covers several). With `overrides` (`run.overrides`: live feed and
+laser power) each item's P and S are taken when its line is first written, with the factors
+in force then; once written a line is never changed (a resend sends the same bytes).
+Without them every line is encoded up front.
 """
 
 from __future__ import annotations
 
 import time
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
 from typing import TYPE_CHECKING
 
-from fivebar_host import protocol
-from fivebar_host.controllers.fivebar import pack
+from fivebar_host import protocol, wire
+from fivebar_host.program import Program
 from fivebar_host.protocol import (
     AlarmPush,
     Banner,
@@ -101,7 +103,7 @@ TRANSITIONS: dict[Phase, frozenset[Phase]] = {
 
 class InFlight:
     """The lines written and not yet answered: (job index, job lines covered, bytes, time
-    written), oldest first; a G6 wire line covers several job lines (`run.pack`).
+    written), oldest first; a G6 wire line covers several job lines (`wire.pack_line`).
 
     Replies come in the order the lines were written, so each reply answers the oldest."""
 
@@ -137,12 +139,12 @@ class InFlight:
 
 
 class Streamer:
-    """One stream of `bodies` over `link`, from the link's next line number; `run` once.
+    """One stream of `program` over `link`, from the link's next line number; `run` once.
 
     Uses the link's raw I/O (`_write`, `_messages`, `_pending`): it is the link's streaming
     half, kept in its own module. Arguments as `Link.stream`."""
 
-    def __init__(self, link: Link, bodies: Sequence[str], *, counting: bool = True,
+    def __init__(self, link: Link, program: Program, *, counting: bool = True,
                  on_progress: Callable[[StreamProgress], None] | None = None,
                  timeout_s: float | None = None,
                  should_stop: Callable[[], bool] | None = None,
@@ -151,22 +153,22 @@ class Streamer:
         if link.banner is None:
             raise LinkError(f"{link.url}: no handshake yet")
         self.link = link
-        self.bodies = bodies
+        self.program = program
         self.on_progress = on_progress
         self.should_stop = should_stop
         self.on_interrupt = on_interrupt
         self.timeout = timeout_s or link.reply_timeout_s
         self.budget = link.banner.rx if counting else 1
         self.first = link.next_line
-        self.encoder = None if overrides is None else OverrideEncoder(bodies, overrides)
-        self.sent_bodies: list[str] = []  # the bodies as sent (overrides applied), in order
+        self.encoder = None if overrides is None else OverrideEncoder(program, overrides)
+        self.sent_values: list[tuple[int, int]] = []  # (P, S) as sent (overrides), in order
         self.feed_after: list[int] = []  # the encoder's feed factor after each of them
         self.wire: dict[int, tuple[bytes, int]] = {}  # job index → (wire line, lines covered)
-        self.absolute = pack.modes(list(bodies)) if pack_lines else None
+        self.absolute = wire.absolute_known(program) if pack_lines else None
         # two packed lines fit the receive buffer, so one is always on its way while the
         # firmware works on the other
         self.limit = min(link.banner.line_max + 1, link.banner.rx // 2)
-        self.total = len(bodies)
+        self.total = len(program)
         if self.encoder is None:
             j = 0
             while j < self.total:
@@ -260,43 +262,47 @@ class Streamer:
         if self.nxt == self.total:
             self._enter(Phase.WAITING)
 
-    def _body(self, index: int) -> str:
-        """Job line `index` as sent: the bodies up to it are encoded now if they were not
+    def _values(self, index: int) -> tuple[int, int]:
+        """Item `index`'s (P, S) as sent: the items up to it are taken now if they were not
         yet (with the overrides in force); kept once written (`_unbuild` drops the rest)."""
-        while len(self.sent_bodies) <= index:
-            j = len(self.sent_bodies)
-            if self.encoder is None:
-                self.sent_bodies.append(self.bodies[j])
-            else:
-                self.sent_bodies.append(self.encoder.body(j))
-                self.feed_after.append(self.encoder.feed_pct)
-        return self.sent_bodies[index]
+        if self.encoder is None:
+            return self.program.rows[3][index], self.program.rows[4][index]
+        while len(self.sent_values) <= index:
+            self.sent_values.append(self.encoder.values(len(self.sent_values)))
+            self.feed_after.append(self.encoder.feed_pct)
+        return self.sent_values[index]
 
     def _unbuild(self, index: int) -> None:
-        """Forget the bodies from job line `index` on, none of them written yet, and the
-        wire line starting there: the overrides in force when they are built again apply
-        (an override takes effect at the next line written, never changes one written)."""
+        """Forget the values from item `index` on, none of them written yet, and the wire
+        line starting there: the overrides in force when they are taken again apply (an
+        override takes effect at the next line written, never changes one written)."""
         assert self.encoder is not None
-        del self.sent_bodies[index:]
+        del self.sent_values[index:]
         del self.feed_after[index:]
         self.encoder.feed_pct = self.feed_after[-1] if self.feed_after else FEED_MAX_PCT
         self.wire.pop(index, None)
 
     def _wire(self, index: int) -> tuple[bytes, int]:
-        """The wire line that starts at job line `index` and how many job lines it covers
-        (a G6 several, `run.pack`); kept once built, so a resend sends the same bytes. The
-        body after a G6 (read to see whether it joins) stays unbuilt."""
+        """The wire line that starts at item `index` and how many items it covers (a G6
+        several, `wire.pack_line`); kept once built, so a resend sends the same bytes. The
+        item after a G6 (read to see whether it joins) stays untaken."""
         got = self.wire.get(index)
         if got is None:
             if self.absolute is None:
-                got = protocol.encode_line(self._body(index), self.first + index), 1
+                p, s = self._values(index)
+                got = protocol.encode_line(wire.body(self.program, index, p, s),
+                                           self.first + index), 1
             else:
-                got = pack.pack_line(self._body, index, self.total, self.first + index,
-                                     self.absolute[index], self.limit)
-                if self.encoder is not None and len(self.sent_bodies) > index + got[1]:
+                got = wire.pack_line(self.program, index, self.first + index,
+                                     bool(self.absolute[index]), self.limit, self._values)
+                if self.encoder is not None and len(self.sent_values) > index + got[1]:
                     self._unbuild(index + got[1])
             self.wire[index] = got
         return got
+
+    def _text(self, index: int) -> str:
+        """Item `index` as a line body, for messages."""
+        return wire.body(self.program, index)
 
     def _poll_status(self) -> None:
         now = time.monotonic()
@@ -334,7 +340,7 @@ class Streamer:
             return
         if self.inflight:
             index, _ = self.inflight.oldest()
-            what = f"job line {index + 1} ({self.bodies[index]!r})"
+            what = f"job line {index + 1} ({self._text(index)!r})"
         else:
             what = "a status report"
         raise self._fault(FaultKind.TIMEOUT, f"the device went silent: no reply for "
@@ -380,7 +386,7 @@ class Streamer:
             info = protocol.CODES.get(msg.code)
             why = info.description if info else "unknown error code"
             fault = self._fault(FaultKind.ERROR, f"job line {index + 1} "
-                                f"({self.bodies[index]!r}) refused: error:{msg.code} {why}",
+                                f"({self._text(index)!r}) refused: error:{msg.code} {why}",
                                 msg.code)
             # A line refused with a plain error was accepted first (protocol 5.2, step 9): its
             # numbers are used. Alone in flight, the next number is known; with later lines on

@@ -18,14 +18,14 @@ plans its own acceleration ramps (`$120`/`$121`) and junction speeds (`$11`): do
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass
 
 import numpy as np
 
+from fivebar_host import wire
 from fivebar_host.compile import Job
 from fivebar_host.config import Profile
-from fivebar_host.run.program import line_param
+from fivebar_host.program import Kind, Program, line_param
 
 #: GRBL's `$30` the host asks for (maximum S); laser power 0–255 is scaled onto 0…$30.
 S_MAX = 1000
@@ -137,12 +137,6 @@ def work_offset_line(profile: Profile) -> str:
     return f"G10 L20 P1 X{h[0]:.4f} Y{h[1]:.4f}"
 
 
-def _num(v: float, digits: int = 8) -> str:
-    """A number GRBL reads exactly (at most `digits` significant digits, no exponent)."""
-    whole = len(str(int(abs(v))))
-    return f"{v:.{max(0, digits - whole)}f}".rstrip("0").rstrip(".") or "0"
-
-
 def angles_deg(profile: Profile, steps: np.ndarray) -> np.ndarray:
     """Absolute steps (from the home pose) → work X/Y degrees."""
     home = np.degrees(np.asarray(profile.motors.home_rad))
@@ -222,10 +216,8 @@ def job_program(job: Job, profile: Profile, laser: bool, start: int = 0,
             continue
         full = deg[k + 1] - angles_deg(profile, job.steps[k]) if k == start else d
         feed = 60.0 * float(np.hypot(full[0], full[1])) / (float(job.duration_us[k]) * 1e-6)
-        word = ""
-        if tool_on and profile.pen is None:
-            word = f" S{_num(int(job.power[k]) * S_MAX / 255.0, 5)}"
-        lines.append(f"G1 X{deg[k + 1, 0]:.4f} Y{deg[k + 1, 1]:.4f} F{_num(feed)}{word}")
+        s = int(job.power[k]) * S_MAX / 255.0 if tool_on and profile.pen is None else None
+        lines.append(wire.grbl_g1(float(deg[k + 1, 0]), float(deg[k + 1, 1]), feed, s))
         seg.append(k)
     if tool_on:
         lines += _tool_lines(profile, laser, False, job, job.n_segments - 1)
@@ -241,32 +233,24 @@ def _tool_lines(profile: Profile, laser: bool, on: bool, job: Job, k: int) -> li
     if pen is not None:
         pulse = pen.pulse_us(pen.down_position if on else pen.up_position)
         s = (pulse - 500.0) / 2000.0 * S_MAX
-        return [f"M3 S{_num(s, 5)}", f"G4 P{pen.move_ms(on) / 1000.0:.3f}"]
+        return [wire.grbl_spindle("M3", s), wire.grbl_dwell(pen.move_ms(on) / 1000.0)]
     if not on:
         return ["M5"]
-    return [f"M4 S{_num(int(job.power[k]) * S_MAX / 255.0, 5)}"]
+    return [wire.grbl_spindle("M4", int(job.power[k]) * S_MAX / 255.0)]
 
 
-_FW_G1 = re.compile(r"^G1 A(-?\d+) B(-?\d+) P(\d+)")
-
-
-def from_firmware_lines(profile: Profile, bodies: list[str], start: tuple[int, int]
-                        ) -> list[str]:
-    """fivebar's own checked, ramped laser-off moves (`run.program` jog and frame lines:
-    `G1 A<steps> B<steps> P<µs>`, absolute) as GRBL lines with the same targets and planned
-    durations; other lines (G90, S0) are dropped, the laser stays off (M5)."""
+def from_program(profile: Profile, moves: Program, start: tuple[int, int]) -> list[str]:
+    """fivebar's own checked, ramped laser-off moves (`run.moves`: jog, frame, travel) as
+    GRBL lines with the same targets and planned durations; items that are not moves
+    (G90, the tool) are dropped, the laser stays off (M5)."""
     out = ["G21 G90 G94 M5"]
-    prev = np.asarray(start, dtype=np.int64)
-    for body in bodies:
-        m = _FW_G1.match(body)
-        if m is None:
-            continue
-        tgt = np.array([int(m.group(1)), int(m.group(2))], dtype=np.int64)
-        d = (tgt - prev) / steps_per_degree(profile)
-        length = float(np.hypot(d[0], d[1]))
-        if length > 0:
-            a, b = angles_deg(profile, tgt)
-            feed = 60.0 * length / (int(m.group(3)) * 1e-6)
-            out.append(f"G1 X{a:.4f} Y{b:.4f} F{_num(feed)}")
-        prev = tgt
+    mv = np.flatnonzero(moves.kind == Kind.MOVE)
+    tgt = moves.positions(start)[mv]
+    prev = np.concatenate((np.asarray(start, dtype=np.int64)[None], tgt[:-1]))
+    d = (tgt - prev) / steps_per_degree(profile)
+    length = np.hypot(d[:, 0], d[:, 1])
+    deg = angles_deg(profile, tgt)
+    for i in np.flatnonzero(length > 0):
+        feed = 60.0 * float(length[i]) / (int(moves.p_us[mv[i]]) * 1e-6)
+        out.append(wire.grbl_g1(float(deg[i, 0]), float(deg[i, 1]), feed))
     return out

@@ -31,8 +31,8 @@ from fivebar_host.compile import Job
 from fivebar_host.config import Profile
 from fivebar_host.controllers.grbl.link import GrblError, GrblLink, StreamState
 from fivebar_host.controllers.grbl.program import GrblProgram
+from fivebar_host.program import line_param
 from fivebar_host.run.errors import PowerLossError
-from fivebar_host.run.program import line_param
 from fivebar_host.run.resume import ResumePoint, fingerprint
 
 #: Lines before the last `ok` that may still be executing: GRBL's 15 planner blocks + 1.

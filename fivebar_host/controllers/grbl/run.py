@@ -40,13 +40,14 @@ from fivebar_host.controllers.grbl.link import (
 )
 from fivebar_host.controllers.grbl.program import (
     GrblProgram,
-    from_firmware_lines,
+    from_program,
     job_program,
     settings_differences,
     steps_per_degree,
     work_offset_line,
 )
 from fivebar_host.controllers.grbl.resume import fault_point, load_point, resume_pose
+from fivebar_host.program import Program
 from fivebar_host.run.resume import RESUME_SUFFIX, resume_path
 
 
@@ -185,10 +186,10 @@ def _after_fault(link: GrblLink, job: Job, profile: Profile, prog: GrblProgram,
 def _travel(link: GrblLink, profile: Profile, assembly: int, start: tuple[int, int],
             end: tuple[int, int]) -> None:
     """A checked laser-off joint-space travel (fivebar's own, ramped) and wait for it."""
-    from fivebar_host.run.program import travel_lines
+    from fivebar_host.run.moves import travel
 
-    bodies = travel_lines(profile, assembly, start, end, "travel to the job's start")
-    link.stream(from_firmware_lines(profile, bodies, start))
+    moves = travel(profile, assembly, start, end, "travel to the job's start")
+    link.stream(from_program(profile, moves, start))
     link.wait_idle(120.0)
 
 
@@ -204,10 +205,10 @@ def home_grbl(link: GrblLink, profile: Profile, confirm: Callable[[str], bool]
     return ensure_pose(link, profile, confirm)
 
 
-def stream_moves(link: GrblLink, profile: Profile, bodies: list[str],
+def stream_moves(link: GrblLink, profile: Profile, moves: Program,
                  start: tuple[int, int], timeout_s: float = 120.0) -> tuple[int, int]:
-    """Run fivebar's checked laser-off lines (jog, frame) on the board; the end position."""
-    link.stream(from_firmware_lines(profile, bodies, start))
+    """Run fivebar's checked laser-off moves (jog, frame) on the board; the end position."""
+    link.stream(from_program(profile, moves, start))
     return position_steps(link, profile, link.wait_idle(timeout_s))
 
 

@@ -24,7 +24,7 @@ from numpy.typing import ArrayLike
 from fivebar_host.compile import Job, distance_to_request
 from fivebar_host.compile.steps import step_angles
 from fivebar_host.config import Profile
-from fivebar_host.run.program import line_param
+from fivebar_host.program import line_param
 from kinematics.arrays import FloatArray, IntArray
 from kinematics.calibration import MachineParams
 

@@ -1,21 +1,23 @@
-"""The online compiler: GRBL moves in machine mm → checked joint-space targets (when a line is
-accepted) → timed firmware lines (for a batch of moves at once, the look-ahead).
+"""The incremental compiler: moves in machine mm, one at a time → checked joint-space targets
+(when a move is accepted) → a timed `Program` (for a batch of moves at once, the look-ahead).
 
-The same stages as `fivebar plot` (`fivebar_host.compile`), on a stream instead of a file:
+The public API the bridge (`fivebar bridge`, a GRBL front door) compiles a sender's stream
+with: the same stages as `fivebar plot` (`fivebar_host.compile`), on a stream instead of a
+file:
 
-* `solve` runs when the sender's line is accepted, before its `ok`: checked inverse
-  kinematics of every vertex (`PoseChecker.inverse`: reach, joint limits, both singularity
-  margins, assembly) and the chords refined in joint space within the tolerance
+* `solve` runs when a move is accepted (the bridge: before the sender's `ok`): checked
+  inverse kinematics of every vertex (`PoseChecker.inverse`: reach, joint limits, both
+  singularity margins, assembly) and the chords refined in joint space within the tolerance
   (`toolpath.segment.refine`); a rapid (G0) is a checked straight joint-space move
   (`joint_moves`, sampled every 0.5°) with the checked Cartesian line as fallback, as pen-up
-  travel is in `compile.travel`. A failure is a `GrblAlarmError` (soft limit) naming the point and
-  the reason, raised before anything of that line moves.
-* `plan` takes the solved moves waiting in the look-ahead buffer, quantises them to absolute
-  steps once (`compile.segments.drop_zero_moves`), times them with the joint speed and
-  acceleration limits on the firmware's rate staircase (`compile.timing.time_stepped`) and
-  writes the firmware lines (`G1 A B P S`; laser power only on drawing segments, S0 on every
-  other move; a pen through `PenDriver`). A batch runs from rest to rest: the look-ahead is
-  what the sender has streamed ahead, up to `LOOKAHEAD_MOVES` moves.
+  travel is in `compile.travel`. A failure is a `MoveRefusedError` naming the point and the
+  reason, raised before anything of that move runs.
+* `plan` takes the solved moves waiting in the look-ahead, quantises them to absolute steps
+  once (`compile.segments.drop_zero_moves`), times them with the joint speed and acceleration
+  limits on the firmware's rate staircase (`compile.timing.time_stepped`) and emits the
+  program (laser power only on drawing segments, S0 on every other move; a pen marked
+  `M3 S0` / `M5`). A batch runs from rest to rest: the look-ahead is what the caller has
+  accepted ahead, up to `LOOKAHEAD_MOVES` moves.
 
 Tolerance budget as in `compile.job`: arcs are flattened within tol/2 (the interpreter's
 chord tolerance) and refined within tol/2, straight lines within tol.
@@ -24,20 +26,19 @@ chord tolerance) and refined within tol/2, straight lines within tol.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from typing import Protocol
+from dataclasses import dataclass
 
 import numpy as np
 
 from fivebar_host import protocol
-from fivebar_host.bridge import codes
-from fivebar_host.bridge.codes import GrblAlarmError
 from fivebar_host.compile import steps
 from fivebar_host.compile.model import MAX_STEP_RAD
 from fivebar_host.compile.segments import Segments, drop_zero_moves
 from fivebar_host.compile.timing import time_stepped
 from fivebar_host.compile.travel import TRAVEL_TOL_MM
 from fivebar_host.config import Profile
+from fivebar_host.errors import FivebarError
+from fivebar_host.program import ABSENT, Kind, Program
 from fivebar_host.toolpath.segment import (
     REASON_KEY,
     CheckFailedError,
@@ -51,23 +52,20 @@ from kinematics.arrays import BoolArray, FloatArray, IntArray
 LOOKAHEAD_MOVES = 200
 
 
-class PenDriver(Protocol):
-    """How the machine puts its pen down and lifts it (firmware lines)."""
+class MoveRefusedError(FivebarError):
+    """A move the machine cannot make: `point` (machine mm; NaN when it is on the way),
+    `reason` (a `toolpath.segment.REASON_KEY` value, in words) and what failed."""
 
-    def down(self) -> list[str]: ...
+    def __init__(self, point: tuple[float, float], reason: str, message: str) -> None:
+        super().__init__(message)
+        self.point = point
+        self.reason = reason
 
-    def up(self) -> list[str]: ...
 
-
-class BracketPen:
-    """fivebar's pen convention until the firmware has pen commands of its own: `M3 S0`
-    before a run of drawing segments, `M5` after it (as `run.program.job_bodies`)."""
-
-    def down(self) -> list[str]:
-        return ["M3 S0"]
-
-    def up(self) -> list[str]:
-        return ["M5"]
+def pen_switch(down: bool) -> Program:
+    """The pen marked down (`M3 S0`) before a run of drawing segments and up (`M5`) after it,
+    which a pen-lift output can follow (the laser-enable state at S0)."""
+    return Program.command(Kind.TOOL_ON, s=3) if down else Program.command(Kind.TOOL_OFF)
 
 
 @dataclass(frozen=True)
@@ -87,20 +85,13 @@ class Solved:
 
 @dataclass(frozen=True)
 class Batch:
-    """Firmware lines for a run of moves, from rest to rest, and where it ends."""
+    """The program of a run of moves, from rest to rest, and where it ends."""
 
-    bodies: list[str]
+    program: Program
     duration_s: float
     end_steps: tuple[int, int]
     jog: bool = False
     moves: int = 0
-
-
-def ascii_text(text: str) -> str:
-    """GRBL's messages are ASCII and hold no `|`, `[` or `]`: symbols spelt out or replaced."""
-    text = (text.replace("°", " deg").replace("→", "->").replace("−", "-")
-            .replace("|", "").replace("[", "(").replace("]", ")"))
-    return text.encode("ascii", "replace").decode()
 
 
 @dataclass
@@ -111,7 +102,6 @@ class OnlineCompiler:
     mode: str
     tolerance_mm: float
     laser: bool
-    pen: PenDriver = field(default_factory=BracketPen)
 
     def __post_init__(self) -> None:
         kin = self.profile.kinematics
@@ -132,12 +122,12 @@ class OnlineCompiler:
         return (float(pts[0, 0]), float(pts[0, 1])) if valid[0] else None
 
     # ------------------------------------------------------------------ solve
-    def _refuse(self, cf: CheckFailedError, code: int = codes.ALARM_SOFT_LIMIT) -> GrblAlarmError:
+    def _refuse(self, cf: CheckFailedError) -> MoveRefusedError:
         x, y = cf.point
         where = f"({x:.3f}, {y:.3f}) mm" if math.isfinite(x) else "on the way"
         why = REASON_KEY_TEXT.get(cf.reason, cf.reason)
-        return GrblAlarmError(code, ascii_text(f"Refused {why} at machine {where}: "
-                                               f"{cf.message} (working mode {self.mode})"))
+        return MoveRefusedError((x, y), why, f"Refused {why} at machine {where}: "
+                                f"{cf.message} (working mode {self.mode})")
 
     def solve(self, th_from: FloatArray, start: tuple[float, float],
               points: list[tuple[float, float]], *, rapid: bool, draw: bool,
@@ -206,7 +196,7 @@ class OnlineCompiler:
         sp = drop_zero_moves(mot, seg)
         end = (int(sp.steps[-1, 0]), int(sp.steps[-1, 1]))
         if sp.draw.shape[0] == 0:
-            return Batch([], 0.0, end, moves[0].jog if moves else False, len(moves))
+            return Batch(Program.empty(), 0.0, end, moves[0].jog if moves else False, len(moves))
         mv = sp.line
         power = np.array([m.power for m in moves], dtype=np.uint8)[mv]
         feed = np.array([m.feed_mm_s for m in moves])[mv]
@@ -219,44 +209,48 @@ class OnlineCompiler:
         speed = planned.length / np.maximum(planned.duration_us * 1e-6, 1e-9)
         scale = np.clip(speed / np.maximum(prog_feed, 1e-9), 0.0, 1.0)
         pw: IntArray = np.rint(np.where(dyn, base * scale, base)).astype(np.int64)
-        bodies = self._bodies(planned.steps[1:], planned.duration_us, planned.draw, pw)
-        return Batch(bodies, float(planned.duration_us.sum()) * 1e-6, end,
+        prog = self._program(planned.steps[1:], planned.duration_us, planned.draw, pw)
+        return Batch(prog, float(planned.duration_us.sum()) * 1e-6, end,
                      moves[0].jog, len(moves))
 
-    def _bodies(self, st: IntArray, dur: IntArray, draw: BoolArray,
-                power: IntArray) -> list[str]:
-        """Firmware lines: laser `M3 S0` … `M5` around the batch with power on drawing
-        segments only; a pen down/up through the `PenDriver` where drawing starts/stops."""
-        out: list[str] = ["M3 S0"] if self.laser else []
-        a, b = st[:, 0].tolist(), st[:, 1].tolist()
-        for i, p_us in enumerate(dur.tolist()):
-            d = bool(draw[i])
-            if not self.laser and d != self.pen_down:
-                out += self.pen.down() if d else self.pen.up()
-                self.pen_down = d
-            s = int(power[i]) if (self.laser and d) else 0
-            out.append(protocol.g1(int(a[i]), int(b[i]), int(p_us), s))
+    def _program(self, st: IntArray, dur: IntArray, draw: BoolArray,
+                 power: IntArray) -> Program:
+        """The batch's items: laser `M3 S0` … `M5` around it with power on drawing segments
+        only; a pen down/up (`pen_switch`) where drawing starts/stops."""
+        s = np.where(draw, power, 0) if self.laser else np.zeros(len(dur), dtype=np.int64)
+        moves = Program.moves(st[:, 0], st[:, 1], dur, s)
         if self.laser:
-            out.append("M5")
-        return out
+            return Program.join([Program.command(Kind.TOOL_ON, s=3), moves,
+                                 Program.command(Kind.TOOL_OFF)])
+        parts: list[Program] = []
+        flips = np.flatnonzero(np.diff(np.concatenate(([self.pen_down], draw)).astype(np.int8)))
+        start = 0
+        for i in flips.tolist():
+            parts += [moves.take(slice(start, i)), pen_switch(bool(draw[i]))]
+            start = i
+        if len(draw):
+            self.pen_down = bool(draw[-1])
+        return Program.join([*parts, moves.take(slice(start, None))])
 
-    def pen_lines(self, down: bool) -> list[str]:
-        """Lines that bring the pen to `down` (none if it is already there, or a laser)."""
+    def pen_program(self, down: bool) -> Program:
+        """The item that brings the pen to `down` (none if it is already there, or a
+        laser)."""
         if self.laser or down == self.pen_down:
-            return []
+            return Program.empty()
         self.pen_down = down
-        return self.pen.down() if down else self.pen.up()
+        return pen_switch(down)
 
 
 REASON_KEY_TEXT = {v: v.replace("_", " ") for v in set(REASON_KEY.values())}
 
 
-def dwell_lines(seconds: float) -> list[str]:
-    """Firmware dwell segments (a G1 without motion) for a G4 of `seconds`."""
+def dwell_program(seconds: float) -> Program:
+    """Dwell items (no motion, no S word) for a G4 of `seconds`, split at the protocol's
+    longest P."""
     us = round(seconds * 1e6)
-    out: list[str] = []
+    parts: list[int] = []
     while us >= protocol.P_MIN_US:
         p = min(us, protocol.P_MAX_US)
-        out.append(f"G1 P{p}")
+        parts.append(p)
         us -= p
-    return out
+    return Program.of(np.full(len(parts), Kind.DWELL), ABSENT, ABSENT, parts, ABSENT)

@@ -1,4 +1,5 @@
-"""Firmware programs: a compiled job (or a frame, a jog) as firmware line bodies.
+"""The programs the host streams: a job's remainder from where the machine stands, the
+travel back to a segment, the frame of a drawing, jogs (typed `Program`s, `fivebar_host.program`).
 
 Pure (no I/O): the sender streams what these functions build, the daemon rebuilds a stream
 from its inputs to check what a controller kept, and the resume logic maps a finished line
@@ -11,86 +12,22 @@ from __future__ import annotations
 
 import itertools
 import math
-import re
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from fivebar_host import protocol
-from fivebar_host.compile import Job, pen_setup_lines, pen_switch_lines
+from fivebar_host.compile import Job
+from fivebar_host.compile.emit import job_program, setup, tool_on_item
 from fivebar_host.compile.steps import absolute_steps, step_angles
 from fivebar_host.config import Profile
+from fivebar_host.program import Kind, Program, line_param
 from fivebar_host.run.errors import SendError
 
 #: Share of the joint speed and acceleration limits used by moves the host adds itself
 #: (travel back on resume, jogs, framing): they are not timed by the job planner.
 SAFE_SHARE = 0.5
-
-
-def line_param(p0: ArrayLike, p1: ArrayLike, pos: ArrayLike) -> float | None:
-    """Where `pos` lies on the straight joint-space line p0 → p1: t in [0, 1] measured on
-    the axis that moves most, when every axis is within one step of the line; else None.
-    (The DDA spreads each motor's steps evenly, so a move stopped part-way sits there.)"""
-    s0 = np.asarray(p0, dtype=np.float64)
-    d = np.asarray(p1, dtype=np.float64) - s0
-    q = np.asarray(pos, dtype=np.float64)
-    if not d.any():
-        return 0.0 if np.array_equal(q, s0) else None
-    ax = int(np.argmax(np.abs(d)))
-    t = float((q[ax] - s0[ax]) / d[ax])
-    if not 0.0 <= t <= 1.0 or not bool(np.all(np.abs(s0 + t * d - q) <= 1.0 + 1e-9)):
-        return None
-    return t
-
-
-_G1_WORDS = re.compile(r"\b([AB])(-?\d+)")
-
-
-@dataclass(frozen=True)
-class Program:
-    """Firmware line bodies and, per line, the job segment it executes (−1: no segment)."""
-
-    bodies: list[str]
-    segment: NDArray[np.int64]
-
-    def finished_segments(self, first_line: int, done_line: int, start: int) -> int:
-        """Index of the first segment not finished, given the firmware's last finished line."""
-        idx = done_line - first_line
-        if idx < 0:
-            return start
-        idx = min(idx, len(self.bodies) - 1)
-        segs = self.segment[: idx + 1]
-        segs = segs[segs >= 0]
-        return int(segs.max()) + 1 if segs.size else start
-
-    def positions(self, start_position: ArrayLike) -> NDArray[np.int64]:
-        """Firmware position after each line, from `start_position` (programs are absolute,
-        `G90`; only `G1` lines move)."""
-        pos = np.asarray(start_position, dtype=np.int64).copy()
-        out = np.empty((len(self.bodies), 2), dtype=np.int64)
-        for i, body in enumerate(self.bodies):
-            if body.split(" ", 1)[0] == "G1":
-                for axis, value in _G1_WORDS.findall(body):
-                    pos["AB".index(axis)] = int(value)
-            out[i] = pos
-        return out
-
-    def on_path(self, first_line: int, done_line: int, start_position: ArrayLike,
-                position: ArrayLike) -> bool:
-        """Whether `position` is where this program can leave the motors when `done_line`
-        is the last line it executed to its end: on the straight joint-space line from the
-        position after that line to the end of the next line that moves (within a step)."""
-        pts = self.positions(start_position)
-        idx = done_line - first_line
-        if not -1 <= idx < len(self.bodies):
-            return False
-        p0 = np.asarray(start_position, dtype=np.int64) if idx < 0 else pts[idx]
-        later = pts[idx + 1:]
-        moving = np.flatnonzero(np.any(later != p0, axis=1))
-        p1 = later[moving[0]] if moving.size else p0
-        return line_param(p0, p1, position) is not None
 
 
 def _ramped_move(start: ArrayLike, end: ArrayLike, rad_per_step: float,
@@ -173,59 +110,23 @@ def check_joint_move(profile: Profile, job_assembly: int, start: ArrayLike,
                         "move the arms by hand to the home pose and run `fivebar home`")
 
 
-def travel_lines(profile: Profile, job_assembly: int, start: ArrayLike,
-                 end: ArrayLike, what: str) -> list[str]:
-    """Checked, ramped, laser-off G1 lines from `start` to `end` (absolute steps)."""
-    check_joint_move(profile, job_assembly, start, end, what)
+def _ramped(profile: Profile, start: ArrayLike, end: ArrayLike) -> Program:
+    """Laser-off moves from `start` to `end` at `SAFE_SHARE` of the joint limits."""
     mo = profile.motors
     pieces = _ramped_move(start, end, mo.rad_per_step,
                           SAFE_SHARE * profile.motion.max_joint_rad_s,
                           SAFE_SHARE * profile.motion.max_joint_rad_s2)
-    return [protocol.g1(a, b, p, 0) for a, b, p in pieces]
+    if not pieces:
+        return Program.empty()
+    a, b, p = np.asarray(pieces, dtype=np.int64).T
+    return Program.moves(a, b, p, 0)
 
 
-def job_bodies(job: Job, profile: Profile, laser: bool, first: int,
-               first_line: str | None = None, end: int | None = None
-               ) -> tuple[list[str], list[int]]:
-    """Firmware lines for segments `first`… `end` − 1 (None: to the job's end) of `job` and
-    the segment of each (−1: none). The pen goes up after the last one (a pen-change stop
-    may cut a run of drawing segments: `Job.pauses`).
-
-    Laser job (`laser`): `M3 S0` once, then drawing segments carry the profile's power.
-    Pen job: S0 everywhere, pen down before and pen up after each run of drawing segments
-    (and dwells with the tool on, `Job.tool_on`; `compile.pen_switch_lines`: the servo's
-    `M280` with its move and settle time on a pen profile, else `M3 S0` / `M5`). A dwell is
-    `G1 P<µs> S<power>` without A/B (`compile.dwell`). `first_line` replaces the first
-    segment's G1 (a partial segment). The same encoding as `fivebar convert` (job.encode_lines)."""
-    n = job.n_segments if end is None else end
-    power = job.power if laser else np.zeros_like(job.power)
-    draw = job.tool_on.tolist()
-    dwell = job.is_dwell.tolist()
-    bodies: list[str] = []
-    seg: list[int] = []
-    if laser:
-        bodies.append(f"{profile.laser.on_command} S0")
-        seg.append(-1)
-    a = job.steps[1:, 0].tolist()
-    b = job.steps[1:, 1].tolist()
-    dur = job.duration_us.tolist()
-    pw = power.tolist()
-    down, up = pen_switch_lines(profile)
-    for k in range(first, n):
-        if not laser and draw[k] and (k == first or not draw[k - 1]):
-            bodies.append(down)
-            seg.append(-1)
-        line = first_line if (k == first and first_line is not None) else protocol.g1(
-            None if dwell[k] else a[k], None if dwell[k] else b[k], dur[k], pw[k])
-        bodies.append(line)
-        seg.append(k)
-        if not laser and draw[k] and (k == n - 1 or not draw[k + 1]):
-            bodies.append(up)
-            seg.append(-1)
-    if not bodies or bodies[-1] != "M5":
-        bodies.append("M5")
-        seg.append(-1)
-    return bodies, seg
+def travel(profile: Profile, job_assembly: int, start: ArrayLike, end: ArrayLike,
+           what: str) -> Program:
+    """Checked, ramped, laser-off moves from `start` to `end` (absolute steps)."""
+    check_joint_move(profile, job_assembly, start, end, what)
+    return _ramped(profile, start, end)
 
 
 def build_program(job: Job, profile: Profile, laser: bool, start_segment: int,
@@ -240,26 +141,23 @@ def build_program(job: Job, profile: Profile, laser: bool, start_segment: int,
     line that stands for it, so nothing is redrawn. Power is sent only with `laser` (the
     CLI's explicit `--laser` opt-in).
     """
-    bodies = ["G90", *pen_setup_lines(profile), "M5"]
-    seg: list[int] = [-1] * len(bodies)
+    parts = [setup(profile, laser)]
     k = start_segment
     steps = job.steps
     pos = np.asarray(position, dtype=np.int64)
-    partial: str | None = None
+    partial: Program | None = None
     if k < job.n_segments and not np.array_equal(pos, steps[k]):
         t = line_param(steps[k], steps[k + 1], pos)
         if t is not None and t > 0.0:
             rest = max(protocol.P_MIN_US, round(float(job.duration_us[k]) * (1.0 - t)))
             at_end = np.array_equal(pos, steps[k + 1])
             pw = int(job.power[k]) if laser and not at_end else 0
-            partial = protocol.g1(int(steps[k + 1, 0]), int(steps[k + 1, 1]), rest, pw)
+            partial = Program.moves(steps[k + 1, 0], steps[k + 1, 1], rest, pw, k)
         else:
-            back = travel_lines(profile, job.assembly, pos, steps[k],
-                                f"travel back to segment {k + 1}")
-            bodies += back
-            seg += [-1] * len(back)
-    more, mseg = job_bodies(job, profile, laser, k, partial, end_segment)
-    return Program(bodies + more, np.asarray(seg + mseg, dtype=np.int64))
+            parts.append(travel(profile, job.assembly, pos, steps[k],
+                                f"travel back to segment {k + 1}"))
+    parts.append(job_program(job, profile, laser, k, end_segment, partial))
+    return Program.join(parts)
 
 
 # ------------------------------------------------------------------ framing and jogging
@@ -290,27 +188,24 @@ def frame_program(job: Job, profile: Profile, position: Sequence[int],
         raise SendError("frame: the drawing's bounding box comes closer to a singularity than "
                         "the profile allows (the drawing itself may still be fine)")
     st = absolute_steps(inv.angles, profile.motors.home_rad, profile.motors.steps_per_rev)
-    bodies = ["G90", f"{profile.laser.on_command} S0"]
-    bodies += travel_lines(profile, job.assembly, position, st[0], "frame: travel to the outline")
+    to_outline = travel(profile, job.assembly, position, st[0], "frame: travel to the outline")
     feed = profile.motion.travel_feed_mm_s
     wmax = SAFE_SHARE * profile.motion.max_joint_rad_s
     seglen = np.hypot(*np.diff(outline, axis=0).T)
     dth = np.abs(np.diff(inv.angles, axis=0)).max(axis=1)
     dur = np.maximum(seglen / feed, dth / wmax)
-    for k in range(1, st.shape[0]):
-        if np.array_equal(st[k], st[k - 1]):
-            continue
-        bodies.append(protocol.g1(int(st[k, 0]), int(st[k, 1]),
-                                  max(protocol.P_MIN_US, round(float(dur[k - 1]) * 1e6)), 0))
-    bodies += travel_lines(profile, job.assembly, st[-1], (0, 0), "frame: return home")
-    bodies.append("M5")
-    return Program(bodies, np.full(len(bodies), -1, dtype=np.int64))
+    moving = np.flatnonzero(np.any(st[1:] != st[:-1], axis=1)) + 1
+    p_us = np.maximum(protocol.P_MIN_US, np.rint(dur[moving - 1] * 1e6)).astype(np.int64)
+    trace = Program.moves(st[moving, 0], st[moving, 1], p_us, 0)
+    back = travel(profile, job.assembly, st[-1], (0, 0), "frame: return home")
+    return Program.join([Program.command(Kind.ABSOLUTE), tool_on_item(profile), to_outline,
+                         trace, back, Program.command(Kind.TOOL_OFF)])
 
 
-def jog_lines(profile: Profile, assembly: int, mode: str, position: Sequence[int], *,
-              motor: str | None = None, steps: int = 0,
-              dxy_mm: tuple[float, float] | None = None, checked: bool = True) -> list[str]:
-    """Ramped lines that move one motor by `steps` or the pen by `dxy_mm`.
+def jog_program(profile: Profile, assembly: int, mode: str, position: Sequence[int], *,
+                motor: str | None = None, steps: int = 0,
+                dxy_mm: tuple[float, float] | None = None, checked: bool = True) -> Program:
+    """Ramped moves that move one motor by `steps` or the pen by `dxy_mm`.
 
     `checked=False` is for a motor jog while the position is unknown (setting the arms up
     before homing): the move is not checked against limits or singularities, since nothing
@@ -321,11 +216,7 @@ def jog_lines(profile: Profile, assembly: int, mode: str, position: Sequence[int
         target["AB".index(motor)] += steps
         what = f"jog motor {motor} by {steps} steps"
         if not checked:
-            mo = profile.motors
-            pieces = _ramped_move(pos, target, mo.rad_per_step,
-                                  SAFE_SHARE * profile.motion.max_joint_rad_s,
-                                  SAFE_SHARE * profile.motion.max_joint_rad_s2)
-            return ["G90", *(protocol.g1(a, b, p, 0) for a, b, p in pieces)]
+            return Program.command(Kind.ABSOLUTE) + _ramped(profile, pos, target)
     else:
         assert dxy_mm is not None
         fb = profile.geometry
@@ -341,4 +232,4 @@ def jog_lines(profile: Profile, assembly: int, mode: str, position: Sequence[int
                             f"working mode {mode}")
         target = absolute_steps(inv.angles, mo.home_rad, mo.steps_per_rev)[0]
         what = f"jog the pen to ({goal[0]:.2f}, {goal[1]:.2f}) mm"
-    return ["G90", *travel_lines(profile, assembly, pos, target, what)]
+    return Program.command(Kind.ABSOLUTE) + travel(profile, assembly, pos, target, what)
