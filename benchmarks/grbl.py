@@ -33,6 +33,7 @@ from fivebar_host.bridge.controller import Bridge  # noqa: E402
 from fivebar_host.bridge.serve import Server  # noqa: E402
 from fivebar_host.config import load_profile  # noqa: E402
 from fivebar_host.controllers.fivebar.link import Link  # noqa: E402
+from fivebar_host.devices import register  # noqa: E402
 from fivebar_host.devices.sim import toolchain_missing  # noqa: E402
 
 DRAWING = ROOT / "tests" / "grbl" / "drawing.nc"
@@ -131,6 +132,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=1)
     args = ap.parse_args()
+    register()  # the emulator's URL scheme
     reason = toolchain_missing()
     if reason is not None:
         print(f"emulator unavailable: {reason}")

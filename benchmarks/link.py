@@ -42,6 +42,7 @@ from fivebar_host import protocol, wire  # noqa: E402
 from fivebar_host.compile import CompileOptions, compile_job  # noqa: E402
 from fivebar_host.config import load_profile  # noqa: E402
 from fivebar_host.controllers.fivebar.link import Link  # noqa: E402
+from fivebar_host.devices import register  # noqa: E402
 from fivebar_host.devices.sim import toolchain_missing  # noqa: E402
 from fivebar_host.program import Program  # noqa: E402
 from fivebar_host.run.moves import build_program  # noqa: E402
@@ -230,6 +231,7 @@ def main() -> None:
     ap.add_argument("--noise", action="store_true", help="only the G6 miss rates")
     ap.add_argument("--noise-lines", type=int, default=1_000_000)
     args = ap.parse_args()
+    register()  # the emulator's URL scheme
     if args.noise:
         from benchmarks import link_noise
 

@@ -126,15 +126,16 @@ def _run(document: vp.Document, action: str, port: str | None, preview_path: Pat
         raise click.UsageError("fivebar plot needs --port PORT (e.g. /dev/ttyUSB0, or "
                                "fivebar-sim:// for the emulator); fivebar preview draws "
                                "the picture and the report without a machine")
-    from fivebar_host.cli.plot import stream_plot
+    from fivebar_host.cli.session import Plot, plot_on_machine
     from fivebar_host.cli.stops import check_stops
+    from fivebar_host.controllers import DEFAULT
     from fivebar_host.run.stops import Copies
 
     copies = Copies(int(job_values.get("copies") or 1),
                     float(job_values.get("page_delay_s") or 0.0))
-    check_stops(job, copies, "fivebar")
-    stream_plot(Path(name), port, prof, job, laser=laser, resume=False, yes=yes,
-                 preview_path=preview_path, copies=copies)
+    check_stops(job)
+    plot_on_machine(Plot(Path(name), port, DEFAULT, laser, False, yes, copies, preview_path),
+                    prof, job)
 
 
 class _ActionFirst(click.Command):
@@ -178,6 +179,9 @@ def fivebar(document: vp.Document, port: str | None, preview_path: Path, name: s
     """Plot the document on a five-bar machine (`fivebar plot --port PORT`), or write its
     dry-run report and preview picture (`fivebar preview`). Options as in `fivebar plot`.
     The document is passed on unchanged."""
+    from fivebar_host.devices import register
+
+    register()  # the emulator's and the mocks' URL schemes (fivebar-sim:// …)
     try:
         _run(document, action, port, preview_path, yes, name, config_path, job_values)
     except FivebarError as e:

@@ -7,7 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from fivebar_host.devices import sim
+from fivebar_host.devices import register, sim
+
+register()  # the test suite is an entry point: the emulator's and the mocks' URL schemes
 
 
 @pytest.fixture

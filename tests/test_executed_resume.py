@@ -12,6 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from runs import run_with
 from sim_plot import compiled_copy
 
 from fivebar_host.controllers.fivebar.link import Link
@@ -19,7 +20,6 @@ from fivebar_host.devices.sim import toolchain_missing
 from fivebar_host.devices.simtrace import read_trace
 from fivebar_host.report.text.executed import executed_path, merge_axes
 from fivebar_host.run.resume import ResumePoint, fingerprint, resume_path
-from fivebar_host.run.sender import run_job
 
 pytestmark = [
     pytest.mark.sim,
@@ -45,7 +45,7 @@ def test_travel_back_after_homing_is_not_scored_as_drawing(tmp_path: Path) -> No
         return "home pose" in question
 
     with Link.open(f"fivebar-sim://?trace={trace}") as link:
-        rep = run_job(link, job, prof, drawing=drawing, laser=True, confirm=lambda q: False,
+        rep = run_with(link, job, prof, drawing=drawing, laser=True, confirm=lambda q: False,
                       resume=True, confirm_placed=person)
     assert len(asked) == 2 and "lost power" in asked[0]
     assert rep.start_segment == k and rep.start_position == (0, 0)

@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 import serial
 from click.testing import CliRunner
+from runs import run_with
 
 from fivebar_host.cli import main
 from fivebar_host.compile import CompileOptions, compile_job
 from fivebar_host.config import load_profile
 from fivebar_host.controllers.grbl.link import GrblError, GrblLink
-from fivebar_host.controllers.grbl.run import run_grbl_job
 from fivebar_host.devices import grblmock, urls
 from fivebar_host.program import line_param
 from fivebar_host.report.text.executed import executed_path
@@ -160,7 +160,7 @@ def test_ctrl_c_holds_and_names_the_exact_segment(tmp_path: Path) -> None:
 
     try:
         with pytest.raises(GrblError, match=r"in segment (\d+) of") as info:
-            run_grbl_job(link, job, prof, laser=True, confirm=lambda q: True,
+            run_with(link, job, prof, laser=True, confirm=lambda q: True,
                          should_stop=stop, on_interrupt=lambda: False,
                          drawing=tmp_path / "text.svg")
     finally:
@@ -213,7 +213,7 @@ def _abort(url: str, drawing: Path, at: int = 300) -> str:
     link = GrblLink.open(url)
     try:
         with pytest.raises(GrblError, match=r"in segment \d+ of") as info:
-            run_grbl_job(link, job, prof, laser=True, confirm=lambda q: True,
+            run_with(link, job, prof, laser=True, confirm=lambda q: True,
                          should_stop=stop, on_interrupt=lambda: False, drawing=drawing)
     finally:
         link.close()
@@ -232,7 +232,7 @@ def test_abort_then_resume_draws_the_plan_exactly_once(tmp_path: Path) -> None:
     notes: list[str] = []
     link = GrblLink.open(url.replace("speed=5", "speed=200"))
     try:
-        rep = run_grbl_job(link, job, prof, laser=True, confirm=lambda q: False,
+        rep = run_with(link, job, prof, laser=True, confirm=lambda q: False,
                            confirm_placed=lambda q: False, drawing=drawing, resume=True,
                            on_note=notes.append)
     finally:

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from runs import run_with
 
 from fivebar_host import protocol, wire
 from fivebar_host.cli.keys import KeyReader, apply_keys, override_keys
@@ -22,7 +23,6 @@ from fivebar_host.devices import mock
 from fivebar_host.run.errors import SendError
 from fivebar_host.run.moves import build_program
 from fivebar_host.run.overrides import Overrides, scaled
-from fivebar_host.run.sender import run_job
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
@@ -158,10 +158,10 @@ def test_resume_after_an_override_is_exact(tmp_path: Path, when: int) -> None:
     ov = Overrides(feed_pct=40, power_pct=70)
     url = f"fivebar-mock://?machine=rs&speed=50&disconnect_after={when}"
     with Link.open(url) as link, pytest.raises(SendError):
-        run_job(link, job, prof, drawing=drawing, laser=True, confirm=lambda _: True,
+        run_with(link, job, prof, drawing=drawing, laser=True, confirm=lambda _: True,
                 overrides=ov)
     with Link.open("fivebar-mock://?machine=rs&speed=50") as link:
-        run_job(link, job, prof, drawing=drawing, laser=True, confirm=lambda _: True,
+        run_with(link, job, prof, drawing=drawing, laser=True, confirm=lambda _: True,
                 resume=True, overrides=Overrides())
     m = mock.machine("rs")
     drawn = np.zeros(2, dtype=np.int64)

@@ -19,13 +19,14 @@ from fivebar_host import wire
 from fivebar_host.cli import main
 from fivebar_host.compile import CompileOptions, Job, compile_job
 from fivebar_host.config import load_profile
+from fivebar_host.controllers.fivebar.kept import kept_resume_segment
 from fivebar_host.controllers.fivebar.link import Link
 from fivebar_host.devices import mock
 from fivebar_host.program import Program
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import SendError
 from fivebar_host.run.moves import build_program
-from fivebar_host.run.resume import ResumePoint, kept_resume_segment, resume_path
+from fivebar_host.run.resume import ResumePoint, resume_path
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from layers_support import PEN, layers_text
+from runs import run_with
 
 from fivebar_host.cli import main
 from fivebar_host.compile import CompileOptions, Job, compile_job
@@ -25,7 +26,6 @@ from fivebar_host.controllers.fivebar.link import Link
 from fivebar_host.devices import mock
 from fivebar_host.run.errors import SendError
 from fivebar_host.run.resume import ResumePoint, resume_path
-from fivebar_host.run.sender import run_job
 from fivebar_host.run.stops import Copies, pieces
 
 
@@ -145,7 +145,7 @@ def test_pen_change_stops_idle_with_the_pen_up_then_finishes_exactly(
         return True
 
     monkeypatch.setattr("fivebar_host.cli.stops.terminal", lambda: True)
-    monkeypatch.setattr("fivebar_host.cli.plot.ask_pen_change", ask)
+    monkeypatch.setattr("fivebar_host.cli.operator.ask_pen_change", ask)
     code, out = run("plot", str(svg), "--port", url("pc"), "--config", str(PEN),
                     "--layer-pause", "--yes")
     assert code == 0, out
@@ -186,7 +186,7 @@ def test_quit_at_the_pen_change_then_resume_finishes_exactly(
 
 def test_enter_continues_and_ctrl_c_at_the_question_stops(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from fivebar_host.cli.stops import ask_pen_change
+    from fivebar_host.cli.operator import ask_pen_change
 
     p = LayerPause(10, "red", 2, 3)
     monkeypatch.setattr("click.prompt", lambda *a, **k: "")
@@ -239,13 +239,13 @@ def test_stop_during_the_page_delay_resumes_at_the_next_copy(tmp_path: Path) -> 
     link = Link.open(url("cd"))
     try:
         with pytest.raises(SendError, match="stopped before copy 2 of 2") as e:
-            run_job(link, job, prof, drawing=svg, laser=False, confirm=lambda q: True,
+            run_with(link, job, prof, drawing=svg, laser=False, confirm=lambda q: True,
                     copies=Copies(2, 5.0), on_wait=lambda s: waiting.update(now=True),
                     should_stop=lambda: waiting["now"], on_interrupt=lambda: False)
         assert "resume file" in str(e.value)
         rp = ResumePoint.load(resume_path(svg))
         assert (rp.copy, rp.next_segment, rp.position) == (2, 0, (0, 0))
-        rep = run_job(link, job, prof, drawing=svg, laser=False, confirm=lambda q: True,
+        rep = run_with(link, job, prof, drawing=svg, laser=False, confirm=lambda q: True,
                       resume=True, copies=Copies(2, 5.0))
         assert rep.segments == job.n_segments  # the second copy only
     finally:
@@ -261,7 +261,7 @@ def test_a_job_with_stops_needs_someone_to_answer(tmp_path: Path) -> None:
     link = Link.open(url("api"))
     try:
         with pytest.raises(SendError, match="nobody is there to answer"):
-            run_job(link, job, load_profile(PEN), drawing=svg, laser=False,
+            run_with(link, job, load_profile(PEN), drawing=svg, laser=False,
                     confirm=lambda q: True)
     finally:
         link.close()

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from runs import run_with
 from sim_plot import compiled_copy, laser_steps, planned_draw_steps
 
 from fivebar_host.controllers.fivebar.link import Link
@@ -15,8 +16,8 @@ from fivebar_host.devices.sim import toolchain_missing
 from fivebar_host.devices.simtrace import read_trace
 from fivebar_host.report.text.executed import executed_path, merge_axes
 from fivebar_host.run.errors import SendError
+from fivebar_host.run.operator import Progress
 from fivebar_host.run.resume import resume_path
-from fivebar_host.run.sender import Progress, run_job
 
 pytestmark = pytest.mark.skipif(toolchain_missing() is not None,
                                 reason=f"emulator unavailable: {toolchain_missing()}")
@@ -27,10 +28,10 @@ def test_svg_to_pulses_within_tolerance_and_laser_only_while_drawing(tmp_path: P
     trace = tmp_path / "pins.trace"
     link = Link.open(f"fivebar-sim://?trace={trace}")
     try:
-        rep = run_job(link, job, prof, drawing=drawing, laser=True, confirm=lambda q: True)
+        rep = run_with(link, job, prof, drawing=drawing, laser=True, confirm=lambda q: True)
     finally:
         link.close()
-    assert rep.final.a == 0 and rep.final.b == 0
+    assert rep.final == (0, 0)
     tr = read_trace(trace)
     t, track = merge_axes(tr.positions("A"), tr.positions("B"))
     ex = executed_path(job, prof, t, track)
@@ -57,7 +58,7 @@ def test_abort_mid_job_then_resume_draws_each_step_once(tmp_path: Path) -> None:
 
     try:
         with pytest.raises(SendError) as ei:
-            run_job(link, job, prof, drawing=drawing, laser=True, confirm=lambda q: True,
+            run_with(link, job, prof, drawing=drawing, laser=True, confirm=lambda q: True,
                     on_progress=on_progress, should_stop=lambda: stop["now"],
                     on_interrupt=lambda: False)
         msg = str(ei.value)
@@ -65,7 +66,7 @@ def test_abort_mid_job_then_resume_draws_each_step_once(tmp_path: Path) -> None:
         assert resume_path(drawing).exists()
         st = link.status()
         assert st.laser == 0 and st.state == "Idle"
-        run_job(link, job, prof, drawing=drawing, laser=True, confirm=lambda q: True,
+        run_with(link, job, prof, drawing=drawing, laser=True, confirm=lambda q: True,
                 resume=True)
         assert not resume_path(drawing).exists()
     finally:
@@ -93,13 +94,13 @@ def test_error_reply_mid_job_then_exact_resume(tmp_path: Path) -> None:
     try:
         link.command(f"$2={limit}")
         with pytest.raises(SendError) as ei:
-            run_job(link, job, prof, drawing=drawing, laser=True, confirm=lambda q: True)
+            run_with(link, job, prof, drawing=drawing, laser=True, confirm=lambda q: True)
         msg = str(ei.value)
         assert "error:11" in msg and "stopped at A = " in msg and "laser off" in msg
         st = link.status()
         assert st.laser == 0
         link.command("$2=100000")
-        run_job(link, job, prof, drawing=drawing, laser=True, confirm=lambda q: True,
+        run_with(link, job, prof, drawing=drawing, laser=True, confirm=lambda q: True,
                 resume=True)
     finally:
         link.close()

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from layers_support import PEN, layers_text
+from runs import run_with
 from sim_plot import all_steps, planned_steps
 
 from fivebar_host.compile import CompileOptions, compile_job
@@ -23,7 +24,6 @@ from fivebar_host.devices.simtrace import read_trace
 from fivebar_host.report.text.executed import executed_path, merge_axes, pen_report
 from fivebar_host.run.errors import SendError
 from fivebar_host.run.resume import ResumePoint, resume_path
-from fivebar_host.run.sender import run_job
 
 pytestmark = pytest.mark.skipif(toolchain_missing() is not None,
                                 reason=f"emulator unavailable: {toolchain_missing()}")
@@ -51,12 +51,12 @@ def test_pen_change_on_the_emulator_quit_and_resume_exactly(tmp_path: Path) -> N
 
     try:
         with pytest.raises(SendError, match="stopped at the pen change before layer 2/2"):
-            run_job(link, job, prof, drawing=drawing, laser=False, confirm=lambda q: True,
+            run_with(link, job, prof, drawing=drawing, laser=False, confirm=lambda q: True,
                     on_pause=quit_at)
         rp = ResumePoint.load(resume_path(drawing))
         assert rp.next_segment == pause.segment
         asked: list[LayerPause] = []
-        run_job(link, job, prof, drawing=drawing, laser=False, confirm=lambda q: True,
+        run_with(link, job, prof, drawing=drawing, laser=False, confirm=lambda q: True,
                 resume=True, on_pause=lambda p: asked.append(p) is None)
         assert asked == []  # resumed at the stop: not asked again
         assert not resume_path(drawing).exists()

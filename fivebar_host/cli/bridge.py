@@ -10,7 +10,7 @@ from typing import Any
 
 import click
 
-from fivebar_host.cli.common import config_option, fail, handle_errors, load, main, open_link
+from fivebar_host.cli.common import config_option, fail, handle_errors, load, main
 
 
 @main.command()
@@ -36,6 +36,7 @@ def bridge(config_path: Path | None, port: str, link_path: Path | None, listen: 
     """Serve a GRBL 1.1 interface (pty and/or TCP) in front of the five-bar at --port."""
     from fivebar_host.bridge.controller import Bridge
     from fivebar_host.bridge.serve import Server, parse_listen
+    from fivebar_host.controllers.fivebar import Controller as Fivebar
 
     if link_path is None and listen is None:
         fail("give --link PATH and/or --listen HOST:PORT")
@@ -44,7 +45,10 @@ def bridge(config_path: Path | None, port: str, link_path: Path | None, listen: 
     except ValueError:
         fail(f"--origin must look like X,Y in mm; got {origin!r}")
     prof = load(config_path)
-    link = open_link(port, prof)
+    machine = Fivebar.open(port, prof)  # the bridge speaks fivebar's own protocol
+    if machine.notice:
+        click.echo(f"warning: {machine.notice}", err=True)
+    link = machine.link
     tol = tolerance if tolerance is not None else prof.motion.tolerance_mm
     log: Any = (lambda m: click.echo(m, err=True)) if verbose else None
     core = Bridge(link, prof, laser=laser, tolerance_mm=tol, origin_mm=(ox, oy), mode=mode,

@@ -16,14 +16,19 @@ import sys
 from collections.abc import Callable
 from functools import wraps
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
 from fivebar_host import __version__
 from fivebar_host.config import Profile, load_profile
+from fivebar_host.controllers import DEFAULT as DEFAULT_CONTROLLER
+from fivebar_host.controllers import names as controller_names
 from fivebar_host.errors import FivebarError, OptionError
 from fivebar_host.options import JOB_OPTIONS, Option, compile_values, parse_page
+
+if TYPE_CHECKING:
+    from fivebar_host.run.controller import Controller
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -32,6 +37,9 @@ F = TypeVar("F", bound=Callable[..., Any])
 @click.version_option(__version__, prog_name="fivebar")
 def main() -> None:
     """Drive a five-bar-linkage pen plotter or laser engraver from SVG or G-code."""
+    from fivebar_host.devices import register
+
+    register()  # the emulator's and the mocks' URL schemes for every command
 
 
 def fail(message: str, code: int = 2) -> None:
@@ -132,71 +140,20 @@ def pop_job_values(kwargs: dict[str, Any]) -> dict[str, Any]:
 
 
 # ------------------------------------------------------------------ machine commands
-def confirm_with(yes: bool) -> Callable[[str], bool]:
-    """A yes/no question for the sender: --yes answers it; otherwise ask on the terminal."""
-
-    def ask(question: str) -> bool:
-        if yes:
-            click.echo(f"{question} yes (--yes)")
-            return True
-        if not sys.stdin.isatty():
-            click.echo(f"{question} (no terminal to ask: pass --yes)", err=True)
-            return False
-        return click.confirm(question, default=False)
-
-    return ask
+controller_option = click.option(
+    "--controller", type=click.Choice(list(controller_names())), default=DEFAULT_CONTROLLER,
+    show_default=True,
+    help="fivebar: fivebar's own firmware; grbl: a stock GRBL 1.1 board driven in joint "
+    "space (G1 X<θA> Y<θB> in degrees; `fivebar grbl-settings` lists its $ settings).")
 
 
-def confirm_placed(yes: bool) -> Callable[[str], bool]:
-    """A question only a person may answer (where the arms are after a power loss): asked on
-    a terminal, never answered by --yes; without a terminal the answer is no."""
-
-    def ask(question: str) -> bool:
-        if not sys.stdin.isatty():
-            click.echo(f"{question} (no terminal to ask; --yes does not answer this)"
-                       if yes else f"{question} (no terminal to ask)", err=True)
-            return False
-        if yes:
-            click.echo("--yes does not answer this question after a power loss:", err=True)
-        return click.confirm(question, default=False)
-
-    return ask
-
-
-def position_text(prof: Profile, a_steps: int, b_steps: int, homed: bool = True) -> str:
-    """A machine position as the user reads it: motor steps and, by forward kinematics of
-    the profile's assembly, the pen in mm ("A = 120 steps, B = -40 steps (x 12.3 mm,
-    y 95.0 mm)"). Without a known position (not homed) the mm are not shown."""
-    text = f"A = {a_steps} steps, B = {b_steps} steps"
-    if not homed:
-        return text + " (position unknown: not homed)"
-    from fivebar_host.compile.steps import pen_position_mm
-
-    xy = pen_position_mm(prof.geometry, prof.kinematics.assembly, prof.motors.home_rad,
-                         prof.motors.steps_per_rev, a_steps, b_steps)
-    if xy is None:
-        return text + " (no pen position: the links cannot close there)"
-    x, y = xy
-    return f"{text} (x {x:.1f} mm, y {y:.1f} mm)"
-
-
-def open_link(port: str | None, prof: Profile, controller: str = "fivebar") -> Any:
-    """Open the machine at --port (required for machine commands): fivebar's firmware, or
-    a stock GRBL board (`--controller grbl`)."""
+def machine(port: str | None, controller: str, prof: Profile) -> Controller:
+    """Open the machine at --port (required for machine commands) with --controller."""
     if port is None:
         fail("give --port PORT")
-    from fivebar_host.controllers.fivebar.link import Link
-    from fivebar_host.controllers.grbl.link import GrblLink
+    from fivebar_host.cli.session import open_machine
 
-    ser = prof.serial
-    if controller == "grbl":
-        return GrblLink.open(str(port), baud=ser.baud, banner_timeout_s=ser.banner_timeout_s,
-                             reply_timeout_s=ser.reply_timeout_s)
-    link = Link.open(str(port), baud=ser.baud, banner_timeout_s=ser.banner_timeout_s,
-                     reply_timeout_s=ser.reply_timeout_s, link_baud=ser.link_baud)
-    if link.baud_warning:
-        click.echo(f"warning: {link.baud_warning}", err=True)
-    return link
+    return open_machine(controller, str(port), prof)
 
 
 def page_size(text: str, landscape: bool = False) -> tuple[float, float]:

@@ -1,4 +1,5 @@
-"""Machine commands: `fivebar home`, `jog` and `frame` (laser off in all three)."""
+"""Machine commands: `fivebar home`, `jog`, `frame` and `status` (laser off in all of them),
+on the controller `--controller` names."""
 
 from __future__ import annotations
 
@@ -10,18 +11,17 @@ import click
 from fivebar_host.cli.common import (
     compile_from_cli,
     config_option,
-    confirm_with,
+    controller_option,
     fail,
     handle_errors,
     job_options,
     load,
+    machine,
     main,
-    open_link,
     port_option,
-    position_text,
     yes_option,
 )
-from fivebar_host.cli.grbl import controller_option
+from fivebar_host.cli.operator import TerminalOperator
 
 
 @main.command("home")
@@ -31,22 +31,13 @@ from fivebar_host.cli.grbl import controller_option
 @config_option
 @handle_errors
 def home_cmd(port: str | None, yes: bool, controller: str, config_path: Path | None) -> None:
-    """Give the firmware a known position: $H with endstops, else confirm the home pose."""
-    from fivebar_host.run.sender import home
-
-
-    prof = load(config_path)
-    if controller == "grbl":
-        from fivebar_host.cli.grbl import grbl_home
-
-        grbl_home(port, prof, yes)
-        return
-    link = open_link(port, prof)
+    """Give the controller a known position: $H with endstops, else confirm the home pose."""
+    c = machine(port, controller, load(config_path))
     try:
-        st = home(link, prof, confirm_with(yes))
+        pos = c.home(TerminalOperator(yes))
     finally:
-        link.close()
-    click.echo(f"homed: {position_text(prof, st.a, st.b)}")
+        c.close()
+    click.echo(f"homed: {c.describe(pos)}")
 
 
 @main.command("jog")
@@ -67,38 +58,30 @@ def jog(port: str | None, motor: str | None, steps: int, dx: float, dy: float, y
     A pen move needs a known position (homed) and is checked; a motor move before homing
     (to bring the arms to the home pose) is not checked, and says so."""
     from fivebar_host.run.moves import jog_program
-    from fivebar_host.run.sender import ensure_known_pose
 
     if (motor is None) == (dx == 0.0 and dy == 0.0):
         fail("give either --motor with --steps, or --dx/--dy")
     prof = load(config_path)
     kin = prof.kinematics
     mode = kin.working_mode if kin.working_mode != "auto" else "+-"
-    if controller == "grbl":
-        from fivebar_host.cli.grbl import grbl_moves
-
-        pos = grbl_moves(port, prof, yes, lambda p: jog_program(
-            prof, 1 if kin.assembly == "+" else -1, mode, p, motor=motor, steps=steps,
-            dxy_mm=None if motor else (dx, dy), checked=True))
-        click.echo(f"at {position_text(prof, *pos)}")
-        return
-    link = open_link(port, prof)
+    c = machine(port, controller, prof)
     try:
-        st = link.status()
+        st = c.status()
         checked = st.homed or motor is None
         if checked:
-            st = ensure_known_pose(link, prof, confirm_with(yes))
+            pos = c.ensure_pose(TerminalOperator(yes))
         else:
+            pos = st.position
             click.echo("position unknown (not homed): the motor move is not checked against "
                        "limits or singularities", err=True)
-        prog = jog_program(prof, 1 if kin.assembly == "+" else -1, mode, (st.a, st.b),
-                           motor=motor, steps=steps, dxy_mm=None if motor else (dx, dy),
-                           checked=checked)
-        link.stream(prog)
-        st = link.wait_idle(60.0)
+        prog = jog_program(prof, 1 if kin.assembly == "+" else -1, mode, pos, motor=motor,
+                           steps=steps, dxy_mm=None if motor else (dx, dy), checked=checked)
+        pos = c.run_moves(prog, pos)
     finally:
-        link.close()
-    click.echo(f"at {position_text(prof, st.a, st.b, st.homed)}")
+        c.close()
+    where = (c.describe(pos) if checked
+             else f"A = {pos[0]} steps, B = {pos[1]} steps (position unknown: not homed)")
+    click.echo(f"at {where}")
 
 
 @main.command("frame")
@@ -112,40 +95,33 @@ def frame(drawing: Path, port: str | None, yes: bool, controller: str,
           config_path: Path | None, **job_values: Any) -> None:
     """Trace the outline (bounding box) of DRAWING's job with the laser off, then go home."""
     from fivebar_host.run.moves import frame_program
-    from fivebar_host.run.sender import ensure_known_pose
 
     prof, job = compile_from_cli(drawing, config_path, job_values)
-    if controller == "grbl":
-        from fivebar_host.cli.grbl import grbl_moves
-
-        pos = grbl_moves(port, prof, yes, lambda p: frame_program(job, prof, p))
-        click.echo(f"framed; back at {position_text(prof, *pos)}")
-        return
-    link = open_link(port, prof)
+    c = machine(port, controller, prof)
     try:
-        st = ensure_known_pose(link, prof, confirm_with(yes))
-        prog = frame_program(job, prof, (st.a, st.b))
-        link.stream(prog)
-        st = link.wait_idle(120.0)
+        pos = c.ensure_pose(TerminalOperator(yes))
+        pos = c.run_moves(frame_program(job, prof, pos), pos)
     finally:
-        link.close()
+        c.close()
     x0, y0, x1, y1 = job.placement.machine_bbox
     click.echo(f"framed ({x0:.1f}, {y0:.1f})–({x1:.1f}, {y1:.1f}) mm; back at "
-               f"{position_text(prof, st.a, st.b)}")
+               f"{c.describe(pos)}")
 
 
 @main.command("status")
 @port_option
+@controller_option
 @config_option
 @handle_errors
-def status_cmd(port: str | None, config_path: Path | None) -> None:
+def status_cmd(port: str | None, controller: str, config_path: Path | None) -> None:
     """Where the machine is (motor steps and pen mm) and what it is doing; moves nothing."""
-    prof = load(config_path)
-    link = open_link(port, prof)
+    c = machine(port, controller, load(config_path))
     try:
-        st = link.status()
+        st = c.status()
     finally:
-        link.close()
+        c.close()
     state = st.state + (f" {st.detail}" if st.detail is not None else "")
-    click.echo(f"{state}: {position_text(prof, st.a, st.b, st.homed)}; laser "
-               f"{'on' if st.laser else 'off'}")
+    a, b = st.position
+    where = (c.describe(st.position) if st.homed
+             else f"A = {a} steps, B = {b} steps (position unknown: not homed)")
+    click.echo(f"{state}: {where}; laser {'on' if st.laser else 'off'}")

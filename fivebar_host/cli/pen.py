@@ -17,14 +17,14 @@ import click
 from fivebar_host.cli.common import (
     click_option,
     config_option,
+    controller_option,
     fail,
     handle_errors,
     load,
+    machine,
     main,
-    open_link,
     port_option,
 )
-from fivebar_host.compile.emit import pen_move
 from fivebar_host.config import Profile, with_pen_overrides
 from fivebar_host.options import BY_NAME, PEN_NAMES
 
@@ -58,32 +58,33 @@ def _wanted(action: str, prof: Profile, pulse_now: int | None) -> bool:
               help="Keep the link alive this long afterwards: the firmware raises a lowered "
               "pen after the profile's silence timeout without host traffic.")
 @_pen_options
+@controller_option
 @config_option
 @handle_errors
-def pen_cmd(action: str, port: str | None, hold_s: float, config_path: Path | None,
+def pen_cmd(action: str, port: str | None, hold_s: float, controller: str,
+            config_path: Path | None,
             **pen_values: Any) -> None:
     """Move the servo pen up, down, or to the other position (the profile's [pen])."""
     prof = with_pen_overrides(load(config_path), pen_values)
     if prof.pen is None:
         fail(f"{prof.source}: no [pen] table: this profile's tool is a laser")
-    link = open_link(port, prof)
+    c = machine(port, controller, prof)
     try:
-        st = link.status()
+        st = c.status()
         if st.state not in ("Idle", "Hold"):
             fail(f"the machine is {st.state}: the pen moves only when it is idle", 3)
-        down = _wanted(action, prof, st.pen)
-        link.command(pen_move(prof, down))
-        st = link.wait_idle(30.0)
+        down = _wanted(action, prof, st.pen_us)
+        st = c.pen(down)
         end = time.monotonic() + hold_s
         while time.monotonic() < end:
             time.sleep(min(0.25, max(0.0, end - time.monotonic())))
-            st = link.status()
+            st = c.status()
     finally:
-        link.close()
+        c.close()
     where = "down" if down else "up"
     note = ("; it goes up again after the silence timeout without host traffic"
             if down and not hold_s else "")
-    click.echo(f"pen {where}: servo pulse {st.pen} µs{note}")
+    click.echo(f"pen {where}: servo pulse {st.pen_us} µs{note}")
 
 
 @main.group("motors")
@@ -93,18 +94,18 @@ def motors() -> None:
 
 @motors.command("off")
 @port_option
+@controller_option
 @config_option
 @handle_errors
-def motors_off(port: str | None, config_path: Path | None) -> None:
+def motors_off(port: str | None, controller: str, config_path: Path | None) -> None:
     """Switch the stepper drivers off (M18) so that the arms can be moved by hand.
 
     Moving them loses the position: home again afterwards (`fivebar home`)."""
-    prof = load(config_path)
-    link = open_link(port, prof)
+    c = machine(port, controller, load(config_path))
     try:
-        link.command("M18")
-        st = link.wait_idle(10.0)
+        st = c.motors_off()
     finally:
-        link.close()
-    click.echo(f"motors off at A = {st.a}, B = {st.b} steps; move the arms by hand, then run "
+        c.close()
+    a, b = st.position
+    click.echo(f"motors off at A = {a}, B = {b} steps; move the arms by hand, then run "
                "`fivebar home`")

@@ -8,33 +8,20 @@ where the machine stands. `--copies N` runs the whole job N times; between copie
 are parked at the homed pose (the job's last move), the pen is up, and the host waits
 `--page-delay` seconds, polling the machine and honouring a stop request like a stream does.
 
-Quitting at a stop writes the same resume file a fault writes (`run.resume`), exact: the
-next segment is the stop's segment, the position the machine's, the copy the one running.
+Quitting at a stop writes the same resume point a fault writes (`run.job.stopped`), exact:
+the next segment is the stop's segment, the position the machine's, the copy the one running.
 A `--resume` that starts exactly at a pen-change stop does not stop there again (the person
-who resumed has changed the pen).
+who resumed has changed the pen). The run itself is `run.job.run_job`; this module is the
+arithmetic of its stops and copies.
 """
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
-from typing import TYPE_CHECKING
 
 from fivebar_host.compile import Job
 from fivebar_host.compile.model import LayerPause
-from fivebar_host.protocol import StatusReport
-from fivebar_host.run.errors import FaultKind, LinkFaultError, SendError
-from fivebar_host.run.resume import ResumePoint
-
-if TYPE_CHECKING:  # the reports use this module without the serial link
-    from fivebar_host.controllers.fivebar.link import Link
-
-#: How often the page delay polls the machine and the stop request, s.
-WAIT_POLL_S = 0.05
-#: ... and reads a status report (keeps the link and the daemon's live view fresh), s.
-WAIT_STATUS_S = 0.5
 
 
 @dataclass(frozen=True)
@@ -108,45 +95,3 @@ def plan_text(job: Job, copies: Copies, fmt: Callable[[float], str]) -> str:
     if changes:
         text += f" + {changes} pen change{'s' if changes > 1 else ''} (wait for you)"
     return text
-
-
-def stopped(link: Link, job: Job, rpath: Path, fingerprint: str, segment: int,
-            st: StatusReport, copy: int, why: str) -> SendError:
-    """Quit at a planned stop: save the exact resume point and the error that says so (its
-    cause an interrupt fault, as a Ctrl-C abort, so the daemon records it the same way)."""
-    ResumePoint(str(job.file), fingerprint, segment, (st.a, st.b), f"interrupt: {why}",
-                job.n_segments, copy=copy).save(rpath)
-    fault = LinkFaultError(FaultKind.INTERRUPT, f"{link.url}: {why}", -1, status=st)
-    err = SendError(f"{why}: the machine is idle at A = {st.a}, B = {st.b} steps, pen up "
-                    f"(laser off); {segment} of {job.n_segments} segments of copy {copy} "
-                    f"done.\nresume file: {rpath} — continue with the same command and "
-                    "--resume")
-    err.__cause__ = fault
-    return err
-
-
-def wait_between_copies(link: Link, delay_s: float,
-                        should_stop: Callable[[], bool] | None,
-                        on_interrupt: Callable[[], bool] | None,
-                        on_wait: Callable[[float], None] | None) -> bool:
-    """Wait `delay_s` with the machine idle, telling `on_wait` the seconds left (about 10
-    times a second). A stop request (`should_stop`, Ctrl-C) asks `on_interrupt` as a stream
-    does: True goes on waiting, False (or no one to ask) gives up → False."""
-    deadline = time.monotonic() + delay_s
-    next_status = 0.0
-    while True:
-        now = time.monotonic()
-        left = deadline - now
-        if on_wait is not None:
-            on_wait(max(0.0, left))
-        if left <= 0.0:
-            return True
-        if should_stop is not None and should_stop():
-            paused_at = time.monotonic()
-            if on_interrupt is None or not on_interrupt():
-                return False
-            deadline += time.monotonic() - paused_at  # the countdown goes on from there
-        if now >= next_status:
-            link.status()
-            next_status = now + WAIT_STATUS_S
-        time.sleep(min(WAIT_POLL_S, max(0.0, left)))

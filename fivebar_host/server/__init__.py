@@ -2,7 +2,7 @@
 
 A plotter hangs off a small computer that stays on; the daemon keeps the port open (so the
 Arduino is not reset for every job), compiles and checks each submitted drawing before it is
-queued, streams the jobs one after another through `run.sender.run_job`, and lets the CLI
+queued, streams the jobs one after another through `run.job.run_job`, and lets the CLI
 (`fivebar plot DRAWING --server URL`) and other programs submit and follow them over a small
 HTTP + JSON API (docs/serve.md).
 

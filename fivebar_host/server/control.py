@@ -4,7 +4,8 @@ HTTP handlers and the daemon call the public methods (any thread): they only set
 under the worker's condition variable, or queue an action for the machine thread to run
 between jobs; `set_overrides` changes the running job's live `Overrides`, which its stream
 reads for every line it writes. The machine thread reads the requests through the stop-kind
-methods, which `Link.stream` calls while a job streams: `should_stop` makes it hold the
+methods, which the job's operator (`server.operator`) passes on while a job streams:
+`should_stop` makes it hold the
 machine (`!`, laser off at once); `on_interrupt` then waits while paused (polling `?`),
 resumes (`~`), or gives up. Cancel gives up at once; a stop (SIGTERM) first lets the
 firmware run out of queued lines, so the machine stops at the end of a segment
@@ -20,8 +21,9 @@ from concurrent.futures import Future
 from typing import Any
 
 from fivebar_host import protocol
+from fivebar_host.controllers.fivebar.controller import FivebarController
 from fivebar_host.protocol import StatusReport
-from fivebar_host.run.sender import home
+from fivebar_host.run.operator import Answering
 from fivebar_host.server import store as st_
 from fivebar_host.server.journal import JournalLink
 from fivebar_host.server.machine import ActionError, JobStateError, MachineState
@@ -126,7 +128,7 @@ class Control(MachineState):
                 raise ActionError("the machine has no endstops: place the arms at the home pose "
                                   "and confirm with at_home=true")
             self._motors_on(link)
-            home(link, self.cfg.profile, lambda q: at_home)
+            FivebarController(link, self.cfg.profile).home(Answering(at_home))
             st = link.wait_idle(120.0)
             self._set_pose(True, st)
             return st
@@ -148,10 +150,10 @@ class Control(MachineState):
         return {"cancel": "job cancelled", "terminate": "the daemon is stopping",
                 "pause": "paused"}.get(kind or "", "interrupted")
 
-    def _should_stop(self) -> bool:
+    def should_stop(self) -> bool:
         return self._stop_kind() in ("pause", "cancel", "terminate")
 
-    def _on_interrupt(self) -> bool:
+    def on_interrupt(self) -> bool:
         """Called by `Link.stream` with the machine held: True resumes, False gives up."""
         link = self.link
         assert link is not None

@@ -133,6 +133,9 @@ class Daemon:
 
     def start(self, timeout_s: float = 15.0) -> str:
         """Start everything; returns the base URL (http://host:port)."""
+        from fivebar_host.devices import register
+
+        register()  # a daemon is an entry point: the emulator's and the mocks' URL schemes
         host, port = parse_listen(self.cfg.listen)
         try:
             self.state_dir.mkdir(mode=0o700, parents=True, exist_ok=True)

@@ -1,8 +1,7 @@
 """The machine thread's journalled link and its off-thread progress writer.
 
-`JournalLink` is a `Link` that calls back just before a stream's first line is written (so
-the worker can commit the stream record: first line number, start segment, start position)
-and remembers when it last heard a status report (for the snapshot's `status_age_s`), telling
+`JournalLink` is a `Link` that says whether a stream is running, and remembers when it last
+heard a status report (for the snapshot's `status_age_s`), telling
 `on_status` (the web page's event stream) that a new one came.
 `ProgressWriter` commits running jobs' progress to SQLite on its own thread, so a slow
 commit (an fsync on an SD card) never stalls the stream.
@@ -16,7 +15,6 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from fivebar_host import wire
 from fivebar_host.controllers.fivebar.link import Link
 from fivebar_host.controllers.fivebar.stream import StreamResult
 from fivebar_host.program import Program
@@ -27,9 +25,8 @@ log = logging.getLogger("fivebar.serve")
 
 
 class JournalLink(Link):
-    """A `Link` that reports when a stream starts and when it last heard a status report."""
+    """A `Link` that says whether it streams and when it last heard a status report."""
 
-    on_stream_start: Callable[[Program, int], None] | None = None
     #: Called (on the machine thread) after every status report; must be quick.
     on_status: Callable[[], None] | None = None
     streaming = False
@@ -63,12 +60,7 @@ class JournalLink(Link):
         return pushes
 
     def stream(self, program: Program | Sequence[str], **kwargs: Any) -> StreamResult:
-        """`Link.stream`, after telling `on_stream_start` the first line number."""
-        if not isinstance(program, Program):
-            program = wire.read_lines(program)
-        hook = self.on_stream_start
-        if hook is not None and len(program) > 1:
-            hook(program, self.next_line)
+        """`Link.stream`, with `streaming` true while it runs."""
         self.streaming = True
         try:
             return super().stream(program, **kwargs)

@@ -255,7 +255,7 @@ class MachineState(threading.Thread):
         except Exception:  # pragma: no cover - closing store at shutdown
             log.exception("could not record the machine state")
 
-    def _answer(self, link: JournalLink, question: str, job_confirm: bool,
+    def answer(self, link: JournalLink, question: str, job_confirm: bool,
                 person_confirm: bool) -> bool:
         """Answer run_job's pose question (module docstring: Questions)."""
         st = link.last_status
@@ -318,8 +318,3 @@ class MachineState(threading.Thread):
                               "submitted); submit it again")
         self.cache.put(rec.id, compiled.job)
         return compiled.job
-
-    def _resume_base(self, job_id: int) -> Path:
-        d = self.cfg.state_dir / "resume"
-        d.mkdir(mode=0o700, exist_ok=True)
-        return d / f"job-{job_id}"

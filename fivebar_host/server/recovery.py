@@ -27,11 +27,11 @@ import time
 import numpy as np
 
 from fivebar_host.compile import Job
+from fivebar_host.controllers.fivebar.kept import kept_resume_segment
 from fivebar_host.program import Program
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import SendError
 from fivebar_host.run.moves import build_program
-from fivebar_host.run.resume import kept_resume_segment
 from fivebar_host.run.stops import later_copies_s, piece_end
 from fivebar_host.server import store as st_
 from fivebar_host.server.jobs import JobOptions, SubmitError

@@ -4,7 +4,7 @@ Only this thread touches the `Link`. HTTP handlers talk to it through small thre
 requests (pause, resume, cancel, home, terminate) and read a snapshot of the machine's last
 status report, so hundreds of status requests per second never reach the serial port.
 
-Each job runs through `run.sender.run_job` (the same start-pose checks, program, streaming and
+Each job runs through `run.job.run_job` (the same start-pose checks, program, streaming and
 fault handling as `fivebar plot --port`), wrapped as follows:
 
 - **Resume points in SQLite.** `run_job` keeps its resume point in a file next to the

@@ -1,6 +1,7 @@
 """After a fault: stop the machine safely, record where it stopped, and say so.
 
-`run_job` calls `after_fault` with the stream that ran. The controller answers: hold, read
+The controller (`controllers.fivebar.controller`) calls `after_fault` with the stream that
+ran. The controller answers: hold, read
 the position, Ctrl-X — the resume point is exact. It restarted (a reset banner) or hung and
 was rebooted through DTR: the status read after the restart shows the record it kept
 (position, `H`, `Ln` done: docs/protocol.md 7), exact when it maps onto this stream. The link
@@ -13,15 +14,16 @@ from __future__ import annotations
 import contextlib
 import time
 from dataclasses import dataclass, replace
-from pathlib import Path
 
 from fivebar_host import protocol
 from fivebar_host.compile import Job
+from fivebar_host.controllers.fivebar.kept import kept_resume_segment
 from fivebar_host.controllers.fivebar.link import Link
 from fivebar_host.program import Program
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import FaultKind, LinkError, LinkFaultError, SendError
-from fivebar_host.run.resume import ResumePoint, kept_resume_segment, redraw_text
+from fivebar_host.run.resume import ResumePoint, redraw_text
+from fivebar_host.run.store import ResumeStore
 
 
 @dataclass(frozen=True)
@@ -183,11 +185,11 @@ class FaultRecord:
         return rp, where
 
 
-def after_fault(link: Link, job: Job, stream: StreamRun, fault: LinkFaultError, rpath: Path,
-                fingerprint: str) -> SendError:
-    """Stop the machine safely, save the resume file at `rpath`, and describe it all."""
+def after_fault(link: Link, job: Job, stream: StreamRun, fault: LinkFaultError,
+                store: ResumeStore, fingerprint: str) -> SendError:
+    """Stop the machine safely, save the resume point in `store`, and describe it all."""
     stop = stop_machine(link, fault)
     rp, where = FaultRecord(job, stream, fault, stop).resume_point(fingerprint)
-    rp.save(rpath)
-    return SendError(f"{fault}\n{where}; {stop.laser_text()}.\nresume file: {rpath} — "
-                     "continue with the same command and --resume")
+    store.save(rp)
+    hint = store.hint()
+    return SendError(f"{fault}\n{where}; {stop.laser_text()}." + (f"\n{hint}" if hint else ""))

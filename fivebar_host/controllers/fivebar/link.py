@@ -33,14 +33,6 @@ from fivebar_host.run.errors import (
 )
 from fivebar_host.run.overrides import Overrides
 
-
-def register_url_handlers() -> None:
-    """Make `fivebar-mock://` and `fivebar-sim://` known to `serial.serial_for_url`."""
-    from fivebar_host.devices import urls
-
-    urls.register()
-
-
 #: How long the link waits for the replies of lines still in flight before it reads the
 #: firmware's line counter after a refused line (`Link.resync_numbering`), s.
 RESYNC_SETTLE_S = 0.2
@@ -74,7 +66,6 @@ class Link:
         `link_baud` (the profile's `[serial] link_baud`): a faster rate to switch to with
         `set_baud` once connected; if the switch fails the link stays at the base rate and
         `baud_warning` says why."""
-        register_url_handlers()
         try:
             port = serial.serial_for_url(url, baudrate=baud, timeout=0.02, write_timeout=5.0)
         except ValueError as e:

@@ -102,9 +102,6 @@ class GrblLink:
              reply_timeout_s: float = 10.0) -> GrblLink:
         """Open the port and wait for GRBL's banner (opening an Uno resets it); without one,
         a Ctrl-X asks for it. A board that never says `Grbl 1.1` is refused."""
-        from fivebar_host.controllers.fivebar.link import register_url_handlers
-
-        register_url_handlers()
         try:
             port = serial.serial_for_url(url, baudrate=baud, timeout=0.05)
         except (serial.SerialException, ValueError) as e:

@@ -187,10 +187,12 @@ class GrblProgram:
 
 
 def job_program(job: Job, profile: Profile, laser: bool, start: int = 0,
-                start_position: tuple[int, int] | None = None) -> GrblProgram:
-    """The job as GRBL lines: G21 G90 G94, then one G1 per moving segment (feed from its
-    planned duration), the laser (M4 S, dynamic: power follows GRBL's own ramps) on
-    drawing runs only, or a servo pen (M3 S down / up with a G4 settle) — see module doc.
+                start_position: tuple[int, int] | None = None,
+                end: int | None = None) -> GrblProgram:
+    """Segments `start` … `end` − 1 (None: to the job's end) as GRBL lines: G21 G90 G94, then
+    one G1 per moving segment (feed from its planned duration), a dwell as `G4 P<s>`, the
+    laser (M4 S, dynamic: power follows GRBL's own ramps) on drawing runs only, or a servo
+    pen (M3 S down / up with a G4 settle) — see module doc. The tool is off at the end.
 
     A resume starts at segment `start` from `start_position` (steps on that segment's line):
     its first G1 goes to the segment's end at the segment's own feed, i.e. in the remaining
@@ -202,14 +204,20 @@ def job_program(job: Job, profile: Profile, laser: bool, start: int = 0,
     lines = ["G21 G90 G94 M5 S0"]
     seg = [-1]
     tool_on = False
-    for k in range(start, job.n_segments):
-        draw = bool(job.draw[k])
-        want = draw and (profile.pen is not None or (laser and int(job.power[k]) > 0))
+    stop = job.n_segments if end is None else end
+    tool = job.tool_on
+    dwell = job.is_dwell
+    for k in range(start, stop):
+        want = bool(tool[k]) and (profile.pen is not None or (laser and int(job.power[k]) > 0))
         if want != tool_on:
-            for text in _tool_lines(profile, laser, want, job, k):
+            for text in tool_lines(profile, laser, want, job, k):
                 lines.append(text)
                 seg.append(-1)
             tool_on = want
+        if dwell[k]:
+            lines.append(wire.grbl_dwell(float(job.duration_us[k]) * 1e-6))
+            seg.append(k)
+            continue
         d = deg[k + 1] - deg[k]
         length = float(np.hypot(d[0], d[1]))
         if length == 0.0:
@@ -220,15 +228,16 @@ def job_program(job: Job, profile: Profile, laser: bool, start: int = 0,
         lines.append(wire.grbl_g1(float(deg[k + 1, 0]), float(deg[k + 1, 1]), feed, s))
         seg.append(k)
     if tool_on:
-        lines += _tool_lines(profile, laser, False, job, job.n_segments - 1)
+        lines += tool_lines(profile, laser, False, job, stop - 1)
         seg += [-1] * (len(lines) - len(seg))
     lines.append("M5")
     seg.append(-1)
     return GrblProgram(lines, np.asarray(seg, dtype=np.int64))
 
 
-def _tool_lines(profile: Profile, laser: bool, on: bool, job: Job, k: int) -> list[str]:
-    """Laser on/off (M4 S… / M5) or pen down/up (M3 S<pulse> then G4 for the servo)."""
+def tool_lines(profile: Profile, laser: bool, on: bool, job: Job | None, k: int) -> list[str]:
+    """Laser on/off (M4 S… at segment k's power / M5) or pen down/up (M3 S<pulse> then G4
+    for the servo; no job needed)."""
     pen = profile.pen
     if pen is not None:
         pulse = pen.pulse_us(pen.down_position if on else pen.up_position)
@@ -236,6 +245,7 @@ def _tool_lines(profile: Profile, laser: bool, on: bool, job: Job, k: int) -> li
         return [wire.grbl_spindle("M3", s), wire.grbl_dwell(pen.move_ms(on) / 1000.0)]
     if not on:
         return ["M5"]
+    assert job is not None
     return [wire.grbl_spindle("M4", int(job.power[k]) * S_MAX / 255.0)]
 
 

@@ -1,4 +1,6 @@
-"""Resume after a fault on a stock GRBL board (`plot --resume --controller grbl`).
+"""Resume after a fault on a stock GRBL board (`plot --resume --controller grbl`): where the
+pen stopped, and whether that stop can be resumed (`GrblController.resume_start` then makes
+the board's count agree with it).
 
 **What is exact.** The path: every line is a straight joint-space move whose targets are the
 job's steps, so "where on the job" is a question of joint angles only. The stop position:
@@ -21,19 +23,13 @@ on fivebar's own path), or, with endstops, the board homes and travels back lase
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable
-from pathlib import Path
-
-import numpy as np
-
 from fivebar_host.compile import Job
-from fivebar_host.config import Profile
-from fivebar_host.controllers.grbl.link import GrblError, GrblLink, StreamState
+from fivebar_host.controllers.grbl.link import GrblError, StreamState
 from fivebar_host.controllers.grbl.program import GrblProgram
 from fivebar_host.program import line_param
-from fivebar_host.run.errors import PowerLossError
 from fivebar_host.run.resume import ResumePoint, fingerprint
+
+Position = tuple[int, int]
 
 #: Lines before the last `ok` that may still be executing: GRBL's 15 planner blocks + 1.
 WINDOW = 16
@@ -59,88 +55,39 @@ def identify(prog: GrblProgram, job: Job, pos: tuple[int, int], state: StreamSta
                   "have been executing (its ok carries no line number)")
 
 
-def fault_point(job: Job, prog: GrblProgram, drawing: str | Path, state: StreamState,
-                pos: tuple[int, int] | None, reason: str) -> tuple[ResumePoint, str]:
-    """The resume file for a stopped GRBL stream and the sentence for the user.
+def fault_point(job: Job, prog: GrblProgram, state: StreamState, pos: Position | None,
+                reason: str, copy: int) -> tuple[ResumePoint, str]:
+    """The resume point of a stopped GRBL stream and the sentence for the user.
 
     `pos` is the board's position read after hold + reset, None when it is not trustworthy
     (not read, an alarm, the board restarted)."""
     first = int(prog.segment[: max(state.acked, 0)].max(initial=-1)) + 1
+    drawing, fp, n = str(job.file), fingerprint(job), job.n_segments
     if pos is None:
         why = f"the stop position is not known ({reason})"
-        rp = ResumePoint(str(drawing), fingerprint(job), max(first - WINDOW, 0), None,
-                         f"{reason}; not resumable: {why}", job.n_segments)
+        rp = ResumePoint(drawing, fp, max(first - WINDOW, 0), None,
+                         f"{reason}; not resumable: {why}", n, copy=copy)
         return rp, f"{why}: --resume is not possible; home and run the job again"
     k, why = identify(prog, job, pos, state)
     if k is None:
-        rp = ResumePoint(str(drawing), fingerprint(job), max(first - WINDOW, 0), pos,
-                         f"{reason}; not resumable: {why}", job.n_segments)
+        rp = ResumePoint(drawing, fp, max(first - WINDOW, 0), pos,
+                         f"{reason}; not resumable: {why}", n, copy=copy)
         return rp, f"the stopped segment cannot be identified ({why}): --resume is refused"
-    rp = ResumePoint(str(drawing), fingerprint(job), k, pos, reason, job.n_segments)
+    rp = ResumePoint(drawing, fp, k, pos, reason, n, copy=copy)
     return rp, (f"The pen stopped at A = {pos[0]}, B = {pos[1]} steps (exact, from MPos), in "
-                f"segment {k} of {job.n_segments} (found from the {state.acked} lines GRBL "
-                "acknowledged and that position; GRBL reports no line numbers). Segments "
-                "before it are drawn; --resume continues from there")
+                f"segment {k} of {n} (found from the {state.acked} lines GRBL acknowledged "
+                "and that position; GRBL reports no line numbers). Segments before it are "
+                "drawn; --resume continues from there")
 
 
-def load_point(rpath: Path, job: Job) -> ResumePoint:
-    """The resume file, refused when it belongs to another job or was not resumable."""
-    rp = ResumePoint.load(rpath)
-    if rp.fingerprint != fingerprint(job) or rp.segments != job.n_segments:
-        raise GrblResumeError(f"{rpath}: the resume file belongs to a different job (drawing "
-                              "or options changed); run the same command as before with "
-                              "--resume. Nothing was sent.")
-    if "not resumable:" in rp.reason or rp.position is None:
-        raise GrblResumeError(f"{rpath}: this stop cannot be resumed on GRBL: {rp.reason}. "
+def check_point(point: ResumePoint, job: Job) -> Position:
+    """The stop position of a saved point, refused when the stop was not resumable or the
+    position is off the stopped segment's line (the run checked the job's fingerprint)."""
+    if "not resumable:" in point.reason or point.position is None:
+        raise GrblResumeError(f"this stop cannot be resumed on GRBL: {point.reason}. "
                               "Nothing was sent.")
-    k = rp.next_segment
-    if k < job.n_segments and line_param(job.steps[k], job.steps[k + 1], rp.position) is None:
-        raise GrblResumeError(f"{rpath}: A = {rp.position[0]}, B = {rp.position[1]} steps does "
-                              f"not lie on segment {k}'s joint-space line. Nothing was sent.")
-    return rp
-
-
-def resume_pose(link: GrblLink, job: Job, profile: Profile, rp: ResumePoint,
-                confirm_placed: Callable[[str], bool], note: Callable[[str], None],
-                travel: Callable[[tuple[int, int], tuple[int, int]], None]) -> tuple[int, int]:
-    """Make the board's count agree with the stop position (module doc); returns it."""
-    from fivebar_host.controllers.grbl.run import position_steps
-
-    assert rp.position is not None
-    stop = rp.position
-    st = link.status()
-    if st.state != "Idle" and not profile.motors.endstops:
-        raise GrblResumeError(f"{link.url}: the board is in {st.state}; clear it ($X) and "
-                              "run this command again. Nothing was sent.")
-    if st.state == "Idle" and position_steps(link, profile, st) == stop:
-        note(f"resuming segment {rp.next_segment} of {job.n_segments} from A = {stop[0]}, "
-             f"B = {stop[1]} steps: the board kept its position since the stop (exact)")
-        return stop
-    if profile.motors.endstops:
-        from fivebar_host.controllers.grbl.program import work_offset_line
-
-        link.command("$H", timeout_s=120.0)
-        link.command(work_offset_line(profile))
-        pos = position_steps(link, profile, link.status())
-        note("the board lost its position: homed; travelling back to the stop, laser off")
-        travel(pos, stop)
-        return stop
-    a, b = (math.degrees(profile.motors.home_rad[i]) + stop[i] * 360.0
-            / profile.motors.steps_per_rev for i in range(2))
-    if not confirm_placed(f"GRBL lost its count since the stop (it rebooted when the port "
-                          f"opened, or lost power). Are the arms still exactly where the job "
-                          f"stopped (θ1 = {a:.4f}°, θ2 = {b:.4f}°)?"):
-        raise PowerLossError(
-            f"{link.url}: GRBL's position since the stop is unknown, and --yes does not "
-            "answer for where the arms are after a reboot or power loss. Run this command "
-            "on a terminal without --yes and confirm there, or home and run the job again. "
-            "Nothing was sent.")
-    st = link.status()
-    link.command(f"G10 L2 P1 X{st.machine[0] - a:.4f} Y{st.machine[1] - b:.4f}")
-    pos = position_steps(link, profile, link.status())
-    if not np.array_equal(pos, stop):
-        raise GrblResumeError(f"{link.url}: the work offset did not take (A = {pos[0]}, "
-                              f"B = {pos[1]} steps, wanted {stop}). Nothing was sent.")
-    note(f"resuming segment {rp.next_segment} of {job.n_segments} from the confirmed stop "
-         f"position A = {stop[0]}, B = {stop[1]} steps")
-    return stop
+    k, pos = point.next_segment, point.position
+    if k < job.n_segments and line_param(job.steps[k], job.steps[k + 1], pos) is None:
+        raise GrblResumeError(f"A = {pos[0]}, B = {pos[1]} steps does not lie on segment "
+                              f"{k}'s joint-space line. Nothing was sent.")
+    return pos

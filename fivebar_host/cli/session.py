@@ -1,0 +1,117 @@
+"""A plot on a machine from a terminal: the public streaming helper of `fivebar plot --port`
+and the vpype plugin's `fivebar plot`.
+
+`plot_on_machine` opens the controller named by `--controller` (`controllers.controller_for`),
+runs the compiled job through `run.job.run_job` with the terminal's operator
+(`cli.operator.TerminalOperator`) and the resume file beside the drawing (`run.store.FileStore`),
+and says what happened; after a run on the emulator it reports the executed path measured
+from the recorded step pulses.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import click
+
+from fivebar_host.cli.operator import TerminalOperator
+from fivebar_host.compile import Job
+from fivebar_host.config import Profile
+from fivebar_host.controllers import open_controller
+from fivebar_host.run.controller import Controller, Recording
+from fivebar_host.run.job import RunOptions, RunReport, run_job
+from fivebar_host.run.overrides import Overrides
+from fivebar_host.run.stops import Copies, plan_text, planned_time_s
+from fivebar_host.run.store import FileStore
+
+
+@dataclass(frozen=True)
+class Plot:
+    """What `fivebar plot --port` was asked: the drawing (its resume file lives beside it),
+    the machine (URL, controller), and how to run (`--laser`, `--resume`, `--yes`,
+    copies); the executed path's CSV goes next to `preview_path`."""
+
+    drawing: Path
+    url: str
+    controller: str
+    laser: bool = False
+    resume: bool = False
+    yes: bool = False
+    copies: Copies = field(default_factory=Copies)
+    preview_path: Path = Path("preview.png")
+
+
+def open_machine(name: str, url: str, profile: Profile) -> Controller:
+    """Open the machine and say what the user should know about the connection."""
+    controller = open_controller(name, url, profile)
+    if controller.notice:
+        click.echo(f"warning: {controller.notice}", err=True)
+    return controller
+
+
+def plot_on_machine(plot: Plot, profile: Profile, job: Job) -> RunReport:
+    """Stream a compiled job with a progress bar, Ctrl-C hold/resume/abort, pen changes,
+    copies with their countdown, the final report (module doc)."""
+    from fivebar_host.report.text.dryrun import format_duration
+
+    click.echo(f"job: {job.n_segments} segments, {job.n_paths} paths, mode {job.mode}, "
+               f"{plan_text(job, plot.copies, format_duration)}, max deviation "
+               f"{job.max_dev_mm:.4f} mm")
+    if profile.pen is not None:
+        click.echo("pen plot: the servo lifts the pen (M280) between strokes; laser output "
+                   "stays at 0")
+    elif not plot.laser:
+        click.echo("laser/pen power output stays at 0 (no servo pen in the profile: M3/M5 "
+                   "only mark pen down/up); pass --laser to burn")
+    controller = open_machine(plot.controller, plot.url, profile)
+    operator = TerminalOperator(plot.yes)
+    overrides = Overrides() if controller.features.live_overrides is None else None
+    options = RunOptions(plot.laser, plot.resume, plot.copies, overrides)
+    try:
+        with operator.attached(job.n_segments, plot.copies.count, plot.laser, overrides):
+            report = run_job(controller, job, operator, FileStore.beside(plot.drawing),
+                             options)
+    finally:
+        controller.close()
+    click.echo(f"done: {report.segments} segments in {report.elapsed_s:.1f} s (planned "
+               f"{planned_time_s(job, plot.copies):.1f} s), {report.bytes_sent} bytes sent, "
+               f"{report.resends} resends; machine at {controller.describe(report.final)}")
+    rec = controller.recording()
+    if rec is not None and rec.path.exists() and plot.copies.count == 1:
+        write_executed(job, profile, rec, plot.preview_path, report)
+    return report
+
+
+def write_executed(job: Job, prof: Profile, rec: Recording, preview_path: Path,
+                   report: RunReport) -> None:
+    """After an emulator run: the executed path from the recorded pulses, next to the
+    preview (CSV of pen points and their deviation), and its largest deviation. With the
+    emulator's `true=` geometry, the pen points are where that machine really draws."""
+    from fivebar_host.compile import write_atomic
+    from fivebar_host.devices.simtrace import read_trace
+    from fivebar_host.report.text.executed import (
+        executed_path,
+        merge_axes,
+        pen_report,
+        true_params,
+    )
+
+    tr, true = read_trace(rec.path), rec.true
+    t, track = merge_axes(tr.positions("A"), tr.positions("B"))
+    ex = executed_path(job, prof, t / tr.freq, track, report.start_segment,
+                       report.start_position, true=true_params(true))
+    out = preview_path.with_name(preview_path.stem + ".executed.csv")
+    rows = ["t_s,a_steps,b_steps,x_mm,y_mm,segment,deviation_mm"]
+    rows += [f"{ti:.6f},{a},{b},{x:.4f},{y:.4f},{sg},{'' if d != d else f'{d:.5f}'}"
+             for ti, (a, b), (x, y), sg, d in zip(t / tr.freq, track.tolist(),
+                                                  ex.points.tolist(), ex.segment.tolist(),
+                                                  ex.deviation_mm.tolist(), strict=True)]
+    write_atomic(out, "\n".join(rows) + "\n")
+    where = " (drawn by the URL's true= machine)" if true is not None else ""
+    click.echo(f"executed path (from the emulator's step pulses{where}): {out}; drawing "
+               f"segments' max deviation "
+               f"{ex.max_deviation_mm:.4f} mm (bound {job.tolerance_mm:g} + step quantum "
+               f"{job.step_quantum_mm:.4f} mm)")
+    if prof.pen is not None:
+        click.echo(pen_report(job, prof, tr.pen_pulses(), tr.freq, ex).line())
