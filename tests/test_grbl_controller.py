@@ -286,3 +286,82 @@ def test_a_stop_where_the_path_crosses_itself_is_not_resumable() -> None:
     assert k is None and "ambiguous" in why and "0, 1" in why
     k, why = identify(prog, job, (50, 20), StreamState(sent=4, acked=4))  # type: ignore
     assert k == 2 and why == ""
+
+
+def test_pen_change_stops_and_copies_run_on_grbl_as_on_fivebar(tmp_path: Path) -> None:
+    """The same run (`run.job.run_job`) on both controllers: at each pen-change stop the
+    board is idle at the stop's first segment with the laser off; every moving segment of
+    every copy runs once, in order, the laser on exactly where the job draws."""
+    from layers_support import layers_text
+
+    from fivebar_host.run.stops import Copies
+
+    _configure("pc")
+    prof = load_profile()
+    svg = tmp_path / "layers.svg"
+    svg.write_text(layers_text())
+    job = compile_job(svg, prof, CompileOptions(layer_pause=True))
+    assert len(job.pauses) == 1
+    seen: list[tuple[int, float, str]] = []
+
+    def pause(p: object) -> bool:
+        board = grblmock.board("pc")
+        lines = [r for r in board.received if not r.startswith("$")]  # $#: the offsets
+        seen.append((len(board.blocks), board.blocks[-1].done, lines[-1]))
+        return True
+
+    link = GrblLink.open("fivebar-grbl://pc?speed=200")
+    try:
+        rep = run_with(link, job, prof, drawing=svg, laser=True, confirm=lambda q: True,
+                       on_pause=pause, copies=Copies(2, 0.0))
+    finally:
+        link.close()
+    assert rep.segments == 2 * job.n_segments and rep.final == tuple(job.steps[-1])
+    assert len(seen) == 2 and all(done == 1.0 for _, done, _ in seen)
+    blocks = [b for b in grblmock.board("pc").blocks if not b.rapid]
+    moving = [k for k in range(job.n_segments)
+              if not np.array_equal(job.steps[k], job.steps[k + 1])]
+    assert len(blocks) == 2 * len(moving)
+    for copy in range(2):
+        run = blocks[copy * len(moving):(copy + 1) * len(moving)]
+        for k, b in zip(moving, run, strict=True):
+            assert b.done == 1.0 and b.end[:2] == tuple(job.steps[k + 1]), (copy, k)
+            assert (b.laser > 0) == bool(job.draw[k] and job.power[k] > 0), (copy, k)
+    stop = job.pauses[0].segment
+    first_copy = blocks[:len(moving)]
+    before = sum(1 for k in moving if k < stop)
+    assert first_copy[before - 1].end[:2] == tuple(job.steps[stop])
+    assert all(last == "M5" for _, _, last in seen)  # the laser off, the board idle
+
+
+def test_what_grbl_cannot_do_is_refused_before_anything_moves(tmp_path: Path) -> None:
+    """A laser dwell (GRBL's M4 is off at rest) and live overrides are refused, naming the
+    line and the reason; the board received no motion."""
+    from test_dwell import TWO_STROKES
+
+    from fivebar_host.errors import UsageError
+    from fivebar_host.run.overrides import Overrides
+
+    _configure("no")
+    prof = load_profile()
+    gcode = tmp_path / "dwell.gcode"
+    gcode.write_text(TWO_STROKES)
+    job = compile_job(gcode, prof, CompileOptions())
+    link = GrblLink.open("fivebar-grbl://no?speed=200")
+    try:
+        with pytest.raises(UsageError, match=r"line 5: a dwell with the laser on: GRBL's "):
+            run_with(link, job, prof, drawing=gcode, laser=True, confirm=lambda q: True)
+        plain = compile_job(TEXT, prof, CompileOptions())
+        with pytest.raises(UsageError, match="live feed and power overrides: a stock GRBL"):
+            run_with(link, plain, prof, drawing=TEXT, laser=True, confirm=lambda q: True,
+                     overrides=Overrides())
+    finally:
+        link.close()
+    assert grblmock.board("no").blocks == []
+    # without the laser the dwells are waits with the tool off: G4 on the board
+    link = GrblLink.open("fivebar-grbl://no?speed=200")
+    try:
+        run_with(link, job, prof, drawing=gcode, laser=False, confirm=lambda q: True)
+    finally:
+        link.close()
+    assert sum(r.startswith("G4") for r in grblmock.board("no").received) == 2
