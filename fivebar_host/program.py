@@ -149,7 +149,8 @@ class Program:
     @property
     def is_motion(self) -> BoolArray:
         """Items that move the arms."""
-        return self.kind == Kind.MOVE
+        out: BoolArray = self.kind == Kind.MOVE
+        return out
 
     def starts_at_rest(self) -> BoolArray:
         """Per item, whether the machine is at rest in the plan when it starts: the first

@@ -172,7 +172,7 @@ ACTIONS = ("plot", "preview")
               help="The document's name in messages and in the resume file's name.")
 @yes_option
 @job_options()
-@vpype_cli.global_processor
+@vpype_cli.global_processor  # type: ignore[untyped-decorator]  # vpype has no type hints
 def fivebar(document: vp.Document, port: str | None, preview_path: Path, name: str,
             yes: bool, config_path: Path | None, action: str = "preview",
             **job_values: Any) -> vp.Document:

@@ -188,7 +188,8 @@ class FiveBar:
         if single:
             if not res.valid[0]:
                 self._raise_inverse(pts[0], Reason(int(res.reason[0])))
-            return res.angles[0]
+            out: FloatArray = res.angles[0]
+            return out
         return res
 
     def inverse_batch(self, points: ArrayLike, mode: str) -> InverseResult:
@@ -280,7 +281,8 @@ class FiveBar:
         if single:
             if not res.valid[0]:
                 self._raise_forward(th[0], Reason(int(res.reason[0])))
-            return res.points[0]
+            out: FloatArray = res.points[0]
+            return out
         return res
 
     def forward_batch(self, angles: ArrayLike, assembly: str | ArrayLike) -> ForwardResult:

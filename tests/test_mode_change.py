@@ -22,8 +22,8 @@ from fivebar_host.compile import (
     encode_lines,
     read_drawing,
 )
-from fivebar_host.compile.chords import _prepare_chords
-from fivebar_host.compile.modes import _break_paths
+from fivebar_host.compile.chords import prepare_chords
+from fivebar_host.compile.modes import break_paths
 from fivebar_host.compile.steps import step_angles
 from fivebar_host.config import load_profile
 from fivebar_host.errors import JobError
@@ -159,12 +159,12 @@ def test_planned_waypoints_are_executed_exactly(job) -> None:  # type: ignore[no
 
 
 def test_transition_targets_follow_the_planned_polyline() -> None:
-    from fivebar_host.compile.modes import _transition_targets
+    from fivebar_host.compile.modes import transition_targets
 
     corners = np.array([[0.2, 0.3], [0.9, 0.35], [1.0, 1.4], [0.4, 1.5]])
     dense = np.concatenate([np.linspace(p, q, 40)[(1 if i else 0):]
                             for i, (p, q) in enumerate(itertools.pairwise(corners))])
-    tg = _transition_targets(dense, corners[0], corners[-1], 0.05)
+    tg = transition_targets(dense, corners[0], corners[-1], 0.05)
     allp = np.concatenate((corners[:1], tg))
     assert np.abs(np.diff(allp, axis=0)).max() <= 0.05 + 1e-12
     for c in corners:  # every corner is a target (the firmware turns exactly there)
@@ -176,7 +176,7 @@ def test_transition_targets_follow_the_planned_polyline() -> None:
                    for p, r in itertools.pairwise(corners))
         assert dmin < 1e-12
     with pytest.raises(JobError, match="internal"):
-        _transition_targets(dense, corners[0] + 0.1, corners[-1], 0.05)
+        transition_targets(dense, corners[0] + 0.1, corners[-1], 0.05)
 
 
 def test_report_lists_every_change(job, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
@@ -240,7 +240,7 @@ def test_break_paths_keeps_geometry_and_parameters() -> None:
     source chord, and its primitive parameters map to its own end points."""
     drawing = read_drawing(ROOT / "examples" / "simple.svg")
     poly = flatten(drawing, 0.05)
-    ch = _prepare_chords(drawing, poly, 0.1, 0.05, np.array([0.0, 0.0]), True)
+    ch = prepare_chords(drawing, poly, 0.1, 0.05, np.array([0.0, 0.0]), True)
     rng = np.random.default_rng(3)
     nchord = ch.chord_from.shape[0]
     bc = rng.choice(nchord, 12, replace=False)
@@ -248,7 +248,7 @@ def test_break_paths_keeps_geometry_and_parameters() -> None:
     # a vertex break only inside a path (not at its last vertex)
     last = np.isin(ch.chord_from[bc] + 1, ch.offsets[1:] - 1)
     bf[last] = 0.5
-    new = _break_paths(ch, bc, bf)
+    new = break_paths(ch, bc, bf)
     assert new.offsets.shape[0] - 1 == ch.offsets.shape[0] - 1 + 12
     # points: drop the duplicate start of every broken part → old points plus interior ones
     starts = new.offsets[:-1]

@@ -93,10 +93,10 @@ def test_step_without_a_fold_is_taken_whatever_the_hint(refused: int, fold_first
     (`refused`) on a step with no fold in it: it still reaches the target, on the branch that
     `simulate` follows (the look-ahead and the skipped attempt only change the order of work)."""
     from kinematics.nbar.results import Status
-    from kinematics.nbar.tracker import _Tracker
+    from kinematics.nbar.tracker import Tracker
 
     mech = parse_mechanism((MECH / "fourbar_crank_rocker.toml").read_text())
-    tr = _Tracker(mech, mech.settings)  # at the initial configuration
+    tr = Tracker(mech, mech.settings)  # at the initial configuration
     target = mech.input0 + 0.05
     ref = simulate(mech, target[None, :], tolerance=1e-13)
     with np.errstate(all="ignore"):

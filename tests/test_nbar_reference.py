@@ -1,6 +1,6 @@
 """The fast path of a sweep against the reference path, on every example mechanism.
 
-`sweep(..., fast=False)` takes every step through `_Tracker.advance` (predictor, Newton, the
+`sweep(..., fast=False)` takes every step through `Tracker.advance` (predictor, Newton, the
 branch-flip guard, subdivision, fold location): the plain per-step algorithm. The default fast
 path (`kinematics.nbar.fast`: blocks, Taylor start, fold look-ahead) must produce the same rows:
 the same statuses and inputs, the same limits at the same inputs, and states that agree to

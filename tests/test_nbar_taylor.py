@@ -12,7 +12,7 @@ import pytest
 from kinematics.nbar import parse_mechanism, simulate, sweep
 from kinematics.nbar.fast import TAYLOR, FastPath
 from kinematics.nbar.results import Status
-from kinematics.nbar.tracker import _Tracker
+from kinematics.nbar.tracker import Tracker
 
 MECH = Path(__file__).resolve().parent.parent / "configs" / "mechanisms"
 NAMES = sorted(p.stem for p in MECH.glob("*.toml"))
@@ -38,7 +38,7 @@ def test_branch_series_matches_independent_solutions(name: str) -> None:
     mech = parse_mechanism((MECH / f"{name}.toml").read_text())
     if mech.overdetermined:
         pytest.skip("least-squares mechanisms are not predicted by the series")
-    tr = _Tracker(mech, mech.settings)
+    tr = Tracker(mech, mech.settings)
     d = mech.step
     coef = FastPath(tr).taylor(tr.q, tr.u, d).copy()
     assert coef.shape == (TAYLOR + 1, mech.system.n_u)

@@ -116,7 +116,7 @@ class Bridge:
 
     def _mode(self, mode: str | None) -> str:
         """The working mode: the option, else the profile's; "auto": the mode at home."""
-        from fivebar_host.compile.modes import _mode_at
+        from fivebar_host.compile.modes import mode_at
 
         m = mode or self.profile.kinematics.working_mode
         if m != "auto":
@@ -124,7 +124,7 @@ class Bridge:
         fb, mot = self.profile.geometry, self.profile.motors
         th = np.array(mot.home_rad)
         pt = fb.forward_batch(th.reshape(1, 2), self.profile.kinematics.assembly).points[0]
-        return _mode_at(fb, th, pt, "+-")
+        return mode_at(fb, th, pt, "+-")
 
     # ------------------------------------------------------------------ life cycle
     def start(self) -> None:

@@ -82,7 +82,7 @@ yes_option = click.option(
 
 
 # ------------------------------------------------------------------ job options, generated
-class OptionType(click.ParamType):
+class OptionType(click.ParamType):  # type: ignore[type-arg]  # generic in click 8.2+ only
     """A click type that parses a value with its `Option` definition (same rules, same
     message as the daemon's API)."""
 

@@ -15,13 +15,16 @@ import sys
 from collections.abc import Callable
 from functools import wraps
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
 from fivebar_host.cli.common import fail
-from fivebar_host.cli.stops import terminal
+from fivebar_host.cli.operator import terminal
 from fivebar_host.options import JOB_OPTIONS
+
+if TYPE_CHECKING:
+    from fivebar_host.server.client import ServerClient
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -48,7 +51,7 @@ def server_option(fn: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
-def _submit(client: Any, kw: dict[str, Any]) -> dict[str, Any]:
+def _submit(client: ServerClient, kw: dict[str, Any]) -> dict[str, Any]:
     """Send the drawing with the plot's job option values; the queued job."""
     from fivebar_host.server.client import plot_options
 
@@ -93,7 +96,7 @@ def plot_via_server(server: str, token: str | None, kw: dict[str, Any]) -> None:
     click.echo(str(job["message"]))
 
 
-def _follow_with_bar(client: Any, job: dict[str, Any]) -> dict[str, Any]:
+def _follow_with_bar(client: ServerClient, job: dict[str, Any]) -> dict[str, Any]:
     """Follow a job with a progress bar until it is over or a person must act; Ctrl-C
     pauses it on the daemon and asks."""
     from fivebar_host.server.client import follow
@@ -145,7 +148,7 @@ def _follow_with_bar(client: Any, job: dict[str, Any]) -> dict[str, Any]:
         signal.signal(signal.SIGINT, previous)
 
 
-def _ask_pen_change(client: Any, job: dict[str, Any]) -> bool:
+def _ask_pen_change(client: ServerClient, job: dict[str, Any]) -> bool:
     """A pen-change stop on the daemon, followed on a terminal: Enter resumes the job (True),
     q (or Ctrl-C) leaves it paused there — the page's resume button goes on later."""
     click.echo(f"\n{job['message']}", err=True)
@@ -185,7 +188,7 @@ def _bar_updater(bar: Any) -> Callable[[dict[str, Any]], None]:
     return on_update
 
 
-def _after_ctrl_c(client: Any, job: dict[str, Any]) -> None:
+def _after_ctrl_c(client: ServerClient, job: dict[str, Any]) -> None:
     """Ctrl-C: pause the running job on the daemon, then resume or abort it."""
     jid = int(job["id"])
     if job["state"] in ("queued", "running"):
@@ -199,7 +202,7 @@ def _after_ctrl_c(client: Any, job: dict[str, Any]) -> None:
         client.resume(jid)
 
 
-def _ask_held(client: Any, job: dict[str, Any]) -> bool:
+def _ask_held(client: ServerClient, job: dict[str, Any]) -> bool:
     """A held job on a terminal: answer its question or choose; True to keep following."""
     jid = int(job["id"])
     if job.get("question"):

@@ -1,5 +1,5 @@
 """Order and join: the flattened strokes of a placed drawing become the job's paths, as one
-array of vertices in machine mm with per-chord provenance and tolerance budgets (`_Chords`).
+array of vertices in machine mm with per-chord provenance and tolerance budgets (`Chords`).
 
 Paths are ordered (nearest neighbour from the homed pen position, `toolpath.order`), reversed
 where that shortens the travel, and consecutive paths whose gap is below the tolerance and
@@ -33,7 +33,7 @@ from kinematics.arrays import BoolArray, FloatArray, IntArray
 
 
 @dataclass(frozen=True)
-class _Chords:
+class Chords:
     """The ordered, joined polylines in machine mm with per-chord provenance."""
 
     pts: FloatArray  # (M, 2)
@@ -60,7 +60,7 @@ class _Chords:
     #: (P,) the section of each path (`compile.layers`; all 0 without pen-change stops)
     path_section: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))
 
-    def per_path(self) -> _Chords:
+    def per_path(self) -> Chords:
         """The per-path arrays only (vertices and chords emptied, `offsets` kept so the
         number of paths stays): what timing and finishing read."""
         zi, zf = np.zeros(0, np.int64), np.zeros(0)
@@ -94,9 +94,9 @@ def _order(starts: FloatArray, ends: FloatArray, start: FloatArray, keep_order: 
     return order.Order(np.concatenate(idx_all), np.concatenate(rev_all), before, after)
 
 
-def _prepare_chords(drawing: Drawing, poly: Polylines, tol: float, tol_f: float,
+def prepare_chords(drawing: Drawing, poly: Polylines, tol: float, tol_f: float,
                     start: FloatArray, keep_order: bool, simplify: bool = True,
-                    stroke_section: IntArray | None = None) -> _Chords:
+                    stroke_section: IntArray | None = None) -> Chords:
     """Simplify runs of lines (ε = tol_f), order, reverse and join the flattened strokes;
     per-chord provenance and budgets. `stroke_section` (per drawing stroke, `compile.layers`)
     keeps the sections apart."""
@@ -156,7 +156,7 @@ def _prepare_chords(drawing: Drawing, poly: Polylines, tol: float, tol_f: float,
     tol_i = np.where(is_line, np.where(cf < cp, tol - tol_f, tol), tol - tol_f)
     tol_i = np.where(np.isnan(bt), tol_i, bt)
     path_of_chord = np.searchsorted(new_offs, chord_from, side="right") - 1
-    return _Chords(pts=pts, offsets=joined_offs, vert_prim=poly.prim[idx],
+    return Chords(pts=pts, offsets=joined_offs, vert_prim=poly.prim[idx],
                    chord_from=chord_from, prim=cp, prim_first=cf, tlo=c_tlo,
                    thi=c_thi, rev=revv, tol_i=tol_i,
                    path_of_chord=new_path_of_old[path_of_chord],

@@ -20,7 +20,7 @@ from fivebar_host.compile.model import (
     PathStats,
     compact_ints,
 )
-from fivebar_host.compile.modes import _densify_joint, _type1_crossings
+from fivebar_host.compile.modes import densify_joint, type1_crossings
 from fivebar_host.compile.place import Home, Placed, Setup
 from fivebar_host.compile.solve import Routed, Solved
 from fivebar_host.compile.timing import Planned, tool_time_s
@@ -83,7 +83,8 @@ def _margins(su: Setup, routed: Routed, solved: Solved, tr: Travel,
         tm = su.fb.singularity_margins(pd.th[sl], pd.pts[sl]) * sgn
         tm[leg, :2] = np.inf
         tmin = np.minimum(tmin, tm.min(axis=0))
-    return np.minimum(jmargin, tmin)
+    out: FloatArray = np.minimum(jmargin, tmin)
+    return out
 
 
 def _step_quantum(su: Setup, pd: Planned) -> float:
@@ -108,7 +109,7 @@ def _executed_mode_changes(su: Setup, file: str, home: Home, routed: Routed, tr:
             continue
         s0, s1 = int(segs[0]), int(segs[-1]) + 1
         q = steps.step_angles(pd.steps[s0:s1 + 1], mot.home_rad, mot.steps_per_rev)
-        dense = _densify_joint(q, math.radians(0.5))
+        dense = densify_joint(q, math.radians(0.5))
         fk = fb.forward_batch(dense, asm)
         marg = (fb.singularity_margins(dense, fk.points)[:, 2] * assembly if fk.valid.all()
                 else np.array([-np.inf]))
@@ -124,7 +125,7 @@ def _executed_mode_changes(su: Setup, file: str, home: Home, routed: Routed, tr:
             path=j, first_seg=s0, end_seg=s1,
             lift_mm=(float(pts_all[s0, 0]), float(pts_all[s0, 1])),
             land_mm=(float(pts_all[s1, 0]), float(pts_all[s1, 1])),
-            crossings=_type1_crossings(fb, dense, fk.points),
+            crossings=type1_crossings(fb, dense, fk.points),
             min_type2_rad=float(marg.min()),
             duration_s=float(pd.duration_us[s0:s1].sum()) * 1e-6))
     return mode_changes

@@ -114,7 +114,8 @@ class OnlineCompiler:
     # ------------------------------------------------------------------ positions
     def angles_of_steps(self, a: int, b: int) -> FloatArray:
         mot = self.profile.motors
-        return steps.step_angles(np.array([[a, b]]), mot.home_rad, mot.steps_per_rev)[0]
+        out: FloatArray = steps.step_angles(np.array([[a, b]]), mot.home_rad, mot.steps_per_rev)[0]
+        return out
 
     def point_of(self, th: FloatArray) -> tuple[float, float] | None:
         """Pen position of joint angles in the machine's assembly (None if none)."""

@@ -4,7 +4,7 @@
 
     read (SVG / G-code) → place (layout) → flatten curves (tol_f = tol/2) → order and join
     paths → [--mode auto when no single mode clears every check: working mode per path,
-    `_plan_modes`] → inverse kinematics + checks on every vertex → refine chords in joint
+    `plan_path_modes`] → inverse kinematics + checks on every vertex → refine chords in joint
     space (interpolation budget tol_i, `toolpath.segment`) → pen-up travel (checked
     joint-space moves, Cartesian fallback; planned pen-up moves for working-mode changes) →
     absolute steps (quantised once) → plan durations (`planner`: speed-up and slow-down cut
@@ -27,8 +27,8 @@ the requested path; rounding to whole steps adds at most one step quantum (repor
 
     place.setup / place / find_home  → Setup, Placed (placement, placed drawing, polylines),
                                        Home (homed pose)
-    solve.route                      → Routed (ordered, joined `_Chords`; mode per path;
-                                       planned working-mode changes, `modes._plan_modes`)
+    solve.route                      → Routed (ordered, joined `Chords`; mode per path;
+                                       planned working-mode changes, `modes.plan_path_modes`)
     solve.solve                      → Solved (checked angles per vertex, refined intervals)
     travel.plan_travel               → Travel (targets, margins, mode changes, notes)
     segments.assemble                → Segments (merged targets with provenance)
@@ -131,7 +131,7 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
                   mode: str, plan_modes: bool = False, consume: bool = False) -> Job:
     """Compile `drawing`, placed for working mode `mode`. Without `plan_modes` every path is
     drawn in `mode`. With it (`--mode auto` when no single mode clears every check), the
-    modes come from `_plan_modes` and every change of mode becomes a checked pen-up
+    modes come from `plan_modes` and every change of mode becomes a checked pen-up
     joint-space move (`ModeChange`). The stages hand their results on as frozen dataclasses
     (module doc: the pipeline); each is slimmed to what the later stages read as soon as the
     next stage has its part, so a large drawing's intermediate arrays do not pile up

@@ -67,7 +67,8 @@ def window_mean(x: IntArray, width: int) -> FloatArray:
     n = x.shape[0]
     lo = np.clip(np.arange(n) - width // 2, 0, n)
     hi = np.clip(lo + width, 0, n)
-    return (c[hi] - c[lo]) / np.maximum(hi - lo, 1)
+    out: FloatArray = (c[hi] - c[lo]) / np.maximum(hi - lo, 1)
+    return out
 
 
 def floor_levels(us: FloatArray) -> IntArray:
@@ -76,7 +77,9 @@ def floor_levels(us: FloatArray) -> IntArray:
     need no `P` (a smooth floor would give every item its own)."""
     k = np.ceil(np.log(np.maximum(us, FIRMWARE_SEGMENT_US) / FIRMWARE_SEGMENT_US)
                 / np.log(LEVEL_RATIO) - 1e-9)
-    return np.ceil(FIRMWARE_SEGMENT_US * LEVEL_RATIO ** np.maximum(k, 0.0)).astype(np.int64)
+    out: IntArray = np.ceil(FIRMWARE_SEGMENT_US * LEVEL_RATIO ** np.maximum(k, 0.0)).astype(
+        np.int64)
+    return out
 
 
 def _blocks(steps: IntArray, power: NDArray[np.integer[Any]], duration_us: IntArray | None,

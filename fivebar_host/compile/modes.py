@@ -2,10 +2,10 @@
 every check, each job path gets its own mode and every change becomes a pen-up joint-space
 move through a type-1 singularity.
 
-`_plan_modes` asks `kinematics.modes.plan_working_modes` path by path, breaking paths that
-change mode inside (`_break_paths`); `_transition_targets` turns a planned joint path into
-firmware targets; `_type1_crossings`, `_densify_joint` and `_mode_at` measure modes and
-crossings; `_merge_intervals` puts the chords refined per mode back into job order.
+`plan_path_modes` asks `kinematics.modes.plan_working_modes` path by path, breaking paths that
+change mode inside (`break_paths`); `transition_targets` turns a planned joint path into
+firmware targets; `type1_crossings`, `densify_joint` and `mode_at` measure modes and
+crossings; `merge_intervals` puts the chords refined per mode back into job order.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from functools import partial
 import numpy as np
 from numpy.typing import NDArray
 
-from fivebar_host.compile.chords import _Chords
+from fivebar_host.compile.chords import Chords
 from fivebar_host.errors import JobError, Where
 from fivebar_host.toolpath.segment import CheckFailedError, Intervals, PoseChecker
 from kinematics.arrays import FloatArray, IntArray
@@ -33,7 +33,7 @@ from kinematics.workspace import NoSafeRegionError, point_safety
 MODE_SAMPLE_MM = 0.5
 
 
-def _mode_at(fb: FiveBar, angles: FloatArray, point: FloatArray, fallback: str) -> str:
+def mode_at(fb: FiveBar, angles: FloatArray, point: FloatArray, fallback: str) -> str:
     """Working mode of one pose; `fallback` if an arm sits exactly on a type-1 singularity."""
     s = fb.mode_of(point.reshape(1, 2), angles.reshape(1, 2))[0]
     if (s == 0).any():
@@ -41,7 +41,7 @@ def _mode_at(fb: FiveBar, angles: FloatArray, point: FloatArray, fallback: str) 
     return ("+" if s[0] > 0 else "-") + ("+" if s[1] > 0 else "-")
 
 
-def _merge_intervals(parts: list[Intervals]) -> Intervals:
+def merge_intervals(parts: list[Intervals]) -> Intervals:
     """Intervals refined per working mode, merged back into job order (chord, then σ)."""
     if len(parts) == 1:
         return parts[0]
@@ -51,7 +51,7 @@ def _merge_intervals(parts: list[Intervals]) -> Intervals:
     return Intervals(*(c[o] for c in cat))
 
 
-def _transition_targets(path: FloatArray, start: FloatArray, end: FloatArray,
+def transition_targets(path: FloatArray, start: FloatArray, end: FloatArray,
                         max_step_rad: float) -> FloatArray:
     """Targets (K, 2) that execute a planned pen-up joint path (samples of straight legs, as
     `plan_joint_move` returns it) exactly under the firmware's linear interpolation: the
@@ -73,7 +73,7 @@ def _transition_targets(path: FloatArray, start: FloatArray, end: FloatArray,
     return np.concatenate(out)
 
 
-def _type1_crossings(fb: FiveBar, th: FloatArray,
+def type1_crossings(fb: FiveBar, th: FloatArray,
                      pts: FloatArray) -> tuple[tuple[int, str, float, float], ...]:
     """Where an arm's type-1 margin changes sign along sampled poses: (arm, "stretched" or
     "folded", x, y), the pen position interpolated linearly between the samples."""
@@ -91,7 +91,7 @@ def _type1_crossings(fb: FiveBar, th: FloatArray,
     return tuple(out)
 
 
-def _break_paths(ch: _Chords, brk_chord: IntArray, brk_frac: FloatArray) -> _Chords:
+def break_paths(ch: Chords, brk_chord: IntArray, brk_frac: FloatArray) -> Chords:
     """Start a new job path at each break: chord `brk_chord[k]` at chord parameter
     `brk_frac[k]` ∈ (0, 1] (1: at the chord's end vertex). The break point ends one path and
     starts the next (it appears twice, once in each), an interior break also splits its
@@ -193,15 +193,15 @@ def _refuse_unsafe(fb: FiveBar, stroke: FloatArray, asm: str, min1: float, min2:
                        + ")", where(stroke[k]), "no_mode")
 
 
-def _plan_modes(ch: _Chords, fb: FiveBar, home_th: FloatArray, home_mode: str, asm: str,
+def plan_path_modes(ch: Chords, fb: FiveBar, home_th: FloatArray, home_mode: str, asm: str,
                 min1: float, min2: float,
                 limits: tuple[tuple[float, float], tuple[float, float]],
                 where_of: Callable[[int, FloatArray], Where]
-                ) -> tuple[_Chords, NDArray[np.str_], dict[int, FloatArray]]:
+                ) -> tuple[Chords, NDArray[np.str_], dict[int, FloatArray]]:
     """Working modes per job path with pen-up changes (`--mode auto` when no single mode
     clears every check): every path, sampled at most `MODE_SAMPLE_MM` apart, goes through
     `kinematics.modes.plan_working_modes` in job order, from the homed pose, in the
-    machine's assembly. Paths that change mode inside are broken there (`_break_paths`).
+    machine's assembly. Paths that change mode inside are broken there (`break_paths`).
     Returns the new chords, the mode of each job path and the planned joint path of each
     mode change by the travel that runs it (travel j goes into path j)."""
     offs = ch.offsets
@@ -247,11 +247,11 @@ def _plan_modes(ch: _Chords, fb: FiveBar, home_th: FloatArray, home_mode: str, a
         cur = last.mode
         pose = np.asarray(fb.inverse(stroke[last.stop - 1], cur), dtype=np.float64)
     if brk_c:
-        ch = _break_paths(ch, np.array(brk_c, np.int64), np.array(brk_f))
+        ch = break_paths(ch, np.array(brk_c, np.int64), np.array(brk_f))
     return ch, np.array(path_mode), changes
 
 
-def _densify_joint(q: FloatArray, step_rad: float) -> FloatArray:
+def densify_joint(q: FloatArray, step_rad: float) -> FloatArray:
     """The firmware's joint-space polyline through targets q (N, 2), sampled at most
     `step_rad` apart (every target included)."""
     d = np.diff(q, axis=0)

@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from fivebar_host.compile.model import AUTO_ORDER, CompileOptions
-from fivebar_host.compile.modes import _mode_at
+from fivebar_host.compile.modes import mode_at
 from fivebar_host.config import Profile
 from fivebar_host.errors import JobError, OptionError, Where
 from fivebar_host.toolpath import layout
@@ -118,12 +118,12 @@ def find_home(su: Setup, file: str) -> Home:
                        f"position in assembly {su.asm}",
                        Where(file=file, what="move from home"), "assembly")
     home_pt = home_fk.points[0]
-    home_mode = _mode_at(su.fb, home[0], home_pt,
+    home_mode = mode_at(su.fb, home[0], home_pt,
                          kin.working_mode if kin.working_mode != "auto" else AUTO_ORDER[0])
     return Home(th=home, pt=home_pt, mode=home_mode)
 
 
-def _where(job_file: str, drawing: Drawing, pl: layout.Placement, point: tuple[float, float],
+def where_at(job_file: str, drawing: Drawing, pl: layout.Placement, point: tuple[float, float],
            prim: int, what: str = "path") -> Where:
     """Where for a failing point on primitive `prim` (−1: unknown)."""
     pm = np.array(point, dtype=np.float64)
@@ -147,7 +147,7 @@ def fail(su: Setup, placed: Placed, cf: CheckFailedError, prim: int, what: str =
     `in_mode` (default: the mode placed for); reach, limit and margin failures add the
     layout's does-not-fit hint."""
     m = in_mode or su.mode
-    w = _where(placed.drawing.file, placed.drawing, placed.pl, cf.point, prim, what)
+    w = where_at(placed.drawing.file, placed.drawing, placed.pl, cf.point, prim, what)
     msg = f"{cf.message} (working mode {m})"
     if cf.reason in ("reach", "joint_limit", "type1_margin", "type2_margin", "assembly"):
         msg += "; " + layout.does_not_fit_hint(placed.pl, su.fb, m, su.min1, su.min2,

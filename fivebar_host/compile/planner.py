@@ -404,7 +404,8 @@ def _bound_after(a: FloatArray, b: FloatArray, p: FloatArray, jump: float,
         p_star = np.sqrt(2.0 * b / acc)
         c = np.where(pc >= p_star, np.sqrt(2.0 * acc * b), b / pc + 0.5 * acc * pc)  # c(p̂)
         q_acc = 2.0 * a / (c + np.sqrt(c * c + 2.0 * acc * a))  # (4)
-    return np.nan_to_num(np.maximum(q_jump, q_acc), nan=0.0).max(axis=1)
+    out: FloatArray = np.nan_to_num(np.maximum(q_jump, q_acc), nan=0.0).max(axis=1)
+    return out
 
 
 def _static_bounds(dth: FloatArray, lo: FloatArray, rest: BoolArray, act: IntArray,

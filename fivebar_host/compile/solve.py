@@ -1,8 +1,8 @@
 """Order the paths, give each its working mode, and solve them: checked inverse kinematics of
 every vertex and the chords refined in joint space.
 
-`route` orders and joins the flattened strokes (`chords._prepare_chords`) and, for
-`--mode auto` with pen-up changes, plans a working mode per path (`modes._plan_modes`);
+`route` orders and joins the flattened strokes (`chords.prepare_chords`) and, for
+`--mode auto` with pen-up changes, plans a working mode per path (`modes.plan_path_modes`);
 `solve` runs the pose checks (reach, joint limits, both singularity margins, assembly) on
 every vertex in its path's mode and refines every chord until the joint-interpolated pen
 path stays within the chord's budget tol_i (`toolpath.segment.refine`, at most
@@ -17,11 +17,11 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from fivebar_host.compile.chords import _Chords, _prepare_chords
+from fivebar_host.compile.chords import Chords, prepare_chords
 from fivebar_host.compile.layers import Sections
 from fivebar_host.compile.model import MAX_STEP_RAD
-from fivebar_host.compile.modes import _merge_intervals, _plan_modes
-from fivebar_host.compile.place import Home, Placed, Setup, _where, fail
+from fivebar_host.compile.modes import merge_intervals, plan_path_modes
+from fivebar_host.compile.place import Home, Placed, Setup, fail, where_at
 from fivebar_host.errors import Where
 from fivebar_host.toolpath.segment import CheckFailedError, Intervals, PoseChecker, refine
 from kinematics.arrays import FloatArray
@@ -29,10 +29,10 @@ from kinematics.arrays import FloatArray
 
 @dataclass(frozen=True)
 class Routed:
-    """The job's paths (`_Chords`), the working mode of each, and the planned joint path of
+    """The job's paths (`Chords`), the working mode of each, and the planned joint path of
     each working-mode change by the travel that runs it (travel j goes into path j)."""
 
-    ch: _Chords
+    ch: Chords
     path_mode: NDArray[np.str_]
     changes: Mapping[int, FloatArray]
     sections: Sections | None = None  # pen-change stops (`compile.layers`)
@@ -86,19 +86,19 @@ def route(su: Setup, placed: Placed, home: Home, keep_order: bool,
           plan_modes: bool, simplify: bool = True, sections: Sections | None = None) -> Routed:
     """Order and join the paths from the homed pen position (section by section with
     pen-change stops); without `plan_modes` every path is drawn in `su.mode`, with it the
-    modes (and changes) come from `_plan_modes`."""
-    ch = _prepare_chords(placed.drawing, placed.poly, su.tol, su.tol_f, home.pt, keep_order,
+    modes (and changes) come from `plan_modes`."""
+    ch = prepare_chords(placed.drawing, placed.poly, su.tol, su.tol_f, home.pt, keep_order,
                          simplify, None if sections is None else sections.of_stroke)
     changes: dict[int, FloatArray] = {}
     if plan_modes:
         first = ch
 
         def where_of(p: int, point: FloatArray) -> Where:
-            return _where(placed.drawing.file, placed.drawing, placed.pl,
-                          (float(point[0]), float(point[1])),
-                          int(first.vert_prim[first.offsets[p]]))
+            return where_at(placed.drawing.file, placed.drawing, placed.pl,
+                            (float(point[0]), float(point[1])),
+                            int(first.vert_prim[first.offsets[p]]))
 
-        ch, path_mode, changes = _plan_modes(ch, su.fb, home.th[0], home.mode, su.asm,
+        ch, path_mode, changes = plan_path_modes(ch, su.fb, home.th[0], home.mode, su.asm,
                                              su.min1, su.min2, su.limits, where_of)
     else:
         path_mode = np.full(ch.offsets.shape[0] - 1, su.mode)
@@ -124,10 +124,10 @@ def solve(su: Setup, placed: Placed, routed: Routed) -> Solved:
             raise fail(su, placed, cf, int(ch.prim[c]) if ch.prim[c] >= 0
                        else int(ch.vert_prim[a[c]]), in_mode=m) from None
         parts.append(r if len(checkers) == 1 else replace(r, chord=cs[r.chord]))
-    return Solved(checkers=checkers, th_v=th_v, iv=_merge_intervals(parts))
+    return Solved(checkers=checkers, th_v=th_v, iv=merge_intervals(parts))
 
 
-def _vertex_angles(su: Setup, placed: Placed, ch: _Chords, path_mode: NDArray[np.str_],
+def _vertex_angles(su: Setup, placed: Placed, ch: Chords, path_mode: NDArray[np.str_],
                    checkers: dict[str, PoseChecker]) -> FloatArray:
     """Checked inverse kinematics of every vertex (M, 2) in its path's working mode (with one
     mode, of all the vertices at once, without index copies)."""
@@ -163,7 +163,7 @@ def _summary(iv: Intervals) -> Intervals:
 REFINE_BLOCK = 1 << 16
 
 
-def _refine_blocks(chk: PoseChecker, ch: _Chords, th_v: FloatArray,
+def _refine_blocks(chk: PoseChecker, ch: Chords, th_v: FloatArray,
                    cs: NDArray[np.int64], summarise: bool = False) -> Intervals:
     """`refine` of chords `cs` in blocks of `REFINE_BLOCK`; chord ids (and a failure's
     index) are positions in `cs`, as one call of `refine` would give. `summarise` (one

@@ -7,7 +7,7 @@ singularity). An inter-path travel that fails runs as a straight Cartesian line 
 (refined like a chord, within `TRAVEL_TOL_MM` or the tolerance); a failing move from or to
 home is refused, unless `--mode auto` can plan it like a working-mode change
 (`kinematics.modes.plan_joint_move`). Working-mode changes (thesis Sec. 7.2) run their
-planned joint paths as targets (`modes._transition_targets`), checked again here.
+planned joint paths as targets (`modes.transition_targets`), checked again here.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fivebar_host.compile.model import MAX_STEP_RAD
-from fivebar_host.compile.modes import _transition_targets
+from fivebar_host.compile.modes import transition_targets
 from fivebar_host.compile.place import Home, Placed, Setup, fail
 from fivebar_host.compile.solve import Routed, Solved
 from fivebar_host.toolpath.segment import REASON_KEY, CheckFailedError, joint_moves, refine
@@ -151,7 +151,7 @@ def _mode_change_targets(su: Setup, placed: Placed, solved: Solved,
     checker = solved.checker
     out: dict[int, tuple[FloatArray, FloatArray]] = {}
     for j, jpath in sorted(changes.items()):
-        tg = _transition_targets(jpath, t_from[j], t_to[j], MAX_STEP_RAD)
+        tg = transition_targets(jpath, t_from[j], t_to[j], MAX_STEP_RAD)
         legs_a = np.concatenate((t_from[j][None], tg[:-1]))
         _, okc, cc, mc = joint_moves(checker, legs_a, tg, MAX_STEP_RAD, check_type1=False)
         if not okc.all():

@@ -43,6 +43,7 @@ import re
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -139,7 +140,7 @@ class _Modal:
         self.g92 = [0.0, 0.0, 0.0]
 
 
-class GrblMock(serial.SerialBase):
+class GrblMock(serial.SerialBase):  # type: ignore[misc]  # pyserial has no type hints
     """The pyserial port (see the module docstring); thread-safe, writes never block."""
 
     opened: ClassVar[list[GrblMock]] = []
@@ -370,9 +371,9 @@ class GrblMock(serial.SerialBase):
     def _system(self, line: str) -> str:
         """`$` commands (GRBL's system.c)."""
         idle = self._state in ("Idle", "Alarm") and not self._queue
-        simple = {"$$": self._settings_text, "$I": lambda: "[VER:1.1h.20190830:]\r\n"
-                  "[OPT:V,15,128]", "$G": self._parser_state, "$#": self._offsets,
-                  "$N": lambda: "$N0=\r\n$N1="}
+        simple: dict[str, Callable[[], str]] = {
+            "$$": self._settings_text, "$I": lambda: "[VER:1.1h.20190830:]\r\n[OPT:V,15,128]",
+            "$G": self._parser_state, "$#": self._offsets, "$N": lambda: "$N0=\r\n$N1="}
         if line in simple:
             if line == "$$" and not idle:
                 return "error:8"

@@ -244,7 +244,7 @@ def _new_emulator(opts: SimOptions) -> tuple[Emulator, Path]:
     return emu, trace
 
 
-class Serial(serial.SerialBase):
+class Serial(serial.SerialBase):  # type: ignore[misc]  # pyserial has no type hints
     """The emulated firmware behind a pyserial interface (delegates to the harness pty)."""
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:

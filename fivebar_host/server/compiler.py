@@ -23,7 +23,7 @@ import traceback
 from collections.abc import Callable
 from multiprocessing.connection import Connection
 from multiprocessing.process import BaseProcess
-from typing import Any, TypeVar
+from typing import Any, TypeVar, cast
 
 from starlette.concurrency import run_in_threadpool
 
@@ -102,7 +102,7 @@ class Compiler:
         proc.join(5.0)
         if not ok:
             raise value
-        return value
+        return cast(T, value)
 
     def close(self) -> None:
         """Stop the compilations still running (their submissions are refused)."""

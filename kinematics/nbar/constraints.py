@@ -343,7 +343,7 @@ def _block_values(b: _Block, blk: FloatArray, d: int, lengths: FloatArray | None
     if b.kind == "PPsin":
         nl = np.sqrt(a[0] * a[0] + a[1] * a[1])
         nm = np.sqrt(o[0] * o[0] + o[1] * o[1])
-        c = a[0] * o[1]
+        c: FloatArray = a[0] * o[1]
         c -= a[1] * o[0]
         nl *= b.value
         nl *= nm

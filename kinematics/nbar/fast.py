@@ -1,7 +1,7 @@
-"""The fast path of a sweep: the same steps as `_Tracker.attempt`, in blocks and a tight loop.
+"""The fast path of a sweep: the same steps as `Tracker.attempt`, in blocks and a tight loop.
 
 In the common case of a sweep (square system, Newton converging from the predictor, the step
-accepted by the branch-flip guard) the per-step machinery of `_Tracker.advance` is not needed.
+accepted by the branch-flip guard) the per-step machinery of `Tracker.advance` is not needed.
 `FastPath.run` takes such steps with the history ring's arrays in local variables:
 
 - blocks: up to BLOCK equal steps are predicted and corrected together (one batched Newton
@@ -15,11 +15,11 @@ accepted by the branch-flip guard) the per-step machinery of `_Tracker.advance` 
   remainder bound or by the residual, or more from there;
 - fold look-ahead: near a fold the branch moves as √(t* − t), so ‖Δq‖² per step grows like
   1/(t* − t); when it grew FOLD_AHEAD-fold in the last step the fold is likely within the next
-  one, and the sweep asks `_Tracker.advance` to look for it before trying that step.
+  one, and the sweep asks `Tracker.advance` to look for it before trying that step.
 
 It stops at the first step that needs anything else (subdivision, a limit, least squares),
 leaving the tracker at the last accepted state; `sweep(..., fast=False)` runs every step through
-`_Tracker.advance` instead (the reference path), with the same results within the tolerance.
+`Tracker.advance` instead (the reference path), with the same results within the tolerance.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ from kinematics.nbar.history import HISTORY, UNIFORM
 from kinematics.nbar.system import CONTRACTION, newton_raw, solve
 
 if TYPE_CHECKING:
-    from kinematics.nbar.tracker import _Tracker
+    from kinematics.nbar.tracker import Tracker
 
 #: Equal sweep steps predicted and corrected together once HISTORY of them are known, and
 #: the fewest worth a block.
@@ -106,14 +106,14 @@ def _keep(ring: FloatArray, slot: int, hs: list[float], qs: FloatArray, s: float
     ring[_RING_SLOTS[slot][a]] = qs[a - keep:]
     hs.extend([s + h * (j + 1) for j in range(a - keep, a)])
     del hs[:-HISTORY]
-    return (slot + a) % HISTORY
+    return int((slot + a) % HISTORY)
 
 
 class FastPath:
     """A sweep's fast path for one tracker: its work rows, and the block size and cool-down
     carried from one `run` to the next."""
 
-    def __init__(self, tr: _Tracker) -> None:
+    def __init__(self, tr: Tracker) -> None:
         sysm = tr.sys
         self.tr = tr
         self.hs, self.hs_t, self.hs_half = sysm.hs, sysm.hs_t, sysm.hs_half
@@ -127,7 +127,7 @@ class FastPath:
         self.fold_ahead = False  # `run` stopped because a fold is likely in the next step
 
     def fresh(self) -> None:
-        """The tracker's history was replaced (`_Tracker.replay`): blocks may start at once."""
+        """The tracker's history was replaced (`Tracker.replay`): blocks may start at once."""
         self.bsize, self.cool = BLOCK, 0
 
     def taylor(self, q: FloatArray, u: FloatArray, d: FloatArray) -> FloatArray:

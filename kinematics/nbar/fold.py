@@ -25,7 +25,7 @@ from kinematics.nbar.guard import NO_PREVIOUS, step_accepted
 from kinematics.nbar.system import newton_raw, solve
 
 if TYPE_CHECKING:
-    from kinematics.nbar.tracker import _Tracker
+    from kinematics.nbar.tracker import Tracker
 
 #: Newton iterations allowed for locating a fold (`fold_limit`), and its convergence test:
 #: squared step ≤ FOLD_STEP2·(1 + ‖q‖²).
@@ -37,7 +37,7 @@ FOLD_MESSAGE = (f"the constraint Jacobian is singular at the turning point (J·v
                 f"a dead centre, {FOLD_REASON} on this branch")
 
 
-def fold_limit(tr: _Tracker, target: FloatArray) -> tuple[int, FloatArray, float] | None:
+def fold_limit(tr: Tracker, target: FloatArray) -> tuple[int, FloatArray, float] | None:
     """Locate a fold between the tracker's state and `target` (see the module docstring)
     and move the tracker just before it. Returns (Newton iterations, failed input, residual
     bound) or None when no such fold is found (fold outside (0, 1], degenerate, not
@@ -60,7 +60,7 @@ def fold_limit(tr: _Tracker, target: FloatArray) -> tuple[int, FloatArray, float
     return _step_before(tr, q, t, vn, k, start, d, its)
 
 
-def _start_vector(tr: _Tracker) -> FloatArray | None:
+def _start_vector(tr: Tracker) -> FloatArray | None:
     """The Newton start for the null vector v: the last step's direction (approaching a fold,
     q' = −J⁻¹Φ_u turns into the null vector of J, its smallest singular direction dominates),
     or without two states to take it from, the smallest right singular vector of J."""
@@ -75,7 +75,7 @@ def _start_vector(tr: _Tracker) -> FloatArray | None:
         return None
 
 
-def _locate(tr: _Tracker, start: FloatArray, d: FloatArray, v: FloatArray
+def _locate(tr: Tracker, start: FloatArray, d: FloatArray, v: FloatArray
             ) -> tuple[int, FloatArray, float, FloatArray] | None:
     """Newton on Φ = 0, J·v = 0, c·v = 1 (c: the start vector) in (q, t, v) from the current
     state at t = 0. Returns (iterations, q*, t*, v*) for a converged fold with 0 < t* ≤ 1."""
@@ -125,7 +125,7 @@ def _locate(tr: _Tracker, start: FloatArray, d: FloatArray, v: FloatArray
     return None
 
 
-def _branch_model(tr: _Tracker, q: FloatArray, t: float, v: FloatArray, start: FloatArray,
+def _branch_model(tr: Tracker, q: FloatArray, t: float, v: FloatArray, start: FloatArray,
                   d: FloatArray) -> tuple[FloatArray, float] | None:
     """(unit null vector vn, k) of the branch through the fold, q ≈ q* ± √(k·(t* − t))·vn,
     or None when Φ(q*) misses the tolerance, or the fold is degenerate or turns the input the
@@ -160,7 +160,7 @@ def _branch_model(tr: _Tracker, q: FloatArray, t: float, v: FloatArray, start: F
     return vn, k
 
 
-def _step_before(tr: _Tracker, q: FloatArray, t: float, vn: FloatArray, k: float,
+def _step_before(tr: Tracker, q: FloatArray, t: float, vn: FloatArray, k: float,
                  start: FloatArray, d: FloatArray, its: int
                  ) -> tuple[int, FloatArray, float] | None:
     """Choose the tracker's branch of the model (the sign of α that reproduces q0), solve the

@@ -1,6 +1,6 @@
 """The branch-flip guard: whether a Newton-corrected step is accepted.
 
-One rule for every step the solver takes (`_Tracker.attempt`, the fast path's single steps
+One rule for every step the solver takes (`Tracker.attempt`, the fast path's single steps
 and blocks, and the state next to a located fold): a step is accepted only if Newton's
 correction from the predictor is at most CONTINUITY of the predicted motion, and the predicted
 motion at most MAX_SPEEDUP times the last step's (per unit step). A jump to the other

@@ -1,6 +1,6 @@
 """Simulation (Algorithm 1): the public entry points `simulate` and `sweep`.
 
-Both follow one branch with a `_Tracker` (`kinematics.nbar.tracker`: predictor, Newton, the
+Both follow one branch with a `Tracker` (`kinematics.nbar.tracker`: predictor, Newton, the
 branch-flip guard of `kinematics.nbar.guard`, subdivision, motion limits located at folds by
 `kinematics.nbar.fold`) and assemble a `Simulation` (`kinematics.nbar.results`), every solved
 state checked again with the paper's exact equations (`Mechanism.residuals`): that is the
@@ -27,7 +27,7 @@ from kinematics.nbar.fast import FastPath, rows
 from kinematics.nbar.history import HISTORY
 from kinematics.nbar.model import Mechanism, Settings
 from kinematics.nbar.results import LimitReport, Simulation, Status, finish
-from kinematics.nbar.tracker import _Snapshot, _Tracker
+from kinematics.nbar.tracker import Snapshot, Tracker
 
 __all__ = ["simulate", "sweep"]
 
@@ -56,7 +56,7 @@ def simulate(mech: Mechanism, inputs: ArrayLike, *, tolerance: float | None = No
         raise ValueError(f"inputs must have shape (N, {n_in}); got {np.shape(inputs)}")
     if not np.all(np.isfinite(u_all)):
         raise ValueError("inputs must be finite")
-    tr = _Tracker(mech, _settings(mech, tolerance, max_halvings))
+    tr = Tracker(mech, _settings(mech, tolerance, max_halvings))
     n_rows = u_all.shape[0]
     xtab = mech.basis.entries_batch(u_all)
     q = np.full((n_rows, mech.system.n_u), np.nan)
@@ -74,7 +74,7 @@ def simulate(mech: Mechanism, inputs: ArrayLike, *, tolerance: float | None = No
                   np.fromiter(status, dtype=np.int8, count=len(status)), limits, None)
 
 
-def _follow(tr: _Tracker, u_all: FloatArray, xtab: FloatArray,
+def _follow(tr: Tracker, u_all: FloatArray, xtab: FloatArray,
             same: NDArray[np.bool_], locked: str | None, q: FloatArray, out_u: FloatArray,
             iters: list[int], subs: list[int], status: list[Status],
             limits: list[LimitReport]) -> None:
@@ -141,7 +141,7 @@ class _Rows:
         self.status[pos: pos + k] = Status.OK
         self.pos += k
 
-    def record(self, tr: _Tracker, st: Status, it: int, sb: int, why: str,
+    def record(self, tr: Tracker, st: Status, it: int, sb: int, why: str,
                failed: FloatArray, res: float, target: FloatArray) -> bool:
         """Append a tracker step's row; at a failure classify it. True when the sweep must
         stop (inconsistent equations)."""
@@ -188,7 +188,7 @@ def sweep(mech: Mechanism, steps: int | None = None, step: ArrayLike | None = No
     inc = mech.step if step is None else np.broadcast_to(
         np.asarray(step, dtype=np.float64), (len(mech.inputs),)).copy()
     rev = s.reverse_at_limit if reverse_at_limit is None else reverse_at_limit
-    tr = _Tracker(mech, _settings(mech, tolerance, max_halvings))
+    tr = Tracker(mech, _settings(mech, tolerance, max_halvings))
     base = tr.u.copy()
     tr.set_line(base, inc)
     # Driven entries of x for every grid point the sweep can visit, in one batch.
@@ -212,7 +212,7 @@ def sweep(mech: Mechanism, steps: int | None = None, step: ArrayLike | None = No
     return out.result(mech, reversed_at)
 
 
-def _sweep_rows(tr: _Tracker, fp: FastPath | None, grid: FloatArray, xtab: FloatArray,
+def _sweep_rows(tr: Tracker, fp: FastPath | None, grid: FloatArray, xtab: FloatArray,
                 offset: int, n_steps: int, rev: bool, out: _Rows) -> int | None:
     """`sweep`'s loop over grid rows offset + index (the start is index 0): the fast path
     while it can, the tracker for the step it stops at, turning back at a limit when `rev`.
@@ -264,7 +264,7 @@ def _sweep_rows(tr: _Tracker, fp: FastPath | None, grid: FloatArray, xtab: Float
     return reversed_at
 
 
-def _turn_back(tr: _Tracker, before: _Snapshot, out: _Rows) -> None:
+def _turn_back(tr: Tracker, before: Snapshot, out: _Rows) -> None:
     """At a limit, turn back: the next row is the grid point before the limit again. Its
     state is known; resume from it (not from the extreme, where the steps would have to grow
     again from the smallest) to run the inputs the other way."""

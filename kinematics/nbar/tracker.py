@@ -1,6 +1,6 @@
 """Following one branch of the solution set (Algorithm 1, per step): predict, correct, accept.
 
-`_Tracker` holds the current state (inputs u, unknowns q) and the predictor's `History`, and
+`Tracker` holds the current state (inputs u, unknowns q) and the predictor's `History`, and
 takes single steps (`attempt`: predictor, Newton, the branch-flip guard of
 `kinematics.nbar.guard`), subdividing a refused step (`advance`) down to 2^-max_halvings of it
 before it reports a motion limit (`explain` says why). This is the reference algorithm: the
@@ -37,8 +37,8 @@ LOCK_TOLERANCE = 1e-7
 CORNER_COS = math.cos(math.radians(10.0))
 
 
-class _Snapshot(NamedTuple):
-    """A tracker's state and predictor history (`_Tracker.snapshot`)."""
+class Snapshot(NamedTuple):
+    """A tracker's state and predictor history (`Tracker.snapshot`)."""
 
     u: FloatArray
     q: FloatArray
@@ -49,7 +49,7 @@ class _Snapshot(NamedTuple):
     direction: FloatArray
 
 
-class _Tracker:
+class Tracker:
     """Follows one branch of the solution set as the inputs change."""
 
     def __init__(self, mech: Mechanism, settings: Settings) -> None:
@@ -108,12 +108,12 @@ class _Tracker:
             return float(u[0])
         return self.arc + float(np.linalg.norm(u - self.u))
 
-    def snapshot(self) -> _Snapshot:
+    def snapshot(self) -> Snapshot:
         """The state and its history, to return to (see `restore`)."""
-        return _Snapshot(self.u, self.q, self.hist.copy(), self.last_m2, self.last_h,
+        return Snapshot(self.u, self.q, self.hist.copy(), self.last_m2, self.last_h,
                          self.arc, self.direction)
 
-    def restore(self, snap: _Snapshot) -> None:
+    def restore(self, snap: Snapshot) -> None:
         """Return to a `snapshot`: used to turn back at a limit from the last grid point
         instead of from the extreme, where the steps would have to grow again from tiny."""
         self.u, self.q = snap.u, snap.q

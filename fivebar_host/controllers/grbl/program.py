@@ -21,11 +21,13 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from fivebar_host import wire
 from fivebar_host.compile import Job
 from fivebar_host.config import Profile
 from fivebar_host.program import Kind, Program, line_param
+from kinematics.arrays import FloatArray
 
 #: GRBL's `$30` the host asks for (maximum S); laser power 0–255 is scaled onto 0…$30.
 S_MAX = 1000
@@ -137,10 +139,11 @@ def work_offset_line(profile: Profile) -> str:
     return f"G10 L20 P1 X{h[0]:.4f} Y{h[1]:.4f}"
 
 
-def angles_deg(profile: Profile, steps: np.ndarray) -> np.ndarray:
+def angles_deg(profile: Profile, steps: ArrayLike) -> FloatArray:
     """Absolute steps (from the home pose) → work X/Y degrees."""
     home = np.degrees(np.asarray(profile.motors.home_rad))
-    return home + np.asarray(steps, dtype=np.float64) / steps_per_degree(profile)
+    out: FloatArray = home + np.asarray(steps, dtype=np.float64) / steps_per_degree(profile)
+    return out
 
 
 @dataclass(frozen=True)

@@ -70,7 +70,7 @@ from fivebar_host.errors import FivebarError
 from fivebar_host.protocol import POS_LIMIT
 
 
-class MockURLError(FivebarError, serial.SerialException, ValueError):
+class MockURLError(FivebarError, serial.SerialException, ValueError):  # type: ignore[misc]
     """A ``fivebar-mock://`` URL with an unknown option or a malformed value."""
 
 

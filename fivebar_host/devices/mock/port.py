@@ -29,7 +29,7 @@ from fivebar_host.protocol import StatusReport
 _CORRUPT_BYTES: Final = bytes(c for c in range(0x20, 0x7F) if c not in b"?!~")
 
 
-class MockSerial(serial.SerialBase):
+class MockSerial(serial.SerialBase):  # type: ignore[misc]  # pyserial has no type hints
     """A pyserial port whose other end is ``MockFirmware`` (see the module docstring).
 
     Timeouts behave like pyserial's: ``timeout=None`` blocks until ``size`` bytes came,
