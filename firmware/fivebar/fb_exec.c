@@ -17,7 +17,6 @@
 #include "config.h"
 #include "status.h"
 
-uint8_t motors_on;
 static uint8_t absolute, laser_on, laser_s;
 static int32_t plan[2];
 static uint16_t pen_plan;  /* pen pulse after the queued M280 blocks */
@@ -29,7 +28,7 @@ static int32_t g6_p;
 
 uint8_t is_idle(void)
 {
-	return !mo_running() && mo_queue_count() == 0 && !homing;
+	return !mo_running() && mo_queue_count() == 0 && !fb_state.homing;
 }
 
 void sync_plan(void)
@@ -45,7 +44,7 @@ void exec_reset(void)
 	absolute = 1;
 	laser_on = 0;
 	laser_s = 0;
-	motors_on = 1;
+	fb_state.motors_on = 1;
 	board_enable_motors(1);
 	sync_plan();
 }
@@ -62,7 +61,7 @@ void exec_reset(void)
 static uint8_t slot_free(void)
 {
 	uint8_t sreg = board_irq_save();
-	uint8_t ok = !f_reset && mo_queue_free();
+	uint8_t ok = !fb_state.f_reset && mo_queue_free();
 	board_irq_restore(sreg);
 	return ok;
 }
@@ -72,7 +71,7 @@ static uint8_t commit_block(void)
 {
 	mo_seal(mo_slot());
 	uint8_t sreg = board_irq_save();
-	uint8_t ok = !f_reset;
+	uint8_t ok = !fb_state.f_reset;
 	if (ok) {
 		if (!mo_running() && mo_queue_count() == 0)
 			first_queued_ms = board_ms();
@@ -100,7 +99,7 @@ static uint8_t queue_sync_block(uint8_t type, int32_t a, int32_t b)
 	blk->type = type;
 	blk->q[0] = (uint32_t)a;
 	blk->q[1] = (uint32_t)b;
-	blk->line = lines.last;
+	blk->line = fb_state.lines.last;
 	return commit_block() ? FB_OK : ST_WAIT;
 }
 
@@ -111,11 +110,11 @@ static uint8_t check_position(const int32_t from[2], const int32_t t[2])
 	for (uint8_t i = 0; i < 2; i++)
 		if (t[i] > CFG_POS_LIMIT || t[i] < -CFG_POS_LIMIT)
 			return FB_ERR_OUT_OF_RANGE;
-	if (settings[SET_SOFT_LIMITS] &&
-	    (t[0] < settings[SET_A_MIN] || t[0] > settings[SET_A_MAX] ||
-	     t[1] < settings[SET_B_MIN] || t[1] > settings[SET_B_MAX]))
+	if (fb_state.settings[SET_SOFT_LIMITS] &&
+	    (t[0] < fb_state.settings[SET_A_MIN] || t[0] > fb_state.settings[SET_A_MAX] ||
+	     t[1] < fb_state.settings[SET_B_MIN] || t[1] > fb_state.settings[SET_B_MAX]))
 		return FB_ERR_SOFT_LIMIT;
-	if (!motors_on && (t[0] != from[0] || t[1] != from[1]))
+	if (!fb_state.motors_on && (t[0] != from[0] || t[1] != from[1]))
 		return FB_ERR_MOTORS_OFF;
 	return FB_OK;
 }
@@ -133,12 +132,12 @@ static uint8_t exec_g1(const fb_cmd_t *c)
 	if (st != FB_OK)
 		return st;
 	fb_block_t *blk = mo_slot();
-	st = mo_prepare(blk, t[0] - plan[0], t[1] - plan[1], (uint32_t)c->p, min_interval);
+	st = mo_prepare(blk, t[0] - plan[0], t[1] - plan[1], (uint32_t)c->p, fb_state.min_interval);
 	if (st != FB_OK)
 		return st;
 	uint8_t s = (c->has & W_S) ? (uint8_t)c->s : laser_s;
 	blk->power = laser_on ? s : 0;
-	blk->line = lines.last - c->g6_count;  /* a G6 head: its first number */
+	blk->line = fb_state.lines.last - c->g6_count;  /* a G6 head: its first number */
 	if (!commit_block())
 		return ST_WAIT;
 	laser_s = s;
@@ -155,7 +154,7 @@ static uint8_t check_target(const int32_t from[2], const int32_t t[2], int32_t p
 	uint8_t st = check_position(from, t);
 	if (st != FB_OK)
 		return st;
-	uint32_t lim = (uint32_t)p_us * (FB_F_CPU / 1000000UL) / min_interval;
+	uint32_t lim = (uint32_t)p_us * (FB_F_CPU / 1000000UL) / fb_state.min_interval;
 	for (uint8_t i = 0; i < 2; i++) {
 		int32_t d = t[i] - from[i];
 		if ((uint32_t)(d < 0 ? -d : d) > lim)
@@ -176,7 +175,7 @@ static uint8_t g6_check(const fb_cmd_t *c)
 	int32_t p = c->p;
 	uint8_t at = c->g6_at;
 	uint8_t st = check_target(from, t, p);
-	while (st == FB_OK && fb_g6_next(line, &at, c->g6_end, &p, d)) {
+	while (st == FB_OK && fb_g6_next(fb_state.line, &at, c->g6_end, &p, d)) {
 		from[0] = t[0];
 		from[1] = t[1];
 		t[0] += d[0];
@@ -205,16 +204,16 @@ static uint8_t exec_g6(const fb_cmd_t *c)
 		g6_at = c->g6_at;
 		g6_p = c->p;
 	}
-	uint32_t first = lines.last - c->g6_count;
+	uint32_t first = fb_state.lines.last - c->g6_count;
 	while (g6_queued <= c->g6_count) {
 		if (!slot_free())
 			return ST_WAIT;
 		uint8_t at = g6_at;
 		int32_t p = g6_p, d[2];
-		if (!fb_g6_next(line, &at, c->g6_end, &p, d))
+		if (!fb_g6_next(fb_state.line, &at, c->g6_end, &p, d))
 			return FB_ERR_BAD_WORD;  /* not reached: the line was checked */
 		fb_block_t *blk = mo_slot();
-		uint8_t st = mo_prepare(blk, d[0], d[1], (uint32_t)p, min_interval);
+		uint8_t st = mo_prepare(blk, d[0], d[1], (uint32_t)p, fb_state.min_interval);
 		if (st != FB_OK)
 			return st;  /* not reached: g6_check ran the same test */
 		blk->power = laser_on ? laser_s : 0;
@@ -233,14 +232,14 @@ static uint8_t exec_g6(const fb_cmd_t *c)
 /* M280: a queued pen block (protocol section 6.2). */
 static uint8_t exec_pen(const fb_cmd_t *c)
 {
-	if (!settings[SET_PEN_PARK])
+	if (!fb_state.settings[SET_PEN_PARK])
 		return FB_ERR_NO_PEN;
 	if (!slot_free())
 		return ST_WAIT;
 	uint16_t to = (uint16_t)c->s;
 	fb_block_t *blk = mo_slot();
 	mo_prepare_pen(blk, pen_plan, to, (uint16_t)c->r, (uint16_t)c->d);
-	blk->line = lines.last;
+	blk->line = fb_state.lines.last;
 	if (!commit_block())
 		return ST_WAIT;
 	pen_plan = to;
@@ -249,7 +248,7 @@ static uint8_t exec_pen(const fb_cmd_t *c)
 
 static uint8_t execute(const fb_cmd_t *c)
 {
-	if (alarm_code) {
+	if (fb_state.alarm_code) {
 		switch (c->kind) {
 		case CMD_NONE: case CMD_M110: case CMD_INFO: case CMD_LIST:
 		case CMD_SET: case CMD_HOME: case CMD_UNLOCK:
@@ -293,7 +292,7 @@ static uint8_t execute(const fb_cmd_t *c)
 	case CMD_M18: {
 		uint8_t st = queue_sync_block(c->kind == CMD_M17 ? BLK_ENABLE : BLK_DISABLE, 0, 0);
 		if (st == FB_OK)
-			motors_on = c->kind == CMD_M17;
+			fb_state.motors_on = c->kind == CMD_M17;
 		return st;
 	}
 	case CMD_INFO:
@@ -305,7 +304,7 @@ static uint8_t execute(const fb_cmd_t *c)
 	case CMD_HOME:
 		return exec_home();
 	case CMD_UNLOCK:
-		alarm_code = 0;
+		fb_state.alarm_code = 0;
 		sync_plan();
 		return FB_OK;
 	case CMD_SET:
@@ -329,12 +328,12 @@ uint8_t exec_command(const fb_cmd_t *c)
 
 void maybe_start(void)
 {
-	if (held || alarm_code || homing || mo_running())
+	if (fb_state.held || fb_state.alarm_code || fb_state.homing || mo_running())
 		return;
 	uint8_t n = mo_queue_count();
 	if (!n)
 		return;
 	if (n >= CFG_START_BLOCKS || !mo_queue_free() ||
 	    board_ms() - first_queued_ms >= CFG_START_DELAY_MS)
-		start_unless(&f_reset);
+		start_unless(&fb_state.f_reset);
 }

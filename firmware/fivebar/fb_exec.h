@@ -10,9 +10,6 @@
 
 #define ST_WAIT 0xffu   /* queue full: try again later */
 
-/* M17 / M18 state, which homing needs on */
-extern uint8_t motors_on;
-
 /* Nothing running, nothing queued, not homing. */
 uint8_t is_idle(void);
 /* The planned position and pen after the queue := where the machine is. */

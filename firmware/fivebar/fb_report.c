@@ -59,7 +59,7 @@ void reply_error(uint8_t code)
 	put_u32(code);
 	if (fb_is_resend(code)) {
 		put_P(FB_PSTR(" resend:"));
-		put_u32(lines.last + 1u);
+		put_u32(fb_state.lines.last + 1u);
 	}
 	put_eol();
 }
@@ -69,14 +69,14 @@ void status_report(void)
 	mo_status_t st;
 	mo_status(&st);
 	board_tx('<');
-	if (alarm_code) {
+	if (fb_state.alarm_code) {
 		put_P(FB_PSTR("Alarm:"));
-		put_u32(alarm_code);
-	} else if (homing) {
+		put_u32(fb_state.alarm_code);
+	} else if (fb_state.homing) {
 		put_P(FB_PSTR("Home"));
-	} else if (held) {
+	} else if (fb_state.held) {
 		put_P(FB_PSTR("Hold:"));
-		put_u32(hold_reason);
+		put_u32(fb_state.hold_reason);
 	} else if (st.busy) {
 		put_P(FB_PSTR("Run"));
 	} else {
@@ -91,7 +91,7 @@ void status_report(void)
 	put_P(FB_PSTR("|Ln:"));
 	put_u32(st.done);
 	board_tx(',');
-	put_u32(lines.last);
+	put_u32(fb_state.lines.last);
 	put_P(FB_PSTR("|L:"));
 	put_u32(st.laser);
 	put_P(FB_PSTR("|U:"));
