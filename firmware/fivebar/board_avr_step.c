@@ -573,8 +573,9 @@ ISR(TIMER1_COMPA_vect, ISR_NAKED)
 		  [portd] "I" (_SFR_IO_ADDR(PORTD)),
 		  [tl] "n" (_SFR_MEM_ADDR(TCNT1L)), [th] "n" (_SFR_MEM_ADDR(TCNT1H)),
 		  [ocrl] "n" (_SFR_MEM_ADDR(OCR1AL)), [ocrh] "n" (_SFR_MEM_ADDR(OCR1AH)),
-		  [keep] "i" (&board_keep), [cur] "i" (&mo_cur), [qtail] "i" (&mo_q_tail),
-		  [qhead] "i" (&mo_q_head), [queue] "i" (mo_queue),
+		  [keep] "i" (&board_keep), [cur] "i" (&mo_state.cur),
+		  [qtail] "i" (&mo_state.tail), [qhead] "i" (&mo_state.head),
+		  [queue] "i" (mo_state.queue),
 		  [sched] "i" (&board_sched), [t2] "i" (&board_t2), [gap] "i" (&board_gap));
 }
 
@@ -615,9 +616,9 @@ static void fast_start(uint16_t base)
 		}
 	}
 	GPIOR1 = pins;
-	if (!mo_cur->f.cnt[0])
+	if (!mo_state.cur->f.cnt[0])
 		flags |= (uint8_t)(1u << FL_ADONE);
-	if (!mo_cur->f.cnt[1])
+	if (!mo_state.cur->f.cnt[1])
 		flags |= (uint8_t)(1u << FL_BDONE);
 	GPIOR0 = flags;
 	/* A start from a stop whose first step the C path has (nearly) run

@@ -23,20 +23,19 @@
 #error "CFG_QUEUE_SIZE must be a power of two up to 128"
 #endif
 
-fb_block_t mo_queue[CFG_QUEUE_SIZE];
-volatile uint8_t mo_q_head; /* written by the main loop */
-volatile uint8_t mo_q_tail; /* written by the step interrupt */
+/* the queue and its running block (fb_motion.h) */
+mo_state_t mo_state;
 
 /* generator state, owned by the step interrupt while running */
-fb_block_t *volatile mo_cur; /* executing block (still in the queue), or 0 */
-static uint32_t s_now;           /* cycle of the pending event within mo_cur */
+static uint32_t s_now;           /* cycle of the pending event within mo_state.cur */
 static uint8_t s_due;            /* motors stepping at that event */
 static uint8_t s_home_axes, s_es_enabled, s_seek_neg;
 static uint8_t s_rest;           /* the block boundary() last started follows a stop */
 static volatile uint8_t s_running, s_alarm, s_home_hits, s_laser;
-/* mo_beat: set by every mo_event() (the step interrupt is alive), consumed by
- * mo_alive() (the fast path's beat is its left[] counting down); s_held: the generator's timer is paused by mo_hold() */
-volatile uint8_t mo_beat;
+/* s_beat: set by every mo_event() (the step interrupt is alive), consumed by
+ * mo_alive() (the fast path's beat is its left[] counting down); s_held: the
+ * generator's timer is paused by mo_hold() */
+static volatile uint8_t s_beat;
 static volatile uint8_t s_held;
 static volatile uint32_t s_underruns;
 
@@ -189,8 +188,8 @@ uint16_t mo_pen_frame(void)
 void mo_init(void)
 {
 	board_timer_stop();
-	mo_q_head = mo_q_tail = 0;
-	mo_cur = 0;
+	mo_state.head = mo_state.tail = 0;
+	mo_state.cur = 0;
 	s_now = 0;
 	s_due = 0;
 	s_running = 0;
@@ -201,21 +200,21 @@ void mo_init(void)
 	pen_park_now(0);
 }
 
-uint8_t mo_queue_count(void) { return (uint8_t)((mo_q_head - mo_q_tail) & 0xffu); }
+uint8_t mo_queue_count(void) { return (uint8_t)((mo_state.head - mo_state.tail) & 0xffu); }
 
 uint8_t mo_queue_free(void) { return (uint8_t)(CFG_QUEUE_SIZE - mo_queue_count()); }
 
 fb_block_t *mo_slot(void)
 {
-	fb_block_t *b = &mo_queue[mo_q_head & QMASK];
+	fb_block_t *b = &mo_state.queue[mo_state.head & QMASK];
 	b->fast = 0;  /* the C form until mo_seal() says otherwise */
 	return b;
 }
-void mo_push(void) { mo_q_head = (uint8_t)(mo_q_head + 1u); }
+void mo_push(void) { mo_state.head = (uint8_t)(mo_state.head + 1u); }
 
 void mo_clear_queue(void)
 {
-	mo_q_tail = mo_q_head;
+	mo_state.tail = mo_state.head;
 }
 
 static uint8_t prep_axis(fb_block_t *b, uint8_t i, int32_t d, uint32_t min_interval)
@@ -349,8 +348,8 @@ FB_ALWAYS_INLINE void set_laser(uint8_t p)
 void mo_start(void)
 {
 	uint8_t sreg = board_irq_save();
-	if (!s_running && mo_q_head != mo_q_tail) {
-		mo_cur = 0;
+	if (!s_running && mo_state.head != mo_state.tail) {
+		mo_state.cur = 0;
 		s_now = 0;
 		s_due = 0;
 		s_running = 1;
@@ -366,13 +365,13 @@ void mo_stop(void)
 	board_timer_stop();
 	s_running = 0;
 	s_held = 0;
-	if (mo_cur) {
+	if (mo_state.cur) {
 		/* the interrupted block is dropped (a fast one's steps so far
 		 * stay in the position) */
-		if (mo_cur->fast)
+		if (mo_state.cur->fast)
 			fast_fold();
-		mo_q_tail = (uint8_t)(mo_q_tail + 1u);
-		mo_cur = 0;
+		mo_state.tail = (uint8_t)(mo_state.tail + 1u);
+		mo_state.cur = 0;
 	}
 	s_due = 0;
 	set_laser(0);
@@ -396,8 +395,8 @@ void mo_resume(void)
 {
 	uint8_t sreg = board_irq_save();
 	if (s_running) {
-		if (mo_cur)
-			set_laser(mo_cur->power);
+		if (mo_state.cur)
+			set_laser(mo_state.cur->power);
 		s_held = 0;
 		board_timer_resume();
 	}
@@ -410,21 +409,21 @@ void mo_resume(void)
  */
 FB_ALWAYS_INLINE fb_block_t *boundary(void)
 {
-	uint8_t t = mo_q_tail;
-	if (mo_cur) {
-		keep_done(mo_cur->line);
+	uint8_t t = mo_state.tail;
+	if (mo_state.cur) {
+		keep_done(mo_state.cur->line);
 		t = (uint8_t)(t + 1u);
-		mo_cur = 0;
+		mo_state.cur = 0;
 	}
 	for (;; t = (uint8_t)(t + 1u)) {
-		if (t == mo_q_head) {
-			mo_q_tail = t;
+		if (t == mo_state.head) {
+			mo_state.tail = t;
 			s_running = 0;
 			s_underruns++;
 			set_laser(0);
 			return 0;
 		}
-		fb_block_t *b = &mo_queue[t & QMASK];
+		fb_block_t *b = &mo_state.queue[t & QMASK];
 		switch (b->type) {
 		case BLK_SETPOS:
 			keep_write((int32_t)b->q[0], (int32_t)b->q[1], b->line, 1);
@@ -448,12 +447,12 @@ FB_ALWAYS_INLINE fb_block_t *boundary(void)
 		default:
 			break;
 		}
-		mo_q_tail = t;
+		mo_state.tail = t;
 		board_set_dirs(b->dirs);
 		s_home_axes = (uint8_t)((b->next[0] != MO_NEVER ? 1u : 0u) |
 					(b->next[1] != MO_NEVER ? 2u : 0u));
 		s_now = 0;
-		mo_cur = b;
+		mo_state.cur = b;
 		set_laser(b->power);
 		return b;
 	}
@@ -478,8 +477,8 @@ FB_ALWAYS_INLINE uint8_t check_endstops(fb_block_t *b, uint8_t due)
 		/* pressed, and this motor just stepped towards its switch */
 		s_alarm = FB_ALARM_ENDSTOP;
 		s_running = 0;
-		mo_q_tail = (uint8_t)(mo_q_tail + 1u);
-		mo_cur = 0;
+		mo_state.tail = (uint8_t)(mo_state.tail + 1u);
+		mo_state.cur = 0;
 		set_laser(0);
 		return 0;
 	}
@@ -521,9 +520,9 @@ FB_ALWAYS_INLINE void step_axis(fb_block_t *b, uint8_t i)
 
 uint16_t mo_event(void)
 {
-	fb_block_t *b = mo_cur;
+	fb_block_t *b = mo_state.cur;
 	uint8_t due = s_due;
-	mo_beat = 1;
+	s_beat = 1;
 	if (due) {
 		/* a reset from here until busy = 0 finds the record invalid: a
 		 * boot cannot know whether the drivers saw the step */
@@ -602,10 +601,10 @@ static void fast_pick(const mo_fast_t *f, uint16_t *t, uint8_t *bits, uint16_t *
 
 uint8_t mo_fast_begin(uint16_t base, uint16_t *t, uint8_t *bits, uint16_t *t2, uint8_t *bits2)
 {
-	mo_fast_t *f = &mo_cur->f;
+	mo_fast_t *f = &mo_state.cur->f;
 	f->t[0] = (uint16_t)(f->t[0] + base);
 	f->t[1] = (uint16_t)(f->t[1] + base);
-	uint8_t dirs = mo_cur->dirs;
+	uint8_t dirs = mo_state.cur->dirs;
 	K.busy = 1;
 	for (uint8_t i = 0; i < 2; i++) {
 		int16_t n = (int16_t)f->cnt[i];
@@ -621,13 +620,13 @@ uint8_t mo_fast_begin(uint16_t base, uint16_t *t, uint8_t *bits, uint16_t *t2, u
 void mo_fast_end(void)
 {
 	fast_fold();
-	s_now = mo_cur->cycles;
+	s_now = mo_state.cur->cycles;
 	s_due = 0;
 }
 
 void mo_fast_shift(uint16_t delta)
 {
-	fb_block_t *b = mo_cur;
+	fb_block_t *b = mo_state.cur;
 	if (b && b->fast) {
 		b->f.t[0] = (uint16_t)(b->f.t[0] + delta);
 		b->f.t[1] = (uint16_t)(b->f.t[1] + delta);
@@ -668,8 +667,8 @@ uint8_t mo_alive(void)
 	static uint8_t seen[2];
 	uint8_t l0 = (uint8_t)K.left[0], l1 = (uint8_t)K.left[1];
 	uint8_t sreg = board_irq_save();
-	uint8_t ok = mo_beat || !s_running || s_held;
-	mo_beat = 0;
+	uint8_t ok = s_beat || !s_running || s_held;
+	s_beat = 0;
 	board_irq_restore(sreg);
 	ok = (uint8_t)(ok || l0 != seen[0] || l1 != seen[1]);
 	seen[0] = l0;
@@ -704,8 +703,8 @@ void mo_status(mo_status_t *st)
 	uint8_t sreg = board_irq_save();
 	uint32_t done = K.done, underruns = s_underruns;
 	uint16_t pen16 = p_now16;
-	uint8_t head = mo_q_head, tail = mo_q_tail, laser = s_laser, running = s_running;
-	uint8_t cur = mo_cur != 0;
+	uint8_t head = mo_state.head, tail = mo_state.tail, laser = s_laser, running = s_running;
+	uint8_t cur = mo_state.cur != 0;
 	board_irq_restore(sreg);
 	uint8_t count = (uint8_t)(head - tail);
 	st->done = done;

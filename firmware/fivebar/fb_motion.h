@@ -174,12 +174,30 @@ void mo_fast_end(void);
 /* The timer's timeline moved by delta cycles (a resumed hold): the running
  * fast block's stored times move with it. */
 void mo_fast_shift(uint16_t delta);
-/* The running block, the queue's read index and the interrupt's beat, for
- * the fast interrupt (read and written only with interrupts off). */
-extern fb_block_t *volatile mo_cur;
-extern volatile uint8_t mo_q_tail, mo_q_head;
-extern volatile uint8_t mo_beat;
-extern fb_block_t mo_queue[CFG_QUEUE_SIZE];
+/*
+ * The queue and its running block: the state fb_motion.c shares with the
+ * board's fast path (board_avr_step.c), which reads and writes these fields
+ * in the step interrupt.  Writers:
+ *   queue[]  the entry at head: the main loop (mo_slot(), before mo_push());
+ *            the running block: the step interrupt, in place (the C form's
+ *            next[] and err[], or the fast form's times); no one else
+ *   cur      the running block, 0 between blocks: the step interrupt (C path
+ *            boundary(), the fast path's switch to the next block);
+ *            mo_init() and mo_stop() with interrupts off
+ *   head     the next entry to fill: the main loop (mo_push(), mo_init())
+ *   tail     the running or next entry to run: the step interrupt (both
+ *            paths, as blocks end); mo_init(), mo_stop(), mo_clear_queue()
+ *            with the generator stopped or interrupts off
+ * Indices run free (mod 256); head - tail is the count, the running block
+ * included.
+ */
+typedef struct {
+	fb_block_t queue[CFG_QUEUE_SIZE];
+	fb_block_t *volatile cur;
+	volatile uint8_t head, tail;
+} mo_state_t;
+
+extern mo_state_t mo_state;
 /* Fold the kept position's step counts into its base (main loop): the fast
  * interrupt counts its steps in the 16-bit off[] without folding. */
 void mo_fold(void);
