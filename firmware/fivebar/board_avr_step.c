@@ -80,23 +80,23 @@ static uint8_t paused;
 #define K_LEFT 22
 #define K_FDIRS 26
 #define K_NDONE 27
-_Static_assert(offsetof(fb_block_t, f.t) == O_T && offsetof(fb_block_t, f.tf) == O_TF &&
-	       offsetof(fb_block_t, f.q) == O_Q && offsetof(fb_block_t, f.qf) == O_QF &&
-	       offsetof(fb_block_t, f.cnt) == O_CNT && offsetof(fb_block_t, f.tail) == O_TAIL &&
-	       offsetof(fb_block_t, line) == O_LINE && offsetof(fb_block_t, dirs) == O_DIRS &&
-	       offsetof(fb_block_t, power) == O_POWER && offsetof(fb_block_t, fast) == O_FAST &&
-	       offsetof(fb_block_t, pdirs) == O_PDIRS && sizeof(fb_block_t) == BLOCK_SIZE,
+_Static_assert(offsetof(mo_block_t, f.t) == O_T && offsetof(mo_block_t, f.tf) == O_TF &&
+	       offsetof(mo_block_t, f.q) == O_Q && offsetof(mo_block_t, f.qf) == O_QF &&
+	       offsetof(mo_block_t, f.cnt) == O_CNT && offsetof(mo_block_t, f.tail) == O_TAIL &&
+	       offsetof(mo_block_t, line) == O_LINE && offsetof(mo_block_t, dirs) == O_DIRS &&
+	       offsetof(mo_block_t, power) == O_POWER && offsetof(mo_block_t, fast) == O_FAST &&
+	       offsetof(mo_block_t, pdirs) == O_PDIRS && sizeof(mo_block_t) == BLOCK_SIZE,
 	       "fast path block offsets");
-_Static_assert(offsetof(fb_keep_t, done) == K_DONE &&
-	       offsetof(fb_keep_t, off) == K_OFF && offsetof(fb_keep_t, busy) == K_BUSY &&
-	       offsetof(fb_keep_t, left) == K_LEFT && offsetof(fb_keep_t, fdirs) == K_FDIRS &&
-	       offsetof(fb_keep_t, ndone) == K_NDONE,
+_Static_assert(offsetof(board_keep_t, done) == K_DONE &&
+	       offsetof(board_keep_t, off) == K_OFF && offsetof(board_keep_t, busy) == K_BUSY &&
+	       offsetof(board_keep_t, left) == K_LEFT && offsetof(board_keep_t, fdirs) == K_FDIRS &&
+	       offsetof(board_keep_t, ndone) == K_NDONE,
 	       "fast path keep offsets");
 _Static_assert(MO_PAIR_CYCLES < 200, "the waits of a pair stay below 128 cycles");
 _Static_assert(MO_PAIR_CYCLES < 256, "the fast path compares -d's low byte");
 /* the fast path writes PIND and PORTD */
 #define FB_PORT_IS_D_D 1
-#if !FB_CAT(FB_PORT_IS_D_, PIN_STEP_PORT) || !FB_CAT(FB_PORT_IS_D_, PIN_DIR_PORT)
+#if !BOARD_CAT(FB_PORT_IS_D_, PIN_STEP_PORT) || !BOARD_CAT(FB_PORT_IS_D_, PIN_DIR_PORT)
 #error "the fast step path needs the step and direction pins on port D"
 #endif
 
@@ -661,7 +661,7 @@ void __vector_fb_step_slow(void)
 		uint16_t d = mo_event();
 		while ((uint16_t)(TCNT1 - t0) < PULSE_CYCLES)
 			;
-		FB_STEP_PORT &= (uint8_t)~FB_STEP_PINS;
+		BOARD_STEP_PORT &= (uint8_t)~BOARD_STEP_PINS;
 		if (!d) {
 			TIMSK1 &= (uint8_t)~(1u << OCIE1A);
 			break;
@@ -701,7 +701,7 @@ void board_timer_stop(void)
 	paused = 0;
 	GPIOR0 = (uint8_t)(1u << FL_SLOW);
 	GPIOR1 = 0;
-	FB_STEP_PORT &= (uint8_t)~FB_STEP_PINS;
+	BOARD_STEP_PORT &= (uint8_t)~BOARD_STEP_PINS;
 	board_irq_restore(s);
 }
 

@@ -41,22 +41,22 @@ static volatile uint32_t resume_at;
 fb_state_t fb_state;
 
 static uint8_t line_len, line_over;
-static fb_cmd_t cmd;
+static proto_cmd_t cmd;
 static uint8_t pending;
 
 /* ---- state ----------------------------------------------------------------- */
 
-void raise_alarm(uint8_t code)
+void fb_raise_alarm(uint8_t code)
 {
 	mo_stop();
 	mo_clear_queue();
 	fb_state.held = 0;
 	resume_at = 0;
 	fb_state.alarm_code = code;
-	sync_plan();
-	put_P(FB_PSTR("ALARM:"));
-	put_u32(code);
-	put_eol();
+	exec_sync_plan();
+	report_P(BOARD_PSTR("ALARM:"));
+	report_u32(code);
+	report_eol();
 }
 
 static void do_reset(void)
@@ -76,7 +76,7 @@ static void do_reset(void)
 	fb_state.lines.numbered = 0;
 	exec_reset();
 	baud_reset();
-	banner();
+	report_banner();
 }
 
 void fb_rx_isr(uint8_t c)
@@ -92,12 +92,12 @@ void fb_rx_isr(uint8_t c)
 			mo_stop();
 		} else if (!fb_state.held && !fb_state.alarm_code) {
 			fb_state.held = 1;
-			fb_state.hold_reason = HOLD_HOST;
+			fb_state.hold_reason = FB_HOLD_HOST;
 			mo_hold();
 		} else if (resume_at) {
 			/* held again while the pen was going back down */
 			resume_at = 0;
-			fb_state.hold_reason = HOLD_HOST;
+			fb_state.hold_reason = FB_HOLD_HOST;
 			mo_hold();
 		}
 		return;
@@ -143,7 +143,7 @@ void fb_rx_isr(uint8_t c)
  * the generator runs all stop the feeding, and the watchdog resets the MCU:
  * laser off at once (board_avr.c), position, H and Ln done kept (section 7).
  */
-void feed_watchdog(void)
+void fb_feed_watchdog(void)
 {
 	if (mo_alive())
 		board_wdt_feed();
@@ -155,7 +155,7 @@ static void error_hold(void)
 	uint8_t sreg = board_irq_save();
 	if (!fb_state.held && (mo_running() || mo_queue_count())) {
 		fb_state.held = 1;
-		fb_state.hold_reason = HOLD_ERROR;
+		fb_state.hold_reason = FB_HOLD_ERROR;
 		mo_hold();
 	}
 	board_irq_restore(sreg);
@@ -164,19 +164,19 @@ static void error_hold(void)
 static void finish(uint8_t st)
 {
 	if (st == FB_OK) {
-		put_P(FB_PSTR("ok"));
-		put_eol();
+		report_P(BOARD_PSTR("ok"));
+		report_eol();
 		return;
 	}
-	if (!fb_is_resend(st))
+	if (!proto_is_resend(st))
 		error_hold();
-	reply_error(st);
+	report_error(st);
 }
 
 static void try_execute(void)
 {
 	uint8_t st = exec_command(&cmd);
-	if (st == ST_WAIT)
+	if (st == EXEC_WAIT)
 		return;
 	pending = 0;
 	finish(st);
@@ -201,7 +201,7 @@ static void handle_line(void)
 		finish(fb_state.lines.numbered ? FB_ERR_CHECKSUM : FB_ERR_LINE_TOO_LONG);
 		return;
 	}
-	uint8_t st = fb_parse_line(&fb_state.lines, fb_state.line, len, &cmd);
+	uint8_t st = proto_parse_line(&fb_state.lines, fb_state.line, len, &cmd);
 	if (st == FB_OK)
 		baud_heard();  /* the host speaks at this rate */
 	if (st != FB_OK) {
@@ -253,7 +253,7 @@ static void laser_watchdog(void)
 		uint8_t sreg = board_irq_save();
 		if (mo_running() || mo_queue_count()) {
 			fb_state.held = 1;
-			fb_state.hold_reason = HOLD_LASER_TIMEOUT;
+			fb_state.hold_reason = FB_HOLD_LASER_TIMEOUT;
 			mo_hold();
 		} else {
 			mo_pen_park();
@@ -302,20 +302,20 @@ void fb_poll(void)
 	uint8_t a = mo_alarm();
 	if (a) {
 		mo_clear_alarm();
-		raise_alarm(a);
+		fb_raise_alarm(a);
 	}
 	if (fb_state.f_status) {
 		fb_state.f_status = 0;
-		status_report();
+		report_status();
 	}
 	laser_watchdog();
 	baud_fallback();
 	resume_when_settled();
-	maybe_start();
+	exec_maybe_start();
 	if (pending)
 		try_execute();
 	else
 		assemble();
 	mo_fold();
-	feed_watchdog();
+	fb_feed_watchdog();
 }

@@ -78,7 +78,7 @@ static void keep_write(int32_t a, int32_t b, uint32_t done, uint8_t homed)
 }
 
 /* Ln done := line (the step interrupt, or interrupts off). */
-FB_ALWAYS_INLINE void keep_done(uint32_t line)
+BOARD_INLINE void keep_done(uint32_t line)
 {
 	K.busy = 1;
 	K.done = line;
@@ -204,9 +204,9 @@ uint8_t mo_queue_count(void) { return (uint8_t)((mo_state.head - mo_state.tail) 
 
 uint8_t mo_queue_free(void) { return (uint8_t)(CFG_QUEUE_SIZE - mo_queue_count()); }
 
-fb_block_t *mo_slot(void)
+mo_block_t *mo_slot(void)
 {
-	fb_block_t *b = &mo_state.queue[mo_state.head & QMASK];
+	mo_block_t *b = &mo_state.queue[mo_state.head & QMASK];
 	b->fast = 0;  /* the C form until mo_seal() says otherwise */
 	return b;
 }
@@ -217,7 +217,7 @@ void mo_clear_queue(void)
 	mo_state.tail = mo_state.head;
 }
 
-static uint8_t prep_axis(fb_block_t *b, uint8_t i, int32_t d, uint32_t min_interval)
+static uint8_t prep_axis(mo_block_t *b, uint8_t i, int32_t d, uint32_t min_interval)
 {
 	uint32_t n;
 	if (d < 0) {
@@ -244,10 +244,10 @@ static uint8_t prep_axis(fb_block_t *b, uint8_t i, int32_t d, uint32_t min_inter
 	return FB_OK;
 }
 
-uint8_t mo_prepare_cycles(fb_block_t *b, int32_t da, int32_t db, uint32_t cycles,
+uint8_t mo_prepare_cycles(mo_block_t *b, int32_t da, int32_t db, uint32_t cycles,
 			  uint32_t min_interval)
 {
-	b->type = BLK_MOVE;
+	b->type = MO_BLK_MOVE;
 	b->dirs = 0;
 	b->cycles = cycles;
 	uint8_t st = prep_axis(b, 0, da, min_interval);
@@ -274,11 +274,11 @@ static uint16_t frac16(uint16_t m, uint16_t n)
 }
 #endif
 
-void mo_seal(fb_block_t *b)
+void mo_seal(mo_block_t *b)
 {
 	b->fast = 0;
 #ifdef __AVR__
-	if (b->type != BLK_MOVE || s_es_enabled)
+	if (b->type != MO_BLK_MOVE || s_es_enabled)
 		return;
 	uint32_t n[2], q[2], m[2];
 	uint16_t tail = 0xffffu;
@@ -316,7 +316,7 @@ void mo_seal(fb_block_t *b)
 #endif
 }
 
-void mo_prepare_pen(fb_block_t *b, uint16_t from_us, uint16_t to_us, uint16_t move_ms,
+void mo_prepare_pen(mo_block_t *b, uint16_t from_us, uint16_t to_us, uint16_t move_ms,
 		    uint16_t settle_ms)
 {
 	uint32_t d16 = (uint32_t)(from_us > to_us ? from_us - to_us : to_us - from_us) << 4;
@@ -327,19 +327,19 @@ void mo_prepare_pen(fb_block_t *b, uint16_t from_us, uint16_t to_us, uint16_t mo
 	frames = frames ? frames - 1u : 0u;
 	uint32_t step = frames ? (d16 + frames - 1u) / frames : 0xffffu;
 	mo_prepare_cycles(b, 0, 0, ((uint32_t)move_ms + settle_ms) * (FB_F_CPU / 1000UL), 0);
-	b->type = BLK_PEN;
+	b->type = MO_BLK_PEN;
 	b->power = 0;
 	b->q[0] = to_us;
 	b->q[1] = step ? (step > 0xffffu ? 0xffffu : step) : 1u;
 	b->r2[0] = (uint32_t)move_ms + settle_ms;
 }
 
-uint8_t mo_prepare(fb_block_t *b, int32_t da, int32_t db, uint32_t p_us, uint32_t min_interval)
+uint8_t mo_prepare(mo_block_t *b, int32_t da, int32_t db, uint32_t p_us, uint32_t min_interval)
 {
 	return mo_prepare_cycles(b, da, db, p_us * (FB_F_CPU / 1000000UL), min_interval);
 }
 
-FB_ALWAYS_INLINE void set_laser(uint8_t p)
+BOARD_INLINE void set_laser(uint8_t p)
 {
 	s_laser = p;
 	board_laser(p);
@@ -407,7 +407,7 @@ void mo_resume(void)
  * Segment boundary: retire the finished block, apply queued G92/M17/M18,
  * point at the next segment.  Returns it, or 0 when the queue is empty.
  */
-FB_ALWAYS_INLINE fb_block_t *boundary(void)
+BOARD_INLINE mo_block_t *boundary(void)
 {
 	uint8_t t = mo_state.tail;
 	if (mo_state.cur) {
@@ -423,17 +423,17 @@ FB_ALWAYS_INLINE fb_block_t *boundary(void)
 			set_laser(0);
 			return 0;
 		}
-		fb_block_t *b = &mo_state.queue[t & QMASK];
+		mo_block_t *b = &mo_state.queue[t & QMASK];
 		switch (b->type) {
-		case BLK_SETPOS:
+		case MO_BLK_SETPOS:
 			keep_write((int32_t)b->q[0], (int32_t)b->q[1], b->line, 1);
 			continue;
-		case BLK_ENABLE:
-		case BLK_DISABLE:
-			board_enable_motors(b->type == BLK_ENABLE);
+		case MO_BLK_ENABLE:
+		case MO_BLK_DISABLE:
+			board_enable_motors(b->type == MO_BLK_ENABLE);
 			keep_done(b->line);
 			continue;
-		case BLK_PEN:
+		case MO_BLK_PEN:
 			/* stores only: the servo frame interrupt moves the pulse */
 			p_target = (uint16_t)b->q[0];
 			p_step16 = (uint16_t)b->q[1];
@@ -459,10 +459,10 @@ FB_ALWAYS_INLINE fb_block_t *boundary(void)
 }
 
 /* Endstops while stepping: homing stops, or the alarm; 0 when stopped. */
-FB_ALWAYS_INLINE uint8_t check_endstops(fb_block_t *b, uint8_t due)
+BOARD_INLINE uint8_t check_endstops(mo_block_t *b, uint8_t due)
 {
 	uint8_t es = board_endstops();
-	if (b->type == BLK_HOME) {
+	if (b->type == MO_BLK_HOME) {
 		uint8_t hit = (uint8_t)(es & due & s_home_axes);
 		if (hit) {
 			s_home_hits |= hit;
@@ -489,7 +489,7 @@ FB_ALWAYS_INLINE uint8_t check_endstops(fb_block_t *b, uint8_t due)
  * Count the step of motor i in the kept record (busy is set): off moves by
  * one; at +-OFF_FOLD it goes into base, and into the check with it.
  */
-FB_ALWAYS_INLINE void count_step(const fb_block_t *b, uint8_t i)
+BOARD_INLINE void count_step(const mo_block_t *b, uint8_t i)
 {
 	int16_t o = K.off[i];
 	o = (int16_t)((b->dirs & (1u << i)) ? o - 1 : o + 1);
@@ -506,7 +506,7 @@ FB_ALWAYS_INLINE void count_step(const fb_block_t *b, uint8_t i)
  * last step (k = n) the next time, floor((2n+1)C/2n), is >= C, past the
  * segment end.
  */
-FB_ALWAYS_INLINE void step_axis(fb_block_t *b, uint8_t i)
+BOARD_INLINE void step_axis(mo_block_t *b, uint8_t i)
 {
 	uint32_t e = b->err[i] + b->r2[i];
 	uint32_t t = b->next[i] + b->q[i];
@@ -520,7 +520,7 @@ FB_ALWAYS_INLINE void step_axis(fb_block_t *b, uint8_t i)
 
 uint16_t mo_event(void)
 {
-	fb_block_t *b = mo_state.cur;
+	mo_block_t *b = mo_state.cur;
 	uint8_t due = s_due;
 	s_beat = 1;
 	if (due) {
@@ -537,7 +537,7 @@ uint16_t mo_event(void)
 			step_axis(b, 0);
 		if (due & 2u)
 			step_axis(b, 1);
-		if ((s_es_enabled || b->type == BLK_HOME) && !check_endstops(b, due))
+		if ((s_es_enabled || b->type == MO_BLK_HOME) && !check_endstops(b, due))
 			return 0;
 	} else if (!b || s_now == b->cycles) {
 		s_rest = !b;
@@ -626,7 +626,7 @@ void mo_fast_end(void)
 
 void mo_fast_shift(uint16_t delta)
 {
-	fb_block_t *b = mo_state.cur;
+	mo_block_t *b = mo_state.cur;
 	if (b && b->fast) {
 		b->f.t[0] = (uint16_t)(b->f.t[0] + delta);
 		b->f.t[1] = (uint16_t)(b->f.t[1] + delta);

@@ -14,13 +14,13 @@
 #include <stdint.h>
 #include "config.h"
 
-enum fb_block_type {
-	BLK_MOVE = 0,   /* steps both motors over a duration */
-	BLK_HOME,       /* like MOVE, but each motor stops at its endstop */
-	BLK_SETPOS,     /* G92: position := n[] (as int32) */
-	BLK_ENABLE,     /* M17 */
-	BLK_DISABLE,    /* M18 */
-	BLK_PEN         /* M280: servo to q[0] us at q[1] per frame, then a dwell */
+enum mo_block_type {
+	MO_BLK_MOVE = 0,   /* steps both motors over a duration */
+	MO_BLK_HOME,       /* like MOVE, but each motor stops at its endstop */
+	MO_BLK_SETPOS,     /* G92: position := n[] (as int32) */
+	MO_BLK_ENABLE,     /* M17 */
+	MO_BLK_DISABLE,    /* M18 */
+	MO_BLK_PEN         /* M280: servo to q[0] us at q[1] per frame, then a dwell */
 };
 
 /*
@@ -54,7 +54,7 @@ typedef struct {
  * there); while the block executes, the step interrupt updates next[] and
  * err[] (or the fast form's t, tf, cnt) in place, so starting a segment
  * copies nothing.
- * For BLK_SETPOS the new position is in q[] (as int32).
+ * For MO_BLK_SETPOS the new position is in q[] (as int32).
  */
 typedef struct {
 	union {
@@ -69,12 +69,12 @@ typedef struct {
 	};
 	uint32_t cycles;   /* segment duration in CPU cycles */
 	uint32_t line;     /* line number of the command */
-	uint8_t type;      /* enum fb_block_type */
+	uint8_t type;      /* enum mo_block_type */
 	uint8_t dirs;      /* bit set = motor steps negative */
 	uint8_t power;     /* laser power during the segment */
 	uint8_t fast;      /* 1 = the fast form above is filled, not next..den */
 	uint8_t pdirs;     /* fast form: the direction pins' port bits */
-} fb_block_t;
+} mo_block_t;
 
 #define MO_NEVER 0xffffffffUL
 
@@ -91,11 +91,11 @@ uint8_t mo_boot(uint8_t power_on);
  * includes the block executing now; mo_status_t.waiting does not. */
 uint8_t mo_queue_count(void);
 uint8_t mo_queue_free(void);
-fb_block_t *mo_slot(void);
+mo_block_t *mo_slot(void);
 void mo_push(void);
 /* Give a filled MOVE block its fast form when it qualifies (AVR builds; main
  * loop, before mo_push, with interrupts on: a few hundred cycles). */
-void mo_seal(fb_block_t *b);
+void mo_seal(mo_block_t *b);
 /* Drop every queued block; only while the generator is stopped. */
 void mo_clear_queue(void);
 
@@ -104,9 +104,9 @@ void mo_clear_queue(void);
  * number of CPU cycles).  Returns FB_OK, or FB_ERR_TOO_FAST when a motor
  * would need an interval below min_interval cycles between steps.
  */
-uint8_t mo_prepare(fb_block_t *b, int32_t da, int32_t db, uint32_t p_us,
+uint8_t mo_prepare(mo_block_t *b, int32_t da, int32_t db, uint32_t p_us,
 		   uint32_t min_interval);
-uint8_t mo_prepare_cycles(fb_block_t *b, int32_t da, int32_t db, uint32_t cycles,
+uint8_t mo_prepare_cycles(mo_block_t *b, int32_t da, int32_t db, uint32_t cycles,
 			  uint32_t min_interval);
 
 /*
@@ -116,7 +116,7 @@ uint8_t mo_prepare_cycles(fb_block_t *b, int32_t da, int32_t db, uint32_t cycles
  * 20 ms servo frame; the block then lasts move_ms + settle_ms with no step,
  * so the next segment's first step waits until the pen has had its time.
  */
-void mo_prepare_pen(fb_block_t *b, uint16_t from_us, uint16_t to_us, uint16_t move_ms,
+void mo_prepare_pen(mo_block_t *b, uint16_t from_us, uint16_t to_us, uint16_t move_ms,
 		    uint16_t settle_ms);
 
 /*
@@ -192,8 +192,8 @@ void mo_fast_shift(uint16_t delta);
  * included.
  */
 typedef struct {
-	fb_block_t queue[CFG_QUEUE_SIZE];
-	fb_block_t *volatile cur;
+	mo_block_t queue[CFG_QUEUE_SIZE];
+	mo_block_t *volatile cur;
 	volatile uint8_t head, tail;
 } mo_state_t;
 

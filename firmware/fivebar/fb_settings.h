@@ -18,12 +18,12 @@ void settings_defaults(void);
 /* Derive fb_state.min_interval and the endstop set-up from the settings. */
 void settings_apply(void);
 /* CPU cycles per step at `rate` steps/s (rounded up). */
-uint32_t interval_for(int32_t rate);
+uint32_t settings_interval(int32_t rate);
 /* Motors whose switch lies in the negative direction ($13 clear bits). */
-uint8_t seek_neg_mask(void);
+uint8_t settings_seek_neg(void);
 /* $n=v */
-uint8_t exec_set(const fb_cmd_t *c);
+uint8_t settings_set(const proto_cmd_t *c);
 /* $$: one $n=v line per setting. */
-void list_settings(void);
+void settings_list(void);
 
 #endif

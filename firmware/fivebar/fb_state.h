@@ -22,7 +22,7 @@
 #include "fb_settings.h"
 
 /* why a job is held (the n of the status report's Hold:n) */
-enum { HOLD_HOST = 0, HOLD_LASER_TIMEOUT = 1, HOLD_ERROR = 2 };
+enum { FB_HOLD_HOST = 0, FB_HOLD_LASER_TIMEOUT = 1, FB_HOLD_ERROR = 2 };
 
 typedef struct {
 	/* '?': a status report is due.  Set: rx.  Cleared (and the report
@@ -43,7 +43,7 @@ typedef struct {
 	 * fb_exec.c (not idle), fb_report.c. */
 	volatile uint8_t homing;
 	/* The alarm in force (FB_ALARM_*, 0: none): commands but $ are locked
-	 * out.  Set: fb_main.c raise_alarm() (fb_home.c's failures, the step
+	 * out.  Set: fb_main.c fb_raise_alarm() (fb_home.c's failures, the step
 	 * generator's endstop alarm).  Cleared: fb_main.c at boot, fb_exec.c
 	 * ($X), fb_home.c (a homing that completed).  Read: rx ('!' is ignored),
 	 * fb_exec.c, fb_report.c. */
@@ -58,7 +58,7 @@ typedef struct {
 	/* The line numbering (fb_proto.c).  Written: fb_main.c (parsing a line,
 	 * a reset).  Read: fb_exec.c and fb_home.c (the line number of a
 	 * block), fb_report.c (resend:, Ln:). */
-	fb_lines_t lines;
+	proto_lines_t lines;
 	/* The $n settings in force.  Written: fb_settings.c (defaults at boot,
 	 * $n=v).  Read: fb_exec.c (limits), fb_home.c, fb_main.c ($6). */
 	int32_t settings[SET_COUNT];
@@ -70,8 +70,8 @@ typedef struct {
 extern fb_state_t fb_state;
 
 /* Stop motion, drop the queue, lock with alarm `code`, report ALARM:<code>. */
-void raise_alarm(uint8_t code);
+void fb_raise_alarm(uint8_t code);
 /* Feed the hardware watchdog if the step generator is alive (fb_main.c). */
-void feed_watchdog(void);
+void fb_feed_watchdog(void);
 
 #endif

@@ -23,7 +23,7 @@ int fake_irq_countdown;
 void (*fake_step_hook)(void);
 uint8_t fake_power_on;
 uint32_t fake_wdt_feeds;
-volatile fb_keep_t board_keep;
+volatile board_keep_t board_keep;
 uint16_t fake_ee_park = 0xffffu;
 uint16_t fake_pen_pulse;
 uint32_t fake_pen_frames;
