@@ -106,6 +106,13 @@ void board_wdt_feed(void);
  *   uint8_t board_endstops(void);            mask of the switches pressed now
  *   uint8_t board_irq_save(void);            mask interrupts, return old state
  *   void board_irq_restore(uint8_t state);
+ *   uint8_t board_dir_bits(uint8_t neg_mask); the direction pins' port bits
+ *                                            (a fast block keeps them)
+ *
+ * BOARD_FAST_PATH is 1 when the board's step interrupt runs blocks in their
+ * fast form (fb_fast.h) itself once mo_event() returns MO_FAST, as the
+ * ATmega328P's hand-written fast path does; 0 when every block runs on
+ * mo_event() (the host fake: it steps on the exact DDA schedule).
  */
 
 #ifdef __AVR__
@@ -177,7 +184,6 @@ BOARD_INLINE void board_steps_high(uint8_t mask)
 	BOARD_STEP_PORT |= bits;
 }
 
-/* Set the direction pins: bit set in neg_mask = that motor steps negative. */
 /* The direction pins' port bits for a neg_mask (bit set = motor steps
  * negative). */
 BOARD_INLINE uint8_t board_dir_bits(uint8_t neg_mask)
@@ -191,11 +197,13 @@ BOARD_INLINE uint8_t board_dir_bits(uint8_t neg_mask)
 	return bits;
 }
 
+/* Set the direction pins: bit set in neg_mask = that motor steps negative. */
 BOARD_INLINE void board_set_dirs(uint8_t neg_mask)
 {
 	BOARD_DIR_PORT = (uint8_t)((BOARD_DIR_PORT & (uint8_t)~BOARD_DIR_PINS) | board_dir_bits(neg_mask));
 }
 
+#define BOARD_FAST_PATH 1
 #define BOARD_PSTR(s) PSTR(s)
 #define BOARD_PROGMEM PROGMEM
 static inline char board_pgm_char(const char *p) { return (char)pgm_read_byte(p); }
@@ -207,6 +215,8 @@ void board_laser(uint8_t power);
 uint8_t board_endstops(void);
 uint8_t board_irq_save(void);
 void board_irq_restore(uint8_t state);
+uint8_t board_dir_bits(uint8_t neg_mask);
+#define BOARD_FAST_PATH 0
 #define BOARD_PSTR(s) (s)
 #define BOARD_PROGMEM
 static inline char board_pgm_char(const char *p) { return *p; }

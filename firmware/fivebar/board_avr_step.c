@@ -6,7 +6,7 @@
  * handled by one of two paths, chosen by GPIOR0 bit FL_SLOW:
  *
  *  - the fast path, hand-written below, for blocks with the fast form
- *    (fb_motion.h mo_fast_t: plain moves of up to 16383 steps at >= 977
+ *    (fb_fast.h fast_t: plain moves of up to 16383 steps at >= 977
  *    steps/s per motor).  The pins of the pending event are in GPIOR1, so
  *    the rising edges leave ten cycles after the vector, whatever the
  *    bookkeeping: the steps left (the kept record's left[]: a block's steps
@@ -15,7 +15,7 @@
  *    the pick of the next event, and the switch to the next block when it is
  *    fast too and keeps the laser power (Ln done, its steps into the kept
  *    position, direction pins, its times).
- *    When the other motor's step follows within MO_PAIR_CYCLES (too close
+ *    When the other motor's step follows within FAST_PAIR_CYCLES (too close
  *    to leave and come back) the pick marks a pair (GPIOR0 FL_PAIR, its time
  *    in board_t2, its pins in GPIOR2) and the same interrupt waits for it;
  *    anything closer than LEAVE_CYCLES when the interrupt ends is waited for
@@ -28,8 +28,8 @@
  *
  * Step pins rise by writing PIND (which toggles PORTD bits: the pins are low
  * before) and fall together by a PORTD write at least PULSE_MIN cycles later.
- * The C version of the pick, fast_pick() in fb_motion.c, is the reference the
- * assembly follows.
+ * fb_fast.c is the portable C the assembly follows: the form, the pick
+ * (fast_pick) and the one-event step (fast_next).
  */
 #ifdef __AVR__
 
@@ -51,7 +51,7 @@
 #define FL_SLOW 0   /* the pending event is the C path's */
 #define FL_ENDED 1  /* ... and it is the end of a fast block */
 #define FL_PAIR 2   /* the pending fast event has a second edge at board_t2 */
-#define FL_CLOSE 3  /* ... within PAIR_CLOSE cycles: a counted wait of board_gap */
+#define FL_CLOSE 3  /* ... a close pair (fb_fast.h): a counted wait of board_gap */
 #define FL_ADONE 4  /* the running fast block's motor A has no step left */
 #define FL_BDONE 5  /* ... and motor B (the fast path's pick reads these) */
 
@@ -92,8 +92,8 @@ _Static_assert(offsetof(board_keep_t, done) == K_DONE &&
 	       offsetof(board_keep_t, left) == K_LEFT && offsetof(board_keep_t, fdirs) == K_FDIRS &&
 	       offsetof(board_keep_t, ndone) == K_NDONE,
 	       "fast path keep offsets");
-_Static_assert(MO_PAIR_CYCLES < 200, "the waits of a pair stay below 128 cycles");
-_Static_assert(MO_PAIR_CYCLES < 256, "the fast path compares -d's low byte");
+_Static_assert(FAST_PAIR_CYCLES < 200, "the waits of a pair stay below 128 cycles");
+_Static_assert(FAST_PAIR_CYCLES < 256, "the fast path compares -d's low byte");
 /* the fast path writes PIND and PORTD */
 #define FB_PORT_IS_D_D 1
 #if !BOARD_CAT(FB_PORT_IS_D_, PIN_STEP_PORT) || !BOARD_CAT(FB_PORT_IS_D_, PIN_DIR_PORT)
@@ -107,22 +107,18 @@ _Static_assert(MO_PAIR_CYCLES < 256, "the fast path compares -d's low byte");
 /* Leave the interrupt only when the next event is at least this far: else
  * it would come while the interrupt is still returning. */
 #define LEAVE_CYCLES 48
-/* A pair's second edge closer than this (after the first edge) is a close
- * pair: the entry path waits a counted board_gap for it. */
-#define PAIR_CLOSE 80
 /* A farther pair's first motor's bookkeeping runs before the second edge
  * when that edge is at least this far when the interrupt looks (the
  * bookkeeping and the wait's set-up take about 56); closer, it waits first
- * (waiting first whenever the edge was within PAIR_CLOSE spent ~40 cycles of
+ * (waiting first whenever the edge was within FAST_CLOSE_CYCLES spent ~40 cycles of
  * each pair at 90-110 cycles spinning). */
 #define PAIR_BK1 60
 /* The waits end this many cycles after the event time, so that an edge
  * placed by waiting leaves when an interrupt's would (measured). */
 #define SPIN_LAG 8
-/* A close pair's second edge leaves 14 + 3 * floor(board_gap / 3) cycles
- * after the first (the instructions between the two in the entry path):
- * board_gap = gap - CLOSE_OVH puts it within a cycle of the gap.  Gaps below
- * PAIR_TINY are one edge at the later time (the first motor <= 7 cycles late). */
+/* A close pair's (fb_fast.h) second edge leaves 14 + 3 * floor(board_gap / 3)
+ * cycles after the first (the instructions between the two in the entry
+ * path): board_gap = gap - CLOSE_OVH puts it within a cycle of the gap. */
 #define CLOSE_OVH 13
 /* fast_start() arms the first event of a block no closer than START_MARGIN
  * cycles after it reads the timer (its writes of OCR1A take about 20); a
@@ -130,7 +126,6 @@ _Static_assert(MO_PAIR_CYCLES < 256, "the fast path compares -d's low byte");
  * (the shift takes about 60 more). */
 #define START_MARGIN 48
 #define START_SHIFT 128
-#define PAIR_TINY 8
 
 #define S_(x) #x
 #define S(x) S_(x)
@@ -271,7 +266,7 @@ ISR(TIMER1_COMPA_vect, ISR_NAKED)
 		"rjmp fp_pick_a\n"
 	"fp_steps_b:\n\t"
 		STEP_MOTOR(1, "sb")
-	/* ---- pick the next event (fast_pick() in fb_motion.c); the motor
+	/* ---- pick the next event (fast_pick() in fb_fast.c); the motor
 	 * stepped last has its next time in r18:r19 unless it is done ---- */
 		"clr r25\n\t"
 		"sts %[keep]+" S(K_BUSY) ", r25\n\t"
@@ -303,7 +298,7 @@ ISR(TIMER1_COMPA_vect, ISR_NAKED)
 		"ldi r24, " S(STEPS_MASK) "\n\t"            /* same time */
 		"rjmp fp_arm\n"
 	"1:\n\t"                                       /* A first, B d later */
-		"cpi r26, " S(MO_PAIR_CYCLES) "\n\t"
+		"cpi r26, " S(FAST_PAIR_CYCLES) "\n\t"
 		"ldi r25, 0\n\t"
 		"cpc r27, r25\n\t"
 		"brsh fp_arm\n\t"
@@ -321,7 +316,7 @@ ISR(TIMER1_COMPA_vect, ISR_NAKED)
 		"com r27\n\tneg r26\n\tsbci r27, 0xff\n\t" /* -d */
 		"tst r27\n\t"
 		"brne fp_b_far\n\t"
-		"cpi r26, " S(MO_PAIR_CYCLES) "\n\t"
+		"cpi r26, " S(FAST_PAIR_CYCLES) "\n\t"
 		"brsh fp_b_far\n\t"
 		"movw r26, r24\n\t"
 		"ldi r24, " S(1 << STEP_B_BIT) "\n\t"
@@ -331,9 +326,9 @@ ISR(TIMER1_COMPA_vect, ISR_NAKED)
 		"sts %[t2]+1, r27\n\t"
 		"out %[gp2], r25\n\t"
 		"sub r26, r18\n\t"                     /* the gap (< 150) */
-		"cpi r26, " S(PAIR_CLOSE) "\n\t"
+		"cpi r26, " S(FAST_CLOSE_CYCLES) "\n\t"
 		"brsh 3f\n\t"
-		"cpi r26, " S(PAIR_TINY) "\n\t"
+		"cpi r26, " S(FAST_TINY_CYCLES) "\n\t"
 		"brsh 1f\n\t"
 		"or r24, r25\n\t"                     /* tiny: both at the later time */
 		"lds r18, %[t2]\n\t"
@@ -597,23 +592,28 @@ static uint8_t step_pins(uint8_t motors)
 /* Start the fast block mo_event() just started at timer time base. */
 static void fast_start(uint16_t base)
 {
-	uint16_t t, t2;
-	uint8_t bits, bits2;
-	uint8_t rest = mo_fast_begin(base, &t, &bits, &t2, &bits2);
-	uint8_t pins = step_pins(bits), flags = 0;
-	GPIOR2 = step_pins(bits2);
-	if (bits2) {
-		/* as the assembly's fp_pair_set */
+	fast_event_t e;
+	uint8_t rest = mo_fast_begin(base, &e);
+	uint16_t t = e.t, t2 = e.t2;
+	uint8_t pins = step_pins(e.bits), flags = 0;
+	GPIOR2 = step_pins(e.bits2);
+	/* as the assembly's fp_pair_set */
+	switch (fast_kind(&e)) {
+	case FAST_TINY:
+		pins = step_pins((uint8_t)(e.bits | e.bits2));
+		t = t2;
+		break;
+	case FAST_CLOSE: {
 		uint16_t gap = (uint16_t)(t2 - t);
-		if (gap < PAIR_TINY) {
-			pins = step_pins((uint8_t)(bits | bits2));
-			t = t2;
-		} else if (gap < PAIR_CLOSE) {
-			board_gap = (uint8_t)(gap > CLOSE_OVH ? gap - CLOSE_OVH : 0u);
-			flags = (uint8_t)(1u << FL_CLOSE);
-		} else {
-			flags = (uint8_t)(1u << FL_PAIR);
-		}
+		board_gap = (uint8_t)(gap > CLOSE_OVH ? gap - CLOSE_OVH : 0u);
+		flags = (uint8_t)(1u << FL_CLOSE);
+		break;
+	}
+	case FAST_PAIR:
+		flags = (uint8_t)(1u << FL_PAIR);
+		break;
+	default:
+		break;
 	}
 	GPIOR1 = pins;
 	if (!mo_state.cur->f.cnt[0])

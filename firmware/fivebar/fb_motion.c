@@ -48,7 +48,7 @@ static volatile uint16_t p_now16, p_target, p_park, p_step16, p_saved, p_time;
 #define FB_KEEP_MAGIC 0xFB5AFE17UL
 /* off is folded into base when a step of the C path takes it to +-OFF_FOLD,
  * and by the main loop (mo_fold) from +-MAIN_FOLD: a fast block adds all its
- * steps (at most MO_FAST_NMAX) when it starts, so off stays in range as long
+ * steps (at most FAST_NMAX) when it starts, so off stays in range as long
  * as the main loop runs once while a block of that size executes (0.27 s at
  * 60 kHz; one main loop pass takes tens of milliseconds at most, measured
  * under the busiest step interrupt) */
@@ -121,7 +121,7 @@ uint8_t mo_boot(uint8_t power_on)
 	uint8_t kept = !power_on && K.busy == 0 && K.homed <= 1 && K.check == keep_sum() &&
 		       K.ndone == ~K.done && K.fdirs <= 3u;
 	for (uint8_t i = 0; kept && i < 2; i++)
-		if (K.left[i] > MO_FAST_NMAX || keep_pos(i) > CFG_POS_LIMIT ||
+		if (K.left[i] > FAST_NMAX || keep_pos(i) > CFG_POS_LIMIT ||
 		    keep_pos(i) < -CFG_POS_LIMIT)
 			kept = 0;
 	if (kept)
@@ -256,64 +256,28 @@ uint8_t mo_prepare_cycles(mo_block_t *b, int32_t da, int32_t db, uint32_t cycles
 	return st;
 }
 
-#ifdef __AVR__
-/* floor(m * 65536 / n) for m < n < 32768: 16 steps of long division, a
- * fraction of __udivmodsi4's cycles (the main loop runs this per block). */
-static uint16_t frac16(uint16_t m, uint16_t n)
+uint8_t mo_fast_form(const mo_block_t *b, fast_t *f)
 {
-	uint16_t q = 0;
-	for (uint8_t i = 0; i < 16; i++) {
-		m = (uint16_t)(m << 1);
-		q = (uint16_t)(q << 1);
-		if (m >= n) {
-			m = (uint16_t)(m - n);
-			q |= 1u;
-		}
-	}
-	return q;
-}
-#endif
-
-void mo_seal(mo_block_t *b)
-{
-	b->fast = 0;
-#ifdef __AVR__
 	if (b->type != MO_BLK_MOVE || s_es_enabled)
-		return;
+		return 0;
 	uint32_t n[2], q[2], m[2];
-	uint16_t tail = 0xffffu;
 	for (uint8_t i = 0; i < 2; i++) {
 		n[i] = b->next[i] == MO_NEVER ? 0 : b->den[i] >> 1;
 		q[i] = b->q[i];
 		m[i] = b->r2[i] >> 1;
-		if (n[i] > MO_FAST_NMAX || (n[i] && q[i] > MO_FAST_QMAX))
-			return;
 	}
-	if (!n[0] && !n[1])
-		return;  /* a pure dwell: the C path's waits */
-	mo_fast_t f;
-	for (uint8_t i = 0; i < 2; i++) {
-		f.cnt[i] = (uint16_t)n[i];
-		if (!n[i]) {
-			f.t[i] = f.tf[i] = f.q[i] = f.qf[i] = 0;
-			continue;
-		}
-		uint16_t qf = frac16((uint16_t)m[i], (uint16_t)n[i]);
-		f.q[i] = (uint16_t)q[i];
-		f.qf[i] = qf;
-		/* step 1 at C/2n = (q + qf/65536) / 2 */
-		f.t[i] = (uint16_t)(q[i] >> 1);
-		f.tf[i] = (uint16_t)(((q[i] & 1u) << 15) | (qf >> 1));
-		/* C - floor((2n-1)C/2n) = ceil(C/2n), with C = qn + m, m < n */
-		uint16_t ti = (uint16_t)((q[i] & 1u) ? (q[i] + 1u) >> 1 : (q[i] >> 1) + (m[i] ? 1u : 0u));
-		if (ti < tail)
-			tail = ti;
-	}
-	f.tail = tail;
+	return fast_form(f, n, q, m);
+}
+
+void mo_seal(mo_block_t *b)
+{
+	fast_t f;
+	b->fast = 0;
+	if (!BOARD_FAST_PATH || !mo_fast_form(b, &f))
+		return;
 	b->f = f;
 	b->pdirs = board_dir_bits(b->dirs);
 	b->fast = 1;
-#endif
 }
 
 void mo_prepare_pen(mo_block_t *b, uint16_t from_us, uint16_t to_us, uint16_t move_ms,
@@ -570,40 +534,10 @@ uint16_t mo_event(void)
 	return t ? (uint16_t)t : 1u;
 }
 
-/* Pick the next event of a fast block: the earlier of the live motors' next
- * steps (both when equal), and the other one when it follows within
- * MO_PAIR_CYCLES.  board_avr.c's fast interrupt does the same in assembly. */
-static void fast_pick(const mo_fast_t *f, uint16_t *t, uint8_t *bits, uint16_t *t2,
-		      uint8_t *bits2)
+uint8_t mo_fast_begin(uint16_t base, fast_event_t *e)
 {
-	*bits2 = 0;
-	if (!f->cnt[1]) {
-		*t = f->t[0];
-		*bits = 1;
-		return;
-	}
-	if (!f->cnt[0]) {
-		*t = f->t[1];
-		*bits = 2;
-		return;
-	}
-	int16_t d = (int16_t)(f->t[1] - f->t[0]);
-	uint8_t first = d < 0 ? 1u : 0u;
-	*t = f->t[first];
-	*bits = (uint8_t)(1u << first);
-	if (d == 0) {
-		*bits = 3;
-	} else if ((uint16_t)(d < 0 ? -d : d) < MO_PAIR_CYCLES) {
-		*t2 = f->t[first ^ 1u];
-		*bits2 = (uint8_t)(2u >> first);
-	}
-}
-
-uint8_t mo_fast_begin(uint16_t base, uint16_t *t, uint8_t *bits, uint16_t *t2, uint8_t *bits2)
-{
-	mo_fast_t *f = &mo_state.cur->f;
-	f->t[0] = (uint16_t)(f->t[0] + base);
-	f->t[1] = (uint16_t)(f->t[1] + base);
+	fast_t *f = &mo_state.cur->f;
+	fast_begin(f, base);
 	uint8_t dirs = mo_state.cur->dirs;
 	K.busy = 1;
 	for (uint8_t i = 0; i < 2; i++) {
@@ -613,7 +547,7 @@ uint8_t mo_fast_begin(uint16_t base, uint16_t *t, uint8_t *bits, uint16_t *t2, u
 	}
 	K.fdirs = dirs;
 	K.busy = 0;
-	fast_pick(f, t, bits, t2, bits2);
+	fast_pick(f, f->cnt, e);
 	return s_rest;
 }
 

@@ -13,6 +13,7 @@
 
 #include <stdint.h>
 #include "config.h"
+#include "fb_fast.h"
 
 enum mo_block_type {
 	MO_BLK_MOVE = 0,   /* steps both motors over a duration */
@@ -24,35 +25,9 @@ enum mo_block_type {
 };
 
 /*
- * The fast form of a MOVE block (AVR builds, see board_avr.c): both motors on
- * 16-bit times with a 16-bit fraction, stepped by the hand-written part of
- * the step interrupt.  Step k of a motor is at t1 + (k-1) * (q + qf/65536)
- * with t1 = (q + qf/65536) / 2: the DDA time floor((2k-1)C/2n) or one cycle
- * before it (the fraction is cut, never rounded up: at most k/65536 cycle
- * early in all, < 1/4 cycle for the n <= MO_FAST_NMAX allowed).  t[] are
- * cycles from the block start until the block starts, timer times after.
- * tail = cycles from the block's last step to its end.
- */
-typedef struct {
-	uint16_t t[2];     /* next step of motor i */
-	uint16_t tf[2];    /* its fraction, 1/65536 cycle */
-	uint16_t q[2];     /* whole cycles between steps */
-	uint16_t qf[2];    /* fraction of a cycle between steps, 1/65536 */
-	uint16_t cnt[2];   /* steps left, the next one included; 0 = done */
-	uint16_t tail;
-} mo_fast_t;
-
-/* A block takes the fast form when each moving motor has n <= MO_FAST_NMAX
- * steps at intervals q <= MO_FAST_QMAX cycles (so every time difference the
- * interrupt compares stays below 32768), endstop supervision ($7) is off and
- * the block is a plain MOVE. */
-#define MO_FAST_NMAX 16383u
-#define MO_FAST_QMAX 16383u
-
-/*
  * One queue entry.  The main loop fills every field (all divisions happen
  * there); while the block executes, the step interrupt updates next[] and
- * err[] (or the fast form's t, tf, cnt) in place, so starting a segment
+ * err[] (or the fast form's t and tf) in place, so starting a segment
  * copies nothing.
  * For MO_BLK_SETPOS the new position is in q[] (as int32).
  */
@@ -65,7 +40,7 @@ typedef struct {
 			uint32_t r2[2];    /* 2 * (cycles % n) */
 			uint32_t den[2];   /* 2 * n */
 		};
-		mo_fast_t f;       /* when fast is 1 */
+		fast_t f;          /* when fast is 1 (fb_fast.h) */
 	};
 	uint32_t cycles;   /* segment duration in CPU cycles */
 	uint32_t line;     /* line number of the command */
@@ -93,8 +68,12 @@ uint8_t mo_queue_count(void);
 uint8_t mo_queue_free(void);
 mo_block_t *mo_slot(void);
 void mo_push(void);
-/* Give a filled MOVE block its fast form when it qualifies (AVR builds; main
- * loop, before mo_push, with interrupts on: a few hundred cycles). */
+/* The fast form (fb_fast.h) of a filled block, 1 when it takes one: a plain
+ * MOVE that fast_form() accepts, with endstop supervision ($7) off. */
+uint8_t mo_fast_form(const mo_block_t *b, fast_t *f);
+/* Give a filled block its fast form when it takes one and the board runs
+ * fast blocks (BOARD_FAST_PATH); main loop, before mo_push, with interrupts
+ * on: a few hundred cycles. */
 void mo_seal(mo_block_t *b);
 /* Drop every queued block; only while the generator is stopped. */
 void mo_clear_queue(void);
@@ -155,19 +134,14 @@ uint16_t mo_event(void);
 #define MO_FAST 0xffffu
 
 /*
- * The fast path's side of the queue (AVR builds; board_avr.c).  The first
- * event of a fast block that mo_event() started at timer time base: the
- * block's times become timer times, *t and *bits = the first event and the
- * motors stepping at it (bit 0 = A, 1 = B); when the other motor's first
- * step follows within MO_PAIR_CYCLES, *t2 and *bits2 are it (else *bits2 = 0).
- * Returns 1 when the block starts from a stop (the first after mo_start()):
- * only then may the board start its whole timeline later.
+ * The fast path's side of the queue (boards with BOARD_FAST_PATH).  The fast
+ * block mo_event() started begins at timer time base: its times become
+ * timer times, its steps go into the kept position (board.h) and *e is its
+ * first event (fast_pick).  Returns 1 when the block starts from a stop (the
+ * first after mo_start()): only then may the board start its whole
+ * timeline later.
  */
-/* 120: a step farther behind the previous one than that gets an interrupt of
- * its own (the waits for pairs at 120-180 took more of the CPU than the
- * extra interrupts; measured with benchmarks/firmware.py --at 55) */
-#define MO_PAIR_CYCLES 120
-uint8_t mo_fast_begin(uint16_t base, uint16_t *t, uint8_t *bits, uint16_t *t2, uint8_t *bits2);
+uint8_t mo_fast_begin(uint16_t base, fast_event_t *e);
 /* The fast interrupt stepped the running block to its end (its boundary is
  * the pending event): the next mo_event() call handles that boundary. */
 void mo_fast_end(void);

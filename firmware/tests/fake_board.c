@@ -161,6 +161,7 @@ void board_steps_high(uint8_t mask)
 }
 
 void board_set_dirs(uint8_t neg_mask) { fake_dirs = neg_mask; }
+uint8_t board_dir_bits(uint8_t neg_mask) { return neg_mask; }
 void board_enable_motors(uint8_t on) { fake_enabled = on; }
 void board_laser(uint8_t power) { fake_laser = power; }
 uint8_t board_endstops(void) { return fake_endstops; }

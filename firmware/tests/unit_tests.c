@@ -1140,7 +1140,7 @@ static void test_kept_record(void)
 	board_keep.fdirs = 2;
 	reboot(0);
 	expect("?", "<Idle|A:7,B:11|Q:0|Ln:1,0|L:0|U:0|H:1|P:0>\r\n");
-	board_keep.left[0] = MO_FAST_NMAX + 1u;
+	board_keep.left[0] = FAST_NMAX + 1u;
 	reboot(0);
 	expect("?", power_on);
 	run_lines("G92 A7 B8\n");
