@@ -4,9 +4,10 @@
  */
 #include "fb_fast.h"
 
-/* floor(m * 65536 / n) for m < n < 32768: 16 steps of long division, a
- * fraction of __udivmodsi4's cycles (the main loop runs this per block). */
-static uint16_t frac16(uint16_t m, uint16_t n)
+/* floor(m * 65536 / n) for m < n < 32768, its remainder in *r: 16 steps of
+ * long division, a fraction of __udivmodsi4's cycles (the main loop runs
+ * this per block). */
+static uint16_t frac16(uint16_t m, uint16_t n, uint16_t *r)
 {
 	uint16_t q = 0;
 	for (uint8_t i = 0; i < 16; i++) {
@@ -17,6 +18,7 @@ static uint16_t frac16(uint16_t m, uint16_t n)
 			q |= 1u;
 		}
 	}
+	*r = m;
 	return q;
 }
 
@@ -34,14 +36,24 @@ uint8_t fast_form(fast_t *f, const uint32_t n[2], const uint32_t q[2], const uin
 			f->t[i] = f->tf[i] = f->q[i] = f->qf[i] = 0;
 			continue;
 		}
-		uint16_t qf = frac16((uint16_t)m[i], (uint16_t)n[i]);
+		uint16_t r;
+		uint16_t qf = frac16((uint16_t)m[i], (uint16_t)n[i], &r);
 		f->q[i] = (uint16_t)q[i];
 		f->qf[i] = qf;
 		/* step 1 at C/2n = (q + qf/65536) / 2 */
 		f->t[i] = (uint16_t)(q[i] >> 1);
 		f->tf[i] = (uint16_t)(((q[i] & 1u) << 15) | (qf >> 1));
-		/* C - floor((2n-1)C/2n) = ceil(C/2n), with C = qn + m, m < n */
+		/* the block ends C cycles after its start: ti = C less this
+		 * motor's last step.  The DDA puts it at floor((2n-1)C/2n), so
+		 * C - that = ceil(C/2n) (C = qn + m, m < n).  The cut puts it
+		 * a cycle earlier when the fraction of (2n-1)C/2n, j/2n with
+		 * j = -C mod 2n, is below what the cut lost, (2n-1)r/(2^17 n)
+		 * (r / 2^16 n of C/n, 2n-1 halves of it): 2^16 j < (2n-1) r. */
 		uint16_t ti = (uint16_t)((q[i] & 1u) ? (q[i] + 1u) >> 1 : (q[i] >> 1) + (m[i] ? 1u : 0u));
+		uint16_t n2 = (uint16_t)(n[i] << 1), c2 = (uint16_t)((q[i] & 1u) ? m[i] + n[i] : m[i]);
+		uint16_t j = c2 ? (uint16_t)(n2 - c2) : 0u;
+		if (((uint32_t)j << 16) < (uint32_t)(n2 - 1u) * r)
+			ti++;
 		if (ti < tail)
 			tail = ti;
 	}

@@ -14,9 +14,9 @@
  * at floor((2k-1) * Q / 2) with Q = floor(65536 C / n), the timer time its
  * whole part.  That is the DDA time floor((2k-1)C/2n) or one cycle before
  * it (the cut loses less than k/65536 cycle, < 1/4 for n <= FAST_NMAX); the
- * same when 65536 (C mod n) is a multiple of n.  The block ends tail cycles
- * after its last step, the DDA's C - floor((2n-1)C/2n) of the motor that
- * steps last.
+ * same when 65536 (C mod n) is a multiple of n.  The block ends exactly C
+ * cycles after its start (tail after its last step, which the cut may have
+ * moved), so the next block starts on the DDA's time.
  *
  * Motor masks: bit 0 = A, bit 1 = B.  No floats, no division outside
  * fast_form() (main loop).
