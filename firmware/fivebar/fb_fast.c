@@ -1,8 +1,18 @@
 /*
  * fb_fast.c - the fast form of a block and its events, in portable C (see
  * fb_fast.h): the specification board_avr_step.c's assembly follows.
+ *
+ * Built with -DFB_FAST_MUTANT=n it is deliberately wrong in one place, so
+ * that tests/fast_tests.c can be seen to fail (`make fast-mutant MUTANT=n`,
+ * tests/firmware/test_unit_c.py):
+ *   1  the pick pairs steps FAST_PAIR_CYCLES apart (its bound off by one)
+ *   2  a motor's next time drops the carry of the fraction's add
  */
 #include "fb_fast.h"
+
+#ifndef FB_FAST_MUTANT
+#define FB_FAST_MUTANT 0
+#endif
 
 /* floor(m * 65536 / n) for m < n < 32768, its remainder in *r: 16 steps of
  * long division, a fraction of __udivmodsi4's cycles (the main loop runs
@@ -89,7 +99,7 @@ void fast_pick(const fast_t *f, const uint16_t left[2], fast_event_t *e)
 	e->bits = (uint8_t)(1u << first);
 	if (d == 0) {
 		e->bits = 3;
-	} else if (gap < FAST_PAIR_CYCLES) {
+	} else if (gap < FAST_PAIR_CYCLES + (FB_FAST_MUTANT == 1)) {
 		e->t2 = f->t[first ^ 1u];
 		e->bits2 = (uint8_t)(2u >> first);
 	}
@@ -103,4 +113,32 @@ uint8_t fast_kind(const fast_event_t *e)
 	if (gap < FAST_TINY_CYCLES)
 		return FAST_TINY;
 	return gap < FAST_CLOSE_CYCLES ? FAST_CLOSE : FAST_PAIR;
+}
+
+/* Motor i's next time: t.tf += q.qf, the fraction's carry into t. */
+static void advance(fast_t *f, uint8_t i)
+{
+	uint32_t tf = (uint32_t)f->tf[i] + f->qf[i];
+	f->tf[i] = (uint16_t)tf;
+	f->t[i] = (uint16_t)(f->t[i] + f->q[i] + (FB_FAST_MUTANT == 2 ? 0u : tf >> 16));
+}
+
+uint8_t fast_next(fast_t *f, uint16_t left[2], fast_event_t *e)
+{
+	uint8_t bits = (uint8_t)(e->bits | e->bits2);
+	/* the event's time, which the block's end counts from: a pair's is its
+	 * second edge (the interrupt's board_sched) */
+	uint16_t now = e->bits2 ? e->t2 : e->t;
+	for (uint8_t i = 0; i < 2; i++) {
+		/* after a motor's last step its time stays: it is done */
+		if ((bits & (1u << i)) && --left[i])
+			advance(f, i);
+	}
+	if (!left[0] && !left[1]) {
+		e->t = (uint16_t)(now + f->tail);
+		e->bits = e->bits2 = 0;
+		return 0;
+	}
+	fast_pick(f, left, e);
+	return 1;
 }

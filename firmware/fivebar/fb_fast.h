@@ -1,12 +1,15 @@
 /*
- * fb_fast.h - the fast form of a block, in portable C: the form itself and
- * the pick of the next event.
+ * fb_fast.h - the fast form of a block, in portable C: the form itself, the
+ * pick of the next event and the one-event step.
  *
  * The step interrupt's fast path (board_avr_step.c, hand-written assembly)
  * executes blocks in this form; this module is its executable specification.
  * The AVR build uses fast_form() when the main loop queues a block
  * (mo_seal) and fast_pick() when the C path starts a fast block
- * (mo_fast_begin); the assembly does the rest in the interrupt.
+ * (mo_fast_begin); the assembly does fast_next()'s work in the interrupt,
+ * making the same decisions.  tests/fast_tests.c runs fast_next() over
+ * random blocks against the DDA schedule; the emulator's pin trace checks
+ * the assembly (tests/firmware, benchmarks/firmware.py).
  *
  * Both motors run on 16-bit timer times with a 16-bit fraction.  Step k of a
  * motor is at t1 + (k-1) * (q + qf/65536) with t1 = (q + qf/65536) / 2, where
@@ -93,5 +96,13 @@ void fast_pick(const fast_t *f, const uint16_t left[2], fast_event_t *e);
 
 /* FAST_ONE (one edge at e->t), or how a pair is issued (see FAST_PAIR_CYCLES). */
 uint8_t fast_kind(const fast_event_t *e);
+
+/*
+ * The one-event step, what the fast interrupt does once the edges of *e have
+ * left: count the steps of its motors in left[], advance their next times,
+ * and pick the following event into *e.  Returns 1, or 0 once both motors
+ * are done: *e is then the block's end (bits 0) at its last event + tail.
+ */
+uint8_t fast_next(fast_t *f, uint16_t left[2], fast_event_t *e);
 
 #endif
