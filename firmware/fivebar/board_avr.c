@@ -269,7 +269,7 @@ uint32_t board_ms(void)
 }
 
 /*
- * The serial interrupts let the step interrupt in (board_avr_step.c): a
+ * The serial interrupts let the step interrupt in (board_avr_step.[cS]): a
  * naked stub masks the interrupt's own source in UCSR0B (so it cannot come
  * again before its byte is handled, and bytes keep their order), enables
  * interrupts, saves the registers a C call may change and calls the handler,

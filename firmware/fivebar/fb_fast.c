@@ -1,6 +1,6 @@
 /*
  * fb_fast.c - the fast form of a block and its events, in portable C (see
- * fb_fast.h): the specification board_avr_step.c's assembly follows.
+ * fb_fast.h): the specification board_avr_step.S's assembly follows.
  *
  * Built with -DFB_FAST_MUTANT=n it is deliberately wrong in one place, so
  * that tests/fast_tests.c can be seen to fail (`make fast-mutant MUTANT=n`,
@@ -127,7 +127,7 @@ uint8_t fast_next(fast_t *f, uint16_t left[2], fast_event_t *e)
 {
 	uint8_t bits = (uint8_t)(e->bits | e->bits2);
 	/* the event's time, which the block's end counts from: a pair's is its
-	 * second edge (the interrupt's board_sched) */
+	 * second edge (the interrupt's board_step.sched) */
 	uint16_t now = e->bits2 ? e->t2 : e->t;
 	for (uint8_t i = 0; i < 2; i++) {
 		/* after a motor's last step its time stays: it is done */

@@ -2,7 +2,7 @@
  * fb_fast.h - the fast form of a block, in portable C: the form itself, the
  * pick of the next event and the one-event step.
  *
- * The step interrupt's fast path (board_avr_step.c, hand-written assembly)
+ * The step interrupt's fast path (board_avr_step.S, hand-written assembly)
  * executes blocks in this form; this module is its executable specification.
  * The AVR build uses fast_form() when the main loop queues a block
  * (mo_seal) and fast_pick() when the C path starts a fast block

@@ -594,7 +594,7 @@ uint8_t mo_running(void) { return s_running; }
 
 uint8_t mo_alive(void)
 {
-	/* the fast path (board_avr_step.c) sets no beat: each of its steps
+	/* the fast path (board_avr_step.S) sets no beat: each of its steps
 	 * counts a kept left[] down, which changes its low byte, so a change of
 	 * a low byte since the last look is its beat (read outside the
 	 * interrupts-off section: one byte is read whole) */

@@ -150,7 +150,7 @@ void mo_fast_end(void);
 void mo_fast_shift(uint16_t delta);
 /*
  * The queue and its running block: the state fb_motion.c shares with the
- * board's fast path (board_avr_step.c), which reads and writes these fields
+ * board's fast path (board_avr_step.S), which reads and writes these fields
  * in the step interrupt.  Writers:
  *   queue[]  the entry at head: the main loop (mo_slot(), before mo_push());
  *            the running block: the step interrupt, in place (the C form's
