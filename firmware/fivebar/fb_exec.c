@@ -81,7 +81,8 @@ static uint8_t commit_block(void)
 	return ok;
 }
 
-/* mo_start() unless *cancel (f_reset, f_home_abort) was set by an interrupt. */
+/* mo_start() unless *cancel (fb_state.f_reset or .f_home_abort) was set by
+ * an interrupt: tested with interrupts off, so none sets it in between. */
 void exec_start_unless(volatile uint8_t *cancel)
 {
 	uint8_t sreg = board_irq_save();

@@ -19,7 +19,8 @@ void exec_reset(void);
 /* Execute c: FB_OK, an error code, or EXEC_WAIT (call again with the same c
  * once the queue has room; a G6 line keeps its progress in between). */
 uint8_t exec_command(const proto_cmd_t *c);
-/* mo_start() unless *cancel (f_reset, f_home_abort) was set by an interrupt. */
+/* mo_start() unless *cancel (fb_state.f_reset or .f_home_abort) was set by
+ * an interrupt. */
 void exec_start_unless(volatile uint8_t *cancel);
 /* Start the queued blocks once enough are queued or the first has waited. */
 void exec_maybe_start(void);

@@ -152,18 +152,20 @@ void mo_fast_shift(uint16_t delta);
  * The queue and its running block: the state fb_motion.c shares with the
  * board's fast path (board_avr_step.S), which reads and writes these fields
  * in the step interrupt.  Writers:
- *   queue[]  the entry at head: the main loop (mo_slot(), before mo_push());
- *            the running block: the step interrupt, in place (the C form's
- *            next[] and err[], or the fast form's times); no one else
+ *   queue[]  the entry at head: the main loop (mo_slot() and the caller,
+ *            before mo_push()); the running block: the step interrupt, in
+ *            place (the C form's next[] and err[], or the fast form's
+ *            times), and mo_fast_shift() as a hold resumes (interrupts off)
  *   cur      the running block, 0 between blocks: the step interrupt (C path
  *            boundary(), the fast path's switch to the next block);
- *            mo_init() and mo_stop() with interrupts off
+ *            mo_init(), mo_start() and mo_stop() with interrupts off
  *   head     the next entry to fill: the main loop (mo_push(), mo_init())
  *   tail     the running or next entry to run: the step interrupt (both
  *            paths, as blocks end); mo_init(), mo_stop(), mo_clear_queue()
  *            with the generator stopped or interrupts off
- * Indices run free (mod 256); head - tail is the count, the running block
- * included.
+ * Readers: the step interrupt (all of it), the main loop (head - tail, the
+ * count; cur in mo_status()).  Indices run free (mod 256); head - tail is
+ * the count, the running block included.
  */
 typedef struct {
 	mo_block_t queue[CFG_QUEUE_SIZE];

@@ -6,9 +6,9 @@
  * (fb_exec.c, fb_home.c, fb_settings.c, fb_report.c) share is here, with who
  * writes it and who reads it; everything else stays static in the module
  * that owns it.  "rx" is fb_rx_isr(), the serial receive interrupt (via the
- * board); everything else runs in the main loop.  The fields rx writes are
- * volatile, and the main loop clears or tests them with interrupts off
- * where a byte arriving in between would matter.
+ * board); everything else runs in the main loop.  The fields rx writes or
+ * reads are volatile, and the main loop clears or tests them with
+ * interrupts off where a byte arriving in between would matter.
  *
  * The motion queue has its own struct (mo_state, fb_motion.h), and the
  * record kept across a reset its own (board_keep, board.h).

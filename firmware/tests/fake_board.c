@@ -161,6 +161,8 @@ void board_steps_high(uint8_t mask)
 }
 
 void board_set_dirs(uint8_t neg_mask) { fake_dirs = neg_mask; }
+/* the fake has no direction port: its "bits" are the mask (the fake runs no
+ * fast block, BOARD_FAST_PATH 0, so no block keeps them) */
 uint8_t board_dir_bits(uint8_t neg_mask) { return neg_mask; }
 void board_enable_motors(uint8_t on) { fake_enabled = on; }
 void board_laser(uint8_t power) { fake_laser = power; }
