@@ -3,7 +3,7 @@
 Builds firmware/fuzz/fuzz_parser.c twice with clang (``make -C firmware fuzz fuzz-parser``,
 both with AddressSanitizer and UndefinedBehaviorSanitizer) and runs, on one core:
 
-1. ``fuzz_parser_only`` (the target's framing part: every line through ``fb_parse_line``
+1. ``fuzz_parser_only`` (the target's framing part: every line through ``proto_parse_line``
    with its invariants — defined status, resends leave the counter, strict framing, a line
    with a ``*`` passes only with the host's exact field, a line that lost its ``N`` and ``*``
    is never accepted) for ``--runs`` executions (10 M by default);

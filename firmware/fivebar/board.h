@@ -15,9 +15,9 @@
 #include <stdint.h>
 #include "config.h"
 
-#define FB_CAT2(a, b) a##b
-#define FB_CAT(a, b) FB_CAT2(a, b)
-#define FB_ALWAYS_INLINE static inline __attribute__((always_inline))
+#define BOARD_CAT2(a, b) a##b
+#define BOARD_CAT(a, b) BOARD_CAT2(a, b)
+#define BOARD_INLINE static inline __attribute__((always_inline))
 
 /* Pins, UART, timers; last of all it starts the hardware watchdog
  * (CFG_WDT_MS), which from then on resets the MCU unless board_wdt_feed()
@@ -51,9 +51,9 @@ typedef struct {
 	uint16_t left[2]; /* the running fast block's steps not yet issued */
 	uint8_t fdirs;    /* ... and its directions (bit set = negative) */
 	uint32_t ndone;   /* ~done */
-} fb_keep_t;
+} board_keep_t;
 
-extern volatile fb_keep_t board_keep;
+extern volatile board_keep_t board_keep;
 
 /* 1 when the hardware says this boot is a power-on (the ATmega328P's PORF
  * reset flag; a bootloader that clears the flags leaves the decision to the
@@ -106,46 +106,53 @@ void board_wdt_feed(void);
  *   uint8_t board_endstops(void);            mask of the switches pressed now
  *   uint8_t board_irq_save(void);            mask interrupts, return old state
  *   void board_irq_restore(uint8_t state);
+ *   uint8_t board_dir_bits(uint8_t neg_mask); the direction pins' port bits
+ *                                            (a fast block keeps them)
+ *
+ * BOARD_FAST_PATH is 1 when the board's step interrupt runs blocks in their
+ * fast form (fb_fast.h) itself once mo_event() returns MO_FAST, as the
+ * ATmega328P's hand-written fast path does; 0 when every block runs on
+ * mo_event() (the host fake: it steps on the exact DDA schedule).
  */
 
 #ifdef __AVR__
 #include <avr/io.h>
 #include <avr/pgmspace.h>
 
-#define FB_REG_PORT(p) FB_CAT(PORT, p)
-#define FB_REG_DDR(p)  FB_CAT(DDR, p)
-#define FB_REG_PIN(p)  FB_CAT(PIN, p)
+#define BOARD_PORT(p) BOARD_CAT(PORT, p)
+#define BOARD_DDR(p)  BOARD_CAT(DDR, p)
+#define BOARD_PIN(p)  BOARD_CAT(PIN, p)
 
-FB_ALWAYS_INLINE uint8_t board_irq_save(void)
+BOARD_INLINE uint8_t board_irq_save(void)
 {
 	uint8_t s = SREG;
 	__asm__ __volatile__("cli" ::: "memory");
 	return s;
 }
 
-FB_ALWAYS_INLINE void board_irq_restore(uint8_t state)
+BOARD_INLINE void board_irq_restore(uint8_t state)
 {
 	__asm__ __volatile__("" ::: "memory");
 	SREG = state;
 }
 
-FB_ALWAYS_INLINE void board_enable_motors(uint8_t on)
+BOARD_INLINE void board_enable_motors(uint8_t on)
 {
 	if (on)
-		FB_REG_PORT(PIN_ENABLE_PORT) &= (uint8_t)~(1u << PIN_ENABLE_BIT);
+		BOARD_PORT(PIN_ENABLE_PORT) &= (uint8_t)~(1u << PIN_ENABLE_BIT);
 	else
-		FB_REG_PORT(PIN_ENABLE_PORT) |= (uint8_t)(1u << PIN_ENABLE_BIT);
+		BOARD_PORT(PIN_ENABLE_PORT) |= (uint8_t)(1u << PIN_ENABLE_BIT);
 }
 
-FB_ALWAYS_INLINE void board_laser(uint8_t power)
+BOARD_INLINE void board_laser(uint8_t power)
 {
 	uint8_t s = board_irq_save();
 	if (power == 0 || power == 255) {
 		TCCR2A &= (uint8_t)~((1u << COM2A1) | (1u << COM2A0));
 		if (power)
-			FB_REG_PORT(PIN_LASER_PORT) |= (uint8_t)(1u << PIN_LASER_BIT);
+			BOARD_PORT(PIN_LASER_PORT) |= (uint8_t)(1u << PIN_LASER_BIT);
 		else
-			FB_REG_PORT(PIN_LASER_PORT) &= (uint8_t)~(1u << PIN_LASER_BIT);
+			BOARD_PORT(PIN_LASER_PORT) &= (uint8_t)~(1u << PIN_LASER_BIT);
 	} else {
 		OCR2A = power;
 		TCCR2A |= (uint8_t)(1u << COM2A1);
@@ -153,34 +160,33 @@ FB_ALWAYS_INLINE void board_laser(uint8_t power)
 	board_irq_restore(s);
 }
 
-FB_ALWAYS_INLINE uint8_t board_endstops(void)
+BOARD_INLINE uint8_t board_endstops(void)
 {
-	uint8_t v = FB_REG_PIN(PIN_ENDSTOP_PORT);
+	uint8_t v = BOARD_PIN(PIN_ENDSTOP_PORT);
 	if (CFG_ENDSTOP_ACTIVE_LOW)
 		v = (uint8_t)~v;
 	return (uint8_t)(((v >> PIN_ENDSTOP_A_BIT) & 1u) | (((v >> PIN_ENDSTOP_B_BIT) & 1u) << 1));
 }
 
-#define FB_STEP_PORT  FB_CAT(PORT, PIN_STEP_PORT)
-#define FB_DIR_PORT   FB_CAT(PORT, PIN_DIR_PORT)
-#define FB_STEP_PINS  ((uint8_t)((1u << PIN_STEP_A_BIT) | (1u << PIN_STEP_B_BIT)))
-#define FB_DIR_PINS   ((uint8_t)((1u << PIN_DIR_A_BIT) | (1u << PIN_DIR_B_BIT)))
+#define BOARD_STEP_PORT  BOARD_CAT(PORT, PIN_STEP_PORT)
+#define BOARD_DIR_PORT   BOARD_CAT(PORT, PIN_DIR_PORT)
+#define BOARD_STEP_PINS  ((uint8_t)((1u << PIN_STEP_A_BIT) | (1u << PIN_STEP_B_BIT)))
+#define BOARD_DIR_PINS   ((uint8_t)((1u << PIN_DIR_A_BIT) | (1u << PIN_DIR_B_BIT)))
 
 /* Raise the step pins of the motors in mask (one port write). */
-FB_ALWAYS_INLINE void board_steps_high(uint8_t mask)
+BOARD_INLINE void board_steps_high(uint8_t mask)
 {
 	uint8_t bits = 0;
 	if (mask & 1u)
 		bits |= (uint8_t)(1u << PIN_STEP_A_BIT);
 	if (mask & 2u)
 		bits |= (uint8_t)(1u << PIN_STEP_B_BIT);
-	FB_STEP_PORT |= bits;
+	BOARD_STEP_PORT |= bits;
 }
 
-/* Set the direction pins: bit set in neg_mask = that motor steps negative. */
 /* The direction pins' port bits for a neg_mask (bit set = motor steps
  * negative). */
-FB_ALWAYS_INLINE uint8_t board_dir_bits(uint8_t neg_mask)
+BOARD_INLINE uint8_t board_dir_bits(uint8_t neg_mask)
 {
 	uint8_t level = (uint8_t)((neg_mask ^ 3u ^ CFG_DIR_INVERT_MASK) & 3u);
 	uint8_t bits = 0;
@@ -191,14 +197,16 @@ FB_ALWAYS_INLINE uint8_t board_dir_bits(uint8_t neg_mask)
 	return bits;
 }
 
-FB_ALWAYS_INLINE void board_set_dirs(uint8_t neg_mask)
+/* Set the direction pins: bit set in neg_mask = that motor steps negative. */
+BOARD_INLINE void board_set_dirs(uint8_t neg_mask)
 {
-	FB_DIR_PORT = (uint8_t)((FB_DIR_PORT & (uint8_t)~FB_DIR_PINS) | board_dir_bits(neg_mask));
+	BOARD_DIR_PORT = (uint8_t)((BOARD_DIR_PORT & (uint8_t)~BOARD_DIR_PINS) | board_dir_bits(neg_mask));
 }
 
-#define FB_PSTR(s) PSTR(s)
-#define FB_PROGMEM PROGMEM
-static inline char fb_pgm_char(const char *p) { return (char)pgm_read_byte(p); }
+#define BOARD_FAST_PATH 1
+#define BOARD_PSTR(s) PSTR(s)
+#define BOARD_PROGMEM PROGMEM
+static inline char board_pgm_char(const char *p) { return (char)pgm_read_byte(p); }
 #else
 void board_steps_high(uint8_t mask);
 void board_set_dirs(uint8_t neg_mask);
@@ -207,9 +215,11 @@ void board_laser(uint8_t power);
 uint8_t board_endstops(void);
 uint8_t board_irq_save(void);
 void board_irq_restore(uint8_t state);
-#define FB_PSTR(s) (s)
-#define FB_PROGMEM
-static inline char fb_pgm_char(const char *p) { return *p; }
+uint8_t board_dir_bits(uint8_t neg_mask);
+#define BOARD_FAST_PATH 0
+#define BOARD_PSTR(s) (s)
+#define BOARD_PROGMEM
+static inline char board_pgm_char(const char *p) { return *p; }
 #endif
 
 #endif

@@ -23,8 +23,8 @@
 #include "fb_main.h"
 #include "fb_motion.h"
 
-#define REG_PORT(p) FB_REG_PORT(p)
-#define REG_DDR(p)  FB_REG_DDR(p)
+#define REG_PORT(p) BOARD_PORT(p)
+#define REG_DDR(p)  BOARD_DDR(p)
 
 #define ENDSTOP_PINS ((uint8_t)((1u << PIN_ENDSTOP_A_BIT) | (1u << PIN_ENDSTOP_B_BIT)))
 #define UBRR_VALUE ((FB_F_CPU + 4UL * FB_BAUD) / (8UL * FB_BAUD) - 1UL)
@@ -36,7 +36,7 @@
 
 /* Not cleared by the C start-up code: a reset that leaves the RAM powered
  * finds it as the firmware left it (board.h). */
-volatile fb_keep_t board_keep __attribute__((section(".noinit")));
+volatile board_keep_t board_keep __attribute__((section(".noinit")));
 
 #if CFG_WDT_MS == 250
 #define WDT_TIMEOUT WDTO_250MS
@@ -72,8 +72,8 @@ static uint8_t reset_flags __attribute__((section(".noinit")));
 __attribute__((naked, used, section(".init3")))
 static void early_init(void)
 {
-	FB_REG_PORT(PIN_LASER_PORT) &= (uint8_t)~(1u << PIN_LASER_BIT);
-	FB_REG_DDR(PIN_LASER_PORT) |= (uint8_t)(1u << PIN_LASER_BIT);
+	BOARD_PORT(PIN_LASER_PORT) &= (uint8_t)~(1u << PIN_LASER_BIT);
+	BOARD_DDR(PIN_LASER_PORT) |= (uint8_t)(1u << PIN_LASER_BIT);
 	reset_flags = MCUSR;
 	MCUSR = 0;
 	wdt_disable();
@@ -91,10 +91,10 @@ static volatile union {
 void board_init(void)
 {
 	cli();
-	REG_PORT(PIN_STEP_PORT) &= (uint8_t)~FB_STEP_PINS;
-	REG_DDR(PIN_STEP_PORT) |= FB_STEP_PINS;
-	REG_PORT(PIN_DIR_PORT) &= (uint8_t)~FB_DIR_PINS;
-	REG_DDR(PIN_DIR_PORT) |= FB_DIR_PINS;
+	REG_PORT(PIN_STEP_PORT) &= (uint8_t)~BOARD_STEP_PINS;
+	REG_DDR(PIN_STEP_PORT) |= BOARD_STEP_PINS;
+	REG_PORT(PIN_DIR_PORT) &= (uint8_t)~BOARD_DIR_PINS;
+	REG_DDR(PIN_DIR_PORT) |= BOARD_DIR_PINS;
 	/* enabled (low) from the start: the drivers keep holding the motors
 	 * where a reset found them, which the kept position counts on */
 	REG_PORT(PIN_ENABLE_PORT) &= (uint8_t)~(1u << PIN_ENABLE_BIT);
@@ -167,7 +167,7 @@ void board_wdt_feed(void)
 #define SV_RISE_EARLY 25u
 #define SV_RISE_LATE 150u
 #define SV_MARGIN 16u
-#define SERVO_PORT FB_REG_PORT(PIN_SERVO_PORT)
+#define SERVO_PORT BOARD_PORT(PIN_SERVO_PORT)
 
 /* the first frame starts at the first tick after boot (ms_ticks 0 -> 1) */
 static uint8_t sv_frame = 1;          /* low byte of ms_ticks at this frame's first tick */
@@ -269,7 +269,7 @@ uint32_t board_ms(void)
 }
 
 /*
- * The serial interrupts let the step interrupt in (board_avr_step.c): a
+ * The serial interrupts let the step interrupt in (board_avr_step.[cS]): a
  * naked stub masks the interrupt's own source in UCSR0B (so it cannot come
  * again before its byte is handled, and bytes keep their order), enables
  * interrupts, saves the registers a C call may change and calls the handler,

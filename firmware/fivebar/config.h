@@ -78,7 +78,7 @@
 /* ---- hardware watchdog ------------------------------------------------------ */
 /* Timeout of the AVR watchdog: 250 (2^15 cycles of its 128 kHz oscillator,
  * 256 ms nominal), 120, 60 or 30.  The main loop feeds it only while it also
- * sees the step interrupt alive (fb_main.c feed_watchdog); a hang resets the
+ * sees the step interrupt alive (fb_main.c fb_feed_watchdog); a hang resets the
  * MCU and the laser output goes low first thing (board_avr.c early_init).
  * Hang to laser off on an Uno: this timeout (+ the oscillator's tolerance)
  * + 65 ms of reset start-up delay (fuses SUT=11) + a few cycles, under 0.5 s. */

@@ -17,7 +17,7 @@ static uint8_t baud_trial;
 
 /* $B=<baud>: one of the rates the Uno's 16 MHz makes (115200 within 0.8 %,
  * the others exactly); the switch waits for the ok (switch_baud). */
-uint8_t exec_baud(const fb_cmd_t *c)
+uint8_t baud_request(const proto_cmd_t *c)
 {
 	switch (c->value) {
 	case 115200L: case 250000L: case 500000L: case 1000000L:

@@ -8,7 +8,7 @@
 #include "fb_proto.h"
 
 /* $B=<baud>: accept one of the supported rates for after the ok. */
-uint8_t exec_baud(const fb_cmd_t *c);
+uint8_t baud_request(const proto_cmd_t *c);
 /* After a reply has been written: switch if a $B asked for it. */
 void baud_after_reply(void);
 /* A valid line arrived: the host speaks at this rate, the trial ends. */

@@ -17,7 +17,6 @@
 #include "config.h"
 #include "status.h"
 
-uint8_t motors_on;
 static uint8_t absolute, laser_on, laser_s;
 static int32_t plan[2];
 static uint16_t pen_plan;  /* pen pulse after the queued M280 blocks */
@@ -27,12 +26,12 @@ static uint32_t first_queued_ms;
 static uint8_t g6_checked, g6_queued, g6_at;
 static int32_t g6_p;
 
-uint8_t is_idle(void)
+uint8_t exec_idle(void)
 {
-	return !mo_running() && mo_queue_count() == 0 && !homing;
+	return !mo_running() && mo_queue_count() == 0 && !fb_state.homing;
 }
 
-void sync_plan(void)
+void exec_sync_plan(void)
 {
 	mo_get_pos(plan);
 	pen_plan = mo_pen_target();
@@ -45,9 +44,9 @@ void exec_reset(void)
 	absolute = 1;
 	laser_on = 0;
 	laser_s = 0;
-	motors_on = 1;
+	fb_state.motors_on = 1;
 	board_enable_motors(1);
-	sync_plan();
+	exec_sync_plan();
 }
 
 
@@ -62,7 +61,7 @@ void exec_reset(void)
 static uint8_t slot_free(void)
 {
 	uint8_t sreg = board_irq_save();
-	uint8_t ok = !f_reset && mo_queue_free();
+	uint8_t ok = !fb_state.f_reset && mo_queue_free();
 	board_irq_restore(sreg);
 	return ok;
 }
@@ -72,7 +71,7 @@ static uint8_t commit_block(void)
 {
 	mo_seal(mo_slot());
 	uint8_t sreg = board_irq_save();
-	uint8_t ok = !f_reset;
+	uint8_t ok = !fb_state.f_reset;
 	if (ok) {
 		if (!mo_running() && mo_queue_count() == 0)
 			first_queued_ms = board_ms();
@@ -82,8 +81,9 @@ static uint8_t commit_block(void)
 	return ok;
 }
 
-/* mo_start() unless *cancel (f_reset, f_home_abort) was set by an interrupt. */
-void start_unless(volatile uint8_t *cancel)
+/* mo_start() unless *cancel (fb_state.f_reset or .f_home_abort) was set by
+ * an interrupt: tested with interrupts off, so none sets it in between. */
+void exec_start_unless(volatile uint8_t *cancel)
 {
 	uint8_t sreg = board_irq_save();
 	if (!*cancel)
@@ -94,14 +94,14 @@ void start_unless(volatile uint8_t *cancel)
 static uint8_t queue_sync_block(uint8_t type, int32_t a, int32_t b)
 {
 	if (!slot_free())
-		return ST_WAIT;
-	fb_block_t *blk = mo_slot();
+		return EXEC_WAIT;
+	mo_block_t *blk = mo_slot();
 	memset(blk, 0, sizeof(*blk));
 	blk->type = type;
 	blk->q[0] = (uint32_t)a;
 	blk->q[1] = (uint32_t)b;
-	blk->line = lines.last;
-	return commit_block() ? FB_OK : ST_WAIT;
+	blk->line = fb_state.lines.last;
+	return commit_block() ? FB_OK : EXEC_WAIT;
 }
 
 /* The position checks of a G1 target t reached from `from` (protocol section
@@ -111,36 +111,36 @@ static uint8_t check_position(const int32_t from[2], const int32_t t[2])
 	for (uint8_t i = 0; i < 2; i++)
 		if (t[i] > CFG_POS_LIMIT || t[i] < -CFG_POS_LIMIT)
 			return FB_ERR_OUT_OF_RANGE;
-	if (settings[SET_SOFT_LIMITS] &&
-	    (t[0] < settings[SET_A_MIN] || t[0] > settings[SET_A_MAX] ||
-	     t[1] < settings[SET_B_MIN] || t[1] > settings[SET_B_MAX]))
+	if (fb_state.settings[SET_SOFT_LIMITS] &&
+	    (t[0] < fb_state.settings[SET_A_MIN] || t[0] > fb_state.settings[SET_A_MAX] ||
+	     t[1] < fb_state.settings[SET_B_MIN] || t[1] > fb_state.settings[SET_B_MAX]))
 		return FB_ERR_SOFT_LIMIT;
-	if (!motors_on && (t[0] != from[0] || t[1] != from[1]))
+	if (!fb_state.motors_on && (t[0] != from[0] || t[1] != from[1]))
 		return FB_ERR_MOTORS_OFF;
 	return FB_OK;
 }
 
-static uint8_t exec_g1(const fb_cmd_t *c)
+static uint8_t exec_g1(const proto_cmd_t *c)
 {
 	if (!slot_free())
-		return ST_WAIT;
+		return EXEC_WAIT;
 	int32_t t[2] = { plan[0], plan[1] };
-	if (c->has & W_A)
+	if (c->has & PROTO_W_A)
 		t[0] = absolute ? c->a : plan[0] + c->a;
-	if (c->has & W_B)
+	if (c->has & PROTO_W_B)
 		t[1] = absolute ? c->b : plan[1] + c->b;
 	uint8_t st = check_position(plan, t);
 	if (st != FB_OK)
 		return st;
-	fb_block_t *blk = mo_slot();
-	st = mo_prepare(blk, t[0] - plan[0], t[1] - plan[1], (uint32_t)c->p, min_interval);
+	mo_block_t *blk = mo_slot();
+	st = mo_prepare(blk, t[0] - plan[0], t[1] - plan[1], (uint32_t)c->p, fb_state.min_interval);
 	if (st != FB_OK)
 		return st;
-	uint8_t s = (c->has & W_S) ? (uint8_t)c->s : laser_s;
+	uint8_t s = (c->has & PROTO_W_S) ? (uint8_t)c->s : laser_s;
 	blk->power = laser_on ? s : 0;
-	blk->line = lines.last - c->g6_count;  /* a G6 head: its first number */
+	blk->line = fb_state.lines.last - c->g6_count;  /* a G6 head: its first number */
 	if (!commit_block())
-		return ST_WAIT;
+		return EXEC_WAIT;
 	laser_s = s;
 	plan[0] = t[0];
 	plan[1] = t[1];
@@ -155,7 +155,7 @@ static uint8_t check_target(const int32_t from[2], const int32_t t[2], int32_t p
 	uint8_t st = check_position(from, t);
 	if (st != FB_OK)
 		return st;
-	uint32_t lim = (uint32_t)p_us * (FB_F_CPU / 1000000UL) / min_interval;
+	uint32_t lim = (uint32_t)p_us * (FB_F_CPU / 1000000UL) / fb_state.min_interval;
 	for (uint8_t i = 0; i < 2; i++) {
 		int32_t d = t[i] - from[i];
 		if ((uint32_t)(d < 0 ? -d : d) > lim)
@@ -166,17 +166,17 @@ static uint8_t check_target(const int32_t from[2], const int32_t t[2], int32_t p
 
 /* Every segment of a G6 line against the checks of a G1, before any is
  * queued: a line is queued whole or not at all (docs/protocol.md 6.3). */
-static uint8_t g6_check(const fb_cmd_t *c)
+static uint8_t g6_check(const proto_cmd_t *c)
 {
 	int32_t from[2] = { plan[0], plan[1] }, t[2] = { plan[0], plan[1] }, d[2];
-	if (c->has & W_A)
+	if (c->has & PROTO_W_A)
 		t[0] = absolute ? c->a : plan[0] + c->a;
-	if (c->has & W_B)
+	if (c->has & PROTO_W_B)
 		t[1] = absolute ? c->b : plan[1] + c->b;
 	int32_t p = c->p;
 	uint8_t at = c->g6_at;
 	uint8_t st = check_target(from, t, p);
-	while (st == FB_OK && fb_g6_next(line, &at, c->g6_end, &p, d)) {
+	while (st == FB_OK && proto_g6_next(fb_state.line, &at, c->g6_end, &p, d)) {
 		from[0] = t[0];
 		from[1] = t[1];
 		t[0] += d[0];
@@ -187,9 +187,9 @@ static uint8_t g6_check(const fb_cmd_t *c)
 }
 
 /* G6: the head as a G1, then one block per item, each as its slot frees
- * (ST_WAIT in between keeps the line pending); blocks get the numbers
+ * (EXEC_WAIT in between keeps the line pending); blocks get the numbers
  * first..first+count. */
-static uint8_t exec_g6(const fb_cmd_t *c)
+static uint8_t exec_g6(const proto_cmd_t *c)
 {
 	if (!g6_checked) {
 		uint8_t st = g6_check(c);
@@ -205,22 +205,22 @@ static uint8_t exec_g6(const fb_cmd_t *c)
 		g6_at = c->g6_at;
 		g6_p = c->p;
 	}
-	uint32_t first = lines.last - c->g6_count;
+	uint32_t first = fb_state.lines.last - c->g6_count;
 	while (g6_queued <= c->g6_count) {
 		if (!slot_free())
-			return ST_WAIT;
+			return EXEC_WAIT;
 		uint8_t at = g6_at;
 		int32_t p = g6_p, d[2];
-		if (!fb_g6_next(line, &at, c->g6_end, &p, d))
+		if (!proto_g6_next(fb_state.line, &at, c->g6_end, &p, d))
 			return FB_ERR_BAD_WORD;  /* not reached: the line was checked */
-		fb_block_t *blk = mo_slot();
-		uint8_t st = mo_prepare(blk, d[0], d[1], (uint32_t)p, min_interval);
+		mo_block_t *blk = mo_slot();
+		uint8_t st = mo_prepare(blk, d[0], d[1], (uint32_t)p, fb_state.min_interval);
 		if (st != FB_OK)
 			return st;  /* not reached: g6_check ran the same test */
 		blk->power = laser_on ? laser_s : 0;
 		blk->line = first + g6_queued;
 		if (!commit_block())
-			return ST_WAIT;
+			return EXEC_WAIT;
 		g6_at = at;
 		g6_p = p;
 		plan[0] += d[0];
@@ -231,110 +231,110 @@ static uint8_t exec_g6(const fb_cmd_t *c)
 }
 
 /* M280: a queued pen block (protocol section 6.2). */
-static uint8_t exec_pen(const fb_cmd_t *c)
+static uint8_t exec_pen(const proto_cmd_t *c)
 {
-	if (!settings[SET_PEN_PARK])
+	if (!fb_state.settings[SET_PEN_PARK])
 		return FB_ERR_NO_PEN;
 	if (!slot_free())
-		return ST_WAIT;
+		return EXEC_WAIT;
 	uint16_t to = (uint16_t)c->s;
-	fb_block_t *blk = mo_slot();
+	mo_block_t *blk = mo_slot();
 	mo_prepare_pen(blk, pen_plan, to, (uint16_t)c->r, (uint16_t)c->d);
-	blk->line = lines.last;
+	blk->line = fb_state.lines.last;
 	if (!commit_block())
-		return ST_WAIT;
+		return EXEC_WAIT;
 	pen_plan = to;
 	return FB_OK;
 }
 
-static uint8_t execute(const fb_cmd_t *c)
+static uint8_t execute(const proto_cmd_t *c)
 {
-	if (alarm_code) {
+	if (fb_state.alarm_code) {
 		switch (c->kind) {
-		case CMD_NONE: case CMD_M110: case CMD_INFO: case CMD_LIST:
-		case CMD_SET: case CMD_HOME: case CMD_UNLOCK:
+		case PROTO_CMD_NONE: case PROTO_CMD_M110: case PROTO_CMD_INFO: case PROTO_CMD_LIST:
+		case PROTO_CMD_SET: case PROTO_CMD_HOME: case PROTO_CMD_UNLOCK:
 			break;
 		default:
 			return FB_ERR_ALARM_LOCK;
 		}
 	}
 	switch (c->kind) {
-	case CMD_G1:
+	case PROTO_CMD_G1:
 		return exec_g1(c);
-	case CMD_G6:
+	case PROTO_CMD_G6:
 		return exec_g6(c);
-	case CMD_G90:
+	case PROTO_CMD_G90:
 		absolute = 1;
 		return FB_OK;
-	case CMD_G91:
+	case PROTO_CMD_G91:
 		absolute = 0;
 		return FB_OK;
-	case CMD_G92: {
-		int32_t a = (c->has & W_A) ? c->a : plan[0];
-		int32_t b = (c->has & W_B) ? c->b : plan[1];
-		uint8_t st = queue_sync_block(BLK_SETPOS, a, b);
+	case PROTO_CMD_G92: {
+		int32_t a = (c->has & PROTO_W_A) ? c->a : plan[0];
+		int32_t b = (c->has & PROTO_W_B) ? c->b : plan[1];
+		uint8_t st = queue_sync_block(MO_BLK_SETPOS, a, b);
 		if (st == FB_OK) {
 			plan[0] = a;
 			plan[1] = b;
 		}
 		return st;
 	}
-	case CMD_M3:
+	case PROTO_CMD_M3:
 		laser_on = 1;
-		if (c->has & W_S)
+		if (c->has & PROTO_W_S)
 			laser_s = (uint8_t)c->s;
 		return FB_OK;
-	case CMD_M5:
+	case PROTO_CMD_M5:
 		laser_on = 0;
 		return FB_OK;
-	case CMD_M280:
+	case PROTO_CMD_M280:
 		return exec_pen(c);
-	case CMD_M17:
-	case CMD_M18: {
-		uint8_t st = queue_sync_block(c->kind == CMD_M17 ? BLK_ENABLE : BLK_DISABLE, 0, 0);
+	case PROTO_CMD_M17:
+	case PROTO_CMD_M18: {
+		uint8_t st = queue_sync_block(c->kind == PROTO_CMD_M17 ? MO_BLK_ENABLE : MO_BLK_DISABLE, 0, 0);
 		if (st == FB_OK)
-			motors_on = c->kind == CMD_M17;
+			fb_state.motors_on = c->kind == PROTO_CMD_M17;
 		return st;
 	}
-	case CMD_INFO:
-		banner();
+	case PROTO_CMD_INFO:
+		report_banner();
 		return FB_OK;
-	case CMD_LIST:
-		list_settings();
+	case PROTO_CMD_LIST:
+		settings_list();
 		return FB_OK;
-	case CMD_HOME:
-		return exec_home();
-	case CMD_UNLOCK:
-		alarm_code = 0;
-		sync_plan();
+	case PROTO_CMD_HOME:
+		return home_cycle();
+	case PROTO_CMD_UNLOCK:
+		fb_state.alarm_code = 0;
+		exec_sync_plan();
 		return FB_OK;
-	case CMD_SET:
-		return exec_set(c);
-	case CMD_BAUD:
-		return exec_baud(c);
+	case PROTO_CMD_SET:
+		return settings_set(c);
+	case PROTO_CMD_BAUD:
+		return baud_request(c);
 	default:
 		return FB_OK;
 	}
 }
 
-uint8_t exec_command(const fb_cmd_t *c)
+uint8_t exec_command(const proto_cmd_t *c)
 {
 	uint8_t st = execute(c);
-	if (st != ST_WAIT) {
+	if (st != EXEC_WAIT) {
 		g6_checked = 0;
 		g6_queued = 0;
 	}
 	return st;
 }
 
-void maybe_start(void)
+void exec_maybe_start(void)
 {
-	if (held || alarm_code || homing || mo_running())
+	if (fb_state.held || fb_state.alarm_code || fb_state.homing || mo_running())
 		return;
 	uint8_t n = mo_queue_count();
 	if (!n)
 		return;
 	if (n >= CFG_START_BLOCKS || !mo_queue_free() ||
 	    board_ms() - first_queued_ms >= CFG_START_DELAY_MS)
-		start_unless(&f_reset);
+		exec_start_unless(&fb_state.f_reset);
 }

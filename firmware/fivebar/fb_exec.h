@@ -8,23 +8,21 @@
 #include <stdint.h>
 #include "fb_proto.h"
 
-#define ST_WAIT 0xffu   /* queue full: try again later */
-
-/* M17 / M18 state, which homing needs on */
-extern uint8_t motors_on;
+#define EXEC_WAIT 0xffu   /* queue full: try again later */
 
 /* Nothing running, nothing queued, not homing. */
-uint8_t is_idle(void);
+uint8_t exec_idle(void);
 /* The planned position and pen after the queue := where the machine is. */
-void sync_plan(void);
+void exec_sync_plan(void);
 /* Reset / Ctrl-X: absolute mode, laser off, motors on, plan synced. */
 void exec_reset(void);
-/* Execute c: FB_OK, an error code, or ST_WAIT (call again with the same c
+/* Execute c: FB_OK, an error code, or EXEC_WAIT (call again with the same c
  * once the queue has room; a G6 line keeps its progress in between). */
-uint8_t exec_command(const fb_cmd_t *c);
-/* mo_start() unless *cancel (f_reset, f_home_abort) was set by an interrupt. */
-void start_unless(volatile uint8_t *cancel);
+uint8_t exec_command(const proto_cmd_t *c);
+/* mo_start() unless *cancel (fb_state.f_reset or .f_home_abort) was set by
+ * an interrupt. */
+void exec_start_unless(volatile uint8_t *cancel);
 /* Start the queued blocks once enough are queued or the first has waited. */
-void maybe_start(void);
+void exec_maybe_start(void);
 
 #endif

@@ -17,43 +17,43 @@
 static uint8_t home_wait(void)
 {
 	while (mo_running()) {
-		feed_watchdog();
+		fb_feed_watchdog();
 		board_idle();
-		if (f_status) {
-			f_status = 0;
-			status_report();
+		if (fb_state.f_status) {
+			fb_state.f_status = 0;
+			report_status();
 		}
-		if (f_home_abort)
+		if (fb_state.f_home_abort)
 			return 0;
 	}
-	return !f_home_abort;
+	return !fb_state.f_home_abort;
 }
 
 static uint8_t home_move(uint8_t type, uint8_t axes, uint8_t neg, uint32_t steps, uint32_t interval)
 {
-	fb_block_t *blk = mo_slot();
+	mo_block_t *blk = mo_slot();
 	int32_t d[2];
 	for (uint8_t i = 0; i < 2; i++)
 		d[i] = (axes & (1u << i)) ? ((neg & (1u << i)) ? -(int32_t)steps : (int32_t)steps) : 0;
 	mo_prepare_cycles(blk, d[0], d[1], steps * interval, 0);
 	blk->type = type;
 	blk->power = 0;
-	blk->line = lines.last;
+	blk->line = fb_state.lines.last;
 	mo_push();
-	start_unless(&f_home_abort);
+	exec_start_unless(&fb_state.f_home_abort);
 	return home_wait();
 }
 
-uint8_t exec_home(void)
+uint8_t home_cycle(void)
 {
-	if (!settings[SET_HOMING])
+	if (!fb_state.settings[SET_HOMING])
 		return FB_ERR_HOMING_DISABLED;
-	if (!is_idle() || held)
+	if (!exec_idle() || fb_state.held)
 		return FB_ERR_BUSY;
-	if (!motors_on)
+	if (!fb_state.motors_on)
 		return FB_ERR_MOTORS_OFF;
-	homing = 1;
-	f_home_abort = 0;
+	fb_state.homing = 1;
+	fb_state.f_home_abort = 0;
 	mo_reset_home_hits();
 	/* the position is unknown until homed: count the seek from 0, which
 	 * also keeps repeated failed homings from running the counter away.  H
@@ -61,15 +61,15 @@ uint8_t exec_home(void)
 	int32_t zero[2] = { 0, 0 };
 	mo_set_homed(0);
 	mo_set_pos(zero);
-	sync_plan();
-	uint32_t interval = interval_for(settings[SET_HOMING_RATE]);
+	exec_sync_plan();
+	uint32_t interval = settings_interval(fb_state.settings[SET_HOMING_RATE]);
 	uint32_t chunk_max = 0x7fffffffUL / interval;
-	uint8_t seek_neg = seek_neg_mask();
-	uint32_t left = (uint32_t)settings[SET_TRAVEL];
+	uint8_t seek_neg = settings_seek_neg();
+	uint32_t left = (uint32_t)fb_state.settings[SET_TRAVEL];
 	uint8_t result = FB_OK;
 	while (left && (mo_home_hits() & 3u) != 3u) {
 		uint32_t chunk = left < chunk_max ? left : chunk_max;
-		if (!home_move(BLK_HOME, (uint8_t)(~mo_home_hits() & 3u), seek_neg, chunk, interval)) {
+		if (!home_move(MO_BLK_HOME, (uint8_t)(~mo_home_hits() & 3u), seek_neg, chunk, interval)) {
 			result = FB_ALARM_HOMING_ABORT;
 			break;
 		}
@@ -77,21 +77,21 @@ uint8_t exec_home(void)
 	}
 	if (result == FB_OK && (mo_home_hits() & 3u) != 3u)
 		result = FB_ALARM_HOMING_FAIL;
-	if (result == FB_OK && settings[SET_PULLOFF] > 0 &&
-	    !home_move(BLK_MOVE, 3u, (uint8_t)(~seek_neg & 3u),
-		       (uint32_t)settings[SET_PULLOFF], interval))
+	if (result == FB_OK && fb_state.settings[SET_PULLOFF] > 0 &&
+	    !home_move(MO_BLK_MOVE, 3u, (uint8_t)(~seek_neg & 3u),
+		       (uint32_t)fb_state.settings[SET_PULLOFF], interval))
 		result = FB_ALARM_HOMING_ABORT;
 	if (result == FB_OK && board_endstops())
 		result = FB_ALARM_HOMING_FAIL;
-	homing = 0;
+	fb_state.homing = 0;
 	if (result != FB_OK) {
-		raise_alarm(result);
+		fb_raise_alarm(result);
 		return result;
 	}
-	int32_t home[2] = { settings[SET_HOME_A], settings[SET_HOME_B] };
+	int32_t home[2] = { fb_state.settings[SET_HOME_A], fb_state.settings[SET_HOME_B] };
 	mo_set_pos(home);
 	mo_set_homed(1);
-	sync_plan();
-	alarm_code = 0;
+	exec_sync_plan();
+	fb_state.alarm_code = 0;
 	return FB_OK;
 }

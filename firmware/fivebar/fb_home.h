@@ -8,6 +8,6 @@
 
 /* Seek both switches, pull off, set the home position; blocks until done
  * (serving status requests).  FB_OK, an error, or the alarm it raised. */
-uint8_t exec_home(void);
+uint8_t home_cycle(void);
 
 #endif

@@ -33,51 +33,50 @@
 static volatile uint8_t rx_buf[CFG_RX_SIZE];
 static volatile uint8_t rx_head, rx_tail, rx_discard, rx_overflow;
 static volatile uint32_t last_rx_ms;
-volatile uint8_t f_status, f_reset, f_home_abort;
-volatile uint8_t held, hold_reason, homing, alarm_code;
 /* a '~' lowered a parked pen again: the timeline resumes at this board_ms()
  * (0 = no resume pending) */
 static volatile uint32_t resume_at;
 
-char line[CFG_LINE_MAX];
+/* the application state the command modules share (fb_state.h) */
+fb_state_t fb_state;
+
 static uint8_t line_len, line_over;
-fb_lines_t lines;
-static fb_cmd_t cmd;
+static proto_cmd_t cmd;
 static uint8_t pending;
 
 /* ---- state ----------------------------------------------------------------- */
 
-void raise_alarm(uint8_t code)
+void fb_raise_alarm(uint8_t code)
 {
 	mo_stop();
 	mo_clear_queue();
-	held = 0;
+	fb_state.held = 0;
 	resume_at = 0;
-	alarm_code = code;
-	sync_plan();
-	put_P(FB_PSTR("ALARM:"));
-	put_u32(code);
-	put_eol();
+	fb_state.alarm_code = code;
+	exec_sync_plan();
+	report_P(BOARD_PSTR("ALARM:"));
+	report_u32(code);
+	report_eol();
 }
 
 static void do_reset(void)
 {
 	uint8_t sreg = board_irq_save();
-	f_reset = 0;
+	fb_state.f_reset = 0;
 	rx_tail = rx_discard;
 	rx_overflow = 0;
-	held = 0;
+	fb_state.held = 0;
 	resume_at = 0;
 	board_irq_restore(sreg);
 	mo_init();
 	line_len = 0;
 	line_over = 0;
 	pending = 0;
-	lines.last = 0;
-	lines.numbered = 0;
+	fb_state.lines.last = 0;
+	fb_state.lines.numbered = 0;
 	exec_reset();
 	baud_reset();
-	banner();
+	report_banner();
 }
 
 void fb_rx_isr(uint8_t c)
@@ -85,25 +84,25 @@ void fb_rx_isr(uint8_t c)
 	last_rx_ms = board_ms();
 	switch (c) {
 	case '?':
-		f_status = 1;
+		fb_state.f_status = 1;
 		return;
 	case '!':
-		if (homing) {
-			f_home_abort = 1;
+		if (fb_state.homing) {
+			fb_state.f_home_abort = 1;
 			mo_stop();
-		} else if (!held && !alarm_code) {
-			held = 1;
-			hold_reason = HOLD_HOST;
+		} else if (!fb_state.held && !fb_state.alarm_code) {
+			fb_state.held = 1;
+			fb_state.hold_reason = FB_HOLD_HOST;
 			mo_hold();
 		} else if (resume_at) {
 			/* held again while the pen was going back down */
 			resume_at = 0;
-			hold_reason = HOLD_HOST;
+			fb_state.hold_reason = FB_HOLD_HOST;
 			mo_hold();
 		}
 		return;
 	case '~':
-		if (held && !resume_at) {
+		if (fb_state.held && !resume_at) {
 			/* a parked pen goes back first; the timeline waits its time */
 			uint16_t ms = mo_pen_unpark();
 			if (ms) {
@@ -111,16 +110,16 @@ void fb_rx_isr(uint8_t c)
 				if (!resume_at)
 					resume_at = 1;
 			} else {
-				held = 0;
+				fb_state.held = 0;
 				mo_resume();
 			}
 		}
 		return;
 	case CTRL_X:
 		mo_stop();
-		if (homing)
-			f_home_abort = 1;
-		f_reset = 1;
+		if (fb_state.homing)
+			fb_state.f_home_abort = 1;
+		fb_state.f_reset = 1;
 		rx_discard = rx_head;
 		return;
 	default:
@@ -144,7 +143,7 @@ void fb_rx_isr(uint8_t c)
  * the generator runs all stop the feeding, and the watchdog resets the MCU:
  * laser off at once (board_avr.c), position, H and Ln done kept (section 7).
  */
-void feed_watchdog(void)
+void fb_feed_watchdog(void)
 {
 	if (mo_alive())
 		board_wdt_feed();
@@ -154,9 +153,9 @@ void feed_watchdog(void)
 static void error_hold(void)
 {
 	uint8_t sreg = board_irq_save();
-	if (!held && (mo_running() || mo_queue_count())) {
-		held = 1;
-		hold_reason = HOLD_ERROR;
+	if (!fb_state.held && (mo_running() || mo_queue_count())) {
+		fb_state.held = 1;
+		fb_state.hold_reason = FB_HOLD_ERROR;
 		mo_hold();
 	}
 	board_irq_restore(sreg);
@@ -165,19 +164,19 @@ static void error_hold(void)
 static void finish(uint8_t st)
 {
 	if (st == FB_OK) {
-		put_P(FB_PSTR("ok"));
-		put_eol();
+		report_P(BOARD_PSTR("ok"));
+		report_eol();
 		return;
 	}
-	if (!fb_is_resend(st))
+	if (!proto_is_resend(st))
 		error_hold();
-	reply_error(st);
+	report_error(st);
 }
 
 static void try_execute(void)
 {
 	uint8_t st = exec_command(&cmd);
-	if (st == ST_WAIT)
+	if (st == EXEC_WAIT)
 		return;
 	pending = 0;
 	finish(st);
@@ -199,10 +198,10 @@ static void handle_line(void)
 		 * most often two lines merged by a lost newline, and its checksum
 		 * field was cut off, so it is refused with a resend like any line
 		 * whose field does not check (docs/protocol.md 5.2, step 2). */
-		finish(lines.numbered ? FB_ERR_CHECKSUM : FB_ERR_LINE_TOO_LONG);
+		finish(fb_state.lines.numbered ? FB_ERR_CHECKSUM : FB_ERR_LINE_TOO_LONG);
 		return;
 	}
-	uint8_t st = fb_parse_line(&lines, line, len, &cmd);
+	uint8_t st = proto_parse_line(&fb_state.lines, fb_state.line, len, &cmd);
 	if (st == FB_OK)
 		baud_heard();  /* the host speaks at this rate */
 	if (st != FB_OK) {
@@ -217,7 +216,7 @@ static void handle_line(void)
 static void assemble(void)
 {
 	/* after a Ctrl-X, the lines received before it are do_reset()'s to discard */
-	while (!f_reset && rx_tail != rx_head) {
+	while (!fb_state.f_reset && rx_tail != rx_head) {
 		uint8_t t = rx_tail;
 		uint8_t c = rx_buf[t & RX_MASK];
 		rx_tail = (uint8_t)(t + 1u);
@@ -228,7 +227,7 @@ static void assemble(void)
 		if (c == '\r')
 			continue;
 		if (line_len < CFG_LINE_MAX)
-			line[line_len++] = (char)c;
+			fb_state.line[line_len++] = (char)c;
 		else
 			line_over = 1;
 	}
@@ -249,12 +248,12 @@ static uint32_t since_last_rx(void)
  */
 static void laser_watchdog(void)
 {
-	if (!held && (mo_laser() || mo_pen_down()) &&
-	    since_last_rx() > (uint32_t)settings[SET_LASER_TIMEOUT]) {
+	if (!fb_state.held && (mo_laser() || mo_pen_down()) &&
+	    since_last_rx() > (uint32_t)fb_state.settings[SET_LASER_TIMEOUT]) {
 		uint8_t sreg = board_irq_save();
 		if (mo_running() || mo_queue_count()) {
-			held = 1;
-			hold_reason = HOLD_LASER_TIMEOUT;
+			fb_state.held = 1;
+			fb_state.hold_reason = FB_HOLD_LASER_TIMEOUT;
 			mo_hold();
 		} else {
 			mo_pen_park();
@@ -269,12 +268,12 @@ static void resume_when_settled(void)
 	/* resume_at is set only while held: the byte keeps this cheap on every
 	 * pass of a running job (the main loop's cycles are scarce at high step
 	 * rates); a torn read is re-checked below, interrupts off */
-	if (!held || !resume_at)
+	if (!fb_state.held || !resume_at)
 		return;
 	uint8_t sreg = board_irq_save();
 	if (resume_at && (int32_t)(board_ms() - resume_at) >= 0) {
 		resume_at = 0;
-		held = 0;
+		fb_state.held = 0;
 		mo_resume();
 	}
 	board_irq_restore(sreg);
@@ -285,38 +284,38 @@ void fb_setup(void)
 	board_init();
 	settings_defaults();
 	settings_apply();
-	alarm_code = 0;
+	fb_state.alarm_code = 0;
 	/* position, H and Ln done survive a reset that leaves the RAM powered;
 	 * after a power-on they start at 0 (the position is unknown) */
 	mo_boot(board_power_on());
 	/* the pen parks up at every boot (a watchdog reset included) */
-	mo_pen_setup((uint16_t)settings[SET_PEN_PARK]);
+	mo_pen_setup((uint16_t)fb_state.settings[SET_PEN_PARK]);
 	do_reset();
 }
 
 void fb_poll(void)
 {
-	if (f_reset) {
+	if (fb_state.f_reset) {
 		mo_clear_done();
 		do_reset();
 	}
 	uint8_t a = mo_alarm();
 	if (a) {
 		mo_clear_alarm();
-		raise_alarm(a);
+		fb_raise_alarm(a);
 	}
-	if (f_status) {
-		f_status = 0;
-		status_report();
+	if (fb_state.f_status) {
+		fb_state.f_status = 0;
+		report_status();
 	}
 	laser_watchdog();
 	baud_fallback();
 	resume_when_settled();
-	maybe_start();
+	exec_maybe_start();
 	if (pending)
 		try_execute();
 	else
 		assemble();
 	mo_fold();
-	feed_watchdog();
+	fb_feed_watchdog();
 }

@@ -23,20 +23,19 @@
 #error "CFG_QUEUE_SIZE must be a power of two up to 128"
 #endif
 
-fb_block_t mo_queue[CFG_QUEUE_SIZE];
-volatile uint8_t mo_q_head; /* written by the main loop */
-volatile uint8_t mo_q_tail; /* written by the step interrupt */
+/* the queue and its running block (fb_motion.h) */
+mo_state_t mo_state;
 
 /* generator state, owned by the step interrupt while running */
-fb_block_t *volatile mo_cur; /* executing block (still in the queue), or 0 */
-static uint32_t s_now;           /* cycle of the pending event within mo_cur */
+static uint32_t s_now;           /* cycle of the pending event within mo_state.cur */
 static uint8_t s_due;            /* motors stepping at that event */
 static uint8_t s_home_axes, s_es_enabled, s_seek_neg;
 static uint8_t s_rest;           /* the block boundary() last started follows a stop */
 static volatile uint8_t s_running, s_alarm, s_home_hits, s_laser;
-/* mo_beat: set by every mo_event() (the step interrupt is alive), consumed by
- * mo_alive() (the fast path's beat is its left[] counting down); s_held: the generator's timer is paused by mo_hold() */
-volatile uint8_t mo_beat;
+/* s_beat: set by every mo_event() (the step interrupt is alive), consumed by
+ * mo_alive() (the fast path's beat is its left[] counting down); s_held: the
+ * generator's timer is paused by mo_hold() */
+static volatile uint8_t s_beat;
 static volatile uint8_t s_held;
 static volatile uint32_t s_underruns;
 
@@ -49,7 +48,7 @@ static volatile uint16_t p_now16, p_target, p_park, p_step16, p_saved, p_time;
 #define FB_KEEP_MAGIC 0xFB5AFE17UL
 /* off is folded into base when a step of the C path takes it to +-OFF_FOLD,
  * and by the main loop (mo_fold) from +-MAIN_FOLD: a fast block adds all its
- * steps (at most MO_FAST_NMAX) when it starts, so off stays in range as long
+ * steps (at most FAST_NMAX) when it starts, so off stays in range as long
  * as the main loop runs once while a block of that size executes (0.27 s at
  * 60 kHz; one main loop pass takes tens of milliseconds at most, measured
  * under the busiest step interrupt) */
@@ -79,7 +78,7 @@ static void keep_write(int32_t a, int32_t b, uint32_t done, uint8_t homed)
 }
 
 /* Ln done := line (the step interrupt, or interrupts off). */
-FB_ALWAYS_INLINE void keep_done(uint32_t line)
+BOARD_INLINE void keep_done(uint32_t line)
 {
 	K.busy = 1;
 	K.done = line;
@@ -122,7 +121,7 @@ uint8_t mo_boot(uint8_t power_on)
 	uint8_t kept = !power_on && K.busy == 0 && K.homed <= 1 && K.check == keep_sum() &&
 		       K.ndone == ~K.done && K.fdirs <= 3u;
 	for (uint8_t i = 0; kept && i < 2; i++)
-		if (K.left[i] > MO_FAST_NMAX || keep_pos(i) > CFG_POS_LIMIT ||
+		if (K.left[i] > FAST_NMAX || keep_pos(i) > CFG_POS_LIMIT ||
 		    keep_pos(i) < -CFG_POS_LIMIT)
 			kept = 0;
 	if (kept)
@@ -189,8 +188,8 @@ uint16_t mo_pen_frame(void)
 void mo_init(void)
 {
 	board_timer_stop();
-	mo_q_head = mo_q_tail = 0;
-	mo_cur = 0;
+	mo_state.head = mo_state.tail = 0;
+	mo_state.cur = 0;
 	s_now = 0;
 	s_due = 0;
 	s_running = 0;
@@ -201,24 +200,24 @@ void mo_init(void)
 	pen_park_now(0);
 }
 
-uint8_t mo_queue_count(void) { return (uint8_t)((mo_q_head - mo_q_tail) & 0xffu); }
+uint8_t mo_queue_count(void) { return (uint8_t)((mo_state.head - mo_state.tail) & 0xffu); }
 
 uint8_t mo_queue_free(void) { return (uint8_t)(CFG_QUEUE_SIZE - mo_queue_count()); }
 
-fb_block_t *mo_slot(void)
+mo_block_t *mo_slot(void)
 {
-	fb_block_t *b = &mo_queue[mo_q_head & QMASK];
+	mo_block_t *b = &mo_state.queue[mo_state.head & QMASK];
 	b->fast = 0;  /* the C form until mo_seal() says otherwise */
 	return b;
 }
-void mo_push(void) { mo_q_head = (uint8_t)(mo_q_head + 1u); }
+void mo_push(void) { mo_state.head = (uint8_t)(mo_state.head + 1u); }
 
 void mo_clear_queue(void)
 {
-	mo_q_tail = mo_q_head;
+	mo_state.tail = mo_state.head;
 }
 
-static uint8_t prep_axis(fb_block_t *b, uint8_t i, int32_t d, uint32_t min_interval)
+static uint8_t prep_axis(mo_block_t *b, uint8_t i, int32_t d, uint32_t min_interval)
 {
 	uint32_t n;
 	if (d < 0) {
@@ -245,10 +244,10 @@ static uint8_t prep_axis(fb_block_t *b, uint8_t i, int32_t d, uint32_t min_inter
 	return FB_OK;
 }
 
-uint8_t mo_prepare_cycles(fb_block_t *b, int32_t da, int32_t db, uint32_t cycles,
+uint8_t mo_prepare_cycles(mo_block_t *b, int32_t da, int32_t db, uint32_t cycles,
 			  uint32_t min_interval)
 {
-	b->type = BLK_MOVE;
+	b->type = MO_BLK_MOVE;
 	b->dirs = 0;
 	b->cycles = cycles;
 	uint8_t st = prep_axis(b, 0, da, min_interval);
@@ -257,67 +256,31 @@ uint8_t mo_prepare_cycles(fb_block_t *b, int32_t da, int32_t db, uint32_t cycles
 	return st;
 }
 
-#ifdef __AVR__
-/* floor(m * 65536 / n) for m < n < 32768: 16 steps of long division, a
- * fraction of __udivmodsi4's cycles (the main loop runs this per block). */
-static uint16_t frac16(uint16_t m, uint16_t n)
+uint8_t mo_fast_form(const mo_block_t *b, fast_t *f)
 {
-	uint16_t q = 0;
-	for (uint8_t i = 0; i < 16; i++) {
-		m = (uint16_t)(m << 1);
-		q = (uint16_t)(q << 1);
-		if (m >= n) {
-			m = (uint16_t)(m - n);
-			q |= 1u;
-		}
-	}
-	return q;
-}
-#endif
-
-void mo_seal(fb_block_t *b)
-{
-	b->fast = 0;
-#ifdef __AVR__
-	if (b->type != BLK_MOVE || s_es_enabled)
-		return;
+	if (b->type != MO_BLK_MOVE || s_es_enabled)
+		return 0;
 	uint32_t n[2], q[2], m[2];
-	uint16_t tail = 0xffffu;
 	for (uint8_t i = 0; i < 2; i++) {
 		n[i] = b->next[i] == MO_NEVER ? 0 : b->den[i] >> 1;
 		q[i] = b->q[i];
 		m[i] = b->r2[i] >> 1;
-		if (n[i] > MO_FAST_NMAX || (n[i] && q[i] > MO_FAST_QMAX))
-			return;
 	}
-	if (!n[0] && !n[1])
-		return;  /* a pure dwell: the C path's waits */
-	mo_fast_t f;
-	for (uint8_t i = 0; i < 2; i++) {
-		f.cnt[i] = (uint16_t)n[i];
-		if (!n[i]) {
-			f.t[i] = f.tf[i] = f.q[i] = f.qf[i] = 0;
-			continue;
-		}
-		uint16_t qf = frac16((uint16_t)m[i], (uint16_t)n[i]);
-		f.q[i] = (uint16_t)q[i];
-		f.qf[i] = qf;
-		/* step 1 at C/2n = (q + qf/65536) / 2 */
-		f.t[i] = (uint16_t)(q[i] >> 1);
-		f.tf[i] = (uint16_t)(((q[i] & 1u) << 15) | (qf >> 1));
-		/* C - floor((2n-1)C/2n) = ceil(C/2n), with C = qn + m, m < n */
-		uint16_t ti = (uint16_t)((q[i] & 1u) ? (q[i] + 1u) >> 1 : (q[i] >> 1) + (m[i] ? 1u : 0u));
-		if (ti < tail)
-			tail = ti;
-	}
-	f.tail = tail;
+	return fast_form(f, n, q, m);
+}
+
+void mo_seal(mo_block_t *b)
+{
+	fast_t f;
+	b->fast = 0;
+	if (!BOARD_FAST_PATH || !mo_fast_form(b, &f))
+		return;
 	b->f = f;
 	b->pdirs = board_dir_bits(b->dirs);
 	b->fast = 1;
-#endif
 }
 
-void mo_prepare_pen(fb_block_t *b, uint16_t from_us, uint16_t to_us, uint16_t move_ms,
+void mo_prepare_pen(mo_block_t *b, uint16_t from_us, uint16_t to_us, uint16_t move_ms,
 		    uint16_t settle_ms)
 {
 	uint32_t d16 = (uint32_t)(from_us > to_us ? from_us - to_us : to_us - from_us) << 4;
@@ -328,19 +291,19 @@ void mo_prepare_pen(fb_block_t *b, uint16_t from_us, uint16_t to_us, uint16_t mo
 	frames = frames ? frames - 1u : 0u;
 	uint32_t step = frames ? (d16 + frames - 1u) / frames : 0xffffu;
 	mo_prepare_cycles(b, 0, 0, ((uint32_t)move_ms + settle_ms) * (FB_F_CPU / 1000UL), 0);
-	b->type = BLK_PEN;
+	b->type = MO_BLK_PEN;
 	b->power = 0;
 	b->q[0] = to_us;
 	b->q[1] = step ? (step > 0xffffu ? 0xffffu : step) : 1u;
 	b->r2[0] = (uint32_t)move_ms + settle_ms;
 }
 
-uint8_t mo_prepare(fb_block_t *b, int32_t da, int32_t db, uint32_t p_us, uint32_t min_interval)
+uint8_t mo_prepare(mo_block_t *b, int32_t da, int32_t db, uint32_t p_us, uint32_t min_interval)
 {
 	return mo_prepare_cycles(b, da, db, p_us * (FB_F_CPU / 1000000UL), min_interval);
 }
 
-FB_ALWAYS_INLINE void set_laser(uint8_t p)
+BOARD_INLINE void set_laser(uint8_t p)
 {
 	s_laser = p;
 	board_laser(p);
@@ -349,8 +312,8 @@ FB_ALWAYS_INLINE void set_laser(uint8_t p)
 void mo_start(void)
 {
 	uint8_t sreg = board_irq_save();
-	if (!s_running && mo_q_head != mo_q_tail) {
-		mo_cur = 0;
+	if (!s_running && mo_state.head != mo_state.tail) {
+		mo_state.cur = 0;
 		s_now = 0;
 		s_due = 0;
 		s_running = 1;
@@ -366,13 +329,13 @@ void mo_stop(void)
 	board_timer_stop();
 	s_running = 0;
 	s_held = 0;
-	if (mo_cur) {
+	if (mo_state.cur) {
 		/* the interrupted block is dropped (a fast one's steps so far
 		 * stay in the position) */
-		if (mo_cur->fast)
+		if (mo_state.cur->fast)
 			fast_fold();
-		mo_q_tail = (uint8_t)(mo_q_tail + 1u);
-		mo_cur = 0;
+		mo_state.tail = (uint8_t)(mo_state.tail + 1u);
+		mo_state.cur = 0;
 	}
 	s_due = 0;
 	set_laser(0);
@@ -396,8 +359,8 @@ void mo_resume(void)
 {
 	uint8_t sreg = board_irq_save();
 	if (s_running) {
-		if (mo_cur)
-			set_laser(mo_cur->power);
+		if (mo_state.cur)
+			set_laser(mo_state.cur->power);
 		s_held = 0;
 		board_timer_resume();
 	}
@@ -408,33 +371,33 @@ void mo_resume(void)
  * Segment boundary: retire the finished block, apply queued G92/M17/M18,
  * point at the next segment.  Returns it, or 0 when the queue is empty.
  */
-FB_ALWAYS_INLINE fb_block_t *boundary(void)
+BOARD_INLINE mo_block_t *boundary(void)
 {
-	uint8_t t = mo_q_tail;
-	if (mo_cur) {
-		keep_done(mo_cur->line);
+	uint8_t t = mo_state.tail;
+	if (mo_state.cur) {
+		keep_done(mo_state.cur->line);
 		t = (uint8_t)(t + 1u);
-		mo_cur = 0;
+		mo_state.cur = 0;
 	}
 	for (;; t = (uint8_t)(t + 1u)) {
-		if (t == mo_q_head) {
-			mo_q_tail = t;
+		if (t == mo_state.head) {
+			mo_state.tail = t;
 			s_running = 0;
 			s_underruns++;
 			set_laser(0);
 			return 0;
 		}
-		fb_block_t *b = &mo_queue[t & QMASK];
+		mo_block_t *b = &mo_state.queue[t & QMASK];
 		switch (b->type) {
-		case BLK_SETPOS:
+		case MO_BLK_SETPOS:
 			keep_write((int32_t)b->q[0], (int32_t)b->q[1], b->line, 1);
 			continue;
-		case BLK_ENABLE:
-		case BLK_DISABLE:
-			board_enable_motors(b->type == BLK_ENABLE);
+		case MO_BLK_ENABLE:
+		case MO_BLK_DISABLE:
+			board_enable_motors(b->type == MO_BLK_ENABLE);
 			keep_done(b->line);
 			continue;
-		case BLK_PEN:
+		case MO_BLK_PEN:
 			/* stores only: the servo frame interrupt moves the pulse */
 			p_target = (uint16_t)b->q[0];
 			p_step16 = (uint16_t)b->q[1];
@@ -448,22 +411,22 @@ FB_ALWAYS_INLINE fb_block_t *boundary(void)
 		default:
 			break;
 		}
-		mo_q_tail = t;
+		mo_state.tail = t;
 		board_set_dirs(b->dirs);
 		s_home_axes = (uint8_t)((b->next[0] != MO_NEVER ? 1u : 0u) |
 					(b->next[1] != MO_NEVER ? 2u : 0u));
 		s_now = 0;
-		mo_cur = b;
+		mo_state.cur = b;
 		set_laser(b->power);
 		return b;
 	}
 }
 
 /* Endstops while stepping: homing stops, or the alarm; 0 when stopped. */
-FB_ALWAYS_INLINE uint8_t check_endstops(fb_block_t *b, uint8_t due)
+BOARD_INLINE uint8_t check_endstops(mo_block_t *b, uint8_t due)
 {
 	uint8_t es = board_endstops();
-	if (b->type == BLK_HOME) {
+	if (b->type == MO_BLK_HOME) {
 		uint8_t hit = (uint8_t)(es & due & s_home_axes);
 		if (hit) {
 			s_home_hits |= hit;
@@ -478,8 +441,8 @@ FB_ALWAYS_INLINE uint8_t check_endstops(fb_block_t *b, uint8_t due)
 		/* pressed, and this motor just stepped towards its switch */
 		s_alarm = FB_ALARM_ENDSTOP;
 		s_running = 0;
-		mo_q_tail = (uint8_t)(mo_q_tail + 1u);
-		mo_cur = 0;
+		mo_state.tail = (uint8_t)(mo_state.tail + 1u);
+		mo_state.cur = 0;
 		set_laser(0);
 		return 0;
 	}
@@ -490,7 +453,7 @@ FB_ALWAYS_INLINE uint8_t check_endstops(fb_block_t *b, uint8_t due)
  * Count the step of motor i in the kept record (busy is set): off moves by
  * one; at +-OFF_FOLD it goes into base, and into the check with it.
  */
-FB_ALWAYS_INLINE void count_step(const fb_block_t *b, uint8_t i)
+BOARD_INLINE void count_step(const mo_block_t *b, uint8_t i)
 {
 	int16_t o = K.off[i];
 	o = (int16_t)((b->dirs & (1u << i)) ? o - 1 : o + 1);
@@ -507,7 +470,7 @@ FB_ALWAYS_INLINE void count_step(const fb_block_t *b, uint8_t i)
  * last step (k = n) the next time, floor((2n+1)C/2n), is >= C, past the
  * segment end.
  */
-FB_ALWAYS_INLINE void step_axis(fb_block_t *b, uint8_t i)
+BOARD_INLINE void step_axis(mo_block_t *b, uint8_t i)
 {
 	uint32_t e = b->err[i] + b->r2[i];
 	uint32_t t = b->next[i] + b->q[i];
@@ -521,9 +484,9 @@ FB_ALWAYS_INLINE void step_axis(fb_block_t *b, uint8_t i)
 
 uint16_t mo_event(void)
 {
-	fb_block_t *b = mo_cur;
+	mo_block_t *b = mo_state.cur;
 	uint8_t due = s_due;
-	mo_beat = 1;
+	s_beat = 1;
 	if (due) {
 		/* a reset from here until busy = 0 finds the record invalid: a
 		 * boot cannot know whether the drivers saw the step */
@@ -538,7 +501,7 @@ uint16_t mo_event(void)
 			step_axis(b, 0);
 		if (due & 2u)
 			step_axis(b, 1);
-		if ((s_es_enabled || b->type == BLK_HOME) && !check_endstops(b, due))
+		if ((s_es_enabled || b->type == MO_BLK_HOME) && !check_endstops(b, due))
 			return 0;
 	} else if (!b || s_now == b->cycles) {
 		s_rest = !b;
@@ -571,41 +534,11 @@ uint16_t mo_event(void)
 	return t ? (uint16_t)t : 1u;
 }
 
-/* Pick the next event of a fast block: the earlier of the live motors' next
- * steps (both when equal), and the other one when it follows within
- * MO_PAIR_CYCLES.  board_avr.c's fast interrupt does the same in assembly. */
-static void fast_pick(const mo_fast_t *f, uint16_t *t, uint8_t *bits, uint16_t *t2,
-		      uint8_t *bits2)
+uint8_t mo_fast_begin(uint16_t base, fast_event_t *e)
 {
-	*bits2 = 0;
-	if (!f->cnt[1]) {
-		*t = f->t[0];
-		*bits = 1;
-		return;
-	}
-	if (!f->cnt[0]) {
-		*t = f->t[1];
-		*bits = 2;
-		return;
-	}
-	int16_t d = (int16_t)(f->t[1] - f->t[0]);
-	uint8_t first = d < 0 ? 1u : 0u;
-	*t = f->t[first];
-	*bits = (uint8_t)(1u << first);
-	if (d == 0) {
-		*bits = 3;
-	} else if ((uint16_t)(d < 0 ? -d : d) < MO_PAIR_CYCLES) {
-		*t2 = f->t[first ^ 1u];
-		*bits2 = (uint8_t)(2u >> first);
-	}
-}
-
-uint8_t mo_fast_begin(uint16_t base, uint16_t *t, uint8_t *bits, uint16_t *t2, uint8_t *bits2)
-{
-	mo_fast_t *f = &mo_cur->f;
-	f->t[0] = (uint16_t)(f->t[0] + base);
-	f->t[1] = (uint16_t)(f->t[1] + base);
-	uint8_t dirs = mo_cur->dirs;
+	fast_t *f = &mo_state.cur->f;
+	fast_begin(f, base);
+	uint8_t dirs = mo_state.cur->dirs;
 	K.busy = 1;
 	for (uint8_t i = 0; i < 2; i++) {
 		int16_t n = (int16_t)f->cnt[i];
@@ -614,20 +547,20 @@ uint8_t mo_fast_begin(uint16_t base, uint16_t *t, uint8_t *bits, uint16_t *t2, u
 	}
 	K.fdirs = dirs;
 	K.busy = 0;
-	fast_pick(f, t, bits, t2, bits2);
+	fast_pick(f, f->cnt, e);
 	return s_rest;
 }
 
 void mo_fast_end(void)
 {
 	fast_fold();
-	s_now = mo_cur->cycles;
+	s_now = mo_state.cur->cycles;
 	s_due = 0;
 }
 
 void mo_fast_shift(uint16_t delta)
 {
-	fb_block_t *b = mo_cur;
+	mo_block_t *b = mo_state.cur;
 	if (b && b->fast) {
 		b->f.t[0] = (uint16_t)(b->f.t[0] + delta);
 		b->f.t[1] = (uint16_t)(b->f.t[1] + delta);
@@ -661,15 +594,15 @@ uint8_t mo_running(void) { return s_running; }
 
 uint8_t mo_alive(void)
 {
-	/* the fast path (board_avr_step.c) sets no beat: each of its steps
+	/* the fast path (board_avr_step.S) sets no beat: each of its steps
 	 * counts a kept left[] down, which changes its low byte, so a change of
 	 * a low byte since the last look is its beat (read outside the
 	 * interrupts-off section: one byte is read whole) */
 	static uint8_t seen[2];
 	uint8_t l0 = (uint8_t)K.left[0], l1 = (uint8_t)K.left[1];
 	uint8_t sreg = board_irq_save();
-	uint8_t ok = mo_beat || !s_running || s_held;
-	mo_beat = 0;
+	uint8_t ok = s_beat || !s_running || s_held;
+	s_beat = 0;
 	board_irq_restore(sreg);
 	ok = (uint8_t)(ok || l0 != seen[0] || l1 != seen[1]);
 	seen[0] = l0;
@@ -704,8 +637,8 @@ void mo_status(mo_status_t *st)
 	uint8_t sreg = board_irq_save();
 	uint32_t done = K.done, underruns = s_underruns;
 	uint16_t pen16 = p_now16;
-	uint8_t head = mo_q_head, tail = mo_q_tail, laser = s_laser, running = s_running;
-	uint8_t cur = mo_cur != 0;
+	uint8_t head = mo_state.head, tail = mo_state.tail, laser = s_laser, running = s_running;
+	uint8_t cur = mo_state.cur != 0;
 	board_irq_restore(sreg);
 	uint8_t count = (uint8_t)(head - tail);
 	st->done = done;

@@ -13,48 +13,23 @@
 
 #include <stdint.h>
 #include "config.h"
+#include "fb_fast.h"
 
-enum fb_block_type {
-	BLK_MOVE = 0,   /* steps both motors over a duration */
-	BLK_HOME,       /* like MOVE, but each motor stops at its endstop */
-	BLK_SETPOS,     /* G92: position := n[] (as int32) */
-	BLK_ENABLE,     /* M17 */
-	BLK_DISABLE,    /* M18 */
-	BLK_PEN         /* M280: servo to q[0] us at q[1] per frame, then a dwell */
+enum mo_block_type {
+	MO_BLK_MOVE = 0,   /* steps both motors over a duration */
+	MO_BLK_HOME,       /* like MOVE, but each motor stops at its endstop */
+	MO_BLK_SETPOS,     /* G92: position := n[] (as int32) */
+	MO_BLK_ENABLE,     /* M17 */
+	MO_BLK_DISABLE,    /* M18 */
+	MO_BLK_PEN         /* M280: servo to q[0] us at q[1] per frame, then a dwell */
 };
-
-/*
- * The fast form of a MOVE block (AVR builds, see board_avr.c): both motors on
- * 16-bit times with a 16-bit fraction, stepped by the hand-written part of
- * the step interrupt.  Step k of a motor is at t1 + (k-1) * (q + qf/65536)
- * with t1 = (q + qf/65536) / 2: the DDA time floor((2k-1)C/2n) or one cycle
- * before it (the fraction is cut, never rounded up: at most k/65536 cycle
- * early in all, < 1/4 cycle for the n <= MO_FAST_NMAX allowed).  t[] are
- * cycles from the block start until the block starts, timer times after.
- * tail = cycles from the block's last step to its end.
- */
-typedef struct {
-	uint16_t t[2];     /* next step of motor i */
-	uint16_t tf[2];    /* its fraction, 1/65536 cycle */
-	uint16_t q[2];     /* whole cycles between steps */
-	uint16_t qf[2];    /* fraction of a cycle between steps, 1/65536 */
-	uint16_t cnt[2];   /* steps left, the next one included; 0 = done */
-	uint16_t tail;
-} mo_fast_t;
-
-/* A block takes the fast form when each moving motor has n <= MO_FAST_NMAX
- * steps at intervals q <= MO_FAST_QMAX cycles (so every time difference the
- * interrupt compares stays below 32768), endstop supervision ($7) is off and
- * the block is a plain MOVE. */
-#define MO_FAST_NMAX 16383u
-#define MO_FAST_QMAX 16383u
 
 /*
  * One queue entry.  The main loop fills every field (all divisions happen
  * there); while the block executes, the step interrupt updates next[] and
- * err[] (or the fast form's t, tf, cnt) in place, so starting a segment
+ * err[] (or the fast form's t and tf) in place, so starting a segment
  * copies nothing.
- * For BLK_SETPOS the new position is in q[] (as int32).
+ * For MO_BLK_SETPOS the new position is in q[] (as int32).
  */
 typedef struct {
 	union {
@@ -65,16 +40,16 @@ typedef struct {
 			uint32_t r2[2];    /* 2 * (cycles % n) */
 			uint32_t den[2];   /* 2 * n */
 		};
-		mo_fast_t f;       /* when fast is 1 */
+		fast_t f;          /* when fast is 1 (fb_fast.h) */
 	};
 	uint32_t cycles;   /* segment duration in CPU cycles */
 	uint32_t line;     /* line number of the command */
-	uint8_t type;      /* enum fb_block_type */
+	uint8_t type;      /* enum mo_block_type */
 	uint8_t dirs;      /* bit set = motor steps negative */
 	uint8_t power;     /* laser power during the segment */
 	uint8_t fast;      /* 1 = the fast form above is filled, not next..den */
 	uint8_t pdirs;     /* fast form: the direction pins' port bits */
-} fb_block_t;
+} mo_block_t;
 
 #define MO_NEVER 0xffffffffUL
 
@@ -91,11 +66,15 @@ uint8_t mo_boot(uint8_t power_on);
  * includes the block executing now; mo_status_t.waiting does not. */
 uint8_t mo_queue_count(void);
 uint8_t mo_queue_free(void);
-fb_block_t *mo_slot(void);
+mo_block_t *mo_slot(void);
 void mo_push(void);
-/* Give a filled MOVE block its fast form when it qualifies (AVR builds; main
- * loop, before mo_push, with interrupts on: a few hundred cycles). */
-void mo_seal(fb_block_t *b);
+/* The fast form (fb_fast.h) of a filled block, 1 when it takes one: a plain
+ * MOVE that fast_form() accepts, with endstop supervision ($7) off. */
+uint8_t mo_fast_form(const mo_block_t *b, fast_t *f);
+/* Give a filled block its fast form when it takes one and the board runs
+ * fast blocks (BOARD_FAST_PATH); main loop, before mo_push, with interrupts
+ * on: a few hundred cycles. */
+void mo_seal(mo_block_t *b);
 /* Drop every queued block; only while the generator is stopped. */
 void mo_clear_queue(void);
 
@@ -104,9 +83,9 @@ void mo_clear_queue(void);
  * number of CPU cycles).  Returns FB_OK, or FB_ERR_TOO_FAST when a motor
  * would need an interval below min_interval cycles between steps.
  */
-uint8_t mo_prepare(fb_block_t *b, int32_t da, int32_t db, uint32_t p_us,
+uint8_t mo_prepare(mo_block_t *b, int32_t da, int32_t db, uint32_t p_us,
 		   uint32_t min_interval);
-uint8_t mo_prepare_cycles(fb_block_t *b, int32_t da, int32_t db, uint32_t cycles,
+uint8_t mo_prepare_cycles(mo_block_t *b, int32_t da, int32_t db, uint32_t cycles,
 			  uint32_t min_interval);
 
 /*
@@ -116,7 +95,7 @@ uint8_t mo_prepare_cycles(fb_block_t *b, int32_t da, int32_t db, uint32_t cycles
  * 20 ms servo frame; the block then lasts move_ms + settle_ms with no step,
  * so the next segment's first step waits until the pen has had its time.
  */
-void mo_prepare_pen(fb_block_t *b, uint16_t from_us, uint16_t to_us, uint16_t move_ms,
+void mo_prepare_pen(mo_block_t *b, uint16_t from_us, uint16_t to_us, uint16_t move_ms,
 		    uint16_t settle_ms);
 
 /*
@@ -155,31 +134,46 @@ uint16_t mo_event(void);
 #define MO_FAST 0xffffu
 
 /*
- * The fast path's side of the queue (AVR builds; board_avr.c).  The first
- * event of a fast block that mo_event() started at timer time base: the
- * block's times become timer times, *t and *bits = the first event and the
- * motors stepping at it (bit 0 = A, 1 = B); when the other motor's first
- * step follows within MO_PAIR_CYCLES, *t2 and *bits2 are it (else *bits2 = 0).
- * Returns 1 when the block starts from a stop (the first after mo_start()):
- * only then may the board start its whole timeline later.
+ * The fast path's side of the queue (boards with BOARD_FAST_PATH).  The fast
+ * block mo_event() started begins at timer time base: its times become
+ * timer times, its steps go into the kept position (board.h) and *e is its
+ * first event (fast_pick).  Returns 1 when the block starts from a stop (the
+ * first after mo_start()): only then may the board start its whole
+ * timeline later.
  */
-/* 120: a step farther behind the previous one than that gets an interrupt of
- * its own (the waits for pairs at 120-180 took more of the CPU than the
- * extra interrupts; measured with benchmarks/firmware.py --at 55) */
-#define MO_PAIR_CYCLES 120
-uint8_t mo_fast_begin(uint16_t base, uint16_t *t, uint8_t *bits, uint16_t *t2, uint8_t *bits2);
+uint8_t mo_fast_begin(uint16_t base, fast_event_t *e);
 /* The fast interrupt stepped the running block to its end (its boundary is
  * the pending event): the next mo_event() call handles that boundary. */
 void mo_fast_end(void);
 /* The timer's timeline moved by delta cycles (a resumed hold): the running
  * fast block's stored times move with it. */
 void mo_fast_shift(uint16_t delta);
-/* The running block, the queue's read index and the interrupt's beat, for
- * the fast interrupt (read and written only with interrupts off). */
-extern fb_block_t *volatile mo_cur;
-extern volatile uint8_t mo_q_tail, mo_q_head;
-extern volatile uint8_t mo_beat;
-extern fb_block_t mo_queue[CFG_QUEUE_SIZE];
+/*
+ * The queue and its running block: the state fb_motion.c shares with the
+ * board's fast path (board_avr_step.S), which reads and writes these fields
+ * in the step interrupt.  Writers:
+ *   queue[]  the entry at head: the main loop (mo_slot() and the caller,
+ *            before mo_push()); the running block: the step interrupt, in
+ *            place (the C form's next[] and err[], or the fast form's
+ *            times), and mo_fast_shift() as a hold resumes (interrupts off)
+ *   cur      the running block, 0 between blocks: the step interrupt (C path
+ *            boundary(), the fast path's switch to the next block);
+ *            mo_init(), mo_start() and mo_stop() with interrupts off
+ *   head     the next entry to fill: the main loop (mo_push(), mo_init())
+ *   tail     the running or next entry to run: the step interrupt (both
+ *            paths, as blocks end); mo_init(), mo_stop(), mo_clear_queue()
+ *            with the generator stopped or interrupts off
+ * Readers: the step interrupt (all of it), the main loop (head - tail, the
+ * count; cur in mo_status()).  Indices run free (mod 256); head - tail is
+ * the count, the running block included.
+ */
+typedef struct {
+	mo_block_t queue[CFG_QUEUE_SIZE];
+	mo_block_t *volatile cur;
+	volatile uint8_t head, tail;
+} mo_state_t;
+
+extern mo_state_t mo_state;
 /* Fold the kept position's step counts into its base (main loop): the fast
  * interrupt counts its steps in the 16-bit off[] without folding. */
 void mo_fold(void);

@@ -29,7 +29,7 @@
 #include <util/crc16.h>
 #endif
 
-uint16_t fb_crc16(const char *s, uint8_t len)
+uint16_t proto_crc16(const char *s, uint8_t len)
 {
 	uint16_t crc = 0xFFFFu;
 	for (uint8_t i = 0; i < len; i++) {
@@ -94,7 +94,7 @@ static uint8_t field_ok(const char *line, uint8_t end, uint8_t len)
 	}
 	if (num[1] > 99u || num[1] != end || skip_ws(line, i, len) < len)
 		return 0;
-	return fb_crc16(line, end) == num[0];
+	return proto_crc16(line, end) == num[0];
 }
 
 /* A number must end at the end, at whitespace or at the next word's letter. */
@@ -150,15 +150,15 @@ static uint8_t parse_int(const char *s, uint8_t *pi, uint8_t end, int32_t *out)
 static uint8_t allowed_words(uint8_t kind)
 {
 	switch (kind) {
-	case CMD_G1: case CMD_G6: return W_A | W_B | W_P | W_S;
-	case CMD_G92: return W_A | W_B;
-	case CMD_M3: return W_S;
-	case CMD_M280: return W_S | W_R | W_D;
+	case PROTO_CMD_G1: case PROTO_CMD_G6: return PROTO_W_A | PROTO_W_B | PROTO_W_P | PROTO_W_S;
+	case PROTO_CMD_G92: return PROTO_W_A | PROTO_W_B;
+	case PROTO_CMD_M3: return PROTO_W_S;
+	case PROTO_CMD_M280: return PROTO_W_S | PROTO_W_R | PROTO_W_D;
 	default: return 0;
 	}
 }
 
-static uint8_t parse_dollar(const char *s, uint8_t i, uint8_t end, fb_cmd_t *cmd)
+static uint8_t parse_dollar(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cmd)
 {
 	if (i >= end)
 		return FB_ERR_UNKNOWN_COMMAND;
@@ -187,7 +187,7 @@ static uint8_t parse_dollar(const char *s, uint8_t i, uint8_t end, fb_cmd_t *cmd
 			return st;
 		if (skip_ws(s, j, end) < end)
 			return FB_ERR_BAD_WORD;
-		cmd->kind = CMD_SET;
+		cmd->kind = PROTO_CMD_SET;
 		cmd->setting = (uint8_t)n;
 		cmd->value = v;
 		return FB_OK;
@@ -201,15 +201,15 @@ static uint8_t parse_dollar(const char *s, uint8_t i, uint8_t end, fb_cmd_t *cmd
 			return st;
 		if (skip_ws(s, j, end) < end)
 			return FB_ERR_BAD_WORD;
-		cmd->kind = CMD_BAUD;
+		cmd->kind = PROTO_CMD_BAUD;
 		cmd->value = v;
 		return FB_OK;
 	}
 	switch (c) {
-	case 'I': cmd->kind = CMD_INFO; break;
-	case '$': cmd->kind = CMD_LIST; break;
-	case 'H': cmd->kind = CMD_HOME; break;
-	case 'X': cmd->kind = CMD_UNLOCK; break;
+	case 'I': cmd->kind = PROTO_CMD_INFO; break;
+	case '$': cmd->kind = PROTO_CMD_LIST; break;
+	case 'H': cmd->kind = PROTO_CMD_HOME; break;
+	case 'X': cmd->kind = PROTO_CMD_UNLOCK; break;
 	default: return FB_ERR_UNKNOWN_COMMAND;
 	}
 	if (skip_ws(s, (uint8_t)(i + 1), end) < end)
@@ -221,22 +221,22 @@ static uint8_t command_kind(char letter, uint32_t code)
 {
 	if (letter == 'G') {
 		switch (code) {
-		case 1: return CMD_G1;
-		case 6: return CMD_G6;
-		case 90: return CMD_G90;
-		case 91: return CMD_G91;
-		case 92: return CMD_G92;
-		default: return CMD_NONE;
+		case 1: return PROTO_CMD_G1;
+		case 6: return PROTO_CMD_G6;
+		case 90: return PROTO_CMD_G90;
+		case 91: return PROTO_CMD_G91;
+		case 92: return PROTO_CMD_G92;
+		default: return PROTO_CMD_NONE;
 		}
 	}
 	switch (code) {
-	case 3: return CMD_M3;
-	case 5: return CMD_M5;
-	case 17: return CMD_M17;
-	case 18: return CMD_M18;
-	case 110: return CMD_M110;
-	case 280: return CMD_M280;
-	default: return CMD_NONE;
+	case 3: return PROTO_CMD_M3;
+	case 5: return PROTO_CMD_M5;
+	case 17: return PROTO_CMD_M17;
+	case 18: return PROTO_CMD_M18;
+	case 110: return PROTO_CMD_M110;
+	case 280: return PROTO_CMD_M280;
+	default: return PROTO_CMD_NONE;
 	}
 }
 
@@ -298,7 +298,7 @@ static uint8_t g6_item(const char *s, uint8_t *pi, uint8_t end, int32_t *p, int3
 	return FB_OK;
 }
 
-uint8_t fb_g6_next(const char *line, uint8_t *at, uint8_t end, int32_t *p, int32_t d[2])
+uint8_t proto_g6_next(const char *line, uint8_t *at, uint8_t end, int32_t *p, int32_t d[2])
 {
 	uint8_t i = skip_ws(line, *at, end);
 	if (i >= end || g6_item(line, &i, end, p, d) != FB_OK)
@@ -308,7 +308,7 @@ uint8_t fb_g6_next(const char *line, uint8_t *at, uint8_t end, int32_t *p, int32
 }
 
 /* The items of a G6 line from s[i]: each must parse; counted in cmd. */
-static uint8_t g6_items(const char *s, uint8_t i, uint8_t end, fb_cmd_t *cmd)
+static uint8_t g6_items(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cmd)
 {
 	int32_t p = cmd->p, d[2];
 	cmd->g6_at = i;
@@ -322,36 +322,36 @@ static uint8_t g6_items(const char *s, uint8_t i, uint8_t end, fb_cmd_t *cmd)
 	return FB_OK;
 }
 
-static uint8_t check_ranges(fb_cmd_t *cmd)
+static uint8_t check_ranges(proto_cmd_t *cmd)
 {
-	if ((cmd->has & W_A) && (cmd->a > CFG_POS_LIMIT || cmd->a < -CFG_POS_LIMIT))
+	if ((cmd->has & PROTO_W_A) && (cmd->a > CFG_POS_LIMIT || cmd->a < -CFG_POS_LIMIT))
 		return FB_ERR_OUT_OF_RANGE;
-	if ((cmd->has & W_B) && (cmd->b > CFG_POS_LIMIT || cmd->b < -CFG_POS_LIMIT))
+	if ((cmd->has & PROTO_W_B) && (cmd->b > CFG_POS_LIMIT || cmd->b < -CFG_POS_LIMIT))
 		return FB_ERR_OUT_OF_RANGE;
-	if (cmd->kind == CMD_M280) {
+	if (cmd->kind == PROTO_CMD_M280) {
 		/* S is a servo pulse here, not a laser power */
-		if ((cmd->has & W_S) && (cmd->s < CFG_SERVO_MIN_US || cmd->s > CFG_SERVO_MAX_US))
+		if ((cmd->has & PROTO_W_S) && (cmd->s < CFG_SERVO_MIN_US || cmd->s > CFG_SERVO_MAX_US))
 			return FB_ERR_OUT_OF_RANGE;
-		if ((cmd->has & W_R) && (cmd->r < 0 || cmd->r > CFG_PEN_MS_MAX))
+		if ((cmd->has & PROTO_W_R) && (cmd->r < 0 || cmd->r > CFG_PEN_MS_MAX))
 			return FB_ERR_OUT_OF_RANGE;
-		if ((cmd->has & W_D) && (cmd->d < 0 || cmd->d > CFG_PEN_MS_MAX))
+		if ((cmd->has & PROTO_W_D) && (cmd->d < 0 || cmd->d > CFG_PEN_MS_MAX))
 			return FB_ERR_OUT_OF_RANGE;
-		if (!(cmd->has & W_S))
+		if (!(cmd->has & PROTO_W_S))
 			return FB_ERR_MISSING_WORD;
-	} else if ((cmd->has & W_S) && (cmd->s < 0 || cmd->s > 255)) {
+	} else if ((cmd->has & PROTO_W_S) && (cmd->s < 0 || cmd->s > 255)) {
 		return FB_ERR_OUT_OF_RANGE;
 	}
-	if ((cmd->has & W_P) && (cmd->p < CFG_P_MIN_US || cmd->p > CFG_P_MAX_US))
+	if ((cmd->has & PROTO_W_P) && (cmd->p < CFG_P_MIN_US || cmd->p > CFG_P_MAX_US))
 		return FB_ERR_OUT_OF_RANGE;
-	if ((cmd->kind == CMD_G1 || cmd->kind == CMD_G6) && !(cmd->has & W_P))
+	if ((cmd->kind == PROTO_CMD_G1 || cmd->kind == PROTO_CMD_G6) && !(cmd->has & PROTO_W_P))
 		return FB_ERR_MISSING_WORD;
-	if (cmd->kind == CMD_G92 && !(cmd->has & (W_A | W_B)))
+	if (cmd->kind == PROTO_CMD_G92 && !(cmd->has & (PROTO_W_A | PROTO_W_B)))
 		return FB_ERR_MISSING_WORD;
 	return FB_OK;
 }
 
 /* Parse the command part of a line: s[i..end) with the checksum removed. */
-static uint8_t parse_body(const char *s, uint8_t i, uint8_t end, fb_cmd_t *cmd)
+static uint8_t parse_body(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cmd)
 {
 	for (uint8_t k = i; k < end; k++) {
 		uint8_t c = (uint8_t)s[k];
@@ -366,7 +366,7 @@ static uint8_t parse_body(const char *s, uint8_t i, uint8_t end, fb_cmd_t *cmd)
 	}
 	i = skip_ws(s, i, end);
 	if (i >= end) {
-		cmd->kind = CMD_NONE;
+		cmd->kind = PROTO_CMD_NONE;
 		return FB_OK;
 	}
 	char c = upper(s[i]);
@@ -380,7 +380,7 @@ static uint8_t parse_body(const char *s, uint8_t i, uint8_t end, fb_cmd_t *cmd)
 	if (st != FB_OK)
 		return st == FB_ERR_OUT_OF_RANGE ? FB_ERR_UNKNOWN_COMMAND : st;
 	cmd->kind = command_kind(c, code);
-	if (cmd->kind == CMD_NONE)
+	if (cmd->kind == PROTO_CMD_NONE)
 		return FB_ERR_UNKNOWN_COMMAND;
 
 	uint8_t allowed = allowed_words(cmd->kind);
@@ -390,7 +390,7 @@ static uint8_t parse_body(const char *s, uint8_t i, uint8_t end, fb_cmd_t *cmd)
 			break;
 		char w = upper(s[i]);
 		/* a G6's items start at a sign, or at a second P */
-		if (cmd->kind == CMD_G6 && (w == '+' || w == '-' || (w == 'P' && (cmd->has & W_P)))) {
+		if (cmd->kind == PROTO_CMD_G6 && (w == '+' || w == '-' || (w == 'P' && (cmd->has & PROTO_W_P)))) {
 			st = g6_items(s, i, end, cmd);
 			if (st != FB_OK)
 				return st;
@@ -399,12 +399,12 @@ static uint8_t parse_body(const char *s, uint8_t i, uint8_t end, fb_cmd_t *cmd)
 		uint8_t bit;
 		int32_t *dst;
 		switch (w) {
-		case 'A': bit = W_A; dst = &cmd->a; break;
-		case 'B': bit = W_B; dst = &cmd->b; break;
-		case 'P': bit = W_P; dst = &cmd->p; break;
-		case 'S': bit = W_S; dst = &cmd->s; break;
-		case 'R': bit = W_R; dst = &cmd->r; break;
-		case 'D': bit = W_D; dst = &cmd->d; break;
+		case 'A': bit = PROTO_W_A; dst = &cmd->a; break;
+		case 'B': bit = PROTO_W_B; dst = &cmd->b; break;
+		case 'P': bit = PROTO_W_P; dst = &cmd->p; break;
+		case 'S': bit = PROTO_W_S; dst = &cmd->s; break;
+		case 'R': bit = PROTO_W_R; dst = &cmd->r; break;
+		case 'D': bit = PROTO_W_D; dst = &cmd->d; break;
 		default: return FB_ERR_BAD_WORD;
 		}
 		if (!(allowed & bit) || (cmd->has & bit))
@@ -443,7 +443,7 @@ static uint8_t lost_number(const char *s, uint8_t i, uint8_t end, uint8_t len, u
 	return j < last && j >= 2 && s[j - 1] == '/' && is_digit(s[j - 2]);
 }
 
-uint8_t fb_parse_line(fb_lines_t *lines, const char *line, uint8_t len, fb_cmd_t *cmd)
+uint8_t proto_parse_line(proto_lines_t *lines, const char *line, uint8_t len, proto_cmd_t *cmd)
 {
 	memset(cmd, 0, sizeof(*cmd));
 	uint8_t end = len;
@@ -477,7 +477,7 @@ uint8_t fb_parse_line(fb_lines_t *lines, const char *line, uint8_t len, fb_cmd_t
 	 * error (held back, so accepted) uses one */
 	if (st != FB_OK)
 		cmd->g6_count = 0;
-	if (st == FB_OK && cmd->kind == CMD_M110) {
+	if (st == FB_OK && cmd->kind == PROTO_CMD_M110) {
 		lines->last = cmd->has_n ? cmd->n : 0;
 		lines->numbered = cmd->has_n;
 		return FB_OK;

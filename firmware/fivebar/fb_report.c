@@ -9,14 +9,14 @@
 #include "board.h"
 #include "config.h"
 
-void put_P(const char *s)
+void report_P(const char *s)
 {
 	char c;
-	while ((c = fb_pgm_char(s++)) != 0)
+	while ((c = board_pgm_char(s++)) != 0)
 		board_tx((uint8_t)c);
 }
 
-void put_u32(uint32_t v)
+void report_u32(uint32_t v)
 {
 	char d[10];
 	uint8_t n = 0;
@@ -28,78 +28,78 @@ void put_u32(uint32_t v)
 		board_tx((uint8_t)d[--n]);
 }
 
-void put_i32(int32_t v)
+void report_i32(int32_t v)
 {
 	if (v < 0) {
 		board_tx('-');
-		put_u32((uint32_t)0 - (uint32_t)v);
+		report_u32((uint32_t)0 - (uint32_t)v);
 	} else {
-		put_u32((uint32_t)v);
+		report_u32((uint32_t)v);
 	}
 }
 
-void put_eol(void) { put_P(FB_PSTR("\r\n")); }
+void report_eol(void) { report_P(BOARD_PSTR("\r\n")); }
 
-void banner(void)
+void report_banner(void)
 {
-	put_P(FB_PSTR("fivebar " FB_VERSION " proto:"));
-	put_u32(FB_PROTOCOL);
-	put_P(FB_PSTR(" rx:"));
-	put_u32(CFG_RX_SIZE);
-	put_P(FB_PSTR(" queue:"));
-	put_u32(CFG_QUEUE_SIZE);
-	put_P(FB_PSTR(" line:"));
-	put_u32(CFG_LINE_MAX);
-	put_eol();
+	report_P(BOARD_PSTR("fivebar " FB_VERSION " proto:"));
+	report_u32(FB_PROTOCOL);
+	report_P(BOARD_PSTR(" rx:"));
+	report_u32(CFG_RX_SIZE);
+	report_P(BOARD_PSTR(" queue:"));
+	report_u32(CFG_QUEUE_SIZE);
+	report_P(BOARD_PSTR(" line:"));
+	report_u32(CFG_LINE_MAX);
+	report_eol();
 }
 
-void reply_error(uint8_t code)
+void report_error(uint8_t code)
 {
-	put_P(FB_PSTR("error:"));
-	put_u32(code);
-	if (fb_is_resend(code)) {
-		put_P(FB_PSTR(" resend:"));
-		put_u32(lines.last + 1u);
+	report_P(BOARD_PSTR("error:"));
+	report_u32(code);
+	if (proto_is_resend(code)) {
+		report_P(BOARD_PSTR(" resend:"));
+		report_u32(fb_state.lines.last + 1u);
 	}
-	put_eol();
+	report_eol();
 }
 
-void status_report(void)
+void report_status(void)
 {
 	mo_status_t st;
 	mo_status(&st);
 	board_tx('<');
-	if (alarm_code) {
-		put_P(FB_PSTR("Alarm:"));
-		put_u32(alarm_code);
-	} else if (homing) {
-		put_P(FB_PSTR("Home"));
-	} else if (held) {
-		put_P(FB_PSTR("Hold:"));
-		put_u32(hold_reason);
+	if (fb_state.alarm_code) {
+		report_P(BOARD_PSTR("Alarm:"));
+		report_u32(fb_state.alarm_code);
+	} else if (fb_state.homing) {
+		report_P(BOARD_PSTR("Home"));
+	} else if (fb_state.held) {
+		report_P(BOARD_PSTR("Hold:"));
+		report_u32(fb_state.hold_reason);
 	} else if (st.busy) {
-		put_P(FB_PSTR("Run"));
+		report_P(BOARD_PSTR("Run"));
 	} else {
-		put_P(FB_PSTR("Idle"));
+		report_P(BOARD_PSTR("Idle"));
 	}
-	put_P(FB_PSTR("|A:"));
-	put_i32(st.pos[0]);
-	put_P(FB_PSTR(",B:"));
-	put_i32(st.pos[1]);
-	put_P(FB_PSTR("|Q:"));
-	put_u32(st.waiting);
-	put_P(FB_PSTR("|Ln:"));
-	put_u32(st.done);
+	report_P(BOARD_PSTR("|A:"));
+	report_i32(st.pos[0]);
+	report_P(BOARD_PSTR(",B:"));
+	report_i32(st.pos[1]);
+	report_P(BOARD_PSTR("|Q:"));
+	report_u32(st.waiting);
+	report_P(BOARD_PSTR("|Ln:"));
+	report_u32(st.done);
 	board_tx(',');
-	put_u32(lines.last);
-	put_P(FB_PSTR("|L:"));
-	put_u32(st.laser);
-	put_P(FB_PSTR("|U:"));
-	put_u32(st.underruns);
-	put_P(FB_PSTR("|H:"));
+	report_u32(fb_state.lines.last);
+	report_P(BOARD_PSTR("|L:"));
+	report_u32(st.laser);
+	report_P(BOARD_PSTR("|U:"));
+	report_u32(st.underruns);
+	report_P(BOARD_PSTR("|H:"));
 	board_tx(st.homed ? '1' : '0');
-	put_P(FB_PSTR("|P:"));
-	put_u32(st.pen);
+	report_P(BOARD_PSTR("|P:"));
+	report_u32(st.pen);
 	board_tx('>');
-	put_eol();
+	report_eol();
 }

@@ -7,16 +7,16 @@
 
 #include <stdint.h>
 
-/* A string in program memory (FB_PSTR). */
-void put_P(const char *s);
-void put_u32(uint32_t v);
-void put_i32(int32_t v);
-void put_eol(void);
+/* A string in program memory (BOARD_PSTR). */
+void report_P(const char *s);
+void report_u32(uint32_t v);
+void report_i32(int32_t v);
+void report_eol(void);
 /* The boot / $I line: version, protocol, ring, queue and line sizes. */
-void banner(void);
+void report_banner(void);
 /* error:<code>, with " resend:<n>" for the codes that ask for one. */
-void reply_error(uint8_t code);
+void report_error(uint8_t code);
 /* <State|A:..,B:..|Q:..|Ln:..|L:..|U:..|H:..|P:..> */
-void status_report(void);
+void report_status(void);
 
 #endif

@@ -7,47 +7,45 @@
 #include "fb_exec.h"
 #include "fb_motion.h"
 #include "fb_report.h"
+#include "fb_state.h"
 #include "board.h"
 #include "config.h"
 #include "status.h"
 
-int32_t settings[SET_COUNT];
-uint32_t min_interval;
-
 void settings_defaults(void)
 {
-	settings[SET_MAX_RATE] = DEF_MAX_RATE;
-	settings[SET_A_MIN] = DEF_LIMIT_A_MIN;
-	settings[SET_A_MAX] = DEF_LIMIT_A_MAX;
-	settings[SET_B_MIN] = DEF_LIMIT_B_MIN;
-	settings[SET_B_MAX] = DEF_LIMIT_B_MAX;
-	settings[SET_SOFT_LIMITS] = DEF_SOFT_LIMITS;
-	settings[SET_LASER_TIMEOUT] = DEF_LASER_TIMEOUT;
-	settings[SET_HOMING] = DEF_HOMING_ENABLE;
-	settings[SET_HOMING_RATE] = DEF_HOMING_RATE;
-	settings[SET_PULLOFF] = DEF_HOMING_PULLOFF;
-	settings[SET_HOME_A] = DEF_HOME_A;
-	settings[SET_HOME_B] = DEF_HOME_B;
-	settings[SET_TRAVEL] = DEF_HOMING_TRAVEL;
-	settings[SET_HOMING_DIR] = DEF_HOMING_DIR;
+	fb_state.settings[SET_MAX_RATE] = DEF_MAX_RATE;
+	fb_state.settings[SET_A_MIN] = DEF_LIMIT_A_MIN;
+	fb_state.settings[SET_A_MAX] = DEF_LIMIT_A_MAX;
+	fb_state.settings[SET_B_MIN] = DEF_LIMIT_B_MIN;
+	fb_state.settings[SET_B_MAX] = DEF_LIMIT_B_MAX;
+	fb_state.settings[SET_SOFT_LIMITS] = DEF_SOFT_LIMITS;
+	fb_state.settings[SET_LASER_TIMEOUT] = DEF_LASER_TIMEOUT;
+	fb_state.settings[SET_HOMING] = DEF_HOMING_ENABLE;
+	fb_state.settings[SET_HOMING_RATE] = DEF_HOMING_RATE;
+	fb_state.settings[SET_PULLOFF] = DEF_HOMING_PULLOFF;
+	fb_state.settings[SET_HOME_A] = DEF_HOME_A;
+	fb_state.settings[SET_HOME_B] = DEF_HOME_B;
+	fb_state.settings[SET_TRAVEL] = DEF_HOMING_TRAVEL;
+	fb_state.settings[SET_HOMING_DIR] = DEF_HOMING_DIR;
 	uint16_t park = board_pen_park_load();
-	settings[SET_PEN_PARK] = park == 0xffffu ? DEF_PEN_PARK : park;
+	fb_state.settings[SET_PEN_PARK] = park == 0xffffu ? DEF_PEN_PARK : park;
 }
 
-uint32_t interval_for(int32_t rate)
+uint32_t settings_interval(int32_t rate)
 {
 	return (uint32_t)((FB_F_CPU + (uint32_t)rate - 1u) / (uint32_t)rate);
 }
 
-uint8_t seek_neg_mask(void)
+uint8_t settings_seek_neg(void)
 {
-	return (uint8_t)(~settings[SET_HOMING_DIR] & 3);
+	return (uint8_t)(~fb_state.settings[SET_HOMING_DIR] & 3);
 }
 
 void settings_apply(void)
 {
-	min_interval = interval_for(settings[SET_MAX_RATE]);
-	mo_set_endstops((uint8_t)settings[SET_HOMING], seek_neg_mask());
+	fb_state.min_interval = settings_interval(fb_state.settings[SET_MAX_RATE]);
+	mo_set_endstops((uint8_t)fb_state.settings[SET_HOMING], settings_seek_neg());
 }
 
 /* Range of setting n, or 0 when there is no such setting. */
@@ -76,7 +74,7 @@ static uint8_t setting_range(uint8_t n, int32_t *lo, int32_t *hi)
 	}
 }
 
-uint8_t exec_set(const fb_cmd_t *c)
+uint8_t settings_set(const proto_cmd_t *c)
 {
 	int32_t lo, hi;
 	if (!setting_range(c->setting, &lo, &hi))
@@ -84,25 +82,25 @@ uint8_t exec_set(const fb_cmd_t *c)
 	if (c->value < lo || c->value > hi ||
 	    (c->setting == SET_PEN_PARK && c->value && c->value < CFG_SERVO_MIN_US))
 		return FB_ERR_OUT_OF_RANGE;
-	if (!is_idle())
+	if (!exec_idle())
 		return FB_ERR_BUSY;
-	settings[c->setting] = c->value;
+	fb_state.settings[c->setting] = c->value;
 	settings_apply();
 	if (c->setting == SET_PEN_PARK) {
 		board_pen_park_store((uint16_t)c->value);
 		mo_pen_setup((uint16_t)c->value);
-		sync_plan();
+		exec_sync_plan();
 	}
 	return FB_OK;
 }
 
-void list_settings(void)
+void settings_list(void)
 {
 	for (uint8_t i = 0; i < SET_COUNT; i++) {
 		board_tx('$');
-		put_u32(i);
+		report_u32(i);
 		board_tx('=');
-		put_i32(settings[i]);
-		put_eol();
+		report_i32(fb_state.settings[i]);
+		report_eol();
 	}
 }

@@ -12,22 +12,18 @@ enum { SET_MAX_RATE, SET_A_MIN, SET_A_MAX, SET_B_MIN, SET_B_MAX, SET_SOFT_LIMITS
        SET_LASER_TIMEOUT, SET_HOMING, SET_HOMING_RATE, SET_PULLOFF, SET_HOME_A,
        SET_HOME_B, SET_TRAVEL, SET_HOMING_DIR, SET_PEN_PARK, SET_COUNT };
 
-/* the values in force ($0..$14) */
-extern int32_t settings[SET_COUNT];
-/* step interval in CPU cycles at the maximum rate $0 */
-extern uint32_t min_interval;
-
-/* Defaults from config.h; $14 from its stored copy if any. */
+/* fb_state.settings := the defaults from config.h; $14 from its stored
+ * copy if any. */
 void settings_defaults(void);
-/* Derive min_interval and the endstop set-up from the settings. */
+/* Derive fb_state.min_interval and the endstop set-up from the settings. */
 void settings_apply(void);
 /* CPU cycles per step at `rate` steps/s (rounded up). */
-uint32_t interval_for(int32_t rate);
+uint32_t settings_interval(int32_t rate);
 /* Motors whose switch lies in the negative direction ($13 clear bits). */
-uint8_t seek_neg_mask(void);
+uint8_t settings_seek_neg(void);
 /* $n=v */
-uint8_t exec_set(const fb_cmd_t *c);
+uint8_t settings_set(const proto_cmd_t *c);
 /* $$: one $n=v line per setting. */
-void list_settings(void);
+void settings_list(void);
 
 #endif

@@ -2,7 +2,7 @@
  * fuzz_parser.c - libFuzzer target for the line parser and the protocol
  * state machine.
  *
- * 1. Every '\n'-separated piece of the input goes through fb_parse_line with
+ * 1. Every '\n'-separated piece of the input goes through proto_parse_line with
  *    a persistent line counter; the result must be a defined status, a
  *    resend status must leave the counter unchanged, once a numbered line
  *    was accepted no unnumbered line but M110 may be (strict framing), and a
@@ -48,7 +48,7 @@ static int has_host_field(const char *line, size_t len)
 		return 1;
 	char want[16];
 	int n = snprintf(want, sizeof want, "*%u/%u",
-			 (unsigned)fb_crc16(line, (uint8_t)star), (unsigned)star);
+			 (unsigned)proto_crc16(line, (uint8_t)star), (unsigned)star);
 	if (n < 0 || len - star < (size_t)n || memcmp(line + star, want, (size_t)n) != 0)
 		return 0;
 	for (size_t k = star + (size_t)n; k < len; k++)
@@ -81,7 +81,7 @@ static int lost_shape(const char *line, size_t len)
 
 static void parse_pieces(const uint8_t *data, size_t size)
 {
-	fb_lines_t lines = { 0 };
+	proto_lines_t lines = { 0 };
 	size_t start = 0;
 	for (size_t i = 0; i <= size; i++) {
 		if (i < size && data[i] != '\n')
@@ -91,26 +91,26 @@ static void parse_pieces(const uint8_t *data, size_t size)
 			len = 255;
 		char *copy = malloc(len ? len : 1);
 		memcpy(copy, data + start, len);
-		fb_cmd_t cmd;
-		fb_lines_t before = lines;
-		uint8_t st = fb_parse_line(&lines, copy, (uint8_t)len, &cmd);
+		proto_cmd_t cmd;
+		proto_lines_t before = lines;
+		uint8_t st = proto_parse_line(&lines, copy, (uint8_t)len, &cmd);
 		int field_ok = has_host_field(copy, len);
 		int lost = lost_shape(copy, len);
 		free(copy);
 		if (st > FB_ERR_RX_OVERFLOW)
 			abort();
-		if (fb_is_resend(st) && (lines.last != before.last || lines.numbered != before.numbered))
+		if (proto_is_resend(st) && (lines.last != before.last || lines.numbered != before.numbered))
 			abort();
 		/* strict framing: after a numbered line, an unnumbered line other
 		 * than M110 is never accepted (the counter does not move) */
-		if (before.numbered && !cmd.has_n && cmd.kind != CMD_M110 && lines.last != before.last)
+		if (before.numbered && !cmd.has_n && cmd.kind != PROTO_CMD_M110 && lines.last != before.last)
 			abort();
 		/* ... nor, in either mode, one that lost its N and its '*' */
-		if (lost && !cmd.has_n && (!fb_is_resend(st) || lines.last != before.last))
+		if (lost && !cmd.has_n && (!proto_is_resend(st) || lines.last != before.last))
 			abort();
-		if (st == FB_OK && cmd.kind >= CMD_KINDS)
+		if (st == FB_OK && cmd.kind >= PROTO_CMD_KINDS)
 			abort();
-		if (!fb_is_resend(st) && !field_ok)
+		if (!proto_is_resend(st) && !field_ok)
 			abort();
 		start = i + 1;
 	}

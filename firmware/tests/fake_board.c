@@ -23,7 +23,7 @@ int fake_irq_countdown;
 void (*fake_step_hook)(void);
 uint8_t fake_power_on;
 uint32_t fake_wdt_feeds;
-volatile fb_keep_t board_keep;
+volatile board_keep_t board_keep;
 uint16_t fake_ee_park = 0xffffu;
 uint16_t fake_pen_pulse;
 uint32_t fake_pen_frames;
@@ -161,6 +161,9 @@ void board_steps_high(uint8_t mask)
 }
 
 void board_set_dirs(uint8_t neg_mask) { fake_dirs = neg_mask; }
+/* the fake has no direction port: its "bits" are the mask (the fake runs no
+ * fast block, BOARD_FAST_PATH 0, so no block keeps them) */
+uint8_t board_dir_bits(uint8_t neg_mask) { return neg_mask; }
 void board_enable_motors(uint8_t on) { fake_enabled = on; }
 void board_laser(uint8_t power) { fake_laser = power; }
 uint8_t board_endstops(void) { return fake_endstops; }

@@ -35,28 +35,28 @@ static mo_status_t motion(void)
 
 /* ---- parser ------------------------------------------------------------------ */
 
-static uint8_t parse(fb_lines_t *ln, const char *s, fb_cmd_t *c)
+static uint8_t parse(proto_lines_t *ln, const char *s, proto_cmd_t *c)
 {
-	return fb_parse_line(ln, s, (uint8_t)strlen(s), c);
+	return proto_parse_line(ln, s, (uint8_t)strlen(s), c);
 }
 
 /* body with its checksum field "*<crc16>/<len>", as the host sends it */
 static void framed(char *out, size_t size, const char *body)
 {
 	uint8_t len = (uint8_t)strlen(body);
-	snprintf(out, size, "%s*%u/%u", body, fb_crc16(body, len), len);
+	snprintf(out, size, "%s*%u/%u", body, proto_crc16(body, len), len);
 }
 
 /* Expected values from Python's binascii.crc_hqx(data, 0xFFFF), an independent
  * CRC-16/CCITT-FALSE. */
 static void test_crc(void)
 {
-	CHECK(fb_crc16("123456789", 9) == 0x29B1, "CRC-16/CCITT-FALSE check value");
-	CHECK(fb_crc16("", 0) == 0xFFFF, "empty crc is the initial value");
-	CHECK(fb_crc16("A", 1) == 47381, "one byte");
-	CHECK(fb_crc16("N201 G1 A-706 B-507 P16795 S255", 31) == 49724, "a G1 line");
+	CHECK(proto_crc16("123456789", 9) == 0x29B1, "CRC-16/CCITT-FALSE check value");
+	CHECK(proto_crc16("", 0) == 0xFFFF, "empty crc is the initial value");
+	CHECK(proto_crc16("A", 1) == 47381, "one byte");
+	CHECK(proto_crc16("N201 G1 A-706 B-507 P16795 S255", 31) == 49724, "a G1 line");
 	/* the line that lost two bytes and kept its CRC-8 (32) under protocol 1 */
-	CHECK(fb_crc16("N201 G1 A-76 B-07 P16795 S255", 29) == 45618, "that line, two bytes lost");
+	CHECK(proto_crc16("N201 G1 A-76 B-07 P16795 S255", 29) == 45618, "that line, two bytes lost");
 }
 
 /* Decimal overflow at the edges of 32 bits (the parser checks v * 10 + d
@@ -77,14 +77,14 @@ static void test_number_bounds(void)
 	};
 	char buf[64];
 	for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
-		fb_lines_t ln = { cases[k].n - 1u, 1 };
-		fb_cmd_t c;
+		proto_lines_t ln = { cases[k].n - 1u, 1 };
+		proto_cmd_t c;
 		framed(buf, sizeof buf, cases[k].body);
 		uint8_t st = parse(&ln, buf, &c);
 		CHECK(st == cases[k].status && (st != FB_OK || c.n == cases[k].n), cases[k].body);
 	}
-	fb_cmd_t c;
-	fb_lines_t ln = { 0 };
+	proto_cmd_t c;
+	proto_lines_t ln = { 0 };
 	CHECK(parse(&ln, "G1 A2147483647 P1000", &c) == FB_ERR_OUT_OF_RANGE, "A 2^31 - 1: beyond the limit");
 	CHECK(parse(&ln, "G1 A2147483648 P1000", &c) == FB_ERR_OUT_OF_RANGE, "A 2^31: over");
 	CHECK(parse(&ln, "G1 A100000000 P1000", &c) == FB_OK && c.a == 100000000L, "A at the limit");
@@ -114,15 +114,15 @@ static void test_parse_g6(void)
 		{ "G6 P1000 +-1+0", FB_ERR_BAD_NUMBER, 0 },
 	};
 	for (size_t i = 0; i < sizeof(cases) / sizeof(cases[0]); i++) {
-		fb_lines_t ln = { 0 };
-		fb_cmd_t c;
+		proto_lines_t ln = { 0 };
+		proto_cmd_t c;
 		uint8_t st = parse(&ln, cases[i].line, &c);
 		CHECK(st == cases[i].status, "'%s': status %u, want %u", cases[i].line, st, cases[i].status);
-		CHECK(c.kind == CMD_G6, "'%s': kind %u", cases[i].line, c.kind);
+		CHECK(c.kind == PROTO_CMD_G6, "'%s': kind %u", cases[i].line, c.kind);
 		CHECK(ln.last == 1u + cases[i].count, "'%s': last %u", cases[i].line, ln.last);
 	}
-	fb_lines_t ln = { 40, 1 };
-	fb_cmd_t c;
+	proto_lines_t ln = { 40, 1 };
+	proto_cmd_t c;
 	char buf[96];
 	framed(buf, sizeof buf, "N41 G6 P1000 +1-1+2+2");
 	CHECK(parse(&ln, buf, &c) == FB_OK && ln.last == 43, "a numbered G6 uses 3 numbers");
@@ -130,87 +130,87 @@ static void test_parse_g6(void)
 	int32_t p = 7, d[2];
 	uint8_t at = 0;
 	const char *items = "P250+3-4 -5+0";
-	CHECK(fb_g6_next(items, &at, (uint8_t)strlen(items), &p, d) && p == 250 && d[0] == 3 &&
+	CHECK(proto_g6_next(items, &at, (uint8_t)strlen(items), &p, d) && p == 250 && d[0] == 3 &&
 	      d[1] == -4, "first item");
-	CHECK(fb_g6_next(items, &at, (uint8_t)strlen(items), &p, d) && p == 250 && d[0] == -5 &&
+	CHECK(proto_g6_next(items, &at, (uint8_t)strlen(items), &p, d) && p == 250 && d[0] == -5 &&
 	      d[1] == 0, "second item keeps P");
-	CHECK(!fb_g6_next(items, &at, (uint8_t)strlen(items), &p, d), "end of the items");
+	CHECK(!proto_g6_next(items, &at, (uint8_t)strlen(items), &p, d), "end of the items");
 }
 
 static void test_parse_table(void)
 {
 	static const struct { const char *line; uint8_t status; uint8_t kind; } cases[] = {
-		{ "G1 A10 B-5 P1000 S3", FB_OK, CMD_G1 },
-		{ "g1a10b-5p1000", FB_OK, CMD_G1 },
-		{ "  G1\tA+10 P100 ; a comment", FB_OK, CMD_G1 },
-		{ "", FB_OK, CMD_NONE },
-		{ "   ; only a comment", FB_OK, CMD_NONE },
-		{ "G1 A10", FB_ERR_MISSING_WORD, CMD_G1 },
-		{ "G1 A1.5 P1000", FB_ERR_BAD_NUMBER, CMD_G1 },
-		{ "G1 A P1000", FB_ERR_BAD_NUMBER, CMD_G1 },
-		{ "G1 A- P1000", FB_ERR_BAD_NUMBER, CMD_G1 },
-		{ "G1 A99999999999 P1000", FB_ERR_OUT_OF_RANGE, CMD_G1 },
-		{ "G1 A100000001 P1000", FB_ERR_OUT_OF_RANGE, CMD_G1 },
-		{ "G1 A-2147483648 P1000", FB_ERR_OUT_OF_RANGE, CMD_G1 },
-		{ "G1 A1 P99", FB_ERR_OUT_OF_RANGE, CMD_G1 },
-		{ "G1 A1 P100000001", FB_ERR_OUT_OF_RANGE, CMD_G1 },
-		{ "G1 A1 P1000 S256", FB_ERR_OUT_OF_RANGE, CMD_G1 },
-		{ "G1 A1 P1000 S-1", FB_ERR_OUT_OF_RANGE, CMD_G1 },
-		{ "G1 X5 P1000", FB_ERR_BAD_WORD, CMD_G1 },
-		{ "G1 A1 A2 P1000", FB_ERR_BAD_WORD, CMD_G1 },
-		{ "G1 G90 P1000", FB_ERR_BAD_WORD, CMD_G1 },
-		{ "G1 A1 P1000 #", FB_ERR_BAD_WORD, CMD_G1 },
-		{ "G2 A1", FB_ERR_UNKNOWN_COMMAND, CMD_NONE },
-		{ "G99999999", FB_ERR_UNKNOWN_COMMAND, CMD_NONE },
-		{ "M999", FB_ERR_UNKNOWN_COMMAND, CMD_NONE },
-		{ "hello", FB_ERR_UNKNOWN_COMMAND, CMD_NONE },
-		{ "A10 P100", FB_ERR_UNKNOWN_COMMAND, CMD_NONE },
-		{ "G", FB_ERR_BAD_NUMBER, CMD_NONE },
-		{ "G1\x01 P100", FB_ERR_INVALID_CHAR, CMD_NONE },
-		{ "G1 P100 \x7f", FB_ERR_INVALID_CHAR, CMD_NONE },
-		{ "G90", FB_OK, CMD_G90 },
-		{ "G91", FB_OK, CMD_G91 },
-		{ "G90 A1", FB_ERR_BAD_WORD, CMD_G90 },
-		{ "G92", FB_ERR_MISSING_WORD, CMD_G92 },
-		{ "G92 B-7", FB_OK, CMD_G92 },
-		{ "G92 P5", FB_ERR_BAD_WORD, CMD_G92 },
-		{ "M3", FB_OK, CMD_M3 },
-		{ "M3 S255", FB_OK, CMD_M3 },
-		{ "M3 S256", FB_ERR_OUT_OF_RANGE, CMD_M3 },
-		{ "M5", FB_OK, CMD_M5 },
-		{ "M5 S1", FB_ERR_BAD_WORD, CMD_M5 },
-		{ "M17", FB_OK, CMD_M17 },
-		{ "M18", FB_OK, CMD_M18 },
-		{ "$I", FB_OK, CMD_INFO },
-		{ "$i", FB_OK, CMD_INFO },
-		{ "$$", FB_OK, CMD_LIST },
-		{ "$H", FB_OK, CMD_HOME },
-		{ "$X", FB_OK, CMD_UNLOCK },
-		{ "$IX", FB_ERR_BAD_WORD, CMD_INFO },
-		{ "$Q", FB_ERR_UNKNOWN_COMMAND, CMD_NONE },
-		{ "$", FB_ERR_UNKNOWN_COMMAND, CMD_NONE },
-		{ "$0", FB_ERR_MISSING_WORD, CMD_NONE },
-		{ "$0=", FB_ERR_BAD_NUMBER, CMD_NONE },
-		{ "$0=12x", FB_ERR_BAD_WORD, CMD_NONE },
-		{ "$0=1.5", FB_ERR_BAD_NUMBER, CMD_NONE },
-		{ "$0=12 3", FB_ERR_BAD_WORD, CMD_NONE },
-		{ "$999=1", FB_ERR_UNKNOWN_SETTING, CMD_NONE },
-		{ "$13=-3", FB_OK, CMD_SET },
+		{ "G1 A10 B-5 P1000 S3", FB_OK, PROTO_CMD_G1 },
+		{ "g1a10b-5p1000", FB_OK, PROTO_CMD_G1 },
+		{ "  G1\tA+10 P100 ; a comment", FB_OK, PROTO_CMD_G1 },
+		{ "", FB_OK, PROTO_CMD_NONE },
+		{ "   ; only a comment", FB_OK, PROTO_CMD_NONE },
+		{ "G1 A10", FB_ERR_MISSING_WORD, PROTO_CMD_G1 },
+		{ "G1 A1.5 P1000", FB_ERR_BAD_NUMBER, PROTO_CMD_G1 },
+		{ "G1 A P1000", FB_ERR_BAD_NUMBER, PROTO_CMD_G1 },
+		{ "G1 A- P1000", FB_ERR_BAD_NUMBER, PROTO_CMD_G1 },
+		{ "G1 A99999999999 P1000", FB_ERR_OUT_OF_RANGE, PROTO_CMD_G1 },
+		{ "G1 A100000001 P1000", FB_ERR_OUT_OF_RANGE, PROTO_CMD_G1 },
+		{ "G1 A-2147483648 P1000", FB_ERR_OUT_OF_RANGE, PROTO_CMD_G1 },
+		{ "G1 A1 P99", FB_ERR_OUT_OF_RANGE, PROTO_CMD_G1 },
+		{ "G1 A1 P100000001", FB_ERR_OUT_OF_RANGE, PROTO_CMD_G1 },
+		{ "G1 A1 P1000 S256", FB_ERR_OUT_OF_RANGE, PROTO_CMD_G1 },
+		{ "G1 A1 P1000 S-1", FB_ERR_OUT_OF_RANGE, PROTO_CMD_G1 },
+		{ "G1 X5 P1000", FB_ERR_BAD_WORD, PROTO_CMD_G1 },
+		{ "G1 A1 A2 P1000", FB_ERR_BAD_WORD, PROTO_CMD_G1 },
+		{ "G1 G90 P1000", FB_ERR_BAD_WORD, PROTO_CMD_G1 },
+		{ "G1 A1 P1000 #", FB_ERR_BAD_WORD, PROTO_CMD_G1 },
+		{ "G2 A1", FB_ERR_UNKNOWN_COMMAND, PROTO_CMD_NONE },
+		{ "G99999999", FB_ERR_UNKNOWN_COMMAND, PROTO_CMD_NONE },
+		{ "M999", FB_ERR_UNKNOWN_COMMAND, PROTO_CMD_NONE },
+		{ "hello", FB_ERR_UNKNOWN_COMMAND, PROTO_CMD_NONE },
+		{ "A10 P100", FB_ERR_UNKNOWN_COMMAND, PROTO_CMD_NONE },
+		{ "G", FB_ERR_BAD_NUMBER, PROTO_CMD_NONE },
+		{ "G1\x01 P100", FB_ERR_INVALID_CHAR, PROTO_CMD_NONE },
+		{ "G1 P100 \x7f", FB_ERR_INVALID_CHAR, PROTO_CMD_NONE },
+		{ "G90", FB_OK, PROTO_CMD_G90 },
+		{ "G91", FB_OK, PROTO_CMD_G91 },
+		{ "G90 A1", FB_ERR_BAD_WORD, PROTO_CMD_G90 },
+		{ "G92", FB_ERR_MISSING_WORD, PROTO_CMD_G92 },
+		{ "G92 B-7", FB_OK, PROTO_CMD_G92 },
+		{ "G92 P5", FB_ERR_BAD_WORD, PROTO_CMD_G92 },
+		{ "M3", FB_OK, PROTO_CMD_M3 },
+		{ "M3 S255", FB_OK, PROTO_CMD_M3 },
+		{ "M3 S256", FB_ERR_OUT_OF_RANGE, PROTO_CMD_M3 },
+		{ "M5", FB_OK, PROTO_CMD_M5 },
+		{ "M5 S1", FB_ERR_BAD_WORD, PROTO_CMD_M5 },
+		{ "M17", FB_OK, PROTO_CMD_M17 },
+		{ "M18", FB_OK, PROTO_CMD_M18 },
+		{ "$I", FB_OK, PROTO_CMD_INFO },
+		{ "$i", FB_OK, PROTO_CMD_INFO },
+		{ "$$", FB_OK, PROTO_CMD_LIST },
+		{ "$H", FB_OK, PROTO_CMD_HOME },
+		{ "$X", FB_OK, PROTO_CMD_UNLOCK },
+		{ "$IX", FB_ERR_BAD_WORD, PROTO_CMD_INFO },
+		{ "$Q", FB_ERR_UNKNOWN_COMMAND, PROTO_CMD_NONE },
+		{ "$", FB_ERR_UNKNOWN_COMMAND, PROTO_CMD_NONE },
+		{ "$0", FB_ERR_MISSING_WORD, PROTO_CMD_NONE },
+		{ "$0=", FB_ERR_BAD_NUMBER, PROTO_CMD_NONE },
+		{ "$0=12x", FB_ERR_BAD_WORD, PROTO_CMD_NONE },
+		{ "$0=1.5", FB_ERR_BAD_NUMBER, PROTO_CMD_NONE },
+		{ "$0=12 3", FB_ERR_BAD_WORD, PROTO_CMD_NONE },
+		{ "$999=1", FB_ERR_UNKNOWN_SETTING, PROTO_CMD_NONE },
+		{ "$13=-3", FB_OK, PROTO_CMD_SET },
 	};
 	for (size_t i = 0; i < sizeof(cases) / sizeof(cases[0]); i++) {
-		fb_lines_t ln = { 0 };
-		fb_cmd_t c;
+		proto_lines_t ln = { 0 };
+		proto_cmd_t c;
 		uint8_t st = parse(&ln, cases[i].line, &c);
 		CHECK(st == cases[i].status, "'%s': status %u, want %u", cases[i].line, st, cases[i].status);
-		if (st == FB_OK || cases[i].kind != CMD_NONE)
+		if (st == FB_OK || cases[i].kind != PROTO_CMD_NONE)
 			CHECK(c.kind == cases[i].kind, "'%s': kind %u, want %u", cases[i].line, c.kind,
 			      cases[i].kind);
 		CHECK(ln.last == 1, "'%s': an unnumbered line advances the line count", cases[i].line);
 	}
-	fb_lines_t ln = { 0 };
-	fb_cmd_t c;
+	proto_lines_t ln = { 0 };
+	proto_cmd_t c;
 	CHECK(parse(&ln, "G1 A10 B-5 P1000 S3", &c) == FB_OK && c.a == 10 && c.b == -5 && c.p == 1000 &&
-	      c.s == 3 && c.has == (W_A | W_B | W_P | W_S), "G1 values");
+	      c.s == 3 && c.has == (PROTO_W_A | PROTO_W_B | PROTO_W_P | PROTO_W_S), "G1 values");
 	CHECK(parse(&ln, "$13=-3", &c) == FB_OK && c.setting == 13 && c.value == -3, "setting values");
 	CHECK(parse(&ln, "G1 A-100000000 P100", &c) == FB_OK && c.a == -100000000, "lowest A");
 	test_parse_g6();
@@ -218,8 +218,8 @@ static void test_parse_table(void)
 
 static void test_framing(void)
 {
-	fb_lines_t ln = { 0 };
-	fb_cmd_t c;
+	proto_lines_t ln = { 0 };
+	proto_cmd_t c;
 	char buf[128];
 	framed(buf, sizeof buf, "N1 G90");
 	CHECK(parse(&ln, buf, &c) == FB_OK && ln.last == 1 && c.has_n && c.n == 1, "N1 accepted");
@@ -270,7 +270,7 @@ static void test_framing(void)
 		      "bad checksum field %s", bad_fields[k]);
 	CHECK(parse(&ln, "G90*56831/3 \t", &c) == FB_OK && ln.last == 2,
 	      "five CRC digits, the length, then spaces and tabs");
-	CHECK(parse(&ln, "*65535/0", &c) == FB_OK && ln.last == 3 && c.kind == CMD_NONE,
+	CHECK(parse(&ln, "*65535/0", &c) == FB_OK && ln.last == 3 && c.kind == PROTO_CMD_NONE,
 	      "an empty body: length 0");
 	CHECK(parse(&ln, "G1 A5 P100 ; a*b*33201/16", &c) == FB_OK && ln.last == 4 && c.a == 5,
 	      "the field follows the last '*'; a '*' in a comment is part of the body");
@@ -288,7 +288,7 @@ static void test_framing(void)
 	};
 	for (int mode = 0; mode < 2; mode++) {
 		for (size_t k = 0; k < sizeof lost / sizeof lost[0]; k++) {
-			fb_lines_t fresh = { 7, (uint8_t)mode };
+			proto_lines_t fresh = { 7, (uint8_t)mode };
 			CHECK(parse(&fresh, lost[k], &c) == FB_ERR_NO_CHECKSUM && fresh.last == 7 &&
 			      fresh.numbered == mode, "'%s' (numbered %d): refused with a resend", lost[k],
 			      mode);
@@ -297,11 +297,11 @@ static void test_framing(void)
 	static const char *const kept[] = { "G90 ; 1/", "G90 ; a/2", "G90 ; 1/a", "G90 ; /2",
 					    "G90 ; 1 /2" };
 	for (size_t k = 0; k < sizeof kept / sizeof kept[0]; k++) {
-		fb_lines_t fresh = { 7, 0 };
+		proto_lines_t fresh = { 7, 0 };
 		CHECK(parse(&fresh, kept[k], &c) == FB_OK && fresh.last == 8, "'%s' accepted", kept[k]);
 	}
-	CHECK(fb_is_resend(FB_ERR_CHECKSUM) && fb_is_resend(FB_ERR_LINE_NUMBER) &&
-	      fb_is_resend(FB_ERR_NO_CHECKSUM) && !fb_is_resend(FB_ERR_BAD_WORD), "resend codes");
+	CHECK(proto_is_resend(FB_ERR_CHECKSUM) && proto_is_resend(FB_ERR_LINE_NUMBER) &&
+	      proto_is_resend(FB_ERR_NO_CHECKSUM) && !proto_is_resend(FB_ERR_BAD_WORD), "resend codes");
 }
 
 /*
@@ -345,10 +345,10 @@ static uint8_t noise_mode;
 static uint32_t noise_last;  /* the counter after the undamaged line (a G6 uses several) */
 static int noisy_outcome(uint32_t n, const char *s, size_t len)
 {
-	fb_lines_t ln = { n - 1u, noise_mode };
-	fb_cmd_t c;
-	uint8_t st = fb_parse_line(&ln, s, (uint8_t)len, &c);
-	if (fb_is_resend(st))
+	proto_lines_t ln = { n - 1u, noise_mode };
+	proto_cmd_t c;
+	uint8_t st = proto_parse_line(&ln, s, (uint8_t)len, &c);
+	if (proto_is_resend(st))
 		return ln.last == n - 1u ? 1 : 0;
 	return st == FB_OK && ln.last == noise_last ? 2 : 0;
 }
@@ -369,9 +369,9 @@ static void test_line_noise(void)
 		const size_t len = strlen(valid);
 		const uint32_t n = (uint32_t)strtoul(noise_lines[k] + 1, NULL, 10);
 		int bad = 0;
-		fb_lines_t first = { n - 1u, noise_mode };
-		fb_cmd_t fc;
-		CHECK(fb_parse_line(&first, valid, (uint8_t)len, &fc) == FB_OK, "%s parses", valid);
+		proto_lines_t first = { n - 1u, noise_mode };
+		proto_cmd_t fc;
+		CHECK(proto_parse_line(&first, valid, (uint8_t)len, &fc) == FB_OK, "%s parses", valid);
 		noise_last = first.last;
 		CHECK(noisy_outcome(n, valid, len) == 2, "%s accepted", valid);
 		/* drops: one byte, and every pair of bytes */
@@ -454,7 +454,7 @@ typedef struct { int32_t a, b; uint32_t p; uint8_t power; } seg_t;
 static void queue_segments(const seg_t *segs, size_t n, uint32_t min_interval)
 {
 	for (size_t i = 0; i < n; i++) {
-		fb_block_t *blk = mo_slot();
+		mo_block_t *blk = mo_slot();
 		CHECK(mo_prepare(blk, segs[i].a, segs[i].b, segs[i].p, min_interval) == FB_OK, "prepare %zu", i);
 		blk->power = segs[i].power;
 		blk->line = (uint32_t)i + 1u;
@@ -588,7 +588,7 @@ static void test_delays_bounded(void)
 
 static void test_too_fast(void)
 {
-	fb_block_t b;
+	mo_block_t b;
 	CHECK(mo_prepare(&b, 4, 0, 100, 400) == FB_OK, "4 steps in 1600 cycles at 400/step");
 	CHECK(mo_prepare(&b, 5, 0, 100, 400) == FB_ERR_TOO_FAST, "5 steps in 1600 cycles");
 	CHECK(mo_prepare(&b, 0, -5, 100, 400) == FB_ERR_TOO_FAST, "B too fast");
@@ -625,9 +625,9 @@ static void test_homing_block(void)
 	int32_t zero[2] = { 0, 0 };
 	mo_set_pos(zero);
 	mo_reset_home_hits();
-	fb_block_t *b = mo_slot();
+	mo_block_t *b = mo_slot();
 	CHECK(mo_prepare_cycles(b, -1000, -1000, 1000u * 800u, 400) == FB_OK, "home block");
-	b->type = BLK_HOME;
+	b->type = MO_BLK_HOME;
 	b->power = 0;
 	mo_push();
 	mo_start();
@@ -1052,7 +1052,7 @@ static int32_t steps_of(int axis)
 	return n;
 }
 
-static fb_keep_t snapshot;
+static board_keep_t snapshot;
 static int snapped;
 
 static void snapshot_isr(void)
@@ -1140,7 +1140,7 @@ static void test_kept_record(void)
 	board_keep.fdirs = 2;
 	reboot(0);
 	expect("?", "<Idle|A:7,B:11|Q:0|Ln:1,0|L:0|U:0|H:1|P:0>\r\n");
-	board_keep.left[0] = MO_FAST_NMAX + 1u;
+	board_keep.left[0] = FAST_NMAX + 1u;
 	reboot(0);
 	expect("?", power_on);
 	run_lines("G92 A7 B8\n");
@@ -1155,7 +1155,7 @@ static void test_kept_record(void)
 	/* random RAM */
 	uint32_t x = 99;
 	for (int round = 0; round < 200; round++) {
-		fb_keep_t junk;
+		board_keep_t junk;
 		uint8_t *bytes = (uint8_t *)&junk;
 		for (size_t i = 0; i < sizeof junk; i++) {
 			x = x * 1103515245u + 12345u;
@@ -1234,7 +1234,7 @@ static void test_strict_framing(void)
 }
 
 /*
- * The watchdog feeding rule (fb_main.c feed_watchdog, mo_alive): the main
+ * The watchdog feeding rule (fb_main.c fb_feed_watchdog, mo_alive): the main
  * loop feeds only while the step generator is stopped, held, or its
  * interrupt ran since the last look.  Here the fake's step timer runs only
  * when the test says so, so "the main loop runs, the step interrupt does not"
@@ -1310,9 +1310,9 @@ static void run_ms(uint32_t ms)
  */
 static void test_pen(void)
 {
-	fb_lines_t ln = { 0, 0 };
-	fb_cmd_t c;
-	CHECK(parse(&ln, "M280 S1500 R200 D150", &c) == FB_OK && c.kind == CMD_M280 &&
+	proto_lines_t ln = { 0, 0 };
+	proto_cmd_t c;
+	CHECK(parse(&ln, "M280 S1500 R200 D150", &c) == FB_OK && c.kind == PROTO_CMD_M280 &&
 	      c.s == 1500 && c.r == 200 && c.d == 150, "M280 parses");
 	CHECK(parse(&ln, "M280 S499", &c) == FB_ERR_OUT_OF_RANGE, "S below the servo range");
 	CHECK(parse(&ln, "M280 S2501", &c) == FB_ERR_OUT_OF_RANGE, "S above the servo range");
