@@ -1,4 +1,4 @@
-"""The mock firmware's UART rate and `$B` (fb_baud.c exec_baud, switch_baud, baud_fallback).
+"""The mock firmware's UART rate and `$B` (fb_baud.c baud_request, switch_baud, baud_fallback).
 
 `$B=<baud>` is answered `ok` at the old rate, then the rate changes; a valid line (one that
 parses) must arrive within `protocol.BAUD_TRIAL_S`, else the firmware returns to

@@ -234,7 +234,7 @@ class MockFirmware(MotionCore):
         self.hung_at = self.t
 
     def _watchdog_reset(self, at: float) -> None:
-        """The watchdog's reset of the hung firmware at ``at`` (fb_main.c feed_watchdog):
+        """The watchdog's reset of the hung firmware at ``at`` (fb_main.c fb_feed_watchdog):
         the motors stopped where the hang froze them, the laser goes off now, and the
         firmware boots with its ``.noinit`` record, as after any reset that keeps the RAM.
         Unlike a DTR reset it cuts no host write: bytes after it reach the new firmware."""
@@ -589,7 +589,7 @@ class MockFirmware(MotionCore):
             return E_BUSY
         if not self.motors_on:
             return E_MOTORS_OFF
-        # the position is unknown until homed: the seek counts from 0 (fb_home.c exec_home)
+        # the position is unknown until homed: the seek counts from 0 (fb_home.c home_cycle)
         self.pos = [0, 0]
         self.plan = [0, 0]
         self.homed = False

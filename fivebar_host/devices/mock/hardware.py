@@ -141,6 +141,6 @@ def forget_machines() -> None:
 
 
 def step_interval(rate: int) -> int:
-    """CPU cycles per step at ``rate`` steps/s, rounded up (fb_settings.c interval_for)."""
+    """CPU cycles per step at ``rate`` steps/s, rounded up (fb_settings.c settings_interval)."""
     return (F_CPU + rate - 1) // rate
 

@@ -1,6 +1,6 @@
 """``$H`` in the mock firmware: seek the switches, pull off, set the home position.
 
-A port of the homing sequence of fb_home.c (exec_home): both motors seek their switches at
+A port of the homing sequence of fb_home.c (home_cycle): both motors seek their switches at
 the ``$8`` rate in their ``$13`` direction, each stopping on its own switch (at most ``$12``
 steps), then pull off by ``$9`` steps; a switch not found, or still pressed after the pull
 off, is ``ALARM:31``, a ``!`` or Ctrl-X while homing ``ALARM:32``.  The moves run on the
@@ -31,7 +31,7 @@ if TYPE_CHECKING:
 
 
 class Homing:
-    """``$H`` in progress (fb_home.c exec_home): seek the switches, pull off, set home."""
+    """``$H`` in progress (fb_home.c home_cycle): seek the switches, pull off, set home."""
 
     def __init__(self, fw: MockFirmware) -> None:
         self.fw = fw
@@ -49,7 +49,7 @@ class Homing:
         self.phase = kind
 
     def seek(self) -> None:
-        """Both motors toward their switches; each stops on its own (BLK_HOME)."""
+        """Both motors toward their switches; each stops on its own (MO_BLK_HOME)."""
         fw = self.fw
         travel = fw.settings[S_TRAVEL]
         steps = [0, 0]

@@ -263,7 +263,7 @@ def _g6_items(s: bytes, i: int, end: int, cmd: Command) -> int:
 
 @dataclass(frozen=True)
 class Parsed:
-    """The outcome of framing and parsing one line (fb_parse_line)."""
+    """The outcome of framing and parsing one line (proto_parse_line)."""
 
     status: int  # OK or an error code
     last: int  # the line counter afterwards
