@@ -3,9 +3,9 @@
 Prints, for the tree this script stands in:
 
 * `run_job`'s parameter count (the one function that runs a job on any controller);
-* where a controller's name is read: comparisons with, and mapping keys of, the names of
-  the registered controllers ("fivebar", "grbl") in `fivebar_host/` (the registry itself,
-  `controller_for`, is the one place that should);
+* where a controller's name is read: the function that imports a controller by its name
+  (`controller_for`, the one place that should), and any comparison with, or mapping key of,
+  the controllers' names ("fivebar", "grbl") in `fivebar_host/`;
 * which host modules write G1/G6/M280 text: string literals and f-strings that begin with
   those words (docstrings and comments do not count; the devices under `devices/`, which
   parse and answer the text as a machine does, are listed apart);
@@ -65,8 +65,16 @@ def run_job_params() -> list[str]:
 
 
 def controller_name_reads() -> list[str]:
-    """Places that compare with, or key a mapping by, a controller's name."""
+    """Places that read a controller's name: functions that import a controller's module by
+    its name (`importlib.import_module` in `fivebar_host/controllers/`), and comparisons
+    with, or mapping keys of, the names of the controllers."""
     out = []
+    for p in py_files(HOST / "controllers"):
+        for node in ast.walk(parse(p)):
+            if isinstance(node, ast.FunctionDef) and any(
+                    isinstance(c, ast.Call) and _called(c) == "import_module"
+                    for c in ast.walk(node)):
+                out.append(f"{rel(p)}:{node.lineno} {node.name} (imports the named module)")
     for p in py_files(HOST):
         for node in ast.walk(parse(p)):
             consts: list[ast.expr] = []
