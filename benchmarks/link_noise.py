@@ -2,7 +2,7 @@
 
 The mock's parser is a port of the firmware's (fb_proto.c; tests/contract/
 test_parser_differential.py keeps them equal), so what it accepts the firmware accepts.
-Random drawing-like jobs are packed into G6 lines by the host's own packer (`run.pack`),
+Random drawing-like jobs are packed into G6 lines by the host's own packer (`wire.pack_line`),
 then damaged two ways, as in the protocol-2 figures of section 14:
 
 - the mock's noisy link (`fivebar-mock://?drop=P&corrupt=P`): each byte of the line is lost
