@@ -92,7 +92,7 @@ static uint8_t field_ok(const char *line, uint8_t end, uint8_t len)
 			i++;
 		}
 	}
-	if (num[1] > 99u || num[1] != end || skip_ws(line, i, len) < len)
+	if (num[1] > 255u || num[1] != end || skip_ws(line, i, len) < len)
 		return 0;
 	return proto_crc16(line, end) == num[0];
 }
@@ -152,6 +152,7 @@ static uint8_t allowed_words(uint8_t kind)
 	switch (kind) {
 	case PROTO_CMD_G1: case PROTO_CMD_G6: return PROTO_W_A | PROTO_W_B | PROTO_W_P | PROTO_W_S;
 	case PROTO_CMD_G92: return PROTO_W_A | PROTO_W_B;
+	case PROTO_CMD_G7: return PROTO_W_U | PROTO_W_T;
 	case PROTO_CMD_M3: return PROTO_W_S;
 	case PROTO_CMD_M280: return PROTO_W_S | PROTO_W_R | PROTO_W_D;
 	default: return 0;
@@ -223,6 +224,7 @@ static uint8_t command_kind(char letter, uint32_t code)
 		switch (code) {
 		case 1: return PROTO_CMD_G1;
 		case 6: return PROTO_CMD_G6;
+		case 7: return PROTO_CMD_G7;
 		case 90: return PROTO_CMD_G90;
 		case 91: return PROTO_CMD_G91;
 		case 92: return PROTO_CMD_G92;
@@ -322,6 +324,51 @@ static uint8_t g6_items(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cmd)
 	return FB_OK;
 }
 
+uint8_t proto_px_escaped(uint8_t c)
+{
+	switch (c) {
+	case '\n': case '\r': case 0x18: case '!': case '*': case '?': case '~':
+	case PROTO_PX_ESC:
+		return 1;
+	default:
+		return 0;
+	}
+}
+
+/* G7 pixel data s[i..end): every escape followed by an escaped byte XOR
+ * PROTO_PX_XOR, no byte that must be escaped sent as it is; counted. */
+static uint8_t px_data(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cmd)
+{
+	cmd->px_at = i;
+	cmd->px_end = end;
+	for (; i < end; i++) {
+		uint8_t c = (uint8_t)s[i];
+		if (c == PROTO_PX_ESC) {
+			if (++i >= end || !proto_px_escaped((uint8_t)((uint8_t)s[i] ^ PROTO_PX_XOR)))
+				return FB_ERR_BAD_WORD;
+		} else if (proto_px_escaped(c)) {
+			return FB_ERR_BAD_WORD;
+		}
+		cmd->px_n++;
+	}
+	return FB_OK;
+}
+
+/* Whether the command at s[i] (after blanks) is G7: the index past its code,
+ * else 0.  A G7's code may end at any byte (its items start with a sign, its
+ * data with ':'), not only where other numbers end. */
+static uint8_t g7_code_end(const char *s, uint8_t i, uint8_t end)
+{
+	i = skip_ws(s, i, end);
+	if (i >= end || upper(s[i]) != 'G')
+		return 0;
+	uint32_t code = 0;
+	uint8_t j = (uint8_t)(i + 1u);
+	while (j < end && is_digit(s[j]) && code < 1000u)
+		code = code * 10u + (uint32_t)(s[j++] - '0');
+	return (code == 7u && j > i + 1u && (j >= end || !is_digit(s[j]))) ? j : 0;
+}
+
 static uint8_t check_ranges(proto_cmd_t *cmd)
 {
 	if ((cmd->has & PROTO_W_A) && (cmd->a > CFG_POS_LIMIT || cmd->a < -CFG_POS_LIMIT))
@@ -345,20 +392,35 @@ static uint8_t check_ranges(proto_cmd_t *cmd)
 		return FB_ERR_OUT_OF_RANGE;
 	if ((cmd->kind == PROTO_CMD_G1 || cmd->kind == PROTO_CMD_G6) && !(cmd->has & PROTO_W_P))
 		return FB_ERR_MISSING_WORD;
+	if ((cmd->has & PROTO_W_U) && (cmd->r < 0 || cmd->r > PROTO_PX_U_MAX))
+		return FB_ERR_OUT_OF_RANGE;
+	if ((cmd->has & PROTO_W_T) && (cmd->d < 0 || cmd->d > PROTO_PX_T_MAX))
+		return FB_ERR_OUT_OF_RANGE;
 	if (cmd->kind == PROTO_CMD_G92 && !(cmd->has & (PROTO_W_A | PROTO_W_B)))
 		return FB_ERR_MISSING_WORD;
 	return FB_OK;
 }
 
-/* Parse the command part of a line: s[i..end) with the checksum removed. */
+/* Parse the command part of a line: s[i..end) with the checksum removed.  A
+ * G7's pixel data (after its ':') is bytes, not text: only its words are
+ * checked as text, and a G7 has no comment. */
 static uint8_t parse_body(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cmd)
 {
+	/* data: a G7's ':' (its pixel data follows, to body_end), else end */
+	uint8_t body_end = end, data = end, g7 = g7_code_end(s, i, end);
+	for (uint8_t k = g7; g7 && k < end; k++) {
+		if (s[k] == ':') {
+			data = k;
+			break;
+		}
+	}
+	end = data;
 	for (uint8_t k = i; k < end; k++) {
 		uint8_t c = (uint8_t)s[k];
 		if ((c < 0x20u || c > 0x7eu) && c != '\t')
 			return FB_ERR_INVALID_CHAR;
 	}
-	for (uint8_t k = i; k < end; k++) {
+	for (uint8_t k = i; k < end && data == body_end; k++) {
 		if (s[k] == ';') {
 			end = k;
 			break;
@@ -376,9 +438,15 @@ static uint8_t parse_body(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cm
 		return FB_ERR_UNKNOWN_COMMAND;
 	i++;
 	uint32_t code = 0;
-	uint8_t st = parse_uint(s, &i, end, 65535u, &code);
-	if (st != FB_OK)
-		return st == FB_ERR_OUT_OF_RANGE ? FB_ERR_UNKNOWN_COMMAND : st;
+	uint8_t st = FB_OK;
+	if (g7) {
+		i = g7;
+		code = 7;
+	} else {
+		st = parse_uint(s, &i, end, 65535u, &code);
+		if (st != FB_OK)
+			return st == FB_ERR_OUT_OF_RANGE ? FB_ERR_UNKNOWN_COMMAND : st;
+	}
 	cmd->kind = command_kind(c, code);
 	if (cmd->kind == PROTO_CMD_NONE)
 		return FB_ERR_UNKNOWN_COMMAND;
@@ -389,8 +457,9 @@ static uint8_t parse_body(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cm
 		if (i >= end)
 			break;
 		char w = upper(s[i]);
-		/* a G6's items start at a sign, or at a second P */
-		if (cmd->kind == PROTO_CMD_G6 && (w == '+' || w == '-' || (w == 'P' && (cmd->has & PROTO_W_P)))) {
+		/* a G6's items start at a sign, or at a second P; a G7's at a sign or P */
+		if ((cmd->kind == PROTO_CMD_G6 && (w == '+' || w == '-' || (w == 'P' && (cmd->has & PROTO_W_P)))) ||
+		    (cmd->kind == PROTO_CMD_G7 && (w == '+' || w == '-' || w == 'P'))) {
 			st = g6_items(s, i, end, cmd);
 			if (st != FB_OK)
 				return st;
@@ -405,6 +474,8 @@ static uint8_t parse_body(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cm
 		case 'S': bit = PROTO_W_S; dst = &cmd->s; break;
 		case 'R': bit = PROTO_W_R; dst = &cmd->r; break;
 		case 'D': bit = PROTO_W_D; dst = &cmd->d; break;
+		case 'U': bit = PROTO_W_U; dst = &cmd->r; break;
+		case 'T': bit = PROTO_W_T; dst = &cmd->d; break;
 		default: return FB_ERR_BAD_WORD;
 		}
 		if (!(allowed & bit) || (cmd->has & bit))
@@ -414,6 +485,16 @@ static uint8_t parse_body(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cm
 		if (st != FB_OK)
 			return st;
 		cmd->has |= bit;
+	}
+	if (cmd->kind == PROTO_CMD_G7) {
+		if (!cmd->g6_count)
+			return FB_ERR_MISSING_WORD;  /* a G7 has at least one segment */
+		cmd->g6_count--;  /* its first item takes the line's own number */
+		if (data < body_end) {
+			st = px_data(s, (uint8_t)(data + 1u), body_end, cmd);
+			if (st != FB_OK)
+				return st;
+		}
 	}
 	return check_ranges(cmd);
 }

@@ -28,11 +28,12 @@ enum proto_cmd_kind {
 	PROTO_CMD_SET,        /* $<n>=<v> */
 	PROTO_CMD_M280,       /* pen servo: S<us> [R<ms>] [D<ms>] (queued) */
 	PROTO_CMD_G6,         /* several segments: a G1 head, then relative +a+b [P] items */
-	PROTO_CMD_BAUD        /* $B=<baud>: the link's rate after this line's ok */
+	PROTO_CMD_BAUD,       /* $B=<baud>: the link's rate after this line's ok */
+	PROTO_CMD_G7          /* raster: [U] [T] items [P]+a+b, then :<pixels> (protocol 4) */
 };
-/* How many command kinds there are (keep PROTO_CMD_BAUD last, or move this): the
+/* How many command kinds there are (keep PROTO_CMD_G7 last, or move this): the
  * fuzz target's oracle refuses any other kind. */
-#define PROTO_CMD_KINDS (PROTO_CMD_BAUD + 1)
+#define PROTO_CMD_KINDS (PROTO_CMD_G7 + 1)
 
 /* Word presence bits in proto_cmd_t.has */
 #define PROTO_W_A 0x01u
@@ -41,6 +42,18 @@ enum proto_cmd_kind {
 #define PROTO_W_S 0x08u
 #define PROTO_W_R 0x10u
 #define PROTO_W_D 0x20u
+#define PROTO_W_U 0x40u
+#define PROTO_W_T 0x80u
+
+/* G7 pixel data (docs/protocol.md 6.4): one byte a pixel power, except the
+ * bytes a line cannot carry (newline, CR, the real-time bytes ! ? ~ Ctrl-X,
+ * the checksum's '*') and the escape itself, each sent as PROTO_PX_ESC then
+ * the byte XOR PROTO_PX_XOR. */
+#define PROTO_PX_ESC 0x7du
+#define PROTO_PX_XOR 0x40u
+/* Longest G7 pixel period T and first-change offset U, cycles (1 s, 100 s). */
+#define PROTO_PX_T_MAX 16000000L
+#define PROTO_PX_U_MAX 1600000000L
 
 typedef struct {
 	uint8_t kind;       /* enum proto_cmd_kind */
@@ -49,12 +62,16 @@ typedef struct {
 	uint8_t setting;    /* PROTO_CMD_SET: setting number */
 	uint32_t n;         /* line number when has_n */
 	int32_t a, b, p, s; /* word values */
-	int32_t r, d;       /* M280: move and settle time, ms */
+	int32_t r, d;       /* M280: move and settle time, ms; G7: U and T, cycles */
 	int32_t value;      /* PROTO_CMD_SET: value */
 	uint8_t g6_count;   /* PROTO_CMD_G6: segments after the head (the line uses
 			     * 1 + g6_count line numbers) */
 	uint8_t g6_at;      /* PROTO_CMD_G6: index of its first item in the line */
 	uint8_t g6_end;     /* PROTO_CMD_G6: end of its items (the '*', ';' or line end) */
+	/* PROTO_CMD_G7: its items as a G6's (g6_count = items - 1: the line uses
+	 * 1 + g6_count numbers), its pixel data line[px_at..px_end) (escaped) and
+	 * the number of pixels in it */
+	uint8_t px_at, px_end, px_n;
 } proto_cmd_t;
 
 /* Line-number state shared by consecutive lines. */
@@ -98,6 +115,10 @@ uint8_t proto_parse_line(proto_lines_t *lines, const char *line, uint8_t len, pr
  * proto_parse_line has refused before), else 1.
  */
 uint8_t proto_g6_next(const char *line, uint8_t *at, uint8_t end, int32_t *p, int32_t d[2]);
+
+/* Whether byte c must be escaped in G7 pixel data (and may follow the escape,
+ * XORed). */
+uint8_t proto_px_escaped(uint8_t c);
 
 /* True when a reply code asks the host to resend. */
 static inline uint8_t proto_is_resend(uint8_t code)
