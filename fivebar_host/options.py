@@ -359,7 +359,49 @@ JOB_OPTIONS: tuple[Option, ...] = (
     Option("no_simplify", "--no-simplify", "no_simplify", "bool", default=False,
            help="Keep every vertex of densely sampled straight-line input (default: runs of "
            "lines are simplified within half the tolerance, the drawn path still within it)."),
+    # raster engraving of an image (PNG, JPEG, BMP, GIF, TIFF, WebP; docs/raster.md)
+    Option("width_mm", "--width", "width", "float", unit="mm", lo=0.0, lo_open=True,
+           hi=10_000.0, metavar="LENGTH", help="Image: its width on the machine, mm or with "
+           "units (40, 40mm, 1.5in); the height follows the image's shape unless --height."),
+    Option("height_mm", "--height", "height", "float", unit="mm", lo=0.0, lo_open=True,
+           hi=10_000.0, metavar="LENGTH", help="Image: its height on the machine, like "
+           "--width."),
+    Option("dpi", "--dpi", "dpi", "float", lo=0.0, lo_open=True, hi=100_000.0,
+           help="Image: its resolution, pixels per inch, when neither --width nor --height "
+           "(default: the file's own, else 96)."),
+    Option("line_interval_mm", "--line-interval", "line_interval", "float", unit="mm",
+           lo=0.005, hi=10.0, metavar="LENGTH", help="Image: the burn's pixel size, mm "
+           "(0.1 = 10 px/mm); the image is resampled to it (default: its own pixels)."),
+    Option("image_mode", "--image-mode", "image_mode", "choice", default="grayscale",
+           choices=("grayscale", "threshold", "floyd", "jarvis", "stucki", "atkinson",
+                    "bayer"), help="Image: grayscale (power per pixel between --power-min "
+           "and --power-max), threshold, or dithering (Floyd-Steinberg, Jarvis, Stucki, "
+           "Atkinson, ordered Bayer 8x8)."),
+    Option("power_min", "--power-min", "power_min", "int", lo=0, hi=255, default=0,
+           help="Image: the power of the lightest non-white pixel (grayscale), 0..255."),
+    Option("power_max", "--power-max", "power_max", "int", lo=0, hi=255,
+           help="Image: the power of black (and of every dithered dot), 0..255 (default: "
+           "the profile's [laser] power)."),
+    Option("gamma", "--gamma", "gamma", "float", lo=0.05, hi=20.0, default=1.0,
+           help="Image: power curve, darkness^gamma (grayscale); above 1 keeps light tones "
+           "lighter."),
+    Option("threshold", "--threshold", "threshold", "float", lo=0.0, lo_open=True, hi=1.0,
+           percent=True, default=0.5, help="Image: darkness from which a pixel burns "
+           "(threshold mode): 0.5 or 50%."),
+    Option("negative", "--negative", "negative", "bool", default=False,
+           help="Image: invert it (burn the light parts)."),
+    Option("scan_angle_deg", "--scan-angle", "scan_angle", "float", unit="degrees",
+           lo=-360.0, hi=360.0, default=0.0, help="Image: the scanlines' direction, degrees "
+           "counter-clockwise from +x (the image stays upright)."),
+    Option("one_way", "--one-way", "one_way", "bool", default=False,
+           help="Image: burn every scanline in the same direction (default: bidirectional)."),
+    Option("passes", "--passes", "passes", "int", lo=1, hi=100, default=1, metavar="N",
+           help="Image: burn it N times over."),
 )
+#: The options of a raster engraving (an image; `raster.job.RasterOptions`).
+RASTER_NAMES: tuple[str, ...] = ("width_mm", "height_mm", "dpi", "line_interval_mm",
+                                 "image_mode", "power_min", "power_max", "gamma", "threshold",
+                                 "negative", "scan_angle_deg", "one_way", "passes")
 BY_NAME: dict[str, Option] = {o.name: o for o in JOB_OPTIONS}
 BY_QUERY: dict[str, Option] = {o.query: o for o in JOB_OPTIONS}
 #: The pen servo overrides (applied to the profile: config.with_pen_overrides).
@@ -369,7 +411,8 @@ RUN_NAMES: tuple[str, ...] = ("copies", "page_delay_s")
 #: The options that shape the compiled job (everything but laser, confirm, the pen's and
 #: the run's).
 COMPILE_NAMES: tuple[str, ...] = tuple(
-    o.name for o in JOB_OPTIONS if o.name not in ("laser", "confirm", *PEN_NAMES, *RUN_NAMES))
+    o.name for o in JOB_OPTIONS
+    if o.name not in ("laser", "confirm", *PEN_NAMES, *RUN_NAMES, *RASTER_NAMES))
 
 
 def defaults() -> dict[str, Any]:

@@ -253,7 +253,10 @@ static uint8_t g7_check(const proto_cmd_t *c)
 	int32_t p = g7_p;
 	uint8_t at = c->g6_at, st = FB_OK;
 	uint32_t total = 0;
-	while (st == FB_OK && proto_g6_next(fb_state.line, &at, c->g6_end, &p, d)) {
+	for (uint8_t k = 0; st == FB_OK && k <= c->g6_count; k++) {
+		if (!proto_g7_next(fb_state.line, &at, c->g6_end, (uint8_t)((c->g7_pmask >> k) & 1u),
+				   &p, d))
+			return FB_ERR_BAD_WORD;  /* not reached: the line was parsed */
 		if (!p)
 			return FB_ERR_MISSING_WORD;  /* no P yet */
 		from[0] = t[0];
@@ -332,7 +335,8 @@ static uint8_t exec_g7(const proto_cmd_t *c)
 			return EXEC_WAIT;
 		uint8_t at = g6_at;
 		int32_t p = g6_p, d[2];
-		if (!proto_g6_next(fb_state.line, &at, c->g6_end, &p, d))
+		if (!proto_g7_next(fb_state.line, &at, c->g6_end,
+				   (uint8_t)((c->g7_pmask >> g6_queued) & 1u), &p, d))
 			return FB_ERR_BAD_WORD;  /* not reached: the line was checked */
 		mo_block_t *blk = mo_slot();
 		uint8_t st = mo_prepare(blk, d[0], d[1], (uint32_t)p, fb_state.min_interval);

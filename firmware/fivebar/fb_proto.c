@@ -3,7 +3,8 @@
  *
  * A line is: [N<n>] <command> [words] [;comment] [*<crc16>/<len>]
  * G6 (protocol 3) carries several segments: a G1 head, then relative items
- * "[P<us>]<+|-><a><+|-><b>", each one more segment and one more line number.
+ * "[P<us>]<+|-><a><+|-><b>", each one more segment and one more line number;
+ * G7 (protocol 4) binary segments and pixels (fb_g7.c).
  * The checksum field covers every byte before the last '*' (the body): its
  * CRC-16 and its length in bytes.  Numbers are decimal integers; there are no
  * floats anywhere in the firmware.
@@ -152,7 +153,6 @@ static uint8_t allowed_words(uint8_t kind)
 	switch (kind) {
 	case PROTO_CMD_G1: case PROTO_CMD_G6: return PROTO_W_A | PROTO_W_B | PROTO_W_P | PROTO_W_S;
 	case PROTO_CMD_G92: return PROTO_W_A | PROTO_W_B;
-	case PROTO_CMD_G7: return PROTO_W_U | PROTO_W_T;
 	case PROTO_CMD_M3: return PROTO_W_S;
 	case PROTO_CMD_M280: return PROTO_W_S | PROTO_W_R | PROTO_W_D;
 	default: return 0;
@@ -324,39 +324,9 @@ static uint8_t g6_items(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cmd)
 	return FB_OK;
 }
 
-uint8_t proto_px_escaped(uint8_t c)
-{
-	switch (c) {
-	case '\n': case '\r': case 0x18: case '!': case '*': case '?': case '~':
-	case PROTO_PX_ESC:
-		return 1;
-	default:
-		return 0;
-	}
-}
-
-/* G7 pixel data s[i..end): every escape followed by an escaped byte XOR
- * PROTO_PX_XOR, no byte that must be escaped sent as it is; counted. */
-static uint8_t px_data(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cmd)
-{
-	cmd->px_at = i;
-	cmd->px_end = end;
-	for (; i < end; i++) {
-		uint8_t c = (uint8_t)s[i];
-		if (c == PROTO_PX_ESC) {
-			if (++i >= end || !proto_px_escaped((uint8_t)((uint8_t)s[i] ^ PROTO_PX_XOR)))
-				return FB_ERR_BAD_WORD;
-		} else if (proto_px_escaped(c)) {
-			return FB_ERR_BAD_WORD;
-		}
-		cmd->px_n++;
-	}
-	return FB_OK;
-}
-
 /* Whether the command at s[i] (after blanks) is G7: the index past its code,
- * else 0.  A G7's code may end at any byte (its items start with a sign, its
- * data with ':'), not only where other numbers end. */
+ * else 0.  A G7's code may end at its data's ':' (not only where other numbers
+ * end). */
 static uint8_t g7_code_end(const char *s, uint8_t i, uint8_t end)
 {
 	i = skip_ws(s, i, end);
@@ -392,35 +362,30 @@ static uint8_t check_ranges(proto_cmd_t *cmd)
 		return FB_ERR_OUT_OF_RANGE;
 	if ((cmd->kind == PROTO_CMD_G1 || cmd->kind == PROTO_CMD_G6) && !(cmd->has & PROTO_W_P))
 		return FB_ERR_MISSING_WORD;
-	if ((cmd->has & PROTO_W_U) && (cmd->r < 0 || cmd->r > PROTO_PX_U_MAX))
-		return FB_ERR_OUT_OF_RANGE;
-	if ((cmd->has & PROTO_W_T) && (cmd->d < 0 || cmd->d > PROTO_PX_T_MAX))
-		return FB_ERR_OUT_OF_RANGE;
 	if (cmd->kind == PROTO_CMD_G92 && !(cmd->has & (PROTO_W_A | PROTO_W_B)))
 		return FB_ERR_MISSING_WORD;
 	return FB_OK;
 }
 
 /* Parse the command part of a line: s[i..end) with the checksum removed.  A
- * G7's pixel data (after its ':') is bytes, not text: only its words are
- * checked as text, and a G7 has no comment. */
+ * G7 is its code, blanks, ':' and binary data to the end (fb_g7.c): only its
+ * code is text. */
 static uint8_t parse_body(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cmd)
 {
-	/* data: a G7's ':' (its pixel data follows, to body_end), else end */
-	uint8_t body_end = end, data = end, g7 = g7_code_end(s, i, end);
-	for (uint8_t k = g7; g7 && k < end; k++) {
-		if (s[k] == ':') {
-			data = k;
-			break;
-		}
+	uint8_t g7 = g7_code_end(s, i, end);
+	if (g7) {
+		cmd->kind = PROTO_CMD_G7;
+		uint8_t k = skip_ws(s, g7, end);
+		if (k >= end || s[k] != ':')
+			return FB_ERR_MISSING_WORD;  /* no data: a G7 has at least one segment */
+		return proto_g7_parse(s, (uint8_t)(k + 1u), end, cmd);
 	}
-	end = data;
 	for (uint8_t k = i; k < end; k++) {
 		uint8_t c = (uint8_t)s[k];
 		if ((c < 0x20u || c > 0x7eu) && c != '\t')
 			return FB_ERR_INVALID_CHAR;
 	}
-	for (uint8_t k = i; k < end && data == body_end; k++) {
+	for (uint8_t k = i; k < end; k++) {
 		if (s[k] == ';') {
 			end = k;
 			break;
@@ -438,15 +403,9 @@ static uint8_t parse_body(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cm
 		return FB_ERR_UNKNOWN_COMMAND;
 	i++;
 	uint32_t code = 0;
-	uint8_t st = FB_OK;
-	if (g7) {
-		i = g7;
-		code = 7;
-	} else {
-		st = parse_uint(s, &i, end, 65535u, &code);
-		if (st != FB_OK)
-			return st == FB_ERR_OUT_OF_RANGE ? FB_ERR_UNKNOWN_COMMAND : st;
-	}
+	uint8_t st = parse_uint(s, &i, end, 65535u, &code);
+	if (st != FB_OK)
+		return st == FB_ERR_OUT_OF_RANGE ? FB_ERR_UNKNOWN_COMMAND : st;
 	cmd->kind = command_kind(c, code);
 	if (cmd->kind == PROTO_CMD_NONE)
 		return FB_ERR_UNKNOWN_COMMAND;
@@ -457,9 +416,8 @@ static uint8_t parse_body(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cm
 		if (i >= end)
 			break;
 		char w = upper(s[i]);
-		/* a G6's items start at a sign, or at a second P; a G7's at a sign or P */
-		if ((cmd->kind == PROTO_CMD_G6 && (w == '+' || w == '-' || (w == 'P' && (cmd->has & PROTO_W_P)))) ||
-		    (cmd->kind == PROTO_CMD_G7 && (w == '+' || w == '-' || w == 'P'))) {
+		/* a G6's items start at a sign, or at a second P */
+		if (cmd->kind == PROTO_CMD_G6 && (w == '+' || w == '-' || (w == 'P' && (cmd->has & PROTO_W_P)))) {
 			st = g6_items(s, i, end, cmd);
 			if (st != FB_OK)
 				return st;
@@ -474,8 +432,6 @@ static uint8_t parse_body(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cm
 		case 'S': bit = PROTO_W_S; dst = &cmd->s; break;
 		case 'R': bit = PROTO_W_R; dst = &cmd->r; break;
 		case 'D': bit = PROTO_W_D; dst = &cmd->d; break;
-		case 'U': bit = PROTO_W_U; dst = &cmd->r; break;
-		case 'T': bit = PROTO_W_T; dst = &cmd->d; break;
 		default: return FB_ERR_BAD_WORD;
 		}
 		if (!(allowed & bit) || (cmd->has & bit))
@@ -485,16 +441,6 @@ static uint8_t parse_body(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cm
 		if (st != FB_OK)
 			return st;
 		cmd->has |= bit;
-	}
-	if (cmd->kind == PROTO_CMD_G7) {
-		if (!cmd->g6_count)
-			return FB_ERR_MISSING_WORD;  /* a G7 has at least one segment */
-		cmd->g6_count--;  /* its first item takes the line's own number */
-		if (data < body_end) {
-			st = px_data(s, (uint8_t)(data + 1u), body_end, cmd);
-			if (st != FB_OK)
-				return st;
-		}
 	}
 	return check_ranges(cmd);
 }

@@ -29,7 +29,7 @@ enum proto_cmd_kind {
 	PROTO_CMD_M280,       /* pen servo: S<us> [R<ms>] [D<ms>] (queued) */
 	PROTO_CMD_G6,         /* several segments: a G1 head, then relative +a+b [P] items */
 	PROTO_CMD_BAUD,       /* $B=<baud>: the link's rate after this line's ok */
-	PROTO_CMD_G7          /* raster: [U] [T] items [P]+a+b, then :<pixels> (protocol 4) */
+	PROTO_CMD_G7          /* raster: binary segments and pixels after ':' (protocol 4, fb_g7.c) */
 };
 /* How many command kinds there are (keep PROTO_CMD_G7 last, or move this): the
  * fuzz target's oracle refuses any other kind. */
@@ -45,10 +45,9 @@ enum proto_cmd_kind {
 #define PROTO_W_U 0x40u
 #define PROTO_W_T 0x80u
 
-/* G7 pixel data (docs/protocol.md 6.4): one byte a pixel power, except the
- * bytes a line cannot carry (newline, CR, the real-time bytes ! ? ~ Ctrl-X,
- * the checksum's '*') and the escape itself, each sent as PROTO_PX_ESC then
- * the byte XOR PROTO_PX_XOR. */
+/* G7 data (docs/protocol.md 6.4, fb_g7.c): bytes, except those a line cannot
+ * carry (newline, CR, the real-time bytes ! ? ~ Ctrl-X, the checksum's '*') and
+ * the escape itself, each sent as PROTO_PX_ESC then the byte XOR PROTO_PX_XOR. */
 #define PROTO_PX_ESC 0x7du
 #define PROTO_PX_XOR 0x40u
 /* Longest G7 pixel period T and first-change offset U, cycles (1 s, 100 s). */
@@ -68,10 +67,12 @@ typedef struct {
 			     * 1 + g6_count line numbers) */
 	uint8_t g6_at;      /* PROTO_CMD_G6: index of its first item in the line */
 	uint8_t g6_end;     /* PROTO_CMD_G6: end of its items (the '*', ';' or line end) */
-	/* PROTO_CMD_G7: its items as a G6's (g6_count = items - 1: the line uses
-	 * 1 + g6_count numbers), its pixel data line[px_at..px_end) (escaped) and
-	 * the number of pixels in it */
+	/* PROTO_CMD_G7 (fb_g7.c): its items from line[g6_at] (g6_count = items - 1:
+	 * the line uses 1 + g6_count numbers), bit i of g7_pmask set when item i
+	 * carries its P, its powers line[px_at..px_end) (escaped), px_n of them;
+	 * U in r and T in d (PROTO_W_U, PROTO_W_T in has) */
 	uint8_t px_at, px_end, px_n;
+	uint32_t g7_pmask;
 } proto_cmd_t;
 
 /* Line-number state shared by consecutive lines. */
@@ -116,9 +117,23 @@ uint8_t proto_parse_line(proto_lines_t *lines, const char *line, uint8_t len, pr
  */
 uint8_t proto_g6_next(const char *line, uint8_t *at, uint8_t end, int32_t *p, int32_t d[2]);
 
-/* Whether byte c must be escaped in G7 pixel data (and may follow the escape,
- * XORed). */
+/* Whether byte c must be escaped in G7 data (and may follow the escape, XORed). */
 uint8_t proto_px_escaped(uint8_t c);
+
+/* A reader of escaped G7 data line[at..end). */
+typedef struct {
+	const char *s;
+	uint8_t at, end;
+} proto_rd_t;
+/* The next data byte, unescaped: 1, or 0 at the end or a malformed escape (a
+ * byte that must be escaped sent as it is, or an escape of another byte). */
+uint8_t proto_rd_byte(proto_rd_t *r, uint8_t *b);
+/* Parse a G7's data line[at..end) into cmd (fb_g7.c): FB_OK or an error. */
+uint8_t proto_g7_parse(const char *s, uint8_t at, uint8_t end, proto_cmd_t *cmd);
+/* The next item of a G7 line already checked by proto_g7_parse, from line[*at]:
+ * its P (into *p, when has_p) and move (d).  Advances *at; 0 when malformed. */
+uint8_t proto_g7_next(const char *line, uint8_t *at, uint8_t end, uint8_t has_p, int32_t *p,
+		      int32_t d[2]);
 
 /* True when a reply code asks the host to resend. */
 static inline uint8_t proto_is_resend(uint8_t code)

@@ -54,18 +54,58 @@ static void add(line_t *l, const char *s)
 	l->n += k;
 }
 
-/* Pixels escaped as the protocol says (PROTO_PX_ESC, XOR PROTO_PX_XOR). */
+/* One data byte escaped as the protocol says (PROTO_PX_ESC, XOR PROTO_PX_XOR). */
+static void put(line_t *l, uint8_t c)
+{
+	if (proto_px_escaped(c)) {
+		l->b[l->n++] = (char)PROTO_PX_ESC;
+		l->b[l->n++] = (char)(c ^ PROTO_PX_XOR);
+	} else {
+		l->b[l->n++] = (char)c;
+	}
+}
+
+/* An unsigned LEB128 varint (7 bits a byte, low first). */
+static void put_varint(line_t *l, uint32_t v)
+{
+	do {
+		uint8_t b = (uint8_t)(v & 0x7fu);
+		v >>= 7;
+		put(l, (uint8_t)(b | (v ? 0x80u : 0u)));
+	} while (v);
+}
+
+static void put_zigzag(line_t *l, int32_t v)
+{
+	put_varint(l, ((uint32_t)v << 1) ^ (uint32_t)(v >> 31));
+}
+
 static void add_pixels(line_t *l, const uint8_t *px, size_t n)
 {
-	l->b[l->n++] = ':';
-	for (size_t i = 0; i < n; i++) {
-		if (proto_px_escaped(px[i])) {
-			l->b[l->n++] = (char)PROTO_PX_ESC;
-			l->b[l->n++] = (char)(px[i] ^ PROTO_PX_XOR);
-		} else {
-			l->b[l->n++] = (char)px[i];
-		}
-	}
+	for (size_t i = 0; i < n; i++)
+		put(l, px[i]);
+}
+
+/* "G7:" and the binary head of `count` segments (U, T when uflag/tflag) and the P mask. */
+static void add_head(line_t *l, uint8_t count, int uflag, uint32_t u, int tflag, uint32_t t,
+		     uint32_t pmask)
+{
+	add(l, "G7:");
+	put(l, (uint8_t)((count - 1u) | (uflag ? 0x20u : 0u) | (tflag ? 0x40u : 0u)));
+	if (uflag)
+		put_varint(l, u);
+	if (tflag)
+		put_varint(l, t);
+	for (uint8_t k = 0; k < (count + 7u) / 8u; k++)
+		put(l, (uint8_t)(pmask >> (8u * k)));
+}
+
+static void add_item(line_t *l, int withp, uint32_t p, int32_t da, int32_t db)
+{
+	if (withp)
+		put_varint(l, p);
+	put_zigzag(l, da);
+	put_zigzag(l, db);
 }
 
 /* The checksum field and the newline. */
@@ -117,49 +157,28 @@ static void boot(void)
 }
 
 /* ---- parsing ----------------------------------------------------------------------- */
-static uint8_t parse_bytes(proto_lines_t *ln, const char *s, size_t n, proto_cmd_t *c)
+static uint8_t parse_l(const line_t *l, proto_cmd_t *c)
 {
-	return proto_parse_line(ln, s, (uint8_t)n, c);
+	proto_lines_t ln = { 0, 0 };
+	return proto_parse_line(&ln, l->b, (uint8_t)l->n, c);
 }
 
 static void test_parse(void)
 {
-	proto_lines_t ln = { 0, 0 };
 	proto_cmd_t c;
-	static const struct { const char *body; uint8_t st; uint8_t items; } cases[] = {
-		{ "G7 P1000 +10-5", FB_OK, 1 },
-		{ "G7P1000+10-5", FB_OK, 1 },
-		{ "G7+10-5", FB_OK, 1 },
-		{ "G7 U5 T400 P1000 +1+1 P2000 +2-2 -3+0", FB_OK, 3 },
-		{ "g7 u5 t400 +1+1", FB_OK, 1 },
-		{ "G7", FB_ERR_MISSING_WORD, 0 },
-		{ "G7 U5", FB_ERR_MISSING_WORD, 0 },
-		{ "G7 T-1 +1+1", FB_ERR_OUT_OF_RANGE, 0 },
-		{ "G7 T16000001 +1+1", FB_ERR_OUT_OF_RANGE, 0 },
-		{ "G7 U1600000001 +1+1", FB_ERR_OUT_OF_RANGE, 0 },
-		{ "G7 A5 +1+1", FB_ERR_BAD_WORD, 0 },
-		{ "G7 +1+1 U5", FB_ERR_BAD_WORD, 0 },
-		{ "G7 P99 +1+1", FB_ERR_OUT_OF_RANGE, 0 },
-		{ "G7 +1", FB_ERR_BAD_WORD, 0 },
-		{ "G70 +1+1", FB_ERR_UNKNOWN_COMMAND, 0 },
-		{ "G7 +1+1 ;x", FB_OK, 1 },         /* no data: a comment as anywhere */
-		{ "G7 +1+1 ;x:ab", FB_ERR_BAD_WORD, 0 },  /* with data: none */
-	};
-	for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
-		ln.last = 0;
-		ln.numbered = 0;
-		uint8_t st = parse_bytes(&ln, cases[k].body, strlen(cases[k].body), &c);
-		CHECK(st == cases[k].st, "'%s': status %u, want %u", cases[k].body, st, cases[k].st);
-		if (st == FB_OK) {
-			CHECK(c.kind == PROTO_CMD_G7 && c.g6_count + 1u == cases[k].items && c.px_n == 0,
-			      "'%s': kind %u items %u px %u", cases[k].body, c.kind, c.g6_count + 1u, c.px_n);
-			CHECK(ln.last == cases[k].items, "'%s': uses %u line numbers", cases[k].body, ln.last);
-		}
-	}
-	/* pixel data: every byte value, escaped where it must be */
-	uint8_t px[100];
 	line_t l = { .n = 0 };
-	add(&l, "N1G7U0T400P1000+1+1");
+	/* one segment with its P, no pixels */
+	add_head(&l, 1, 0, 0, 0, 0, 1);
+	add_item(&l, 1, 1000, 10, -5);
+	CHECK(parse_l(&l, &c) == FB_OK && c.kind == PROTO_CMD_G7 && c.g6_count == 0 && c.px_n == 0,
+	      "one segment");
+	/* three segments, P on the first, U and T, pixels: three line numbers */
+	l.n = 0;
+	add_head(&l, 3, 1, 5, 1, 400, 1);
+	add_item(&l, 1, 1000, 1, 1);
+	add_item(&l, 0, 0, 2, -2);
+	add_item(&l, 0, 0, -3, 0);
+	uint8_t px[100];
 	for (int i = 0; i < 100; i++)
 		px[i] = (uint8_t)(i * 37 + 5);
 	uint8_t must[] = { '\n', '\r', 0x18, '!', '*', '?', '~', PROTO_PX_ESC };
@@ -167,41 +186,46 @@ static void test_parse(void)
 		px[i] = must[i];
 	add_pixels(&l, px, 100);
 	size_t body = l.n;
+	proto_lines_t ln = { 0, 0 };
+	CHECK(proto_parse_line(&ln, l.b, (uint8_t)l.n, &c) == FB_OK && c.g6_count == 2 &&
+	      c.px_n == 100 && c.r == 5 && c.d == 400 && ln.last == 3, "three segments, 100 pixels");
+	line_t f = l;
+	finish_line(&f);
 	CHECK(body > 99, "a body of three-digit length: %zu", body);
-	finish_line(&l);
 	ln.last = 0;
-	uint8_t st = parse_bytes(&ln, l.b, l.n - 1, &c);
-	CHECK(st == FB_OK && c.px_n == 100, "100 pixels with escapes: status %u, %u pixels", st, c.px_n);
-	for (size_t i = 0; i < body; i++)
-		if (i > c.px_at)
-			CHECK(l.b[i] != '\n' && l.b[i] != '*', "no newline or '*' in the data");
-	/* a raw byte that must be escaped, a bad escape, an escape at the end */
-	static const char *bad[] = { "G7+1+1:a*b", "G7+1+1:a\x7dz", "G7+1+1:ab\x7d", "G7+1+1:\x7d\x7d" };
-	for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
-		ln.last = 0;
-		ln.numbered = 0;
-		st = parse_bytes(&ln, bad[k], strlen(bad[k]), &c);
-		/* "a*b": the last '*' starts a checksum field: that is error 8 */
-		CHECK(st == FB_ERR_BAD_WORD || (k == 0 && st == FB_ERR_CHECKSUM), "bad data %zu: %u", k, st);
-	}
-	/* the field's length has three digits past 99, still without a leading zero */
-	line_t z = { .n = 0 };
-	add(&z, "N1G7U0T400P1000+1+1");
-	add_pixels(&z, px + 8, 90);
-	char f[32];
-	snprintf(f, sizeof f, "*%u/0%u", proto_crc16(z.b, (uint8_t)z.n), (unsigned)z.n);
-	add(&z, f);
-	ln.last = 0;
-	CHECK(parse_bytes(&ln, z.b, z.n, &c) == FB_ERR_CHECKSUM, "a leading zero in the length");
-	/* every single-byte drop of a G7 line with pixels is refused with a resend */
-	for (size_t k = 0; k + 1 < l.n; k++) {
+	CHECK(proto_parse_line(&ln, f.b, (uint8_t)(f.n - 1), &c) == FB_OK, "framed, 3-digit length");
+	for (size_t i = 0; i + 1 < f.n; i++)
+		CHECK(f.b[i] != '\n' && f.b[i] != '!' && f.b[i] != '?' && f.b[i] != '~' &&
+		      f.b[i] != 0x18 && (f.b[i] != '*' || i >= body), "no reserved byte in the body");
+	/* every single-byte drop of the framed line is refused with a resend */
+	for (size_t k = 0; k + 1 < f.n; k++) {
 		char d[300];
-		memcpy(d, l.b, k);
-		memcpy(d + k, l.b + k + 1, l.n - 1 - k - 1);
+		memcpy(d, f.b, k);
+		memcpy(d + k, f.b + k + 1, f.n - 1 - k - 1);
 		ln.last = 0;
 		ln.numbered = 1;
-		st = parse_bytes(&ln, d, l.n - 2, &c);
+		uint8_t st = proto_parse_line(&ln, d, (uint8_t)(f.n - 2), &c);
 		CHECK(proto_is_resend(st), "drop at %zu: status %u", k, st);
+	}
+	/* malformed: no data, no head, a cut item, out of ranges, a stray P bit, a bad escape */
+	struct { const char *what; uint8_t want; } bad[10];
+	line_t b[10];
+	int nb = 0;
+#define BAD(w, code) do { bad[nb].what = (w); bad[nb].want = (code); b[nb].n = 0; } while (0)
+	BAD("no ':'", FB_ERR_MISSING_WORD); add(&b[nb], "G7"); nb++;
+	BAD("no head", FB_ERR_BAD_WORD); add(&b[nb], "G7:"); nb++;
+	BAD("a cut item", FB_ERR_BAD_NUMBER); add_head(&b[nb], 1, 0, 0, 0, 0, 1); put_varint(&b[nb], 1000); nb++;
+	BAD("P 99", FB_ERR_OUT_OF_RANGE); add_head(&b[nb], 1, 0, 0, 0, 0, 1); add_item(&b[nb], 1, 99, 1, 1); nb++;
+	BAD("T too big", FB_ERR_OUT_OF_RANGE); add_head(&b[nb], 1, 0, 0, 1, PROTO_PX_T_MAX + 1, 0); add_item(&b[nb], 0, 0, 1, 1); nb++;
+	BAD("move too big", FB_ERR_OUT_OF_RANGE); add_head(&b[nb], 1, 0, 0, 0, 0, 0); add_item(&b[nb], 0, 0, CFG_POS_LIMIT + 1, 1); nb++;
+	BAD("P bit past the segments", FB_ERR_BAD_WORD); add_head(&b[nb], 1, 0, 0, 0, 0, 3); add_item(&b[nb], 1, 1000, 1, 1); nb++;
+	BAD("a raw real-time byte in data", FB_ERR_BAD_WORD); add_head(&b[nb], 1, 0, 0, 0, 0, 0); add_item(&b[nb], 0, 0, 1, 1); add(&b[nb], "a~"); nb++;
+	BAD("escape of a plain byte", FB_ERR_BAD_WORD); add_head(&b[nb], 1, 0, 0, 0, 0, 0); add_item(&b[nb], 0, 0, 1, 1); add(&b[nb], "\x7dz"); nb++;
+	BAD("six-byte varint", FB_ERR_BAD_NUMBER); add_head(&b[nb], 1, 0, 0, 0, 0, 0); add(&b[nb], "\x80\x80\x80\x80\x80\x01\x02"); nb++;
+#undef BAD
+	for (int k = 0; k < nb; k++) {
+		uint8_t st = parse_l(&b[k], &c);
+		CHECK(st == bad[k].want, "%s: status %u, want %u", bad[k].what, st, bad[k].want);
 	}
 }
 
@@ -219,20 +243,14 @@ typedef struct {
 
 static void g7_line(line_t *l, uint32_t number, const g7_t *g)
 {
-	char w[96];
-	l->n = 0;
 	(void)number;  /* unnumbered: the field alone */
-	snprintf(w, sizeof w, "G7 U%u T%u", g->u, g->t);
-	add(l, w);
-	for (uint8_t i = 0; i < g->items; i++) {
-		snprintf(w, sizeof w, "%sP%u%+d%+d", i ? "" : " ", g->p_us, g->d[i][0], g->d[i][1]);
-		add(l, w);
-	}
-	if (g->n)
-		add_pixels(l, g->px, g->n);
+	l->n = 0;
+	add_head(l, g->items, 1, g->u, 1, g->t, 1);
+	for (uint8_t i = 0; i < g->items; i++)
+		add_item(l, i == 0, g->p_us, g->d[i][0], g->d[i][1]);
+	add_pixels(l, g->px, g->n);
 	finish_line(l);
 }
-
 
 /* Whether the recorded changes after index from are exactly the expected ones
  * (times and powers), the first change of the run at run_start. */
@@ -326,27 +344,39 @@ static void test_scan_timing(void)
 }
 
 /* A change outside the line's segments, a period too short, pixels without T. */
+static void send_g7(uint8_t count, int uf, uint32_t u, int tf, uint32_t t, uint32_t p,
+		    const uint8_t *px, size_t n)
+{
+	line_t l = { .n = 0 };
+	add_head(&l, count, uf, u, tf, t, p ? 1u : 0u);
+	for (uint8_t i = 0; i < count; i++)
+		add_item(&l, i == 0 && p, p, 1, 1);
+	add_pixels(&l, px, n);
+	finish_line(&l);
+	send_n(l.b, l.n);
+}
+
 static void test_refused(void)
 {
 	boot();
 	send("$0=60000\nG90\nM3 S0\n");
 	run_slices(6, 0);
 	take();
-	static const char *lines[][2] = {
-		{ "G7 U0 T400 P1000 +1+1:\x01\x02", "ok\r\n" },
-		{ "G7 U15600 T400 P1000 +1+1:\x01\x02", "error:7\r\n" },   /* 15600 + 400 = C */
-		{ "G7 U15599 T400 P1000 +1+1:\x01\x02", "ok\r\n" },
-		{ "G7 U0 T399 P1000 +1+1:\x01\x02", "error:7\r\n" },
-		{ "G7 U0 T1000 P1000 +1+1 +1+1:\x01\x02\x03\x04", "ok\r\n" },
-		{ "G7 U15999 P1000 +1+1:\x05", "ok\r\n" },                 /* one pixel: no T needed */
-		{ "G7 U16000 P1000 +1+1:\x05", "error:7\r\n" },
+	static const uint8_t px[4] = { 1, 2, 3, 4 };
+	static const struct { uint8_t count; uint32_t u, t; size_t n; const char *want; } cases[] = {
+		{ 1, 0, 400, 2, "ok\r\n" },
+		{ 1, 15600, 400, 2, "error:7\r\n" },   /* 15600 + 400 = C */
+		{ 1, 15599, 400, 2, "ok\r\n" },
+		{ 1, 0, 399, 2, "error:7\r\n" },
+		{ 2, 0, 1000, 4, "ok\r\n" },
+		{ 1, 15999, 0, 1, "ok\r\n" },          /* one pixel: no T needed */
+		{ 1, 16000, 0, 1, "error:7\r\n" },
 	};
-	for (size_t i = 0; i < sizeof lines / sizeof lines[0]; i++) {
-		send(lines[i][0]);
-		send("\n");
+	for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+		send_g7(cases[i].count, 1, cases[i].u, cases[i].n > 1, cases[i].t, 1000, px, cases[i].n);
 		run_slices(20, 100000);
 		const char *out = take();
-		CHECK(strcmp(out, lines[i][1]) == 0, "'%s': got '%s' want '%s'", lines[i][0], out, lines[i][1]);
+		CHECK(strcmp(out, cases[i].want) == 0, "case %zu: got '%s' want '%s'", i, out, cases[i].want);
 		send("\x18");
 		run_slices(4, 0);
 		take();
@@ -355,7 +385,7 @@ static void test_refused(void)
 		take();
 	}
 	/* no P yet after a reset: the first G7 needs one */
-	send("G7 +1+1\n");
+	send_g7(1, 0, 0, 0, 0, 0, px, 0);
 	run_slices(6, 0);
 	CHECK(strcmp(take(), "error:6\r\n") == 0, "G7 without a P");
 }

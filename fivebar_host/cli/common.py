@@ -129,8 +129,14 @@ def compile_from_cli(drawing: Path, config_path: Path | None,
     from fivebar_host.compile import CompileOptions, compile_job
     from fivebar_host.config import require_tool, with_pen_overrides
 
+    from fivebar_host.raster.image import is_image_file
+
     prof = with_pen_overrides(load(config_path), values)
     require_tool(prof, bool(values.get("laser")))
+    if is_image_file(drawing):
+        from fivebar_host.raster.job import compile_raster, raster_options
+
+        return prof, compile_raster(drawing, prof, raster_options(values, prof))
     return prof, compile_job(drawing, prof, CompileOptions(**compile_values(values)))
 
 

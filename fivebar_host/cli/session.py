@@ -97,6 +97,11 @@ def write_executed(job: Job, prof: Profile, rec: Recording, preview_path: Path,
         true_params,
     )
 
+    if job.raster is not None:
+        from fivebar_host.raster.dose import figures, read_pins
+
+        click.echo(figures(job, prof, read_pins(rec.path)).line())
+        return
     tr, true = read_trace(rec.path), rec.true
     t, track = merge_axes(tr.positions("A"), tr.positions("B"))
     ex = executed_path(job, prof, t / tr.freq, track, report.start_segment,

@@ -1,0 +1,308 @@
+"""The burned image from the step pulses and the laser pin: the dose per pixel and the
+figures of a raster run (`fivebar plot … --port fivebar-sim://` prints them as its
+`raster:` line; `benchmarks/raster.py` measures with them).
+
+The motion is rebuilt from the step edges alone: a step of motor i at cycle t moves it from
+k − 1 to k (signed by its direction pin), and the firmware's DDA puts step k of a constant-
+rate segment at the time its continuous position n·t/C passes k − ½, so the motor's
+position is the linear interpolation of (t, k − ½·dir) over its steps — the same model the
+planner places the pixel boundaries on (`raster.pixels`).  The pen is forward kinematics of
+both motors' positions at a time.
+
+The laser pin's high intervals are cut into chunks of at most `CHUNK` cycles, each burned
+where the pen is at its middle: the dose of a pixel is the high time (cycles) spent inside
+its cell, and the burned power is 255 · dose / (the pixel's time at the scan speed).
+
+A *change* is where the firmware put a new power on the laser: it restarts the PWM period
+there (board.h board_laser), so it shows as a rising edge that does not follow the one
+before by a whole period, or as the pin going to a steady level (0 or 255).  For each change
+found in the trace: the pen's distance from the nearest pixel boundary of its scanline
+(placement), and how long before or after the change the pen crossed that boundary (time).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from fivebar_host.compile.steps import step_angles
+from fivebar_host.compile.model import Job
+from fivebar_host.config import Profile
+from fivebar_host.raster.runs import RasterRuns
+from kinematics.arrays import BoolArray, FloatArray, IntArray
+
+F_CPU = 16_000_000
+#: The laser PWM's period in cycles (Timer2 at F_CPU / 256, config.h CFG_LASER_PWM_DIV 1).
+PWM_PERIOD = 256
+#: Laser high time is burned in chunks of at most this many cycles.
+CHUNK = 64
+#: A rise this close to a period after the one before is the PWM's own, cycles.
+SLACK = 3
+#: Rises closer than this to a change are the first period after it, cycles.
+SETTLE = 300
+#: A pause of the steps longer than this inside a scanline is an underrun, s.
+STALL_S = 0.002
+
+
+@dataclass(frozen=True)
+class PinTrace:
+    """A trace file's events as arrays (cycle, pin index, level), time ordered per pin."""
+
+    cycle: IntArray
+    level: IntArray
+    pin: IntArray
+    names: tuple[str, ...]
+
+    def of(self, name: str) -> tuple[IntArray, IntArray]:
+        """(cycles, levels) of one pin."""
+        if name not in self.names:
+            z = np.zeros(0, dtype=np.int64)
+            return z, z
+        sel = self.pin == self.names.index(name)
+        return self.cycle[sel], self.level[sel]
+
+
+def read_pins(path: str | Path) -> PinTrace:
+    """The trace file of `fbsim -t` (`<cycle> <pin> <level>` lines) as arrays."""
+    text = Path(path).read_text(encoding="ascii")
+    lines = [ln for ln in text.splitlines() if ln and not ln.startswith("#")]
+    tok = " ".join(lines).split()
+    names: list[str] = []
+    index: dict[str, int] = {}
+    pins = np.empty(len(lines), dtype=np.int64)
+    for i, name in enumerate(tok[1::3]):
+        k = index.get(name)
+        if k is None:
+            k = index[name] = len(names)
+            names.append(name)
+        pins[i] = k
+    cycle = np.array(tok[0::3], dtype=np.int64)
+    level = np.array(tok[2::3], dtype=np.int64)
+    return PinTrace(cycle, level, pins, tuple(names))
+
+
+@dataclass(frozen=True)
+class Motion:
+    """Each motor's continuous position as (times, positions) to interpolate, in steps."""
+
+    t: tuple[FloatArray, FloatArray]
+    x: tuple[FloatArray, FloatArray]
+
+    def at(self, cycles: FloatArray) -> FloatArray:
+        """Motor positions (N, 2) in steps at the given cycles."""
+        return np.stack([np.interp(cycles, self.t[i], self.x[i]) for i in range(2)], axis=1)
+
+    def step_cycles(self) -> FloatArray:
+        """Every step's cycle, both motors, sorted."""
+        return np.sort(np.concatenate(self.t))
+
+
+def motion_of(pt: PinTrace) -> Motion:
+    """The motors' continuous positions from their step edges (module docstring)."""
+    ts, xs = [], []
+    for axis in "AB":
+        sc, sl = pt.of("step" + axis)
+        rise = sc[sl == 1]
+        dc, dl = pt.of("dir" + axis)
+        if dc.size:
+            at = np.searchsorted(dc, rise, side="right") - 1
+            lev = np.where(at >= 0, dl[np.maximum(at, 0)], 0)
+        else:
+            lev = np.zeros(rise.shape[0], dtype=np.int64)
+        sign = np.where(lev == 1, 1, -1)
+        pos = np.cumsum(sign)
+        ts.append(rise.astype(np.float64))
+        xs.append(pos - 0.5 * sign)
+    return Motion((ts[0], ts[1]), (xs[0], xs[1]))
+
+
+def pen_at(job: Job, profile: Profile, mo: Motion, cycles: FloatArray) -> FloatArray:
+    """The pen (N, 2) mm at the given cycles."""
+    th = step_angles(mo.at(cycles), job.home_rad, job.steps_per_rev)
+    res = profile.geometry.forward_batch(th, "+" if job.assembly > 0 else "-")
+    out: FloatArray = res.points
+    return out
+
+
+def high_intervals(pt: PinTrace) -> tuple[IntArray, IntArray]:
+    """The laser pin's high intervals [rise, fall) in cycles."""
+    c, lv = pt.of("laser")
+    rise = c[(lv == 1)]
+    fall = c[(lv == 0)]
+    if rise.size == 0:
+        z = np.zeros(0, dtype=np.int64)
+        return z, z
+    j = np.searchsorted(fall, rise, side="right")
+    end = np.where(j < fall.size, fall[np.minimum(j, fall.size - 1)], c.max())
+    return rise, end
+
+
+def grid_coords(r: RasterRuns, pts: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """(s, t) mm of machine points in the scan grid's frame."""
+    d = pts - np.asarray(r.origin)
+    return d @ np.asarray(r.u), d @ np.asarray(r.n)
+
+
+def dose_grid(job: Job, profile: Profile, pt: PinTrace, mo: Motion) -> FloatArray:
+    """Laser-high cycles inside each cell of the scan grid (R, C) (module docstring)."""
+    r = job.raster
+    assert r is not None
+    rise, fall = high_intervals(pt)
+    n = np.maximum(1, -(-(fall - rise) // CHUNK))
+    start = np.repeat(rise, n)
+    k = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+    length = np.repeat(fall - rise, n)
+    lo = start + k * CHUNK
+    hi = np.minimum(lo + CHUNK, start + length)
+    s, t = grid_coords(r, pen_at(job, profile, mo, 0.5 * (lo + hi)))
+    rows, cols = r.target.shape
+    ci = np.floor(s / r.pitch_mm).astype(np.int64)
+    ri = np.floor(t / r.interval_mm).astype(np.int64)
+    inside = (ci >= 0) & (ci < cols) & (ri >= 0) & (ri < rows)
+    out = np.zeros(rows * cols)
+    np.add.at(out, ri[inside] * cols + ci[inside], (hi - lo)[inside])
+    return out.reshape(rows, cols)
+
+
+def pixel_cycles(r: RasterRuns) -> float:
+    """A pixel's time at the scan speed, cycles."""
+    return r.pitch_mm / r.speed_mm_s * F_CPU
+
+
+def changes(pt: PinTrace) -> FloatArray:
+    """Cycles of the power changes the laser pin shows (module docstring): a rising edge
+    that does not follow the one before by a period (± `SLACK`) — inside a period (a
+    change between two powers of the PWM) or after a steady low (from 0).  A change from
+    full power (a steady high) shows only a period later and is left out, as is the edge
+    just after a change (simavr times the first period after a TCNT2 write a few cycles
+    long: `SETTLE`)."""
+    c, lv = pt.of("laser")
+    rise = c[lv == 1]
+    fall = c[lv == 0]
+    if rise.size < 2:
+        return rise.astype(np.float64)
+    gap = np.diff(rise)
+    j = np.searchsorted(fall, rise[1:]) - 1
+    prev_fall = np.where(j >= 0, fall[np.maximum(j, 0)], -(10**12))
+    low_for = rise[1:] - prev_fall
+    regular = np.abs(gap - PWM_PERIOD) <= SLACK
+    after_high = (gap > PWM_PERIOD + SLACK) & (low_for < PWM_PERIOD)
+    cand = np.concatenate((rise[:1], rise[1:][~regular & ~after_high]))
+    keep = np.ones(cand.shape[0], dtype=bool)
+    last = -(10**12)
+    for k, t in enumerate(cand.tolist()):  # the first of changes closer than SETTLE
+        if t - last < SETTLE:
+            keep[k] = False
+        else:
+            last = t
+    out: FloatArray = cand[keep].astype(np.float64) - 1.0  # the edge a tick after the change
+    return out
+
+
+@dataclass(frozen=True)
+class Figures:
+    """The figures of a raster run (module docstring), printed as the `raster:` line."""
+
+    pixels: int
+    seconds: float
+    underruns: int
+    placement_mm: float
+    change_us: float
+    outside_steps: int
+    dose: FloatArray  # burned power per cell (R, C), 255 = full power for a pixel's time
+
+    @property
+    def rate(self) -> float:
+        return self.pixels / self.seconds if self.seconds > 0 else 0.0
+
+    def line(self) -> str:
+        """The `raster:` line."""
+        return (f"raster: {self.pixels} px in {self.seconds:.2f} s = {self.rate:.0f} px/s, "
+                f"{self.underruns} underruns; burned image from the step pulses: pixel "
+                f"placement max {self.placement_mm:.3f} mm, power changes within "
+                f"{self.change_us:.1f} µs of the pixel boundaries, laser on outside the image "
+                f"{self.outside_steps} steps")
+
+
+def _boundary_errors(job: Job, profile: Profile, mo: Motion, ch: FloatArray
+                     ) -> tuple[float, float]:
+    """Largest placement error (mm) and change-to-crossing time (µs) of the changes."""
+    r = job.raster
+    assert r is not None
+    if ch.size == 0:
+        return 0.0, 0.0
+    s, t = grid_coords(r, pen_at(job, profile, mo, ch))
+    inside = _inside_image(r, s, t, r.pitch_mm)
+    if not inside.any():
+        return 0.0, 0.0
+    ch, s, t = ch[inside], s[inside], t[inside]
+    row = np.clip(np.floor(t / r.interval_mm), 0, r.target.shape[0] - 1)
+    across = np.abs(t - (row + 0.5) * r.interval_mm)
+    near = np.rint(s / r.pitch_mm) * r.pitch_mm
+    along = s - near
+    # the time the pen crossed the boundary: along / the pen's speed along the scan there
+    ds, _ = grid_coords(r, pen_at(job, profile, mo, ch + 8.0))
+    speed = np.abs(ds - s) / 8.0  # mm a cycle
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dt = np.where(speed > 0, np.abs(along) / speed, 0.0)
+    return float(np.hypot(along, across).max()), float(dt.max()) / F_CPU * 1e6
+
+
+def _inside_image(r: RasterRuns, s: FloatArray, t: FloatArray, margin: float = 0.0
+                  ) -> BoolArray:
+    """Whether grid points lie on a burned stretch of their row (between its scanline's
+    first and last cell, widened by `margin` mm)."""
+    rows, cols = r.target.shape
+    ri = np.floor(t / r.interval_mm).astype(np.int64)
+    span = np.zeros((rows, 2))
+    span[:, 0] = math.inf
+    for sl in r.lines:
+        span[sl.row] = (min(span[sl.row, 0], sl.c0 * r.pitch_mm),
+                        max(span[sl.row, 1], sl.c1 * r.pitch_mm))
+    ok = (ri >= 0) & (ri < rows)
+    rc = np.clip(ri, 0, rows - 1)
+    out: BoolArray = ok & (s >= span[rc, 0] - margin) & (s <= span[rc, 1] + margin)
+    return out
+
+
+def figures(job: Job, profile: Profile, pt: PinTrace) -> Figures:
+    """The figures of a raster run from its trace (module docstring)."""
+    r = job.raster
+    assert r is not None
+    mo = motion_of(pt)
+    ch = changes(pt)
+    rise, fall = high_intervals(pt)
+    seconds = float(fall.max() - rise.min()) / F_CPU if rise.size else 0.0
+    place, dt_us = _boundary_errors(job, profile, mo, ch)
+    # steps while the laser is on (PWM lows inside a period merged) outside the image
+    steps = mo.step_cycles()
+    on = np.zeros(steps.shape[0], dtype=bool)
+    if rise.size:
+        j = np.searchsorted(rise, steps, side="right") - 1
+        fall_m = np.maximum.accumulate(fall)
+        on = (j >= 0) & (steps < fall_m[np.maximum(j, 0)] + PWM_PERIOD)
+    s, t = grid_coords(r, pen_at(job, profile, mo, steps[on]))
+    outside = int((~_inside_image(r, s, t)).sum())
+    dose = dose_grid(job, profile, pt, mo) * 255.0 / pixel_cycles(r)
+    return Figures(r.n_pixels, seconds, _stalls(job, profile, mo, steps), place, dt_us,
+                   outside, dose)
+
+
+def _stalls(job: Job, profile: Profile, mo: Motion, steps: FloatArray) -> int:
+    """Underruns inside the image: pauses of the steps while the pen is on a burned stretch,
+    longer than `STALL_S` and than 20 times the usual step interval there."""
+    r = job.raster
+    assert r is not None
+    if steps.size < 2:
+        return 0
+    s, t = grid_coords(r, pen_at(job, profile, mo, steps))
+    inside = _inside_image(r, s, t)
+    both = inside[1:] & inside[:-1]
+    gaps = np.diff(steps)[both]
+    if gaps.size == 0:
+        return 0
+    limit = max(STALL_S * F_CPU, 20.0 * float(np.median(gaps)))
+    return int((gaps > limit).sum())
