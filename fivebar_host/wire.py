@@ -103,6 +103,9 @@ def body(prog: Program, i: int, p_us: int | None = None, s: int | None = None) -
         return f"$14={sv}"
     if k == Kind.TEXT:
         return prog.texts[sv]
+    if k == Kind.RASTER:  # for messages: a G7 line's data is bytes (g7_line writes it)
+        run = f" run {sv}" if sv >= 0 else ""
+        return f"G7 segment A{int(prog.a[i])} B{int(prog.b[i])} P{p}{run}"
     raise ProtocolError(f"item {i}: unknown kind {k}")
 
 

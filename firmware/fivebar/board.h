@@ -75,8 +75,9 @@ void board_timer_resume(void);
 /*
  * Pixel timer (raster scans, fb_raster.h): the same free-running timer as
  * the steps, its own compare (Timer1 compare B on the AVR).  arm: call fb's
- * px_event() at timer time t (a time already past: at once), then again
- * after each delay it returns until it returns 0.  The step timer's pause
+ * px_event() at timer time t (a time already past: at once, the events
+ * after it still counted from t), then again after each delay it returns
+ * until it returns 0.  The step timer's pause
  * and resume (a hold) freeze and move it with the step timeline.  sched is
  * the time of the pending event, now the timer's count.  Interrupts off or
  * in an interrupt.

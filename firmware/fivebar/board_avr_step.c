@@ -200,9 +200,14 @@ ISR(TIMER1_COMPB_vect)
 			return;
 		}
 		uint16_t t = (uint16_t)(px_sched + d);
-		px_arm_at(t);
-		if ((int16_t)(t - TCNT1) >= PX_NEAR)
+		if ((int16_t)(t - TCNT1) >= PX_NEAR) {
+			px_arm_at(t);
 			return;
+		}
+		/* too close to leave: handled here.  OCR1B is not written for it: a
+		 * compare the timer passes while we wait would set the flag and run
+		 * the event a second time after the return */
+		px_sched = t;
 		while ((int16_t)(TCNT1 - t) < 0)
 			;
 	}
@@ -211,9 +216,11 @@ ISR(TIMER1_COMPB_vect)
 void board_px_arm(uint16_t t)
 {
 	uint8_t s = board_irq_save();
-	if ((int16_t)(t - TCNT1) < PX_NEAR)
-		t = (uint16_t)(TCNT1 + PX_NEAR);  /* past or too close: at once */
-	px_arm_at(t);
+	/* the schedule keeps t (the events after it follow from it); the compare
+	 * comes at once when t is past or too close */
+	uint16_t at = (int16_t)(t - TCNT1) < PX_NEAR ? (uint16_t)(TCNT1 + PX_NEAR) : t;
+	px_sched = t;
+	OCR1B = ocr_value(at);
 	TIFR1 = (uint8_t)(1u << OCF1B);
 	TIMSK1 |= (uint8_t)(1u << OCIE1B);
 	px_paused = 0;

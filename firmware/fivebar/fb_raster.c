@@ -20,8 +20,12 @@
 px_state_t px_state;
 #define X px_state
 
-/* Cycles the main loop arms a late record's change after "now". */
+/* A record that comes later than its first change: up to PX_LATE_MAX cycles
+ * late its changes keep their times (the first at once); later still, the
+ * record starts PX_ARM_MARGIN cycles after "now" (16-bit timer times stay
+ * well within their signed range). */
 #define PX_ARM_MARGIN 48u
+#define PX_LATE_MAX 0x3000u
 
 void px_init(void)
 {
@@ -132,10 +136,14 @@ void px_push(uint8_t scan, uint8_t n, uint32_t gap, uint32_t period, const char 
 			uint32_t elapsed = X.since - ahead;  /* last change to now */
 			if (g >= X.since) {
 				X.rem = g - X.since;  /* after the scheduled tick */
-			} else if (g > elapsed + PX_ARM_MARGIN) {
+			} else if (g + PX_LATE_MAX >= elapsed) {
+				/* before the tick: at its own time (at once when that has
+				 * passed: late, the changes after it still on time) */
+				if (g < elapsed)
+					X.late++;
 				X.since = g;
 				X.rem = 0;
-				board_px_arm((uint16_t)(now + (uint16_t)(g - elapsed)));
+				board_px_arm((uint16_t)(now - (uint16_t)(elapsed - g)));
 			} else {
 				X.late++;
 				X.since = elapsed + PX_ARM_MARGIN;

@@ -112,6 +112,9 @@ void board_timer_stop(void)
 }
 
 static uint64_t paused_at;
+/* the exact time of the pending pixel event (fake_px_at: when it runs, at once
+ * when that time is past) */
+static uint64_t px_sched;
 
 void board_timer_pause(void)
 {
@@ -125,8 +128,10 @@ void board_timer_pause(void)
  * fake_now already, the pixel timer's is absolute. */
 void board_timer_resume(void)
 {
-	if (fake_timer_paused && fake_px_on)
+	if (fake_timer_paused && fake_px_on) {
 		fake_px_at += fake_now - paused_at;
+		px_sched += fake_now - paused_at;
+	}
 	fake_timer_paused = 0;
 }
 
@@ -142,15 +147,14 @@ void board_idle(void)
 /* The pixel timer: the same 16-bit timer as the steps, fake_now's low bits. */
 void board_px_arm(uint16_t t)
 {
-	uint16_t ahead = (uint16_t)(t - (uint16_t)fake_now);
-	if ((int16_t)ahead < 0)
-		ahead = 0;  /* a time already past: at once */
-	fake_px_at = fake_now + ahead;
+	int16_t ahead = (int16_t)(uint16_t)(t - (uint16_t)fake_now);
+	px_sched = (uint64_t)((int64_t)fake_now + ahead);
+	fake_px_at = ahead < 0 ? fake_now : px_sched;  /* a time already past: at once */
 	fake_px_on = 1;
 }
 
 void board_px_stop(void) { fake_px_on = 0; }
-uint16_t board_px_sched(void) { return (uint16_t)fake_px_at; }
+uint16_t board_px_sched(void) { return (uint16_t)px_sched; }
 uint16_t board_px_now(void) { return (uint16_t)fake_now; }
 
 /* The pixel events due before the next step event (which comes first at an
@@ -161,10 +165,12 @@ static int px_until(uint64_t step_at, uint64_t limit)
 	while (fake_px_on && !fake_timer_paused && fake_px_at < step_at && fake_px_at <= limit) {
 		fake_now = fake_px_at;
 		uint16_t d = px_event();
-		if (!d)
+		if (!d) {
 			fake_px_on = 0;
-		else
-			fake_px_at += d;
+		} else {
+			px_sched += d;
+			fake_px_at = px_sched > fake_now ? px_sched : fake_now;
+		}
 	}
 	return step_at <= limit;
 }

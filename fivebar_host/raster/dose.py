@@ -15,9 +15,9 @@ its cell, and the burned power is 255 · dose / (the pixel's time at the scan sp
 
 A *change* is where the firmware put a new power on the laser: it restarts the PWM period
 there (board.h board_laser), so it shows as a rising edge that does not follow the one
-before by a whole period, or as the pin going to a steady level (0 or 255).  For each change
-found in the trace: the pen's distance from the nearest pixel boundary of its scanline
-(placement), and how long before or after the change the pen crossed that boundary (time).
+before by a whole period.  At each pixel boundary (the pen's crossing found from the steps)
+the nearest such edge within half a pixel is its change: the pen's distance there from the
+boundary's point (placement) and the time between the change and the crossing.
 """
 
 from __future__ import annotations
@@ -43,6 +43,8 @@ CHUNK = 64
 SLACK = 3
 #: Rises closer than this to a change are the first period after it, cycles.
 SETTLE = 300
+#: Pulses shorter than this (or longer than a period less it) make no clean change, cycles.
+MIN_PULSE = 8
 #: A pause of the steps longer than this inside a scanline is an underrun, s.
 STALL_S = 0.002
 
@@ -172,33 +174,47 @@ def pixel_cycles(r: RasterRuns) -> float:
     return r.pitch_mm / r.speed_mm_s * F_CPU
 
 
-def changes(pt: PinTrace) -> FloatArray:
-    """Cycles of the power changes the laser pin shows (module docstring): a rising edge
-    that does not follow the one before by a period (± `SLACK`) — inside a period (a
-    change between two powers of the PWM) or after a steady low (from 0).  A change from
-    full power (a steady high) shows only a period later and is left out, as is the edge
-    just after a change (simavr times the first period after a TCNT2 write a few cycles
-    long: `SETTLE`)."""
+def restarts(pt: PinTrace) -> tuple[IntArray, IntArray]:
+    """The laser pin's rising edges and whether each restarts the PWM's period (it does not
+    follow the rise before by a whole number of periods, within `SLACK`)."""
     c, lv = pt.of("laser")
     rise = c[lv == 1]
-    fall = c[lv == 0]
-    if rise.size < 2:
-        return rise.astype(np.float64)
-    gap = np.diff(rise)
-    j = np.searchsorted(fall, rise[1:]) - 1
-    prev_fall = np.where(j >= 0, fall[np.maximum(j, 0)], -(10**12))
-    low_for = rise[1:] - prev_fall
-    regular = np.abs(gap - PWM_PERIOD) <= SLACK
-    after_high = (gap > PWM_PERIOD + SLACK) & (low_for < PWM_PERIOD)
-    cand = np.concatenate((rise[:1], rise[1:][~regular & ~after_high]))
-    keep = np.ones(cand.shape[0], dtype=bool)
-    last = -(10**12)
-    for k, t in enumerate(cand.tolist()):  # the first of changes closer than SETTLE
-        if t - last < SETTLE:
-            keep[k] = False
-        else:
-            last = t
-    out: FloatArray = cand[keep].astype(np.float64) - 1.0  # the edge a tick after the change
+    gap = np.diff(rise, prepend=-(10**12))
+    off = np.mod(gap + SLACK, PWM_PERIOD) > 2 * SLACK
+    return rise, off.astype(np.int64)
+
+
+def crossings(job: Job, profile: Profile, mo: Motion) -> list[tuple[int, FloatArray]]:
+    """Per scanline (job order): when the pen crossed each of its pixel boundaries, cycles
+    (NaN where it did not), from the step events while the pen was on the scanline's row
+    and stretch — the scanline's visit of its row (a row is visited once per pass)."""
+    r = job.raster
+    assert r is not None
+    steps = mo.step_cycles()
+    s, t = grid_coords(r, pen_at(job, profile, mo, steps))
+    row_of = np.floor(t / r.interval_mm).astype(np.int64)
+    seen: dict[int, int] = {}
+    out: list[tuple[int, FloatArray]] = []
+    h = r.pitch_mm
+    for sl in r.lines:
+        on = (row_of == sl.row) & (s > sl.c0 * h - h) & (s < sl.c1 * h + h)
+        idx = np.flatnonzero(on)
+        visit = seen.get(sl.row, 0)
+        seen[sl.row] = visit + 1
+        bound = np.full(sl.c1 - sl.c0 + 1, np.nan)
+        if idx.size:
+            breaks = np.flatnonzero(np.diff(idx) > 1)
+            starts = np.concatenate(([0], breaks + 1))
+            stops = np.concatenate((breaks + 1, [idx.size]))
+            if visit < starts.size:
+                sel = idx[starts[visit]:stops[visit]]
+                entry = sl.c0 * h if sl.sign > 0 else sl.c1 * h
+                sig = (s[sel] - entry) * sl.sign
+                order = np.argsort(sig)
+                want = np.arange(bound.size) * h
+                ok = (want >= sig.min()) & (want <= sig.max())
+                bound[ok] = np.interp(want[ok], sig[order], steps[sel][order])
+        out.append((sl.row, bound))
     return out
 
 
@@ -227,28 +243,40 @@ class Figures:
                 f"{self.outside_steps} steps")
 
 
-def _boundary_errors(job: Job, profile: Profile, mo: Motion, ch: FloatArray
-                     ) -> tuple[float, float]:
-    """Largest placement error (mm) and change-to-crossing time (µs) of the changes."""
+def _boundary_errors(job: Job, profile: Profile, mo: Motion, pt: PinTrace
+                     ) -> tuple[float, float, int]:
+    """Largest placement error (mm) and change-to-crossing time (µs) over the changes the
+    pin shows unambiguously, and how many there are: at every pixel boundary of a scanline
+    whose powers before and after are both at least `MIN_PULSE` and at most 255 −
+    `MIN_PULSE` (the PWM restarts there: the restarting rise nearest the pen's crossing
+    (within half a pixel) is the change; tiny and full duties restart nothing visible)."""
     r = job.raster
     assert r is not None
-    if ch.size == 0:
-        return 0.0, 0.0
-    s, t = grid_coords(r, pen_at(job, profile, mo, ch))
-    inside = _inside_image(r, s, t, r.pitch_mm)
-    if not inside.any():
-        return 0.0, 0.0
-    ch, s, t = ch[inside], s[inside], t[inside]
-    row = np.clip(np.floor(t / r.interval_mm), 0, r.target.shape[0] - 1)
-    across = np.abs(t - (row + 0.5) * r.interval_mm)
-    near = np.rint(s / r.pitch_mm) * r.pitch_mm
-    along = s - near
-    # the time the pen crossed the boundary: along / the pen's speed along the scan there
-    ds, _ = grid_coords(r, pen_at(job, profile, mo, ch + 8.0))
-    speed = np.abs(ds - s) / 8.0  # mm a cycle
-    with np.errstate(divide="ignore", invalid="ignore"):
-        dt = np.where(speed > 0, np.abs(along) / speed, 0.0)
-    return float(np.hypot(along, across).max()), float(dt.max()) / F_CPU * 1e6
+    rise, restart = restarts(pt)
+    cand = rise[restart.astype(bool)].astype(np.float64) - 1.0  # the rise a tick after
+    half = 0.5 * pixel_cycles(r)
+    worst_mm, worst_dt, n = 0.0, 0.0, 0
+    for sl, (_, tau) in zip(r.lines, crossings(job, profile, mo), strict=True):
+        before = np.concatenate(([0], sl.change_power[:-1])).astype(np.int64)
+        after = sl.change_power.astype(np.int64)
+        clean = ((after >= MIN_PULSE) & (after <= 255 - MIN_PULSE)
+                 & ((before >= MIN_PULSE) & (before <= 255 - MIN_PULSE) | (before == 0)))
+        idx = np.flatnonzero(clean & np.isfinite(tau))
+        if not idx.size:
+            continue
+        k = np.clip(np.searchsorted(cand, tau[idx]), 1, cand.size - 1)
+        lo, hi = cand[k - 1], cand[k]
+        got = np.where(np.abs(lo - tau[idx]) < np.abs(hi - tau[idx]), lo, hi)
+        found = np.abs(got - tau[idx]) <= half
+        if not found.any():
+            continue
+        idx, got = idx[found], got[found]
+        n += int(idx.size)
+        worst_dt = max(worst_dt, float(np.abs(got - tau[idx]).max()))
+        ideal = np.asarray(sl.p0) + np.outer(idx * r.pitch_mm, np.asarray(sl.d))
+        worst_mm = max(worst_mm, float(np.hypot(*(pen_at(job, profile, mo, got)
+                                                  - ideal).T).max()))
+    return worst_mm, worst_dt / F_CPU * 1e6, n
 
 
 def _inside_image(r: RasterRuns, s: FloatArray, t: FloatArray, margin: float = 0.0
@@ -273,10 +301,9 @@ def figures(job: Job, profile: Profile, pt: PinTrace) -> Figures:
     r = job.raster
     assert r is not None
     mo = motion_of(pt)
-    ch = changes(pt)
     rise, fall = high_intervals(pt)
     seconds = float(fall.max() - rise.min()) / F_CPU if rise.size else 0.0
-    place, dt_us = _boundary_errors(job, profile, mo, ch)
+    place, dt_us, _ = _boundary_errors(job, profile, mo, pt)
     # steps while the laser is on (PWM lows inside a period merged) outside the image
     steps = mo.step_cycles()
     on = np.zeros(steps.shape[0], dtype=bool)

@@ -181,7 +181,13 @@ class _Line:
                 u, t, res = u2, self.t_prev, res2
         size = g7_line_bytes(g7_body(self.items[j:end], max(u, 0), t, pw, self.p_prev,
                                      self.t_prev))
-        ok = (size <= LINE_LIMIT and len(pw) <= PX_RING - protocol.PX_HEAD
+        over = u + max(len(pw) - 1, 0) * t - int(self.start[end] - self.start[j] - 1)
+        if over > 0:  # every change inside the line's segments (the firmware's rule)
+            u -= over
+            res = float(np.abs(self.ch.t[a:b] - self.start[j] - u
+                               - np.arange(b - a) * t).max())
+        inside = u >= 0
+        ok = (size <= LINE_LIMIT and len(pw) <= PX_RING - protocol.PX_HEAD and inside
               and res <= FIT_CYCLES and u >= 0 and (len(pw) < 2 or t >= protocol.PX_T_MIN))
         if not ok and not force:
             return None
