@@ -170,11 +170,14 @@ BOARD_INLINE void board_laser(uint8_t power)
 			BOARD_PORT(PIN_LASER_PORT) &= (uint8_t)~(1u << PIN_LASER_BIT);
 	} else {
 		/* OCR2A is double-buffered in fast PWM (taken at BOTTOM): TCNT2 at
-		 * MAX makes the next timer tick BOTTOM, so the new duty and its
-		 * period start within one tick, not up to a period later */
+		 * MAX - 1 makes the second timer tick BOTTOM, so the new duty and
+		 * its period start within two ticks, not up to a period later.  Not
+		 * MAX: simavr takes a write of TOP as a write of 0 and starts the
+		 * period a whole period later (the pin trace shows it); MAX - 1 is
+		 * the same on the chip and in the emulator. */
 		OCR2A = power;
 		TCCR2A |= (uint8_t)(1u << COM2A1);
-		TCNT2 = 0xff;
+		TCNT2 = 0xfe;
 	}
 	board_irq_restore(s);
 }

@@ -226,8 +226,9 @@ uint16_t px_event(void)
 		/* a change: the next power of the record */
 		uint8_t p = at(X.rd);
 		X.rd = (uint8_t)(X.rd + 1u);
+		if (p != X.power)  /* the same power: its PWM runs on unbroken */
+			mo_set_laser(p);
 		X.power = p;
-		mo_set_laser(p);
 		X.since = 0;
 		uint32_t g;
 		if (X.left) {

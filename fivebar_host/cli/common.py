@@ -128,7 +128,6 @@ def compile_from_cli(drawing: Path, config_path: Path | None,
     (profile, Job). Raises the pipeline's errors."""
     from fivebar_host.compile import CompileOptions, compile_job
     from fivebar_host.config import require_tool, with_pen_overrides
-
     from fivebar_host.raster.image import is_image_file
 
     prof = with_pen_overrides(load(config_path), values)

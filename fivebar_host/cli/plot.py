@@ -86,6 +86,14 @@ def plot(drawing: Path, dry_run: bool, preview_path: Path, port: str | None, res
     laser = bool(job_values["laser"])
     copies = Copies(int(job_values["copies"]), float(job_values["page_delay_s"]))
     prof, job = compile_from_cli(drawing, config_path, job_values)
+    if dry_run and job.raster is not None:
+        from fivebar_host.raster import preview
+
+        for line in preview.report_lines(job):
+            click.echo(line)
+        preview.draw_preview(job, preview_path)
+        click.echo(f"preview       {preview_path}")
+        return
     if dry_run:
         for line in report_lines(job, nbar_opinion(job, prof), laser=laser, profile=prof,
                                  copies=copies):

@@ -12,20 +12,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fivebar_host import protocol
 from fivebar_host.compile import steps as stepsmod
 from fivebar_host.compile.model import Job, PathStats, compact_ints
 from fivebar_host.config import Profile
 from fivebar_host.program import PixelRun
+from fivebar_host.raster import lines as linesmod
 from fivebar_host.raster import motion, pixels, travel
 from fivebar_host.raster.runs import RasterRuns, ScanInfo
 from fivebar_host.toolpath import layout
 from fivebar_host.toolpath.geometry import Drawing
-from fivebar_host.wire import g7_body, g7_line_bytes
-from kinematics.arrays import FloatArray, IntArray
+from fivebar_host.toolpath.segment import PoseChecker
+from kinematics.arrays import BoolArray, FloatArray, IntArray
 
 #: Bytes a travel piece takes on the wire as a G6 item, and a G6 line's own (wire.py).
 TRAVEL_ITEM_B = 8
 TRAVEL_LINE_B = 36
+#: Travel pieces one G6 line carries at most (within `lines.LINE_LIMIT`).
+TRAVEL_ITEMS = 1 + (linesmod.LINE_LIMIT - TRAVEL_LINE_B) // TRAVEL_ITEM_B
 
 
 @dataclass
@@ -34,13 +38,13 @@ class Segments:
 
     targets: list[IntArray]
     duration: list[IntArray]
-    draw: list[IntArray]
+    draw: list[BoolArray]
     scan: list[IntArray]
     run: list[IntArray]
     g7: list[IntArray]
     n: int = 0
 
-    def add(self, targets: IntArray, duration: IntArray, draw: IntArray, scan: int,
+    def add(self, targets: IntArray, duration: IntArray, draw: BoolArray, scan: int,
             run: IntArray, g7: bool) -> int:
         """Append pieces; returns the index of the first."""
         k = int(duration.shape[0])
@@ -62,68 +66,74 @@ class WireLines:
 
     nbytes: list[int]
     start_s: list[float]
+    nseg: list[int]  # segments a line carries
 
 
-def g7_bytes(sm: motion.ScanMotion, g: pixels.Group, prev: pixels.Group | None,
-             prev_t: int | None) -> int:
-    """Bytes of a G7 line as the wire writes it within its scanline (`wire.g7_body`: P and T
-    where the line before did not set them; 6-digit line numbers)."""
-    d = np.diff(sm.steps[g.first:g.first + g.count + 1], axis=0).tolist()
-    p = sm.duration_us[g.first:g.first + g.count].tolist()
-    items = [(int(q), int(a), int(b)) for q, (a, b) in zip(p, d, strict=True)]
-    p_prev = None if prev is None else int(sm.duration_us[g.first - 1])
-    return g7_line_bytes(g7_body(items, g.u, g.t, g.powers, p_prev, prev_t))
+@dataclass(frozen=True)
+class Collected:
+    """The job's segments, the G7 lines' runs, each scanline's segments [first, end) and
+    the wire lines."""
+
+    seg: Segments
+    runs: list[PixelRun]
+    spans: list[tuple[int, int]]
+    wire: WireLines
 
 
-def collect(profile: Profile, checker: travel.PoseChecker, planned_scans: list[motion.ScanMotion],
-            groups: list[list[pixels.Group]], home_steps: IntArray
-            ) -> tuple[Segments, list[PixelRun], list[tuple[int, int]], WireLines]:
-    """Segments, runs, each scanline's [first, end) and the wire lines (module docstring)."""
+def collect(profile: Profile, checker: PoseChecker, planned_scans: list[motion.ScanMotion],
+            groups: list[list[linesmod.Group]], home_steps: IntArray, lead_us: int = 0
+            ) -> Collected:
+    """Segments, runs, each scanline's [first, end) and the wire lines (module docstring);
+    the move to the first scanline lasts at least `lead_us`."""
     seg = Segments([], [], [], [], [], [])
     runs: list[PixelRun] = []
     spans: list[tuple[int, int]] = []
-    wire = WireLines([], [])
+    wire = WireLines([], [], [])
     t_us = 0
     cur = np.asarray(home_steps, dtype=np.int64)
 
-    def move(to: IntArray, scan: int, what: str) -> None:
+    def move(to: IntArray, scan: int, what: str, lead: int = 0) -> None:
         nonlocal cur, t_us
         travel.check_move(profile, checker, cur, to, what)
         tg, du = travel.joint_move(profile, cur, to)
+        if 0 < du.sum() < lead:  # slower, so that the stream gets ahead
+            du = np.minimum(-(-du * lead // int(du.sum())), protocol.P_MAX_US)
         if du.shape[0]:
             seg.add(tg, du, np.zeros(du.shape[0], bool), scan, np.full(du.shape[0], -1), False)
-            wire.nbytes.append(TRAVEL_LINE_B + TRAVEL_ITEM_B * (du.shape[0] - 1))
-            wire.start_s.append(t_us * 1e-6)
+            at = np.concatenate(([0], np.cumsum(du)))
+            for a in range(0, du.shape[0], TRAVEL_ITEMS):  # G6 lines of TRAVEL_ITEMS
+                n = min(TRAVEL_ITEMS, du.shape[0] - a)
+                wire.nbytes.append(TRAVEL_LINE_B + TRAVEL_ITEM_B * (n - 1))
+                wire.start_s.append((t_us + int(at[a])) * 1e-6)
+                wire.nseg.append(n)
             t_us += int(du.sum())
         cur = np.asarray(to, dtype=np.int64)
 
     for i, sm in enumerate(planned_scans):
-        move(sm.steps[0], i, f"move to scanline {i + 1} (row {sm.line.row})")
+        move(sm.steps[0], i, f"move to scanline {i + 1} (row {sm.line.row})",
+             0 if i else lead_us)
         run = np.full(sm.duration_us.shape[0], -1, dtype=np.int64)
         start_us = np.concatenate(([0], np.cumsum(sm.duration_us)))
-        prev: pixels.Group | None = None
-        prev_t: int | None = None
         for g in groups[i]:
             run[g.first] = len(runs)
             runs.append(PixelRun(g.u, g.t, g.powers))
-            wire.nbytes.append(g7_bytes(sm, g, prev, prev_t))
+            wire.nbytes.append(g.nbytes)
             wire.start_s.append((t_us + int(start_us[g.first])) * 1e-6)
-            prev, prev_t = g, g.t if len(g.powers) > 1 else prev_t
+            wire.nseg.append(g.count)
         first = seg.add(sm.steps[1:], sm.duration_us, sm.kind == motion.SCAN, i, run, True)
         spans.append((first, seg.n))
         t_us += sm.time_us
         cur = sm.steps[-1]
     move(home_steps, len(planned_scans), "move back to the homed pose")
-    return seg, runs, spans, wire
+    return Collected(seg, runs, spans, wire)
 
 
-def build_job(profile: Profile, checker: travel.PoseChecker, file: str, mode: str,
+def build_job(profile: Profile, checker: PoseChecker, file: str, mode: str,
               home_steps: IntArray, seg: Segments, info: RasterRuns,
               placement: layout.Placement, notes: list[str]) -> Job:
     """The `Job` of the collected segments (module docstring)."""
     mo = profile.motors
-    steps = np.concatenate([np.asarray(home_steps, dtype=np.int64).reshape(1, 2)]
-                           + seg.targets)
+    steps = np.concatenate([np.asarray(home_steps, dtype=np.int64).reshape(1, 2), *seg.targets])
     th = stepsmod.step_angles(steps, mo.home_rad, mo.steps_per_rev)
     pts, _ = checker.forward(th)
     draw = np.concatenate(seg.draw)
@@ -131,7 +141,7 @@ def build_job(profile: Profile, checker: travel.PoseChecker, file: str, mode: st
     n_lines = len(info.lines)
     path = np.where(scan >= 0, scan, n_lines)
     length = np.hypot(*np.diff(pts, axis=0).T)
-    code, m = checker.codes(th, pts, check_type1=False)
+    _code, m = checker.codes(th, pts, check_type1=False)
     jac = profile.geometry.jacobian(th, pts)
     quantum = stepsmod.step_quantum_mm(jac, mo.rad_per_step)
     firsts = np.array([s.first for s in info.lines], dtype=np.int64)

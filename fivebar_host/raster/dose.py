@@ -14,10 +14,19 @@ where the pen is at its middle: the dose of a pixel is the high time (cycles) sp
 its cell, and the burned power is 255 · dose / (the pixel's time at the scan speed).
 
 A *change* is where the firmware put a new power on the laser: it restarts the PWM period
-there (board.h board_laser), so it shows as a rising edge that does not follow the one
-before by a whole period.  At each pixel boundary (the pen's crossing found from the steps)
-the nearest such edge within half a pixel is its change: the pen's distance there from the
-boundary's point (placement) and the time between the change and the crossing.
+there (board.h board_laser writes TCNT2), so the rises after it keep a new phase.  On the
+chip the first rise comes two ticks after the write; simavr 1.6 restarts the phase at the
+write without the BOTTOM event (the pin keeps its level until the new compare, then rises a
+whole period after the write — the trace shows it at every change), so the write is at the
+first restarted rise less `RESTART` cycles.  At each pixel boundary (the pen's crossing
+found from the steps) the restarted rise whose write is nearest, within `WINDOW_US` (and
+half a pixel), is its change: the pen's distance there from the boundary's point
+(placement) and the time between the change and the crossing.  A change whose new phase
+falls within `SLACK` of the old one (about one in forty) shows no restart and is not
+counted (`Figures.changes_seen` says how many were).
+
+The laser is *on* from a rise to its fall, and across the low part of a PWM period when the
+next rise follows within a period: a step then is a step with the laser on.
 """
 
 from __future__ import annotations
@@ -28,8 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fivebar_host.compile.steps import step_angles
 from fivebar_host.compile.model import Job
+from fivebar_host.compile.steps import step_angles
 from fivebar_host.config import Profile
 from fivebar_host.raster.runs import RasterRuns
 from kinematics.arrays import BoolArray, FloatArray, IntArray
@@ -41,8 +50,11 @@ PWM_PERIOD = 256
 CHUNK = 64
 #: A rise this close to a period after the one before is the PWM's own, cycles.
 SLACK = 3
-#: Rises closer than this to a change are the first period after it, cycles.
-SETTLE = 300
+#: Cycles from a power change's TCNT2 write to its first restarted rise in simavr 1.6
+#: (module docstring): a period and the two ticks to BOTTOM.
+RESTART = PWM_PERIOD + 2
+#: How far from the crossing a change is looked for, µs.
+WINDOW_US = 40.0
 #: Pulses shorter than this (or longer than a period less it) make no clean change, cycles.
 MIN_PULSE = 8
 #: A pause of the steps longer than this inside a scanline is an underrun, s.
@@ -123,7 +135,7 @@ def motion_of(pt: PinTrace) -> Motion:
 
 def pen_at(job: Job, profile: Profile, mo: Motion, cycles: FloatArray) -> FloatArray:
     """The pen (N, 2) mm at the given cycles."""
-    th = step_angles(mo.at(cycles), job.home_rad, job.steps_per_rev)
+    th = step_angles(mo.at(cycles), job.home_rad, job.steps_per_rev)  # type: ignore[arg-type]
     res = profile.geometry.forward_batch(th, "+" if job.assembly > 0 else "-")
     out: FloatArray = res.points
     return out
@@ -229,6 +241,7 @@ class Figures:
     change_us: float
     outside_steps: int
     dose: FloatArray  # burned power per cell (R, C), 255 = full power for a pixel's time
+    boundaries: Boundaries
 
     @property
     def rate(self) -> float:
@@ -243,47 +256,51 @@ class Figures:
                 f"{self.outside_steps} steps")
 
 
-def _boundary_errors(job: Job, profile: Profile, mo: Motion, pt: PinTrace
-                     ) -> tuple[float, float, int]:
-    """Largest placement error (mm) and change-to-crossing time (µs) over the changes the
-    pin shows unambiguously, and how many there are: at every pixel boundary of a scanline
-    whose powers before and after are both at least `MIN_PULSE` and at most 255 −
-    `MIN_PULSE` (the PWM restarts there: the restarting rise nearest the pen's crossing
-    (within half a pixel) is the change; tiny and full duties restart nothing visible)."""
+@dataclass(frozen=True)
+class Boundaries:
+    """The changes found at the pixel boundaries (`boundary_errors`)."""
+
+    placement_mm: FloatArray  # the pen's distance from the boundary at each change
+    dt_us: FloatArray  # change − crossing, µs
+    clean: int  # boundaries whose change the pin can show (MIN_PULSE)
+
+
+def boundary_errors(job: Job, profile: Profile, mo: Motion, pt: PinTrace) -> Boundaries:
+    """The changes at every pixel boundary of a scanline whose powers before and after are
+    both at least `MIN_PULSE` and at most 255 − `MIN_PULSE` (0 before too): the restarted
+    rise whose write (module docstring) is nearest the pen's crossing within `WINDOW_US`."""
     r = job.raster
     assert r is not None
     rise, restart = restarts(pt)
-    cand = rise[restart.astype(bool)].astype(np.float64) - 1.0  # the rise a tick after
-    half = 0.5 * pixel_cycles(r)
-    worst_mm, worst_dt, n = 0.0, 0.0, 0
+    cand = rise[restart.astype(bool)].astype(np.float64) - RESTART  # the writes
+    half = min(0.5 * pixel_cycles(r), WINDOW_US * F_CPU * 1e-6)
+    place, dts, clean_n = [], [], 0
     for sl, (_, tau) in zip(r.lines, crossings(job, profile, mo), strict=True):
         before = np.concatenate(([0], sl.change_power[:-1])).astype(np.int64)
         after = sl.change_power.astype(np.int64)
         clean = ((after >= MIN_PULSE) & (after <= 255 - MIN_PULSE)
                  & ((before >= MIN_PULSE) & (before <= 255 - MIN_PULSE) | (before == 0)))
         idx = np.flatnonzero(clean & np.isfinite(tau))
-        if not idx.size:
+        clean_n += int(idx.size)
+        if not idx.size or cand.size < 2:
             continue
         k = np.clip(np.searchsorted(cand, tau[idx]), 1, cand.size - 1)
         lo, hi = cand[k - 1], cand[k]
         got = np.where(np.abs(lo - tau[idx]) < np.abs(hi - tau[idx]), lo, hi)
         found = np.abs(got - tau[idx]) <= half
-        if not found.any():
-            continue
         idx, got = idx[found], got[found]
-        n += int(idx.size)
-        worst_dt = max(worst_dt, float(np.abs(got - tau[idx]).max()))
+        dts.append((got - tau[idx]) / F_CPU * 1e6)
         ideal = np.asarray(sl.p0) + np.outer(idx * r.pitch_mm, np.asarray(sl.d))
-        worst_mm = max(worst_mm, float(np.hypot(*(pen_at(job, profile, mo, got)
-                                                  - ideal).T).max()))
-    return worst_mm, worst_dt / F_CPU * 1e6, n
+        place.append(np.hypot(*(pen_at(job, profile, mo, got) - ideal).T))
+    return Boundaries(np.concatenate([np.zeros(0), *place]),
+                      np.concatenate([np.zeros(0), *dts]), clean_n)
 
 
 def _inside_image(r: RasterRuns, s: FloatArray, t: FloatArray, margin: float = 0.0
                   ) -> BoolArray:
     """Whether grid points lie on a burned stretch of their row (between its scanline's
     first and last cell, widened by `margin` mm)."""
-    rows, cols = r.target.shape
+    rows, _cols = r.target.shape
     ri = np.floor(t / r.interval_mm).astype(np.int64)
     span = np.zeros((rows, 2))
     span[:, 0] = math.inf
@@ -296,6 +313,21 @@ def _inside_image(r: RasterRuns, s: FloatArray, t: FloatArray, margin: float = 0
     return out
 
 
+def laser_on(rise: IntArray, fall: IntArray, cycles: FloatArray) -> BoolArray:
+    """Whether the laser is on at each of `cycles` (module docstring: a high interval, or
+    the low between two rises less than a period apart)."""
+    if not rise.size:
+        return np.zeros(cycles.shape[0], dtype=bool)
+    joined = np.concatenate((rise[1:] - fall[:-1] < PWM_PERIOD, [False]))
+    # merged intervals: a start where the one before was not joined to it
+    start = np.concatenate(([True], ~joined[:-1]))
+    first = rise[start]
+    ends = fall[np.concatenate((np.flatnonzero(start)[1:] - 1, [fall.size - 1]))]
+    j = np.searchsorted(first, cycles, side="right") - 1
+    out: BoolArray = (j >= 0) & (cycles < ends[np.maximum(j, 0)])
+    return out
+
+
 def figures(job: Job, profile: Profile, pt: PinTrace) -> Figures:
     """The figures of a raster run from its trace (module docstring)."""
     r = job.raster
@@ -303,19 +335,16 @@ def figures(job: Job, profile: Profile, pt: PinTrace) -> Figures:
     mo = motion_of(pt)
     rise, fall = high_intervals(pt)
     seconds = float(fall.max() - rise.min()) / F_CPU if rise.size else 0.0
-    place, dt_us, _ = _boundary_errors(job, profile, mo, pt)
-    # steps while the laser is on (PWM lows inside a period merged) outside the image
+    b = boundary_errors(job, profile, mo, pt)
+    # steps while the laser is on (module docstring) outside the image
     steps = mo.step_cycles()
-    on = np.zeros(steps.shape[0], dtype=bool)
-    if rise.size:
-        j = np.searchsorted(rise, steps, side="right") - 1
-        fall_m = np.maximum.accumulate(fall)
-        on = (j >= 0) & (steps < fall_m[np.maximum(j, 0)] + PWM_PERIOD)
+    on = laser_on(rise, fall, steps)
     s, t = grid_coords(r, pen_at(job, profile, mo, steps[on]))
     outside = int((~_inside_image(r, s, t)).sum())
     dose = dose_grid(job, profile, pt, mo) * 255.0 / pixel_cycles(r)
-    return Figures(r.n_pixels, seconds, _stalls(job, profile, mo, steps), place, dt_us,
-                   outside, dose)
+    return Figures(r.n_pixels, seconds, _stalls(job, profile, mo, steps),
+                   float(b.placement_mm.max(initial=0.0)), float(np.abs(b.dt_us).max(initial=0.0)),
+                   outside, dose, b)
 
 
 def _stalls(job: Job, profile: Profile, mo: Motion, steps: FloatArray) -> int:

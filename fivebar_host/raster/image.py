@@ -108,9 +108,9 @@ def decode(data: bytes, name: str) -> Gray:
     oriented = ImageOps.exif_transpose(img)
     if oriented is not None and oriented.size != img.size:
         notes.append("EXIF orientation applied")
-    img = oriented if oriented is not None else img
-    dpi = _dpi(img.info.get("dpi"))
-    return Gray(_darkness(img, notes), dpi, name, tuple(notes))
+    shown: Image.Image = oriented if oriented is not None else img
+    dpi = _dpi(shown.info.get("dpi"))
+    return Gray(_darkness(shown, notes), dpi, name, tuple(notes))
 
 
 def _dpi(value: object) -> tuple[float, float] | None:
@@ -154,4 +154,5 @@ def _darkness(img: object, notes: list[str]) -> FloatArray:
             notes.append("transparency composited on white")
         rgb = rgb * alpha + (1.0 - alpha)
     y = rgb @ np.array([0.299, 0.587, 0.114])
-    return 1.0 - np.clip(y, 0.0, 1.0)
+    out: FloatArray = 1.0 - np.clip(y, 0.0, 1.0)
+    return out

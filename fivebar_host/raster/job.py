@@ -8,12 +8,9 @@ the burn resolution `resolution` (pixels per mm on the scan grid; default: the i
 pixels) resamples it (area-weighted when smaller, bilinear when larger) before the image
 mode turns darkness into powers.
 
-The pen speed is `speed_mm_s` (default the profile's draw feed), lowered where needed so
-that (1) no joint exceeds `SPEED_SHARE` of `max_joint_rad_s` over the image, and (2) the
-link keeps up: the wire lines, in order, at `compile.linkrate.LINK_SHARE` of the link's
-byte rate, each arriving before its first segment runs, the firmware holding at most
-`BUFFER_BYTES` of them ahead (`link_lateness`).  One speed for the whole image: the dose
-per pixel is the same on every scanline.
+The pen speed is `speed_mm_s` (default the profile's draw feed), lowered where the joints
+or the link need it (`raster.speed`): one speed for the whole image, so the dose per pixel
+is the same on every scanline.
 
 Segments: from the homed pose a checked move to the first scanline's overscan start, then
 per scanline its pieces (G7: ramp in, image, ramp out) and the move to the next one, then
@@ -25,34 +22,25 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from fivebar_host import protocol
-from fivebar_host.compile import linkrate
-from fivebar_host.compile.model import CompileOptions, Job, PathStats
+from fivebar_host.compile.model import CompileOptions, Job
 from fivebar_host.compile.place import find_home, setup
-from fivebar_host.compile.steps import absolute_steps, step_angles
+from fivebar_host.compile.steps import absolute_steps
 from fivebar_host.config import Profile
 from fivebar_host.errors import InputError, JobError, OptionError, Where
-from fivebar_host.program import PixelRun
+from fivebar_host.raster import assemble, image, motion, speed
 from fivebar_host.raster import grid as gridmod
-from fivebar_host.raster import image, motion, pixels, travel
 from fivebar_host.raster.modes import ImageMode, to_powers
-from fivebar_host.raster.runs import RasterRuns, ScanInfo
+from fivebar_host.raster.runs import RasterRuns
 from fivebar_host.toolpath import layout
-from fivebar_host.toolpath.geometry import Drawing
 from fivebar_host.toolpath.segment import PoseChecker
-from kinematics.arrays import FloatArray, IntArray
+from kinematics.arrays import FloatArray
 
-#: Share of max_joint_rad_s the scan speed may ask of a joint.
-SPEED_SHARE = 0.9
-#: The firmware's buffering a stream can get ahead by: its receive ring (255), its line
-#: buffer and pixel ring (128 each), less a line of margin.
-BUFFER_BYTES = 380
 #: The chord of a scan piece may bow this share of the tolerance off the line (the rest is
 #: the step quantisation's).
 CHORD_SHARE = 0.5
@@ -66,7 +54,7 @@ DEFAULT_DPI = 96.0
 class RasterOptions:
     """How an image is burned (module docstring)."""
 
-    mode: ImageMode = ImageMode()
+    mode: ImageMode = ImageMode()  # noqa: RUF009 (frozen: one shared default is fine)
     width_mm: float | None = None
     height_mm: float | None = None
     dpi: float | None = None
@@ -76,16 +64,6 @@ class RasterOptions:
     passes: int = 1
     speed_mm_s: float | None = None
     origin_mm: tuple[float, float] | None = None
-
-
-@dataclass(frozen=True)
-class Planned:
-    """The scanlines planned at one speed: their motion, changes and G7 lines."""
-
-    ctx: motion.RasterCtx
-    scans: list[motion.ScanMotion]
-    changes: list[pixels.Changes]
-    groups: list[list[pixels.Group]]
 
 
 def pixel_size(gray: image.Gray, ro: RasterOptions) -> tuple[float, float]:
@@ -142,101 +120,27 @@ def _top_left(profile: Profile, mode: str, size: tuple[float, float],
     return np.array([cx - size[0] / 2, cy + size[1] / 2])
 
 
-def plan_line(ctx: motion.RasterCtx, sl: gridmod.Scanline
-              ) -> tuple[motion.ScanMotion, pixels.Changes]:
-    """One scanline planned, with its changes: scan pieces short enough that each piece's
-    changes fit one progression U + i·T within `pixels.FIT_CYCLES` (the pen's speed drifts
-    slightly along a joint-space chord; in cycles the drift grows as the speed falls, and
-    quadratically with the piece's length)."""
-    row = ctx.grid.powers[sl.row, sl.c0:sl.c1]
-    row = row if sl.sign > 0 else row[::-1]
-    k = motion.scan_k(ctx, sl)
-    while True:
-        sm = motion.plan(ctx, sl, k)
-        ch = pixels.crossings(ctx, sm, row)
-        worst = pixels.piece_residual(sm, ch)
-        if worst <= pixels.FIT_CYCLES or k == 1:
-            return sm, ch
-        k = max(1, min(k - 1, math.floor(k * math.sqrt(pixels.FIT_CYCLES / worst) * 0.9)))
-
-
-def plan_all(ctx: motion.RasterCtx, lines: list[gridmod.Scanline]) -> Planned:
-    """Every scanline planned at ctx.v, its changes and its G7 lines."""
-    scans, changes, groups = [], [], []
-    for sl in lines:
-        sm, ch = plan_line(ctx, sl)
-        scans.append(sm)
-        changes.append(ch)
-        groups.append(pixels.groups(sm, ch))
-    return Planned(ctx, scans, changes, groups)
-
-
-def speed_cap(ctx: motion.RasterCtx, lines: list[gridmod.Scanline]) -> float:
-    """The fastest pen speed no joint exceeds `SPEED_SHARE` of its limit at (module doc)."""
-    mot = ctx.profile.motion
-    wmax = SPEED_SHARE * min(mot.max_joint_rad_s,
-                             protocol.SETTINGS[0][2] * 2 * math.pi / ctx.spr)
-    g = max(motion.gains(ctx, sl, 0.0, (sl.c1 - sl.c0) * ctx.grid.pitch)[0] for sl in lines)
-    return wmax / g
-
-
-def link_lateness(line_bytes: list[int], line_start_s: list[float], rate: float) -> float:
-    """How late the latest wire line arrives, s (≤ 0: none is late): the lines streamed in
-    order at `rate` bytes/s, never more than `BUFFER_BYTES` of them sent and not yet begun,
-    the job's clock starting when its first line has arrived (its line l begins at
-    `line_start_s[l]` on that clock)."""
-    if not line_bytes:
-        return 0.0
-    t0 = line_bytes[0] / rate
-    t, ahead, started, worst = 0.0, 0, 0, -math.inf
-    for i, b in enumerate(line_bytes):
-        while started < i and t0 + line_start_s[started] <= t:
-            ahead -= line_bytes[started]
-            started += 1
-        while ahead + b > BUFFER_BYTES and started < i:
-            t = max(t, t0 + line_start_s[started])
-            ahead -= line_bytes[started]
-            started += 1
-        t += b / rate
-        ahead += b
-        worst = max(worst, t - (t0 + line_start_s[i]))
-    return worst
-
-
 def _placement(grid: gridmod.ScanGrid, how: str) -> layout.Placement:
-    from fivebar_host.raster.assemble import machine_bbox
-
-    box = machine_bbox(grid.corners_mm())
+    box = assemble.machine_bbox(grid.corners_mm())
     return layout.Placement(np.eye(2), np.zeros(2), 1.0, 0.0, box, box, None, how)
-
-
-def _wire_lateness(ctx: motion.RasterCtx, pl: Planned, home: IntArray) -> float:
-    from fivebar_host.raster.assemble import collect
-
-    _, _, _, wire = collect(ctx.profile, ctx.checker, pl.scans, pl.groups, home)
-    return link_lateness(wire.nbytes, wire.start_s, linkrate.bytes_per_s(ctx.profile))
 
 
 def compile_raster(path: str | Path, profile: Profile, ro: RasterOptions,
                    gray: image.Gray | None = None) -> Job:
     """Read and compile an image (module docstring); `gray` when it is already read (an
     SVG `<image>`). Raises `InputError`, `JobError` or `OptionError`."""
-    from fivebar_host.raster.assemble import build_job, collect, scan_infos
-
     file = str(path)
     try:
-        return _compile(file, profile, ro, gray, (build_job, collect, scan_infos))
+        return _compile(file, profile, ro, gray)
     except JobError as e:
         if e.where is None:
             raise JobError(e.detail, Where(file=file), e.reason) from None
         raise
 
 
-def _compile(file: str, profile: Profile, ro: RasterOptions, gray: image.Gray | None,
-             fns: tuple) -> Job:  # type: ignore[type-arg]
-    build_job, collect, scan_infos = fns
-    g = gray if gray is not None else image.load(file)
-    notes = list(g.notes)
+def _grid(file: str, g: image.Gray, ro: RasterOptions, profile: Profile, mode: str
+          ) -> gridmod.ScanGrid:
+    """The image's powers on its scan grid, placed on the machine (module docstring)."""
     pw, ph = pixel_size(g, ro)
     size = (g.shape[1] * pw, g.shape[0] * ph)
     if ro.resolution is not None:
@@ -247,45 +151,38 @@ def _compile(file: str, profile: Profile, ro: RasterOptions, gray: image.Gray | 
     else:
         dark, px = g.dark, (pw, ph)
     powers = to_powers(dark, ro.mode)
-    su = setup(profile, CompileOptions(), profile.kinematics.working_mode)
-    home = find_home(su, file)
-    mode = su.mode if su.mode != "auto" else home.mode
-    checker = _checker(profile, mode)
-    grid = gridmod.scan_grid(powers, px, _top_left(profile, mode, size, ro.origin_mm, file),
+    return gridmod.scan_grid(powers, px, _top_left(profile, mode, size, ro.origin_mm, file),
                              ro.angle_deg)
+
+
+def _compile(file: str, profile: Profile, ro: RasterOptions, gray: image.Gray | None) -> Job:
+    g = gray if gray is not None else image.load(file)
+    notes = list(g.notes)
+    su = setup(profile, CompileOptions(), profile.kinematics.working_mode)
+    mode = su.mode if su.mode != "auto" else find_home(su, file).mode
+    checker = _checker(profile, mode)
+    grid = _grid(file, g, ro, profile, mode)
     lines = gridmod.scanlines(grid, ro.bidirectional, ro.passes)
     if not lines:
         raise InputError("nothing to burn: every pixel is white at these settings", file)
     v0 = ro.speed_mm_s if ro.speed_mm_s is not None else profile.motion.draw_feed_mm_s
     ctx = motion.RasterCtx(profile, checker, grid, v0, CHORD_SHARE * profile.motion.tolerance_mm,
                            K_MAX)
-    cap = speed_cap(ctx, lines)
-    if cap < v0:
-        notes.append(f"speed {v0:g} → {cap:.1f} mm/s: the joints' speed limit along the image")
-        ctx = replace(ctx, v=cap)
     home_steps = absolute_steps(np.asarray(profile.motors.home_rad).reshape(1, 2),
                                 profile.motors.home_rad, profile.motors.steps_per_rev)[0]
-    pl = plan_all(ctx, lines)
-    for _ in range(6):  # the link's floor: one speed for the whole image
-        late = _wire_lateness(ctx, pl, home_steps)
-        if late <= 0:
-            break
-        total = sum(sm.time_us for sm in pl.scans) * 1e-6
-        v_new = ctx.v * total / (total + late) * 0.97
-        notes.append(f"speed {ctx.v:.1f} → {v_new:.1f} mm/s: what the link carries")
-        ctx = replace(ctx, v=v_new)
-        pl = plan_all(ctx, lines)
-    seg, runs, spans, _ = collect(profile, checker, pl.scans, pl.groups, home_steps)
+    pl = speed.plan_image(ctx, lines, home_steps, notes)
+    col = pl.collected
     residual = max((gr.residual for gs in pl.groups for gr in gs), default=0.0)
+    seg = col.seg
     info = RasterRuns(np.concatenate(seg.g7), np.concatenate(seg.run), np.concatenate(seg.scan),
-                      tuple(runs), scan_infos(pl.scans, pl.changes, spans),
+                      tuple(col.runs), assemble.scan_infos(pl.scans, pl.changes, col.spans),
                       (float(grid.origin[0]), float(grid.origin[1])),
                       (float(grid.u[0]), float(grid.u[1])), (float(grid.n[0]), float(grid.n[1])),
-                      grid.pitch, grid.interval, grid.powers, ctx.v,
+                      grid.pitch, grid.interval, grid.powers, pl.ctx.v,
                       min(sm.accel for sm in pl.scans), residual, file, tuple(notes))
     how = "origin" if ro.origin_mm is not None else "centred"
-    return build_job(profile, checker, file, mode, home_steps, seg, info,
-                     _placement(grid, how), notes)
+    return assemble.build_job(profile, checker, file, mode, home_steps, seg, info,
+                              _placement(grid, how), notes)
 
 
 def raster_options(values: Mapping[str, Any], profile: Profile) -> RasterOptions:

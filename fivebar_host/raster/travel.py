@@ -70,7 +70,7 @@ def check_move(profile: Profile, checker: PoseChecker, start: IntArray, end: Int
     pts, valid = checker.forward(q)
     if not valid.all():
         raise JobError(f"{what}: the linkage cannot close along the move", None, "reach")
-    q, ok1, ok2 = wrap_to_limits(q, mo.limits_rad)
+    q, _ok1, _ok2 = wrap_to_limits(q, mo.limits_rad)
     code, _ = checker.codes(q, pts, check_type1=False)
     bad = np.flatnonzero(code)
     if bad.size:
