@@ -99,8 +99,14 @@ def write_executed(job: Job, prof: Profile, rec: Recording, preview_path: Path,
 
     if job.raster is not None:
         from fivebar_host.raster.dose import figures, read_pins
+        from fivebar_host.raster.preview import save_burned
 
-        click.echo(figures(job, prof, read_pins(rec.path)).line())
+        fig = figures(job, prof, read_pins(rec.path))
+        click.echo(fig.line())
+        burned = preview_path.with_name(preview_path.stem + ".burned.png")
+        save_burned(fig, burned)
+        click.echo(f"burned image (dose from the step pulses and the laser pin): {burned}; "
+                   f"boundary data {burned.with_suffix('.npz')}")
         return
     tr, true = read_trace(rec.path), rec.true
     t, track = merge_axes(tr.positions("A"), tr.positions("B"))

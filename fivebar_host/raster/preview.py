@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from fivebar_host.compile.model import Job
+from fivebar_host.raster.dose import Figures
 from fivebar_host.raster.runs import RasterRuns
 from kinematics.arrays import FloatArray
 
@@ -67,3 +68,15 @@ def draw_preview(job: Job, path: Path) -> None:
 
     r = raster_of(job)
     Image.fromarray(burn_picture(r.target)).save(path)
+
+
+def save_burned(fig: Figures, path: Path) -> None:
+    """Write the burned image reconstructed from the trace (`dose.figures`: power per cell,
+    255 = full power for a pixel's time) as a picture like the preview's, and beside it
+    (`.npz`) the boundaries' placement (mm) and change − crossing times (µs) and the dose
+    grid, for a closer look."""
+    from PIL import Image
+
+    Image.fromarray(burn_picture(fig.dose)).save(path)
+    np.savez_compressed(path.with_suffix(".npz"), placement_mm=fig.boundaries.placement_mm,
+                        dt_us=fig.boundaries.dt_us, dose=fig.dose)
