@@ -199,7 +199,8 @@ def restarts(pt: PinTrace) -> tuple[IntArray, IntArray]:
 def crossings(job: Job, profile: Profile, mo: Motion) -> list[tuple[int, FloatArray]]:
     """Per scanline (job order): when the pen crossed each of its pixel boundaries, cycles
     (NaN where it did not), from the step events while the pen was on the scanline's row
-    and stretch — the scanline's visit of its row (a row is visited once per pass)."""
+    and stretch with its overscan — the scanline's visit of its row (a row is visited once
+    per pass), from the overscan's start to its end."""
     r = job.raster
     assert r is not None
     steps = mo.step_cycles()
@@ -208,8 +209,9 @@ def crossings(job: Job, profile: Profile, mo: Motion) -> list[tuple[int, FloatAr
     seen: dict[int, int] = {}
     out: list[tuple[int, FloatArray]] = []
     h = r.pitch_mm
+    over = h + 1.5 * r.speed_mm_s ** 2 / (2 * r.accel_mm_s2)  # the overscan and a pixel
     for sl in r.lines:
-        on = (row_of == sl.row) & (s > sl.c0 * h - h) & (s < sl.c1 * h + h)
+        on = (row_of == sl.row) & (s > sl.c0 * h - over) & (s < sl.c1 * h + over)
         idx = np.flatnonzero(on)
         visit = seen.get(sl.row, 0)
         seen[sl.row] = visit + 1
@@ -222,6 +224,11 @@ def crossings(job: Job, profile: Profile, mo: Motion) -> list[tuple[int, FloatAr
                 sel = idx[starts[visit]:stops[visit]]
                 entry = sl.c0 * h if sl.sign > 0 else sl.c1 * h
                 sig = (s[sel] - entry) * sl.sign
+                # the scan itself: from its overscan's start (the visit's least σ: the move
+                # there may pass the row's end first) to its end (the most σ after it)
+                lo = int(np.argmin(sig))
+                hi = lo + int(np.argmax(sig[lo:])) + 1
+                sel, sig = sel[lo:hi], sig[lo:hi]
                 order = np.argsort(sig)
                 want = np.arange(bound.size) * h
                 ok = (want >= sig.min()) & (want <= sig.max())
