@@ -14,11 +14,12 @@ where the pen is at its middle: the dose of a pixel is the high time (cycles) sp
 its cell, and the burned power is 255 · dose / (the pixel's time at the scan speed).
 
 A *change* is where the firmware put a new power on the laser: it restarts the PWM period
-there (board.h board_laser writes TCNT2), so the rises after it keep a new phase.  On the
-chip the first rise comes two ticks after the write; simavr 1.6 restarts the phase at the
-write without the BOTTOM event (the pin keeps its level until the new compare, then rises a
-whole period after the write — the trace shows it at every change), so the write is at the
-first restarted rise less `RESTART` cycles.  At each pixel boundary (the pen's crossing
+there (board.h board_laser writes TCNT2 = MAX − 1), so the rises after it keep a new
+phase.  The new period starts two ticks after the write (BOTTOM), on the chip as in simavr;
+a pin that was low at the write rises there, but a pin that was high stays high through it
+(the write skips the old compare: the pulse runs on to the new one) and shows its first
+restarted rise a period later — `change_writes` tells the two apart by the pin's level a
+period before the rise.  At each pixel boundary (the pen's crossing
 found from the steps) the restarted rise whose write is nearest, within `WINDOW_US` (and
 half a pixel), is its change: the pen's distance there from the boundary's point
 (placement) and the time between the change and the crossing.  A change whose new phase
@@ -50,9 +51,10 @@ PWM_PERIOD = 256
 CHUNK = 64
 #: A rise this close to a period after the one before is the PWM's own, cycles.
 SLACK = 3
-#: Cycles from a power change's TCNT2 write to its first restarted rise in simavr 1.6
-#: (module docstring): a period and the two ticks to BOTTOM.
-RESTART = PWM_PERIOD + 2
+#: Cycles from a power change's TCNT2 write (TCNT2 = MAX − 1) to the new period's start.
+TICKS = 2
+#: ... and to the second new period's start (`change_writes`).
+RESTART = PWM_PERIOD + TICKS
 #: How far from the crossing a change is looked for, µs.
 WINDOW_US = 40.0
 #: Pulses shorter than this (or longer than a period less it) make no clean change, cycles.
@@ -263,6 +265,23 @@ class Figures:
                 f"{self.outside_steps} steps")
 
 
+def change_writes(pt: PinTrace, restart: IntArray) -> FloatArray:
+    """The TCNT2 writes (cycles) behind the restarted rises (`restarts`' flags; module
+    docstring).  The write makes the next timer tick BOTTOM, `TICKS` after it: a pin low at
+    the write rises there.  A pin high at the write stays high through it (the write skips
+    the old compare), falls at the new compare — `TICKS` + the new width after the write —
+    and shows its first restarted rise a period later: that is the case where the fall
+    before the rise is the new width after the rise's period start, and the write is then
+    `RESTART` before the rise."""
+    rise, fall = high_intervals(pt)
+    k = np.flatnonzero(restart)
+    width = fall[k] - rise[k]
+    f_prev = np.where(k > 0, fall[np.maximum(k - 1, 0)], -(10**12))
+    late = np.abs(f_prev - (rise[k] - PWM_PERIOD + width)) <= SLACK
+    out: FloatArray = rise[k].astype(np.float64) - np.where(late, RESTART, TICKS)
+    return out
+
+
 @dataclass(frozen=True)
 class Boundaries:
     """The changes found at the pixel boundaries (`boundary_errors`)."""
@@ -278,8 +297,8 @@ def boundary_errors(job: Job, profile: Profile, mo: Motion, pt: PinTrace) -> Bou
     rise whose write (module docstring) is nearest the pen's crossing within `WINDOW_US`."""
     r = job.raster
     assert r is not None
-    rise, restart = restarts(pt)
-    cand = rise[restart.astype(bool)].astype(np.float64) - RESTART  # the writes
+    _, restart = restarts(pt)
+    cand = change_writes(pt, restart)
     half = min(0.5 * pixel_cycles(r), WINDOW_US * F_CPU * 1e-6)
     place, dts, clean_n = [], [], 0
     for sl, (_, tau) in zip(r.lines, crossings(job, profile, mo), strict=True):
