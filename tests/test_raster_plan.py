@@ -141,3 +141,36 @@ def test_passes_and_one_way(tmp_path: Path) -> None:
     assert r is not None
     assert len(r.lines) == 6 and {s.sign for s in r.lines} == {1}
     assert {s.pass_no for s in r.lines} == {0, 1}
+
+
+def _firmware_refusals(job: Job, profile: Profile) -> list[str]:
+    """The G7 lines of the job's program that fb_exec.c g7_check would refuse: more
+    pixels than the ring holds, T under 400 cycles, a change past the line's segments."""
+    from fivebar_host import protocol
+    from fivebar_host.compile.emit import job_program
+    from fivebar_host.program import Kind
+
+    prog = job_program(job, profile, True)
+    kind, _a, _b, p, s = (np.asarray(x) for x in prog.rows)
+    modal_t: int | None = None
+    out = []
+    for st in np.flatnonzero((kind == Kind.RASTER) & (s >= 0)).tolist():
+        raw, n = wire.g7_line(prog, st, 1)
+        g = protocol.read_g7(raw.split(b"G7:", 1)[1].rsplit(b"*", 1)[0])
+        modal_t = g.t if g.t is not None else modal_t
+        npx, per = len(g.powers), modal_t or 0
+        total = int(p[st:st + n].sum()) * 16
+        if (npx > 128 - protocol.PX_HEAD or (npx > 1 and per < 400)
+                or (npx and (g.u or 0) + (npx - 1) * per >= total)):
+            out.append(f"item {st}: {npx} px, U {g.u}, T {per}, {total} cycles")
+    return out
+
+
+def test_every_g7_line_passes_the_firmware_checks() -> None:
+    """The photo on the fast profile has long single-piece lines in its light areas, where
+    the modal T once put the last change past the segment's end (error:7)."""
+    prof = load_profile(Path(__file__).resolve().parents[1] / "configs" / "raster-fast.toml")
+    photo = Path(__file__).resolve().parents[1] / "examples" / "photo.png"
+    v = defaults()  # the file's 254 dpi: 32 × 32 mm at 10 px/mm
+    job = rjob.compile_raster(photo, prof, rjob.raster_options(v, prof))
+    assert _firmware_refusals(job, prof) == []

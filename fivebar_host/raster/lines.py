@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fivebar_host import protocol
+from fivebar_host.errors import JobError
 from fivebar_host.raster.motion import ScanMotion
 from fivebar_host.raster.pixels import CYCLES_PER_US, FIT_CYCLES, Changes
 from kinematics.arrays import IntArray
@@ -141,6 +142,8 @@ def _fit_line(c: _Costs, j: int, end: int, t_prev: int | None
         cands.append(0)
     best: tuple[int, int, float] | None = None
     total = int(c.start[end] - c.start[j])
+    if n > 1:  # a T a cycle shorter: room where the secant's last change meets the end
+        cands.append(min(cands[-2:]) - 1)
     for k, t in enumerate(cands):
         r = off - i * t
         u = round((float(r.max()) + float(r.min())) / 2)
@@ -148,6 +151,8 @@ def _fit_line(c: _Costs, j: int, end: int, t_prev: int | None
         if over > 0:  # every change inside the line's segments (the firmware's rule)
             u -= over
         res = float(np.abs(r - u).max())
+        if u < 0:  # no U fits both ends: not a candidate (unless nothing else is)
+            res += 1e9
         if k == 0 and t_prev is not None and n > 1 and res <= FIT_CYCLES:
             return u, t, res  # the modal T: a shorter line
         if best is None or res < best[2]:
@@ -205,7 +210,10 @@ def groups(sm: ScanMotion, ch: Changes) -> list[Group]:
                 break
             end -= 1
         a, b = int(c.cuts[j]), int(c.cuts[end])
-        out.append(Group(j, end - j, max(u, 0), t, ch.power[a:b].tobytes(), res, size))
+        if u < 0:  # not reached: a piece's changes lie inside it, and T − 1 makes room
+            raise JobError(f"pixel run of {b - a} changes fits no U ≥ 0 in its G7 line", None,
+                           "internal")
+        out.append(Group(j, end - j, u, t, ch.power[a:b].tobytes(), res, size))
         if b - a > 1:
             t_prev = t
         j = end
