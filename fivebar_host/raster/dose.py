@@ -290,30 +290,60 @@ class Boundaries:
     dt_us: FloatArray  # change − crossing, µs
     clean: int  # boundaries whose change the pin can show (MIN_PULSE)
 
+    @property
+    def found(self) -> int:
+        """Boundaries whose change was found within `WINDOW_US`."""
+        return int(self.dt_us.shape[0])
+
+
+def _nearest(cand: FloatArray, tau: FloatArray, half: float) -> tuple[BoolArray, FloatArray]:
+    """The candidate nearest each crossing, and whether it is within `half`."""
+    if cand.size < 2:
+        return np.zeros(tau.shape[0], dtype=bool), tau
+    k = np.clip(np.searchsorted(cand, tau), 1, cand.size - 1)
+    lo, hi = cand[k - 1], cand[k]
+    got = np.where(np.abs(lo - tau) < np.abs(hi - tau), lo, hi)
+    return np.abs(got - tau) <= half, got
+
+
+def off_writes(pt: PinTrace) -> FloatArray:
+    """The laser-off writes (cycles): falls after which the pin stays low longer than a
+    period (board_laser(0) drives the pin low at once)."""
+    rise, fall = high_intervals(pt)
+    nxt = np.concatenate((rise[1:], [np.iinfo(np.int64).max]))
+    out: FloatArray = fall[nxt - fall > PWM_PERIOD + SLACK].astype(np.float64)
+    return out
+
 
 def boundary_errors(job: Job, profile: Profile, mo: Motion, pt: PinTrace) -> Boundaries:
-    """The changes at every pixel boundary of a scanline whose powers before and after are
-    both at least `MIN_PULSE` and at most 255 − `MIN_PULSE` (0 before too): the restarted
-    rise whose write (module docstring) is nearest the pen's crossing within `WINDOW_US`."""
+    """The changes at the pixel boundaries the pin shows: a change between two powers of at
+    least `MIN_PULSE` and at most 255 − `MIN_PULSE`, or from 0 to any power, is the restarted
+    rise whose write (`change_writes`) is nearest the pen's crossing within `WINDOW_US`; a
+    change to 0 inside the line is the nearest laser-off fall (`off_writes`).  A change
+    farther than `WINDOW_US` from its crossing is not found (`Boundaries.found` < `clean`)."""
     r = job.raster
     assert r is not None
     _, restart = restarts(pt)
-    cand = change_writes(pt, restart)
+    cand_on, cand_off = change_writes(pt, restart), off_writes(pt)
     half = min(0.5 * pixel_cycles(r), WINDOW_US * F_CPU * 1e-6)
     place, dts, clean_n = [], [], 0
     for sl, (_, tau) in zip(r.lines, crossings(job, profile, mo), strict=True):
         before = np.concatenate(([0], sl.change_power[:-1])).astype(np.int64)
         after = sl.change_power.astype(np.int64)
-        clean = ((after >= MIN_PULSE) & (after <= 255 - MIN_PULSE)
-                 & ((before >= MIN_PULSE) & (before <= 255 - MIN_PULSE) | (before == 0)))
-        idx = np.flatnonzero(clean & np.isfinite(tau))
+        mid = (after >= MIN_PULSE) & (after <= 255 - MIN_PULSE)
+        on = ((mid & (before >= MIN_PULSE) & (before <= 255 - MIN_PULSE))
+              | ((before == 0) & (after >= MIN_PULSE)))
+        off = (after == 0) & (before > 0)
+        off[-1] = False  # the exit: where the ramp's steps leave the crossing loose
+        idx = np.flatnonzero((on | off) & np.isfinite(tau))
         clean_n += int(idx.size)
-        if not idx.size or cand.size < 2:
+        if not idx.size:
             continue
-        k = np.clip(np.searchsorted(cand, tau[idx]), 1, cand.size - 1)
-        lo, hi = cand[k - 1], cand[k]
-        got = np.where(np.abs(lo - tau[idx]) < np.abs(hi - tau[idx]), lo, hi)
-        found = np.abs(got - tau[idx]) <= half
+        f_on, g_on = _nearest(cand_on, tau[idx], half)
+        f_off, g_off = _nearest(cand_off, tau[idx], half)
+        is_off = off[idx]
+        found = np.where(is_off, f_off, f_on)
+        got = np.where(is_off, g_off, g_on)
         idx, got = idx[found], got[found]
         dts.append((got - tau[idx]) / F_CPU * 1e6)
         ideal = np.asarray(sl.p0) + np.outer(idx * r.pitch_mm, np.asarray(sl.d))
