@@ -17,7 +17,7 @@ forward kinematics of the executed steps and the laser pin's duty, `raster.dose`
 - a flat 50 % grey patch (10 × 10 mm at 10 px/mm, grayscale) on the default profile: the
   dose variation across the patch ((max − min) / mean of the burned power of the patch's
   cells, its outermost cells left out);
-- a 1-megapixel photo (examples/photo.png scaled to 1000 × 1000, Floyd–Steinberg, 0.1 mm
+- a 1-megapixel photo (examples/photo.png scaled to 1000 × 1000, Floyd–Steinberg, 0.04 mm
   pixels) dithered, planned and encoded: CPU seconds and peak memory (ru_maxrss of a child
   process doing only that).
 
@@ -136,7 +136,7 @@ import tempfile, pathlib
 import raster as b
 d = pathlib.Path(tempfile.mkdtemp())
 Image.open({str(PHOTO)!r}).convert('L').resize((1000, 1000)).save(d / 'mp.png')
-cpu, n, _ = b.host_cpu(d / 'mp.png', None, dict(width_mm=100.0, image_mode='floyd'))
+cpu, n, _ = b.host_cpu(d / 'mp.png', None, dict(width_mm=40.0, image_mode='floyd'))
 print(cpu, n, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
 """
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

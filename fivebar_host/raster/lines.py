@@ -19,7 +19,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from fivebar_host import protocol
-from fivebar_host.errors import JobError
 from fivebar_host.raster.motion import ScanMotion
 from fivebar_host.raster.pixels import CYCLES_PER_US, FIT_CYCLES, Changes
 from kinematics.arrays import IntArray
@@ -124,8 +123,9 @@ def _costs(sm: ScanMotion, ch: Changes) -> _Costs:
 def _fit_line(c: _Costs, j: int, end: int, t_prev: int | None
               ) -> tuple[int, int, float]:
     """U, T and the residual of the changes of pieces j … end − 1: T the secant's floor or
-    ceil (or the modal `t_prev` when it fits within `FIT_CYCLES`), U the minimax offset,
-    lowered where the last change would fall past the line's segments."""
+    ceil (or the modal `t_prev` when it fits within `FIT_CYCLES`, or the longest that keeps
+    every change inside at U = 0), U the minimax offset, lowered where the last change
+    would fall past the line's segments and never below 0."""
     a, b = int(c.cuts[j]), int(c.cuts[end])
     off = c.ch.t[a:b] - float(c.start[j])
     n = b - a
@@ -142,17 +142,16 @@ def _fit_line(c: _Costs, j: int, end: int, t_prev: int | None
         cands.append(0)
     best: tuple[int, int, float] | None = None
     total = int(c.start[end] - c.start[j])
-    if n > 1:  # a T a cycle shorter: room where the secant's last change meets the end
-        cands.append(min(cands[-2:]) - 1)
+    if n > 1:  # the longest T with every change inside at U = 0: always a valid line
+        cands.append((total - 1) // (n - 1))
     for k, t in enumerate(cands):
         r = off - i * t
         u = round((float(r.max()) + float(r.min())) / 2)
-        over = u + (n - 1) * t - (total - 1)
-        if over > 0:  # every change inside the line's segments (the firmware's rule)
-            u -= over
+        # every change inside the line's segments (the firmware's rule), U ≥ 0 (a varint)
+        u = max(min(u, total - 1 - (n - 1) * t), 0)
+        if u + (n - 1) * t > total - 1:
+            continue
         res = float(np.abs(r - u).max())
-        if u < 0:  # no U fits both ends: not a candidate (unless nothing else is)
-            res += 1e9
         if k == 0 and t_prev is not None and n > 1 and res <= FIT_CYCLES:
             return u, t, res  # the modal T: a shorter line
         if best is None or res < best[2]:
@@ -210,9 +209,6 @@ def groups(sm: ScanMotion, ch: Changes) -> list[Group]:
                 break
             end -= 1
         a, b = int(c.cuts[j]), int(c.cuts[end])
-        if u < 0:  # not reached: a piece's changes lie inside it, and T − 1 makes room
-            raise JobError(f"pixel run of {b - a} changes fits no U ≥ 0 in its G7 line", None,
-                           "internal")
         out.append(Group(j, end - j, u, t, ch.power[a:b].tobytes(), res, size))
         if b - a > 1:
             t_prev = t

@@ -119,6 +119,6 @@ def piece_residual(sm: ScanMotion, ch: Changes) -> float:
     for t in (np.floor(t0), np.ceil(t0)):
         r = off - i * t[who]
         mx, mn = np.maximum.reduceat(r, cuts), np.minimum.reduceat(r, cuts)
-        u = np.rint((mx + mn) / 2)
+        u = np.maximum(np.rint((mx + mn) / 2), 0.0)  # U ≥ 0 on the wire
         best = np.minimum(best, np.maximum(mx - u, u - mn))
     return float(best[big].max())
