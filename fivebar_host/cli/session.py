@@ -55,9 +55,10 @@ def plot_on_machine(plot: Plot, profile: Profile, job: Job) -> RunReport:
     copies with their countdown, the final report (module doc)."""
     from fivebar_host.report.text.dryrun import format_duration
 
+    quality = (f"{job.raster.n_pixels} px at {job.raster.speed_mm_s:.1f} mm/s"
+               if job.raster is not None else f"max deviation {job.max_dev_mm:.4f} mm")
     click.echo(f"job: {job.n_segments} segments, {job.n_paths} paths, mode {job.mode}, "
-               f"{plan_text(job, plot.copies, format_duration)}, max deviation "
-               f"{job.max_dev_mm:.4f} mm")
+               f"{plan_text(job, plot.copies, format_duration)}, {quality}")
     if profile.pen is not None:
         click.echo("pen plot: the servo lifts the pen (M280) between strokes; laser output "
                    "stays at 0")
