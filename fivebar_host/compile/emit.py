@@ -95,15 +95,18 @@ DEFAULT_MAX_RATE = 20000
 
 
 def raster_program(job: Job, profile: Profile, laser: bool, first: int = 0,
-                   end: int | None = None) -> Program:
+                   end: int | None = None, reached: int | None = None) -> Program:
     """The items of a raster job's segments `first` … `end` − 1 (`first` a G7 line's first
     segment or a travel segment): RASTER items for the G7 segments (the line's first
     carries its run's index), MOVE items for the moves between scanlines. With `laser` the
     laser is enabled (`M3 S0`) first — without it the firmware burns no G7 pixel — and off
     (`M5`) at the end. A raster faster than the firmware's boot step rate (`$0`) sets it
-    first (the setting needs an idle machine: a program starts on one)."""
+    first (the setting needs an idle machine: a program starts on one).  `reached`: a
+    resumed run got as far as that segment; the pixels changed before it are burned at 0
+    (`RasterRuns.runs_after`)."""
     r = job.raster
     assert r is not None
+    runs = r.runs if reached is None else r.runs_after(first, reached, job.duration_us)
     n = job.n_segments if end is None else end
     g7 = r.g7[first:n]
     body = Program(np.where(g7, Kind.RASTER, Kind.MOVE).astype(np.int64),
@@ -111,7 +114,7 @@ def raster_program(job: Job, profile: Profile, laser: bool, first: int = 0,
                    job.steps[first + 1:n + 1, 1].astype(np.int64),
                    job.duration_us[first:n].astype(np.int64),
                    np.where(g7, r.run[first:n], 0).astype(np.int64),
-                   np.arange(first, n, dtype=np.int64), runs=r.runs)
+                   np.arange(first, n, dtype=np.int64), runs=runs)
     parts = []
     rate = max_step_rate(job, first, n)
     if rate > DEFAULT_MAX_RATE:

@@ -16,6 +16,9 @@ from numpy.typing import NDArray
 from fivebar_host.program import PixelRun
 from kinematics.arrays import BoolArray, FloatArray, IntArray
 
+#: The firmware's timer cycles a µs (16 MHz).
+CYCLES_PER_US = 16
+
 
 @dataclass(frozen=True)
 class ScanInfo:
@@ -80,3 +83,34 @@ class RasterRuns:
         t = (np.arange(r) + 0.5) * self.interval_mm
         out: FloatArray = o + s[None, :, None] * u + t[:, None, None] * n
         return out
+
+    def restart_segment(self, segment: int) -> int:
+        """Where a run interrupted before `segment` restarts: the first segment of the
+        scanline `segment` lies in (its overscan's start), else `segment` itself."""
+        line = self.line_of(segment)
+        if line < 0:
+            return segment
+        return self.lines[line].first
+
+    def runs_after(self, first: int, reached: int, duration_us: IntArray
+                   ) -> tuple[PixelRun, ...]:
+        """The runs with every pixel of the G7 lines from segment `first` whose change comes
+        before segment `reached` starts at power 0: restarted at `first` (a scanline's
+        start) after a run reached `reached`, nothing is burned twice (a pixel under way
+        at the stop stays as far as it got)."""
+        out = list(self.runs)
+        if reached <= first:
+            return tuple(out)
+        start = np.concatenate(([0], np.cumsum(duration_us[first:reached].astype(np.int64))))
+        stop = int(start[-1]) * CYCLES_PER_US
+        for g in range(first, reached):
+            k = int(self.run[g])
+            if k < 0:
+                continue
+            run = out[k]
+            at = int(start[g - first]) * CYCLES_PER_US + run.u + run.t * np.arange(
+                len(run.powers))
+            pw = np.frombuffer(run.powers, dtype=np.uint8).copy()
+            pw[at < stop] = 0
+            out[k] = PixelRun(run.u, run.t, pw.tobytes())
+        return tuple(out)
