@@ -296,7 +296,7 @@ def test_machine_panel_fault_and_resume(browser: Any, tmp_path: Path) -> None:
     """Home, jog the pen and a motor, motors off, an alarm and its clearing; a job held by a
     fault and resumed from the page to done."""
     d = browser
-    with daemon(tmp_path / "state", "fivebar-mock://?speed=10&machine=web4&error_on=40") as dm:
+    with daemon(tmp_path / "state", "fivebar-mock://?speed=10&machine=web4&error_on=12") as dm:
         open_page(d, dm.url)
         css(d, "#at-home").click()
         css(d, "#home").click()
