@@ -56,3 +56,31 @@ def test_resume_inside_a_scanline_restarts_it_without_burning_twice(tmp_path: Pa
     reached = float(start[-1]) * 16
     assert (sl.change_t[:n_zero] < reached).all() and sl.change_t[n_zero] >= reached
     assert set(got[n_zero:-1].tolist()) == {want}
+
+
+def test_a_fresh_start_is_the_job_itself_and_rate_comes_first(tmp_path: Path) -> None:
+    """From the home pose at segment 0 nothing is restarted or added (segment 0 is the move
+    to the first scanline, not a scan); on a profile whose raster is faster than the boot
+    step rate the `$0` setting comes before every move, resumed or not (it needs the
+    machine idle: error:13 otherwise)."""
+    from fivebar_host.compile.emit import job_program
+
+    root = Path(__file__).resolve().parents[1]
+    prof = load_profile(root / "configs" / "raster-fast.toml")
+    p = tmp_path / "grey.png"
+    Image.fromarray(np.full((4, 40), 100, dtype=np.uint8)).save(p)
+    v = defaults()
+    v.update(width_mm=10.0, line_interval_mm=0.1)
+    job = rjob.compile_raster(p, prof, rjob.raster_options(v, prof))
+    r = job.raster
+    assert r is not None and not r.g7[0]
+    fresh = build_program(job, prof, True, 0, job.steps[0])
+    body = job_program(job, prof, True, 0)
+    assert np.array_equal(fresh.kind[-len(body):], body.kind)
+    assert np.array_equal(fresh.a[-len(body):], body.a)
+    k = r.lines[2].first + 3
+    for prog in (fresh, build_program(job, prof, True, k, job.steps[k])):
+        text = np.flatnonzero(prog.kind == Kind.TEXT)
+        moves = np.flatnonzero(np.isin(prog.kind, (Kind.MOVE, Kind.RASTER)))
+        assert text.size == 1 and prog.texts[int(prog.s[text[0]])].startswith("$0=")
+        assert text[0] < moves[0]

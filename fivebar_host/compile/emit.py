@@ -95,7 +95,8 @@ DEFAULT_MAX_RATE = 20000
 
 
 def raster_program(job: Job, profile: Profile, laser: bool, first: int = 0,
-                   end: int | None = None, reached: int | None = None) -> Program:
+                   end: int | None = None, reached: int | None = None,
+                   lead: Program | None = None) -> Program:
     """The items of a raster job's segments `first` … `end` − 1 (`first` a G7 line's first
     segment or a travel segment): RASTER items for the G7 segments (the line's first
     carries its run's index), MOVE items for the moves between scanlines. With `laser` the
@@ -103,7 +104,8 @@ def raster_program(job: Job, profile: Profile, laser: bool, first: int = 0,
     (`M5`) at the end. A raster faster than the firmware's boot step rate (`$0`) sets it
     first (the setting needs an idle machine: a program starts on one).  `reached`: a
     resumed run got as far as that segment; the pixels changed before it are burned at 0
-    (`RasterRuns.runs_after`)."""
+    (`RasterRuns.runs_after`).  `lead` (a resume's travel back) runs after the `$0`
+    setting, which needs the machine idle, and before the laser is enabled."""
     r = job.raster
     assert r is not None
     runs = r.runs if reached is None else r.runs_after(first, reached, job.duration_us)
@@ -119,6 +121,8 @@ def raster_program(job: Job, profile: Profile, laser: bool, first: int = 0,
     rate = max_step_rate(job, first, n)
     if rate > DEFAULT_MAX_RATE:
         parts.append(Program.text(f"$0={min(60000, int(rate * 1.02) + 1)}"))
+    if lead is not None:
+        parts.append(lead)
     if laser:
         parts.append(tool_on_item(profile))
     parts += [body, Program.command(Kind.TOOL_OFF)]

@@ -86,9 +86,10 @@ class RasterRuns:
 
     def restart_segment(self, segment: int) -> int:
         """Where a run interrupted before `segment` restarts: the first segment of the
-        scanline `segment` lies in (its overscan's start), else `segment` itself."""
+        scanline whose G7 segment it is (its overscan's start), else (a move between
+        scanlines) `segment` itself."""
         line = self.line_of(segment)
-        if line < 0:
+        if line < 0 or not self.g7[segment]:
             return segment
         return self.lines[line].first
 

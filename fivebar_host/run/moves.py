@@ -171,12 +171,12 @@ def _raster_rest(job: Job, profile: Profile, laser: bool, k: int, pos: IntArray,
     r = job.raster
     assert r is not None
     k0 = r.restart_segment(k) if k < job.n_segments else k
-    out = []
+    lead = None
     if k0 < job.n_segments and not np.array_equal(pos, job.steps[k0]):
-        out.append(travel(profile, job.assembly, pos, job.steps[k0],
-                          f"travel back to segment {k0 + 1}"))
-    out.append(raster_program(job, profile, laser, k0, end_segment, k if k0 < k else None))
-    return out
+        lead = travel(profile, job.assembly, pos, job.steps[k0],
+                      f"travel back to segment {k0 + 1}")
+    return [raster_program(job, profile, laser, k0, end_segment, k if k0 < k else None,
+                           lead)]
 
 
 # ------------------------------------------------------------------ framing and jogging
