@@ -107,14 +107,6 @@ def raise_to_link(floor_us: IntArray, steps: IntArray, power: NDArray[np.integer
         np.maximum(floor_us[i:j], need, out=floor_us[i:j])
 
 
-def any_short(steps: IntArray, power: NDArray[np.integer[Any]], duration_us: IntArray,
-              profile: Profile) -> bool:
-    """Whether a segment of the plan is shorter than its link floor (`link_floor_us`),
-    block by block (no whole-job array)."""
-    return any(bool((np.asarray(duration_us[i:j]) < need).any())
-               for i, j, need in _blocks(steps, power, duration_us, profile))
-
-
 def link_floor_us(steps: IntArray, power: NDArray[np.integer[Any]], duration_us: IntArray,
                   profile: Profile) -> IntArray:
     """Every segment's link floor (`_blocks`) with the planned `duration_us` deciding which
