@@ -52,6 +52,8 @@ def _valid_pattern() -> re.Pattern[str]:
     return re.compile(rf"{wsp}(?:[Mm]{wsp}{sets(2)}{block}*+)?")
 
 
+#: Argument sets after the first of a moveto are linetos.
+_IMPLICIT = {"M": "L", "m": "l"}
 #: `_valid_pattern`, and the tokens (command letters and numbers) of such data.
 _VALID = _valid_pattern()
 _TOKEN = re.compile(rf"[MmLlHhVvCcSsQqTtZz]|{NUMBER}")
@@ -146,18 +148,17 @@ def _parse_valid(d: str) -> PathResult:
     argument sets (none after Z/z), so the sets are applied as the scanner applies them."""
     tokens = _TOKEN.findall(d)
     st = _State()
-    cmd, i, n = "", 0, len(tokens)
+    cmd, k, i, n = "", 0, 0, len(tokens)
     while i < n:
         t = tokens[i]
         if t.isalpha():
-            cmd, i = t, i + 1
-            if cmd in "Zz":
+            cmd, k, i = t, ARGS[t.lower()], i + 1
+            if not k:  # Z/z
                 _close(st)
                 continue
-        k = ARGS[cmd.lower()]
         _apply(st, cmd, [float(x) for x in tokens[i:i + k]])
         i += k
-        cmd = {"M": "L", "m": "l"}.get(cmd, cmd)  # later pairs are implicit linetos
+        cmd = _IMPLICIT.get(cmd, cmd)
     st.new_subpath()
     return PathResult(st.subpaths)
 
