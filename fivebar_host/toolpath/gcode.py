@@ -232,8 +232,8 @@ def _check_values(rd: _Reader, v: dict[str, float], ln: int) -> None:
 
 
 def _check_g92(rd: _Reader, block: Block, ln: int) -> None:
-    """G92 X.. Y.. alone. As before the interpreter, a G4, P or M2/M30 on a G92 line is
-    ignored: only its modal words and the offset act."""
+    """G92 X.. Y.. alone. Only its modal words and the offset act: a G4, P or M2/M30 on a
+    G92 line is ignored, as this reader always did (for the word-class policy to decide)."""
     v = block.values
     if "X" not in v and "Y" not in v:
         raise InputError("G92 needs X and/or Y", rd.name, ln)
