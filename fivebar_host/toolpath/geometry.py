@@ -26,6 +26,7 @@ import math
 from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 from numpy.typing import NDArray
@@ -39,6 +40,7 @@ ARC = 2
 
 #: Largest coordinate accepted anywhere, mm. Anything larger is a unit mistake or garbage.
 MAX_COORD_MM = 1.0e6
+_PAD = (0.0,) * 8  # primitive parameters are padded to 8
 
 
 @dataclass(frozen=True)
@@ -155,8 +157,21 @@ class DrawingBuilder:
         self._open = True
 
     def add(self, kind: int, params: tuple[float, ...], line: int) -> None:
-        """Append one primitive to the open stroke (params padded to 8)."""
-        self.add_many([(kind, params)], line)
+        """Append one primitive to the open stroke (params padded to 8): `add_many` of one,
+        without its lists (the G-code reader adds one a line)."""
+        if not self._open:
+            raise RuntimeError("add() before begin_stroke()")
+        if self.limit is not None and len(self.kinds) >= self.limit:
+            self._over_limit(line)
+        self.kinds.append(kind)
+        self.params.extend(params + _PAD[len(params):])
+        self.strokes.append(len(self.stroke_source) - 1)
+        self.lines.append(line)
+        self.matrix_ids.append(-1)
+
+    def _over_limit(self, line: int) -> NoReturn:
+        raise InputError(f"the drawing has more than {self.limit:,} path segments (lines, "
+                         f"curves, arcs), the limit{self.limit_hint}", self.file, line)
 
     def add_many(self, prims: list[tuple[int, tuple[float, ...]]], line: int,
                  matrix: int = -1) -> None:
@@ -166,13 +181,11 @@ class DrawingBuilder:
             raise RuntimeError("add() before begin_stroke()")
         n = len(prims)
         if self.limit is not None and len(self.kinds) + n > self.limit:
-            raise InputError(f"the drawing has more than {self.limit:,} path segments (lines, "
-                             f"curves, arcs), the limit{self.limit_hint}", self.file, line)
+            self._over_limit(line)
         stroke = len(self.stroke_source) - 1
-        pad = (0.0,) * 8
         for kind, p in prims:
             self.kinds.append(kind)
-            self.params.extend(p + pad[:8 - len(p)] if len(p) < 8 else p)
+            self.params.extend(p + _PAD[len(p):])
         self.strokes.extend([stroke] * n)
         self.lines.extend([line] * n)
         self.matrix_ids.extend([matrix] * n)
