@@ -51,10 +51,11 @@ from fivebar_host.server.jobs import (
     SubmitError,
     compile_upload,
 )
-from fivebar_host.server.machine import ActionError, JobStateError
+from fivebar_host.server.requests import WorkerHandle
 from fivebar_host.server.security import RETRY_AFTER_S
+from fivebar_host.server.state import ActionError, JobStateError, LiveView, machine_view
 from fivebar_host.server.store import JobRecord, JobStore
-from fivebar_host.server.worker import Worker
+from fivebar_host.server.stored import StoredJobs
 
 T = TypeVar("T")
 
@@ -223,17 +224,17 @@ class StatusOut(BaseModel):
 
 
 # ---------------------------------------------------------------------------- helpers
-def job_out(rec: JobRecord, worker: Worker) -> JobOut:
-    """The API view of a job, with live progress for the running one."""
+def job_out(rec: JobRecord, live: LiveView | None) -> JobOut:
+    """The API view of a job, with live progress for the running one (`live`: the
+    machine thread's last published progress)."""
     done, remaining, elapsed = rec.segments_done, rec.remaining_s, rec.run_s
     copy = rec.resume.copy if rec.resume is not None else rec.copy
-    live, ov = worker.live, None
+    ov = None
     if live is not None and live.job_id == rec.id:
         done, remaining, elapsed = live.segments_done, live.remaining_s, live.elapsed_s
         copy = live.copy
         if rec.state in (st_.RUNNING, st_.PAUSED):
-            feed, power = live.overrides.values()
-            ov = OverridesOut(feed_pct=feed, power_pct=power)
+            ov = OverridesOut(feed_pct=live.feed_pct, power_pct=live.power_pct)
     if rec.state == st_.QUEUED and rec.resume is None:
         remaining = rec.estimated_s
     o = JobOptions.from_json(rec.options).to_json()
@@ -271,7 +272,8 @@ class _Ctx:
     """What the route handlers share."""
 
     store: JobStore
-    worker: Worker
+    worker: WorkerHandle
+    jobs: StoredJobs
     cache: CompiledCache
     profile: Profile
     stopping: threading.Event
@@ -336,7 +338,7 @@ async def reject_unknown_query(request: Request) -> None:
         seen.add(key)
 
 
-def create_app(*, store: JobStore, worker: Worker, cache: CompiledCache, profile: Profile,
+def create_app(*, store: JobStore, worker: WorkerHandle, jobs: StoredJobs, profile: Profile,
                stopping: threading.Event, compiler: Compiler,
                compile_slots: int = 2) -> FastAPI:
     """The FastAPI application over a store and a running worker; submissions compile with
@@ -349,8 +351,8 @@ def create_app(*, store: JobStore, worker: Worker, cache: CompiledCache, profile
         "parameters. With a token configured, every request needs "
         "'Authorization: Bearer <token>'.",
         docs_url=None, redoc_url=None, dependencies=[Depends(reject_unknown_query)])
-    ctx = _Ctx(store, worker, cache, profile, stopping, asyncio.Semaphore(compile_slots),
-               time.monotonic(), compiler)
+    ctx = _Ctx(store, worker, jobs, jobs.cache, profile, stopping,
+               asyncio.Semaphore(compile_slots), time.monotonic(), compiler)
     _error_handlers(app)
     _status_routes(app, ctx)
     _job_routes(app, ctx)
@@ -400,12 +402,13 @@ def _status_routes(app: FastAPI, ctx: _Ctx) -> None:
         now = time.monotonic()
         if now - status_cache["at"] > STATUS_CACHE_S:
             blk = ctx.store.blocking()
+            snap = ctx.worker.snapshot()
             out = StatusOut(
                 version=__version__, uptime_s=round(now - ctx.started, 3),
-                stopping=ctx.stopping.is_set(), machine=MachineOut(**ctx.worker.machine()),
-                jobs=ctx.store.counts(), current_job=ctx.worker.current,
-                blocked_by=blk.id if blk is not None and blk.id != ctx.worker.current
-                else None)
+                stopping=ctx.stopping.is_set(),
+                machine=MachineOut(**machine_view(snap, ctx.profile)),
+                jobs=ctx.store.counts(), current_job=snap.current,
+                blocked_by=blk.id if blk is not None and blk.id != snap.current else None)
             status_cache["body"] = out.model_dump_json().encode()
             status_cache["at"] = now
         return Response(status_cache["body"], media_type="application/json")
@@ -507,7 +510,7 @@ def _queue(ctx: _Ctx, name: str, opts: JobOptions, body: bytes, compiled: Compil
                             estimated_s=planned_time_s(job, opts.copies_plan()))
     ctx.cache.put(rec.id, job)
     ctx.worker.notify()
-    return job_out(rec, ctx.worker)
+    return job_out(rec, ctx.worker.snapshot().live)
 
 
 def _job_routes(app: FastAPI, ctx: _Ctx) -> None:
@@ -523,12 +526,13 @@ def _job_routes(app: FastAPI, ctx: _Ctx) -> None:
         if bad:
             raise ApiError(422, "bad_option", f"unknown state(s) {bad}; states are "
                            f"{', '.join(st_.STATES)}")
-        return [job_out(r, worker) for r in store.list(tuple(state) or None, limit)]
+        live = worker.snapshot().live
+        return [job_out(r, live) for r in store.list(tuple(state) or None, limit)]
 
     @app.get("/api/jobs/{job_id}", response_model=JobOut, tags=["jobs"], responses=_ERRORS)
     def get_job(job_id: JobId) -> JobOut:
         """One job, with live progress while it runs."""
-        return job_out(ctx.get_rec(job_id), worker)
+        return job_out(ctx.get_rec(job_id), worker.snapshot().live)
 
     def act(job_id: int, fn: Any) -> JobOut:
         ctx.get_rec(job_id)
@@ -538,7 +542,7 @@ def _job_routes(app: FastAPI, ctx: _Ctx) -> None:
             raise ApiError(409, "conflict", str(e)) from e
         except KeyError:
             raise ApiError(404, "not_found", f"no job {job_id}") from None
-        return job_out(ctx.get_rec(job_id), worker)
+        return job_out(ctx.get_rec(job_id), worker.snapshot().live)
 
     @app.post("/api/jobs/{job_id}/pause", response_model=JobOut, status_code=202,
               tags=["jobs"], responses=_ERRORS)
@@ -569,7 +573,7 @@ def _job_routes(app: FastAPI, ctx: _Ctx) -> None:
         return Response(status_code=204)
 
 
-def machine_action(worker: Worker, fn: Any) -> MachineOut:
+def machine_action(ctx: _Ctx, fn: Any) -> MachineOut:
     """Run a manual machine action on the machine thread; its outcome as the API answers
     it: the machine afterwards, or 409 (not now: a job runs, alarm, unknown pose, unsafe),
     504 (did not finish in time) or 502 (a link fault, whose message says what happened)."""
@@ -581,7 +585,7 @@ def machine_action(worker: Worker, fn: Any) -> MachineOut:
         raise ApiError(504, "timeout", "the machine did not finish in time") from e
     except Exception as e:  # a link fault: the message says what happened
         raise ApiError(502, "machine_error", str(e)) from e
-    return MachineOut(**worker.machine())
+    return MachineOut(**machine_view(ctx.worker.snapshot(), ctx.profile))
 
 
 def _machine_routes(app: FastAPI, ctx: _Ctx) -> None:
@@ -594,4 +598,4 @@ def _machine_routes(app: FastAPI, ctx: _Ctx) -> None:
                                    "confirms the arms are at the profile's home pose.")
              ) -> MachineOut:
         """Home: `$H` with endstops, else set the position to the home pose (G92 A0 B0)."""
-        return machine_action(worker, lambda: worker.home(at_home))
+        return machine_action(ctx, lambda: worker.home(at_home))

@@ -27,7 +27,6 @@ from fivebar_host.errors import FivebarError
 from fivebar_host.server.app import create_app
 from fivebar_host.server.compiler import Compiler
 from fivebar_host.server.jobs import CompiledCache
-from fivebar_host.server.machine import WorkerConfig
 from fivebar_host.server.security import (
     MAX_IN_FLIGHT,
     MAX_UPLOAD_BYTES_PENDING,
@@ -38,7 +37,9 @@ from fivebar_host.server.security import (
     is_loopback,
     load_or_create_token,
 )
+from fivebar_host.server.state import WorkerConfig
 from fivebar_host.server.store import JobStore
+from fivebar_host.server.stored import StoredJobs
 from fivebar_host.server.worker import Worker
 
 log = logging.getLogger("fivebar.serve")
@@ -129,6 +130,7 @@ class Daemon:
         self._thread: threading.Thread | None = None
         self.compiler: Compiler | None = None
         self.store: JobStore | None = None
+        self.cache: CompiledCache | None = None
         self.worker: Worker | None = None
 
     def start(self, timeout_s: float = 15.0) -> str:
@@ -154,14 +156,15 @@ class Daemon:
         if pruned:
             log.info("forgot %d old finished jobs", pruned)
         ser = self.profile.serial
-        cache = CompiledCache()
+        self.cache = CompiledCache()
+        jobs = StoredJobs(self.store, self.cache, self.profile)
         self.worker = Worker(WorkerConfig(
-            port_url=self.cfg.port_url, profile=self.profile, state_dir=self.state_dir,
-            baud=ser.baud, banner_timeout_s=self.cfg.banner_timeout_s or ser.banner_timeout_s,
+            port_url=self.cfg.port_url, profile=self.profile, baud=ser.baud,
+            banner_timeout_s=self.cfg.banner_timeout_s or ser.banner_timeout_s,
             reply_timeout_s=ser.reply_timeout_s, auto_resume=self.cfg.auto_resume),
-            self.store, cache)
+            self.store, jobs)
         self.compiler = Compiler(self.cfg.compile_processes)
-        app = create_app(store=self.store, worker=self.worker, cache=cache,
+        app = create_app(store=self.store, worker=self.worker.handle, jobs=jobs,
                          profile=self.profile, stopping=self.stopping,
                          compiler=self.compiler, compile_slots=self.cfg.compile_slots)
         guarded = Guard(app, Policy(token=self.token, loopback=loopback,
@@ -214,8 +217,9 @@ class Daemon:
         """Stop the running job (segment boundary, laser off), then the HTTP server."""
         self.stopping.set()
         if self.worker is not None:
-            self.worker.terminate(hurry)
-            self.worker.finished.wait(timeout_s)
+            self.worker.handle.terminate(hurry)
+            if self.worker.ident is not None:  # started
+                self.worker.join(timeout_s)
         if self._server is not None:
             self._server.should_exit = True
         if self._thread is not None:
@@ -247,7 +251,7 @@ def run_foreground(cfg: ServeConfig) -> int:
         signals.append(signum)
         wake.set()
         if len(signals) > 1 and daemon.worker is not None:
-            daemon.worker.terminate(hurry=True)
+            daemon.worker.handle.terminate(hurry=True)
 
     previous = {s: signal.signal(s, on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
     try:

@@ -53,7 +53,7 @@ from fivebar_host.server.app import (
 )
 from fivebar_host.server.events import JOBS_SENT, EventHub
 from fivebar_host.server.jobs import JobOptions, SubmitError, compile_upload
-from fivebar_host.server.machine import JobStateError
+from fivebar_host.server.state import JobStateError
 
 #: The page's files: name → media type. Only these are served.
 STATIC_TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=utf-8",
@@ -203,12 +203,14 @@ def _dryrun_route(app: FastAPI, ctx: _Ctx) -> None:
 def _jobs_view(ctx: _Ctx) -> dict[str, Any]:
     """The `jobs` event: recent jobs (oldest first) and the queue's run order."""
     recs = ctx.store.list(None, JOBS_SENT)
+    live = ctx.worker.snapshot().live
     return {"queue": ctx.store.queue_order(),
-            "jobs": [job_out(r, ctx.worker).model_dump() for r in recs]}
+            "jobs": [job_out(r, live).model_dump() for r in recs]}
 
 
 def _queue_routes(app: FastAPI, ctx: _Ctx) -> None:
-    hub = EventHub(ctx.worker, ctx.store, ctx.profile, ctx.stopping, lambda: _jobs_view(ctx))
+    hub = EventHub(ctx.worker, ctx.store, ctx.cache, ctx.profile, ctx.stopping,
+                   lambda: _jobs_view(ctx))
 
     @app.get("/api/events", tags=["web"], response_class=StreamingResponse)
     async def events(request: Request) -> StreamingResponse:
@@ -250,9 +252,9 @@ def _queue_routes(app: FastAPI, ctx: _Ctx) -> None:
         try:
             if job is None:
                 compiled = await run_in_slot(ctx, request, compile_upload,
-                                             ctx.worker.upload(rec), rec.name,
+                                             ctx.jobs.upload(rec), rec.name,
                                              JobOptions.from_json(rec.options), ctx.profile)
-                job = ctx.worker.adopt(rec, compiled)
+                job = ctx.jobs.adopt(rec, compiled)
         except SubmitError as e:
             raise ApiError(409, "conflict", str(e)) from e
         step = max(1, -(-job.n_segments // PATH_POINTS))
@@ -285,7 +287,7 @@ def _override_route(app: FastAPI, ctx: _Ctx) -> None:
         except JobStateError as e:
             raise ApiError(409, "conflict", f"job {job_id} is {rec.state}: overrides apply "
                            "to the running job only") from e
-        return job_out(ctx.get_rec(job_id), ctx.worker)
+        return job_out(ctx.get_rec(job_id), ctx.worker.snapshot().live)
 
 
 def _manual_routes(app: FastAPI, ctx: _Ctx) -> None:
@@ -295,7 +297,7 @@ def _manual_routes(app: FastAPI, ctx: _Ctx) -> None:
               "or in alarm, the position is unknown, or the move is not safe."}}
 
     def done(fn: Any) -> MachineOut:
-        return machine_action(worker, fn)
+        return machine_action(ctx, fn)
 
     @app.post("/api/machine/jog", response_model=MachineOut, tags=["machine"],
               responses=responses)
