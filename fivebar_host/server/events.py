@@ -1,12 +1,11 @@
 """Server-sent events for the web page: machine status, live progress and the queue, pushed.
 
-`GET /api/events` (server.web) answers `text/event-stream`. Nothing polls on a timer: the
-machine thread calls `EventHub.poke` whenever it publishes a new snapshot of its state (every
-status report, progress update and request it carries out: `WorkerHandle.listeners`), and
-the store calls it after every
-committed write (`JobStore.listeners`). A poke wakes every open stream on the event loop
-(coalesced: at most one wake-up is pending at a time), and each stream sends what changed,
-at most once per `MIN_INTERVAL_S`:
+`GET /api/events` (server.routes.page) answers `text/event-stream`. Nothing polls on a timer:
+the machine thread calls `EventHub.poke` whenever it publishes a new snapshot of its state
+(every status report, progress update and request it carries out: `WorkerHandle.listeners`),
+and the store calls it after every committed write (`JobStore.listeners`). A poke wakes
+every open stream on the event loop (coalesced: at most one wake-up is pending at a time),
+and each stream sends what changed, at most once per `MIN_INTERVAL_S`:
 
 - `status`: the machine as last reported (the `/api/status` machine fields), the pen's
   point and the linkage pose in mm, the running job's live progress (segment n of m,
