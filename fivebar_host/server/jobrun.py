@@ -24,7 +24,6 @@ from dataclasses import dataclass, field
 from fivebar_host import protocol
 from fivebar_host.compile import Job
 from fivebar_host.compile.model import LayerPause
-from fivebar_host.config import Profile
 from fivebar_host.run.errors import FaultKind, LinkError, LinkFaultError, SendError
 from fivebar_host.run.job import RunOptions, RunReport, run_job
 from fivebar_host.run.operator import Progress
@@ -70,12 +69,11 @@ class JobRunner:
     current job, live progress and question; `changed` publishes the record."""
 
     def __init__(self, record: MachineRecord, store: JobStore, jobs: StoredJobs,
-                 profile: Profile, progress: ProgressWriter, pose: PoseKeeper,
-                 control: JobControl, changed: Callable[[], None]) -> None:
+                 progress: ProgressWriter, pose: PoseKeeper, control: JobControl,
+                 changed: Callable[[], None]) -> None:
         self.record = record
         self.store = store
         self.jobs = jobs
-        self.profile = profile
         self.progress = progress
         self.pose = pose
         self.control = control

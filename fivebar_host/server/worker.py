@@ -92,8 +92,8 @@ class Worker(threading.Thread):
         self.control = JobControl(self.record, store, jobs.cache, cfg.drain_timeout_s,
                                   self.poll, self.changed)
         self.manual = Manual(self.record, cfg.profile, self.pose)
-        self.runner = JobRunner(self.record, store, jobs, cfg.profile, self.progress,
-                                self.pose, self.control, self.changed)
+        self.runner = JobRunner(self.record, store, jobs, self.progress, self.pose,
+                                self.control, self.changed)
         self.recovery = Recovery(store, jobs, cfg.profile, self.pose, cfg.drain_timeout_s,
                                  cfg.auto_resume)
 
@@ -115,6 +115,7 @@ class Worker(threading.Thread):
             if self.record.conn is not None:
                 self.record.conn.link.close()
                 self.record.conn = None
+                self.changed()
             self._close_door()
 
     def _loop(self) -> None:
