@@ -89,7 +89,7 @@ def test_client_refuses_unknown_and_out_of_range_before_sending() -> None:
                                                      "no_simplify": "false",
                                                      "layer_pause": "false",
                                                      "no_pause": "false", "copies": "1",
-                                                     "page_delay": "15.0"}
+                                                     "page_delay": "15.0", "strict": "false"}
 
 
 def _cli_params(command: str) -> dict[str, click.Parameter]:
