@@ -502,7 +502,8 @@ def extreme_points(kind: NDArray[np.int8], params: FloatArray) -> FloatArray:
 def _arc_at(p: FloatArray, theta: FloatArray) -> FloatArray:
     """Points of arcs `p` (ARC parameters) at angles `theta`."""
     cs = np.stack((np.cos(theta), np.sin(theta)), axis=1)
-    return p[:, 0:2] + np.einsum("nij,nj->ni", p[:, 2:6].reshape(-1, 2, 2), cs)
+    out: FloatArray = p[:, 0:2] + np.einsum("nij,nj->ni", p[:, 2:6].reshape(-1, 2, 2), cs)
+    return out
 
 
 def nearest_distance(kind: NDArray[np.int8], params: FloatArray, q: FloatArray,
