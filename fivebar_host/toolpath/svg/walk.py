@@ -28,6 +28,7 @@ from fivebar_host.toolpath.svg import clip
 from fivebar_host.toolpath.svg.css import StyleSheet
 from fivebar_host.toolpath.svg.paint import INHERITED, inherit, number_or_percent, painted
 from fivebar_host.toolpath.svg.shapes import SHAPES, shape_subpaths
+from fivebar_host.toolpath.svg.undrawn import Undrawn
 from fivebar_host.toolpath.svg.units import Lengths, numbers, viewport_transform
 from fivebar_host.toolpath.svg.xmltree import INKSCAPE_NS, XLINK_NS, Node
 
@@ -76,6 +77,7 @@ class Walker:
         self.ignored_tags: dict[str, int] = {}
         self.text_nodes: list[Node] = []
         self.notes: dict[str, tuple[str, Node, int]] = {}
+        self.undrawn = Undrawn()  # element kinds and properties not drawn (one note)
         self.collector: list[Collected] | None = None
         self.collect_all_paint = False
         self.region: Callable[[Node, dict[str, str], Ctx], Ctx] | None = None
@@ -142,7 +144,11 @@ class Walker:
 
     # ---------------------------------------------------------------- traversal
     def walk(self, node: Node, ctx: Ctx) -> None:
-        if not node.is_svg or node.tag in NOT_RENDERED:
+        if not node.is_svg:
+            return
+        if self.collector is None and self.undrawn.element(node):
+            return
+        if node.tag in NOT_RENDERED:
             return
         if self.use_depth:
             self.use_visits += 1
@@ -157,6 +163,8 @@ class Walker:
         if c.opacity <= 0.0:
             self.skipped_hidden += self.collector is None
             return
+        if self.collector is None:
+            self.undrawn.properties(node, spec)
         self.dispatch(node, c)
 
     def enter(self, node: Node, spec: dict[str, str], ctx: Ctx, own_transform: bool) -> Ctx:
