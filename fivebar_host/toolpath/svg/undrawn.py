@@ -1,10 +1,11 @@
 """What the SVG reader does not draw, counted for ONE note (`Undrawn.note`) and named when a
 file has nothing else (`Undrawn.only`): one table entry per kind, so a kind that becomes
-drawn (raster images, markers: their issues) leaves the table and nothing else changes.
+drawn (raster images, markers did) leaves the table and nothing else changes.
 
 Elements (`ELEMENTS`) are counted where the walk meets them; properties (`PROPERTIES`: a
-marker or a filter on an element that is drawn without it) where the element's own style
-sets them. Text keeps its own note with its hint (`reader.TEXT_HINT`) until it is drawn.
+filter on an element that is drawn without it) where the element's own style sets them.
+Markers are drawn (`markers`). Text keeps its own note with its hint (`reader.TEXT_HINT`)
+until it is drawn.
 """
 
 from __future__ import annotations
@@ -24,10 +25,6 @@ ELEMENTS: dict[str, str] = {
 }
 #: Properties whose rendering is not drawn (the element itself is), and why.
 PROPERTIES: dict[str, str] = {
-    "marker-start": "markers (arrowheads and the like) not drawn yet",
-    "marker-mid": "markers (arrowheads and the like) not drawn yet",
-    "marker-end": "markers (arrowheads and the like) not drawn yet",
-    "marker": "markers (arrowheads and the like) not drawn yet",
     "filter": "filter effects (drawn without the filter)",
 }
 
