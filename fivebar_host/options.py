@@ -348,6 +348,11 @@ JOB_OPTIONS: tuple[Option, ...] = (
     Option("no_pause", "--no-pause", "no_pause", "bool", default=False,
            help="Never stop for a pen change, not even before '!' layers (needed to plot "
            "such a drawing without a terminal to answer)."),
+    Option("gcode_strict", "--strict", "strict", "bool", default=False,
+           help="G-code: refuse every word the reader does not draw with, as fivebar did "
+           "before word classes (default: words that cannot change the drawn path, such as "
+           "coolant, $ queries or G64, are skipped with one note; M0/M6 become pen-change "
+           "stops; docs/gcode.md)."),
     Option("copies", "--copies", "copies", "int", lo=1, hi=9999, default=1, metavar="N",
            help="Plot the whole job N times, the pen up and the arms parked between copies."),
     Option("page_delay_s", "--page-delay", "page_delay", "float", unit="s", lo=0.0,

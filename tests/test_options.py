@@ -32,7 +32,7 @@ def test_query_round_trip_of_every_option() -> None:
               "max_segments": 3e6, "pen_up_position": 70.0,
               "pen_down_position": 20.5, "pen_up_rate": 300.0, "pen_down_rate": 150.0,
               "pen_up_delay_ms": 80.0, "pen_down_delay_ms": 120.0, "layer_pause": True,
-              "no_pause": False, "copies": 3, "page_delay_s": 2.5}
+              "no_pause": False, "copies": 3, "page_delay_s": 2.5, "gcode_strict": True}
     assert set(values) == {o.name for o in JOB_OPTIONS}
     q = to_query(values)
     pairs = [(k, v) for k, vs in q.items() for v in (vs if isinstance(vs, list) else [vs])]
@@ -89,7 +89,7 @@ def test_client_refuses_unknown_and_out_of_range_before_sending() -> None:
                                                      "no_simplify": "false",
                                                      "layer_pause": "false",
                                                      "no_pause": "false", "copies": "1",
-                                                     "page_delay": "15.0"}
+                                                     "page_delay": "15.0", "strict": "false"}
 
 
 def _cli_params(command: str) -> dict[str, click.Parameter]:

@@ -12,9 +12,23 @@ A G-code line is parsed and run on a copy of the modal state by fivebar's G-code
 joint-space segmentation). A refused move raises ALARM:2 with a `[MSG:…]` before anything of
 it moves: the machine is stopped (laser off), the look-ahead dropped, every later line gets
 `error:9` until `$X`. Accepted moves wait in the look-ahead buffer until `LOOKAHEAD_MOVES`
-are there, the sender pauses for `FLUSH_IDLE_S`, or something needs them run (dwell, pause,
-end of program, a `$` command); then they are planned as one batch and handed to the
-machine thread (`machine.MachineDriver`).
+are there, the sender pauses for `FLUSH_IDLE_S`, the machine stands idle, or something needs
+them run (dwell, pause, end of program, a `$` command); then they are planned as one batch
+and handed to the machine thread (`machine.MachineDriver`).
+
+`ok` is bounded as GRBL's is: GRBL answers a line once its block is in the 15-block planner,
+so a sender's count of `ok`s is at most 15 blocks (plus its 128-byte buffer) ahead of the
+motion. The bridge holds the `ok` of a line whose moves would put more than `ok_window`
+(default `OK_WINDOW` = 15) accepted moves ahead of those the machine has run to their end
+(`MachineDriver.moves_done`); meanwhile it reads no further line, as GRBL's parser waits for
+room in its planner. `ok_window=0` answers as soon as a line is in the look-ahead (up to
+`LOOKAHEAD_MOVES` ahead: smoother batches, untruthful progress).
+
+A sender that closes the port after complete lines (GRBL's `stream.py`, `cat file >
+port`: every fire-and-forget streamer) leaves the bridge to finish what it received, as GRBL
+does: the lines run, the laser under the job's own power. A close in the middle of a line
+(or after an overlong line) holds the machine with the laser off; so does every close with
+`hold_on_disconnect` (the behaviour before issue 35).
 """
 
 from __future__ import annotations
@@ -54,6 +68,8 @@ from fivebar_host.gcode import errors as gcode_errors
 from fivebar_host.program import Program
 
 FLUSH_IDLE_S = 0.05
+#: GRBL 1.1's planner: `ok` means the block is one of at most 15 not yet run.
+OK_WINDOW = 15
 UNLOCK_MSG = "[MSG:'$H'|'$X' to unlock]"
 
 
@@ -72,8 +88,12 @@ class Bridge:
 
     def __init__(self, link: Link, profile: Profile, *, laser: bool, tolerance_mm: float,
                  origin_mm: tuple[float, float] = (0.0, 0.0), mode: str | None = None,
-                 log: Callable[[str], None] | None = None) -> None:
+                 log: Callable[[str], None] | None = None, ok_window: int = OK_WINDOW,
+                 hold_on_disconnect: bool = False) -> None:
         self.profile = profile
+        self.ok_window = ok_window
+        self.hold_on_disconnect = hold_on_disconnect
+        self.moves_acked = 0  # accepted moves (not jogs) answered or being answered
         self.laser = laser
         self.log = log or (lambda _: None)
         self.settings = views.Settings()
@@ -151,16 +171,24 @@ class Bridge:
             self.send(UNLOCK_MSG)
 
     def detach(self, writer: Callable[[bytes], None]) -> None:
-        """The sender went away: hold the machine (laser off), forget its partial input."""
+        """The sender went away: after complete lines the bridge finishes what it received
+        (GRBL does); in the middle of a line, or with `hold_on_disconnect`, it holds the
+        machine (laser off) and forgets the input (module doc)."""
         with self._wlock:
             if self._writer != writer:  # bound methods compare equal, never identical
                 return
             self._writer = None
+        clean = self.input.drop_partial()
+        if clean and not self.hold_on_disconnect:
+            self.log("sender closed the port after complete lines: finishing them, as GRBL "
+                     "does")
+            return
         self.input.clear()
         if self.grbl_state() not in ("Idle", "Alarm", "Check"):
             self.held = True
             self.machine.hold()
-        self.log("sender disconnected: machine held, laser off")
+        self.log("sender disconnected" + ("" if clean else " in the middle of a line")
+                 + ": machine held, laser off")
 
     def send(self, text: str) -> None:
         with self._wlock:
@@ -255,11 +283,32 @@ class Bridge:
                 continue
             got = self.input.take(0.01 if self.pending else 0.1)
             if got is None:
-                if self.pending and time.monotonic() - self._last_line_at > FLUSH_IDLE_S:
+                if self.pending and (time.monotonic() - self._last_line_at > FLUSH_IDLE_S
+                                     or self.machine.idle):
                     self.flush()
                 continue
             self._last_line_at = time.monotonic()
-            self.send(self.handle_line(*got[:2]))
+            reply = self.handle_line(*got[:2])
+            if self._wait_window():
+                self.send(reply)
+
+    def _moves_ahead(self) -> int:
+        """Accepted moves the machine has not run to their end."""
+        return self.moves_acked - self.machine.moves_done
+
+    def _wait_window(self) -> bool:
+        """Hold the line's `ok` until at most `ok_window` accepted moves are ahead of the
+        motion, running the look-ahead when the machine has nothing else (module doc);
+        False when a reset, an alarm or the bridge's end came first (no reply then)."""
+        if not self.ok_window:
+            return True
+        while self._moves_ahead() > self.ok_window:
+            if self._reset_req.is_set() or self._stop.is_set() or self.alarm is not None:
+                return False
+            if self.pending and self.machine.batches.empty() and not self.machine.busy:
+                self.flush()
+            time.sleep(0.005)
+        return True
 
     def handle_line(self, raw: str, overflow: bool) -> str:
         """One line → its reply (`ok` / `error:N`); output it causes is sent before."""
@@ -302,6 +351,7 @@ class Bridge:
             items.append(PenSync(self._pen_wanted(state)))
         if not self.check_mode:
             self.pending += items
+            self.moves_acked += sum(isinstance(i, Solved) for i in items)
         for act in actions:
             if isinstance(act, ProgramFlow):
                 self._program_flow(act.code)
@@ -469,6 +519,7 @@ class Bridge:
         """Stop now (firmware Ctrl-X: queue cleared, laser off, position kept)."""
         self.pending = []
         self.machine.reset()
+        self.moves_acked = self.machine.moves_done  # the rest will never run
         self.held = False
         self._resync()
 
@@ -506,6 +557,7 @@ class Bridge:
         """A machine-side fault (machine thread): GRBL's nearest alarm."""
         code = codes.FIRMWARE_ALARM.get(firmware_alarm or 0, codes.ALARM_ABORT_CYCLE)
         self.pending = []
+        self.moves_acked = self.machine.moves_done
         self.alarm = code
         self.send(f"ALARM:{code}")
         self.send(f"[MSG:machine: {message}]")

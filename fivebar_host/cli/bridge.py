@@ -28,11 +28,19 @@ from fivebar_host.cli.common import config_option, fail, handle_errors, load, ma
 @click.option("--tolerance", type=float, default=None,
               help="Path tolerance, mm (default: the profile's).")
 @click.option("--mode", default=None, help="Working mode (default: the profile's).")
+@click.option("--ok-window", type=click.IntRange(0, 200), default=15, show_default=True,
+              help="Answer a line's ok only while at most this many accepted moves are "
+              "ahead of the motion (GRBL's 15 planner blocks, so a sender's progress is "
+              "true); 0: answer as soon as a line is in the look-ahead (up to 200 moves "
+              "ahead).")
+@click.option("--hold-on-disconnect", is_flag=True,
+              help="Hold the machine (laser off) whenever the sender closes the port; by "
+              "default a close after complete lines finishes them, as GRBL does.")
 @click.option("--verbose", "-v", is_flag=True, help="Log refused lines and faults.")
 @handle_errors
 def bridge(config_path: Path | None, port: str, link_path: Path | None, listen: str | None,
            laser: bool, origin: str, tolerance: float | None, mode: str | None,
-           verbose: bool) -> None:
+           ok_window: int, hold_on_disconnect: bool, verbose: bool) -> None:
     """Serve a GRBL 1.1 interface (pty and/or TCP) in front of the five-bar at --port."""
     from fivebar_host.bridge.controller import Bridge
     from fivebar_host.bridge.serve import Server, parse_listen
@@ -52,7 +60,7 @@ def bridge(config_path: Path | None, port: str, link_path: Path | None, listen: 
     tol = tolerance if tolerance is not None else prof.motion.tolerance_mm
     log: Any = (lambda m: click.echo(m, err=True)) if verbose else None
     core = Bridge(link, prof, laser=laser, tolerance_mm=tol, origin_mm=(ox, oy), mode=mode,
-                  log=log)
+                  log=log, ok_window=ok_window, hold_on_disconnect=hold_on_disconnect)
     server = Server(core, link_path, parse_listen(listen) if listen else None)
     core.start()
     server.start()

@@ -62,6 +62,14 @@ class MoveRefusedError(FivebarError):
         self.reason = reason
 
 
+def moves_finished(program: Program, items_done: int, moves: int) -> int:
+    """How many of a batch's `moves` accepted moves have run to their end once its first
+    `items_done` items have (`Program.segment` of a move item is its move's index)."""
+    rest = program.segment[max(items_done, 0):]
+    ahead = rest[rest >= 0]
+    return moves if ahead.size == 0 else int(ahead[0])
+
+
 def pen_switch(down: bool) -> Program:
     """The pen marked down (`M3 S0`) before a run of drawing segments and up (`M5`) after it,
     which a pen-lift output can follow (the laser-enable state at S0)."""
@@ -210,16 +218,19 @@ class OnlineCompiler:
         speed = planned.length / np.maximum(planned.duration_us * 1e-6, 1e-9)
         scale = np.clip(speed / np.maximum(prog_feed, 1e-9), 0.0, 1.0)
         pw: IntArray = np.rint(np.where(dyn, base * scale, base)).astype(np.int64)
-        prog = self._program(planned.steps[1:], planned.duration_us, planned.draw, pw)
+        prog = self._program(planned.steps[1:], planned.duration_us, planned.draw, pw,
+                             planned.line)
         return Batch(prog, float(planned.duration_us.sum()) * 1e-6, end,
                      moves[0].jog, len(moves))
 
     def _program(self, st: IntArray, dur: IntArray, draw: BoolArray,
-                 power: IntArray) -> Program:
+                 power: IntArray, move: IntArray) -> Program:
         """The batch's items: laser `M3 S0` … `M5` around it with power on drawing segments
-        only; a pen down/up (`pen_switch`) where drawing starts/stops."""
+        only; a pen down/up (`pen_switch`) where drawing starts/stops. Each move item's
+        `segment` is the index of the accepted move it belongs to in the batch (how many
+        moves have run follows from the firmware's last finished line: `moves_finished`)."""
         s = np.where(draw, power, 0) if self.laser else np.zeros(len(dur), dtype=np.int64)
-        moves = Program.moves(st[:, 0], st[:, 1], dur, s)
+        moves = Program.moves(st[:, 0], st[:, 1], dur, s, move)
         if self.laser:
             return Program.join([Program.command(Kind.TOOL_ON, s=3), moves,
                                  Program.command(Kind.TOOL_OFF)])

@@ -80,16 +80,18 @@ def gcode_tool(profile: Profile | None) -> dict[str, Any]:
 
 
 def read_drawing(path: str | Path, layers: tuple[str, ...] = (),
-                 max_segments: float | None = None, profile: Profile | None = None) -> Drawing:
+                 max_segments: float | None = None, profile: Profile | None = None,
+                 strict: bool = False) -> Drawing:
     """Read an SVG or G-code file, chosen by suffix (or by content when unknown); an SVG
     with more than `max_segments` path segments (None: the reader's default) is refused.
-    `profile` gives G-code Z words their meaning (`gcode_tool`). The reader's own state
-    is freed before the drawing is returned (`_read_and_collect`)."""
-    return _read_and_collect(Path(path), layers, max_segments, profile)
+    `profile` gives G-code Z words their meaning (`gcode_tool`); `strict`: the G-code
+    reader's `--strict`. The reader's own state is freed before the drawing is returned
+    (`_read_and_collect`)."""
+    return _read_and_collect(Path(path), layers, max_segments, profile, strict)
 
 
 def _read_and_collect(p: Path, layers: tuple[str, ...], max_segments: float | None,
-                      profile: Profile | None) -> Drawing:
+                      profile: Profile | None, strict: bool = False) -> Drawing:
     """`read_drawing`, then one full garbage collection: the SVG reader's walker, element
     tree and drawing builder refer to each other, so their buffers (the builder's
     per-primitive arrays, the parser's nodes: about 25 bytes per primitive and more) would
@@ -97,7 +99,7 @@ def _read_and_collect(p: Path, layers: tuple[str, ...], max_segments: float | No
     which a numpy-heavy compile may never trigger. Only for drawings of at least
     `COLLECT_MIN_PRIMITIVES` primitives: a collection costs some 20–30 ms, more than a small
     drawing's reader state is worth."""
-    drawing = _read(p, layers, max_segments, profile)
+    drawing = _read(p, layers, max_segments, profile, strict)
     if drawing.kind.shape[0] >= COLLECT_MIN_PRIMITIVES:
         gc.collect()
     return drawing
@@ -108,7 +110,7 @@ COLLECT_MIN_PRIMITIVES = 1 << 16
 
 
 def _read(p: Path, layers: tuple[str, ...], max_segments: float | None,
-          profile: Profile | None) -> Drawing:
+          profile: Profile | None, strict: bool = False) -> Drawing:
     """`read_drawing` itself."""
     suffix = p.suffix.lower()
     limit = DEFAULT_MAX_SEGMENTS if max_segments is None else int(max_segments)
@@ -117,14 +119,14 @@ def _read(p: Path, layers: tuple[str, ...], max_segments: float | None,
     if suffix in GCODE_SUFFIXES:
         if layers:
             raise InputError("--layer applies to SVG files only", str(p))
-        return read_gcode(p, **gcode_tool(profile))
+        return read_gcode(p, strict=strict, **gcode_tool(profile))
     try:
         head = p.read_bytes()[:512].lstrip()
     except OSError as e:
         raise InputError(f"cannot read file: {e.strerror or e}", str(p)) from e
     if head.startswith((b"<?xml", b"<svg", b"<!--", b"<!DOCTYPE")):
         return read_svg(p, layers or None, max_segments=limit)
-    return read_gcode(p, **gcode_tool(profile))
+    return read_gcode(p, strict=strict, **gcode_tool(profile))
 
 
 def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
@@ -240,5 +242,5 @@ def _compile_with_mode_changes(drawing: Drawing, profile: Profile,
 def compile_job(path: str | Path, profile: Profile, opts: CompileOptions | None = None) -> Job:
     """Read and compile a drawing file (see module doc). Raises `InputError` or `JobError`."""
     o = opts or CompileOptions()
-    drawing = read_drawing(path, o.layers, o.max_segments, profile)
+    drawing = read_drawing(path, o.layers, o.max_segments, profile, o.gcode_strict)
     return compile_drawing(drawing, profile, o, consume=True)

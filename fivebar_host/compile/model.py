@@ -100,6 +100,7 @@ class CompileOptions:
     max_segments: float | None = None  # None: `toolpath.svg.reader.DEFAULT_MAX_SEGMENTS`
     layer_pause: bool = False  # stop for a pen change between Inkscape layers
     no_pause: bool = False  # never stop for a pen change (not even before "!" layers)
+    gcode_strict: bool = False  # G-code: every word outside the honoured ones refused
 
 
 @dataclass(frozen=True)

@@ -29,10 +29,20 @@ from fivebar_host.gcode.modal import (
     check_target,
     execute,
 )
-from fivebar_host.gcode.words import NUMBER, Block, Policy, Word, parse, preparse, strip_file
+from fivebar_host.gcode.words import (
+    NUMBER,
+    Block,
+    Policy,
+    Word,
+    parse,
+    preparse,
+    shorten,
+    strip_file,
+    whole_token,
+)
 
 __all__ = [
     "MM_PER_INCH", "NUMBER", "WCS_NAMES", "Action", "Arc", "ArcRules", "ArcWords", "Block",
     "Dwell", "GcodeError", "ModalState", "Move", "Policy", "ProgramFlow", "Rules", "Vec", "Word",
-    "check_target", "execute", "parse", "preparse", "strip_file",
+    "check_target", "execute", "parse", "preparse", "shorten", "strip_file", "whole_token",
 ]

@@ -22,7 +22,12 @@ Two pre-parsers, one per kind of input, then one parser of the words (`parse`):
 
 Which of the words it knows a front door honours is that front door's `Policy`: `parse`
 passes every word through it, in order, before sorting it, and `Block.words` keeps them
-all.
+all. A policy may also set a word aside (the file reader's words that cannot change the
+drawn path, and the commands it turns into stops): such a word is not sorted, whatever it
+is, and `Block.skipped` keeps it for the front door.
+
+`whole_token` and `shorten` give an error the whole token a bad number was written as
+(`X1e308`, `X1.2.3`), shortened when it is long, for the file reader's messages.
 """
 
 from __future__ import annotations
@@ -95,6 +100,7 @@ class Block:
     m: dict[str, int]
     gcodes: list[int]
     values: dict[str, float]
+    skipped: list[Word]
 
 
 def preparse(raw: str) -> str:
@@ -160,10 +166,11 @@ class Policy(NamedTuple):
     """What a front door honours of the words the interpreter knows: a word whose letter is
     in `plain` is taken as the interpreter reads it; any other goes to `check` first, which
     refuses it by raising `GcodeError` (in the order of the line: the first refused word is
-    the one named)."""
+    the one named), or returns True to set it aside (`Block.skipped`: not sorted, for the
+    front door to deal with), or a false value to let it be sorted."""
 
     plain: frozenset[str]
-    check: Callable[[Word], None]
+    check: Callable[[Word], bool | None]
 
 
 def parse(text: str, strict: bool, policy: Policy | None = None) -> Block:
@@ -177,6 +184,7 @@ def parse(text: str, strict: bool, policy: Policy | None = None) -> Block:
     m: dict[str, int] = {}
     gcodes: list[int] = []
     values: dict[str, float] = {}
+    skipped: list[Word] = []
     plain, check = policy or _HONOUR_ALL
     for as_written, letter, number, _ in found:
         letter, value, tok = letter.upper(), float(number), as_written.replace(" ", "")
@@ -184,8 +192,9 @@ def parse(text: str, strict: bool, policy: Policy | None = None) -> Block:
         words.append(w)
         if not isfinite(value):
             raise GcodeError(errors.BAD_NUMBER_FORMAT, f"{tok}: not a finite number", tok)
-        if check is not None and letter not in plain:
-            check(w)
+        if check is not None and letter not in plain and check(w):
+            skipped.append(w)
+            continue
         if letter == "G":
             tenths = value * 10
             if tenths.is_integer():  # exact tenths (G1, G17): both ways agree, no rounding
@@ -209,10 +218,39 @@ def parse(text: str, strict: bool, policy: Policy | None = None) -> Block:
             if letter in values:
                 _repeated(w)
             values[letter] = value
-    return Block(words, g, m, gcodes, values)
+    return Block(words, g, m, gcodes, values, skipped)
 
 
-_HONOUR_ALL: tuple[frozenset[str], Callable[[Word], None] | None] = (frozenset(), None)
+_HONOUR_ALL: tuple[frozenset[str], Callable[[Word], bool | None] | None] = (frozenset(), None)
+#: Characters a number may be written with (`X1e308`, `X1.2.3`, `X--5`: one token each).
+_NUMBERISH = frozenset("0123456789.+-eE")
+#: A token longer than this is shortened in messages.
+SHORT_MAX = 24
+
+
+def whole_token(text: str, part: str) -> str:
+    """The token of `text` that `part` (a word or the junk a message names) was read from:
+    the number-like characters around it, with the letter before them (`X1e308` for `e308`
+    in `G1 X1e308`), so a message names what the user wrote, not a piece of it."""
+    at = text.find(part)
+    if at < 0:
+        return part
+    start, end = at, at + len(part)
+    while start > 0 and text[start - 1] in _NUMBERISH:
+        start -= 1
+    if start > 0 and text[start - 1].isalpha():
+        start -= 1
+    while end < len(text) and text[end] in _NUMBERISH:
+        end += 1
+    return text[start:end]
+
+
+def shorten(token: str) -> str:
+    """A token as a message quotes it: whole when short, else its first and last characters
+    and its length (a megabyte of digits must not fill the terminal)."""
+    if len(token) <= SHORT_MAX:
+        return token
+    return f"{token[:12]}…{token[-6:]} ({len(token)} characters)"
 
 
 def _g_code(w: Word) -> int:

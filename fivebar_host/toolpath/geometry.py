@@ -444,36 +444,66 @@ def flatten(drawing: Drawing, tol_mm: float, max_points: int | None = None) -> P
                      drawing.stroke[first].astype(np.int64))
 
 
-def bbox(drawing: Drawing, rel_tol: float = 1e-4) -> tuple[float, float, float, float]:
-    """Bounding box (xmin, ymin, xmax, ymax) of the curves, mm, tight to within a relative
-    `rel_tol` of the control-point extent (flattened, then inflated by that tolerance so the
-    box always contains the curves)."""
+def bbox(drawing: Drawing) -> tuple[float, float, float, float]:
+    """Exact bounding box (xmin, ymin, xmax, ymax) of the curves, mm: every primitive's end
+    points and the interior points where its x or y is extreme (`extreme_points`), so a
+    nearly straight arc of a 35 m radius adds nothing beyond its own extent."""
     if drawing.kind.shape[0] == 0:
         raise ValueError("empty drawing has no bounding box")
-    ctrl = drawing.params.reshape(-1, 4, 2)
-    arc = drawing.kind == ARC
-    ext_pts = ctrl[~arc].reshape(-1, 2)
-    if arc.any():
-        p = drawing.params[arc]
-        r = np.linalg.svd(p[:, 2:6].reshape(-1, 2, 2), compute_uv=False)[:, 0]
-        ext_pts = np.concatenate((ext_pts, p[:, 0:2] + r[:, None], p[:, 0:2] - r[:, None]))
+    kind, params = drawing.kind, drawing.params
+    pts = np.concatenate((start_points(kind, params), end_points(kind, params),
+                          extreme_points(kind, params)))
     # (column by column: numpy's reductions over the long axis of an (N, 2) array are
-    # some 30× slower)
-    span = float(np.maximum(np.ptp(ext_pts[:, 0]), np.ptp(ext_pts[:, 1]))) if ext_pts.size \
-        else 0.0
-    tol = max(span * rel_tol, 1e-9)
-    line = drawing.kind == LINE
-    pts = [drawing.params[line][:, 0:4].reshape(-1, 2)]  # exact end points
-    if (~line).any():
-        curves = Drawing(drawing.file, drawing.kind[~line], drawing.params[~line],
-                         np.arange(int((~line).sum()), dtype=np.int64),
-                         drawing.line[~line], drawing.stroke_source, drawing.stroke_power,
-                         drawing.stroke_feed_mm_s, drawing.sources)
-        poly = flatten(curves, tol).points
-        pts += [poly - tol, poly + tol]  # chords are within tol of the curves
-    allp = np.concatenate(pts)
-    x, y = allp[:, 0], allp[:, 1]
+    # some 30x slower)
+    x, y = pts[:, 0], pts[:, 1]
     return float(x.min()), float(y.min()), float(x.max()), float(y.max())
+
+
+def extreme_points(kind: NDArray[np.int8], params: FloatArray) -> FloatArray:
+    """The interior points of cubics and arcs where x or y is extreme (the derivative of one
+    coordinate is zero): with the end points, a primitive's exact bounding box.
+
+    Cubic: B'(t)/3 = (d0 − 2d1 + d2)t² + 2(d1 − d0)t + d0 per coordinate (d_i = p_{i+1} − p_i),
+    its roots in (0, 1). Arc E(θ) = c + M·(cos θ, sin θ): x is extreme at θ = atan2(M01, M00)
+    and θ + π, y at atan2(M11, M10) and θ + π, where those fall inside the sweep."""
+    out = [np.zeros((0, 2))]
+    cub = np.flatnonzero(kind == CUBIC)
+    if cub.size:
+        p = params[cub].reshape(-1, 4, 2)
+        d0, d1, d2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 1], p[:, 3] - p[:, 2]
+        a, b, c = d0 - 2 * d1 + d2, 2 * (d1 - d0), d0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            disc = np.sqrt(np.maximum(b * b - 4 * a * c, 0.0))
+            quad = np.abs(a) > 1e-12 * (np.abs(b) + np.abs(c) + 1e-300)
+            r1 = np.where(quad, (-b + disc) / (2 * a), -c / b)
+            r2 = np.where(quad, (-b - disc) / (2 * a), np.nan)
+        for t in (r1, r2):
+            for col in (0, 1):
+                tt = t[:, col]
+                ok = np.isfinite(tt) & (tt > 0) & (tt < 1)
+                if ok.any():
+                    out.append(evaluate(kind[cub[ok]], params[cub[ok]], tt[ok]))
+    arc = np.flatnonzero(kind == ARC)
+    if arc.size:
+        p = params[arc]
+        th0, sweep = p[:, 6], p[:, 7]
+        base = np.stack((np.arctan2(p[:, 3], p[:, 2]), np.arctan2(p[:, 5], p[:, 4])), axis=1)
+        for phi in (base[:, 0], base[:, 0] + np.pi, base[:, 1], base[:, 1] + np.pi):
+            ahead = np.mod(np.where(sweep >= 0, phi - th0, th0 - phi), 2 * np.pi)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = np.where(np.abs(sweep) >= 2 * np.pi, 0.5, ahead / np.abs(sweep))
+            ok = np.isfinite(t) & (t <= 1.0)
+            if ok.any():
+                out.append(_arc_at(p[ok], np.where(np.abs(sweep[ok]) >= 2 * np.pi,
+                                                   phi[ok], th0[ok] + t[ok] * sweep[ok])))
+    return np.concatenate(out)
+
+
+def _arc_at(p: FloatArray, theta: FloatArray) -> FloatArray:
+    """Points of arcs `p` (ARC parameters) at angles `theta`."""
+    cs = np.stack((np.cos(theta), np.sin(theta)), axis=1)
+    out: FloatArray = p[:, 0:2] + np.einsum("nij,nj->ni", p[:, 2:6].reshape(-1, 2, 2), cs)
+    return out
 
 
 def nearest_distance(kind: NDArray[np.int8], params: FloatArray, q: FloatArray,

@@ -96,6 +96,8 @@ class GrblLink:
         self.messages: list[str] = []  # [MSG:…] and other feedback, in order
         self._buf = b""
         self._skipped: deque[str] = deque()  # lines passed over while waiting for another
+        self.dialect = "GRBL 1.1"  # `dialects.detect` of the banner
+        self.banner = ""
 
     @classmethod
     def open(cls, url: str, *, baud: int = 115200, banner_timeout_s: float = 5.0,
@@ -106,14 +108,20 @@ class GrblLink:
             port = serial.serial_for_url(url, baudrate=baud, timeout=0.05)
         except (serial.SerialException, ValueError) as e:
             raise GrblError(f"{url}: cannot open the port: {e}") from e
+        from fivebar_host.controllers.grbl.dialects import detect
+
         link = cls(port, url, reply_timeout_s)
         for attempt in range(2):
-            line = link._wait_line(lambda s: s.startswith("Grbl "), banner_timeout_s)
+            line = link._wait_line(lambda s: s.startswith(("Grbl ", "GrblHAL ")),
+                                   banner_timeout_s)
             if line is not None:
-                if not line.startswith("Grbl 1.1"):
+                dialect = detect(line)
+                if dialect is None:
                     port.close()
                     raise GrblError(f"{url}: the board says {line!r}; --controller grbl "
-                                    "needs GRBL 1.1")
+                                    "needs GRBL 1.1, grblHAL or FluidNC")
+                link.dialect = dialect
+                link.banner = line
                 return link
             if attempt == 0:
                 port.write(b"\x18")

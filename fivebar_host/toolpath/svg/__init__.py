@@ -16,6 +16,8 @@ something other than what the file shows. Modules:
   Inkscape layers.
 - `clip`, `masking`: `clip-path`, `mask` and viewport overflow as regions (shapely); pen
   lines are cut exactly where they leave a region.
+- `markers`: `marker-start`/`-mid`/`-end` drawn at the shapes' vertices, as browsers do.
+- `undrawn`: what is not drawn (images, foreign objects, filters), counted for one note.
 - `reader`: `read_svg`, the page, warnings and the final checks.
 """
 

@@ -24,7 +24,9 @@ from fivebar_host.toolpath.svg.xmltree import Node
 #: Properties the reader uses (others do not change which outlines a pen draws).
 PROPS = frozenset({"display", "visibility", "stroke", "fill", "stroke-width", "opacity",
                    "fill-opacity", "stroke-opacity", "clip-path", "mask", "clip-rule",
-                   "fill-rule", "font-size", "stroke-dasharray", "overflow"})
+                   "fill-rule", "font-size", "stroke-dasharray", "overflow"}
+                  # counted when not drawn (`undrawn.PROPERTIES`)
+                  | {"marker-start", "marker-mid", "marker-end", "marker", "filter"})
 _DYNAMIC = frozenset({"hover", "active", "focus", "visited", "link", "focus-within",
                       "focus-visible", "target"})
 _COMMENT = re.compile(r"/\*.*?\*/", re.S)

@@ -15,7 +15,8 @@ from dataclasses import dataclass
 #: Inherited properties (CSS/SVG) and their initial values.
 INHERITED = {"visibility": "visible", "stroke": "none", "fill": "black", "stroke-width": "1",
              "fill-opacity": "1", "stroke-opacity": "1", "clip-rule": "nonzero",
-             "fill-rule": "nonzero", "stroke-dasharray": "none"}
+             "fill-rule": "nonzero", "stroke-dasharray": "none",
+             "marker-start": "none", "marker-mid": "none", "marker-end": "none"}
 
 _NAMED = {"black": (0, 0, 0), "white": (255, 255, 255), "red": (255, 0, 0),
           "lime": (0, 255, 0), "green": (0, 128, 0), "blue": (0, 0, 255),

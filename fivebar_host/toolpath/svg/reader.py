@@ -149,7 +149,8 @@ def _warnings(r: Walker) -> list[str]:
                    f"{TEXT_HINT}")
     if r.skipped_hidden:
         out.append(f"skipped {r.skipped_hidden} hidden element(s)")
-    return out + _notes(r)
+    undrawn = r.undrawn.note()
+    return out + _notes(r) + ([undrawn] if undrawn else [])
 
 
 def _notes(r: Walker) -> list[str]:
@@ -161,7 +162,7 @@ def _notes(r: Walker) -> list[str]:
 def _nothing_message(r: Walker) -> str:
     what = f" in layer(s) {', '.join(r.layers)}" if r.layers else ""
     msg = (f"no strokes to draw{what}: the file has no visible path, line, polyline, polygon, "
-           "rect, circle or ellipse with a non-zero extent")
+           "rect, circle or ellipse with a non-zero extent") + r.undrawn.only()
     if r.text_nodes:
         lines = ", ".join(str(n.line) for n in r.text_nodes[:5])
         more = ", ..." if len(r.text_nodes) > 5 else ""

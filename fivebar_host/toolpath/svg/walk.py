@@ -26,8 +26,10 @@ from fivebar_host.errors import InputError
 from fivebar_host.toolpath.geometry import DrawingBuilder
 from fivebar_host.toolpath.svg import clip
 from fivebar_host.toolpath.svg.css import StyleSheet
+from fivebar_host.toolpath.svg.markers import Markers, expand_shorthand
 from fivebar_host.toolpath.svg.paint import INHERITED, inherit, number_or_percent, painted
 from fivebar_host.toolpath.svg.shapes import SHAPES, shape_subpaths
+from fivebar_host.toolpath.svg.undrawn import Undrawn
 from fivebar_host.toolpath.svg.units import Lengths, numbers, viewport_transform
 from fivebar_host.toolpath.svg.xmltree import INKSCAPE_NS, XLINK_NS, Node
 
@@ -76,6 +78,8 @@ class Walker:
         self.ignored_tags: dict[str, int] = {}
         self.text_nodes: list[Node] = []
         self.notes: dict[str, tuple[str, Node, int]] = {}
+        self.undrawn = Undrawn()  # element kinds and properties not drawn (one note)
+        self.markers = Markers(self)
         self.collector: list[Collected] | None = None
         self.collect_all_paint = False
         self.region: Callable[[Node, dict[str, str], Ctx], Ctx] | None = None
@@ -137,12 +141,16 @@ class Walker:
             n = n.parent
         props = root_props()
         for a in reversed(chain):
-            props = inherit(props, self.sheet.cascade(a))
+            props = inherit(props, expand_shorthand(self.sheet.cascade(a)))
         return props
 
     # ---------------------------------------------------------------- traversal
     def walk(self, node: Node, ctx: Ctx) -> None:
-        if not node.is_svg or node.tag in NOT_RENDERED:
+        if not node.is_svg:
+            return
+        if self.collector is None and self.undrawn.element(node):
+            return
+        if node.tag in NOT_RENDERED:
             return
         if self.use_depth:
             self.use_visits += 1
@@ -157,6 +165,8 @@ class Walker:
         if c.opacity <= 0.0:
             self.skipped_hidden += self.collector is None
             return
+        if self.collector is None:
+            self.undrawn.properties(node, spec)
         self.dispatch(node, c)
 
     def enter(self, node: Node, spec: dict[str, str], ctx: Ctx, own_transform: bool) -> Ctx:
@@ -176,7 +186,8 @@ class Walker:
         font = ctx.lengths.font_size(spec.get("font-size"), self.file, node.line) \
             if "font-size" in spec else ctx.lengths.font_px
         lengths = replace(ctx.lengths, font_px=font)
-        c = Ctx(m, inherit(ctx.props, spec), lengths, layer, selected, ctx.clip,
+        c = Ctx(m, inherit(ctx.props, expand_shorthand(spec)), lengths, layer, selected,
+                ctx.clip,
                 ctx.opacity * number_or_percent(spec.get("opacity")))
         if self.region is not None and ("clip-path" in spec or "mask" in spec):
             c = self.region(node, spec, c)
@@ -301,8 +312,14 @@ class Walker:
     def shape(self, node: Node, c: Ctx) -> None:
         if not c.selected and self.collector is None:
             return
+        painted_too = True
         if self.collector is None or not self.collect_all_paint:
-            if not self.visible(node, c):
+            painted_too = self.visible(node, c)
+            marked = self.collector is None and any(
+                c.props.get(p, "none").strip() not in ("none", "") for p in
+                ("marker-start", "marker-mid", "marker-end"))
+            if not painted_too and not (marked and c.props["visibility"].strip().lower()
+                                        not in ("hidden", "collapse")):
                 self.skipped_hidden += self.collector is None
                 return
         elif c.props["visibility"].strip().lower() in ("hidden", "collapse"):
@@ -321,7 +338,9 @@ class Walker:
             clip.check_finite(subs, self.file, node.line, node.tag)
             self.collector.append(Collected(node, c, subs))
             return
-        self.emit(node, c, res.subpaths)
+        if painted_too:
+            self.emit(node, c, res.subpaths)
+        self.markers.draw(node, c, res.subpaths)
 
     def emit(self, node: Node, c: Ctx, subpaths: clip.Subpaths) -> None:
         src = self.b.add_source(node.get("id"), node.line, node.tag, c.layer)
