@@ -44,7 +44,8 @@ applies to Z as written, in work coordinates).
 Every other word has a class (`toolpath.gcode_words`, docs/gcode.md "Word classes"): words
 that cannot change the drawn path on this machine are skipped and told in one note naming
 their lines; `M0`/`M1` and `T…`/`M6` become pen-change stops before the next cut; `G28`/`G30`
-travel home with the tool off; `M300` servo pens set the pen (their `G4 P` in milliseconds,
+are a travel with the tool off (the stroke ends, the pen is up; fivebar plans the travel to
+the next cut itself and parks at the home pose at the end of the job); `M300` servo pens set the pen (their `G4 P` in milliseconds,
 RepRap's unit); what would change the path or the burn (other axes, other planes' arcs,
 cutter compensation, canned cycles, units changed after the first move, unknown words, a bad
 number) is an `InputError` naming the file, the line and the word (the whole token as
