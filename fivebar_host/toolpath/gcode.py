@@ -41,16 +41,16 @@ profile's `[tool] kind` and `[pen] z_threshold_mm`; without a tool they are refu
 Z follows G20/G21 and G90/G91 like X and Y; `G92 Z` sets the Z offset (the pen threshold
 applies to Z as written, in work coordinates).
 
-Every other word has a class (`toolpath.gcode_words`, docs/gcode.md "Word classes"): words
-that cannot change the drawn path on this machine are skipped and told in one note naming
-their lines; `M0`/`M1` and `T…`/`M6` become pen-change stops before the next cut; `G28`/`G30`
-are a travel with the tool off (the stroke ends, the pen is up; fivebar plans the travel to
-the next cut itself and parks at the home pose at the end of the job); `M300` servo pens set the pen (their `G4 P` in milliseconds,
-RepRap's unit); what would change the path or the burn (other axes, other planes' arcs,
-cutter compensation, canned cycles, units changed after the first move, unknown words, a bad
-number) is an `InputError` naming the file, the line and the word (the whole token as
-written, shortened when long). `strict=True` (`--strict`) keeps the older reading: every
-word outside the honoured ones is refused.
+Every other word has a class (`toolpath.gcode_words`, docs/gcode.md "Word classes"): words that
+cannot change the drawn path on this machine are skipped and told in one note naming their
+lines; `M0`/`M1` and `T…`/`M6` become pen-change stops before the next cut; `G28`/`G30` are a
+travel with the tool off (the stroke ends, the pen is up; fivebar plans the travel to the next
+cut itself and parks at the home pose at the end of the job); `M300` servo pens set the pen
+(their `G4 P` in milliseconds, RepRap's unit); what would change the path or the burn (other
+axes, other planes' arcs, cutter compensation, canned cycles, units changed after the first
+move, unknown words, a bad number) is an `InputError` naming the file, the line and the word
+(the whole token as written, shortened when long). `strict=True` (`--strict`) keeps the older
+reading: every word outside the honoured ones is refused.
 
 The file's bytes are UTF-8 (a byte-order mark is dropped) or UTF-16 with its mark, as an
 SVG may be.
