@@ -57,12 +57,17 @@ FONTS = {
 MONO_FROM = "futural"
 MONO_ADVANCE = 24  # Hershey units: every futural glyph lies within ±11 of its centre
 #: Adobe glyph names of ASCII 32–126.
-NAMES = ("space exclam quotedbl numbersign dollar percent ampersand quotesingle parenleft "
-         "parenright asterisk plus comma hyphen period slash zero one two three four five six "
-         "seven eight nine colon semicolon less equal greater question at A B C D E F G H I J "
-         "K L M N O P Q R S T U V W X Y Z bracketleft backslash bracketright asciicircum "
-         "underscore grave a b c d e f g h i j k l m n o p q r s t u v w x y z braceleft bar "
-         "braceright asciitilde").split()
+NAMES = (
+    "space", "exclam", "quotedbl", "numbersign", "dollar", "percent", "ampersand",
+    "quotesingle", "parenleft", "parenright", "asterisk", "plus", "comma", "hyphen", "period",
+    "slash", "zero", "one", "two", "three", "four", "five", "six", "seven", "eight", "nine",
+    "colon", "semicolon", "less", "equal", "greater", "question", "at", "A", "B", "C", "D",
+    "E", "F", "G", "H", "I", "J", "K", "L", "M", "N", "O", "P", "Q", "R", "S", "T", "U", "V",
+    "W", "X", "Y", "Z", "bracketleft", "backslash", "bracketright", "asciicircum",
+    "underscore", "grave", "a", "b", "c", "d", "e", "f", "g", "h", "i", "j", "k", "l", "m",
+    "n", "o", "p", "q", "r", "s", "t", "u", "v", "w", "x", "y", "z", "braceleft", "bar",
+    "braceright", "asciitilde",
+)
 
 Glyph = tuple[int, int, list[list[tuple[int, int]]]]
 
