@@ -25,6 +25,7 @@ from fivebar_host.toolpath.fonts.library import FontLibrary, TextConfig
 from fivebar_host.toolpath.geometry import MAX_COORD_MM, Drawing, bbox, read_source
 from fivebar_host.toolpath.svg.masking import Masking
 from fivebar_host.toolpath.svg.stream import StreamTree, scan
+from fivebar_host.toolpath.svg.text import CharLayout
 from fivebar_host.toolpath.svg.units import MM_PER_PX, Lengths, parse_length, viewport_transform
 from fivebar_host.toolpath.svg.walk import Ctx, Walker, root_props
 from fivebar_host.toolpath.svg.xmltree import Node, parse_xml
@@ -62,20 +63,23 @@ LIMIT_HINT = ("; raise it with --max-segments (job option max_segments) if the m
 def read_svg(source: str | Path | bytes, layers: Sequence[str] | None = None,
              file: str | None = None, language: str = "en",
              max_segments: int | None = DEFAULT_MAX_SEGMENTS,
-             text: TextConfig | FontLibrary | None = None) -> Drawing:
+             text: TextConfig | FontLibrary | None = None,
+             layouts: list[CharLayout] | None = None) -> Drawing:
     """Read an SVG file (path or bytes) into a `Drawing` in mm, y up, page bottom-left at 0.
 
     `layers`: Inkscape layer labels or ids to draw (None: everything visible). `language`:
     the user language `<switch>`'s `systemLanguage` is matched against. `max_segments`: the
     most path segments drawn (None: no limit); more is an `InputError` raised while reading.
     `text`: the profile's `[text]` table (or a library built from one) that chooses the
-    fonts of `<text>` (None: the built-in choices). The document is walked while it is
-    parsed where its references allow (`stream`).
+    fonts of `<text>` (None: the built-in choices); `layouts`, when given, receives each
+    drawn text element's character layout (`svg.text.CharLayout`). The document is walked
+    while it is parsed where its references allow (`stream`).
     """
     data, name = read_source(source, file, "<svg>")
     sc = scan(data, name)
     fonts = text if isinstance(text, FontLibrary) else FontLibrary(text)
     r = Walker(name, layers, language, max_segments, LIMIT_HINT, fonts)
+    r.layouts = layouts
     Masking(r)
     for sheet, line in sc.sheets:
         r.sheet.add_sheet(sheet, f"<style> at line {line}")

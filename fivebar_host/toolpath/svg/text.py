@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 import re
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -32,10 +33,27 @@ from fivebar_host.toolpath.svg import textpath as tp
 from fivebar_host.toolpath.svg.paint import number_or_percent, text_prop
 from fivebar_host.toolpath.svg.textcontent import Collector, Content, Span
 from fivebar_host.toolpath.svg.xmltree import Node
-from kinematics.arrays import FloatArray, IntArray
+from kinematics.arrays import BoolArray, FloatArray, IntArray
 
 if TYPE_CHECKING:
     from fivebar_host.toolpath.svg.walk import Ctx, Walker
+
+@dataclass(frozen=True)
+class CharLayout:
+    """Where one text element's characters went (for tools and the tests that compare the
+    layout with a browser's): the element's id, its addressable characters, each glyph's
+    origin on its baseline in the text's user space and in the drawing frame (mm, y up),
+    its rotation in user space (degrees), whether it is placed (a glyph off its path is not)
+    and whether it draws strokes."""
+
+    ident: str | None
+    chars: str
+    user: FloatArray
+    drawing: FloatArray
+    rotate: FloatArray
+    placed: BoolArray
+    drawn: BoolArray
+
 
 _FAMILY = re.compile(r"""\s*(?:"([^"]*)"|'([^']*)'|([^,]+))\s*(?:,|$)""")
 #: Characters of a text shown in the dry run before it is shortened.
@@ -133,7 +151,9 @@ class TextDrawer:
         if lay.missing:
             self._missing(c, lay, face_lists)
         tl.advances(lay, c, w.file)
-        tl.positions(lay, c)
+        ends = [(float(p[0][0]), float(p[0][1])) for p in
+                (g.at(np.array([g.length]))[0] for g, _ in self.paths)]
+        tl.positions(lay, c, lambda k: face_lists[k], ends)
         on = np.ones(len(c.chars))
         for a, b in tl.chunks(lay):
             anchor = text_prop(c.spans[c.span[a]].props, "text-anchor").lower()
@@ -217,6 +237,19 @@ def draw_text(w: Walker, node: Node, ctx: Ctx) -> None:
         src = _emit_fast(w, node, ctx, c, lay, idx, ctx.matrix @ glyphs)
     if w.collector is None:
         _record(w, node, ctx, c, lay, idx, src)
+        if w.layouts is not None:
+            w.layouts.append(_char_layout(node, ctx, c, lay, on, idx))
+
+
+def _char_layout(node: Node, ctx: Ctx, c: Content, lay: tl.Layout, on: FloatArray,
+                 idx: IntArray) -> CharLayout:
+    every = np.arange(len(c.chars))
+    m = glyph_matrices(lay, every)
+    user = m[:, :2, 2]
+    drawing = user @ ctx.matrix[:2, :2].T + ctx.matrix[:2, 2]
+    drawn = np.zeros(len(c.chars), dtype=bool)
+    drawn[idx] = True
+    return CharLayout(node.get("id"), c.text, user, drawing, lay.rotate.copy(), on > 0, drawn)
 
 
 def _drawn(c: Content, lay: tl.Layout, on: FloatArray, i: int) -> bool:

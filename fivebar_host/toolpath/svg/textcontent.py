@@ -45,8 +45,10 @@ _LIST_SEP = re.compile(r"[\s,]+")
 class Span:
     """One text content element's computed text style: its inherited properties, the
     lengths its values refer to (font-size = `lengths.font_px`), its specified values,
-    the baseline shift accumulated from it and its ancestors (user units, up), the text
-    decorations in force and the `<textPath>` it lies in (index into `Content.paths`)."""
+    the baseline shift accumulated from it and its ancestors (lengths and percentages in
+    user units, up; `sub`/`super` as (±1, the span that says it), whose font sets the
+    amount), the text decorations in force and the `<textPath>` it lies in (index into
+    `Content.paths`)."""
 
     node: Node
     props: dict[str, str]
@@ -55,6 +57,7 @@ class Span:
     shift: float
     decoration: frozenset[str]
     path: int = -1
+    subsup: tuple[tuple[int, int], ...] = ()
 
     @property
     def painted(self) -> bool:
@@ -104,9 +107,10 @@ class Collector:
 
     def collect(self, node: Node, props: dict[str, str], lengths: Lengths) -> Content:
         spec = self.cascade(node)
-        self._element(node, Span(node, props, lengths, spec, _shift(spec, lengths, 0.0,
-                                                                    self.file, node.line),
-                                 _decoration(spec, frozenset())), False)
+        shift, sign = _shift(spec, lengths, 0.0, self.file, node.line)
+        self._element(node, Span(node, props, lengths, spec, shift,
+                                 _decoration(spec, frozenset()), -1,
+                                 ((sign, 0),) if sign else ()), False)
         while self.c.chars and self.c.chars[-1] == " " and self.c.collapsible[-1]:
             self._pop()  # spaces at the end of the (single) line are removed
         n = len(self.c.chars)
@@ -161,9 +165,10 @@ class Collector:
             else:
                 self.c.paths.append(child)
                 path = len(self.c.paths) - 1
-        sub = Span(child, inherit(span.props, spec), lengths, spec,
-                   _shift(spec, lengths, span.shift, self.file, child.line),
-                   _decoration(spec, span.decoration), path)
+        shift, sign = _shift(spec, lengths, span.shift, self.file, child.line)
+        terms = (*span.subsup, (sign, len(self.c.spans))) if sign else span.subsup
+        sub = Span(child, inherit(span.props, spec), lengths, spec, shift,
+                   _decoration(spec, span.decoration), path, terms)
         self._element(child, sub, preserve)
 
     def _add(self, text: str, span: int, preserve: bool) -> None:
@@ -240,28 +245,25 @@ def _length_list(node: Node, attr: str, lengths: Lengths, file: str) -> list[flo
 
 
 def _shift(spec: dict[str, str], lengths: Lengths, parent: float, file: str,
-           line: int) -> float:
-    """The accumulated `baseline-shift` (user units, up): sub and super as Chromium shifts
-    them when the font has no OS/2 sub/superscript offsets (em/5 down, em/3 up), a length,
-    or a percentage of the font-size (SVG 1.1 §10.9.2: of the line-height, which SVG text
-    takes as the font-size)."""
+           line: int) -> tuple[float, int]:
+    """The accumulated `baseline-shift` (user units, up) of lengths and percentages (of the
+    font-size: SVG 1.1 §10.9.2 takes the line-height, which SVG text sets to the
+    font-size), and −1 for `sub`, +1 for `super` (their amount depends on the face:
+    `textlayout`), else 0."""
     v = spec.get("baseline-shift", "").strip().lower()
     if v in ("", "baseline", "0", "initial", "inherit"):
-        return parent
-    em = lengths.font_px
-    if v == "sub":
-        return parent - em / 5
-    if v == "super":
-        return parent + em / 3
+        return parent, 0
+    if v in ("sub", "super"):
+        return parent, -1 if v == "sub" else 1
     if v.endswith("%"):
         try:
-            return parent + float(v[:-1]) / 100 * em
+            return parent + float(v[:-1]) / 100 * lengths.font_px, 0
         except ValueError:
-            return parent
+            return parent, 0
     try:
-        return parent + lengths.user(v, file, line, "baseline-shift")
+        return parent + lengths.user(v, file, line, "baseline-shift"), 0
     except InputError:
-        return parent  # an invalid declaration is ignored (CSS)
+        return parent, 0  # an invalid declaration is ignored (CSS)
 
 
 def _decoration(spec: dict[str, str], parent: frozenset[str]) -> frozenset[str]:

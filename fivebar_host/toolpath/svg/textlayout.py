@@ -22,8 +22,12 @@ out SVG text (SVG 2 §11.8 "Text layout algorithm", horizontal left-to-right tex
 - Baselines (CSS Inline 3 §4): the glyph origin moves from the position's y to the
   baseline that `dominant-baseline` (or an element's own `alignment-baseline`) names, from
   the face's metrics: alphabetic 0, middle x-height/2, central (ascent + descent)/2,
-  mathematical ascent/2, hanging 0.8 ascent, text-before-edge/text-top the ascent,
-  text-after-edge/text-bottom/ideographic the descent; then `baseline-shift`.
+  mathematical ascent/2, hanging 0.8 ascent, text-before-edge the ascent,
+  text-after-edge and ideographic the descent (descent < 0); then `baseline-shift`, where
+  `sub`/`super` move by half the face's height (ascent − descent) at the size of the
+  element that says it. These are the amounts headless Chromium uses (measured with a
+  font of known metrics, `tests/test_text_browser.py`); Chromium ignores `text-top` and
+  `text-bottom`, and so does this.
 """
 
 from __future__ import annotations
@@ -91,18 +95,22 @@ def spacing(span: Span, key: str, file: str) -> float:
         return 0.0  # an invalid declaration is ignored (CSS)
 
 
-def _baseline(span: Span, face: Face, scale: float) -> float:
-    """The glyph origin's offset below the position's y for this span (module doc)."""
+def _baseline(c: Content, k: int, faces: Callable[[int], list[Face]]) -> float:
+    """The glyph origin's offset below the position's y for span k (module doc)."""
+    span = c.spans[k]
     own = span.spec.get("alignment-baseline", "").strip().lower()
     which = own if own not in ("", "auto", "baseline") else text_prop(
         span.props, "dominant-baseline").lower()
-    f = face.font
+    f = faces(k)[0].font
     off = {"middle": f.x_height / 2, "central": (f.ascent + f.descent) / 2,
            "mathematical": f.ascent / 2, "hanging": 0.8 * f.ascent,
-           "text-before-edge": f.ascent, "text-top": f.ascent,
-           "text-after-edge": f.descent, "text-bottom": f.descent,
+           "text-before-edge": f.ascent, "text-after-edge": f.descent,
            "ideographic": f.descent}.get(which, 0.0)
-    return off * scale - span.shift
+    up = span.shift
+    for sign, j in span.subsup:
+        fj = faces(j)[0].font
+        up += sign * (fj.ascent - fj.descent) / 2 * c.spans[j].lengths.font_px / fj.units_per_em
+    return off * span.lengths.font_px / f.units_per_em - up
 
 
 def select_glyphs(c: Content, faces: Callable[[int], list[Face]],
@@ -189,18 +197,24 @@ def advances(lay: Layout, c: Content, file: str) -> None:
             lay.advance[i] += letter + (word if c.chars[i] in WORD_SEPARATORS else 0.0)
 
 
-def positions(lay: Layout, c: Content) -> None:
+def positions(lay: Layout, c: Content, faces: Callable[[int], list[Face]],
+              path_ends: list[tuple[float, float]]) -> None:
     """Current text positions, chunks and the baseline offsets (module doc), before
-    anchoring. A `<textPath>` starts a chunk and its x values are distances along it."""
+    anchoring. A `<textPath>` starts a chunk and its x values are distances along it; the
+    text after it goes on from the path's end point (`path_ends`), as in Chromium."""
     cx = cy = 0.0
     path = -1
+    baselines: dict[int, float] = {}
     for i in range(len(c.chars)):
-        span = c.spans[c.span[i]]
+        k = c.span[i]
+        span = c.spans[k]
         new = i == 0 or span.path != path
         if span.path != path:
+            if path >= 0 and span.path < 0:
+                cx, cy = path_ends[path]
             path = span.path
             if path >= 0:
-                cx = 0.0  # along the path, from its start (+ startOffset, textpath)
+                cx = cy = 0.0  # along the path from its start (+ startOffset), across it
         if not math.isnan(c.x[i]):
             cx, new = float(c.x[i]), True
         if not math.isnan(c.y[i]):
@@ -211,9 +225,9 @@ def positions(lay: Layout, c: Content) -> None:
             cy += float(c.dy[i])
         lay.chunk_start[i] = new
         lay.x[i], lay.y[i] = cx, cy
-        face = lay.face[i]
-        if face is not None:
-            lay.baseline[i] = _baseline(span, face, float(lay.scale[i]))
+        if k not in baselines:
+            baselines[k] = _baseline(c, k, faces)
+        lay.baseline[i] = baselines[k]
         lay.rotate[i] = 0.0 if math.isnan(c.rotate[i]) else float(c.rotate[i])
         cx += float(lay.advance[i])
 

@@ -29,7 +29,7 @@ from fivebar_host.toolpath.svg import clip
 from fivebar_host.toolpath.svg.css import StyleSheet
 from fivebar_host.toolpath.svg.paint import INHERITED, inherit, number_or_percent, painted
 from fivebar_host.toolpath.svg.shapes import SHAPES, shape_subpaths
-from fivebar_host.toolpath.svg.text import draw_text
+from fivebar_host.toolpath.svg.text import CharLayout, draw_text
 from fivebar_host.toolpath.svg.units import Lengths, numbers, viewport_transform
 from fivebar_host.toolpath.svg.xmltree import INKSCAPE_NS, XLINK_NS, Node
 
@@ -69,6 +69,8 @@ class Walker:
                  fonts: FontLibrary | None = None) -> None:
         self.file = file
         self.fonts = fonts or FontLibrary()
+        #: each drawn text element's character layout, when a caller asks (`read_svg`)
+        self.layouts: list[CharLayout] | None = None
         self.layers = [s for s in (layers or []) if s]
         self.language = language.lower()
         self.found_layers: list[tuple[str | None, str | None]] = []
