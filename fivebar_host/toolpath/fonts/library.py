@@ -181,10 +181,12 @@ class FontLibrary:
 
     # ------------------------------------------------------------------ resolving
     def face(self, family: str, bold: bool = False, italic: bool = False,
-             trusted: bool = False) -> Face | None:
+             trusted: bool = False, quoted: bool = False) -> Face | None:
         """The face for one family name (None: unknown here). `trusted` names may be file
-        paths (the profile's); a drawing's names never read files outside `font_dirs`."""
-        found = self._locate(family, bold, italic, trusted, 0)
+        paths (the profile's); a drawing's names never read files outside `font_dirs`.
+        A `quoted` name is never a generic family (CSS Fonts 4 §2.1.1: "cursive" quoted is
+        the family of that name, vpype's Hershey font, not the generic)."""
+        found = self._locate(family, bold, italic, trusted, 0, quoted)
         if found is None:
             return None
         key, label, oblique = found
@@ -196,7 +198,7 @@ class FontLibrary:
         return self._locate(family, False, False, True, 0) is not None
 
     def _locate(self, family: str, bold: bool, italic: bool, trusted: bool,
-                depth: int) -> tuple[str, str, bool] | None:
+                depth: int, quoted: bool = False) -> tuple[str, str, bool] | None:
         """(what `load` takes, the label, synthesized oblique) for a family name."""
         if depth > 8:
             raise InputError(f"[text] names refer to each other in a cycle ({family!r})",
@@ -205,7 +207,7 @@ class FontLibrary:
         again = self._aliases.get(key)
         if again is None:
             generic = GENERIC_ALIASES.get(family.strip().lower(), family.strip().lower())
-            again = (self.config.generic.get(generic) if generic in GENERICS
+            again = (self.config.generic.get(generic) if generic in GENERICS and not quoted
                      else _COMMON.get(key))
         if again is not None:
             return self._locate(again, bold, italic, True, depth + 1)

@@ -60,15 +60,16 @@ _FAMILY = re.compile(r"""\s*(?:"([^"]*)"|'([^']*)'|([^,]+))\s*(?:,|$)""")
 SHOWN = 40
 
 
-def family_list(value: str) -> list[str]:
-    """A CSS `font-family` value as names (CSS Fonts 4 §2.1: quoted strings or sequences of
-    identifiers, comma-separated)."""
+def family_list(value: str) -> list[tuple[str, bool]]:
+    """A CSS `font-family` value as (name, quoted) pairs (CSS Fonts 4 §2.1: quoted strings
+    or sequences of identifiers, comma-separated; only unquoted names can be generic)."""
     out = []
     for m in _FAMILY.finditer(value):
+        quoted = m.group(1) is not None or m.group(2) is not None
         name = m.group(1) if m.group(1) is not None else m.group(2) if m.group(2) is not None \
             else " ".join(m.group(3).split())
         if name.strip():
-            out.append(name.strip())
+            out.append((name.strip(), quoted))
     return out
 
 
@@ -98,8 +99,8 @@ class TextDrawer:
         key = (fam, bold, italic)
         if key not in self.faces_cache:
             found = []
-            for name in family_list(fam):
-                face = self.fonts.face(name, bold, italic)
+            for name, quoted in family_list(fam):
+                face = self.fonts.face(name, bold, italic, quoted=quoted)
                 if face is None:
                     self.w.note(f"font-{name.lower()}", span.node,
                                 f"font-family {name!r} is not a single-stroke font fivebar "

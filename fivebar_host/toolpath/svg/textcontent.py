@@ -110,7 +110,7 @@ class Collector:
         shift, sign = _shift(spec, lengths, 0.0, self.file, node.line)
         self._element(node, Span(node, props, lengths, spec, shift,
                                  _decoration(spec, frozenset()), -1,
-                                 ((sign, 0),) if sign else ()), False)
+                                 ((sign, 0),) if sign else ()), _preserved(node))
         while self.c.chars and self.c.chars[-1] == " " and self.c.collapsible[-1]:
             self._pop()  # spaces at the end of the (single) line are removed
         n = len(self.c.chars)
@@ -210,6 +210,18 @@ class Collector:
             if vals:
                 idx = np.minimum(np.arange(b - a), len(vals) - 1)
                 c.rotate[a:b] = np.asarray(vals)[idx]
+
+
+def _preserved(node: Node) -> bool:
+    """Whether the nearest `xml:space` above a text element says preserve (XML 1.0 §2.10:
+    the attribute applies to the element's content and inherits)."""
+    n = node.parent
+    while n is not None:
+        v = n.get(f"{XML_NS} space")
+        if v is not None:
+            return v.strip() == "preserve"
+        n = n.parent
+    return False
 
 
 def _transform(ch: str, how: str, prev: str) -> str:
