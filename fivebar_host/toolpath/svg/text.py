@@ -322,7 +322,8 @@ def _record(w: Walker, node: Node, ctx: Ctx, c: Content, lay: tl.Layout, idx: In
             label = face.label + (" (fallback)" if lay.fallback[i] else "")
             if label not in labels:
                 labels.append(label)
-    text = c.text
+    text = "".join((" / " if lay.chunk_start[i] and i else "") + ch  # chunks: lines
+                   for i, ch in enumerate(c.chars))
     shown = text if len(text) <= SHOWN else text[:SHOWN - 1] + "…"
     mm = c.spans[0].lengths.font_px * affine_scale(ctx.matrix[:2, :2])
     strokes = sum(g.n_strokes for g in (lay.glyph[i] for i in idx.tolist()) if g is not None)
