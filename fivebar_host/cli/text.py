@@ -105,8 +105,8 @@ def text(lines: tuple[str, ...], font: str, size: float, bold: bool, italic: boo
     for info in drawing.texts:
         click.echo(f"lettered {len(split)} line(s), {info.glyphs} glyphs, {info.strokes} "
                    f"strokes in {', '.join(info.fonts)} at {size:g} mm")
-    for w in drawing.warnings:
-        click.echo(f"note: {w}")
+    for note in drawing.warnings:
+        click.echo(f"note: {note}")
     write_atomic(output, strokes_svg(drawing) if paths else svg)
     assert drawing.page_size_mm is not None
     w, h = drawing.page_size_mm
