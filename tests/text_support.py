@@ -99,3 +99,49 @@ def browser_origins(driver: Any, directory: Path, html: str) -> list[dict[str, A
     driver.execute_async_script("const done = arguments[0]; document.fonts.ready.then("
                                 "() => done(true));")
     return list(json.loads(driver.execute_script(JS_ORIGINS)))
+
+
+def segments_of(points: list[Any]) -> Any:
+    """The chords (n, 2, 2) of polylines (each an (m, 2) array)."""
+    import numpy as np
+
+    parts = [np.stack([p[:-1], p[1:]], axis=1) for p in points if len(p) > 1]
+    return np.concatenate(parts) if parts else np.zeros((0, 2, 2))
+
+
+def doubled(segs: Any, line_tol: float = 0.005, min_len: float = 0.05) -> int:
+    """How many pairs of chords lie on one line (within `line_tol`) and overlap along more
+    than `min_len`: a piece of stroke drawn twice. Chords are grouped by their line (angle
+    and offset, rounded, neighbours included), so the count takes no quadratic time."""
+    import math
+
+    import numpy as np
+
+    d = segs[:, 1] - segs[:, 0]
+    length = np.hypot(d[:, 0], d[:, 1])
+    keep = length > min_len
+    a, d, length = segs[keep, 0], d[keep], length[keep]
+    u = d / length[:, None]
+    flip = (u[:, 0] < 0) | ((u[:, 0] == 0) & (u[:, 1] < 0))
+    u[flip] *= -1
+    theta = np.arctan2(u[:, 1], u[:, 0])
+    rho = a[:, 0] * u[:, 1] - a[:, 1] * u[:, 0]
+    t0 = a @ np.array([1.0, 0.0]) * u[:, 0] + a[:, 1] * u[:, 1]
+    lo, hi = np.minimum(t0, t0 + np.where(flip, -length, length)), np.maximum(
+        t0, t0 + np.where(flip, -length, length))
+    tq, rq = np.round(theta / 1e-3).astype(int), np.round(rho / line_tol).astype(int)
+    bins: dict[tuple[int, int], list[int]] = {}
+    for i, key in enumerate(zip(tq.tolist(), rq.tolist(), strict=True)):
+        bins.setdefault(key, []).append(i)
+    count = 0
+    for i, (q, r) in enumerate(zip(tq.tolist(), rq.tolist(), strict=True)):
+        for dq in (-1, 0, 1):
+            for dr in (-1, 0, 1):
+                for j in bins.get((q + dq, r + dr), ()):
+                    if j <= i or abs(rho[i] - rho[j]) > line_tol or \
+                            abs(math.sin(theta[i] - theta[j])) * max(length[i], length[j]) > \
+                            line_tol:
+                        continue
+                    if min(hi[i], hi[j]) - max(lo[i], lo[j]) > min_len:
+                        count += 1
+    return count
