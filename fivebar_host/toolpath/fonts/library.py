@@ -122,6 +122,11 @@ _COMMON = {norm(k): v for k, v in COMMON.items()}
 _LOADED: dict[tuple[str, int], Font] = {}
 
 
+def forget_fonts() -> None:
+    """Forget the fonts read so far (the next read loads them again: a cold read)."""
+    _LOADED.clear()
+
+
 @dataclass(frozen=True)
 class TextConfig:
     """The profile's `[text]` table: the font each generic family draws with (a family,
