@@ -256,3 +256,21 @@ def test_streamed_and_whole_tree_reads_agree() -> None:
     a = read_svg(svg(body))
     b = read_svg(svg(body + '<use href="#late"/><g id="late"/>'))  # a forward reference
     assert np.array_equal(a.params, b.params) and a.texts == b.texts
+
+
+def test_decorations_are_one_pen_line_each_at_the_fonts_positions() -> None:
+    size = 10.0
+    d, _ = read(f'<text x="10" y="50" font-family="futural" font-size="{size}" '
+                'text-decoration="underline">ab<tspan baseline-shift="super">c</tspan>'
+                '<tspan style="text-decoration: line-through">d</tspan></text>')
+    glyph_strokes = sum(FUT.glyph(ch).n_strokes for ch in "abcd")
+    assert d.texts[0].strokes == glyph_strokes + 2 == d.n_strokes
+    lines = d.to_file_frame(d.params[-2:, :4].reshape(-1, 2)).reshape(-1, 2, 2)
+    total = advance(FUT, "abcd", size)
+    # underline: the futural file gives no underline-position, so 0.1 em below the
+    # baseline, across all four letters (the superscript does not move it)
+    assert np.allclose(lines[0], [[10, 51], [10 + total, 51]])
+    # line-through of "d": half its x-height above the baseline
+    xd = 10 + advance(FUT, "abc", size)
+    y = 50 - FUT.x_height / 2 * size / 1000
+    assert np.allclose(lines[1], [[xd, y], [10 + total, y]])

@@ -6,7 +6,8 @@ is one pen-down run. SVG fonts are XML, so they are read with the SVG reader's o
 parser (`svg.xmltree`) and path-data parser (`svg.pathdata`); no font library is needed.
 
 Read (SVG 1.1 §20.3–20.8): `<font horiz-adv-x horiz-origin-x>`, `<font-face units-per-em
-ascent descent x-height cap-height underline-position underline-thickness font-family>`,
+ascent descent x-height cap-height underline-position overline-position
+strikethrough-position font-family>`,
 `<missing-glyph>`, `<glyph unicode glyph-name horiz-adv-x d>` (a `unicode` of several
 characters is a ligature, matched longest first, §20.4) and `<hkern u1 g1 u2 g2 k>` (kerning
 pairs by character, unicode range or glyph name; `k` is subtracted from the advance, §20.7).
@@ -85,6 +86,8 @@ class Font:
     cap_height: float
     underline_position: float
     underline_thickness: float
+    overline_position: float
+    strikethrough_position: float
     origin_x: float
     missing_advance: float
     _by_char: dict[str, _Raw] = field(default_factory=dict, repr=False)
@@ -212,6 +215,10 @@ def load_svg_font(source: str | Path | bytes, file: str | None = None,
         cap_height=_number(face, "cap-height", 0.7 * ascent, fname),
         underline_position=_number(face, "underline-position", -0.1 * em, fname),
         underline_thickness=_number(face, "underline-thickness", 0.05 * em, fname),
+        overline_position=_number(face, "overline-position", ascent, fname),
+        strikethrough_position=_number(face, "strikethrough-position",
+                                       0.5 * _number(face, "x-height", 0.5 * ascent, fname),
+                                       fname),
         origin_x=_number(font_node, "horiz-origin-x", 0.0, fname), missing_advance=adv)
     for child in font_node.children:
         if child.tag == "missing-glyph":

@@ -27,11 +27,12 @@ import numpy as np
 
 from fivebar_host.errors import InputError
 from fivebar_host.toolpath.fonts.library import OBLIQUE_DEG, Face, FontLibrary
-from fivebar_host.toolpath.geometry import TextInfo, affine_scale, transform
+from fivebar_host.toolpath.geometry import LINE, TextInfo, affine_scale, transform
 from fivebar_host.toolpath.svg import textlayout as tl
 from fivebar_host.toolpath.svg import textpath as tp
 from fivebar_host.toolpath.svg.paint import number_or_percent, text_prop
 from fivebar_host.toolpath.svg.textcontent import Collector, Content, Span
+from fivebar_host.toolpath.svg.textdeco import Line, decoration_lines
 from fivebar_host.toolpath.svg.xmltree import Node
 from kinematics.arrays import BoolArray, FloatArray, IntArray
 
@@ -89,6 +90,7 @@ class TextDrawer:
         self.fonts: FontLibrary = w.fonts
         self.faces_cache: dict[tuple[str, bool, bool], list[Face]] = {}
         self.paths: list[tuple[tp.PathGeometry, float]] = []
+        self.face_lists: list[list[Face]] = []
 
     # ------------------------------------------------------------------ faces
     def faces(self, span: Span) -> list[Face]:
@@ -147,7 +149,7 @@ class TextDrawer:
             node, ctx.props, ctx.lengths)
         if not c.chars:
             return None
-        face_lists = [self.faces(s) for s in c.spans]
+        face_lists = self.face_lists = [self.faces(s) for s in c.spans]
         lay = tl.select_glyphs(c, lambda k: face_lists[k], self.fonts.fallback())
         if lay.missing:
             self._missing(c, lay, face_lists)
@@ -230,14 +232,16 @@ def draw_text(w: Walker, node: Node, ctx: Ctx) -> None:
         return
     c, lay, on = res
     idx = np.flatnonzero([_drawn(c, lay, on, i) for i in range(len(c.chars))])
-    _notes(w, node, ctx, c, lay)
+    lines, on_path = decoration_lines(c, lay, lambda k: d.face_lists[k], on)
+    _notes(w, node, ctx, c, lay, on_path)
     glyphs = glyph_matrices(lay, idx) if idx.size else np.zeros((0, 3, 3))
     if w.collector is not None or ctx.clip is not None:
-        src = w.emit(node, ctx, _subpaths(c, lay, idx, glyphs), "text")
+        subs = _subpaths(c, lay, idx, glyphs) + [[(LINE, p)] for _, p in lines]
+        src = w.emit(node, ctx, subs, "text") if subs else -1
     else:
-        src = _emit_fast(w, node, ctx, c, lay, idx, ctx.matrix @ glyphs)
+        src = _emit_fast(w, node, ctx, c, lay, idx, ctx.matrix @ glyphs, lines)
     if w.collector is None:
-        _record(w, node, ctx, c, lay, idx, src)
+        _record(w, node, ctx, c, lay, idx, src, len(lines))
         if w.layouts is not None:
             w.layouts.append(_char_layout(node, ctx, c, lay, on, idx))
 
@@ -260,10 +264,11 @@ def _drawn(c: Content, lay: tl.Layout, on: FloatArray, i: int) -> bool:
 
 
 def _emit_fast(w: Walker, node: Node, ctx: Ctx, c: Content, lay: tl.Layout,
-               idx: IntArray, mats: FloatArray) -> int:
+               idx: IntArray, mats: FloatArray, lines: list[Line]) -> int:
     """Glyph strokes straight into the builder, each glyph with its own matrix (user
-    units → drawing frame included); the source index, −1 when nothing is drawn."""
-    if not idx.size:
+    units → drawing frame included), then the decoration lines; the source index, −1 when
+    nothing is drawn."""
+    if not idx.size and not lines:
         return -1
     b = w.b
     src = b.add_source(node.get("id"), node.line, "text", ctx.layer)
@@ -273,6 +278,13 @@ def _emit_fast(w: Walker, node: Node, ctx: Ctx, c: Content, lay: tl.Layout,
         b.matrices.append(mats[k])
         b.add_strokes(src, g.kinds, g.params, g.starts, c.spans[c.span[i]].node.line,
                       len(b.matrices) - 1)
+    if lines:
+        b.matrices.append(ctx.matrix)
+        one = np.zeros(1, dtype=np.int64)
+        for line, p in lines:
+            b.add_strokes(src, np.array([LINE], dtype=np.int8),
+                          np.array([[*p, 0.0, 0.0, 0.0, 0.0]]), one, line,
+                          len(b.matrices) - 1)
     return src
 
 
@@ -291,7 +303,8 @@ def _subpaths(c: Content, lay: tl.Layout, idx: IntArray,
     return subs
 
 
-def _notes(w: Walker, node: Node, ctx: Ctx, c: Content, lay: tl.Layout) -> None:
+def _notes(w: Walker, node: Node, ctx: Ctx, c: Content, lay: tl.Layout,
+           deco_on_path: bool) -> None:
     """What the pen draws other than the screen shows, once per kind."""
     if lay.fallback.any():
         i = int(np.flatnonzero(lay.fallback)[0])
@@ -308,12 +321,12 @@ def _notes(w: Walker, node: Node, ctx: Ctx, c: Content, lay: tl.Layout) -> None:
     if node.get("textLength") or node.get("lengthAdjust"):
         w.note("text-length", node, "textLength is not applied: the text is drawn at its "
                                     "font's natural length")
-    if any(s.decoration for s in c.spans):
-        w.note("text-decoration", node, "text-decoration (underline …) is not drawn")
+    if deco_on_path:
+        w.note("text-decoration", node, "text-decoration on a <textPath> is not drawn")
 
 
 def _record(w: Walker, node: Node, ctx: Ctx, c: Content, lay: tl.Layout, idx: IntArray,
-            src: int) -> None:
+            src: int, lines: int) -> None:
     """The dry run's record of this text element."""
     labels: list[str] = []
     for i in idx.tolist():
@@ -328,4 +341,4 @@ def _record(w: Walker, node: Node, ctx: Ctx, c: Content, lay: tl.Layout, idx: In
     mm = c.spans[0].lengths.font_px * affine_scale(ctx.matrix[:2, :2])
     strokes = sum(g.n_strokes for g in (lay.glyph[i] for i in idx.tolist()) if g is not None)
     w.texts.append(TextInfo(src, node.describe(), node.line, shown, tuple(labels), mm,
-                            int(idx.size), int(strokes)))
+                            int(idx.size), int(strokes) + lines))

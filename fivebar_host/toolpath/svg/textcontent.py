@@ -278,9 +278,15 @@ def _shift(spec: dict[str, str], lengths: Lengths, parent: float, file: str,
         return parent, 0  # an invalid declaration is ignored (CSS)
 
 
+def own_decoration(spec: dict[str, str]) -> tuple[str, ...]:
+    """The decoration lines an element sets itself (`text-decoration-line`, or the lines of
+    the `text-decoration` shorthand), in a fixed order."""
+    v = (spec.get("text-decoration-line") or spec.get("text-decoration") or "").lower()
+    words = v.split()
+    return tuple(w for w in ("underline", "overline", "line-through") if w in words)
+
+
 def _decoration(spec: dict[str, str], parent: frozenset[str]) -> frozenset[str]:
     """Text decorations in force: an element's own lines added to its ancestors' (CSS Text
     Decoration 3 §2: decorations propagate to the text of descendants)."""
-    v = (spec.get("text-decoration-line") or spec.get("text-decoration") or "").lower()
-    own = {w for w in v.split() if w in ("underline", "overline", "line-through")}
-    return parent | own
+    return parent | set(own_decoration(spec))

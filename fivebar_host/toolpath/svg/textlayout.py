@@ -95,7 +95,7 @@ def spacing(span: Span, key: str, file: str) -> float:
         return 0.0  # an invalid declaration is ignored (CSS)
 
 
-def _baseline(c: Content, k: int, faces: Callable[[int], list[Face]]) -> float:
+def baseline_offset(c: Content, k: int, faces: Callable[[int], list[Face]]) -> float:
     """The glyph origin's offset below the position's y for span k (module doc)."""
     span = c.spans[k]
     own = span.spec.get("alignment-baseline", "").strip().lower()
@@ -226,7 +226,7 @@ def positions(lay: Layout, c: Content, faces: Callable[[int], list[Face]],
         lay.chunk_start[i] = new
         lay.x[i], lay.y[i] = cx, cy
         if k not in baselines:
-            baselines[k] = _baseline(c, k, faces)
+            baselines[k] = baseline_offset(c, k, faces)
         lay.baseline[i] = baselines[k]
         lay.rotate[i] = 0.0 if math.isnan(c.rotate[i]) else float(c.rotate[i])
         cx += float(lay.advance[i])
