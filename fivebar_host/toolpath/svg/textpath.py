@@ -15,6 +15,7 @@ length, scaled by the path's `pathLength` when it has one. `side`, `method` and 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -64,7 +65,7 @@ def referenced_shape(node: Node, ids: dict[str, Node]) -> Node | None:
 
 
 def measure(shape: Node, lengths: Lengths, file: str,
-            parse_transform: object) -> PathGeometry | None:
+            parse_transform: Callable[[str, Node], FloatArray]) -> PathGeometry | None:
     """The shape in the text's user space (its own transform applied), measured within a
     tolerance of 1e-4 of its extent; None when it has no length."""
     res = shape_subpaths(shape, lengths, file)
@@ -75,7 +76,7 @@ def measure(shape: Node, lengths: Lengths, file: str,
     params = np.array([p for _, p in prims], dtype=np.float64)
     tf = shape.get("transform")
     if tf:
-        m = parse_transform(tf, shape)  # type: ignore[operator]
+        m = parse_transform(tf, shape)
         params = transform(kind, params, m[:2, :2], m[:2, 2])
     ext = float(np.ptp(params[:, :2], axis=0).max()) + float(np.abs(params).max()) * 1e-9
     n = piece_counts(kind, params, max(ext, 1e-9) * 1e-4)
