@@ -109,3 +109,21 @@ def test_bad_text_table_names_the_key(key: str, value: Any, msg: str) -> None:
     doc["text"][key] = value
     with pytest.raises(ConfigError, match=msg):
         parse_profile(doc, "p.toml")
+
+
+def test_the_daemon_compiles_text_with_the_profiles_fonts(tmp_path: Path) -> None:
+    """An upload with text compiles in the daemon with the profile's [text] table and its
+    dry-run report (the web page's) says which font drew it; the page draws the job's
+    paths, of which the glyph strokes are some, like any other."""
+    from fivebar_host.config import load_profile
+    from fivebar_host.report.text.dryrun import report_lines
+    from fivebar_host.server.jobs import JobOptions, compile_upload
+
+    prof = tmp_path / "p.toml"
+    prof.write_text('[text]\ncursive = "Relief SingleLine"\n')
+    data = (Path(__file__).resolve().parent.parent / "examples" / "birthday_card.svg"
+            ).read_bytes()
+    job = compile_upload(data, "card.svg", JobOptions(), load_profile(prof)).job
+    lines = [ln for ln in report_lines(job) if ln.startswith("text")]
+    assert len(lines) == 4 and "'Happy Birthday' in Relief SingleLine" in lines[0]
+    assert job.n_paths <= sum(t.strokes for t in job.drawing.texts) + 2  # + border, heart
