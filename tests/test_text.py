@@ -274,3 +274,15 @@ def test_decorations_are_one_pen_line_each_at_the_fonts_positions() -> None:
     xd = 10 + advance(FUT, "abc", size)
     y = 50 - FUT.x_height / 2 * size / 1000
     assert np.allclose(lines[1], [[xd, y], [10 + total, y]])
+
+
+def test_what_is_not_applied_is_said_once_per_kind() -> None:
+    d, _ = read('<text x="0" y="9" textLength="50" font-variant="small-caps">a</text>'
+                '<text x="0" y="19" textLength="50">b</text>'
+                '<text x="0" y="29"><tref href="#x"/>c<textPath href="#p" side="right">'
+                "d</textPath></text><path id='p' d='M0 50 L90 50'/>")
+    notes = [w for w in d.warnings if "textLength" in w]
+    assert len(notes) == 1 and "2 elements" in notes[0]
+    assert any("small-caps" in w for w in d.warnings)
+    assert any("<tref> inside <text> is not text content" in w for w in d.warnings)
+    assert any("<textPath> side is not used" in w for w in d.warnings)

@@ -321,6 +321,10 @@ def _notes(w: Walker, node: Node, ctx: Ctx, c: Content, lay: tl.Layout,
     if node.get("textLength") or node.get("lengthAdjust"):
         w.note("text-length", node, "textLength is not applied: the text is drawn at its "
                                     "font's natural length")
+    if any(text_prop(s.props, "font-variant").lower() not in ("normal", "none", "")
+           for s in c.spans):
+        w.note("text-variant", node, "font-variant (small-caps …) is not applied: the "
+                                     "characters are drawn as written")
     if deco_on_path:
         w.note("text-decoration", node, "text-decoration on a <textPath> is not drawn")
 
