@@ -286,3 +286,10 @@ def test_what_is_not_applied_is_said_once_per_kind() -> None:
     assert any("small-caps" in w for w in d.warnings)
     assert any("<tref> inside <text> is not text content" in w for w in d.warnings)
     assert any("<textPath> side is not used" in w for w in d.warnings)
+
+
+def test_font_size_zero_draws_nothing_and_huge_text_is_refused() -> None:
+    d, lay = read('<text x="0" y="9" font-size="0">gone</text><text x="0" y="19">a</text>')
+    assert [t.glyphs for t in d.texts] == [0, 1] and lay[0].chars == "gone"
+    with pytest.raises(InputError, match="not finite or larger than"):
+        read('<text x="0" y="9" font-size="1e200">a</text>')

@@ -134,7 +134,7 @@ def _one(lay: Layout, c: Content, text: str, i: int, span: Span, chosen: list[Fa
     """Glyph of character i (and of a ligature's later characters): how many it covers."""
     ch = text[i]
     em = span.lengths.font_px
-    if ch in ZERO_WIDTH:
+    if ch in ZERO_WIDTH or not em > 0:  # font-size 0 (or negative) renders nothing (CSS)
         lay.face[i] = chosen[0] if chosen else fallback
         return 1
     for k, face in enumerate([*chosen, *([fallback] if fallback else [])]):
