@@ -100,7 +100,7 @@ def text(lines: tuple[str, ...], font: str, size: float, bold: bool, italic: boo
     prof = load(config_path)
     split = tuple(part for line in lines for part in line.split("\n"))
     lt = Lettering(split, font, size, bold, italic, anchor, line_height, letter_spacing)
-    svg = lettering_svg(lt, prof.text)
+    svg = lettering_svg(lt, prof.text, str(output))
     drawing = read_svg(svg.encode(), file=str(output), text=prof.text)
     for info in drawing.texts:
         click.echo(f"lettered {len(split)} line(s), {info.glyphs} glyphs, {info.strokes} "

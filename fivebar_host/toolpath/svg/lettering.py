@@ -50,9 +50,9 @@ class Lettering:
     margin_mm: float = 5.0
 
 
-def _text_element(lt: Lettering) -> str:
+def _text_element(lt: Lettering, file: str) -> str:
     if sum(len(s) for s in lt.lines) > MAX_CHARS:
-        raise InputError(f"more than {MAX_CHARS:,} characters to letter")
+        raise InputError(f"more than {MAX_CHARS:,} characters to letter", file)
     attrs = {"font-family": lt.family, "font-size": f"{lt.size_mm:g}",
              "text-anchor": lt.anchor}
     if lt.bold:
@@ -67,12 +67,14 @@ def _text_element(lt: Lettering) -> str:
     return f'<text xml:space="preserve" {a}>{spans}</text>'
 
 
-def lettering_svg(lt: Lettering, text: TextConfig | None = None) -> str:
-    """The SVG document of `lt` (module doc); `text`: the profile's font choices."""
-    element = _text_element(lt)
+def lettering_svg(lt: Lettering, text: TextConfig | None = None,
+                  file: str = "<lettering>") -> str:
+    """The SVG document of `lt` (module doc); `text`: the profile's font choices; `file`
+    names the document in messages."""
+    element = _text_element(lt, file)
     probe = (f'<svg xmlns="http://www.w3.org/2000/svg" width="1000mm" height="1000mm" '
              f'viewBox="-500 -500 1000 1000">{element}</svg>')
-    d = read_svg(probe.encode(), file="<lettering>", text=text)
+    d = read_svg(probe.encode(), file=file, text=text)
     x0, y0, x1, y1 = bbox(d)
     m = lt.margin_mm
     # the probe's drawing frame: x = user x + 500, y up from the page bottom (user y = 500)
