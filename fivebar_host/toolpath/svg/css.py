@@ -308,9 +308,8 @@ class StyleSheet:
             if prop in PROPS and (prop not in ranked or key >= ranked[prop][0]):
                 ranked[prop] = (key, value.strip())
 
-        for prop in PROPS:
-            v = n.get(prop)
-            if v is not None and v.strip():
+        for prop, v in n.attrs.items():  # an element has few attributes; PROPS has many
+            if prop in PROPS and v.strip():
                 offer(prop, v, (0, 0, (0, 0, 0), 0))
         if self.by_key:
             for r in self.matching(n):
