@@ -6,9 +6,9 @@ Bytes from the sender (any transport: `fivebar_host.bridge.serve`) go through
 wait for the bridge's own thread, which answers each with exactly one `ok` or `error:N`, in
 order, as GRBL does, so a sender's character counting against 128 bytes holds.
 
-A G-code line is parsed (`gcode`), run on a copy of the modal state (`interp`), and its moves
-are solved at once (`compile.incremental.OnlineCompiler.solve`: reach, joint limits,
-singularity margins,
+A G-code line is parsed and run on a copy of the modal state by fivebar's G-code interpreter
+(`fivebar_host.gcode`, read GRBL's way: `policy`), and its moves are solved at once
+(`compile.incremental.OnlineCompiler.solve`: reach, joint limits, singularity margins,
 joint-space segmentation). A refused move raises ALARM:2 with a `[MSG:…]` before anything of
 it moves: the machine is stopped (laser off), the look-ahead dropped, every later line gets
 `error:9` until `$X`. Accepted moves wait in the look-ahead buffer until `LOOKAHEAD_MOVES`
@@ -22,14 +22,12 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
-from fivebar_host.bridge import codes, views
+from fivebar_host.bridge import codes, policy, views
 from fivebar_host.bridge.codes import GrblAlarmError, GrblError, ascii_text
-from fivebar_host.bridge.gcode import parse, preparse
-from fivebar_host.bridge.interp import Dwell, ModalState, Move, ProgramFlow, Vec, execute
 from fivebar_host.bridge.machine import MachineDriver
 from fivebar_host.bridge.realtime import (
     RT_CYCLE_START,
@@ -51,6 +49,8 @@ from fivebar_host.compile.incremental import (
 )
 from fivebar_host.config import Profile
 from fivebar_host.controllers.fivebar.link import Link
+from fivebar_host.gcode import Dwell, GcodeError, ModalState, Move, ProgramFlow, Vec, preparse
+from fivebar_host.gcode import errors as gcode_errors
 from fivebar_host.program import Program
 
 FLUSH_IDLE_S = 0.05
@@ -265,7 +265,7 @@ class Bridge:
         """One line → its reply (`ok` / `error:N`); output it causes is sent before."""
         try:
             if overflow:
-                raise GrblError(codes.LINE_OVERFLOW, "line too long")
+                raise GrblError(gcode_errors.LINE_OVERFLOW, "line too long")
             text = preparse(raw)
             if not text:
                 return "ok"
@@ -273,8 +273,8 @@ class Bridge:
                 run_system(self, text)
             else:
                 self._gcode(text)
-        except GrblError as e:
-            self.log(f"{raw.strip()!r}: {e}")
+        except GcodeError as e:
+            self.log(f"{raw.strip()!r}: error:{e.code} {e.message}")
             return f"error:{e.code}"
         except GrblAlarmError as e:
             self.raise_alarm(e.code, e.message)
@@ -285,8 +285,7 @@ class Bridge:
     def _gcode(self, text: str) -> None:
         if self.alarm is not None or self.locked or self.machine.jogging:
             raise GrblError(codes.GCODE_LOCK, "alarm or jog state")
-        block = parse(text)
-        state, actions = execute(self.modal, block, self.compiler.tolerance_mm / 2)
+        state, actions = policy.run(self.modal, policy.parse(text))
         th = self.th
         items: list[Item] = []
         for act in actions:
@@ -308,7 +307,7 @@ class Bridge:
                 self._program_flow(act.code)
 
     def _pen_wanted(self, st: ModalState | Move) -> bool:
-        z = st.position[2] if isinstance(st, ModalState) else st.z
+        z = st.position[2] if isinstance(st, ModalState) else st.end[2]
         return (st.z_seen and z <= 0.0) or (st.spindle in (3, 4) and st.s > 0)
 
     def _power(self, s: float) -> int:
@@ -321,18 +320,18 @@ class Bridge:
         if mv.rapid:
             feed = self.profile.motion.travel_feed_mm_s * self.ov.rapid / 100
         else:
-            feed = min(mv.feed_mm_min * self.ov.feed / 100,
-                       self.settings.feed_cap_mm_min()) / 60.0
+            feed = min(mv.feed * self.ov.feed / 100, self.settings.feed_cap_mm_min()) / 60.0
         if self.laser:
             draw = mv.spindle in (3, 4) and self._power(mv.s) > 0
         else:
             draw = self._pen_wanted(mv)
         dynamic = mv.spindle == 4 and bool(self.settings.values[32])
+        points = mv.points(self.compiler.tolerance_mm / 2)  # arcs: half the budget
         try:
-            return self.compiler.solve(th, (mv.start[0], mv.start[1]), list(mv.points),
+            return self.compiler.solve(th, (mv.start[0], mv.start[1]), points,
                                        rapid=mv.rapid, draw=draw and not jog, feed_mm_s=feed,
                                        power=self._power(mv.s) if self.laser else 0,
-                                       dynamic=dynamic, arc=len(mv.points) > 1, jog=jog)
+                                       dynamic=dynamic, arc=len(points) > 1, jog=jog)
         except MoveRefusedError as e:  # a soft limit, GRBL's alarm 2
             raise GrblAlarmError(codes.ALARM_SOFT_LIMIT, ascii_text(str(e))) from None
 
@@ -399,25 +398,24 @@ class Bridge:
         """`$J=`: a checked move in mm at its own F, planned and sent at once."""
         if self.alarm is not None or self.locked:
             raise GrblError(codes.GCODE_LOCK, "jog in alarm")
-        block = parse(words)
+        block = policy.parse(words)
         extra_g = set(block.g) - {"units", "distance", "non_modal"}
         if (extra_g or block.m or block.g.get("non_modal", 530) != 530
                 or set(block.values) - set("XYZF")):
             raise GrblError(codes.INVALID_JOG_COMMAND, "only G20/G21/G90/G91/G53 X Y Z F")
         if "F" not in block.values:
-            raise GrblError(codes.UNDEFINED_FEED_RATE, "jog without F")
-        if not block.axes:
-            raise GrblError(codes.NO_AXIS_WORDS, "jog without axis words")
+            raise GrblError(gcode_errors.UNDEFINED_FEED_RATE, "jog without F")
+        if not any(a in block.values for a in "XYZ"):
+            raise GrblError(gcode_errors.NO_AXIS_WORDS, "jog without axis words")
         block.g["motion"] = 10
-        jog_state = replace(self.modal, spindle=5)
-        state, actions = execute(jog_state, block, self.compiler.tolerance_mm / 2)
+        state, actions = policy.run(self.modal._replace(spindle=5), block)
         mv = actions[0]
         assert isinstance(mv, Move)
         try:
             solved = self._solve(mv, self.th, jog=True)
         except GrblAlarmError as e:
             raise GrblError(codes.TRAVEL_EXCEEDED, e.message) from None
-        self.modal = replace(self.modal, position=state.position)
+        self.modal = self.modal._replace(position=state.position)
         if solved is not None and not self.check_mode:
             self.th = solved.th[-1]
             self.flush()
@@ -457,7 +455,7 @@ class Bridge:
     def _sync_position(self) -> None:
         p = self.compiler.point_of(self.th)
         if p is not None:
-            self.modal = replace(self.modal, position=(p[0], p[1], self.modal.position[2]))
+            self.modal = self.modal._replace(position=(p[0], p[1], self.modal.position[2]))
 
     def _resync(self) -> None:
         """After a stop: the parser and the planner start from where the machine is."""
@@ -481,7 +479,7 @@ class Bridge:
         """Ctrl-X: stop, GRBL's modal state to defaults, banner (alarm kept)."""
         self._reset_req.clear()
         self._stop_motion()
-        self.modal = replace(self.modal.after_reset(), g92=(0.0, 0.0, 0.0))
+        self.modal = self.modal.after_reset()._replace(g92=(0.0, 0.0, 0.0))
         self._resync()
         self.check_mode = False
         self.attach_banner()

@@ -82,7 +82,7 @@ def _margins(su: Setup, routed: Routed, solved: Solved, tr: Travel,
         sl = slice(i, i + FINISH_BLOCK)
         tm = su.fb.singularity_margins(pd.th[sl], pd.pts[sl]) * sgn
         tm[leg, :2] = np.inf
-        tmin = np.minimum(tmin, tm.min(axis=0))
+        tmin = np.minimum(tmin, [tm[:, c].min() for c in range(3)])  # (min(axis=0) is slow)
     out: FloatArray = np.minimum(jmargin, tmin)
     return out
 

@@ -223,8 +223,7 @@ def _time(profile: Profile, checker: PoseChecker, handed: list[Stepped],
                                          protocol.P_MIN_US)]
     if trim:
         release_free_memory()  # the per-segment settings' and the floors' inputs' holes
-    duration_us = compact_ints(_link_bound_staircase(profile, dq, floor_us, stop, st, power,
-                                                     trim))
+    duration_us = compact_ints(_link_bound_staircase(profile, dq, floor_us, stop, st, power))
     del dq, stop
     return Planned(th=th_all, pts=pts_all, draw=seg_draw, length=length, steps=st,
                    power=power, f0=f0, f1=f1, duration_us=duration_us,
@@ -232,31 +231,28 @@ def _time(profile: Profile, checker: PoseChecker, handed: list[Stepped],
 
 
 def _link_bound_staircase(profile: Profile, dq: FloatArray, handed: list[IntArray],
-                          stop: BoolArray, st: IntArray, power: NDArray[np.uint8],
-                          trim: bool) -> IntArray:
+                          stop: BoolArray, st: IntArray, power: NDArray[np.uint8]) -> IntArray:
     """Step 4 with the link's floor (`compile.linkrate`) on the floors in `handed` (emptied:
     the staircase frees them): the staircase on the floors raised to what the wire carries,
     again while a segment of its result is shorter than the floor its own durations give
     (an item that needs a `P` costs more bytes). A later pass starts from the durations
     before it, raised where short: the least durations above those floors are the least
-    above the raised floors (every pass's result is at least the one before), without
-    keeping the floors through the staircase (memory on large jobs); with `trim` the heap's
-    free pages go back after each pass (`_time`)."""
+    above the raised floors (every pass's result is at least the one before), and the
+    staircase is only measured again near the raised segments (`planner.raise_staircase`:
+    a few hundred of a large job's, where a whole staircase took some 70 ms a pass on
+    100k segments)."""
     j_lim = planner.JUNCTION_JUMP_RAD_S
     acc = profile.motion.max_joint_rad_s2
     linkrate.raise_to_link(handed[0], st, power, profile)
     duration_us = planner.enforce_staircase(dq, handed.pop(), stop, acc, j_lim)
     for _ in range(linkrate.LINK_PASSES - 1):
-        if not linkrate.any_short(st, power, duration_us, profile):
-            break
         need = linkrate.link_floor_us(st, power, duration_us, profile)
-        np.maximum(duration_us, need, out=duration_us)
+        short = np.flatnonzero(duration_us < need)
+        if not short.size:
+            break
+        duration_us[short] = need[short]
         del need
-        handed.append(duration_us)
-        del duration_us
-        if trim:
-            release_free_memory()  # the last pass's staircase temporaries
-        duration_us = planner.enforce_staircase(dq, handed.pop(), stop, acc, j_lim)
+        planner.raise_staircase(dq, duration_us, short, acc, j_lim)
     return duration_us
 
 

@@ -32,7 +32,7 @@ from fivebar_host.server.jobs import SubmitError
 T = TypeVar("T")
 
 #: Modules the forkserver imports once, so each compilation's process starts with them.
-PRELOAD = ["fivebar_host.server.jobs", "fivebar_host.server.web"]
+PRELOAD = ["fivebar_host.server.jobs", "fivebar_host.server.dryrun"]
 _START_LOCK = threading.Lock()
 
 

@@ -19,6 +19,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 from types import FrameType
+from typing import Any
 
 import uvicorn
 
@@ -27,7 +28,6 @@ from fivebar_host.errors import FivebarError
 from fivebar_host.server.app import create_app
 from fivebar_host.server.compiler import Compiler
 from fivebar_host.server.jobs import CompiledCache
-from fivebar_host.server.machine import WorkerConfig
 from fivebar_host.server.security import (
     MAX_IN_FLIGHT,
     MAX_UPLOAD_BYTES_PENDING,
@@ -38,7 +38,9 @@ from fivebar_host.server.security import (
     is_loopback,
     load_or_create_token,
 )
+from fivebar_host.server.state import WorkerConfig
 from fivebar_host.server.store import JobStore
+from fivebar_host.server.stored import StoredJobs
 from fivebar_host.server.worker import Worker
 
 log = logging.getLogger("fivebar.serve")
@@ -129,6 +131,7 @@ class Daemon:
         self._thread: threading.Thread | None = None
         self.compiler: Compiler | None = None
         self.store: JobStore | None = None
+        self.cache: CompiledCache | None = None
         self.worker: Worker | None = None
 
     def start(self, timeout_s: float = 15.0) -> str:
@@ -137,6 +140,25 @@ class Daemon:
 
         register()  # a daemon is an entry point: the emulator's and the mocks' URL schemes
         host, port = parse_listen(self.cfg.listen)
+        loopback = is_loopback(host)
+        self._open_state(need_token=self.cfg.require_token or not loopback)
+        sock = _bind(host, port)
+        worker, server = self._machine_and_http(loopback)
+        worker.start()
+        self._thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]},
+                                        name="fivebar-http", daemon=True)
+        self._thread.start()
+        deadline = time.monotonic() + timeout_s
+        while not server.started:
+            if not self._thread.is_alive() or time.monotonic() > deadline:
+                self.stop(hurry=True)
+                raise ServeError("the HTTP server did not start")
+            time.sleep(0.01)
+        self._announce(sock.getsockname(), loopback)
+        return self.url
+
+    def _open_state(self, need_token: bool) -> None:
+        """The state directory and the API token (made on the first start)."""
         try:
             self.state_dir.mkdir(mode=0o700, parents=True, exist_ok=True)
         except OSError as e:
@@ -145,23 +167,25 @@ class Daemon:
         token, self.token_path, created = load_or_create_token(self.state_dir)
         if created:
             log.info("created the API token: %s (mode 0600)", self.token_path)
-        loopback = is_loopback(host)
-        need_token = self.cfg.require_token or not loopback
         self.token = token if need_token else None
-        sock = _bind(host, port)
+
+    def _machine_and_http(self, loopback: bool) -> tuple[Worker, uvicorn.Server]:
+        """The database, the machine thread and the HTTP server over the guarded
+        application (neither started)."""
         self.store = JobStore(self.state_dir / "fivebar.db")
         pruned = self.store.prune()
         if pruned:
             log.info("forgot %d old finished jobs", pruned)
         ser = self.profile.serial
-        cache = CompiledCache()
+        self.cache = CompiledCache()
+        jobs = StoredJobs(self.store, self.cache, self.profile)
         self.worker = Worker(WorkerConfig(
-            port_url=self.cfg.port_url, profile=self.profile, state_dir=self.state_dir,
-            baud=ser.baud, banner_timeout_s=self.cfg.banner_timeout_s or ser.banner_timeout_s,
+            port_url=self.cfg.port_url, profile=self.profile, baud=ser.baud,
+            banner_timeout_s=self.cfg.banner_timeout_s or ser.banner_timeout_s,
             reply_timeout_s=ser.reply_timeout_s, auto_resume=self.cfg.auto_resume),
-            self.store, cache)
+            self.store, jobs)
         self.compiler = Compiler(self.cfg.compile_processes)
-        app = create_app(store=self.store, worker=self.worker, cache=cache,
+        app = create_app(store=self.store, worker=self.worker.handle, jobs=jobs,
                          profile=self.profile, stopping=self.stopping,
                          compiler=self.compiler, compile_slots=self.cfg.compile_slots)
         guarded = Guard(app, Policy(token=self.token, loopback=loopback,
@@ -180,21 +204,15 @@ class Daemon:
                                 timeout_keep_alive=5, server_header=False,
                                 h11_max_incomplete_event_size=16 * 1024)
         self._server = uvicorn.Server(config)
-        self.worker.start()
-        self._thread = threading.Thread(target=self._server.run, kwargs={"sockets": [sock]},
-                                        name="fivebar-http", daemon=True)
-        self._thread.start()
-        deadline = time.monotonic() + timeout_s
-        while not self._server.started:
-            if not self._thread.is_alive() or time.monotonic() > deadline:
-                self.stop(hurry=True)
-                raise ServeError("the HTTP server did not start")
-            time.sleep(0.01)
-        bound = sock.getsockname()
+        return self.worker, self._server
+
+    def _announce(self, bound: tuple[Any, ...], loopback: bool) -> None:
+        """The base URL from the bound socket address (host, port, …), the log lines that
+        say where and how the daemon listens, and the ready file."""
         shown = f"[{bound[0]}]" if ":" in bound[0] else bound[0]
         self.url = f"http://{shown}:{bound[1]}"
         log.info("listening on %s (%s); machine port %s; state %s", self.url,
-                 "token required" if need_token else "loopback, no token",
+                 "token required" if self.token is not None else "loopback, no token",
                  self.cfg.port_url, self.state_dir)
         if not loopback:
             log.warning("listening on a non-loopback address: every request needs the token "
@@ -203,7 +221,6 @@ class Daemon:
             tmp = self.cfg.ready_file.with_name(self.cfg.ready_file.name + ".tmp")
             tmp.write_text(self.url + "\n", encoding="utf-8")
             tmp.replace(self.cfg.ready_file)
-        return self.url
 
     def alive(self) -> bool:
         """Both threads still running."""
@@ -214,8 +231,9 @@ class Daemon:
         """Stop the running job (segment boundary, laser off), then the HTTP server."""
         self.stopping.set()
         if self.worker is not None:
-            self.worker.terminate(hurry)
-            self.worker.finished.wait(timeout_s)
+            self.worker.handle.terminate(hurry)
+            if self.worker.ident is not None:  # started
+                self.worker.join(timeout_s)
         if self._server is not None:
             self._server.should_exit = True
         if self._thread is not None:
@@ -247,7 +265,7 @@ def run_foreground(cfg: ServeConfig) -> int:
         signals.append(signum)
         wake.set()
         if len(signals) > 1 and daemon.worker is not None:
-            daemon.worker.terminate(hurry=True)
+            daemon.worker.handle.terminate(hurry=True)
 
     previous = {s: signal.signal(s, on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
     try:

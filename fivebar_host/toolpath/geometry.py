@@ -26,6 +26,7 @@ import math
 from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 from numpy.typing import NDArray
@@ -39,6 +40,7 @@ ARC = 2
 
 #: Largest coordinate accepted anywhere, mm. Anything larger is a unit mistake or garbage.
 MAX_COORD_MM = 1.0e6
+_PAD = (0.0,) * 8  # primitive parameters are padded to 8
 
 
 @dataclass(frozen=True)
@@ -174,8 +176,21 @@ class DrawingBuilder:
         self._open = True
 
     def add(self, kind: int, params: tuple[float, ...], line: int) -> None:
-        """Append one primitive to the open stroke (params padded to 8)."""
-        self.add_many([(kind, params)], line)
+        """Append one primitive to the open stroke (params padded to 8): `add_many` of one,
+        without its lists (the G-code reader adds one a line)."""
+        if not self._open:
+            raise RuntimeError("add() before begin_stroke()")
+        if self.limit is not None and len(self.kinds) >= self.limit:
+            self._over_limit(line)
+        self.kinds.append(kind)
+        self.params.extend(params + _PAD[len(params):])
+        self.strokes.append(len(self.stroke_source) - 1)
+        self.lines.append(line)
+        self.matrix_ids.append(-1)
+
+    def _over_limit(self, line: int) -> NoReturn:
+        raise InputError(f"the drawing has more than {self.limit:,} path segments (lines, "
+                         f"curves, arcs), the limit{self.limit_hint}", self.file, line)
 
     def add_many(self, prims: list[tuple[int, tuple[float, ...]]], line: int,
                  matrix: int = -1) -> None:
@@ -185,13 +200,11 @@ class DrawingBuilder:
             raise RuntimeError("add() before begin_stroke()")
         n = len(prims)
         if self.limit is not None and len(self.kinds) + n > self.limit:
-            raise InputError(f"the drawing has more than {self.limit:,} path segments (lines, "
-                             f"curves, arcs), the limit{self.limit_hint}", self.file, line)
+            self._over_limit(line)
         stroke = len(self.stroke_source) - 1
-        pad = (0.0,) * 8
         for kind, p in prims:
             self.kinds.append(kind)
-            self.params.extend(p + pad[:8 - len(p)] if len(p) < 8 else p)
+            self.params.extend(p + _PAD[len(p):])
         self.strokes.extend([stroke] * n)
         self.lines.extend([line] * n)
         self.matrix_ids.extend([matrix] * n)
@@ -492,7 +505,10 @@ def bbox(drawing: Drawing, rel_tol: float = 1e-4) -> tuple[float, float, float, 
         p = drawing.params[arc]
         r = np.linalg.svd(p[:, 2:6].reshape(-1, 2, 2), compute_uv=False)[:, 0]
         ext_pts = np.concatenate((ext_pts, p[:, 0:2] + r[:, None], p[:, 0:2] - r[:, None]))
-    span = float(np.ptp(ext_pts, axis=0).max()) if ext_pts.size else 0.0
+    # (column by column: numpy's reductions over the long axis of an (N, 2) array are
+    # some 30× slower)
+    span = float(np.maximum(np.ptp(ext_pts[:, 0]), np.ptp(ext_pts[:, 1]))) if ext_pts.size \
+        else 0.0
     tol = max(span * rel_tol, 1e-9)
     line = drawing.kind == LINE
     pts = [drawing.params[line][:, 0:4].reshape(-1, 2)]  # exact end points
@@ -504,9 +520,8 @@ def bbox(drawing: Drawing, rel_tol: float = 1e-4) -> tuple[float, float, float, 
         poly = flatten(curves, tol).points
         pts += [poly - tol, poly + tol]  # chords are within tol of the curves
     allp = np.concatenate(pts)
-    lo = allp.min(axis=0)
-    hi = allp.max(axis=0)
-    return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
+    x, y = allp[:, 0], allp[:, 1]
+    return float(x.min()), float(y.min()), float(x.max()), float(y.max())
 
 
 def nearest_distance(kind: NDArray[np.int8], params: FloatArray, q: FloatArray,

@@ -59,38 +59,38 @@ def _greedy(starts: FloatArray, ends: FloatArray, start: FloatArray) -> tuple[In
     g = max(1, int(np.sqrt(n)))
     h = span / g * (1 + 1e-9)
     cij = np.minimum(((pts - lo) / h).astype(np.int64), g - 1)
-    cells: dict[tuple[int, int], list[int]] = {}
-    for c, (ci, cj) in enumerate(cij.tolist()):
-        cells.setdefault((ci, cj), []).append(c)
+    cell_of = (cij[:, 0] * g + cij[:, 1]).tolist()  # cell (i, j) is cells[i·g + j]
+    cells: list[list[int]] = [[] for _ in range(g * g)]
+    for c, cell in enumerate(cell_of):
+        cells[cell].append(c)
     xs = pts[:, 0].tolist()
     ys = pts[:, 1].tolist()
     px, py = float(start[0]), float(start[1])
+    lx, ly = float(lo[0]), float(lo[1])
     for k in range(n):
-        ci = min(max(int((px - lo[0]) / h), 0), g - 1)
-        cj = min(max(int((py - lo[1]) / h), 0), g - 1)
-        best, best_d = -1, float("inf")
+        ci = min(max(int((px - lx) / h), 0), g - 1)
+        cj = min(max(int((py - ly) / h), 0), g - 1)
+        best, best_d, best_d2 = -1, float("inf"), float("inf")  # best_d2 = best_d²
         r = 0
         while r <= g:
             if best >= 0 and (r - 1) * h > best_d:
                 break
-            for i in range(ci - r, ci + r + 1):
-                if i < 0 or i >= g:
-                    continue
+            for i in range(max(ci - r, 0), min(ci + r, g - 1) + 1):
                 step = 1 if abs(i - ci) == r else 2 * r
                 for j in range(cj - r, cj + r + 1, max(step, 1)):
-                    lst = cells.get((i, j))
-                    if not lst:
+                    if j < 0 or j >= g:
                         continue
-                    for c in lst:
+                    for c in cells[i * g + j]:
                         d = (xs[c] - px) ** 2 + (ys[c] - py) ** 2
-                        if d < best_d * best_d or best < 0:
+                        if d < best_d2 or best < 0:
                             best, best_d = c, d**0.5
+                            best_d2 = best_d * best_d
             r += 1
         p = best % n
         order[k] = p
         rev[k] = best >= n
-        for c in (p, p + n):
-            cells[(int(cij[c, 0]), int(cij[c, 1]))].remove(c)
+        cells[cell_of[p]].remove(p)
+        cells[cell_of[p + n]].remove(p + n)
         q = p if rev[k] else p + n  # leave from the other end
         px, py = xs[q], ys[q]
     return order, rev
@@ -108,26 +108,27 @@ def _two_opt(starts: FloatArray, ends: FloatArray, order: IntArray, rev: BoolArr
         s = np.where(rev[:, None], ends[order], starts[order])
         e = np.where(rev[:, None], starts[order], ends[order])
         # Padded node arrays: index 0 is the start (its "end" is the start position), index
-        # n+1 the park position (its "start"); tour paths are 1..n.
-        sp = np.concatenate((start[None], s, (end if end is not None else s[-1])[None]))
-        ep = np.concatenate((start[None], e, e[-1][None]))
+        # n+1 the park position (its "start"); tour paths are 1..n. Coordinates apart
+        # (x, y): every index range below is a slice, no gathered copies.
+        sx, sy = np.concatenate((start[None], s, (end if end is not None else s[-1])[None])).T
+        ex, ey = np.concatenate((start[None], e, e[-1][None])).T
+        # the tour's own edges: into path i (from i−1) and out of path j (to j+1), i, j = 1..n
+        edge_in = np.hypot(sx[1:n + 1] - ex[:n], sy[1:n + 1] - ey[:n])
+        edge_out = np.hypot(sx[2:] - ex[1:n + 1], sy[2:] - ey[1:n + 1])
         best_gain = np.zeros(n + 2)
         best_j = np.full(n + 2, -1, dtype=np.int64)
-        i = np.arange(1, n + 1)
         for w in range(min(window, n)):
-            j = i + w
-            ok = j <= n
-            ii, jj = i[ok], j[ok]
-            old = np.hypot(*(sp[ii] - ep[ii - 1]).T)
-            new = np.hypot(*(ep[jj] - ep[ii - 1]).T)
-            has_next = (jj < n) | (end is not None)
-            nxt = np.minimum(jj + 1, n + 1)
-            old = old + np.where(has_next, np.hypot(*(sp[nxt] - ep[jj]).T), 0.0)
-            new = new + np.where(has_next, np.hypot(*(sp[nxt] - sp[ii]).T), 0.0)
+            m = n - w  # blocks i..j = i + w with i = 1..m
+            ii, jj = slice(1, m + 1), slice(1 + w, n + 1)
+            i0, j1 = slice(0, m), slice(2 + w, n + 2)  # i − 1 and j + 1
+            has_next = (np.arange(1 + w, n + 1) < n) | (end is not None)
+            old = edge_in[:m] + np.where(has_next, edge_out[w:], 0.0)
+            new = np.hypot(ex[jj] - ex[i0], ey[jj] - ey[i0]) + np.where(
+                has_next, np.hypot(sx[j1] - sx[ii], sy[j1] - sy[ii]), 0.0)
             gain = old - new
-            better = gain > best_gain[ii] + 1e-9
-            best_gain[ii[better]] = gain[better]
-            best_j[ii[better]] = jj[better]
+            better = np.flatnonzero(gain > best_gain[ii] + 1e-9)
+            best_gain[better + 1] = gain[better]
+            best_j[better + 1] = better + 1 + w
         cand = np.flatnonzero(best_gain > 1e-9)
         if cand.size == 0:
             break

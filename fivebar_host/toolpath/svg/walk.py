@@ -349,7 +349,8 @@ class Walker:
         n0 = len(self.b.kinds)
         if c.clip is None:
             mats = self.b.matrices
-            if not mats or not np.array_equal(mats[-1], c.matrix):
+            # (the same context's matrix is the same object: no element-wise comparison)
+            if not mats or (mats[-1] is not c.matrix and not np.array_equal(mats[-1], c.matrix)):
                 mats.append(c.matrix)
             mid = len(mats) - 1
         else:
