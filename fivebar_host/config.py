@@ -12,14 +12,15 @@ import json
 import math
 import tomllib
 from collections.abc import Iterable
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from fivebar_host.errors import FivebarError
+from fivebar_host.errors import FivebarError, InputError
 from fivebar_host.protocol import BASE_BAUD, BAUD_RATES
+from fivebar_host.toolpath.fonts.library import FontLibrary, TextConfig
 from kinematics.fivebar import WORKING_MODES, FiveBar
 
 #: Assembly modes: "+" iff the pen lies left of the directed line R1→R2 (elbow to elbow).
@@ -151,6 +152,7 @@ class Profile:
     source: str
     tool: str = "laser"  # "pen" (a servo pen lift, `pen` set) or "laser"
     pen: Pen | None = None
+    text: TextConfig = field(default_factory=TextConfig)  # `[text]`: the fonts of SVG text
 
 
 class _Table:
@@ -241,7 +243,11 @@ class _Table:
                               + did_you_mean(extra, self.used))
 
 
-KNOWN_TABLES = ("geometry", "motors", "kinematics", "motion", "laser", "serial", "tool", "pen")
+KNOWN_TABLES = ("geometry", "motors", "kinematics", "motion", "laser", "serial", "tool", "pen",
+                "text")
+#: `[text]` keys naming the font of each CSS generic family (TOML keys cannot hold "-").
+GENERIC_KEYS = {"serif": "serif", "sans_serif": "sans-serif", "cursive": "cursive",
+                "fantasy": "fantasy", "monospace": "monospace"}
 TOOLS = ("pen", "laser")
 #: Pulse range a hobby servo takes (the firmware refuses others).
 SERVO_RANGE_US = (500, 2500)
@@ -275,6 +281,49 @@ def _parse_pen(doc: dict[str, Any], source: str) -> tuple[str, Pen | None]:
         raise ConfigError(f"{p.where('down_position')}: must differ from up_position")
     return kind, Pen(smin, smax, pos["up_position"], pos["down_position"], rates["up_rate"],
                      rates["down_rate"], delays["up_delay_ms"], delays["down_delay_ms"], z)
+
+
+def _parse_text(doc: dict[str, Any], source: str) -> TextConfig:
+    """The `[text]` table (optional; docs/text.md): the font of each generic family, the
+    default family, the fallback face, more names (`aliases`) and `font_dirs`. Every name
+    must resolve to a bundled font or an existing SVG font file."""
+    if "text" not in doc:
+        return TextConfig(source=source)
+    t = _Table(doc, "text", source)
+    base = TextConfig()
+
+    def text_key(key: str, default: str) -> str:
+        if key not in t.raw:
+            return default
+        v = t.get(key)
+        if not isinstance(v, str):
+            raise ConfigError(f"{t.where(key)}: must be a string; got {v!r}")
+        return v
+
+    generic = {g: text_key(k, base.generic[g]) for k, g in GENERIC_KEYS.items()}
+    aliases = t.get("aliases") if "aliases" in t.raw else {}
+    dirs = t.get("font_dirs") if "font_dirs" in t.raw else []
+    if not isinstance(aliases, dict) or not all(isinstance(v, str) for v in aliases.values()):
+        raise ConfigError(f"{t.where('aliases')}: must be a table of names to fonts; got "
+                          f"{aliases!r}")
+    if not isinstance(dirs, list) or not all(isinstance(v, str) for v in dirs):
+        raise ConfigError(f"{t.where('font_dirs')}: must be a list of directories; got {dirs!r}")
+    cfg = TextConfig(generic, text_key("fallback", base.fallback),
+                     text_key("default", base.default), dict(aliases), tuple(dirs), source)
+    t.done()
+    lib = FontLibrary(cfg)
+    names = [(k, generic[g]) for k, g in GENERIC_KEYS.items()] + [
+        ("default", cfg.default), ("fallback", cfg.fallback)] + [
+        (f"aliases.{k}", v) for k, v in cfg.aliases.items()]
+    for key, name in names:
+        try:
+            ok = not name or lib.known(name)
+        except InputError as e:
+            raise ConfigError(f"{t.where(key)}: {e.detail}") from e
+        if not ok:
+            raise ConfigError(f"{t.where(key)} = {name!r} names no bundled font, [text] alias or "
+                              "SVG font file (docs/text.md lists the names)")
+    return cfg
 
 
 def require_tool(profile: Profile, laser: bool) -> None:
@@ -406,7 +455,8 @@ def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
     )
     se.done()
     tool, pen = _parse_pen(doc, source)
-    return Profile(geometry, motors, kin, motion, laser, serial, source, tool, pen)
+    return Profile(geometry, motors, kin, motion, laser, serial, source, tool, pen,
+                   _parse_text(doc, source))
 
 
 def _read_toml(p: Path) -> dict[str, Any]:
@@ -480,6 +530,8 @@ def _toml_value(v: Any) -> str:
         return json.dumps(v)
     if isinstance(v, list):
         return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{json.dumps(k)} = {_toml_value(x)}" for k, x in v.items()) + "}"
     return repr(v)
 
 
@@ -506,4 +558,9 @@ def describe(profile: Profile) -> str:
             mot = profile.motors
             lines.append(f"  # steps_per_rev = {mot.steps_per_rev:g} "
                          f"({math.degrees(mot.rad_per_step):.5f}° per step)")
+    tx = profile.text
+    lines.append("[text]")
+    lines.extend(f"  {k} = {tx.generic[g]!r}" for k, g in GENERIC_KEYS.items())
+    lines += [f"  default = {tx.default!r}", f"  fallback = {tx.fallback!r}",
+              f"  font_dirs = {list(tx.font_dirs)!r}", f"  aliases = {dict(tx.aliases)!r}"]
     return "\n".join(lines)

@@ -82,7 +82,7 @@ def test_plot_without_port_or_dry_run_says_what_to_give() -> None:
 @pytest.mark.parametrize(("content", "suffix", "message"), [
     ("<svg xmlns='http://www.w3.org/2000/svg'><path d='M0 0 L1 1'></svg>", ".svg",
      "malformed XML"),
-    ("<svg xmlns='http://www.w3.org/2000/svg' width='10mm' height='10mm'><text>x</text></svg>",
+    ("<svg xmlns='http://www.w3.org/2000/svg' width='10mm' height='10mm'><text> </text></svg>",
      ".svg", "no strokes"),
     ("<svg xmlns='http://www.w3.org/2000/svg' width='10mm' height='10mm'>"
      "<path d='M0 0 L1e999 0'/></svg>", ".svg", "not finite or larger than"),

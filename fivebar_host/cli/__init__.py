@@ -19,6 +19,7 @@ from fivebar_host.cli import (  # noqa: F401  (commands)
     plot,
     pose,
     serve,
+    text,
 )
 from fivebar_host.cli.common import main
 

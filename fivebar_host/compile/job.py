@@ -114,8 +114,9 @@ def _read(p: Path, layers: tuple[str, ...], max_segments: float | None,
     """`read_drawing` itself."""
     suffix = p.suffix.lower()
     limit = DEFAULT_MAX_SEGMENTS if max_segments is None else int(max_segments)
+    text = profile.text if profile is not None else None  # the fonts of SVG <text>
     if suffix == ".svg":
-        return read_svg(p, layers or None, max_segments=limit)
+        return read_svg(p, layers or None, max_segments=limit, text=text)
     if suffix in GCODE_SUFFIXES:
         if layers:
             raise InputError("--layer applies to SVG files only", str(p))
@@ -125,7 +126,7 @@ def _read(p: Path, layers: tuple[str, ...], max_segments: float | None,
     except OSError as e:
         raise InputError(f"cannot read file: {e.strerror or e}", str(p)) from e
     if head.startswith((b"<?xml", b"<svg", b"<!--", b"<!DOCTYPE")):
-        return read_svg(p, layers or None, max_segments=limit)
+        return read_svg(p, layers or None, max_segments=limit, text=text)
     return read_gcode(p, strict=strict, **gcode_tool(profile))
 
 

@@ -123,14 +123,15 @@ def read_upload(data: bytes, name: str, layers: tuple[str, ...],
     if not data.strip():
         raise SubmitError("empty_upload", f"{name}: the upload is empty", status=400)
     suffix = _suffix(name)
+    text = profile.text if profile is not None else None  # the fonts of SVG <text>
     if suffix in SVG_SUFFIXES:
-        return read_svg(data, layers or None, file=name)
+        return read_svg(data, layers or None, file=name, text=text)
     if suffix in GCODE_SUFFIXES or not data.lstrip()[:512].startswith(
             (b"<?xml", b"<svg", b"<!--", b"<!DOCTYPE")):
         if layers:
             raise InputError("--layer applies to SVG files only", name)
         return read_gcode(data, file=name, **gcode_tool(profile))
-    return read_svg(data, layers or None, file=name)
+    return read_svg(data, layers or None, file=name, text=text)
 
 
 @dataclass(frozen=True)

@@ -55,6 +55,23 @@ class SourceInfo:
 
 
 @dataclass(frozen=True)
+class TextInfo:
+    """One drawn SVG `<text>` element, for the dry run: its source (index into
+    `Drawing.sources`), element and line, the text (shortened), the faces that drew it (in
+    order of first use; the profile's fallback marked), the font-size in the drawing's mm,
+    and its glyph and stroke counts."""
+
+    source: int
+    element: str
+    line: int
+    text: str
+    fonts: tuple[str, ...]
+    size_mm: float
+    glyphs: int
+    strokes: int
+
+
+@dataclass(frozen=True)
 class Dwell:
     """A pause (G-code `G4`) at the start (`after` False) or the end (`after` True) of stroke
     `stroke`: `seconds` long, with the tool on (`tool_on`: laser at `power`, a fraction of
@@ -77,7 +94,7 @@ class Drawing:
     int64 (source line, 0 if unknown). Per stroke: `stroke_source` (S,) index into `sources`,
     `stroke_power` (S,) laser power as a fraction 0..1 of the profile's power, `stroke_feed_mm_s`
     (S,) requested feed (NaN: the profile's draw feed). `dwells`: the G-code dwells, in file
-    order (none for an SVG).
+    order (none for an SVG). `texts`: the SVG text elements drawn (`TextInfo`).
     """
 
     file: str
@@ -93,6 +110,7 @@ class Drawing:
     page_size_mm: tuple[float, float] | None = None
     warnings: list[str] = field(default_factory=list)
     dwells: list[Dwell] = field(default_factory=list)
+    texts: list[TextInfo] = field(default_factory=list)
 
     @property
     def n_strokes(self) -> int:
@@ -110,7 +128,7 @@ class Drawing:
         return Drawing(self.file, self.kind, transform(self.kind, self.params, a, b),
                        self.stroke, self.line, self.stroke_source, self.stroke_power,
                        self.stroke_feed_mm_s, self.sources, self.page_height_mm,
-                       self.page_size_mm, self.warnings, self.dwells)
+                       self.page_size_mm, self.warnings, self.dwells, self.texts)
 
 
 class DrawingBuilder:
@@ -136,6 +154,7 @@ class DrawingBuilder:
         self.sources: list[SourceInfo] = []
         self.warnings: list[str] = []
         self.dwells: list[Dwell] = []
+        self.texts: list[TextInfo] = []
         self.matrices: list[NDArray[np.float64]] = []
         self.matrix_ids = array("q")
         self._open = False
@@ -190,6 +209,34 @@ class DrawingBuilder:
         self.lines.extend([line] * n)
         self.matrix_ids.extend([matrix] * n)
 
+    def add_strokes(self, source: int, kinds: NDArray[np.int8], params: FloatArray,
+                    starts: IntArray, line: int, matrix: int) -> None:
+        """Append whole strokes at once (a placed glyph): primitives `kinds` (N,), `params`
+        (N, 8), stroke `starts` (S,) into them, all from source line `line` and mapped by
+        `self.matrices[matrix]` at `build`; each stroke has at least one primitive."""
+        n = int(kinds.shape[0])
+        if n == 0:
+            return
+        if self.limit is not None and len(self.kinds) + n > self.limit:
+            raise InputError(f"the drawing has more than {self.limit:,} path segments (lines, "
+                             f"curves, arcs), the limit{self.limit_hint}", self.file, line)
+        if self._open and (not self.strokes or self.strokes[-1] != len(self.stroke_source) - 1):
+            self.stroke_source.pop()  # an empty stroke left open before
+            self.stroke_power.pop()
+            self.stroke_feed.pop()
+        first = len(self.stroke_source)
+        s = int(starts.shape[0])
+        self.stroke_source.extend([source] * s)
+        self.stroke_power.extend([1.0] * s)
+        self.stroke_feed.extend([math.nan] * s)
+        ids = first + np.repeat(np.arange(s), np.diff(np.append(starts, n)))
+        self.kinds.frombytes(np.ascontiguousarray(kinds, dtype=np.int8).tobytes())
+        self.params.frombytes(np.ascontiguousarray(params, dtype=np.float64).tobytes())
+        self.strokes.frombytes(ids.astype(np.int64).tobytes())
+        self.lines.frombytes(np.full(n, line, dtype=np.int64).tobytes())
+        self.matrix_ids.frombytes(np.full(n, matrix, dtype=np.int64).tobytes())
+        self._open = True
+
     def build(self, page_height_mm: float | None = None,
               page_size_mm: tuple[float, float] | None = None) -> Drawing:
         if self._open and (not self.strokes or self.strokes[-1] != len(self.stroke_source) - 1):
@@ -219,6 +266,7 @@ class DrawingBuilder:
             page_size_mm=page_size_mm,
             warnings=self.warnings,
             dwells=self.dwells,
+            texts=self.texts,
         )
 
 

@@ -81,6 +81,29 @@ def link_lines(job: Job, profile: Profile) -> list[str]:
             f"the queue never runs dry{faster}"]
 
 
+#: Text elements listed one by one in the report; the rest are counted.
+TEXTS_LISTED = 8
+
+
+def text_lines(job: Job) -> list[str]:
+    """One line per drawn SVG `<text>` (the first `TEXTS_LISTED`): the element, its line,
+    its text, the faces that drew it and its size on the machine (font-size, after the
+    placement's scale)."""
+    texts = job.drawing.texts
+    out = []
+    for t in texts[:TEXTS_LISTED]:
+        size = t.size_mm * job.placement.scale
+        src = f" (source #{t.source})" if t.source >= 0 else ""
+        out.append(f"text          {t.element} line {t.line}{src}: {t.text!r} in "
+                   f"{', '.join(t.fonts) or 'no font (nothing drawn)'}, {size:.1f} mm, "
+                   f"{t.glyphs} glyphs, {t.strokes} strokes")
+    if len(texts) > TEXTS_LISTED:
+        rest = texts[TEXTS_LISTED:]
+        out.append(f"text          … and {len(rest)} more text elements "
+                   f"({sum(t.glyphs for t in rest)} glyphs)")
+    return out
+
+
 def report_lines(job: Job, nbar: NbarOpinion | None = None, laser: bool = False,
                  profile: Profile | None = None, copies: Copies | None = None) -> list[str]:
     """The dry-run report: paths, segments, lengths, time, deviation, margins, mode, tool (pen,
@@ -128,6 +151,7 @@ def report_lines(job: Job, nbar: NbarOpinion | None = None, laser: bool = False,
                  f"{deg(mm[2]):.1f}°")
     if profile is not None:
         lines.extend(link_lines(job, profile))
+    lines.extend(text_lines(job))
     lines.extend(pause_lines(job))
     lines.extend(f"mode change {k:<2d}{mc.describe(job.n_paths)}"
                  for k, mc in enumerate(job.mode_changes, start=1))

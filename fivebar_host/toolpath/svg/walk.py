@@ -23,12 +23,14 @@ import numpy as np
 from shapely.geometry.base import BaseGeometry
 
 from fivebar_host.errors import InputError
-from fivebar_host.toolpath.geometry import DrawingBuilder
+from fivebar_host.toolpath.fonts.library import FontLibrary
+from fivebar_host.toolpath.geometry import DrawingBuilder, TextInfo
 from fivebar_host.toolpath.svg import clip
 from fivebar_host.toolpath.svg.css import StyleSheet
 from fivebar_host.toolpath.svg.markers import Markers, expand_shorthand
 from fivebar_host.toolpath.svg.paint import INHERITED, inherit, number_or_percent, painted
 from fivebar_host.toolpath.svg.shapes import SHAPES, shape_subpaths
+from fivebar_host.toolpath.svg.text import CharLayout, draw_text
 from fivebar_host.toolpath.svg.undrawn import Undrawn
 from fivebar_host.toolpath.svg.units import Lengths, numbers, viewport_transform
 from fivebar_host.toolpath.svg.xmltree import INKSCAPE_NS, XLINK_NS, Node
@@ -37,7 +39,8 @@ from fivebar_host.toolpath.svg.xmltree import INKSCAPE_NS, XLINK_NS, Node
 NOT_RENDERED = {"defs", "symbol", "clipPath", "mask", "marker", "pattern", "metadata", "title",
                 "desc", "style", "script", "linearGradient", "radialGradient", "filter",
                 "namedview", "foreignObject"}
-TEXT = ("text", "flowRoot")
+#: Text the reader does not draw: Inkscape's flowed text (not SVG; browsers show nothing).
+FLOWED = ("flowRoot",)
 #: Elements instantiated through `<use>` before the file is refused (exponential nesting).
 MAX_USE_VISITS = 500_000
 
@@ -64,8 +67,12 @@ class Collected:
 
 class Walker:
     def __init__(self, file: str, layers: Sequence[str] | None, language: str,
-                 max_segments: int | None = None, limit_hint: str = "") -> None:
+                 max_segments: int | None = None, limit_hint: str = "",
+                 fonts: FontLibrary | None = None) -> None:
         self.file = file
+        self.fonts = fonts or FontLibrary()
+        #: each drawn text element's character layout, when a caller asks (`read_svg`)
+        self.layouts: list[CharLayout] | None = None
         self.layers = [s for s in (layers or []) if s]
         self.language = language.lower()
         self.found_layers: list[tuple[str | None, str | None]] = []
@@ -83,6 +90,11 @@ class Walker:
         self.collector: list[Collected] | None = None
         self.collect_all_paint = False
         self.region: Callable[[Node, dict[str, str], Ctx], Ctx] | None = None
+
+    @property
+    def texts(self) -> list[TextInfo]:
+        """The text elements drawn so far (`svg.text`), kept by the builder."""
+        return self.b.texts
 
     # ---------------------------------------------------------------- bookkeeping
     def note(self, kind: str, node: Node, message: str) -> None:
@@ -209,7 +221,9 @@ class Walker:
             self.walk_use(node, c)
         elif tag in SHAPES:
             self.shape(node, c)
-        elif tag in TEXT:
+        elif tag == "text":
+            draw_text(self, node, c)
+        elif tag in FLOWED:
             if self.collector is None and c.props["visibility"] == "visible":
                 self.text_nodes.append(node)
         elif self.collector is None:
@@ -342,8 +356,15 @@ class Walker:
             self.emit(node, c, res.subpaths)
         self.markers.draw(node, c, res.subpaths)
 
-    def emit(self, node: Node, c: Ctx, subpaths: clip.Subpaths) -> None:
-        src = self.b.add_source(node.get("id"), node.line, node.tag, c.layer)
+    def emit(self, node: Node, c: Ctx, subpaths: clip.Subpaths, tag: str | None = None) -> int:
+        """Draw an element's subpaths (user units) as one source, clipped by the context's
+        region; into the collector when one is set. The source's index, −1 for none."""
+        if self.collector is not None:
+            subs = clip.transform_subpaths(subpaths, c.matrix)
+            clip.check_finite(subs, self.file, node.line, node.tag)
+            self.collector.append(Collected(node, c, subs))
+            return -1
+        src = self.b.add_source(node.get("id"), node.line, tag or node.tag, c.layer)
         n0 = len(self.b.kinds)
         if c.clip is None:
             mats = self.b.matrices
@@ -362,6 +383,8 @@ class Walker:
             self.b.add_many(sub, node.line, mid)
         if len(self.b.kinds) == n0:
             self.b.sources.pop()
+            return -1
+        return src
 
 
 def root_props() -> dict[str, str]:
