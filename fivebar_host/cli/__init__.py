@@ -13,6 +13,7 @@ from fivebar_host.cli import (  # noqa: F401  (commands)
     bridge,
     calibrate,
     design,
+    flash,
     grbl,
     machine,
     pen,
