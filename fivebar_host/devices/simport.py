@@ -35,7 +35,7 @@ URL options: `fivebar-sim://?trace=PATH&realtime=1&endstops=A,B&machine=NAME&res
 - `bootloader=optiboot|atmegaboot`: the chip boots a real bootloader (firmware/Makefile
   `bootloaders`: Optiboot at 115200 built from Debian's arduino-core-avr source, the old
   ATmegaBOOT at 57600) at its boot section, as an Uno or an old Nano does, with its
-  application flash erased (`app=fivebar`: already holding the fivebar firmware); `fivebar
+  application flash erased (`app=firmware`: already holding the fivebar firmware); `fivebar
   flash` and avrdude program it over the pty, `port.flash_image()` reads the flash back.
   Emulation then runs in real time (the bootloaders' timeouts are in wall-clock terms for
   the programmer). `chip=atmega168` puts Optiboot on an ATmega168 (another signature);
@@ -68,9 +68,7 @@ from __future__ import annotations
 
 import atexit
 import math
-import os
 import random
-import re
 import tempfile
 import threading
 import urllib.parse
@@ -81,6 +79,12 @@ from typing import Any
 import serial
 
 from fivebar_host.devices.sim import Emulator, EmulatorError, ensure_built
+from fivebar_host.devices.simboard import (
+    BOOTLOADERS,
+    dump_memories,
+    harness_args,
+    parse_board_option,
+)
 from fivebar_host.devices.simtrace import Trace, read_trace
 
 SCHEME = "fivebar-sim"
@@ -88,13 +92,6 @@ SCHEME = "fivebar-sim"
 #: Options that configure the harness process (fixed by a machine's first open).
 HARNESS_OPTIONS = ("trace", "realtime", "endstops", "bootloader", "chip", "app", "held",
                    "stuck_page", "state")
-#: The bootloaders the emulator boots: hex file (firmware/build/boot/) per chip.
-BOOTLOADERS = {("optiboot", "atmega328p"): "optiboot_atmega328.hex",
-               ("optiboot", "atmega168"): "optiboot_atmega168.hex",
-               ("atmegaboot", "atmega328p"): "ATmegaBOOT_168_atmega328.hex"}
-CHIPS = ("atmega328p", "atmega168")
-#: Where machines are kept between runs unless `state=` or $FIVEBAR_SIM_STATE says.
-STATE_ENV = "FIVEBAR_SIM_STATE"
 #: Fault options: what happens after the N-th line, and the harness command for it.
 FAULTS = {"disconnect_after": None, "reset_after": "reset", "power_cut_after": "power",
           "stall_after": "hang"}
@@ -194,7 +191,7 @@ def parse_sim_url(url: str) -> SimOptions:
             opts.seed = int(value)
         elif key == "true":
             opts.true = parse_true_geometry(value, url)
-        elif not _parse_board_option(opts, key, value, url):
+        elif not parse_board_option(opts, key, value, url):
             raise ValueError(f"{url}: unknown option {key!r} (known: {', '.join(_KNOWN)})")
     if opts.bootloader is None and (opts.chip != "atmega328p" or "app" in given):
         raise ValueError(f"{url}: chip and app describe a chip with a bootloader: add "
@@ -204,47 +201,6 @@ def parse_sim_url(url: str) -> SimOptions:
                          + ", ".join(f"{b} on {c}" for b, c in BOOTLOADERS) + ")")
     opts.given = frozenset(given & set(HARNESS_OPTIONS))
     return opts
-
-
-def _flag(value: str, key: str, url: str) -> bool:
-    if value not in ("0", "1"):
-        raise ValueError(f"{url}: {key} must be 0 or 1, got {value!r}")
-    return value == "1"
-
-
-def _parse_board_option(opts: SimOptions, key: str, value: str, url: str) -> bool:
-    """The chip, bootloader and between-runs options; False for an unknown key."""
-    if key == "bootloader":
-        if value not in ("optiboot", "atmegaboot"):
-            raise ValueError(f"{url}: bootloader must be optiboot or atmegaboot, got {value!r}")
-        opts.bootloader = value
-    elif key == "chip":
-        if value not in CHIPS:
-            raise ValueError(f"{url}: chip must be one of {', '.join(CHIPS)}, got {value!r}")
-        opts.chip = value
-    elif key == "app":
-        if value not in ("empty", "fivebar"):
-            raise ValueError(f"{url}: app must be empty or fivebar, got {value!r}")
-        opts.app = value
-    elif key in ("held", "power_loss", "fresh"):
-        setattr(opts, key, _flag(value, key, url))
-    elif key == "stuck_page":
-        if not value.isdigit() or int(value) >= 256:
-            raise ValueError(f"{url}: stuck_page must be a flash page 0-255, got {value!r}")
-        opts.stuck_page = int(value)
-    elif key == "usb":
-        m = re.fullmatch(r"([0-9a-fA-F]{4}):([0-9a-fA-F]{4})", value)
-        if m is None:
-            raise ValueError(f"{url}: usb must be VID:PID in hex (2341:0043), got {value!r}")
-        opts.usb = (int(m.group(1), 16), int(m.group(2), 16))
-    elif key == "state":
-        if not value:
-            raise ValueError(f"{url}: state must be a directory or off")
-        opts.state = value
-    else:
-        return False
-    return True
-
 
 
 class SimMachine:
@@ -297,18 +253,6 @@ class SimMachine:
         return self.emulator.stop()
 
 
-def dump_memories(emu: Emulator, opts: SimOptions) -> tuple[bytes, bytes]:
-    """The flash and EEPROM of a harness with a bootloader (its `dump` command)."""
-    path = emu.dump_path
-    if opts.bootloader is None or path is None:
-        raise serial.SerialException(f"{SCHEME}: reading the flash needs bootloader=")
-    try:
-        emu.control("dump")
-    except EmulatorError as e:
-        raise serial.SerialException(f"{SCHEME}: {e}") from e
-    return path.read_bytes(), Path(str(path) + ".eeprom").read_bytes()
-
-
 _MACHINES: dict[str, SimMachine] = {}
 _MACHINES_LOCK = threading.Lock()
 
@@ -332,42 +276,6 @@ def forget_machines() -> None:
 atexit.register(forget_machines)
 
 
-def state_path(opts: SimOptions) -> Path | None:
-    """The file a machine is kept in between runs (module doc), or None (`state=off`)."""
-    where = opts.state or os.environ.get(STATE_ENV) or str(
-        Path(os.environ.get("XDG_STATE_HOME") or Path.home() / ".local" / "state")
-        / "fivebar" / "sim")
-    if where == "off":
-        return None
-    name = re.sub(r"[^A-Za-z0-9_.-]", "_", opts.machine or "default")
-    kind = f"{opts.bootloader}-{opts.chip}" if opts.bootloader else "firmware"
-    return Path(where).expanduser() / f"{name}-{kind}.state"
-
-
-def _harness_args(opts: SimOptions, work: Path) -> tuple[list[str], bool]:
-    """The harness options for the chip, bootloader, faults and state of ``opts``, and
-    whether the firmware is loaded as the application."""
-    from fivebar_host.devices.sim import firmware_dir
-
-    args: list[str] = []
-    app = True
-    if opts.bootloader is not None:
-        boot = firmware_dir() / "build" / "boot" / BOOTLOADERS[(opts.bootloader, opts.chip)]
-        args += ["-m", opts.chip, "-B", str(boot), "-F", str(work / "flash.bin")]
-        app = opts.app == "fivebar"
-    if opts.held:
-        args.append("-H")
-    if opts.stuck_page is not None:
-        args += ["-X", str(opts.stuck_page)]
-    state = state_path(opts)
-    if state is not None:
-        state.parent.mkdir(parents=True, exist_ok=True)
-        if opts.fresh:
-            state.unlink(missing_ok=True)
-        args += ["-S", str(state), *(["-L"] if opts.power_loss else [])]
-    return args, app
-
-
 def _new_emulator(opts: SimOptions) -> tuple[Emulator, Path]:
     """Build if needed and make (not start) a harness for ``opts``; returns it and its trace
     path."""
@@ -379,7 +287,7 @@ def _new_emulator(opts: SimOptions) -> tuple[Emulator, Path]:
     trace = opts.trace or work / "pins.trace"
     a, b = opts.endstops
     try:
-        extra, app = _harness_args(opts, work)
+        extra, app = harness_args(opts, work)
     except OSError as e:
         raise serial.SerialException(f"{SCHEME}: cannot keep the machine's state: {e}") from e
     # a bootloader's timeouts are wall-clock time for its programmer: run in real time

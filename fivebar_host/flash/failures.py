@@ -9,6 +9,7 @@ import errno
 
 from fivebar_host.errors import FivebarError
 from fivebar_host.flash.stk500 import Fault, Stk500Error
+from fivebar_host.protocol import Banner, trailing_banner
 
 #: The ATmega328P's signature, and the chips a maker may find on a board instead.
 ATMEGA328P = bytes((0x1E, 0x95, 0x0F))
@@ -59,9 +60,10 @@ def no_bootloader(url: str, faults: dict[int, Stk500Error]) -> FlashError:
                           "port, or a board that does not reset on DTR (press its reset "
                           "button as the flash starts)")
     text = got.decode("ascii", errors="replace")
-    if "fivebar" in text:
+    banner = _banner(text)
+    if banner is not None:
         return FlashError("out_of_sync", f"{url}: the board answered as the fivebar firmware "
-                          f"({_first_line(text)!r}), not as a bootloader: no bootloader ran "
+                          f"{banner.version} (its banner), not as a bootloader: no bootloader ran "
                           "after the reset (none on the chip, or auto-reset cut). Press the "
                           "reset button as the flash starts, or burn a bootloader with an ISP")
     return FlashError("out_of_sync", f"{url}: the board answers but not as a bootloader (not "
@@ -107,9 +109,13 @@ def classify(url: str, exc: BaseException) -> FlashError | None:
     return None
 
 
-def _first_line(text: str) -> str:
-    lines = [ln.strip() for ln in text.splitlines() if "fivebar" in ln]
-    return (lines[0] if lines else text.strip())[:60]
+def _banner(text: str) -> Banner | None:
+    """The firmware's banner among the lines a board sent, if any."""
+    for line in text.splitlines():
+        banner = trailing_banner(line.strip())
+        if banner is not None:
+            return banner
+    return None
 
 
 __all__ = [
