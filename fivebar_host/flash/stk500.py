@@ -96,7 +96,7 @@ class Stk500:
                 time.sleep(0.05)  # answers to earlier tries, if they arrive late
                 self.port.reset_input_buffer()
                 return
-            got += reply + self._read(256, 0.0)
+            got += reply + (self._read(256, 0.1) if reply else b"")  # a whole line
         if got:
             raise Stk500Error(Fault.OUT_OF_SYNC, f"not in sync: got {got[:48]!r}", got)
         raise Stk500Error(Fault.NO_REPLY, "no reply", b"")
