@@ -45,7 +45,7 @@ def test_convert_sends_power_only_with_laser(tmp_path: Path) -> None:
     g1 = [ln for ln in out.read_text().splitlines() if ln.startswith("G1 ")]
     assert {ln.rsplit(" ", 1)[1] for ln in g1} == {"S0", "S255"}
     code, text = run("plot", src, "--dry-run", "--preview", str(tmp_path / "p.png"))
-    assert code == 0 and "tool          pen: S0 on every line" in text
+    assert code == 0 and "tool          laser off: S0 on every line" in text
     code, text = run("plot", src, "--dry-run", "--laser", "--preview", str(tmp_path / "p.png"))
     assert code == 0 and "tool          laser: S up to 255" in text
 

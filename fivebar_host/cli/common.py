@@ -12,6 +12,9 @@ OS error. Nothing else is caught, so a bug still shows its traceback.
 
 from __future__ import annotations
 
+import contextlib
+import io
+import os
 import sys
 from collections.abc import Callable
 from functools import wraps
@@ -40,6 +43,55 @@ def main() -> None:
     from fivebar_host.devices import register
 
     register()  # the emulator's and the mocks' URL schemes for every command
+    if not isinstance(sys.stdout, QuietPipe):
+        sys.stdout = QuietPipe(sys.stdout)  # `fivebar … | head` ends quietly
+
+
+class QuietPipe(io.TextIOBase):
+    """Standard output that goes quiet when its reader leaves (`fivebar plot … | head`):
+    the first write into a closed pipe points the descriptor at /dev/null and every later
+    write is dropped, so the command finishes (a plot on a machine is not cut short by its
+    output) without a traceback or an error line."""
+
+    def __init__(self, inner: Any) -> None:
+        super().__init__()
+        self.inner = inner
+        self.gone = False
+
+    @property
+    def encoding(self) -> str:  # type: ignore[override]
+        return str(getattr(self.inner, "encoding", "utf-8"))
+
+    def _quiet(self) -> None:
+        self.gone = True
+        with contextlib.suppress(OSError, ValueError):
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, self.inner.fileno())
+            os.close(devnull)
+
+    def write(self, text: str) -> int:
+        if not self.gone:
+            try:
+                self.inner.write(text)
+            except BrokenPipeError:
+                self._quiet()
+        return len(text)
+
+    def flush(self) -> None:
+        if not self.gone:
+            try:
+                self.inner.flush()
+            except BrokenPipeError:
+                self._quiet()
+
+    def isatty(self) -> bool:
+        return bool(self.inner.isatty())
+
+    def fileno(self) -> int:
+        return int(self.inner.fileno())
+
+    def writable(self) -> bool:
+        return True
 
 
 def fail(message: str, code: int = 2) -> None:

@@ -22,6 +22,25 @@ from fivebar_host.cli.common import (
     yes_option,
 )
 from fivebar_host.cli.operator import TerminalOperator
+from fivebar_host.options import parse_length
+
+
+class LengthType(click.ParamType):  # type: ignore[type-arg]  # generic in click 8.2+ only
+    """A length in mm, read as every job option's (`options.parse_length`: 5, 5mm, 0.5in)."""
+
+    name = "length"
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> float:
+        if isinstance(value, float):
+            return value
+        try:
+            return parse_length(str(value))
+        except ValueError as e:
+            self.fail(str(e), param, ctx)
+
+
+LENGTH = LengthType()
 
 
 @main.command("home")
@@ -45,8 +64,10 @@ def home_cmd(port: str | None, yes: bool, controller: str, config_path: Path | N
 @click.option("--motor", type=click.Choice(["A", "B"]), default=None,
               help="Move one motor (with --steps).")
 @click.option("--steps", type=int, default=0, help="Steps for --motor (signed).")
-@click.option("--dx", type=float, default=0.0, help="Move the pen by this much in x, mm.")
-@click.option("--dy", type=float, default=0.0, help="Move the pen by this much in y, mm.")
+@click.option("--dx", type=LENGTH, default="0", metavar="LENGTH",
+              help="Move the pen by this much in x: mm, or with a unit (5mm, 0.5in, 1cm).")
+@click.option("--dy", type=LENGTH, default="0", metavar="LENGTH",
+              help="Move the pen by this much in y, like --dx.")
 @yes_option
 @controller_option
 @config_option

@@ -98,7 +98,9 @@ def write_executed(job: Job, prof: Profile, rec: Recording, preview_path: Path,
     )
 
     tr, true = read_trace(rec.path), rec.true
-    t, track = merge_axes(tr.positions("A"), tr.positions("B"))
+    # the arms start where the emulated machine kept them (the trace's `start=`)
+    t, track = merge_axes(tr.positions("A", tr.start[0]), tr.positions("B", tr.start[1]),
+                          tr.start)
     ex = executed_path(job, prof, t / tr.freq, track, report.start_segment,
                        report.start_position, true=true_params(true))
     out = preview_path.with_name(preview_path.stem + ".executed.csv")
@@ -115,3 +117,22 @@ def write_executed(job: Job, prof: Profile, rec: Recording, preview_path: Path,
                f"{job.step_quantum_mm:.4f} mm)")
     if prof.pen is not None:
         click.echo(pen_report(job, prof, tr.pen_pulses(), tr.freq, ex).line())
+    check_deviation(ex.max_deviation_mm, job.tolerance_mm + job.step_quantum_mm, out,
+                    true is not None)
+
+
+def check_deviation(dev_mm: float, bound_mm: float, csv: Path, true_machine: bool) -> None:
+    """A drawing the machine drew farther off than the bound is a failed run, not a
+    report line: DeviationError (exit 3) says how far, and the likely causes."""
+    from fivebar_host.report.text.executed import DeviationError
+
+    if dev_mm <= bound_mm:
+        return
+    why = ("the machine as really built (the URL's true=) differs from the profile: "
+           "calibrate it (docs/calibration.md)" if true_machine else
+           "the arms were not where the controller's count said: a power loss answered "
+           "'yes, they are where the job stopped' while they were elsewhere, or steps lost "
+           "to a stall")
+    raise DeviationError(f"the machine drew {dev_mm:.2f} mm off the drawing, beyond the "
+                         f"bound of {bound_mm:.4f} mm (tolerance + step quantum): {why}. "
+                         f"Every point is in {csv}")

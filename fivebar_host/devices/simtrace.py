@@ -41,6 +41,9 @@ class Trace:
     freq: int
     changes: dict[str, list[tuple[int, int]]] = field(default_factory=dict)
     dir_invert: tuple[bool, bool] = (False, False)
+    #: Where the arms stood (motor steps, the harness's count) when the trace began: (0, 0)
+    #: for a new machine, where the last run left them for one kept between runs (`-S`).
+    start: tuple[int, int] = (0, 0)
 
     def pin(self, name: str) -> list[tuple[int, int]]:
         """Changes of one pin, in time order (empty if it never changed)."""
@@ -188,6 +191,9 @@ def parse_trace(text: str, dir_invert: tuple[bool, bool] = (False, False)) -> Tr
             for word in line.split():
                 if word.startswith("freq="):
                     trace.freq = int(word[5:])
+                elif word.startswith("start="):
+                    a, b = word[6:].split(",")
+                    trace.start = (int(a), int(b))
             continue
         parts = line.split()
         if len(parts) != 3 or not parts[0].isdigit() or parts[2] not in ("0", "1"):

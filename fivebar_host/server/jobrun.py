@@ -269,8 +269,9 @@ class JobRunner:
             log.info("job %d stopped for shutdown at %s", rec.id, where)
         elif (question := self.record.question) is not None:
             self.store.set_state(rec.id, st_.HELD, question=question, message=(
-                f"waiting for a person: {question} Answer by resuming the job with "
-                "confirm=true once it is so (nothing has moved)."))
+                f"waiting for a person: {question} Answer yes on the web page, or on a "
+                "terminal following it with `fivebar plot --server`, once it is so "
+                "(nothing has moved)."))
             log.warning("job %d held: %s", rec.id, question)
         else:
             self.store.set_state(rec.id, st_.HELD, message=text + (

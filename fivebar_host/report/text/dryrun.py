@@ -49,9 +49,9 @@ def tool_line(job: Job, laser: bool, profile: Profile | None = None) -> str:
         return ("tool          laser: S up to "
                 f"{int(job.power.max(initial=0))} while drawing, S0 on travel (--laser)")
     pen = profile.pen if profile is not None else None
-    if pen is None:
-        return ("tool          pen: S0 on every line (no laser power without --laser); pen "
-                "down/up = M3/M5 around drawing strokes")
+    if pen is None:  # a laser profile (the bundled default): without --laser it stays off
+        return ("tool          laser off: S0 on every line (power only with --laser); "
+                "M3/M5 mark each drawing stroke (a pen lift on M3 draws it)")
     return (f"tool          pen servo (profile [tool] pen): down {pen.down_position:g} % "
             f"({pen.pulse_us(pen.down_position)} µs) in {pen.move_ms(True)} ms + "
             f"{pen.down_delay_ms} ms settle, up {pen.up_position:g} % "

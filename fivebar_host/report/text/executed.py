@@ -24,9 +24,16 @@ from numpy.typing import ArrayLike
 from fivebar_host.compile import Job, distance_to_request
 from fivebar_host.compile.steps import step_angles
 from fivebar_host.config import Profile
+from fivebar_host.errors import FivebarError
 from fivebar_host.program import line_param
 from kinematics.arrays import FloatArray, IntArray
 from kinematics.calibration import MachineParams
+
+
+class DeviationError(FivebarError):
+    """The executed path left the drawing by more than its bound (a failed run)."""
+
+    exit_code = 3
 
 
 @dataclass(frozen=True)

@@ -64,6 +64,8 @@ def static_files() -> dict[str, tuple[bytes, str]]:
 def option_schema(o: Option) -> dict[str, Any]:
     """One job option as the page needs it to build and check its form field."""
     return {"name": o.name, "query": o.query, "kind": o.kind, "help": o.help,
+            "label": o.label or o.query, "page_help": o.web_help or o.help,
+            "example": o.example, "units": o.unit in ("mm", "mm/s") or o.percent,
             "description": o.describe(), "unit": o.unit, "default": o.default,
             "min": o.lo, "max": o.hi, "min_exclusive": o.lo_open, "range": o.range_text(),
             "choices": list(o.choices), "repeat": o.repeat, "flag": o.flag}
