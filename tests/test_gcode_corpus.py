@@ -15,8 +15,9 @@ import pytest
 from gcode_reference import box, length, reference
 
 from fivebar_host.errors import InputError
+from fivebar_host.toolpath.extent import bbox
 from fivebar_host.toolpath.gcode import read_gcode
-from fivebar_host.toolpath.geometry import ARC, LINE, Drawing, bbox
+from fivebar_host.toolpath.geometry import ARC, LINE, Drawing
 
 CORPUS = Path(__file__).resolve().parent / "gcode_corpus"
 #: file → None (drawn with a pen profile) or the refusal's reason (a part of the message).

@@ -14,8 +14,9 @@ from fivebar_host.compile.job import compile_job
 from fivebar_host.compile.model import CompileOptions
 from fivebar_host.config import load_profile
 from fivebar_host.errors import InputError
+from fivebar_host.toolpath.extent import bbox
 from fivebar_host.toolpath.gcode import read_gcode
-from fivebar_host.toolpath.geometry import ARC, Drawing, bbox, flatten
+from fivebar_host.toolpath.geometry import ARC, Drawing, flatten
 
 SQUARE = "G1 X10 Y0 F600\nG1 X10 Y10\nG1 X0 Y10\n"
 

@@ -16,13 +16,13 @@ from xml.sax.saxutils import escape, quoteattr
 import numpy as np
 
 from fivebar_host.errors import InputError
+from fivebar_host.toolpath.extent import bbox
 from fivebar_host.toolpath.fonts.library import TextConfig
 from fivebar_host.toolpath.geometry import (
     ARC,
     CUBIC,
     Drawing,
     Polylines,
-    bbox,
     flatten,
     start_points,
 )

@@ -21,8 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from fivebar_host.errors import InputError
+from fivebar_host.toolpath.extent import bbox
 from fivebar_host.toolpath.fonts.library import FontLibrary, TextConfig
-from fivebar_host.toolpath.geometry import MAX_COORD_MM, Drawing, bbox, read_source
+from fivebar_host.toolpath.geometry import MAX_COORD_MM, Drawing, read_source
 from fivebar_host.toolpath.svg.masking import Masking
 from fivebar_host.toolpath.svg.stream import StreamTree, scan
 from fivebar_host.toolpath.svg.text import CharLayout
