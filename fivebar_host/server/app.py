@@ -36,7 +36,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from fivebar_host import __version__
 from fivebar_host.config import Profile
-from fivebar_host.errors import OptionError
+from fivebar_host.errors import OptionError, bounded
 from fivebar_host.options import unknown_option
 from fivebar_host.server.compiler import Compiler
 from fivebar_host.server.context import Context
@@ -52,7 +52,7 @@ from fivebar_host.server.stored import StoredJobs
 def _error_response(status: int, error: str, message: str,
                     detail: dict[str, Any] | None = None,
                     headers: dict[str, str] | None = None) -> JSONResponse:
-    body: dict[str, Any] = {"error": error, "message": message}
+    body: dict[str, Any] = {"error": error, "message": bounded(message)}
     body.update(detail or {})
     return JSONResponse(body, status_code=status, headers=headers)
 

@@ -16,7 +16,7 @@ from typing import Annotated, Any, Literal
 from fastapi import Path
 from pydantic import BaseModel, BeforeValidator, Field, create_model
 
-from fivebar_host.errors import FivebarError
+from fivebar_host.errors import FivebarError, shorten
 from fivebar_host.options import JOB_OPTIONS, Option
 from fivebar_host.server import store as st_
 from fivebar_host.server.jobs import JobOptions
@@ -65,8 +65,9 @@ def busy(message: str, retry_after_s: float = RETRY_AFTER_S) -> ApiError:
 
 
 def shown(key: str) -> str:
-    """A client's parameter name as echoed in a message (long ones cut)."""
-    return key if len(key) <= MAX_ECHO else key[:MAX_ECHO - 3] + "..."
+    """A client's parameter name or value as echoed in a message (long ones shortened:
+    first and last characters and the length)."""
+    return shorten(key, MAX_ECHO)
 
 
 # ---------------------------------------------------------------------------- models
