@@ -24,7 +24,7 @@ from fivebar_host import __version__
 from fivebar_host.config import Profile, load_profile
 from fivebar_host.controllers import DEFAULT as DEFAULT_CONTROLLER
 from fivebar_host.controllers import names as controller_names
-from fivebar_host.errors import FivebarError, OptionError
+from fivebar_host.errors import FivebarError, OptionError, bounded
 from fivebar_host.options import JOB_OPTIONS, Option, compile_values, parse_page
 
 if TYPE_CHECKING:
@@ -35,16 +35,20 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="fivebar")
-def main() -> None:
+@click.pass_context
+def main(ctx: click.Context) -> None:
     """Drive a five-bar-linkage pen plotter or laser engraver from SVG or G-code."""
+    from fivebar_host.controllers import ports
     from fivebar_host.devices import register
 
     register()  # the emulator's and the mocks' URL schemes for every command
+    # how the lock file of a port this command opens names its holder ("fivebar plot")
+    ports.set_command(f"fivebar {ctx.invoked_subcommand or ''}".strip())
 
 
 def fail(message: str, code: int = 2) -> None:
     """Print an error in one line on stderr and exit non-zero."""
-    click.echo(f"error: {message}", err=True)
+    click.echo(f"error: {bounded(message)}", err=True)
     sys.exit(code)
 
 

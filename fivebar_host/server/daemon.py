@@ -116,6 +116,12 @@ def _bind(host: str, port: int) -> socket.socket:
     return sock
 
 
+def _base_url(bound: tuple[Any, ...]) -> str:
+    """The API's base URL from a bound socket address (host, port, …)."""
+    shown = f"[{bound[0]}]" if ":" in bound[0] else bound[0]
+    return f"http://{shown}:{bound[1]}"
+
+
 class Daemon:
     """One running daemon (machine thread + HTTP thread); see the module docstring."""
 
@@ -143,7 +149,7 @@ class Daemon:
         loopback = is_loopback(host)
         self._open_state(need_token=self.cfg.require_token or not loopback)
         sock = _bind(host, port)
-        worker, server = self._machine_and_http(loopback)
+        worker, server = self._machine_and_http(loopback, _base_url(sock.getsockname()))
         worker.start()
         self._thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]},
                                         name="fivebar-http", daemon=True)
@@ -169,9 +175,9 @@ class Daemon:
             log.info("created the API token: %s (mode 0600)", self.token_path)
         self.token = token if need_token else None
 
-    def _machine_and_http(self, loopback: bool) -> tuple[Worker, uvicorn.Server]:
+    def _machine_and_http(self, loopback: bool, url: str) -> tuple[Worker, uvicorn.Server]:
         """The database, the machine thread and the HTTP server over the guarded
-        application (neither started)."""
+        application (neither started); `url` is where the API will answer."""
         self.store = JobStore(self.state_dir / "fivebar.db")
         pruned = self.store.prune()
         if pruned:
@@ -182,7 +188,8 @@ class Daemon:
         self.worker = Worker(WorkerConfig(
             port_url=self.cfg.port_url, profile=self.profile, baud=ser.baud,
             banner_timeout_s=self.cfg.banner_timeout_s or ser.banner_timeout_s,
-            reply_timeout_s=ser.reply_timeout_s, auto_resume=self.cfg.auto_resume),
+            reply_timeout_s=ser.reply_timeout_s, auto_resume=self.cfg.auto_resume,
+            port_hint=f"use `fivebar plot --server {url}` (or the page there)"),
             self.store, jobs)
         self.compiler = Compiler(self.cfg.compile_processes)
         app = create_app(store=self.store, worker=self.worker.handle, jobs=jobs,
@@ -209,8 +216,7 @@ class Daemon:
     def _announce(self, bound: tuple[Any, ...], loopback: bool) -> None:
         """The base URL from the bound socket address (host, port, …), the log lines that
         say where and how the daemon listens, and the ready file."""
-        shown = f"[{bound[0]}]" if ":" in bound[0] else bound[0]
-        self.url = f"http://{shown}:{bound[1]}"
+        self.url = _base_url(bound)
         log.info("listening on %s (%s); machine port %s; state %s", self.url,
                  "token required" if self.token is not None else "loopback, no token",
                  self.cfg.port_url, self.state_dir)
