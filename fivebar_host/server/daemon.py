@@ -27,8 +27,11 @@ from fivebar_host.config import Profile, load_profile
 from fivebar_host.errors import FivebarError
 from fivebar_host.server.app import create_app
 from fivebar_host.server.compiler import Compiler
+from fivebar_host.server.connections import HEADER_TIMEOUT_S, protocol_class
 from fivebar_host.server.jobs import CompiledCache
 from fivebar_host.server.security import (
+    BODY_GRACE_S,
+    BODY_IDLE_S,
     MAX_IN_FLIGHT,
     MAX_UPLOAD_BYTES_PENDING,
     MAX_UPLOADS,
@@ -93,6 +96,11 @@ class ServeConfig:
     max_uploads: int = MAX_UPLOADS
     max_in_flight: int = MAX_IN_FLIGHT
     compile_slots: int = 2
+    #: Slow clients (docs/serve.md, Limits): the deadline of a request's headers and the
+    #: pace a body must keep (`server.connections`, `security.Guard`).
+    header_timeout_s: float = HEADER_TIMEOUT_S
+    body_grace_s: float = BODY_GRACE_S
+    body_idle_s: float = BODY_IDLE_S
     #: Compile submissions in child processes (`server.compiler`), never in a thread of
     #: the process that streams; False: in a thread (tests that replace the compiler).
     compile_processes: bool = True
@@ -139,6 +147,7 @@ class Daemon:
         self.store: JobStore | None = None
         self.cache: CompiledCache | None = None
         self.worker: Worker | None = None
+        self.guard: Guard | None = None  # the HTTP guard (its counters: benchmarks, tests)
 
     def start(self, timeout_s: float = 15.0) -> str:
         """Start everything; returns the base URL (http://host:port)."""
@@ -201,13 +210,19 @@ class Daemon:
                                     max_uploads=self.cfg.max_uploads,
                                     max_upload_bytes_pending=max(
                                         MAX_UPLOAD_BYTES_PENDING,
-                                        2 * self.cfg.max_upload_bytes)))
+                                        2 * self.cfg.max_upload_bytes),
+                                    body_grace_s=self.cfg.body_grace_s,
+                                    body_idle_s=self.cfg.body_idle_s))
+        self.guard = guarded
         # No limit_concurrency: uvicorn's cap counts open connections, idle ones included,
         # and refuses with a plain-text 503 — a burst of 200 connections was refused almost
         # whole. The Guard caps requests in flight and uploads instead, answering the
         # documented JSON `busy` with Retry-After; extra connections wait in the backlog.
+        # The protocol class adds a deadline for request headers and a cap on connections
+        # per client address (server.connections); the Guard one for bodies.
         config = uvicorn.Config(guarded, log_config=None, access_log=self.cfg.access_log,
                                 lifespan="off", limit_concurrency=None, backlog=LISTEN_BACKLOG,
+                                http=protocol_class(self.cfg.header_timeout_s),
                                 timeout_keep_alive=5, server_header=False,
                                 h11_max_incomplete_event_size=16 * 1024)
         self._server = uvicorn.Server(config)
