@@ -20,7 +20,13 @@ from fivebar_host.options import JOB_OPTIONS, parse_query
 from fivebar_host.run.stops import planned_time_s
 from fivebar_host.server.context import Context, Ctx
 from fivebar_host.server.dryrun import DryRunOut, dry_run_upload
-from fivebar_host.server.jobs import Compiled, JobOptions, SubmitError, compile_upload
+from fivebar_host.server.jobs import (
+    NAME_PATTERN,
+    Compiled,
+    JobOptions,
+    SubmitError,
+    compile_upload,
+)
 from fivebar_host.server.models import ApiError, ErrorOut, JobOut, busy, job_out
 
 T = TypeVar("T")
@@ -45,10 +51,14 @@ SUBMIT_RESPONSES: dict[int | str, dict[str, Any]] = {
 #: The request body and the job options (generated from their one definition).
 SUBMIT_EXTRA: dict[str, Any] = {
     "requestBody": {"required": True, "description": "The drawing's bytes.", "content": {
-        "image/svg+xml": {"schema": {"type": "string"}},
-        "text/x-gcode": {"schema": {"type": "string"}},
-        "application/octet-stream": {"schema": {"type": "string", "format": "binary"}}}},
+        "image/svg+xml": {"schema": {"type": "string", "minLength": 1}},
+        "text/x-gcode": {"schema": {"type": "string", "minLength": 1}},
+        "application/octet-stream": {"schema": {"type": "string", "format": "binary",
+                                                "minLength": 1}}}},
     "parameters": [o.openapi() for o in JOB_OPTIONS]}
+
+#: The `name` parameter's schema: the pattern the daemon checks (`jobs.NAME_PATTERN`).
+NAME_SCHEMA: dict[str, Any] = {"pattern": NAME_PATTERN, "minLength": 1, "maxLength": 128}
 
 router = APIRouter()
 
@@ -59,7 +69,9 @@ async def submit(
     ctx: Ctx,
     request: Request,
     name: str = Query(..., description="File name of the drawing (a label; its suffix "
-                      "tells SVG from G-code). No directories."),
+                      "tells SVG from G-code). No directories, no leading dot, no control "
+                      "or bidi characters; else 400 bad_name.",
+                      json_schema_extra=NAME_SCHEMA),
 ) -> JobOut:
     """Compile and check a drawing, then queue it; a job that cannot run is refused.
 
@@ -77,7 +89,8 @@ async def submit(
 @router.post("/api/dryrun", response_model=DryRunOut, tags=["jobs"],
              responses=SUBMIT_RESPONSES, openapi_extra=SUBMIT_EXTRA)
 async def dryrun(ctx: Ctx, request: Request, name: str = Query(
-        ..., description="File name of the drawing (as for a submission).")) -> DryRunOut:
+        ..., description="File name of the drawing (as for a submission).",
+        json_schema_extra=NAME_SCHEMA)) -> DryRunOut:
     """Compile and check a drawing exactly as a submission would, and answer the dry
     run (report, estimate, deviation, warnings, preview picture); nothing is queued.
     A job that cannot run is refused as a submission is (422 with the CLI's message)."""
