@@ -130,12 +130,14 @@ def compile_from_cli(drawing: Path, config_path: Path | None,
                      values: dict[str, Any]) -> tuple[Profile, Any]:
     """Compile and check a drawing with the job option values a command received:
     (profile, Job). Raises the pipeline's errors."""
+    from fivebar_host.cli.progress import compile_progress
     from fivebar_host.compile import CompileOptions, compile_job
     from fivebar_host.config import require_tool, with_pen_overrides
 
     prof = with_pen_overrides(load(config_path), values)
     require_tool(prof, bool(values.get("laser")))
-    return prof, compile_job(drawing, prof, CompileOptions(**compile_values(values)))
+    with compile_progress():  # a bar (TTY) or a line every few seconds for long compiles
+        return prof, compile_job(drawing, prof, CompileOptions(**compile_values(values)))
 
 
 def pop_job_values(kwargs: dict[str, Any]) -> dict[str, Any]:
