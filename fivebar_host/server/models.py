@@ -172,6 +172,19 @@ class MachineOut(BaseModel):
     status_age_s: float | None = Field(description="Age of the last status report, s.")
 
 
+class CompilingOut(BaseModel):
+    """A drawing being compiled (a submission or a dry run), before any job exists."""
+
+    name: str = Field(description="The drawing's name as submitted.")
+    stage: str = Field(description="reading, placing, ordering paths, solving, travel, "
+                       "segments, timing, validating.")
+    progress: float | None = Field(description="How far the stage is, 0..1 (null: not "
+                                   "known).")
+    elapsed_s: float
+    note: str | None = Field(None, description="The size of the work and its estimated "
+                             "time, once known.")
+
+
 class StatusOut(BaseModel):
     """Daemon, machine and queue at a glance."""
 
@@ -183,6 +196,8 @@ class StatusOut(BaseModel):
     current_job: int | None
     blocked_by: int | None = Field(description="A paused or held job that keeps the queue "
                                    "from moving (resume or cancel it).")
+    compiling: list[CompilingOut] = Field(default_factory=list, description="Drawings "
+                                          "being compiled now (state `compiling`).")
 
 
 # ---------------------------------------------------------------------------- the job view

@@ -135,9 +135,9 @@ async def path(ctx: Ctx, job_id: JobId, request: Request) -> dict[str, Any]:
     job = ctx.cache.get(rec.id)
     try:
         if job is None:
-            compiled = await run_in_slot(ctx, request, compile_upload, ctx.jobs.upload(rec),
-                                         rec.name, JobOptions.from_json(rec.options),
-                                         ctx.profile)
+            compiled = await run_in_slot(ctx, request, rec.name, compile_upload,
+                                         ctx.jobs.upload(rec), rec.name,
+                                         JobOptions.from_json(rec.options), ctx.profile)
             job = ctx.jobs.adopt(rec, compiled)
     except SubmitError as e:
         raise ApiError(409, "conflict", str(e)) from e
