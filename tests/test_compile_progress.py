@@ -78,3 +78,40 @@ def test_the_estimate_is_told_for_large_work_only(monkeypatch: pytest.MonkeyPatc
         budget.told(1.0, "small")
         budget.told(150.0, "1,000,000 paths")
     assert notes == ["1,000,000 paths: about 2 min"]
+
+
+def tiny_paths_svg(n: int) -> bytes:
+    """`n` tiny separate paths on a 40 mm page (benchmarks/tiny_paths.py's kind)."""
+    side = int(n ** 0.5) + 1
+    rows = [f'<path d="M{(i % side) * 100 / side:.3f} {(i // side) * 100 / side:.3f}h.05"/>'
+            for i in range(n)]
+    return ('<svg xmlns="http://www.w3.org/2000/svg" width="40mm" height="40mm" '
+            'viewBox="0 0 100 100">\n' + "\n".join(rows) + "\n</svg>\n").encode()
+
+
+def test_the_daemon_shows_a_submission_compiling(tmp_path: Path) -> None:
+    import threading
+    import time
+
+    from serve_support import running_daemon, wait_for
+
+    from fivebar_host.server.client import ServerClient, plot_options
+
+    body = tiny_paths_svg(40_000)
+    with running_daemon(tmp_path, "compiling") as d:  # compiles in child processes
+        c = ServerClient(d.url)
+        done: list[dict[str, object]] = []
+        t = threading.Thread(target=lambda: done.append(
+            c.submit(body, "tiny.svg", plot_options(confirm=True))))
+        t.start()
+        seen: list[dict[str, object]] = []
+        deadline = time.monotonic() + 120
+        while t.is_alive() and time.monotonic() < deadline:
+            seen += c.status().get("compiling", [])
+            time.sleep(0.02)
+        t.join(120)
+        assert done and done[0]["name"] == "tiny.svg"
+        wait_for(lambda: c.status()["compiling"] == [], what="the entry gone")
+    assert {s["name"] for s in seen} == {"tiny.svg"}
+    stages = {s["stage"] for s in seen}
+    assert stages & {"reading", "placing", "ordering paths", "solving", "validating"}, stages

@@ -148,7 +148,7 @@ def test_the_dense_job_keeps_ahead_of_a_slow_host_in_emulated_time() -> None:
     """The real-time question — does the queue run empty? — asked in the model's time with
     a slow host, so that it holds on a machine at any load. The real-time figure (the
     emulator in wall-clock time, host and emulator sharing the cores) is a benchmark:
-    `python benchmarks/link.py --planned` (median of `--repeat` runs)."""
+    `python benchmarks/link.py --dense --repeat 5` (the median of the runs)."""
     bodies, _, _ = dense()
     assert late_segments(bodies, SIMAVR_BPS, HOST_LATENCY_S) == 0
     assert late_segments(bodies, SIMAVR_BPS, 8 * HOST_LATENCY_S) > 0  # the model can tell
