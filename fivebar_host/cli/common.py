@@ -27,7 +27,7 @@ from fivebar_host import __version__
 from fivebar_host.config import Profile, load_profile
 from fivebar_host.controllers import DEFAULT as DEFAULT_CONTROLLER
 from fivebar_host.controllers import names as controller_names
-from fivebar_host.errors import FivebarError, OptionError
+from fivebar_host.errors import FivebarError, OptionError, bounded
 from fivebar_host.options import JOB_OPTIONS, Option, compile_values, parse_page
 
 if TYPE_CHECKING:
@@ -38,13 +38,17 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="fivebar")
-def main() -> None:
+@click.pass_context
+def main(ctx: click.Context) -> None:
     """Drive a five-bar-linkage pen plotter or laser engraver from SVG or G-code."""
+    from fivebar_host.controllers import ports
     from fivebar_host.devices import register
 
     register()  # the emulator's and the mocks' URL schemes for every command
     if not isinstance(sys.stdout, QuietPipe):
         sys.stdout = QuietPipe(sys.stdout)  # `fivebar … | head` ends quietly
+    # how the lock file of a port this command opens names its holder ("fivebar plot")
+    ports.set_command(f"fivebar {ctx.invoked_subcommand or ''}".strip())
 
 
 class QuietPipe(io.TextIOBase):
@@ -96,7 +100,7 @@ class QuietPipe(io.TextIOBase):
 
 def fail(message: str, code: int = 2) -> None:
     """Print an error in one line on stderr and exit non-zero."""
-    click.echo(f"error: {message}", err=True)
+    click.echo(f"error: {bounded(message)}", err=True)
     sys.exit(code)
 
 
@@ -178,12 +182,14 @@ def compile_from_cli(drawing: Path, config_path: Path | None,
                      values: dict[str, Any]) -> tuple[Profile, Any]:
     """Compile and check a drawing with the job option values a command received:
     (profile, Job). Raises the pipeline's errors."""
+    from fivebar_host.cli.progress import compile_progress
     from fivebar_host.compile import CompileOptions, compile_job
     from fivebar_host.config import require_tool, with_pen_overrides
 
     prof = with_pen_overrides(load(config_path), values)
     require_tool(prof, bool(values.get("laser")))
-    return prof, compile_job(drawing, prof, CompileOptions(**compile_values(values)))
+    with compile_progress():  # a bar (TTY) or a line every few seconds for long compiles
+        return prof, compile_job(drawing, prof, CompileOptions(**compile_values(values)))
 
 
 def pop_job_values(kwargs: dict[str, Any]) -> dict[str, Any]:

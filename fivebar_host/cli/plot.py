@@ -93,6 +93,10 @@ def plot_file(drawing: Path, dry_run: bool, preview_path: Path, port: str | None
 
     laser = bool(job_values["laser"])
     copies = Copies(int(job_values["copies"]), float(job_values["page_delay_s"]))
+    if port is not None and not dry_run:
+        from fivebar_host.controllers.ports import refuse_if_held
+
+        refuse_if_held(port)  # before compiling: another process owns the machine
     prof, job = compile_from_cli(drawing, config_path, job_values)
     if dry_run:
         for line in report_lines(job, nbar_opinion(job, prof), laser=laser, profile=prof,

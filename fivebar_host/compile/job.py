@@ -50,6 +50,7 @@ from typing import Any
 
 import numpy as np
 
+from fivebar_host.compile import budget
 from fivebar_host.compile.finish import draw_geometry, finish, requested_rows
 from fivebar_host.compile.layers import sections
 from fivebar_host.compile.model import AUTO_ORDER, CompileOptions, Job, release_free_memory
@@ -60,6 +61,7 @@ from fivebar_host.compile.timing import plan_timing
 from fivebar_host.compile.travel import plan_travel
 from fivebar_host.config import Profile
 from fivebar_host.errors import InputError, JobError, OptionError, Where
+from fivebar_host.progress import report
 from fivebar_host.toolpath import layout
 from fivebar_host.toolpath.gcode import read_gcode
 from fivebar_host.toolpath.geometry import Drawing
@@ -139,28 +141,35 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
     (module doc: the pipeline); each is slimmed to what the later stages read as soon as the
     next stage has its part, so a large drawing's intermediate arrays do not pile up
     (`consume`: the drawing is placed in place, `place.place`)."""
+    report("placing")
     su = setup(profile, opts, mode)
     placed = place(su, drawing, opts, consume)
     del drawing
     home = find_home(su, placed.drawing.file)
     secs = sections(placed.drawing, placed.poly.stroke, opts.layer_pause, opts.no_pause)
+    report("ordering paths", 0.0)
     routed = route(su, placed, home, opts.keep_order, plan_modes, not opts.no_simplify, secs)
     placed = placed.without_strokes()
     release_free_memory()
+    report("solving")
     solved = solve(su, placed, routed)
+    report("travel")
     tr = plan_travel(su, placed, home, routed, solved, plan_modes)
     solved = solved.summarised()
     release_free_memory()
+    report("segments")
     segments = assemble(placed, home, routed, solved, tr)
     rows = requested_rows(routed, solved)
     routed, solved = routed.per_path(), solved.per_path()
     handed = [drop_zero_moves(profile.motors, segments)]  # timing empties it
     del segments  # the stepped copy replaces it
     release_free_memory()
+    report("timing")
     planned = plan_timing(su, routed, solved, handed)
     geometry = draw_geometry(rows, planned)  # consumes `rows`
     planned = replace(planned, perm=_NO_INTS, f0=_NO_FLOATS, f1=_NO_FLOATS)
     release_free_memory()
+    report("validating")
     return finish(su, placed, home, routed, solved, tr, planned, geometry, opts)
 
 
@@ -183,6 +192,7 @@ def compile_drawing(drawing: Drawing, profile: Profile, opts: CompileOptions,
     """Compile an already-read drawing; `opts.mode` "auto" tries every working mode.
     `consume`: the caller no longer needs `drawing`, which may then be placed in place (its
     primitives become the job's, in machine mm) to save memory on large drawings."""
+    budget.before_compiling(drawing)
     profile = with_job_motion(profile, opts)
     mode = opts.mode or profile.kinematics.working_mode
     if mode != "auto":
@@ -243,5 +253,7 @@ def _compile_with_mode_changes(drawing: Drawing, profile: Profile,
 def compile_job(path: str | Path, profile: Profile, opts: CompileOptions | None = None) -> Job:
     """Read and compile a drawing file (see module doc). Raises `InputError` or `JobError`."""
     o = opts or CompileOptions()
+    budget.before_reading(Path(path))
+    report("reading", 0.0)
     drawing = read_drawing(path, o.layers, o.max_segments, profile, o.gcode_strict)
     return compile_drawing(drawing, profile, o, consume=True)

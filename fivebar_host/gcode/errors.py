@@ -8,7 +8,7 @@ and line (`InputError`).
 
 from __future__ import annotations
 
-from fivebar_host.errors import FivebarError
+from fivebar_host.errors import FivebarError, bounded
 
 EXPECTED_COMMAND_LETTER = 1
 BAD_NUMBER_FORMAT = 2
@@ -41,5 +41,5 @@ class GcodeError(FivebarError, ValueError):
     def __init__(self, code: int, message: str, word: str | None = None) -> None:
         super().__init__(message)
         self.code = code
-        self.message = message
+        self.message = bounded(message)  # a sender's 10^6-digit number is not echoed whole
         self.word = word

@@ -27,6 +27,7 @@ import functools
 import threading
 import time
 import types
+from collections.abc import Iterable, Iterator
 from typing import Annotated, Any, Union, get_args, get_origin
 
 from fastapi import Depends, FastAPI, Request
@@ -36,7 +37,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from fivebar_host import __version__
 from fivebar_host.config import Profile
-from fivebar_host.errors import OptionError
+from fivebar_host.errors import OptionError, bounded
 from fivebar_host.options import unknown_option
 from fivebar_host.server.compiler import Compiler
 from fivebar_host.server.context import Context
@@ -52,7 +53,7 @@ from fivebar_host.server.stored import StoredJobs
 def _error_response(status: int, error: str, message: str,
                     detail: dict[str, Any] | None = None,
                     headers: dict[str, str] | None = None) -> JSONResponse:
-    body: dict[str, Any] = {"error": error, "message": message}
+    body: dict[str, Any] = {"error": error, "message": bounded(message)}
     body.update(detail or {})
     return JSONResponse(body, status_code=status, headers=headers)
 
@@ -144,5 +145,29 @@ def _error_handlers(app: FastAPI) -> None:
     @app.exception_handler(StarletteHTTPException)
     async def http_error(request: Request, exc: StarletteHTTPException) -> JSONResponse:
         key = {404: "not_found", 405: "method_not_allowed"}.get(exc.status_code, "http_error")
-        return _error_response(exc.status_code, key, str(exc.detail),
-                               headers=getattr(exc, "headers", None))
+        headers = getattr(exc, "headers", None)
+        if exc.status_code == 405:
+            headers = {**(headers or {}), "Allow": ", ".join(allowed_methods(request))}
+        return _error_response(exc.status_code, key, str(exc.detail), headers=headers)
+
+
+def allowed_methods(request: Request) -> list[str]:
+    """Every method some route takes at this path (Starlette's 405 names only the first
+    matching route's: `Allow: GET` for a path that also takes DELETE)."""
+    path = request.scope.get("path", "")
+    methods: set[str] = set()
+    for route in _all_routes(request.app.routes):
+        regex = getattr(route, "path_regex", None)
+        if regex is not None and regex.match(path):
+            methods |= set(getattr(route, "methods", None) or ())
+    return sorted(methods)
+
+
+def _all_routes(routes: Iterable[Any]) -> Iterator[Any]:
+    """The routes, those of included routers too (FastAPI may wrap an included router)."""
+    for route in routes:
+        inner = getattr(getattr(route, "original_router", None), "routes", None)
+        if inner is not None:
+            yield from _all_routes(inner)
+        else:
+            yield route

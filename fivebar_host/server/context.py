@@ -20,7 +20,7 @@ from fastapi import Depends, Request
 from fivebar_host.config import Profile
 from fivebar_host.server import store as st_
 from fivebar_host.server.compiler import Compiler
-from fivebar_host.server.events import EventHub
+from fivebar_host.server.events import Compiling, EventHub
 from fivebar_host.server.jobs import CompiledCache
 from fivebar_host.server.models import ApiError, shown
 from fivebar_host.server.requests import WorkerHandle
@@ -56,6 +56,11 @@ class Context:
     def cache(self) -> CompiledCache:
         """The compiled jobs kept for the machine thread."""
         return self.jobs.cache
+
+    @property
+    def compiling(self) -> dict[int, Compiling]:
+        """The compilations under way (submissions, dry runs), shown as `compiling`."""
+        return self.events.compiling
 
     def live(self) -> LiveView | None:
         """The running job's live progress as the machine thread last published it."""

@@ -27,8 +27,11 @@ from fivebar_host.config import Profile, load_profile
 from fivebar_host.errors import FivebarError
 from fivebar_host.server.app import create_app
 from fivebar_host.server.compiler import Compiler
+from fivebar_host.server.connections import HEADER_TIMEOUT_S, protocol_class
 from fivebar_host.server.jobs import CompiledCache
 from fivebar_host.server.security import (
+    BODY_GRACE_S,
+    BODY_IDLE_S,
     MAX_IN_FLIGHT,
     MAX_UPLOAD_BYTES_PENDING,
     MAX_UPLOADS,
@@ -93,6 +96,11 @@ class ServeConfig:
     max_uploads: int = MAX_UPLOADS
     max_in_flight: int = MAX_IN_FLIGHT
     compile_slots: int = 2
+    #: Slow clients (docs/serve.md, Limits): the deadline of a request's headers and the
+    #: pace a body must keep (`server.connections`, `security.Guard`).
+    header_timeout_s: float = HEADER_TIMEOUT_S
+    body_grace_s: float = BODY_GRACE_S
+    body_idle_s: float = BODY_IDLE_S
     #: Compile submissions in child processes (`server.compiler`), never in a thread of
     #: the process that streams; False: in a thread (tests that replace the compiler).
     compile_processes: bool = True
@@ -116,6 +124,12 @@ def _bind(host: str, port: int) -> socket.socket:
     return sock
 
 
+def _base_url(bound: tuple[Any, ...]) -> str:
+    """The API's base URL from a bound socket address (host, port, …)."""
+    shown = f"[{bound[0]}]" if ":" in bound[0] else bound[0]
+    return f"http://{shown}:{bound[1]}"
+
+
 class Daemon:
     """One running daemon (machine thread + HTTP thread); see the module docstring."""
 
@@ -133,6 +147,7 @@ class Daemon:
         self.store: JobStore | None = None
         self.cache: CompiledCache | None = None
         self.worker: Worker | None = None
+        self.guard: Guard | None = None  # the HTTP guard (its counters: benchmarks, tests)
 
     def start(self, timeout_s: float = 15.0) -> str:
         """Start everything; returns the base URL (http://host:port)."""
@@ -143,7 +158,7 @@ class Daemon:
         loopback = is_loopback(host)
         self._open_state(need_token=self.cfg.require_token or not loopback)
         sock = _bind(host, port)
-        worker, server = self._machine_and_http(loopback)
+        worker, server = self._machine_and_http(loopback, _base_url(sock.getsockname()))
         worker.start()
         self._thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]},
                                         name="fivebar-http", daemon=True)
@@ -169,9 +184,9 @@ class Daemon:
             log.info("created the API token: %s (mode 0600)", self.token_path)
         self.token = token if need_token else None
 
-    def _machine_and_http(self, loopback: bool) -> tuple[Worker, uvicorn.Server]:
+    def _machine_and_http(self, loopback: bool, url: str) -> tuple[Worker, uvicorn.Server]:
         """The database, the machine thread and the HTTP server over the guarded
-        application (neither started)."""
+        application (neither started); `url` is where the API will answer."""
         self.store = JobStore(self.state_dir / "fivebar.db")
         pruned = self.store.prune()
         if pruned:
@@ -182,7 +197,8 @@ class Daemon:
         self.worker = Worker(WorkerConfig(
             port_url=self.cfg.port_url, profile=self.profile, baud=ser.baud,
             banner_timeout_s=self.cfg.banner_timeout_s or ser.banner_timeout_s,
-            reply_timeout_s=ser.reply_timeout_s, auto_resume=self.cfg.auto_resume),
+            reply_timeout_s=ser.reply_timeout_s, auto_resume=self.cfg.auto_resume,
+            port_hint=f"use `fivebar plot --server {url}` (or the page there)"),
             self.store, jobs)
         self.compiler = Compiler(self.cfg.compile_processes)
         app = create_app(store=self.store, worker=self.worker.handle, jobs=jobs,
@@ -194,13 +210,19 @@ class Daemon:
                                     max_uploads=self.cfg.max_uploads,
                                     max_upload_bytes_pending=max(
                                         MAX_UPLOAD_BYTES_PENDING,
-                                        2 * self.cfg.max_upload_bytes)))
+                                        2 * self.cfg.max_upload_bytes),
+                                    body_grace_s=self.cfg.body_grace_s,
+                                    body_idle_s=self.cfg.body_idle_s))
+        self.guard = guarded
         # No limit_concurrency: uvicorn's cap counts open connections, idle ones included,
         # and refuses with a plain-text 503 — a burst of 200 connections was refused almost
         # whole. The Guard caps requests in flight and uploads instead, answering the
         # documented JSON `busy` with Retry-After; extra connections wait in the backlog.
+        # The protocol class adds a deadline for request headers and a cap on connections
+        # per client address (server.connections); the Guard one for bodies.
         config = uvicorn.Config(guarded, log_config=None, access_log=self.cfg.access_log,
                                 lifespan="off", limit_concurrency=None, backlog=LISTEN_BACKLOG,
+                                http=protocol_class(self.cfg.header_timeout_s),
                                 timeout_keep_alive=5, server_header=False,
                                 h11_max_incomplete_event_size=16 * 1024)
         self._server = uvicorn.Server(config)
@@ -209,8 +231,7 @@ class Daemon:
     def _announce(self, bound: tuple[Any, ...], loopback: bool) -> None:
         """The base URL from the bound socket address (host, port, …), the log lines that
         say where and how the daemon listens, and the ready file."""
-        shown = f"[{bound[0]}]" if ":" in bound[0] else bound[0]
-        self.url = f"http://{shown}:{bound[1]}"
+        self.url = _base_url(bound)
         log.info("listening on %s (%s); machine port %s; state %s", self.url,
                  "token required" if self.token is not None else "loopback, no token",
                  self.cfg.port_url, self.state_dir)

@@ -37,6 +37,7 @@ import numpy as np
 
 from fivebar_host.compile.steps import step_angles
 from fivebar_host.config import Profile
+from fivebar_host.progress import Event
 from fivebar_host.server.jobs import CompiledCache
 from fivebar_host.server.manual import pose_mm
 from fivebar_host.server.requests import WorkerHandle
@@ -81,6 +82,27 @@ def sse(event: str, data: Any) -> bytes:
     return f"event: {event}\ndata: {json.dumps(data, separators=(',', ':'))}\n\n".encode()
 
 
+@dataclass
+class Compiling:
+    """A compilation under way, as its progress reports say (`fivebar_host.progress`)."""
+
+    name: str
+    started: float  # monotonic s
+    on_change: Callable[[], None] | None = None  # wakes the event streams
+    stage: str = "waiting for a compilation slot"
+    fraction: float | None = None
+    note: str | None = None
+
+    def heard(self, ev: Event) -> None:
+        """Take one progress report (from a compiling process, through its pipe)."""
+        if ev.note is not None:
+            self.note = ev.note
+        else:
+            self.stage, self.fraction = ev.stage, ev.fraction
+        if self.on_change is not None:
+            self.on_change()
+
+
 class EventHub:
     """Wakes the open event streams when something changed (module docstring)."""
 
@@ -94,6 +116,7 @@ class EventHub:
         self.stopping = stopping
         self.jobs_view = jobs_view
         self.trail = Trail()
+        self.compiling: dict[int, Compiling] = {}  # compilations under way, by id
         self._lock = threading.Lock()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._changed = asyncio.Event()
@@ -165,6 +188,9 @@ class EventHub:
                 "segments_total": live.segments_total, "elapsed_s": round(live.elapsed_s, 2),
                 "remaining_s": round(live.remaining_s, 2), "paused": live.paused,
                 "overrides": {"feed_pct": live.feed_pct, "power_pct": live.power_pct}},
+            "compiling": [{"name": c.name, "stage": c.stage, "progress": c.fraction,
+                           "elapsed_s": round(time.monotonic() - c.started, 1),
+                           "note": c.note} for c in list(self.compiling.values())],
             "changed_at": changed_at}
 
     def trail_since(self, serial: int, start: int

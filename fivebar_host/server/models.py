@@ -16,7 +16,7 @@ from typing import Annotated, Any, Literal
 from fastapi import Path
 from pydantic import BaseModel, BeforeValidator, Field, create_model
 
-from fivebar_host.errors import FivebarError
+from fivebar_host.errors import FivebarError, shorten
 from fivebar_host.options import JOB_OPTIONS, Option
 from fivebar_host.server import store as st_
 from fivebar_host.server.jobs import JobOptions
@@ -65,8 +65,9 @@ def busy(message: str, retry_after_s: float = RETRY_AFTER_S) -> ApiError:
 
 
 def shown(key: str) -> str:
-    """A client's parameter name as echoed in a message (long ones cut)."""
-    return key if len(key) <= MAX_ECHO else key[:MAX_ECHO - 3] + "..."
+    """A client's parameter name or value as echoed in a message (long ones shortened:
+    first and last characters and the length)."""
+    return shorten(key, MAX_ECHO)
 
 
 # ---------------------------------------------------------------------------- models
@@ -171,6 +172,19 @@ class MachineOut(BaseModel):
     status_age_s: float | None = Field(description="Age of the last status report, s.")
 
 
+class CompilingOut(BaseModel):
+    """A drawing being compiled (a submission or a dry run), before any job exists."""
+
+    name: str = Field(description="The drawing's name as submitted.")
+    stage: str = Field(description="reading, placing, ordering paths, solving, travel, "
+                       "segments, timing, validating.")
+    progress: float | None = Field(description="How far the stage is, 0..1 (null: not "
+                                   "known).")
+    elapsed_s: float
+    note: str | None = Field(None, description="The size of the work and its estimated "
+                             "time, once known.")
+
+
 class StatusOut(BaseModel):
     """Daemon, machine and queue at a glance."""
 
@@ -182,6 +196,8 @@ class StatusOut(BaseModel):
     current_job: int | None
     blocked_by: int | None = Field(description="A paused or held job that keeps the queue "
                                    "from moving (resume or cancel it).")
+    compiling: list[CompilingOut] = Field(default_factory=list, description="Drawings "
+                                          "being compiled now (state `compiling`).")
 
 
 # ---------------------------------------------------------------------------- the job view

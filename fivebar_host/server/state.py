@@ -51,6 +51,8 @@ class WorkerConfig:
     idle_poll_s: float = 0.25
     auto_resume: bool = False
     drain_timeout_s: float = 120.0
+    #: What a command refused the port is told (the lock file's hint): where the API is.
+    port_hint: str | None = None
 
 
 @dataclass(frozen=True)

@@ -206,7 +206,8 @@ class Worker(threading.Thread):
             opened = JournalLink.open(cfg.port_url, baud=cfg.baud,
                                       banner_timeout_s=cfg.banner_timeout_s,
                                       reply_timeout_s=cfg.reply_timeout_s,
-                                      link_baud=cfg.profile.serial.link_baud)
+                                      link_baud=cfg.profile.serial.link_baud,
+                                      command="fivebar serve", hint=cfg.port_hint)
         except (LinkError, OSError) as e:
             if rec.error != str(e):
                 log.warning("cannot open %s: %s (retrying every %g s)", cfg.port_url, e,
@@ -216,8 +217,9 @@ class Worker(threading.Thread):
             return False
         assert isinstance(opened, JournalLink)
         link = opened
-        if link.baud_warning:
-            log.warning("%s", link.baud_warning)
+        for notice in (link.baud_warning, link.lock and link.lock.note):
+            if notice:
+                log.warning("%s", notice)
         link.on_status = self.changed
         rec.conn = Connection(link, FivebarController(link, cfg.profile))
         rec.error = None

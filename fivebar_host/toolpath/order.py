@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fivebar_host import progress
 from kinematics.arrays import BoolArray, FloatArray, IntArray
 
 
@@ -67,7 +68,9 @@ def _greedy(starts: FloatArray, ends: FloatArray, start: FloatArray) -> tuple[In
     ys = pts[:, 1].tolist()
     px, py = float(start[0]), float(start[1])
     lx, ly = float(lo[0]), float(lo[1])
+    ticker = progress.Ticker("ordering paths", n)
     for k in range(n):
+        ticker.tick(k)
         ci = min(max(int((px - lx) / h), 0), g - 1)
         cj = min(max(int((py - ly) / h), 0), g - 1)
         best, best_d, best_d2 = -1, float("inf"), float("inf")  # best_d2 = best_d²

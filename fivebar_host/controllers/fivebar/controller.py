@@ -84,7 +84,8 @@ class FivebarController:
         self.profile = profile
         self.url = link.url
         #: What the user should know about the connection (a faster rate refused).
-        self.notice = link.baud_warning
+        self.notice = "; ".join(n for n in (link.baud_warning, link.lock and link.lock.note)
+                                if n) or None
 
     @classmethod
     def open(cls, url: str, profile: Profile) -> FivebarController:

@@ -91,7 +91,7 @@ class GrblController:
         self.link = link
         self.profile = profile
         self.url = link.url
-        self.notice: str | None = None
+        self.notice: str | None = link.lock.note if link.lock is not None else None
         diff = dialects.differences(link, profile)
         if diff:
             how = ("set each item in its config.yaml or with `$/item=value`"

@@ -38,7 +38,9 @@ router = APIRouter()
 @router.get("/api/jobs", response_model=list[JobOut], tags=["jobs"])
 def list_jobs(ctx: Ctx,
               state: Annotated[list[str] | None, Query(
-                  description="Only these states (repeatable).")] = None,
+                  description="Only these states (repeatable).",
+                  json_schema_extra={"items": {"type": "string",
+                                               "enum": list(st_.STATES)}})] = None,
               limit: int = Query(200, ge=1, le=1000)) -> list[JobOut]:
     """Jobs, oldest first (the most recent `limit`)."""
     state = state or []
@@ -133,9 +135,9 @@ async def path(ctx: Ctx, job_id: JobId, request: Request) -> dict[str, Any]:
     job = ctx.cache.get(rec.id)
     try:
         if job is None:
-            compiled = await run_in_slot(ctx, request, compile_upload, ctx.jobs.upload(rec),
-                                         rec.name, JobOptions.from_json(rec.options),
-                                         ctx.profile)
+            compiled = await run_in_slot(ctx, request, rec.name, compile_upload,
+                                         ctx.jobs.upload(rec), rec.name,
+                                         JobOptions.from_json(rec.options), ctx.profile)
             job = ctx.jobs.adopt(rec, compiled)
     except SubmitError as e:
         raise ApiError(409, "conflict", str(e)) from e
@@ -157,11 +159,10 @@ def overrides(ctx: Ctx, job_id: JobId,
                                         description="Laser power, % of the planned "
                                         "power.")) -> JobOut:
     """Set the running (or paused) job's live feed and/or laser-power override; the job
-    with the overrides now in force. Lines already written to the controller (about 15
-    segments) keep their values; a power change applies from the next line written, a
-    feed change from the next point where the plan comes to rest (docs/serve.md)."""
-    if feed is None and power is None:
-        raise ApiError(422, "bad_option", "give feed and/or power (percent)")
+    with the overrides now in force (with neither, nothing changes). Lines already written
+    to the controller (about 15 segments) keep their values; a power change applies from
+    the next line written, a feed change from the next point where the plan comes to rest
+    (docs/serve.md)."""
     rec = ctx.get_rec(job_id)
     try:
         ctx.worker.set_overrides(job_id, feed, power)

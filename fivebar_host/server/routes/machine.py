@@ -55,19 +55,29 @@ def home(ctx: Ctx, at_home: bool = Query(False, description="Without endstops: t
 @router.post("/api/machine/jog", response_model=MachineOut, tags=["machine"],
              responses=RESPONSES)
 def jog(ctx: Ctx,
-        motor: str | None = Query(None, pattern="^[AB]$", description="Motor A or B "
-                                  "(with steps); else the pen moves by dx, dy."),
-        steps: int = Query(0, ge=-MAX_JOG_STEPS, le=MAX_JOG_STEPS,
-                           description="Motor steps (with motor)."),
         dx: float = Query(0.0, ge=-MAX_JOG_MM, le=MAX_JOG_MM, description="Pen move, mm."),
-        dy: float = Query(0.0, ge=-MAX_JOG_MM, le=MAX_JOG_MM, description="Pen move, mm.")
+        dy: float = Query(0.0, ge=-MAX_JOG_MM, le=MAX_JOG_MM, description="Pen move, mm."),
+        motor: str | None = Query(None, pattern="^[AB]$", include_in_schema=False),
+        steps: int = Query(0, ge=-MAX_JOG_STEPS, le=MAX_JOG_STEPS, include_in_schema=False),
         ) -> MachineOut:
-    """Jog as `fivebar jog` (laser off): a motor by steps, or the pen by dx, dy mm (the
-    pen move is checked and needs a known position)."""
+    """Jog the pen by dx, dy mm as `fivebar jog` (laser off; checked, needs a known
+    position: 409 where the move is not safe). A motor jog is `/api/machine/jog_motor`
+    (the `motor` and `steps` parameters here, which the web page sends, are the same)."""
     if motor is not None and (dx or dy):
         raise ApiError(422, "bad_option", "give motor with steps, or dx/dy, not both")
     return machine_action(ctx, lambda: ctx.worker.jog(motor=motor, steps=steps)
                           if motor is not None else ctx.worker.jog(dxy_mm=(dx, dy)))
+
+
+@router.post("/api/machine/jog_motor", response_model=MachineOut, tags=["machine"],
+             responses=RESPONSES)
+def jog_motor(ctx: Ctx,
+              motor: str = Query(..., pattern="^[AB]$", description="Motor A or B."),
+              steps: int = Query(..., ge=-MAX_JOG_STEPS, le=MAX_JOG_STEPS,
+                                 description="Motor steps (unchecked before homing).")
+              ) -> MachineOut:
+    """Jog one motor by steps as `fivebar jog --motor` (laser off)."""
+    return machine_action(ctx, lambda: ctx.worker.jog(motor=motor, steps=steps))
 
 
 @router.post("/api/machine/motors_off", response_model=MachineOut, tags=["machine"],

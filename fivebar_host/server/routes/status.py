@@ -14,7 +14,7 @@ from fastapi.responses import Response
 
 from fivebar_host import __version__
 from fivebar_host.server.context import Ctx
-from fivebar_host.server.models import MachineOut, StatusOut
+from fivebar_host.server.models import CompilingOut, MachineOut, StatusOut
 from fivebar_host.server.state import machine_view
 
 #: How long a built status answer is reused, s.
@@ -36,7 +36,10 @@ async def status(ctx: Ctx) -> Response:
             stopping=ctx.stopping.is_set(),
             machine=MachineOut(**machine_view(snap, ctx.profile)),
             jobs=ctx.store.counts(), current_job=snap.current,
-            blocked_by=blk.id if blk is not None and blk.id != snap.current else None)
+            blocked_by=blk.id if blk is not None and blk.id != snap.current else None,
+            compiling=[CompilingOut(name=c.name, stage=c.stage, progress=c.fraction,
+                                    elapsed_s=round(now - c.started, 1), note=c.note)
+                       for c in list(ctx.compiling.values())])
         cached.body = out.model_dump_json().encode()
         cached.at = now
     return Response(cached.body, media_type="application/json")

@@ -11,6 +11,7 @@ compiling process (server.compiler), never in the daemon that streams.
 from __future__ import annotations
 
 import asyncio
+import time
 from collections.abc import Callable
 from typing import Any, TypeVar
 
@@ -20,7 +21,14 @@ from fivebar_host.options import JOB_OPTIONS, parse_query
 from fivebar_host.run.stops import planned_time_s
 from fivebar_host.server.context import Context, Ctx
 from fivebar_host.server.dryrun import DryRunOut, dry_run_upload
-from fivebar_host.server.jobs import Compiled, JobOptions, SubmitError, compile_upload
+from fivebar_host.server.events import Compiling
+from fivebar_host.server.jobs import (
+    NAME_PATTERN,
+    Compiled,
+    JobOptions,
+    SubmitError,
+    compile_upload,
+)
 from fivebar_host.server.models import ApiError, ErrorOut, JobOut, busy, job_out
 
 T = TypeVar("T")
@@ -45,10 +53,14 @@ SUBMIT_RESPONSES: dict[int | str, dict[str, Any]] = {
 #: The request body and the job options (generated from their one definition).
 SUBMIT_EXTRA: dict[str, Any] = {
     "requestBody": {"required": True, "description": "The drawing's bytes.", "content": {
-        "image/svg+xml": {"schema": {"type": "string"}},
-        "text/x-gcode": {"schema": {"type": "string"}},
-        "application/octet-stream": {"schema": {"type": "string", "format": "binary"}}}},
+        "image/svg+xml": {"schema": {"type": "string", "minLength": 1}},
+        "text/x-gcode": {"schema": {"type": "string", "minLength": 1}},
+        "application/octet-stream": {"schema": {"type": "string", "format": "binary",
+                                                "minLength": 1}}}},
     "parameters": [o.openapi() for o in JOB_OPTIONS]}
+
+#: The `name` parameter's schema: the pattern the daemon checks (`jobs.NAME_PATTERN`).
+NAME_SCHEMA: dict[str, Any] = {"pattern": NAME_PATTERN, "minLength": 1, "maxLength": 128}
 
 router = APIRouter()
 
@@ -59,14 +71,17 @@ async def submit(
     ctx: Ctx,
     request: Request,
     name: str = Query(..., description="File name of the drawing (a label; its suffix "
-                      "tells SVG from G-code). No directories."),
+                      "tells SVG from G-code). No directories, no leading dot, no control "
+                      "or bidi characters; else 400 bad_name.",
+                      json_schema_extra=NAME_SCHEMA),
 ) -> JobOut:
     """Compile and check a drawing, then queue it; a job that cannot run is refused.
 
     The job options are the query parameters declared in `fivebar_host.options` (the
     same definitions as `fivebar plot`'s options); an unknown one is refused."""
     opts, body = await read_submission(ctx, request, name)
-    compiled = await run_in_slot(ctx, request, compile_upload, body, name, opts, ctx.profile)
+    compiled = await run_in_slot(ctx, request, name, compile_upload, body, name, opts,
+                                 ctx.profile)
     if await request.is_disconnected():
         # Nobody would learn the job's id: queueing it would start a drawing nobody
         # knows was accepted (the client reports a failure).
@@ -77,12 +92,14 @@ async def submit(
 @router.post("/api/dryrun", response_model=DryRunOut, tags=["jobs"],
              responses=SUBMIT_RESPONSES, openapi_extra=SUBMIT_EXTRA)
 async def dryrun(ctx: Ctx, request: Request, name: str = Query(
-        ..., description="File name of the drawing (as for a submission).")) -> DryRunOut:
+        ..., description="File name of the drawing (as for a submission).",
+        json_schema_extra=NAME_SCHEMA)) -> DryRunOut:
     """Compile and check a drawing exactly as a submission would, and answer the dry
     run (report, estimate, deviation, warnings, preview picture); nothing is queued.
     A job that cannot run is refused as a submission is (422 with the CLI's message)."""
     opts, body = await read_submission(ctx, request, name)
-    return await run_in_slot(ctx, request, dry_run_upload, body, name, opts, ctx.profile)
+    return await run_in_slot(ctx, request, name, dry_run_upload, body, name, opts,
+                             ctx.profile)
 
 
 async def read_submission(ctx: Context, request: Request, name: str
@@ -101,24 +118,35 @@ async def read_submission(ctx: Context, request: Request, name: str
     return opts, await request.body()
 
 
-async def run_in_slot(ctx: Context, request: Request, fn: Callable[..., T], *args: Any) -> T:
-    """`fn(*args)` (a compilation: `compile_upload` or the dry run's) in one of the
-    compilation slots, in a compiling process (`server.compiler`); `ApiError` with the
-    CLI's message when it cannot run, `busy` when no slot comes free in time."""
-    # Wait on the event loop (no thread held) for a compilation slot.
+async def run_in_slot(ctx: Context, request: Request, name: str, fn: Callable[..., T],
+                      *args: Any) -> T:
+    """`fn(*args)` (a compilation of the drawing `name`: `compile_upload` or the dry
+    run's) in one of the compilation slots, in a compiling process (`server.compiler`),
+    shown as `compiling` with its progress (`GET /api/status`) meanwhile; `ApiError` with
+    the CLI's message when it cannot run, `busy` when no slot comes free in time."""
+    entry = Compiling(name, time.monotonic(), ctx.events.poke)
+    ctx.compiling[id(entry)] = entry
+    ctx.events.poke()
     try:
-        await asyncio.wait_for(ctx.slots.acquire(), SUBMIT_WAIT_S)
-    except TimeoutError:
-        raise busy(f"no compilation slot came free within {SUBMIT_WAIT_S:.0f} s; "
-                   "nothing was queued, submit again later") from None
-    try:
-        if await request.is_disconnected():
-            raise ApiError(499, "client_gone", "the client went away; nothing was queued")
-        return await ctx.compiler.run(fn, *args)
-    except SubmitError as e:
-        raise ApiError(e.status, e.code, str(e), e.detail) from e
+        # Wait on the event loop (no thread held) for a compilation slot.
+        try:
+            await asyncio.wait_for(ctx.slots.acquire(), SUBMIT_WAIT_S)
+        except TimeoutError:
+            raise busy(f"no compilation slot came free within {SUBMIT_WAIT_S:.0f} s; "
+                       "nothing was queued, submit again later") from None
+        try:
+            if await request.is_disconnected():
+                raise ApiError(499, "client_gone", "the client went away; nothing was "
+                               "queued")
+            entry.stage = "reading"
+            return await ctx.compiler.run(fn, *args, on_progress=entry.heard)
+        except SubmitError as e:
+            raise ApiError(e.status, e.code, str(e), e.detail) from e
+        finally:
+            ctx.slots.release()
     finally:
-        ctx.slots.release()
+        ctx.compiling.pop(id(entry), None)
+        ctx.events.poke()
 
 
 def queue_job(ctx: Context, name: str, opts: JobOptions, body: bytes,

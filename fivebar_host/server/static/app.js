@@ -360,8 +360,21 @@ function renderStatus() {
   $('#m-fw').textContent = m.firmware ? m.firmware.version + ' (protocol ' + m.firmware.protocol + ')' : '–';
   $('#alarm').hidden = !m.alarm;
   $('#alarm-text').textContent = m.alarm ? 'Alarm — ' + m.alarm : '';
+  renderCompiling(st.compiling || []);
   const p = st.pose;
   $('#pos').textContent = p ? 'x ' + p.pen[0].toFixed(2) + ' mm, y ' + p.pen[1].toFixed(2) + ' mm (mode ' + p.mode + ')' : '–';
+}
+// drawings being compiled (no job yet): "compiling x.svg: ordering paths 45% (12 s)"
+function renderCompiling(list) {
+  const ul = $('#compiling');
+  ul.hidden = !list.length;
+  ul.replaceChildren(...list.map(c => {
+    const li = document.createElement('li');
+    li.textContent = 'compiling ' + c.name + ': ' + c.stage +
+      (c.progress === null ? '' : ' ' + Math.round(100 * c.progress) + '%') +
+      ' (' + Math.round(c.elapsed_s) + ' s)' + (c.note ? ' — ' + c.note : '');
+    return li;
+  }));
 }
 // 'copy 2 of 3 · ' for a job that draws several copies (its options.copies), else ''
 function copyOf(n, job) {

@@ -148,7 +148,7 @@ class StreamTree:
         parser.StartElementHandler = self._start
         parser.EndElementHandler = self._end
         parser.CharacterDataHandler = self._chars
-        run_parser(parser, data, file)
+        run_parser(parser, data, file, stage="reading")
         assert self.root is not None  # scan refused a file without one
         return self.root
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import xml.parsers.expat
 from dataclasses import dataclass, field
 
+from fivebar_host import progress
 from fivebar_host.errors import InputError
 
 SVG_NS = "http://www.w3.org/2000/svg"
@@ -67,10 +68,23 @@ def new_parser() -> xml.parsers.expat.XMLParserType:
     return xml.parsers.expat.ParserCreate(namespace_separator=" ")
 
 
-def run_parser(parser: xml.parsers.expat.XMLParserType, data: bytes, file: str) -> None:
-    """Parse all of `data`; XML and decoding errors become `InputError`s naming the line."""
+#: Bytes parsed between two progress reports (`run_parser`'s `stage`).
+PROGRESS_CHUNK = 1 << 20
+
+
+def run_parser(parser: xml.parsers.expat.XMLParserType, data: bytes, file: str,
+               stage: str | None = None) -> None:
+    """Parse all of `data`; XML and decoding errors become `InputError`s naming the line.
+    With `stage`, the bytes parsed are reported (`fivebar_host.progress`) as they go."""
     try:
-        parser.Parse(data, True)
+        if stage is None or len(data) <= PROGRESS_CHUNK or not progress.listening():
+            parser.Parse(data, True)
+            return
+        view = memoryview(data)
+        for at in range(0, len(data), PROGRESS_CHUNK):
+            parser.Parse(bytes(view[at:at + PROGRESS_CHUNK]), False)
+            progress.report(stage, min(1.0, (at + PROGRESS_CHUNK) / len(data)))
+        parser.Parse(b"", True)
     except xml.parsers.expat.ExpatError as e:
         raise InputError(f"malformed XML: {xml.parsers.expat.ErrorString(e.code)} "
                          f"(line {e.lineno}, column {e.offset + 1})", file, e.lineno) from e
