@@ -55,9 +55,11 @@ def flash_board(url: str, image: FlashImage, profile: Profile, *, baud: int | No
     """Flash `image` to the board at `url` (module doc); FlashError on any failure."""
     import serial
 
+    from fivebar_host.controllers import ports
+
     report = FlashReport(url, describe_usb(None))
-    try:
-        port = serial.serial_for_url(url, baudrate=baud or 115200, timeout=0.05,
+    try:  # held for this process first (`controllers.ports`: a second opener is refused)
+        port, lock = ports.open_port(url, baudrate=baud or 115200, timeout=0.05,
                                      write_timeout=5.0)
     except (serial.SerialException, OSError, ValueError) as e:
         raise failures.open_failure(url, e) from e
@@ -74,7 +76,7 @@ def flash_board(url: str, image: FlashImage, profile: Profile, *, baud: int | No
     except (serial.SerialException, OSError) as e:
         raise failures.open_failure(url, e) from e
     finally:
-        port.close()
+        ports.close_port(port, lock)
     return report
 
 
