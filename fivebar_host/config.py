@@ -21,6 +21,7 @@ import numpy as np
 from fivebar_host.errors import FivebarError, InputError
 from fivebar_host.protocol import BASE_BAUD, BAUD_RATES
 from fivebar_host.toolpath.fonts.library import FontLibrary, TextConfig
+from kinematics.extension import ExtendedFiveBar
 from kinematics.fivebar import WORKING_MODES, FiveBar
 
 #: Assembly modes: "+" iff the pen lies left of the directed line R1→R2 (elbow to elbow).
@@ -364,6 +365,24 @@ def did_you_mean(names: list[str], known: Iterable[str]) -> str:
     return ""
 
 
+def _parse_geometry(doc: dict[str, Any], source: str) -> FiveBar:
+    """`[geometry]`: the five lengths, and the pen's `extension` (mm beyond the joint of the
+    distal links, on link b1) turned by `extension_angle_deg` from the line R1→joint; with
+    an extension the geometry is a `kinematics.extension.ExtendedFiveBar`."""
+    g = _Table(doc, "geometry", source)
+    lengths = {k: g.number(k, 0.0, 1e5, lo_open=True) for k in ("a1", "b1", "a2", "b2", "w")}
+    ext = g.number("extension", 0.0, 1e5) if "extension" in g.raw else 0.0
+    ang = g.number("extension_angle_deg", -180.0, 180.0) if "extension_angle_deg" in g.raw \
+        else 0.0
+    g.done()
+    try:
+        if ext > 0.0:
+            return ExtendedFiveBar(**lengths, extension=ext, extension_angle=math.radians(ang))
+        return FiveBar(**lengths)
+    except ValueError as e:
+        raise ConfigError(f"{source}: [geometry]: {e}") from e
+
+
 def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
     """Validate a parsed TOML document into a `Profile`."""
     unknown = sorted(set(doc) - set(KNOWN_TABLES))
@@ -372,13 +391,7 @@ def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
                           f"(known: {', '.join(KNOWN_TABLES)})"
                           + did_you_mean(unknown, KNOWN_TABLES))
 
-    g = _Table(doc, "geometry", source)
-    lengths = {k: g.number(k, 0.0, 1e5, lo_open=True) for k in ("a1", "b1", "a2", "b2", "w")}
-    g.done()
-    try:
-        geometry = FiveBar(**lengths)
-    except ValueError as e:
-        raise ConfigError(f"{source}: [geometry]: {e}") from e
+    geometry = _parse_geometry(doc, source)
 
     m = _Table(doc, "motors", source)
     full_steps = m.integer("full_steps", 1, 100_000)
