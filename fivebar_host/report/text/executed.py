@@ -28,6 +28,8 @@ from fivebar_host.errors import FivebarError
 from fivebar_host.program import line_param
 from kinematics.arrays import FloatArray, IntArray
 from kinematics.calibration import MachineParams
+from kinematics.extension import ExtendedFiveBar
+from kinematics.fivebar import FiveBar
 
 
 class DeviationError(FivebarError):
@@ -82,6 +84,15 @@ def true_params(values: Sequence[float] | None) -> MachineParams | None:
     return MachineParams(a1, b1, a2, b2, w, math.radians(h1), math.radians(h2))
 
 
+def true_geometry(true: MachineParams, profile_geometry: FiveBar) -> FiveBar:
+    """The true machine's five-bar: its lengths, with the profile's pen extension if any
+    (`true=` gives the five lengths; the pen's place on link 1 is the profile's)."""
+    if isinstance(profile_geometry, ExtendedFiveBar):
+        return ExtendedFiveBar(true.a1, true.b1, true.a2, true.b2, true.w,
+                               profile_geometry.extension, profile_geometry.extension_angle)
+    return true.fivebar()
+
+
 def ledger_track(ledger: Sequence[Any]) -> tuple[FloatArray, IntArray]:
     """(time, positions) of a mock's ledger: the start and the end of every G1 block."""
     g1 = [e for e in ledger if e.kind == "G1"]
@@ -128,7 +139,7 @@ def executed_path(job: Job, profile: Profile, time: FloatArray, track: IntArray,
             k = skip_empty(k + 1)
     completed = k
     home = job.home_rad if true is None else true.home_rad
-    fb = profile.geometry if true is None else true.fivebar()
+    fb = profile.geometry if true is None else true_geometry(true, profile.geometry)
     th = step_angles(track, home, job.steps_per_rev)
     fwd = fb.forward_batch(th, "+" if job.assembly > 0 else "-")
     dev = np.full(track.shape[0], np.nan)
