@@ -43,6 +43,8 @@ class Motors:
     home_rad: tuple[float, float]
     limits_rad: tuple[tuple[float, float], tuple[float, float]]
     endstops: bool
+    #: each motor's slack in steps, taken up at its reversals (compile/backlash.py)
+    backlash_steps: tuple[int, int] = (0, 0)
 
     @property
     def steps_per_rev(self) -> float:
@@ -416,10 +418,13 @@ def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
                               f"limits_deg[{i}] = [{lo:g}, {hi:g}]")
         lims.append((math.radians(lo), math.radians(hi)))
     endstops = m.boolean("endstops")
+    lash = m.pair("backlash_steps", 0, 10_000) if "backlash_steps" in m.raw else (0.0, 0.0)
+    if any(v != int(v) for v in lash):
+        raise ConfigError(f"{m.where('backlash_steps')}: must be whole steps; got {lash!r}")
     m.done()
     motors = Motors(full_steps, microsteps, gear_ratio,
                     (math.radians(home[0]), math.radians(home[1])),
-                    (lims[0], lims[1]), endstops)
+                    (lims[0], lims[1]), endstops, (int(lash[0]), int(lash[1])))
 
     k = _Table(doc, "kinematics", source)
     kin = KinematicsCfg(

@@ -33,6 +33,8 @@ the requested path; rounding to whole steps adds at most one step quantum (repor
     travel.plan_travel               → Travel (targets, margins, mode changes, notes)
     segments.assemble                → Segments (merged targets with provenance)
     segments.drop_zero_moves         → Stepped (absolute steps, zero moves dropped)
+    backlash.take_up                 → Stepped (motor counts; a take-up segment at every
+                                       reversal of a motor with backlash)
     timing.plan_timing               → Planned (ramp pieces, power, durations)
     finish.finish                    → Job (per-path bookkeeping, margins, validation)
 
@@ -51,6 +53,7 @@ from typing import Any
 import numpy as np
 
 from fivebar_host.compile import budget
+from fivebar_host.compile.backlash import take_up
 from fivebar_host.compile.finish import draw_geometry, finish, requested_rows
 from fivebar_host.compile.layers import sections
 from fivebar_host.compile.model import AUTO_ORDER, CompileOptions, Job, release_free_memory
@@ -161,7 +164,9 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
     segments = assemble(placed, home, routed, solved, tr)
     rows = requested_rows(routed, solved)
     routed, solved = routed.per_path(), solved.per_path()
-    handed = [drop_zero_moves(profile.motors, segments)]  # timing empties it
+    # motor counts, with a take-up segment at every reversal of a motor with backlash
+    handed = [take_up(drop_zero_moves(profile.motors, segments),
+                      profile.motors.backlash_steps)]  # timing empties it
     del segments  # the stepped copy replaces it
     release_free_memory()
     report("timing")

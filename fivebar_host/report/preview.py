@@ -246,7 +246,7 @@ def draw_preview(job: Job, profile: Profile, out: str | Path, samples: int = 4,
     """Write the preview PNG (see module doc) atomically; returns the path."""
     fb = profile.geometry
     fig, ax = plt.subplots(figsize=(11.0, 8.0))
-    th = step_angles(job.steps, job.home_rad, job.steps_per_rev)
+    th = step_angles(job.joint_steps, job.home_rad, job.steps_per_rev)
     sel = _pose_indices(job)
     pose_pts = fb.forward_batch(th[sel], _assembly(job)).points
     box = _extent(job, fb, th[sel], pose_pts)
