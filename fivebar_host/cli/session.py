@@ -102,7 +102,7 @@ def write_executed(job: Job, prof: Profile, rec: Recording, preview_path: Path,
     t, track = merge_axes(tr.positions("A", tr.start[0]), tr.positions("B", tr.start[1]),
                           tr.start)
     ex = executed_path(job, prof, t / tr.freq, track, report.start_segment,
-                       report.start_position, true=true_params(true))
+                       report.start_position, true=true_params(true), backlash=rec.backlash)
     out = preview_path.with_name(preview_path.stem + ".executed.csv")
     rows = ["t_s,a_steps,b_steps,x_mm,y_mm,segment,deviation_mm"]
     rows += [f"{ti:.6f},{a},{b},{x:.4f},{y:.4f},{sg},{'' if d != d else f'{d:.5f}'}"
@@ -110,7 +110,8 @@ def write_executed(job: Job, prof: Profile, rec: Recording, preview_path: Path,
                                                   ex.points.tolist(), ex.segment.tolist(),
                                                   ex.deviation_mm.tolist(), strict=True)]
     write_atomic(out, "\n".join(rows) + "\n")
-    where = " (drawn by the URL's true= machine)" if true is not None else ""
+    where = (" (drawn by the URL's true= machine)" if true is not None
+             or rec.backlash is not None else "")
     click.echo(f"executed path (from the emulator's step pulses{where}): {out}; drawing "
                f"segments' max deviation "
                f"{ex.max_deviation_mm:.4f} mm (bound {job.tolerance_mm:g} + step quantum "

@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from fivebar_host.compile import Job, distance_to_request
+from fivebar_host.compile.backlash import play
 from fivebar_host.compile.steps import step_angles
 from fivebar_host.config import Profile
 from fivebar_host.errors import FivebarError
@@ -105,7 +106,8 @@ def ledger_track(ledger: Sequence[Any]) -> tuple[FloatArray, IntArray]:
 
 def executed_path(job: Job, profile: Profile, time: FloatArray, track: IntArray,
                   first_segment: int = 0, start_steps: ArrayLike | None = None,
-                  true: MachineParams | None = None) -> ExecutedPath:
+                  true: MachineParams | None = None,
+                  backlash: tuple[int, int] | None = None) -> ExecutedPath:
     """Assign recorded positions to the job's segments and measure each drawing point.
 
     The run started at `start_steps` (default: the start of `first_segment`). A resumed run
@@ -113,7 +115,10 @@ def executed_path(job: Job, profile: Profile, time: FloatArray, track: IntArray,
     that starts elsewhere (after homing) first travels back to the segment's start, laser
     off: those events belong to no segment (−1) and are not measured against the drawing.
     Assignment walks the events once: an event belongs to the segment being executed, and a
-    segment ends at the event whose position equals its target.
+    segment ends at the event whose position equals its target. The pen points are those of
+    the joints behind the motor counts (`compile.backlash.play`): with the machine's real
+    slack `backlash` (steps per motor; None: the profile's `[motors] backlash_steps`), from
+    the slack the job planned at the start.
     """
     tgt = job.steps
     n = job.n_segments
@@ -140,7 +145,13 @@ def executed_path(job: Job, profile: Profile, time: FloatArray, track: IntArray,
     completed = k
     home = job.home_rad if true is None else true.home_rad
     fb = profile.geometry if true is None else true_geometry(true, profile.geometry)
-    th = step_angles(track, home, job.steps_per_rev)
+    lash = profile.motors.backlash_steps if backlash is None else backlash
+    joint = track
+    if any(lash) or job.slack.shape[0]:
+        row = min(first_segment, job.steps.shape[0] - 1)
+        start = job.slack[row] if job.slack.shape[0] else (0, 0)
+        joint = play(track, lash, np.minimum(start, lash))
+    th = step_angles(joint, home, job.steps_per_rev)
     fwd = fb.forward_batch(th, "+" if job.assembly > 0 else "-")
     dev = np.full(track.shape[0], np.nan)
     draw_idx = np.flatnonzero((seg >= 0) & job.draw[np.maximum(seg, 0)])
