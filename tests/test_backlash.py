@@ -62,6 +62,8 @@ def test_take_up_segments_hold_the_joint_and_move_only_the_reversing_motor() -> 
     assert take.sum() >= 4  # a square and a circle reverse each motor several times
     # Pieces of one take-up add up to ±B per motor; the joint's slack is B or 0 only.
     assert set(np.unique(job.slack).tolist()) <= {0, LASH}
+    # The job ends with the slack taken up downward, as the next one assumes at home.
+    assert (job.slack[-1] == 0).all() and (job.steps[-1] == job.joint_steps[-1]).all()
     assert np.abs(motor_moves[take]).max() <= LASH
     # A take-up keeps the pen's state: drawing take-ups stay drawing (no pen lift).
     assert job.pen_downs == plain.pen_downs

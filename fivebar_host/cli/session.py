@@ -110,16 +110,15 @@ def write_executed(job: Job, prof: Profile, rec: Recording, preview_path: Path,
                                                   ex.points.tolist(), ex.segment.tolist(),
                                                   ex.deviation_mm.tolist(), strict=True)]
     write_atomic(out, "\n".join(rows) + "\n")
-    where = (" (drawn by the URL's true= machine)" if true is not None
-             or rec.backlash is not None else "")
+    truth = true is not None or rec.backlash is not None
+    where = " (drawn by the URL's true=/backlash= machine)" if truth else ""
     click.echo(f"executed path (from the emulator's step pulses{where}): {out}; drawing "
                f"segments' max deviation "
                f"{ex.max_deviation_mm:.4f} mm (bound {job.tolerance_mm:g} + step quantum "
                f"{job.step_quantum_mm:.4f} mm)")
     if prof.pen is not None:
         click.echo(pen_report(job, prof, tr.pen_pulses(), tr.freq, ex).line())
-    check_deviation(ex.max_deviation_mm, job.tolerance_mm + job.step_quantum_mm, out,
-                    true is not None)
+    check_deviation(ex.max_deviation_mm, job.tolerance_mm + job.step_quantum_mm, out, truth)
 
 
 def check_deviation(dev_mm: float, bound_mm: float, csv: Path, true_machine: bool) -> None:
@@ -129,8 +128,9 @@ def check_deviation(dev_mm: float, bound_mm: float, csv: Path, true_machine: boo
 
     if dev_mm <= bound_mm:
         return
-    why = ("the machine as really built (the URL's true=) differs from the profile: "
-           "calibrate it (docs/calibration.md)" if true_machine else
+    why = ("the machine as really built (the URL's true= or backlash=) differs from the "
+           "profile: calibrate it (docs/calibration.md) or set its [motors] backlash_steps "
+           "(docs/backlash.md)" if true_machine else
            "the arms were not where the controller's count said: a power loss answered "
            "'yes, they are where the job stopped' while they were elsewhere, or steps lost "
            "to a stall")

@@ -93,7 +93,7 @@ def take_up(sp: Stepped, backlash: tuple[int, int]) -> Stepped:
     after, before = reversal_slack(sp.steps, backlash)
     change = (after != before).any(axis=1)  # a take-up before segment k
     at = np.flatnonzero(change)
-    if not at.size:
+    if not at.size and not after[-1].any():
         return sp
     # slack at every target: target r ends segment r − 1
     slack_rows = np.concatenate((np.zeros((1, 2), dtype=np.int64), after))
@@ -104,16 +104,28 @@ def take_up(sp: Stepped, backlash: tuple[int, int]) -> Stepped:
     k = at + 1  # the take-up's end is inserted right after the reversal point
     new_steps = np.insert(joint + slack_rows, k, joint[at] + ins_slack, axis=0)
     new_slack = np.insert(slack_rows, k, ins_slack, axis=0)
-    rows = at
+    # The job ends with the slack taken up downward, as the next job assumes at home: a
+    # last take-up (pen up, the joint still) where a motor last moved up.
+    end = [sp.draw.shape[0]] if after[-1].any() else []
+    seg = np.concatenate((at, end)).astype(np.int64)
+    src = np.minimum(seg, sp.draw.shape[0] - 1)  # provenance: the next segment (or the last)
+    if end:
+        new_steps = np.concatenate((new_steps, new_steps[-1:] - new_slack[-1:]))
+        new_slack = np.concatenate((new_slack, np.zeros((1, 2), dtype=np.int64)))
+    rows = np.concatenate((at, [sp.th.shape[0] - 1] if end else [])).astype(np.int64)
+    k = np.concatenate((at + 1, [sp.th.shape[0]] if end else [])).astype(np.int64)
+    draw = sp.draw[src].copy()
+    if end:
+        draw[-1] = False
     return replace(
         sp, th=np.insert(sp.th, k, sp.th[rows], axis=0),
         pts=np.insert(sp.pts, k, sp.pts[rows], axis=0),
-        draw=np.insert(sp.draw, at, sp.draw[at]),
-        path=np.insert(sp.path, at, sp.path[at]),
-        source=np.insert(sp.source, at, sp.source[at]),
-        line=np.insert(sp.line, at, sp.line[at]),
-        length=np.insert(sp.length, at, 0.0),
-        perm=np.insert(sp.perm, at, sp.perm[at]),
+        draw=np.insert(sp.draw, seg, draw),
+        path=np.insert(sp.path, seg, sp.path[src]),
+        source=np.insert(sp.source, seg, sp.source[src]),
+        line=np.insert(sp.line, seg, sp.line[src]),
+        length=np.insert(sp.length, seg, 0.0),
+        perm=np.insert(sp.perm, seg, sp.perm[src]),
         steps=new_steps, slack=new_slack)
 
 
