@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from fivebar_host.errors import FivebarError, InputError
+from fivebar_host.joints import ServoJoints, parse_joints
 from fivebar_host.protocol import BASE_BAUD, BAUD_RATES
 from fivebar_host.toolpath.fonts.library import FontLibrary, TextConfig
 from kinematics.extension import ExtendedFiveBar
@@ -156,6 +157,7 @@ class Profile:
     tool: str = "laser"  # "pen" (a servo pen lift, `pen` set) or "laser"
     pen: Pen | None = None
     text: TextConfig = field(default_factory=TextConfig)  # `[text]`: the fonts of SVG text
+    joints: ServoJoints | None = None  # `[joints]`: None = steppers (fivebar_host/joints.py)
 
 
 class _Table:
@@ -247,7 +249,7 @@ class _Table:
 
 
 KNOWN_TABLES = ("geometry", "motors", "kinematics", "motion", "laser", "serial", "tool", "pen",
-                "text")
+                "text", "joints")
 #: `[text]` keys naming the font of each CSS generic family (TOML keys cannot hold "-").
 GENERIC_KEYS = {"serif": "serif", "sans_serif": "sans-serif", "cursive": "cursive",
                 "fantasy": "fantasy", "monospace": "monospace"}
@@ -473,8 +475,16 @@ def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
     )
     se.done()
     tool, pen = _parse_pen(doc, source)
+    joints = None
+    if "joints" in doc:
+        jt = _Table(doc, "joints", source)
+        try:
+            joints = parse_joints(jt)
+        except FivebarError as e:
+            raise ConfigError(str(e)) from e
+        jt.done()
     return Profile(geometry, motors, kin, motion, laser, serial, source, tool, pen,
-                   _parse_text(doc, source))
+                   _parse_text(doc, source), joints)
 
 
 def _read_toml(p: Path) -> dict[str, Any]:
