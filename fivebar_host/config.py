@@ -370,14 +370,12 @@ def did_you_mean(names: list[str], known: Iterable[str]) -> str:
 
 
 def _parse_geometry(doc: dict[str, Any], source: str) -> FiveBar:
-    """`[geometry]`: the five lengths, and the pen's `extension` (mm beyond the joint of the
-    distal links, on link b1) turned by `extension_angle_deg` from the line R1→joint; with
-    an extension the geometry is a `kinematics.extension.ExtendedFiveBar`."""
+    """`[geometry]`: five lengths and the pen's `extension` on b1 beyond the joint, turned by
+    `extension_angle_deg` from R1→joint (then a `kinematics.extension.ExtendedFiveBar`)."""
     g = _Table(doc, "geometry", source)
     lengths = {k: g.number(k, 0.0, 1e5, lo_open=True) for k in ("a1", "b1", "a2", "b2", "w")}
-    ext = g.number("extension", 0.0, 1e5) if "extension" in g.raw else 0.0
-    ang = g.number("extension_angle_deg", -180.0, 180.0) if "extension_angle_deg" in g.raw \
-        else 0.0
+    ext, ang = (g.number(k, lo, hi) if k in g.raw else 0.0 for k, lo, hi in
+                (("extension", 0.0, 1e5), ("extension_angle_deg", -180.0, 180.0)))
     g.done()
     try:
         if ext > 0.0:
@@ -475,14 +473,10 @@ def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
     )
     se.done()
     tool, pen = _parse_pen(doc, source)
-    joints = None
-    if "joints" in doc:
-        jt = _Table(doc, "joints", source)
-        try:
-            joints = parse_joints(jt)
-        except FivebarError as e:
-            raise ConfigError(str(e)) from e
-        jt.done()
+    try:
+        joints = parse_joints(_Table(doc, "joints", source) if "joints" in doc else None)
+    except FivebarError as e:
+        raise ConfigError(str(e)) from e
     return Profile(geometry, motors, kin, motion, laser, serial, source, tool, pen,
                    _parse_text(doc, source), joints)
 

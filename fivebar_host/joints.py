@@ -105,11 +105,17 @@ class _Reader:
 
 
 def parse_joints(t: Any) -> ServoJoints | None:
-    """`[joints]` (a `config._Table`): None for stepper joints, else the servos. Errors
-    name the key (the caller turns them into `ConfigError`)."""
-    kind = t.choice("kind", JOINT_KINDS)
-    if kind == "stepper":
+    """`[joints]` (a `config._Table`, None when the profile has none): None for stepper
+    joints, else the servos. Errors name the key (the caller makes them `ConfigError`)."""
+    if t is None:
         return None
+    joints = _parse_servos(t) if t.choice("kind", JOINT_KINDS) == "servo" else None
+    t.done()
+    return joints
+
+
+def _parse_servos(t: Any) -> ServoJoints:
+    """The servo keys of `[joints]` (module doc)."""
     rd = _Reader(t)
     lo, hi = SERVO_LIMITS_US
     refresh = t.number("refresh_hz", 1.0, 1000.0)
