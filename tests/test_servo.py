@@ -106,3 +106,22 @@ def test_servo_profile_errors_name_the_key(tmp_path: Path, key: str, value: str,
     cfg.write_text(text)
     with pytest.raises(ConfigError, match=match):
         load_profile(cfg)
+
+
+def test_plotclock_servo_profile_plans_pulses_within_its_servos() -> None:
+    """configs/plotclock-servo.toml (the sketch's default servo lines): the dry-run job's
+    joint angles map to pulses inside every servo's range, and back onto the angles."""
+    from fivebar_host.compile import CompileOptions, compile_job
+
+    root = Path(__file__).resolve().parent.parent
+    prof = load_profile(root / "configs" / "plotclock-servo.toml")
+    assert prof.joints is not None
+    job = compile_job(root / "examples" / "fivebar_text.svg", prof, CompileOptions(fit=True))
+    pul = prof.joints.pulses(job.angles_rad)
+    assert pul.min() >= 500.0 and pul.max() <= 2500.0
+    # The sketch's left servo: 2250 µs at 180°, 650 µs per radian.
+    left = prof.joints.joints[0].curve
+    assert float(left.pulse(math.pi)) == pytest.approx(2250.0, abs=0.05)
+    for i, j in enumerate(prof.joints.joints):
+        got = hysteresis(j.curve.angle(pul[:, i]), j.dead_band_rad)
+        assert np.abs(got - job.angles_rad[:, i]).max() <= math.radians(0.25 / 11.345) + 1e-9
