@@ -110,8 +110,9 @@ def write_executed(job: Job, prof: Profile, rec: Recording, preview_path: Path,
                                                   ex.points.tolist(), ex.segment.tolist(),
                                                   ex.deviation_mm.tolist(), strict=True)]
     write_atomic(out, "\n".join(rows) + "\n")
-    truth = true is not None or rec.backlash is not None
-    where = " (drawn by the URL's true=/backlash= machine)" if truth else ""
+    given = [k for k, v in (("true=", true), ("backlash=", rec.backlash)) if v is not None]
+    truth = bool(given)
+    where = f" (drawn by the URL's {' and '.join(given)} machine)" if truth else ""
     click.echo(f"executed path (from the emulator's step pulses{where}): {out}; drawing "
                f"segments' max deviation "
                f"{ex.max_deviation_mm:.4f} mm (bound {job.tolerance_mm:g} + step quantum "
