@@ -125,3 +125,15 @@ def test_plotclock_servo_profile_plans_pulses_within_its_servos() -> None:
     for i, j in enumerate(prof.joints.joints):
         got = hysteresis(j.curve.angle(pul[:, i]), j.dead_band_rad)
         assert np.abs(got - job.angles_rad[:, i]).max() <= math.radians(0.25 / 11.345) + 1e-9
+
+
+def test_servo_speed_caps_the_planned_joint_speed(tmp_path: Path) -> None:
+    from fivebar_host.compile import CompileOptions
+    from fivebar_host.compile.job import with_job_motion
+
+    cfg = tmp_path / "slow.toml"
+    cfg.write_text(SERVO_TOML.replace("speed_s_per_60deg = [0.12, 0.1]",
+                                      "speed_s_per_60deg = [0.5, 0.3]"))
+    prof = load_profile(cfg)
+    got = with_job_motion(prof, CompileOptions()).motion.max_joint_rad_s
+    assert got == pytest.approx((math.pi / 3) / 0.5)  # the slower servo, below 6 rad/s

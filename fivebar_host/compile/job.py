@@ -184,10 +184,13 @@ _NO_FLOATS = np.zeros(0)
 
 def with_job_motion(profile: Profile, opts: CompileOptions) -> Profile:
     """The profile with the job's speed options in place of its [motion] values (the feeds,
-    and the acceleration limit scaled by `accel_fraction` ≤ 1: never above the profile's)."""
+    and the acceleration limit scaled by `accel_fraction` ≤ 1: never above the profile's);
+    on servo joints the joint speed at most the slower servo's rated speed."""
     mo = profile.motion
+    servo = profile.joints.max_joint_rad_s if profile.joints is not None else math.inf
     new = replace(mo, draw_feed_mm_s=opts.draw_feed_mm_s or mo.draw_feed_mm_s,
                   travel_feed_mm_s=opts.travel_feed_mm_s or mo.travel_feed_mm_s,
+                  max_joint_rad_s=min(mo.max_joint_rad_s, servo),
                   max_joint_rad_s2=mo.max_joint_rad_s2 * (opts.accel_fraction or 1.0))
     return profile if new == mo else replace(profile, motion=new)
 
