@@ -18,8 +18,9 @@ the motor turns inside the slack, so (B1) the joint — and the pen — do not m
 pen stays down on the drawing where it is, the planner sees a segment like any other (the
 other motor slows to the junction limit, waits, and speeds up again), so the take-up costs a
 few milliseconds and no drawn accuracy, and no pen lift (a lift and lowering per reversal
-would cost hundreds of milliseconds and a mark of its own). On a laser the take-up segment
-keeps the laser's power like a dwell of its length (milliseconds at the joint speed limit).
+would cost hundreds of milliseconds and a mark of its own). On a laser the take-up runs at
+power 0 (compile/timing.py), at rest on both sides (the power changes there), so the
+standing beam burns no dot.
 
 The job's `steps` are motor counts; `slack` (T+1, 2) holds what the counts exceed the joint
 by at every target, so `steps − slack` are the joint's steps, which forward kinematics,

@@ -78,7 +78,8 @@ def cut_accel(profile: Profile) -> float:
 
 def _settings(profile: Profile, routed: Routed,
               sp: Stepped) -> tuple[NDArray[np.uint8], FloatArray, BoolArray]:
-    """Per segment: laser power (the path's fraction × the profile's power, 0 on travel),
+    """Per segment: laser power (the path's fraction × the profile's power, 0 on travel and
+    backlash take-ups),
     feed (the path's F, else the profile's draw feed; travel feed on travel), and whether the
     tool stops after it (pen switch or new power)."""
     ch, npath, motion = routed.ch, routed.npath, profile.motion
@@ -86,6 +87,8 @@ def _settings(profile: Profile, routed: Routed,
     power_frac = np.where(seg_draw, ch.power[np.minimum(seg_path, npath - 1)], 0.0)
     power = np.where(seg_draw, np.clip(np.rint(power_frac * profile.laser.power), 0, 255),
                      0).astype(np.uint8)
+    if sp.slack.shape[0]:  # a backlash take-up stands still: no power, or it burns a dot
+        power[(sp.slack[1:] != sp.slack[:-1]).any(axis=1)] = 0
     pfeed = ch.feed[np.minimum(seg_path, npath - 1)]
     feed = np.where(seg_draw, np.where(np.isnan(pfeed), motion.draw_feed_mm_s, pfeed),
                     motion.travel_feed_mm_s)
