@@ -567,8 +567,8 @@ def describe(profile: Profile) -> str:
         lines.append(f"[{name}]")
         for f in fields(obj):
             v = getattr(obj, f.name)
-            if f.name.endswith("_rad") and isinstance(v, float):
-                lines.append(f"  {f.name[:-4]}_deg = {math.degrees(v):g}")
+            if f.name.endswith(("_rad", "_angle")) and isinstance(v, float):
+                lines.append(f"  {f.name.removesuffix('_rad')}_deg = {math.degrees(v):g}")
             elif f.name == "home_rad":
                 lines.append(f"  home_deg = [{', '.join(f'{math.degrees(x):g}' for x in v)}]")
             elif f.name == "limits_rad":
