@@ -102,38 +102,47 @@ def layer_settings(name: str | None, base: Hatch) -> tuple[Hatch, bool]:
 def apply(mdraw: Drawing, pl: layout.Placement, tol: float, opts: CompileOptions,
           profile: Profile) -> Drawing:
     """The placed drawing with its hatches and without its hidden parts (module doc)."""
-    paint = mdraw.paint or PaintTable.empty(len(mdraw.sources))
+    return fill_drawing(mdraw, base_hatch(opts, profile), opts.hiding, tol, pl.matrix,
+                        opts.hatch_mm is not None)
+
+
+def fill_drawing(d: Drawing, base: Hatch, hiding: bool, tol: float,
+                 matrix: FloatArray | None = None, hatching: bool = True) -> Drawing:
+    """`d` hatched (`base` per layer, unless `hatching` is off) and with its hidden parts
+    removed (`hiding`), everything found within `FINE`·`tol`; `matrix` maps the drawing's
+    directions to `d`'s frame (the placement's, for the hatch angle; None: the same)."""
+    paint = d.paint or PaintTable.empty(len(d.sources))
     fine = tol * FINE
-    poly = flatten(mdraw, fine)
-    regions = fill_regions(mdraw, fine, poly)
-    base = base_hatch(opts, profile)
+    poly = flatten(d, fine)
+    regions = fill_regions(d, fine, poly)
+    if not hatching:
+        base = replace(base, spacing_mm=0.0)
     by_layer: dict[str | None, tuple[Hatch, bool]] = {}
-    for s in mdraw.sources:
+    for s in d.sources:
         if s.layer not in by_layer:
             by_layer[s.layer] = layer_settings(s.layer, base)
-    hides = np.array([by_layer[s.layer][1] for s in mdraw.sources], dtype=bool)
-    notes: list[str] = []
-    if opts.hiding:
-        occluding = np.zeros(len(mdraw.sources), bool)
+    hides = np.array([by_layer[s.layer][1] for s in d.sources], dtype=bool)
+    occluding = np.zeros(len(d.sources), bool)
+    if hiding:
         occluding[[s for s in regions if hides[s]]] = True
-        vis, hidden_mm, unstroked_mm, hidden_segs = _hide(mdraw, poly, paint, regions,
+        vis, hidden_mm, unstroked_mm, hidden_segs = _hide(d, poly, paint, regions,
                                                           occluding, hides, fine)
     else:
-        occluding = np.zeros(len(mdraw.sources), bool)
-        vis, hidden_mm, unstroked_mm = _all_visible(mdraw), 0.0, 0.0
+        vis, hidden_mm, unstroked_mm = _all_visible(d), 0.0, 0.0
         hidden_segs = np.zeros((0, 2, 2))
-    hatches, stats = _hatch_all(mdraw, pl, regions, by_layer, occluding, fine)
-    if not regions and (opts.hatch_mm is not None or opts.hiding):
-        notes.append("nothing in the drawing is filled: --hatch and --hiding change nothing")
+    m = np.identity(2) if matrix is None else np.asarray(matrix, dtype=np.float64)
+    hatches, stats = _hatch_all(d, m, regions, by_layer, occluding, fine)
+    notes = () if regions else ("nothing in the drawing is filled: --hatch and --hiding "
+                                "change nothing",)
     result = FillResult(hatch_mm=stats[0], link_mm=stats[1], regions=int(stats[2]),
                         simple_regions=int(stats[3]), hatch_runs=int(stats[4]),
                         hatch_runs_simple=int(stats[5]), hidden_mm=hidden_mm,
-                        unstroked_mm=unstroked_mm, hiding=opts.hiding, hidden=hidden_segs,
-                        notes=tuple(notes))
-    out = rebuild(mdraw, vis, hatches, result)
+                        unstroked_mm=unstroked_mm, hiding=hiding, hidden=hidden_segs,
+                        notes=notes)
+    out = rebuild(d, vis, hatches, result)
     if out.kind.shape[0] == 0:
         raise InputError("nothing is left to draw: every line is hidden under later fills "
-                         "(--hiding) and nothing is hatched", mdraw.file)
+                         "(--hiding) and nothing is hatched", d.file)
     return out
 
 
@@ -187,7 +196,7 @@ def _visible_region(s: int, regions: dict[int, BaseGeometry], later: list[int],
     return g.difference(shapely.union_all(cover)) if cover else g
 
 
-def _hatch_all(d: Drawing, pl: layout.Placement, regions: dict[int, BaseGeometry],
+def _hatch_all(d: Drawing, m: FloatArray, regions: dict[int, BaseGeometry],
                by_layer: dict[str | None, tuple[Hatch, bool]], occluding: BoolArray,
                fine: float) -> tuple[list[HatchStrokes], tuple[float, ...]]:
     """Hatch strokes of every hatched source, and (hatch mm, link mm, regions, simple
@@ -208,7 +217,7 @@ def _hatch_all(d: Drawing, pl: layout.Placement, regions: dict[int, BaseGeometry
             continue
         runs: list[FloatArray] = []
         for extra in (0.0, 90.0) if h.cross else (0.0,):
-            r, st = hatch_region(g, _machine_angle(pl, h.angle_deg + extra), h.spacing_mm,
+            r, st = hatch_region(g, _machine_angle(m, h.angle_deg + extra), h.spacing_mm,
                                  fine)
             runs.extend(r)
             tot += st
@@ -217,10 +226,11 @@ def _hatch_all(d: Drawing, pl: layout.Placement, regions: dict[int, BaseGeometry
     return out, tuple(float(v) for v in tot)
 
 
-def _machine_angle(pl: layout.Placement, deg: float) -> float:
-    """The hatch direction on the machine for an angle on the drawing."""
+def _machine_angle(m: FloatArray, deg: float) -> float:
+    """The hatch direction on the machine for an angle on the drawing (`m`: the
+    placement's linear part)."""
     a = math.radians(deg)
-    v = pl.matrix @ np.array([math.cos(a), math.sin(a)])
+    v = m @ np.array([math.cos(a), math.sin(a)])
     return math.atan2(float(v[1]), float(v[0]))
 
 

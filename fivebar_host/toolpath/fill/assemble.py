@@ -63,7 +63,11 @@ def rebuild(d: Drawing, vis: Visible, hatches: list[HatchStrokes], result: FillR
     src = d.stroke_source[old_stroke].astype(np.int64)
     # hatch strokes: LINE primitives, one stroke per run, under a new "hatch" source
     sources = list(d.sources)
-    h_kind, h_params, h_stroke_n, h_src, h_parent, h_line = [], [], [], [], [], []
+    h_params: list[FloatArray] = []
+    h_stroke_n: list[int] = []
+    h_src: list[int] = []
+    h_parent: list[int] = []
+    h_line: list[int] = []
     for h in hatches:
         el = d.sources[h.source]
         hs = len(sources)

@@ -43,10 +43,10 @@ class _Walk:
     def __init__(self, rg: Rings, ln: Lines, region: BaseGeometry, eps: float) -> None:
         self.rg, self.ln, self.region, self.eps = rg, ln, region, eps
         n = ln.count
-        self.x = np.stack((ln.x0, ln.x1), axis=1).reshape(-1).tolist()
-        self.y = np.repeat(ln.y, 2).tolist()
-        self.ring = ln.ring.tolist()
-        self.pos = ln.pos.tolist()
+        self.x: list[float] = np.stack((ln.x0, ln.x1), axis=1).reshape(-1).tolist()
+        self.y: list[float] = np.repeat(ln.y, 2).tolist()
+        self.ring: list[int] = ln.ring.tolist()
+        self.pos: list[float] = ln.pos.tolist()
         self.perim = [rg.perimeter(r) for r in range(rg.offsets.shape[0] - 1)]
         # ring neighbours of every crossing (cyclic order by position on its ring)
         order = np.lexsort((ln.pos, ln.ring))
@@ -59,19 +59,19 @@ class _Walk:
             grp = order[a:b]
             nxt[grp] = np.roll(grp, -1)
             prv[grp] = np.roll(grp, 1)
-        self.nxt, self.prv = nxt.tolist(), prv.tolist()
+        self.nxt: list[int] = nxt.tolist()
+        self.prv: list[int] = prv.tolist()
         self.done = [False] * n
         self.left = n
-        self.start_order = np.lexsort((ln.x0, ln.line)).tolist()
+        self.start_order: list[int] = np.lexsort((ln.x0, ln.line)).tolist()
         self.start_at = 0
         self.prepared = False
 
     def ring_step(self, a: int, b: int, forward: bool) -> float:
         """Arc length from crossing a to crossing b along their ring, forwards or back."""
-        d = self.pos[b] - self.pos[a]
-        p = self.perim[self.ring[a]]
-        d = d % p if forward else (-d) % p
-        return d
+        d: float = self.pos[b] - self.pos[a]
+        p: float = self.perim[self.ring[a]]
+        return d % p if forward else (-d) % p
 
     def boundary(self, a: int, b: int, forward: bool) -> list[tuple[float, float]]:
         """The ring's vertices strictly between crossings a and b, walking one way."""

@@ -146,7 +146,7 @@ def hatch_lines(rg: Rings, spacing: float) -> Lines:
     k0 = math.ceil(float(y.min()) / spacing - 0.5)
     k1 = math.floor(float(y.max()) / spacing - 0.5)
     ks = np.arange(k0, k1 + 1, dtype=np.int64)
-    lines = crossings(rg, (ks + 0.5) * spacing, ks)
+    lines = crossings(rg, (ks + 0.5).astype(np.float64) * spacing, ks)
     hit = np.zeros(int(rg.part.max()) + 1, dtype=bool)
     hit[rg.part[lines.ring]] = True
     missed = np.flatnonzero(~hit)

@@ -12,6 +12,7 @@ and the visible fill (fill region ∩ clip) is kept for hatching and hidden line
 
 from __future__ import annotations
 
+import itertools
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -73,7 +74,7 @@ def record_shape(w: Walker, node: Node, c: Ctx, subpaths: clip.Subpaths, src: in
             xy = np.asarray(g.coords)
             w.b.begin_stroke(src)
             w.b.add_many([(LINE, (float(a[0]), float(a[1]), float(b[0]), float(b[1])))
-                          for a, b in zip(xy[:-1], xy[1:], strict=True)], node.line)
+                          for a, b in itertools.pairwise(xy)], node.line)
         if src < 0:  # the fill shows, nothing of its outline: a source for its hatch
             src = w.b.add_source(node.get("id"), node.line, node.tag, c.layer)
     if src >= 0:
