@@ -52,6 +52,12 @@ class Hatch:
     inset_mm: float
 
 
+def describe(h: Hatch) -> str:
+    """A hatch in words for the dry run."""
+    return (f"{h.spacing_mm:g} mm apart at {h.angle_deg:g}°" + (" and +90°" if h.cross else "")
+            + (f", {h.inset_mm:g} mm inside the edges" if h.inset_mm else ""))
+
+
 def wanted(opts: CompileOptions) -> bool:
     """Whether the stage has anything to do."""
     return opts.hatch_mm is not None or opts.hiding
@@ -131,14 +137,14 @@ def fill_drawing(d: Drawing, base: Hatch, hiding: bool, tol: float,
         vis, hidden_mm, unstroked_mm = _all_visible(d), 0.0, 0.0
         hidden_segs = np.zeros((0, 2, 2))
     m = np.identity(2) if matrix is None else np.asarray(matrix, dtype=np.float64)
-    hatches, stats = _hatch_all(d, m, regions, by_layer, occluding, fine)
+    hatches, stats = _hatch_all(d, m, regions, by_layer, occluding, fine, paint.paper)
     notes = () if regions else ("nothing in the drawing is filled: --hatch and --hiding "
                                 "change nothing",)
     result = FillResult(hatch_mm=stats[0], link_mm=stats[1], regions=int(stats[2]),
                         simple_regions=int(stats[3]), hatch_runs=int(stats[4]),
                         hatch_runs_simple=int(stats[5]), hidden_mm=hidden_mm,
                         unstroked_mm=unstroked_mm, hiding=hiding, hidden=hidden_segs,
-                        notes=notes)
+                        notes=notes, hatch=describe(base) if hatching else "")
     out = rebuild(d, vis, hatches, result)
     if out.kind.shape[0] == 0:
         raise InputError("nothing is left to draw: every line is hidden under later fills "
@@ -198,9 +204,9 @@ def _visible_region(s: int, regions: dict[int, BaseGeometry], later: list[int],
 
 def _hatch_all(d: Drawing, m: FloatArray, regions: dict[int, BaseGeometry],
                by_layer: dict[str | None, tuple[Hatch, bool]], occluding: BoolArray,
-               fine: float) -> tuple[list[HatchStrokes], tuple[float, ...]]:
-    """Hatch strokes of every hatched source, and (hatch mm, link mm, regions, simple
-    regions, runs, runs in simple regions)."""
+               fine: float, paper: BoolArray) -> tuple[list[HatchStrokes], tuple[float, ...]]:
+    """Hatch strokes of every hatched source (not white ones: `paper`), and (hatch mm,
+    link mm, regions, simple regions, runs, runs in simple regions)."""
     later = [s for s in regions if occluding[s]]
     tree = shapely.STRtree([regions[s] for s in later]) if later else None
     out: list[HatchStrokes] = []
@@ -208,7 +214,7 @@ def _hatch_all(d: Drawing, m: FloatArray, regions: dict[int, BaseGeometry],
     for s in sorted(regions):
         src = d.sources[s]
         h = by_layer[src.layer][0]
-        if h.spacing_mm <= 0 or src.role:
+        if h.spacing_mm <= 0 or src.role or paper[s]:
             continue
         g = _visible_region(s, regions, later, tree)
         if h.inset_mm > 0:

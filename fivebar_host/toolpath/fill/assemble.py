@@ -36,6 +36,8 @@ class FillResult:
     hiding: bool = False
     hidden: FloatArray = field(default_factory=lambda: np.zeros((0, 2, 2)))
     notes: tuple[str, ...] = ()
+    #: the job's hatch in words ("0.4 mm at 45°"; "" without hatching)
+    hatch: str = ""
 
     def transformed(self, a: FloatArray, b: FloatArray) -> FillResult:
         """The hidden pieces mapped by x ↦ a·x + b (lengths are kept: the placement's

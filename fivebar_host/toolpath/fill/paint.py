@@ -39,11 +39,14 @@ class PaintTable:
     rule: NDArray[np.int8]
     stroked: BoolArray
     clipped: dict[int, BaseGeometry] = field(default_factory=dict)
+    #: per source: its fill is the paper's colour (white): it hides, it is not hatched
+    paper: BoolArray = field(default_factory=lambda: np.zeros(0, bool))
 
     @staticmethod
     def empty(n_sources: int) -> PaintTable:
         """Nothing filled, everything stroked (a G-code drawing, or text)."""
-        return PaintTable(np.zeros(n_sources, np.int8), np.ones(n_sources, bool))
+        return PaintTable(np.zeros(n_sources, np.int8), np.ones(n_sources, bool), {},
+                          np.zeros(n_sources, bool))
 
     def extended(self, n_sources: int) -> PaintTable:
         """The table grown to `n_sources` (new sources: not filled, stroked)."""
@@ -51,7 +54,8 @@ class PaintTable:
         if n <= 0:
             return self
         return PaintTable(np.concatenate((self.rule, np.zeros(n, np.int8))),
-                          np.concatenate((self.stroked, np.ones(n, bool))), self.clipped)
+                          np.concatenate((self.stroked, np.ones(n, bool))), self.clipped,
+                          np.concatenate((self.paper, np.zeros(n, bool))))
 
     def transformed(self, a: FloatArray, b: FloatArray) -> PaintTable:
         """The table with its regions mapped by x ↦ a·x + b."""
@@ -62,7 +66,8 @@ class PaintTable:
         keys = list(self.clipped)
         geoms = shapely.transform(np.array([self.clipped[k] for k in keys], dtype=object),
                                   lambda xy: xy @ m.T + off)
-        return PaintTable(self.rule, self.stroked, dict(zip(keys, geoms, strict=True)))
+        return PaintTable(self.rule, self.stroked, dict(zip(keys, geoms, strict=True)),
+                          self.paper)
 
 
 class PaintRecorder:
@@ -73,12 +78,16 @@ class PaintRecorder:
         self.rule: dict[int, int] = {}
         self.unstroked: set[int] = set()
         self.clipped: dict[int, BaseGeometry] = {}
+        self.paper: set[int] = set()
 
     def record(self, source: int, rule: int, stroked: bool,
-               clipped: BaseGeometry | None = None) -> None:
-        """One drawn element's paint (`rule` NO_FILL when its fill is not painted)."""
+               clipped: BaseGeometry | None = None, paper: bool = False) -> None:
+        """One drawn element's paint (`rule` NO_FILL when its fill is not painted; `paper`:
+        its fill is white)."""
         if rule != NO_FILL:
             self.rule[source] = rule
+            if paper:
+                self.paper.add(source)
         if not stroked:
             self.unstroked.add(source)
         if clipped is not None and rule != NO_FILL:
@@ -91,4 +100,6 @@ class PaintRecorder:
         for s in self.unstroked:
             t.stroked[s] = False
         t.clipped = dict(self.clipped)
+        for s in self.paper:
+            t.paper[s] = True
         return t

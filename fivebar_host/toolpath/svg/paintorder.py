@@ -23,7 +23,7 @@ from fivebar_host.errors import InputError
 from fivebar_host.toolpath.fill.paint import NO_FILL, RULES
 from fivebar_host.toolpath.geometry import LINE
 from fivebar_host.toolpath.svg import clip
-from fivebar_host.toolpath.svg.paint import number_or_percent, painted
+from fivebar_host.toolpath.svg.paint import colour, number_or_percent, painted
 from fivebar_host.toolpath.svg.xmltree import Node
 
 if TYPE_CHECKING:
@@ -78,4 +78,11 @@ def record_shape(w: Walker, node: Node, c: Ctx, subpaths: clip.Subpaths, src: in
         if src < 0:  # the fill shows, nothing of its outline: a source for its hatch
             src = w.b.add_source(node.get("id"), node.line, node.tag, c.layer)
     if src >= 0:
-        w.paint.record(src, rule, stroked, region)
+        w.paint.record(src, rule, stroked, region, paper_white(c.props["fill"]))
+
+
+def paper_white(fill: str) -> bool:
+    """Whether a fill is the paper's colour (white, opaque): it hides what is beneath it
+    but a pen has nothing to draw for it, so it is not hatched."""
+    col = colour(fill)
+    return col.known and col.alpha >= 1.0 and col.luminance >= 0.999
