@@ -40,19 +40,19 @@ class Pieces:
 
 def convex_pieces(regions: dict[int, BaseGeometry]) -> Pieces:
     """The regions as convex pieces (module doc), owners = the regions' keys."""
-    polys: list[BaseGeometry] = []
-    owners: list[int] = []
-    for s, g in regions.items():
-        for p in shapely.get_parts(g).tolist():
-            if p.geom_type != "Polygon" or p.is_empty or p.area <= 0:
-                continue
-            hull = p.convex_hull
-            if not p.interiors and p.area >= hull.area * (1 - 1e-12):
-                parts = [shapely.simplify(p, 0.0)]
-            else:
-                parts = shapely.get_parts(shapely.constrained_delaunay_triangles(p)).tolist()
-            polys.extend(parts)
-            owners.extend([s] * len(parts))
+    keys = list(regions)
+    parts, idx = shapely.get_parts(np.array([regions[k] for k in keys], dtype=object),
+                                   return_index=True)
+    ok = (shapely.get_type_id(parts) == 3) & (shapely.area(parts) > 0)
+    parts, owner_of = parts[ok], np.array(keys, dtype=np.int64)[idx[ok]]
+    convex = (shapely.get_num_interior_rings(parts) == 0) & (
+        shapely.area(parts) >= shapely.area(shapely.convex_hull(parts)) * (1 - 1e-12))
+    polys: list[BaseGeometry] = parts[convex].tolist()
+    owners: list[int] = owner_of[convex].tolist()
+    for p, s in zip(parts[~convex].tolist(), owner_of[~convex].tolist(), strict=True):
+        tri = shapely.get_parts(shapely.constrained_delaunay_triangles(p)).tolist()
+        polys.extend(tri)
+        owners.extend([s] * len(tri))
     if not polys:
         z = np.zeros(0, np.int64)
         return Pieces(np.zeros((0, 2)), np.zeros(1, np.int64), z, np.array([], dtype=object))
