@@ -190,7 +190,8 @@ def main() -> None:
     ap.add_argument("--speed", action="store_true")
     ap.add_argument("--occult", action="store_true")
     ap.add_argument("--runs", type=int, default=5)
-    ap.add_argument("--spacing", type=Path, metavar="CSV")
+    ap.add_argument("--spacing", nargs="?", const=Path("-"), type=Path, metavar="CSV",
+                    help="an emulator run's executed CSV; without one the run is made")
     ap.add_argument("--pictures", type=Path, metavar="DIR")
     a, rest = ap.parse_known_args()
     everything = not (a.corpus or a.lifts or a.speed or a.occult or a.spacing or a.pictures)
@@ -205,7 +206,7 @@ def main() -> None:
     if a.spacing:
         from benchmarks.fillspacing import spacing_report
 
-        spacing_report(a.spacing, rest)
+        spacing_report(None if str(a.spacing) == "-" else a.spacing, rest)
     if a.pictures:
         from benchmarks.fillspacing import pictures
 

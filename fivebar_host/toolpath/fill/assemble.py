@@ -38,6 +38,8 @@ class FillResult:
     notes: tuple[str, ...] = ()
     #: the job's hatch in words ("0.4 mm at 45°"; "" without hatching)
     hatch: str = ""
+    #: each hatch source's element: {hatch source index: element source index}
+    hatch_of: dict[int, int] = field(default_factory=dict)
 
     def transformed(self, a: FloatArray, b: FloatArray) -> FillResult:
         """The hidden pieces mapped by x ↦ a·x + b (lengths are kept: the placement's
@@ -102,6 +104,8 @@ def rebuild(d: Drawing, vis: Visible, hatches: list[HatchStrokes], result: FillR
     feed = np.concatenate((d.stroke_feed_mm_s[old_stroke], np.full(n_h, np.nan)))[order]
     out_stroke = np.repeat(np.arange(n_out + n_h), counts[order])
     paint = None if d.paint is None else d.paint.extended(len(sources))
+    result = replace(result, hatch_of={len(d.sources) + i: h.source
+                                       for i, h in enumerate(hatches)})
     return Drawing(d.file, all_kind[prim_order], all_params[prim_order], out_stroke,
                    all_line[prim_order], stroke_src, power, feed, sources, d.page_height_mm,
                    d.page_size_mm, d.warnings, [], d.texts, paint, result)
