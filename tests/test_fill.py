@@ -17,6 +17,7 @@ import shapely
 from fivebar_host.compile import CompileOptions, compile_job
 from fivebar_host.compile.fill import Hatch, fill_drawing, layer_settings
 from fivebar_host.config import load_profile
+from fivebar_host.errors import InputError
 from fivebar_host.toolpath.geometry import Drawing, flatten
 from fivebar_host.toolpath.svg import read_svg
 
@@ -204,3 +205,18 @@ def test_layers_choose_their_hatch_and_can_stay_out_of_hiding() -> None:
             + g.format("cover", '<rect x="20" y="40" width="20" height="20" fill="black"/>'))
     d = fill(body, hiding=True, hatching=False)
     assert length(runs(d)) == pytest.approx(100)
+
+
+def test_text_is_drawn_once_never_hatched_and_cut_where_covered() -> None:
+    # text keeps its documented exception: filled text draws its glyph strokes once; it is
+    # not hatched (a single-stroke font has no outline) and hides nothing, but a fill
+    # painted over it hides its strokes like any other
+    t = '<text x="10" y="50" font-size="20" fill="black">HI</text>'
+    plain = fill(t, 0.5)
+    assert runs(plain, "hatch") == []
+    whole = length(runs(plain))
+    cover = '<rect x="0" y="0" width="100" height="100" fill="white"/>'
+    with pytest.raises(InputError, match="every line is hidden"):
+        fill(t + cover, 0.5, hiding=True)  # the white cover hides it all and is not hatched
+    under = fill(cover.replace("white", "black") + t, 0.5, hiding=True)
+    assert length(runs(under)) - length(runs(under, "hatch")) == pytest.approx(whole)
