@@ -11,6 +11,7 @@ its fills black on white, so the browser's coverage of a pixel is 1 − grey/255
 from __future__ import annotations
 
 import io
+import itertools
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -76,7 +77,7 @@ def hatch_points(d: Drawing, step_mm: float = 0.05) -> np.ndarray:
         if not hatch_src[d.stroke_source[poly.stroke[i]]]:
             continue
         run = pts[a:b]
-        for p0, p1 in zip(run[:-1], run[1:], strict=True):
+        for p0, p1 in itertools.pairwise(run):
             n = max(2, int(np.hypot(*(p1 - p0)) * MM_PER_PX / step_mm) + 2)
             out.append(p0 + (p1 - p0) * np.linspace(0, 1, n)[:, None])
     return np.concatenate(out) if out else np.zeros((0, 2))

@@ -121,12 +121,11 @@ def fill_drawing(d: Drawing, base: Hatch, hiding: bool, tol: float,
     fine = tol * FINE
     poly = flatten(d, fine)
     regions = fill_regions(d, fine, poly)
-    if not hatching:
-        base = replace(base, spacing_mm=0.0)
     by_layer: dict[str | None, tuple[Hatch, bool]] = {}
     for s in d.sources:
         if s.layer not in by_layer:
-            by_layer[s.layer] = layer_settings(s.layer, base)
+            h, hide = layer_settings(s.layer, base)
+            by_layer[s.layer] = (h if hatching else replace(h, spacing_mm=0.0), hide)
     hides = np.array([by_layer[s.layer][1] for s in d.sources], dtype=bool)
     occluding = np.zeros(len(d.sources), bool)
     if hiding:

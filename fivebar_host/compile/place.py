@@ -103,7 +103,7 @@ def place(su: Setup, drawing: Drawing, opts: CompileOptions, consume: bool = Fal
     mdraw = drawing.transformed(pl.matrix, pl.offset)
     if fill.wanted(opts):
         mdraw = fill.apply(mdraw, pl, su.tol, opts, su.profile)
-        inv = np.linalg.inv(pl.matrix)  # the drawing-frame twin that messages read
+        inv = np.asarray(np.linalg.inv(pl.matrix), dtype=np.float64)  # the twin messages read
         drawing = mdraw.transformed(inv, -inv @ pl.offset)
     elif consume:
         drawing.params = mdraw.params
