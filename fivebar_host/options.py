@@ -390,6 +390,13 @@ JOB_OPTIONS: tuple[Option, ...] = (
     Option("hatch_inset_mm", "--hatch-inset", "hatch_inset", "float", unit="mm", lo=0.0,
            hi=100.0, default=0.0, metavar="DISTANCE",
            help="Keep the hatch this far inside each shape's edge, mm or with units."),
+    Option("hatch_along", "--hatch-along", "hatch_along", "choice", default="lines",
+           choices=("lines", "arm1", "arm2"),
+           help="Hatch with straight lines, or along joint-iso arcs: arm1 holds motor 1 "
+           "still on a whole step while motor 2 swings the pen about arm 1's elbow (the "
+           "pen exactly on the arc, no step rounding across it); the gap between arcs "
+           "varies with the linkage's angles, at most the spacing, and the dry run says "
+           "how much. --crosshatch adds the other arm's arcs."),
     Option("hiding", "--hiding", "hiding", "bool", default=False,
            help="Hidden-line removal: a filled shape hides what lies beneath it (paint "
            "order); strokes and hatches are cut where covered, fill-only shapes hide "
@@ -448,6 +455,8 @@ _WORDS: dict[str, tuple[str, str, str]] = {
     "crosshatch": ("Cross-hatch", "Hatch a second time at right angles.", ""),
     "hatch_inset_mm": ("Hatch inset", "Keep the hatch this far inside each shape's edge.",
                        "0.2mm"),
+    "hatch_along": ("Hatch along", "Straight lines, or arcs that one motor draws alone "
+                    "(arm1: motor 1 still; arm2: motor 2 still).", ""),
     "hiding": ("Hide what is covered", "Shapes filled in the drawing hide the lines "
                "beneath them; shapes without an outline are not outlined.", ""),
 }

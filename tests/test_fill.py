@@ -220,3 +220,24 @@ def test_text_is_drawn_once_never_hatched_and_cut_where_covered() -> None:
         fill(t + cover, 0.5, hiding=True)  # the white cover hides it all and is not hatched
     under = fill(cover.replace("white", "black") + t, 0.5, hiding=True)
     assert length(runs(under)) - length(runs(under, "hatch")) == pytest.approx(whole)
+
+
+def test_joint_iso_arcs_move_one_motor_and_keep_their_gaps(tmp_path: Path) -> None:
+    # --hatch-along arm1: on every arc of the hatch motor 1 stays on one whole step, so
+    # the executed arc is exactly the requested one; the gaps are at most the spacing
+    f = tmp_path / "disc.svg"
+    f.write_bytes(svg('<circle cx="50" cy="50" r="40" fill="black"/>'))
+    prof = load_profile(ROOT / "configs" / "pen-servo.toml")
+    job = compile_job(f, prof, CompileOptions(hatch_mm=0.5, hatch_along="arm1", fit=True))
+    d = job.drawing
+    hatch = np.array([s.role == "hatch" for s in d.sources])
+    k = np.flatnonzero(job.draw)
+    on_arc = (d.kind[job.seg_prim] == 2) & hatch[job.source[k]]
+    assert on_arc.sum() > 100
+    ks = k[on_arc]
+    assert np.array_equal(job.steps[ks, 0], job.steps[ks + 1, 0])
+    assert d.fill is not None
+    (note,) = [n for n in d.fill.notes if "joint-iso" in n]
+    lo, hi = (float(v) for v in note.split("is ")[1].split(" mm")[0].split("–"))
+    assert 0 < lo <= hi <= 0.5
+    assert job.max_dev_mm <= job.tolerance_mm + job.step_quantum_mm

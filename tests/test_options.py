@@ -34,7 +34,7 @@ def test_query_round_trip_of_every_option() -> None:
               "pen_up_delay_ms": 80.0, "pen_down_delay_ms": 120.0, "layer_pause": True,
               "no_pause": False, "copies": 3, "page_delay_s": 2.5, "gcode_strict": True,
               "hatch_mm": 0.4, "hatch_angle_deg": 30.0, "crosshatch": True,
-              "hatch_inset_mm": 0.1, "hiding": True}
+              "hatch_inset_mm": 0.1, "hiding": True, "hatch_along": "arm1"}
     assert set(values) == {o.name for o in JOB_OPTIONS}
     q = to_query(values)
     pairs = [(k, v) for k, vs in q.items() for v in (vs if isinstance(vs, list) else [vs])]
@@ -96,7 +96,8 @@ def test_client_refuses_unknown_and_out_of_range_before_sending() -> None:
                                                      "page_delay": "15.0", "strict": "false",
                                                      "hatch_angle": "45.0",
                                                      "crosshatch": "false",
-                                                     "hatch_inset": "0.0", "hiding": "false"}
+                                                     "hatch_inset": "0.0", "hiding": "false",
+                                                     "hatch_along": "lines"}
 
 
 def _cli_params(command: str) -> dict[str, click.Parameter]:

@@ -27,6 +27,7 @@ from fivebar_host.config import Profile
 from fivebar_host.errors import InputError
 from fivebar_host.options import parse_length
 from fivebar_host.toolpath import layout
+from fivebar_host.toolpath.fill.arcs import ArcFrame, arc_hatch
 from fivebar_host.toolpath.fill.assemble import FillResult, HatchStrokes, rebuild
 from fivebar_host.toolpath.fill.chains import join_segments
 from fivebar_host.toolpath.fill.cuts import Visible, visible_pieces
@@ -34,7 +35,7 @@ from fivebar_host.toolpath.fill.hatch import hatch_lines, rings_of, rotation
 from fivebar_host.toolpath.fill.hiding import Hidden, convex_pieces, hidden_chords
 from fivebar_host.toolpath.fill.paint import PaintTable
 from fivebar_host.toolpath.fill.regions import fill_regions
-from fivebar_host.toolpath.geometry import Drawing, Polylines, flatten
+from fivebar_host.toolpath.geometry import ARC, Drawing, Polylines, flatten
 from kinematics.arrays import BoolArray, FloatArray, IntArray
 
 #: Regions and hidden parts are found within this share of the job's tolerance.
@@ -50,12 +51,19 @@ class Hatch:
     angle_deg: float
     cross: bool
     inset_mm: float
+    along: str = "lines"  # or "arm1", "arm2": joint-iso arcs (`fill.arcs`)
 
 
 def describe(h: Hatch) -> str:
     """A hatch in words for the dry run."""
-    return (f"{h.spacing_mm:g} mm apart at {h.angle_deg:g}°" + (" and +90°" if h.cross else "")
-            + (f", {h.inset_mm:g} mm inside the edges" if h.inset_mm else ""))
+    if h.along != "lines":
+        other = "arm2" if h.along == "arm1" else "arm1"
+        how = (f"at most {h.spacing_mm:g} mm apart along {h.along}'s joint-iso arcs (motor "
+               f"{h.along[-1]} still)" + (f" and {other}'s" if h.cross else ""))
+    else:
+        how = f"{h.spacing_mm:g} mm apart at {h.angle_deg:g}°" + (" and +90°" if h.cross
+                                                                   else "")
+    return how + (f", {h.inset_mm:g} mm inside the edges" if h.inset_mm else "")
 
 
 def wanted(opts: CompileOptions) -> bool:
@@ -73,7 +81,8 @@ def base_hatch(opts: CompileOptions, profile: Profile) -> Hatch:
     sp = opts.hatch_mm
     if sp is not None and sp == 0.0:
         sp = default_width(profile)
-    return Hatch(sp or 0.0, opts.hatch_angle_deg, opts.crosshatch, opts.hatch_inset_mm)
+    return Hatch(sp or 0.0, opts.hatch_angle_deg, opts.crosshatch, opts.hatch_inset_mm,
+                 opts.hatch_along)
 
 
 _TOKEN = re.compile(r"\+(hatch|angle|inset)=(\S+)|\+(cross|nohatch|nohide)\b", re.I)
@@ -106,17 +115,23 @@ def layer_settings(name: str | None, base: Hatch) -> tuple[Hatch, bool]:
 
 
 def apply(mdraw: Drawing, pl: layout.Placement, tol: float, opts: CompileOptions,
-          profile: Profile) -> Drawing:
-    """The placed drawing with its hatches and without its hidden parts (module doc)."""
+          profile: Profile, mode: str) -> Drawing:
+    """The placed drawing with its hatches and without its hidden parts (module doc);
+    `mode`: the working mode the job is placed for (joint-iso arcs keep its signs)."""
+    mo = profile.motors
+    frames = tuple(ArcFrame(profile.geometry, mode, arm, mo.home_rad[arm - 1],
+                            mo.rad_per_step) for arm in (1, 2))
     return fill_drawing(mdraw, base_hatch(opts, profile), opts.hiding, tol, pl.matrix,
-                        opts.hatch_mm is not None)
+                        opts.hatch_mm is not None, frames)
 
 
 def fill_drawing(d: Drawing, base: Hatch, hiding: bool, tol: float,
-                 matrix: FloatArray | None = None, hatching: bool = True) -> Drawing:
+                 matrix: FloatArray | None = None, hatching: bool = True,
+                 frames: tuple[ArcFrame, ...] = ()) -> Drawing:
     """`d` hatched (`base` per layer, unless `hatching` is off) and with its hidden parts
     removed (`hiding`), everything found within `FINE`·`tol`; `matrix` maps the drawing's
-    directions to `d`'s frame (the placement's, for the hatch angle; None: the same)."""
+    directions to `d`'s frame (the placement's, for the hatch angle; None: the same);
+    `frames`: the machine of each arm, for hatching along joint-iso arcs."""
     paint = d.paint or PaintTable.empty(len(d.sources))
     fine = tol * FINE
     poly = flatten(d, fine)
@@ -136,9 +151,14 @@ def fill_drawing(d: Drawing, base: Hatch, hiding: bool, tol: float,
         vis, hidden_mm, unstroked_mm = _all_visible(d), 0.0, 0.0
         hidden_segs = np.zeros((0, 2, 2))
     m = np.identity(2) if matrix is None else np.asarray(matrix, dtype=np.float64)
-    hatches, stats = _hatch_all(d, m, regions, by_layer, occluding, fine, paint.paper)
-    notes = () if regions else ("nothing in the drawing is filled: --hatch and --hiding "
-                                "change nothing",)
+    hatches, stats, gaps = _hatch_all(d, m, regions, by_layer, occluding, fine, paint.paper,
+                                      frames)
+    notes: tuple[str, ...] = () if regions else (
+        "nothing in the drawing is filled: --hatch and --hiding change nothing",)
+    notes += tuple(f"hatch along {arm}'s joint-iso arcs: {k} motor steps apart, so the gap "
+                   f"between neighbouring arcs on the paper is {lo:.3f}–{hi:.3f} mm here "
+                   "(the still motor on a whole step; the gap varies with the angle between "
+                   "the arm's two links)" for arm, (k, lo, hi) in sorted(gaps.items()))
     result = FillResult(hatch_mm=stats[0], link_mm=stats[1], regions=int(stats[2]),
                         simple_regions=int(stats[3]), hatch_runs=int(stats[4]),
                         hatch_runs_simple=int(stats[5]), hidden_mm=hidden_mm,
@@ -203,13 +223,17 @@ def _visible_region(s: int, regions: dict[int, BaseGeometry], later: list[int],
 
 def _hatch_all(d: Drawing, m: FloatArray, regions: dict[int, BaseGeometry],
                by_layer: dict[str | None, tuple[Hatch, bool]], occluding: BoolArray,
-               fine: float, paper: BoolArray) -> tuple[list[HatchStrokes], tuple[float, ...]]:
-    """Hatch strokes of every hatched source (not white ones: `paper`), and (hatch mm,
-    link mm, regions, simple regions, runs, runs in simple regions)."""
+               fine: float, paper: BoolArray, frames: tuple[ArcFrame, ...]
+               ) -> tuple[list[HatchStrokes], tuple[float, ...],
+                          dict[str, tuple[int, float, float]]]:
+    """Hatch strokes of every hatched source (not white ones: `paper`), (hatch mm, link
+    mm, regions, simple regions, runs, runs in simple regions), and per arm hatched along
+    its arcs (steps apart, narrowest and widest gap, mm)."""
     later = [s for s in regions if occluding[s]]
     tree = shapely.STRtree([regions[s] for s in later]) if later else None
     out: list[HatchStrokes] = []
     tot = np.zeros(6)
+    gaps: dict[str, tuple[int, float, float]] = {}
     for s in sorted(regions):
         src = d.sources[s]
         h = by_layer[src.layer][0]
@@ -220,6 +244,11 @@ def _hatch_all(d: Drawing, m: FloatArray, regions: dict[int, BaseGeometry],
             g = g.buffer(-h.inset_mm, join_style="mitre")
         if g.is_empty:
             continue
+        if h.along != "lines" and frames:
+            hs = _arc_hatch(s, g, h, frames, fine / FINE, tot, gaps)
+            if hs.prims:
+                out.append(hs)
+            continue
         runs: list[FloatArray] = []
         for extra in (0.0, 90.0) if h.cross else (0.0,):
             r, st = hatch_region(g, _machine_angle(m, h.angle_deg + extra), h.spacing_mm,
@@ -228,7 +257,34 @@ def _hatch_all(d: Drawing, m: FloatArray, regions: dict[int, BaseGeometry],
             tot += st
         if runs:
             out.append(HatchStrokes(s, runs))
-    return out, tuple(float(v) for v in tot)
+    return out, tuple(float(v) for v in tot), gaps
+
+
+def _arc_hatch(s: int, g: BaseGeometry, h: Hatch, frames: tuple[ArcFrame, ...], tol: float,
+               tot: FloatArray, gaps: dict[str, tuple[int, float, float]]) -> HatchStrokes:
+    """Source s's region hatched along joint-iso arcs (`fill.arcs`) for a job of
+    tolerance `tol`, its figures added to `tot` and `gaps`."""
+    arms = [int(h.along[-1])] + ([3 - int(h.along[-1])] if h.cross else [])
+    out = HatchStrokes(s, [])
+    for arm in arms:
+        for part in shapely.get_parts(g).tolist():
+            if part.geom_type != "Polygon" or part.is_empty:
+                continue
+            ah = arc_hatch(part, frames[arm - 1], h.spacing_mm, tol * FINE, tol)
+            tot[2] += 1
+            tot[3] += not part.interiors
+            tot[4] += len(ah.runs)
+            tot[5] += len(ah.runs) if not part.interiors else 0
+            for kinds, params in ah.runs:
+                arc = kinds == ARC
+                tot[0] += float(np.abs(params[arc, 7]).sum()) * frames[arm - 1].b
+                tot[1] += float(np.hypot(*(params[~arc, 2:4] - params[~arc, 0:2]).T).sum())
+            out.prims.extend(ah.runs)
+            if ah.runs:
+                k, lo, hi = gaps.get(f"arm{arm}", (ah.steps, np.inf, 0.0))
+                gaps[f"arm{arm}"] = (min(k, ah.steps), min(lo, ah.gap_min),
+                                     max(hi, ah.gap_max))
+    return out
 
 
 def _machine_angle(m: FloatArray, deg: float) -> float:

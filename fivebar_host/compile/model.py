@@ -107,6 +107,7 @@ class CompileOptions:
     crosshatch: bool = False  # a second pass at +90°
     hatch_inset_mm: float = 0.0  # the hatch keeps this far inside each region's edge
     hiding: bool = False  # hidden-line removal in paint order (AxiDraw's --hiding)
+    hatch_along: str = "lines"  # "arm1"/"arm2": joint-iso arcs, that motor still
 
 
 @dataclass(frozen=True)

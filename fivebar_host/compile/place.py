@@ -102,7 +102,7 @@ def place(su: Setup, drawing: Drawing, opts: CompileOptions, consume: bool = Fal
                       fit=opts.fit, assembly=su.asm)
     mdraw = drawing.transformed(pl.matrix, pl.offset)
     if fill.wanted(opts):
-        mdraw = fill.apply(mdraw, pl, su.tol, opts, su.profile)
+        mdraw = fill.apply(mdraw, pl, su.tol, opts, su.profile, su.mode)
         inv = np.asarray(np.linalg.inv(pl.matrix), dtype=np.float64)  # the twin messages read
         drawing = mdraw.transformed(inv, -inv @ pl.offset)
     elif consume:

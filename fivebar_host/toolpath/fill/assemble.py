@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from numpy.typing import NDArray
 
 from fivebar_host.toolpath.fill.cuts import Visible, sub_primitives
 from fivebar_host.toolpath.geometry import LINE, Drawing, SourceInfo
@@ -50,10 +51,21 @@ class FillResult:
 
 @dataclass
 class HatchStrokes:
-    """Hatch runs of one source: polylines (each (M, 2), M ≥ 2)."""
+    """Hatch runs of one source: polylines (each (M, 2), M ≥ 2), and runs of exact
+    primitives (kinds (n,), params (n, 8): joint-iso arcs and their links)."""
 
     source: int
     runs: list[FloatArray]
+    prims: list[tuple[NDArray[np.int8], FloatArray]] = field(default_factory=list)
+
+    def all_runs(self) -> list[tuple[NDArray[np.int8], FloatArray]]:
+        """Every run as primitives (a polyline's chords as lines)."""
+        out = list(self.prims)
+        for run in self.runs:
+            p = np.zeros((run.shape[0] - 1, 8))
+            p[:, 0:2], p[:, 2:4] = run[:-1], run[1:]
+            out.append((np.full(p.shape[0], LINE, np.int8), p))
+        return out
 
 
 def rebuild(d: Drawing, vis: Visible, hatches: list[HatchStrokes], result: FillResult
@@ -67,6 +79,7 @@ def rebuild(d: Drawing, vis: Visible, hatches: list[HatchStrokes], result: FillR
     src = d.stroke_source[old_stroke].astype(np.int64)
     # hatch strokes: LINE primitives, one stroke per run, under a new "hatch" source
     sources = list(d.sources)
+    h_kind: list[NDArray[np.int8]] = []
     h_params: list[FloatArray] = []
     h_stroke_n: list[int] = []
     h_src: list[int] = []
@@ -76,9 +89,8 @@ def rebuild(d: Drawing, vis: Visible, hatches: list[HatchStrokes], result: FillR
         el = d.sources[h.source]
         hs = len(sources)
         sources.append(SourceInfo(hs, el.ident, el.line, el.tag, el.layer, role="hatch"))
-        for run in h.runs:
-            p = np.zeros((run.shape[0] - 1, 8))
-            p[:, 0:2], p[:, 2:4] = run[:-1], run[1:]
+        for k, p in h.all_runs():
+            h_kind.append(k)
             h_params.append(p)
             h_stroke_n.append(p.shape[0])
             h_src.append(hs)
@@ -92,7 +104,7 @@ def rebuild(d: Drawing, vis: Visible, hatches: list[HatchStrokes], result: FillR
     order = np.lexsort((np.arange(n_out + n_h), key_sub, key_src))
     counts = np.concatenate((np.bincount(new_id, minlength=n_out) if n_out else
                              np.zeros(0, np.int64), np.array(h_stroke_n, dtype=np.int64)))
-    all_kind = np.concatenate((kind, np.full(int(sum(h_stroke_n)), LINE, np.int8)))
+    all_kind = np.concatenate((kind, *h_kind))
     all_params = np.concatenate([params, *h_params]) if h_params else params
     all_line = np.concatenate((d.line[vis.prim].astype(np.int64),
                                np.repeat(np.array(h_line, dtype=np.int64),
