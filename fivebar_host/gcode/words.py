@@ -41,6 +41,7 @@ from typing import NamedTuple, NoReturn
 
 from fivebar_host.gcode import errors
 from fivebar_host.gcode.errors import GcodeError
+from kinematics.errors import shorten as shorten_value
 
 #: GRBL's line buffer is 80 bytes: 79 characters after pre-parsing, then the terminator.
 LINE_MAX = 79
@@ -191,7 +192,8 @@ def parse(text: str, strict: bool, policy: Policy | None = None) -> Block:
         w = _new_word(Word, (letter, value, tok))
         words.append(w)
         if not isfinite(value):
-            raise GcodeError(errors.BAD_NUMBER_FORMAT, f"{tok}: not a finite number", tok)
+            raise GcodeError(errors.BAD_NUMBER_FORMAT, f"{shorten(tok)}: not a finite number",
+                             tok)
         if check is not None and letter not in plain and check(w):
             skipped.append(w)
             continue
@@ -246,11 +248,10 @@ def whole_token(text: str, part: str) -> str:
 
 
 def shorten(token: str) -> str:
-    """A token as a message quotes it: whole when short, else its first and last characters
-    and its length (a megabyte of digits must not fill the terminal)."""
-    if len(token) <= SHORT_MAX:
-        return token
-    return f"{token[:12]}…{token[-6:]} ({len(token)} characters)"
+    """A token as a message quotes it: whole when short, else its first 12 and last 6
+    characters and its length (`kinematics.errors.shorten`: a megabyte of digits must not
+    fill the terminal)."""
+    return token if len(token) <= SHORT_MAX else shorten_value(token, 19)
 
 
 def _g_code(w: Word) -> int:
