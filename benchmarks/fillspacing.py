@@ -18,7 +18,9 @@ import math
 import subprocess
 import sys
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import shapely
@@ -67,11 +69,9 @@ def _job_args(rest: list[str]) -> tuple[Path, Path, dict[str, object]]:
 def spacing_report(csv: Path | None, rest: list[str]) -> None:
     """Print the spacing and outside figures (module doc). `rest`: --file F, --config P and
     the plot options of the run (with no CSV given, the run is made here)."""
-    from fivebar_host.compile import CompileOptions, compile_job, read_drawing
-    from fivebar_host.compile.fill import FINE
+    from fivebar_host.compile import CompileOptions
     from fivebar_host.config import load_profile
     from fivebar_host.options import compile_values
-    from fivebar_host.toolpath.fill.regions import fill_regions
 
     file, profile_path, values = _job_args(rest)
     prof = load_profile(profile_path)
@@ -81,6 +81,38 @@ def spacing_report(csv: Path | None, rest: list[str]) -> None:
         plot_args = [a for a in rest if a not in ("--file", str(file), "--config",
                                                   str(profile_path))]
         csv = run_on_emulator(file, plot_args, profile_path, tmp)
+    sf = spacing_figures(csv, file, opts, prof)
+    rel = sf.gaps / sf.nominal - 1.0
+    print(f"hatch spacing at the paper (executed steps → forward kinematics), nominal "
+          f"{sf.nominal:g} mm, {sf.gaps.size} pairs of neighbouring lines, {sf.points} points:")
+    print(f"  mean {np.mean(sf.gaps):.5f} mm ({100 * np.mean(rel):+.3f} %), median "
+          f"{np.median(sf.gaps):.5f} mm ({100 * np.median(rel):+.3f} %); 5–95 %: "
+          f"{100 * np.percentile(rel, 5):+.2f} % … {100 * np.percentile(rel, 95):+.2f} %; "
+          f"worst pair {100 * np.abs(rel).max():.2f} % (goal: mean within ±1 %)")
+    print(f"  executed hatch segments outside their region by more than {sf.bound:.4f} mm "
+          f"(tolerance + step quantum): {sf.outside} of {sf.segments}")
+
+
+@dataclass(frozen=True)
+class SpacingFigures:
+    """The nominal spacing, the executed gaps between neighbouring hatch lines (mm), the
+    points they come from, and the executed hatch segments farther outside their region
+    than `bound` (of `segments`)."""
+
+    nominal: float
+    gaps: np.ndarray
+    points: int
+    bound: float
+    outside: int
+    segments: int
+
+
+def spacing_figures(csv: Path, file: Path, opts: Any, prof: Any) -> SpacingFigures:
+    """`SpacingFigures` of an emulator run's executed CSV (module doc)."""
+    from fivebar_host.compile import compile_job, read_drawing
+    from fivebar_host.compile.fill import FINE
+    from fivebar_host.toolpath.fill.regions import fill_regions
+
     job = compile_job(file, prof, opts)
     f = job.drawing.fill
     assert f is not None and f.hatch, "the job has no hatch"
@@ -116,13 +148,6 @@ def spacing_report(csv: Path | None, rest: list[str]) -> None:
     ksrc, kk = uk >> 32, (uk & ((1 << 32) - 1)) - (1 << 31)
     nxt = (ksrc[1:] == ksrc[:-1]) & (kk[1:] == kk[:-1] + 1)
     gaps = (mean[1:] - mean[:-1])[nxt]
-    rel = gaps / s - 1.0
-    print(f"hatch spacing at the paper (executed steps → forward kinematics), nominal "
-          f"{s:g} mm, {gaps.size} pairs of neighbouring lines, {int(sel.sum())} points:")
-    print(f"  mean {np.mean(gaps):.5f} mm ({100 * np.mean(rel):+.3f} %), median "
-          f"{np.median(gaps):.5f} mm ({100 * np.median(rel):+.3f} %); 5–95 %: "
-          f"{100 * np.percentile(rel, 5):+.2f} % … {100 * np.percentile(rel, 95):+.2f} %; "
-          f"worst pair {100 * np.abs(rel).max():.2f} % (goal: mean within ±1 %)")
     # outside: executed points of hatch segments against their element's fill region
     d0 = read_drawing(file, opts.layers, None, prof)
     md = d0.transformed(job.placement.matrix, job.placement.offset)
@@ -139,9 +164,10 @@ def spacing_report(csv: Path | None, rest: list[str]) -> None:
         g = regions[el]
         dist = shapely.distance(g, shapely.points(pts[m]))
         far_segs.update(seg[m][dist > bound].tolist())
-    n_seg = int(np.unique(seg[hs]).size)
-    print(f"  executed hatch segments outside their region by more than {bound:.4f} mm "
-          f"(tolerance + step quantum): {len(far_segs)} of {n_seg}")
+    return SpacingFigures(s, gaps, int(sel.sum()), bound, len(far_segs),
+                          int(np.unique(seg[hs]).size))
+
+
 
 
 def pictures(out_dir: Path) -> None:
