@@ -28,7 +28,7 @@ from fivebar_host.config import Profile, load_profile
 from fivebar_host.controllers import DEFAULT as DEFAULT_CONTROLLER
 from fivebar_host.controllers import names as controller_names
 from fivebar_host.errors import FivebarError, OptionError, bounded
-from fivebar_host.options import JOB_OPTIONS, Option, compile_values, parse_page
+from fivebar_host.options import JOB_OPTIONS, Option, compile_values, parse_length, parse_page
 
 if TYPE_CHECKING:
     from fivebar_host.run.controller import Controller
@@ -154,6 +154,21 @@ class OptionType(click.ParamType):  # type: ignore[type-arg]  # generic in click
             return self.opt.parse(value)
         except OptionError as e:
             self.fail(e.why, param, ctx)
+
+
+class LengthType(click.ParamType):  # type: ignore[type-arg]  # generic in click 8.2+ only
+    """A length in mm, read as every job option's (`options.parse_length`: 5, 5mm, 0.5in)."""
+
+    name = "length"
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> float:
+        if isinstance(value, float):
+            return value
+        try:
+            return parse_length(str(value))
+        except ValueError as e:
+            self.fail(str(e), param, ctx)
 
 
 def click_option(opt: Option) -> Callable[[F], F]:

@@ -9,6 +9,7 @@ from typing import Any
 import click
 
 from fivebar_host.cli.common import (
+    LengthType,
     compile_from_cli,
     config_option,
     controller_option,
@@ -22,23 +23,6 @@ from fivebar_host.cli.common import (
     yes_option,
 )
 from fivebar_host.cli.operator import TerminalOperator
-from fivebar_host.options import parse_length
-
-
-class LengthType(click.ParamType):  # type: ignore[type-arg]  # generic in click 8.2+ only
-    """A length in mm, read as every job option's (`options.parse_length`: 5, 5mm, 0.5in)."""
-
-    name = "length"
-
-    def convert(self, value: Any, param: click.Parameter | None,
-                ctx: click.Context | None) -> float:
-        if isinstance(value, float):
-            return value
-        try:
-            return parse_length(str(value))
-        except ValueError as e:
-            self.fail(str(e), param, ctx)
-
 
 LENGTH = LengthType()
 

@@ -20,6 +20,7 @@ from typing import Any
 import click
 
 from fivebar_host.cli.common import (
+    LengthType,
     controller_option,
     handle_errors,
     job_options,
@@ -28,22 +29,6 @@ from fivebar_host.cli.common import (
     port_option,
     yes_option,
 )
-from fivebar_host.options import parse_length
-
-
-class LengthType(click.ParamType):  # type: ignore[type-arg]  # generic in click 8.2+ only
-    """A length in mm, or with a unit (10mm, 0.5in, 24pt, 1cm)."""
-
-    name = "length"
-
-    def convert(self, value: Any, param: click.Parameter | None,
-                ctx: click.Context | None) -> float:
-        if isinstance(value, float):
-            return value
-        try:
-            return parse_length(str(value))
-        except ValueError as e:
-            self.fail(str(e), param, ctx)
 
 
 @main.command("text")
