@@ -92,6 +92,8 @@ class Laser:
     on_command: str
     off_between_paths: bool
     silence_timeout_s: float
+    #: the width the beam burns, mm (optional, default 0.1): `--hatch`'s default spacing
+    spot_mm: float = 0.1
 
 
 @dataclass(frozen=True)
@@ -101,7 +103,8 @@ class Pen:
     Positions are percent of the servo's range like AxiDraw's (0 % = `servo_min_us`, 100 %
     = `servo_max_us`), rates percent of that range per second, delays the time the pen
     needs to settle after a move before the arms may move (ms). `z_threshold_mm`: G-code Z
-    above it means pen up."""
+    above it means pen up. `width_mm` (optional, default 0.5): the line the pen draws, the
+    default spacing of `--hatch`."""
 
     servo_min_us: int
     servo_max_us: int
@@ -112,6 +115,7 @@ class Pen:
     up_delay_ms: int
     down_delay_ms: int
     z_threshold_mm: float
+    width_mm: float = 0.5
 
     def pulse_us(self, position: float) -> int:
         """Servo pulse of a position in percent of the range, µs."""
@@ -281,11 +285,13 @@ def _parse_pen(doc: dict[str, Any], source: str) -> tuple[str, Pen | None]:
     rates = {k: p.number(k, 0.0, 1e6, lo_open=True) for k in ("up_rate", "down_rate")}
     delays = {k: p.integer(k, 0, 10_000) for k in ("up_delay_ms", "down_delay_ms")}
     z = p.number("z_threshold_mm", -1e4, 1e4)
+    width = p.number("width_mm", 0.0, 100.0, lo_open=True) if "width_mm" in p.raw else 0.5
     p.done()
     if pos["up_position"] == pos["down_position"]:
         raise ConfigError(f"{p.where('down_position')}: must differ from up_position")
     return kind, Pen(smin, smax, pos["up_position"], pos["down_position"], rates["up_rate"],
-                     rates["down_rate"], delays["up_delay_ms"], delays["down_delay_ms"], z)
+                     rates["down_rate"], delays["up_delay_ms"], delays["down_delay_ms"], z,
+                     width)
 
 
 def _parse_text(doc: dict[str, Any], source: str) -> TextConfig:
@@ -460,6 +466,7 @@ def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
         la.choice("on_command", ("M3", "M4")),
         la.boolean("off_between_paths"),
         la.number("silence_timeout_s", 0.0, 3600.0, lo_open=True),
+        la.number("spot_mm", 0.0, 100.0, lo_open=True) if "spot_mm" in la.raw else 0.1,
     )
     la.done()
 

@@ -134,6 +134,9 @@ class Option:
     metavar: str = ""
     cli: bool = True
     percent: bool = False  # a float that may be written as a percentage ("50%")
+    #: a word that stands for the value 0 (`--hatch pen`: the profile's pen width); the
+    #: CLI flag may then be given without a value, meaning that word
+    word: str = ""
     #: The web page's words: its label, its help where `help` speaks in flags or G-code
     #: (empty: `help`), and an example value for the empty field.
     label: str = ""
@@ -181,6 +184,8 @@ class Option:
 
     def _number(self, text: str) -> float:
         """The number of a float option's text, in its unit (ValueError when malformed)."""
+        if self.word and text.lower() == self.word:
+            return 0.0
         if self.unit == "mm":
             return parse_length(text)
         if self.unit == "mm/s":
@@ -370,6 +375,32 @@ JOB_OPTIONS: tuple[Option, ...] = (
     Option("no_simplify", "--no-simplify", "no_simplify", "bool", default=False,
            help="Keep every vertex of densely sampled straight-line input (default: runs of "
            "lines are simplified within half the tolerance, the drawn path still within it)."),
+    # fills (docs/fill.md)
+    Option("hatch_mm", "--hatch", "hatch", "float", unit="mm", lo=0.0, hi=100.0,
+           word="pen", metavar="SPACING",
+           help="Fill every filled shape with hatch lines this far apart on the paper: mm or "
+           "with units (0.4mm); 'pen' or the bare flag: the profile's pen width "
+           "([pen] width_mm, a laser's [laser] spot_mm). Exact fill-rule; text is not "
+           "hatched."),
+    Option("hatch_angle_deg", "--hatch-angle", "hatch_angle", "float", unit="degrees",
+           default=45.0, lo=-360.0, hi=360.0, metavar="DEGREES",
+           help="Hatch direction on the drawing, degrees counter-clockwise from its x axis."),
+    Option("crosshatch", "--crosshatch", "crosshatch", "bool", default=False,
+           help="Hatch a second time at right angles."),
+    Option("hatch_inset_mm", "--hatch-inset", "hatch_inset", "float", unit="mm", lo=0.0,
+           hi=100.0, default=0.0, metavar="DISTANCE",
+           help="Keep the hatch this far inside each shape's edge, mm or with units."),
+    Option("hatch_along", "--hatch-along", "hatch_along", "choice", default="lines",
+           choices=("lines", "arm1", "arm2"),
+           help="Hatch with straight lines, or along joint-iso arcs: arm1 holds motor 1 "
+           "still on a whole step while motor 2 swings the pen about arm 1's elbow (the "
+           "pen exactly on the arc, no step rounding across it); the gap between arcs "
+           "varies with the linkage's angles, at most the spacing, and the dry run says "
+           "how much. --crosshatch adds the other arm's arcs."),
+    Option("hiding", "--hiding", "hiding", "bool", default=False,
+           help="Hidden-line removal: a filled shape hides what lies beneath it (paint "
+           "order); strokes and hatches are cut where covered, fill-only shapes hide "
+           "without being outlined. A layer with '+nohide' in its name is left out."),
 )
 #: The web page's words for each option (label, help in words where the CLI's help names
 #: flags, settings or G-code, an example): no option's API name reaches the page's text.
@@ -417,6 +448,17 @@ _WORDS: dict[str, tuple[str, str, str]] = {
                 "home pose without asking (first job after power-up).", ""),
     "no_simplify": ("Keep every point", "Do not thin densely sampled lines (they are "
                     "thinned within half the tolerance otherwise).", ""),
+    "hatch_mm": ("Fill shapes with hatch lines", "The distance between the lines on the "
+                 "paper; 'pen' for the pen's width (default: outlines only).",
+                 "0.4mm or pen"),
+    "hatch_angle_deg": ("Hatch angle", "Degrees counter-clockwise.", "45"),
+    "crosshatch": ("Cross-hatch", "Hatch a second time at right angles.", ""),
+    "hatch_inset_mm": ("Hatch inset", "Keep the hatch this far inside each shape's edge.",
+                       "0.2mm"),
+    "hatch_along": ("Hatch along", "Straight lines, or arcs that one motor draws alone "
+                    "(arm1: motor 1 still; arm2: motor 2 still).", ""),
+    "hiding": ("Hide what is covered", "Shapes filled in the drawing hide the lines "
+               "beneath them; shapes without an outline are not outlined.", ""),
 }
 JOB_OPTIONS = tuple(
     dataclasses.replace(o, label=_WORDS[o.name][0], web_help=_WORDS[o.name][1],

@@ -175,6 +175,10 @@ def click_option(opt: Option) -> Callable[[F], F]:
     """The click option generated from one job option definition."""
     if opt.kind == "bool":
         return click.option(opt.flag, opt.name, is_flag=True, help=opt.describe())
+    if opt.word:  # `--hatch` alone means `--hatch pen`
+        return click.option(opt.flag, opt.name, type=OptionType(opt), default=opt.default,
+                            is_flag=False, flag_value=opt.word,
+                            metavar=f"[{opt.metavar or 'VALUE'}]", help=opt.describe())
     return click.option(opt.flag, opt.name, type=OptionType(opt), default=opt.default,
                         multiple=opt.repeat, metavar=opt.metavar or None,
                         help=opt.describe())

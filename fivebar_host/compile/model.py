@@ -101,6 +101,13 @@ class CompileOptions:
     layer_pause: bool = False  # stop for a pen change between Inkscape layers
     no_pause: bool = False  # never stop for a pen change (not even before "!" layers)
     gcode_strict: bool = False  # G-code: every word outside the honoured ones refused
+    # fills (`compile.fill`, docs/fill.md)
+    hatch_mm: float | None = None  # hatch spacing on the paper; 0: the profile's pen width
+    hatch_angle_deg: float = 45.0  # on the drawing, counter-clockwise from its x axis
+    crosshatch: bool = False  # a second pass at +90°
+    hatch_inset_mm: float = 0.0  # the hatch keeps this far inside each region's edge
+    hiding: bool = False  # hidden-line removal in paint order (AxiDraw's --hiding)
+    hatch_along: str = "lines"  # "arm1"/"arm2": joint-iso arcs, that motor still
 
 
 @dataclass(frozen=True)

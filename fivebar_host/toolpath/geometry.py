@@ -26,13 +26,17 @@ import math
 from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import NoReturn
+from typing import TYPE_CHECKING, NoReturn
 
 import numpy as np
 from numpy.typing import NDArray
 
 from fivebar_host.errors import InputError
 from kinematics.arrays import FloatArray, IntArray
+
+if TYPE_CHECKING:
+    from fivebar_host.toolpath.fill.assemble import FillResult
+    from fivebar_host.toolpath.fill.paint import PaintTable
 
 LINE = 0
 CUBIC = 1
@@ -52,6 +56,9 @@ class SourceInfo:
     line: int | None  # 1-based line in the input file
     tag: str  # "path", "circle", ..., or "gcode"
     layer: str | None = None
+    #: "" for the element's own outline; "hatch" for the hatch lines of its fill
+    #: (`toolpath.fill`), which share its id, line and layer
+    role: str = ""
 
 
 @dataclass(frozen=True)
@@ -111,6 +118,10 @@ class Drawing:
     warnings: list[str] = field(default_factory=list)
     dwells: list[Dwell] = field(default_factory=list)
     texts: list[TextInfo] = field(default_factory=list)
+    #: per source: fill rule, stroke painted, clipped fill regions (SVG; `fill.paint`)
+    paint: PaintTable | None = None
+    #: what hatching and hidden-line removal did (`fill.assemble`; None: neither ran)
+    fill: FillResult | None = None
 
     @property
     def n_strokes(self) -> int:
@@ -128,7 +139,9 @@ class Drawing:
         return Drawing(self.file, self.kind, transform(self.kind, self.params, a, b),
                        self.stroke, self.line, self.stroke_source, self.stroke_power,
                        self.stroke_feed_mm_s, self.sources, self.page_height_mm,
-                       self.page_size_mm, self.warnings, self.dwells, self.texts)
+                       self.page_size_mm, self.warnings, self.dwells, self.texts,
+                       None if self.paint is None else self.paint.transformed(a, b),
+                       None if self.fill is None else self.fill.transformed(a, b))
 
 
 class DrawingBuilder:

@@ -127,6 +127,32 @@ def joint_lines(job: Job, profile: Profile) -> list[str]:
     return lines
 
 
+def fill_lines(job: Job) -> list[str]:
+    """What hatching and hidden-line removal did (`--hatch`, `--hiding`): how much of the
+    drawing is hatch, how much was hidden, and the pen lifts."""
+    f = job.drawing.fill
+    if f is None:
+        return []
+    hatch_src = np.array([s.role == "hatch" for s in job.drawing.sources] + [False])
+    seg = job.draw & (job.source >= 0)
+    hatch_mm = float(job.length_mm[seg & hatch_src[job.source]].sum())
+    total = job.draw_length_mm
+    out = []
+    if f.hatch:
+        out.append(f"hatch         {hatch_mm:.1f} mm of the {total:.1f} mm drawn "
+                   f"({100 * hatch_mm / total if total else 0:.0f} %): {f.hatch}; "
+                   f"{f.regions} regions ({f.simple_regions} simple, in "
+                   f"{f.hatch_runs_simple} pen-down runs), {f.link_mm:.1f} mm of links "
+                   "inside them")
+    if f.hiding:
+        out.append(f"hidden        {f.hidden_mm:.1f} mm of lines under later fills, "
+                   f"{f.unstroked_mm:.1f} mm of fill-only outlines not drawn (--hiding)")
+    incl = ", hatch included" if f.hatch else ""
+    out.append(f"pen lifts     {job.pen_downs} (pen-down runs{incl})")
+    out.extend(f"note          {n}" for n in f.notes)
+    return out
+
+
 def report_lines(job: Job, nbar: NbarOpinion | None = None, laser: bool = False,
                  profile: Profile | None = None, copies: Copies | None = None) -> list[str]:
     """The dry-run report: paths, segments, lengths, time, deviation, margins, mode, tool (pen,
@@ -152,6 +178,7 @@ def report_lines(job: Job, nbar: NbarOpinion | None = None, laser: bool = False,
         f"segments      {job.n_segments} ({int(job.draw.sum())} drawing, "
         f"{int((~job.draw).sum())} travel)",
         f"drawing       {job.draw_length_mm:.1f} mm",
+        *fill_lines(job),
         f"travel        {job.travel_length_mm:.1f} mm (pen-up straight-line estimate "
         f"{job.travel_before_mm:.1f} mm in file order → {job.travel_after_mm:.1f} mm "
         "reordered)",

@@ -105,6 +105,7 @@ def read_svg(source: str | Path | bytes, layers: Sequence[str] | None = None,
     _check_layers(r, name)
     r.b.warnings.extend(_warnings(r))
     drawing = r.b.build(page_height_mm=height_mm, page_size_mm=(width_mm, height_mm))
+    drawing.paint = r.paint.table(len(drawing.sources))
     _check_coordinates(drawing, name)
     if drawing.kind.shape[0] == 0:
         raise InputError(_nothing_message(r), name)

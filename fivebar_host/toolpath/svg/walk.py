@@ -23,12 +23,14 @@ import numpy as np
 from shapely.geometry.base import BaseGeometry
 
 from fivebar_host.errors import InputError
+from fivebar_host.toolpath.fill.paint import PaintRecorder
 from fivebar_host.toolpath.fonts.library import FontLibrary
 from fivebar_host.toolpath.geometry import DrawingBuilder, TextInfo
 from fivebar_host.toolpath.svg import clip
 from fivebar_host.toolpath.svg.css import StyleSheet
 from fivebar_host.toolpath.svg.markers import Markers, expand_shorthand
 from fivebar_host.toolpath.svg.paint import INHERITED, inherit, number_or_percent, painted
+from fivebar_host.toolpath.svg.paintorder import record_shape
 from fivebar_host.toolpath.svg.shapes import SHAPES, shape_subpaths
 from fivebar_host.toolpath.svg.text import CharLayout, draw_text
 from fivebar_host.toolpath.svg.undrawn import Undrawn
@@ -90,6 +92,7 @@ class Walker:
         self.collector: list[Collected] | None = None
         self.collect_all_paint = False
         self.region: Callable[[Node, dict[str, str], Ctx], Ctx] | None = None
+        self.paint = PaintRecorder()  # each drawn shape's fill rule and stroke, by source
 
     @property
     def texts(self) -> list[TextInfo]:
@@ -353,7 +356,7 @@ class Walker:
             self.collector.append(Collected(node, c, subs))
             return
         if painted_too:
-            self.emit(node, c, res.subpaths)
+            record_shape(self, node, c, res.subpaths, self.emit(node, c, res.subpaths))
         self.markers.draw(node, c, res.subpaths)
 
     def emit(self, node: Node, c: Ctx, subpaths: clip.Subpaths, tag: str | None = None) -> int:
