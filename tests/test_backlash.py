@@ -115,3 +115,34 @@ def test_backlash_options_are_checked() -> None:
     doc["motors"]["backlash_steps"] = [-1, 0]
     with pytest.raises(ConfigError, match="backlash_steps"):
         parse_profile(doc, "x.toml")
+
+
+def test_the_grbl_bridge_takes_up_slack_too() -> None:
+    """The bridge's online compiler (GRBL senders' streams): a square drawn move by move gets
+    take-ups at its reversals, and every batch ends with the slack taken up downward, so its
+    counts are the joints' steps where the next batch starts."""
+    from fivebar_host.compile.incremental import OnlineCompiler
+
+    prof = _profile(LASH)
+    oc = OnlineCompiler(prof, "+-", 0.05, laser=True)
+    th0 = oc.angles_of_steps(0, 0)
+    start = oc.point_of(th0)
+    assert start is not None
+    x, y = start
+    corners = [(x + 10, y - 10), (x + 10, y - 30), (x - 10, y - 30), (x - 10, y - 10),
+               (x + 10, y - 10)]
+    moves, th, pt = [], th0, start
+    for c in corners:
+        m = oc.solve(th, pt, [c], rapid=False, draw=True, feed_mm_s=20.0, power=200,
+                     dynamic=False, arc=False)
+        assert m is not None
+        moves.append(m)
+        th, pt = m.th[-1], (float(m.pts[-1, 0]), float(m.pts[-1, 1]))
+    batch = oc.plan(th0, start, moves)
+    prog = batch.program
+    counts = np.concatenate(([[0, 0]], prog.positions((0, 0))[prog.is_motion]))
+    joint = play(counts, (LASH, LASH))
+    # The batch ends with the slack taken down: the counts are the joints' steps there.
+    assert batch.end_steps == tuple(joint[-1].tolist()) == tuple(counts[-1].tolist())
+    take = (np.diff(joint, axis=0) == 0).all(axis=1) & (np.diff(counts, axis=0) != 0).any(axis=1)
+    assert take.sum() >= 2

@@ -105,8 +105,8 @@ def take_up(sp: Stepped, backlash: tuple[int, int]) -> Stepped:
     k = at + 1  # the take-up's end is inserted right after the reversal point
     new_steps = np.insert(joint + slack_rows, k, joint[at] + ins_slack, axis=0)
     new_slack = np.insert(slack_rows, k, ins_slack, axis=0)
-    # The job ends with the slack taken up downward, as the next job assumes at home: a
-    # last take-up (pen up, the joint still) where a motor last moved up.
+    # The job ends with the slack taken up downward, as the next job (or the bridge's next
+    # batch) assumes: a last take-up (the joint still) where a motor last moved up.
     end = [sp.draw.shape[0]] if after[-1].any() else []
     seg = np.concatenate((at, end)).astype(np.int64)
     src = np.minimum(seg, sp.draw.shape[0] - 1)  # provenance: the next segment (or the last)
@@ -115,9 +115,7 @@ def take_up(sp: Stepped, backlash: tuple[int, int]) -> Stepped:
         new_slack = np.concatenate((new_slack, np.zeros((1, 2), dtype=np.int64)))
     rows = np.concatenate((at, [sp.th.shape[0] - 1] if end else [])).astype(np.int64)
     k = np.concatenate((at + 1, [sp.th.shape[0]] if end else [])).astype(np.int64)
-    draw = sp.draw[src].copy()
-    if end:
-        draw[-1] = False
+    draw = sp.draw[src]  # the pen keeps its state: the joint does not move
     return replace(
         sp, th=np.insert(sp.th, k, sp.th[rows], axis=0),
         pts=np.insert(sp.pts, k, sp.pts[rows], axis=0),
