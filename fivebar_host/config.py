@@ -19,8 +19,10 @@ from typing import Any
 import numpy as np
 
 from fivebar_host.errors import FivebarError, InputError
+from fivebar_host.joints import ServoJoints, parse_joints
 from fivebar_host.protocol import BASE_BAUD, BAUD_RATES
 from fivebar_host.toolpath.fonts.library import FontLibrary, TextConfig
+from kinematics.extension import ExtendedFiveBar
 from kinematics.fivebar import WORKING_MODES, FiveBar
 
 #: Assembly modes: "+" iff the pen lies left of the directed line R1→R2 (elbow to elbow).
@@ -42,6 +44,8 @@ class Motors:
     home_rad: tuple[float, float]
     limits_rad: tuple[tuple[float, float], tuple[float, float]]
     endstops: bool
+    #: each motor's slack in steps, taken up at its reversals (compile/backlash.py)
+    backlash_steps: tuple[int, int] = (0, 0)
 
     @property
     def steps_per_rev(self) -> float:
@@ -157,6 +161,7 @@ class Profile:
     tool: str = "laser"  # "pen" (a servo pen lift, `pen` set) or "laser"
     pen: Pen | None = None
     text: TextConfig = field(default_factory=TextConfig)  # `[text]`: the fonts of SVG text
+    joints: ServoJoints | None = None  # `[joints]`: None = steppers (fivebar_host/joints.py)
 
 
 class _Table:
@@ -248,7 +253,7 @@ class _Table:
 
 
 KNOWN_TABLES = ("geometry", "motors", "kinematics", "motion", "laser", "serial", "tool", "pen",
-                "text")
+                "text", "joints")
 #: `[text]` keys naming the font of each CSS generic family (TOML keys cannot hold "-").
 GENERIC_KEYS = {"serif": "serif", "sans_serif": "sans-serif", "cursive": "cursive",
                 "fantasy": "fantasy", "monospace": "monospace"}
@@ -370,6 +375,22 @@ def did_you_mean(names: list[str], known: Iterable[str]) -> str:
     return ""
 
 
+def _parse_geometry(doc: dict[str, Any], source: str) -> FiveBar:
+    """`[geometry]`: five lengths and the pen's `extension` on b1 beyond the joint, turned by
+    `extension_angle_deg` from R1→joint (then a `kinematics.extension.ExtendedFiveBar`)."""
+    g = _Table(doc, "geometry", source)
+    lengths = {k: g.number(k, 0.0, 1e5, lo_open=True) for k in ("a1", "b1", "a2", "b2", "w")}
+    ext, ang = (g.number(k, lo, hi) if k in g.raw else 0.0 for k, lo, hi in
+                (("extension", 0.0, 1e5), ("extension_angle_deg", -180.0, 180.0)))
+    g.done()
+    try:
+        if ext > 0.0:
+            return ExtendedFiveBar(**lengths, extension=ext, extension_angle=math.radians(ang))
+        return FiveBar(**lengths)
+    except ValueError as e:
+        raise ConfigError(f"{source}: [geometry]: {e}") from e
+
+
 def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
     """Validate a parsed TOML document into a `Profile`."""
     unknown = sorted(set(doc) - set(KNOWN_TABLES))
@@ -378,13 +399,7 @@ def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
                           f"(known: {', '.join(KNOWN_TABLES)})"
                           + did_you_mean(unknown, KNOWN_TABLES))
 
-    g = _Table(doc, "geometry", source)
-    lengths = {k: g.number(k, 0.0, 1e5, lo_open=True) for k in ("a1", "b1", "a2", "b2", "w")}
-    g.done()
-    try:
-        geometry = FiveBar(**lengths)
-    except ValueError as e:
-        raise ConfigError(f"{source}: [geometry]: {e}") from e
+    geometry = _parse_geometry(doc, source)
 
     m = _Table(doc, "motors", source)
     full_steps = m.integer("full_steps", 1, 100_000)
@@ -409,10 +424,13 @@ def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
                               f"limits_deg[{i}] = [{lo:g}, {hi:g}]")
         lims.append((math.radians(lo), math.radians(hi)))
     endstops = m.boolean("endstops")
+    lash = m.pair("backlash_steps", 0, 10_000) if "backlash_steps" in m.raw else (0.0, 0.0)
+    if any(v != int(v) for v in lash):
+        raise ConfigError(f"{m.where('backlash_steps')}: must be whole steps; got {lash!r}")
     m.done()
     motors = Motors(full_steps, microsteps, gear_ratio,
                     (math.radians(home[0]), math.radians(home[1])),
-                    (lims[0], lims[1]), endstops)
+                    (lims[0], lims[1]), endstops, (int(lash[0]), int(lash[1])))
 
     k = _Table(doc, "kinematics", source)
     kin = KinematicsCfg(
@@ -462,8 +480,12 @@ def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
     )
     se.done()
     tool, pen = _parse_pen(doc, source)
+    try:
+        joints = parse_joints(_Table(doc, "joints", source) if "joints" in doc else None)
+    except FivebarError as e:
+        raise ConfigError(str(e)) from e
     return Profile(geometry, motors, kin, motion, laser, serial, source, tool, pen,
-                   _parse_text(doc, source))
+                   _parse_text(doc, source), joints)
 
 
 def _read_toml(p: Path) -> dict[str, Any]:
@@ -552,8 +574,8 @@ def describe(profile: Profile) -> str:
         lines.append(f"[{name}]")
         for f in fields(obj):
             v = getattr(obj, f.name)
-            if f.name.endswith("_rad") and isinstance(v, float):
-                lines.append(f"  {f.name[:-4]}_deg = {math.degrees(v):g}")
+            if f.name.endswith(("_rad", "_angle")) and isinstance(v, float):
+                lines.append(f"  {f.name.removesuffix('_rad')}_deg = {math.degrees(v):g}")
             elif f.name == "home_rad":
                 lines.append(f"  home_deg = [{', '.join(f'{math.degrees(x):g}' for x in v)}]")
             elif f.name == "limits_rad":

@@ -102,7 +102,7 @@ def write_executed(job: Job, prof: Profile, rec: Recording, preview_path: Path,
     t, track = merge_axes(tr.positions("A", tr.start[0]), tr.positions("B", tr.start[1]),
                           tr.start)
     ex = executed_path(job, prof, t / tr.freq, track, report.start_segment,
-                       report.start_position, true=true_params(true))
+                       report.start_position, true=true_params(true), backlash=rec.backlash)
     out = preview_path.with_name(preview_path.stem + ".executed.csv")
     rows = ["t_s,a_steps,b_steps,x_mm,y_mm,segment,deviation_mm"]
     rows += [f"{ti:.6f},{a},{b},{x:.4f},{y:.4f},{sg},{'' if d != d else f'{d:.5f}'}"
@@ -110,15 +110,16 @@ def write_executed(job: Job, prof: Profile, rec: Recording, preview_path: Path,
                                                   ex.points.tolist(), ex.segment.tolist(),
                                                   ex.deviation_mm.tolist(), strict=True)]
     write_atomic(out, "\n".join(rows) + "\n")
-    where = " (drawn by the URL's true= machine)" if true is not None else ""
+    given = [k for k, v in (("true=", true), ("backlash=", rec.backlash)) if v is not None]
+    truth = bool(given)
+    where = f" (drawn by the URL's {' and '.join(given)} machine)" if truth else ""
     click.echo(f"executed path (from the emulator's step pulses{where}): {out}; drawing "
                f"segments' max deviation "
                f"{ex.max_deviation_mm:.4f} mm (bound {job.tolerance_mm:g} + step quantum "
                f"{job.step_quantum_mm:.4f} mm)")
     if prof.pen is not None:
         click.echo(pen_report(job, prof, tr.pen_pulses(), tr.freq, ex).line())
-    check_deviation(ex.max_deviation_mm, job.tolerance_mm + job.step_quantum_mm, out,
-                    true is not None)
+    check_deviation(ex.max_deviation_mm, job.tolerance_mm + job.step_quantum_mm, out, truth)
 
 
 def check_deviation(dev_mm: float, bound_mm: float, csv: Path, true_machine: bool) -> None:
@@ -128,8 +129,9 @@ def check_deviation(dev_mm: float, bound_mm: float, csv: Path, true_machine: boo
 
     if dev_mm <= bound_mm:
         return
-    why = ("the machine as really built (the URL's true=) differs from the profile: "
-           "calibrate it (docs/calibration.md)" if true_machine else
+    why = ("the machine as really built (the URL's true= or backlash=) differs from the "
+           "profile: calibrate it (docs/calibration.md) or set its [motors] backlash_steps "
+           "(docs/backlash.md)" if true_machine else
            "the arms were not where the controller's count said: a power loss answered "
            "'yes, they are where the job stopped' while they were elsewhere, or steps lost "
            "to a stall")

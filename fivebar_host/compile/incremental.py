@@ -32,6 +32,7 @@ import numpy as np
 
 from fivebar_host import protocol
 from fivebar_host.compile import steps
+from fivebar_host.compile.backlash import take_up
 from fivebar_host.compile.model import MAX_STEP_RAD
 from fivebar_host.compile.segments import Segments, drop_zero_moves
 from fivebar_host.compile.timing import time_stepped
@@ -202,12 +203,16 @@ class OnlineCompiler:
                        line=np.repeat(np.arange(len(moves)), counts),
                        length=np.concatenate([m.length for m in moves]),
                        perm=np.arange(k))
-        sp = drop_zero_moves(mot, seg)
+        # backlash: take-ups at reversals; each batch ends with the slack taken up downward,
+        # so the counts equal the joints' steps between batches (compile.backlash)
+        sp = take_up(drop_zero_moves(mot, seg), mot.backlash_steps)
         end = (int(sp.steps[-1, 0]), int(sp.steps[-1, 1]))
         if sp.draw.shape[0] == 0:
             return Batch(Program.empty(), 0.0, end, moves[0].jog if moves else False, len(moves))
         mv = sp.line
         power = np.array([m.power for m in moves], dtype=np.uint8)[mv]
+        if sp.slack.shape[0]:  # a standing take-up burns nothing
+            power[(sp.slack[1:] != sp.slack[:-1]).any(axis=1)] = 0
         feed = np.array([m.feed_mm_s for m in moves])[mv]
         stop = np.zeros(mv.shape[0], dtype=bool)
         stop[:-1] = (sp.draw[1:] != sp.draw[:-1]) | (power[1:] != power[:-1])

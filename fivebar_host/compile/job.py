@@ -33,6 +33,8 @@ the requested path; rounding to whole steps adds at most one step quantum (repor
     travel.plan_travel               → Travel (targets, margins, mode changes, notes)
     segments.assemble                → Segments (merged targets with provenance)
     segments.drop_zero_moves         → Stepped (absolute steps, zero moves dropped)
+    backlash.take_up                 → Stepped (motor counts; a take-up segment at every
+                                       reversal of a motor with backlash)
     timing.plan_timing               → Planned (ramp pieces, power, durations)
     finish.finish                    → Job (per-path bookkeeping, margins, validation)
 
@@ -51,6 +53,7 @@ from typing import Any
 import numpy as np
 
 from fivebar_host.compile import budget
+from fivebar_host.compile.backlash import take_up
 from fivebar_host.compile.finish import draw_geometry, finish, requested_rows
 from fivebar_host.compile.layers import sections
 from fivebar_host.compile.model import AUTO_ORDER, CompileOptions, Job, release_free_memory
@@ -161,7 +164,9 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
     segments = assemble(placed, home, routed, solved, tr)
     rows = requested_rows(routed, solved)
     routed, solved = routed.per_path(), solved.per_path()
-    handed = [drop_zero_moves(profile.motors, segments)]  # timing empties it
+    # motor counts, with a take-up segment at every reversal of a motor with backlash
+    handed = [take_up(drop_zero_moves(profile.motors, segments),
+                      profile.motors.backlash_steps)]  # timing empties it
     del segments  # the stepped copy replaces it
     release_free_memory()
     report("timing")
@@ -179,10 +184,13 @@ _NO_FLOATS = np.zeros(0)
 
 def with_job_motion(profile: Profile, opts: CompileOptions) -> Profile:
     """The profile with the job's speed options in place of its [motion] values (the feeds,
-    and the acceleration limit scaled by `accel_fraction` ≤ 1: never above the profile's)."""
+    and the acceleration limit scaled by `accel_fraction` ≤ 1: never above the profile's);
+    on servo joints the joint speed at most the slower servo's rated speed."""
     mo = profile.motion
+    servo = profile.joints.max_joint_rad_s if profile.joints is not None else math.inf
     new = replace(mo, draw_feed_mm_s=opts.draw_feed_mm_s or mo.draw_feed_mm_s,
                   travel_feed_mm_s=opts.travel_feed_mm_s or mo.travel_feed_mm_s,
+                  max_joint_rad_s=min(mo.max_joint_rad_s, servo),
                   max_joint_rad_s2=mo.max_joint_rad_s2 * (opts.accel_fraction or 1.0))
     return profile if new == mo else replace(profile, motion=new)
 

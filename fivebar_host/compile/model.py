@@ -234,6 +234,9 @@ class Job:
     dwell: BoolArray = field(default_factory=lambda: np.zeros(0, bool))
     #: pen-change stops, by segment (`compile.layers`; empty: the job runs through)
     pauses: tuple[LayerPause, ...] = ()
+    #: per target, what the motor counts `steps` exceed the joint's steps by: the slack
+    #: taken up at reversals (`compile.backlash`; empty: no backlash, counts = joint)
+    slack: IntArray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
 
     # ------------------------------------------------------------------ derived
     @property
@@ -255,6 +258,12 @@ class Job:
     def dwell_time_s(self) -> float:
         """Planned time of the dwells, s (part of `total_time_s`)."""
         return float(self.duration_us[self.is_dwell].sum()) * 1e-6
+
+    @property
+    def joint_steps(self) -> IntArray:
+        """The joints' steps at every target (T+1, 2): `steps` less the `slack` (backlash);
+        what forward kinematics of the job reads."""
+        return self.steps if not self.slack.shape[0] else self.steps.astype(np.int64) - self.slack
 
     @property
     def relative_steps(self) -> IntArray:
@@ -295,7 +304,7 @@ class Job:
     def executed_points(self, fb: FiveBar, samples: int = 4) -> FloatArray:
         """Pen positions along the whole job from the quantised steps, `samples` per segment
         plus the final target (forward kinematics of the joint-space interpolation)."""
-        th = steps.step_angles(self.steps, self.home_rad, self.steps_per_rev)
+        th = steps.step_angles(self.joint_steps, self.home_rad, self.steps_per_rev)
         s = np.arange(samples) / samples
         dth = np.diff(th, axis=0)
         q = (th[:-1, None, :] + s[None, :, None] * dth[:, None, :]).reshape(-1, 2)

@@ -32,6 +32,9 @@ URL options: `fivebar-sim://?trace=PATH&realtime=1&endstops=A,B&machine=NAME&res
 - `true=a1,b1,a2,b2,w,home1,home2` (mm, degrees): the machine as really built, where it
   differs from the profile; the executed-path report after `fivebar plot` then measures where
   that machine draws (calibration tests: docs/calibration.md);
+- `backlash=A,B` (steps): each motor's real slack (gears, belts), where it differs from the
+  profile's `[motors] backlash_steps`; the executed-path report draws through it
+  (`compile.backlash.play`; docs/backlash.md);
 - `bootloader=optiboot|atmegaboot`: the chip boots a real bootloader (firmware/Makefile
   `bootloaders`: Optiboot at 115200 built from Debian's arduino-core-avr source, the old
   ATmegaBOOT at 57600) at its boot section, as an Uno or an old Nano does, with its
@@ -97,8 +100,8 @@ FAULTS = {"disconnect_after": None, "reset_after": "reset", "power_cut_after": "
           "stall_after": "hang"}
 #: Line noise options (per-byte probabilities) and the seed of their generator.
 NOISE = ("drop", "corrupt")
-_KNOWN = (*HARNESS_OPTIONS, "machine", *FAULTS, *NOISE, "seed", "true", "usb", "power_loss",
-          "fresh")
+_KNOWN = (*HARNESS_OPTIONS, "machine", *FAULTS, *NOISE, "seed", "true", "backlash", "usb",
+          "power_loss", "fresh")
 #: Real-time bytes pass untouched; a corruption never produces one (docs/protocol.md 2).
 _REALTIME = frozenset(b"?!~\x18")
 _CORRUPT_BYTES = bytes(c for c in range(0x20, 0x7F) if c not in _REALTIME)
@@ -119,6 +122,8 @@ class SimOptions:
     #: The machine as really built (a1, b1, a2, b2, w mm, home1, home2 degrees), where it
     #: differs from the profile: the executed-path report measures what it really draws.
     true: tuple[float, ...] | None = None
+    #: Each motor's real slack in steps, where it differs from the profile's backlash.
+    backlash: tuple[int, int] | None = None
     bootloader: str | None = None
     chip: str = "atmega328p"
     app: str = "empty"
@@ -143,6 +148,15 @@ def parse_true_geometry(text: str, url: str) -> tuple[float, ...]:
         raise ValueError(f"{url}: true must be a1,b1,a2,b2,w,home1,home2 (positive mm, "
                          f"degrees within ±360), got {text!r}")
     return vals
+
+
+def parse_backlash(text: str, url: str) -> tuple[int, int]:
+    """`backlash=A,B`: each motor's real slack, two whole steps in 0–10000."""
+    parts = text.split(",")
+    if len(parts) != 2 or not all(p.strip().isdigit() and int(p) <= 10_000 for p in parts):
+        raise ValueError(f"{url}: backlash must be two step counts A,B in 0..10000, got "
+                         f"{text!r}")
+    return int(parts[0]), int(parts[1])
 
 
 def parse_sim_url(url: str) -> SimOptions:
@@ -191,6 +205,8 @@ def parse_sim_url(url: str) -> SimOptions:
             opts.seed = int(value)
         elif key == "true":
             opts.true = parse_true_geometry(value, url)
+        elif key == "backlash":
+            opts.backlash = parse_backlash(value, url)
         elif not parse_board_option(opts, key, value, url):
             raise ValueError(f"{url}: unknown option {key!r} (known: {', '.join(_KNOWN)})")
     if opts.bootloader is None and (opts.chip != "atmega328p" or "app" in given):

@@ -215,9 +215,13 @@ def _linkages(ax: Axes, fb: FiveBar, th: FloatArray, pose_pts: FloatArray) -> Ha
     for k in range(th.shape[0]):
         r1, r2 = fb.elbows(th[k].reshape(1, 2))
         p = pose_pts[k]
-        ax.plot([0.0, r1[0, 0], p[0], r2[0, 0], fb.w], [0.0, r1[0, 1], p[1], r2[0, 1], 0.0],
-                "-o", color="#1f77b4", lw=2.0, ms=3.5, alpha=0.9 if k == 0 else 0.45,
-                label=None, zorder=5)
+        j = fb.joint_from_pen(r1, p.reshape(1, 2))[0]  # the pen unless it is off the joint
+        xs = [0.0, r1[0, 0], j[0], r2[0, 0], fb.w]
+        ys = [0.0, r1[0, 1], j[1], r2[0, 1], 0.0]
+        if not np.array_equal(j, p):  # the extension of link 1 to the pen
+            xs[3:3], ys[3:3] = [p[0], r1[0, 0], j[0]], [p[1], r1[0, 1], j[1]]
+        ax.plot(xs, ys, "-o", color="#1f77b4", lw=2.0, ms=3.5,
+                alpha=0.9 if k == 0 else 0.45, label=None, zorder=5)
     return [Line2D([], [], color="#1f77b4", marker="o", lw=2.0, ms=3.5,
                    label="linkage (home, first, middle, last)")]
 
@@ -263,7 +267,7 @@ def draw_preview(job: Job, profile: Profile, out: str | Path, samples: int = 4,
     """Write the preview PNG (see module doc) atomically; returns the path."""
     fb = profile.geometry
     fig, ax = plt.subplots(figsize=(11.0, 8.0))
-    th = step_angles(job.steps, job.home_rad, job.steps_per_rev)
+    th = step_angles(job.joint_steps, job.home_rad, job.steps_per_rev)
     sel = _pose_indices(job)
     pose_pts = fb.forward_batch(th[sel], _assembly(job)).points
     box = _extent(job, fb, th[sel], pose_pts)

@@ -88,6 +88,8 @@ class Recording:
 
     path: Path
     true: tuple[float, ...] | None
+    #: each motor's real slack in steps (`?backlash=`), None: the profile's backlash
+    backlash: tuple[int, int] | None = None
 
 
 @dataclass(frozen=True)

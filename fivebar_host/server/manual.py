@@ -39,10 +39,11 @@ log = logging.getLogger("fivebar.serve")
 
 @dataclass(frozen=True)
 class Pose:
-    """The linkage at a motor position, machine mm: M1, R1, P, R2, M2 and the working mode."""
+    """The linkage at a motor position, machine mm: M1, R1, P, R2, M2 (with the joint J of
+    the distal links after P when the pen is off it) and the working mode."""
 
     pen: tuple[float, float]
-    points: tuple[tuple[float, float], ...]  # M1, R1, P, R2, M2
+    points: tuple[tuple[float, float], ...]  # M1, R1, P, [J,] R2, M2
     mode: str
 
 
@@ -57,8 +58,10 @@ def pose_mm(profile: Profile, a: int, b: int) -> Pose | None:
     r1, r2 = fb.elbows(th)
     signs = fb.mode_of(fk.points, th)[0]
     mode = "".join("+" if s >= 0 else "-" for s in signs)
+    j = fb.joint_from_pen(r1, fk.points)[0]
+    joint = () if np.array_equal(j, p) else ((float(j[0]), float(j[1])),)
     pts = ((0.0, 0.0), (float(r1[0, 0]), float(r1[0, 1])), (float(p[0]), float(p[1])),
-           (float(r2[0, 0]), float(r2[0, 1])), (float(fb.w), 0.0))
+           *joint, (float(r2[0, 0]), float(r2[0, 1])), (float(fb.w), 0.0))
     return Pose((float(p[0]), float(p[1])), pts, mode)
 
 

@@ -130,8 +130,10 @@ class FivebarController:
         trace = getattr(self.link.port, "trace_path", None)
         if trace is None:
             return None
-        true = getattr(getattr(self.link.port, "options", None), "true", None)
-        return Recording(Path(trace), None if true is None else tuple(true))
+        opts = getattr(self.link.port, "options", None)
+        true = getattr(opts, "true", None)
+        return Recording(Path(trace), None if true is None else tuple(true),
+                         getattr(opts, "backlash", None))
 
     # ------------------------------------------------------------------ pose
     def ensure_pose(self, operator: Operator) -> Position:

@@ -14,6 +14,7 @@ import numpy as np
 from fivebar_host import protocol
 from fivebar_host.compile import Job, NbarOpinion, linkrate
 from fivebar_host.config import Profile
+from fivebar_host.errors import FivebarError
 from fivebar_host.run.stops import Copies, plan_text
 
 
@@ -104,6 +105,28 @@ def text_lines(job: Job) -> list[str]:
     return out
 
 
+def joint_lines(job: Job, profile: Profile) -> list[str]:
+    """The backlash take-ups (compile.backlash) and, on servo joints, the pulse targets."""
+    lines = []
+    lash = profile.motors.backlash_steps
+    if any(lash) and job.slack.shape[0]:
+        still = (np.diff(job.joint_steps, axis=0) == 0).all(axis=1)
+        piece = still & (np.diff(job.steps.astype(np.int64), axis=0) != 0).any(axis=1)
+        runs = int(piece[:1].sum()) + int((piece[1:] & ~piece[:-1]).sum())
+        t = float(job.duration_us[piece].sum()) * 1e-6
+        lines.append(f"backlash      {runs} take-up(s) of A {lash[0]}, B {lash[1]} steps at "
+                     f"reversals, {t:.2f} s (the pen stays put while a motor takes up)")
+    if profile.joints is not None:
+        try:
+            pul = profile.joints.pulses(job.angles_rad)
+            lines.append(f"servo joints  pulses A {pul[:, 0].min():g}–{pul[:, 0].max():g} µs, "
+                         f"B {pul[:, 1].min():g}–{pul[:, 1].max():g} µs (0.5 µs steps, dead "
+                         "band compensated); the firmware does not drive arm servos yet")
+        except FivebarError as e:
+            lines.append(f"servo joints  {e}")
+    return lines
+
+
 def fill_lines(job: Job) -> list[str]:
     """What hatching and hidden-line removal did (`--hatch`, `--hiding`): how much of the
     drawing is hatch, how much was hidden, and the pen lifts."""
@@ -178,6 +201,7 @@ def report_lines(job: Job, nbar: NbarOpinion | None = None, laser: bool = False,
                  f"{deg(mm[2]):.1f}°")
     if profile is not None:
         lines.extend(link_lines(job, profile))
+        lines.extend(joint_lines(job, profile))
     lines.extend(text_lines(job))
     lines.extend(pause_lines(job))
     lines.extend(f"mode change {k:<2d}{mc.describe(job.n_paths)}"
