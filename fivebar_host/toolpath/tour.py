@@ -1,0 +1,417 @@
+"""Local search on a tour of reversible paths (`toolpath.order`'s second stage), numpy only.
+
+The tour is a sequence of positions 0..n+1: position 0 is the pen's start (only an exit
+point), positions 1..n are the paths, each entered at `A[k]` and left at `B[k]` (its start
+and end, swapped when it is drawn reversed), and position n+1 the park position (only an
+entry point; with no park position every distance to it is 0). The cost is the sum of the
+travel edges B[k] → A[k+1]. Two kinds of moves, both found through the K nearest endpoints
+of every endpoint (`neighbours`, a grid searched at growing cell sizes):
+
+- 2-opt: reverse the block i..j (and every path in it): the edges B[i−1] → A[i] and
+  B[j] → A[j+1] become B[i−1] → B[j] and A[i] → A[j+1]. A pair of near exits (or of near
+  entries) proposes it; a single path's reversal is the block i..i.
+- Or-opt: move the block i..j of 1–3 paths between k and k+1, forwards or reversed. A near
+  exit/entry pair (the new edge B[k] → A[i] or B[j] → A[k+1]) or a near pair of exits or
+  of entries (reversed insertion) proposes it.
+
+Each round computes the gain of every proposed move of one kind at once (vectorised), takes
+the improving moves best first while they touch disjoint positions (their gains then add
+up exactly), applies them together, and marks the endpoints whose edges changed; the next
+rounds only propose moves with a marked endpoint (don't-look bits). Rounds alternate
+between the kinds until neither improves.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from kinematics.arrays import BoolArray, FloatArray, IntArray
+
+#: Moves gaining less than this (mm) are not taken (rounding noise).
+EPS = 1e-9
+
+
+def neighbours(pts: FloatArray, k: int, owner: IntArray) -> tuple[IntArray, IntArray]:
+    """Up to `k` nearest other points of every point (pairs (i, j), i's nearest first),
+    skipping points with the same `owner`. Points are binned in a square grid of about two
+    points per cell and each point's candidates are the points of its 3 × 3 block of cells
+    (at most `4k + 8` from any one cell, so that many coincident points stay linear in work);
+    points with fewer than `k` candidates are searched again in a grid twice as coarse, until
+    every point has `k` or the grid covers the drawing."""
+    m = pts.shape[0]
+    lo = pts.min(axis=0)
+    span = float(max(np.ptp(pts, axis=0).max(), 1e-9))
+    h = span / max(1.0, np.sqrt(m / 2.0))
+    query = np.arange(m)
+    out_i: list[IntArray] = []
+    out_j: list[IntArray] = []
+    while query.size:
+        cells = np.floor((pts - lo) / h).astype(np.int64)
+        g = int(cells.max()) + 3
+        key = (cells[:, 0] + 1) * g + cells[:, 1] + 1
+        srt = np.argsort(key, kind="stable")
+        ukey, first, count = np.unique(key[srt], return_index=True, return_counts=True)
+        pi_l: list[IntArray] = []
+        pj_l: list[IntArray] = []
+        qkey = key[query]
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                nk = qkey + dx * g + dy
+                c = np.searchsorted(ukey, nk)
+                c = np.minimum(c, ukey.size - 1)
+                hit = ukey[c] == nk
+                q, c = query[hit], c[hit]
+                cnt = np.minimum(count[c], 4 * k + 8)
+                rep = np.repeat(np.arange(q.size), cnt)
+                off = np.arange(rep.size) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+                pi_l.append(q[rep])
+                pj_l.append(srt[first[c][rep] + off])
+        pi = np.concatenate(pi_l)
+        pj = np.concatenate(pj_l)
+        ok = owner[pi] != owner[pj]
+        pi, pj = pi[ok], pj[ok]
+        d2 = ((pts[pi] - pts[pj]) ** 2).sum(axis=1)
+        srt2 = np.lexsort((d2, pi))
+        pi, pj = pi[srt2], pj[srt2]
+        start = np.searchsorted(pi, pi, side="left")
+        rank = np.arange(pi.size) - start
+        keep = rank < k
+        found = np.bincount(pi[keep], minlength=m)
+        done = (found[query] >= k) | (h > 2 * span)
+        sel = keep & np.isin(pi, query[done])
+        out_i.append(pi[sel])
+        out_j.append(pj[sel])
+        query = query[~done]
+        h *= 2.0
+    pi, pj = np.concatenate(out_i), np.concatenate(out_j)
+    srt = np.argsort(pi, kind="stable")  # each point's pairs come from one pass, nearest first
+    return pi[srt], pj[srt]
+
+
+class Tour:
+    """The tour's mutable state (module doc): path and reversal per position, entry (A) and
+    exit (B) coordinates per position, and each path's position."""
+
+    def __init__(self, starts: FloatArray, ends: FloatArray, order: IntArray, rev: BoolArray,
+                 start: FloatArray, end: FloatArray | None) -> None:
+        self.n = n = order.shape[0]
+        self.free_end = end is None
+        self.path = np.concatenate(([-1], order, [-1])).astype(np.int64)
+        self.rev = np.concatenate(([False], rev, [False]))
+        r = rev[:, None]
+        a = np.concatenate((start[None], np.where(r, ends[order], starts[order]),
+                            (start if end is None else end)[None]))
+        b = np.concatenate((start[None], np.where(r, starts[order], ends[order]), a[-1:]))
+        self.ax, self.ay = a[:, 0].copy(), a[:, 1].copy()
+        self.bx, self.by = b[:, 0].copy(), b[:, 1].copy()
+        self.pos = np.empty(n, dtype=np.int64)
+        self.pos[order] = np.arange(1, n + 1)
+
+    def length(self) -> float:
+        """The tour's travel."""
+        d = np.hypot(self.ax[1:] - self.bx[:-1], self.ay[1:] - self.by[:-1])
+        if self.free_end:
+            d[-1] = 0.0
+        return float(d.sum())
+
+    def roles(self, e: IntArray) -> tuple[IntArray, BoolArray]:
+        """Position and whether it is the exit, of endpoint ids (id < n: start of path id,
+        n ≤ id < 2n: end of path id − n, 2n: the start position, 2n + 1: the park)."""
+        n = self.n
+        inner = e < 2 * n
+        k = np.where(inner, self.pos[np.where(inner, e % n, 0)],
+                     np.where(e == 2 * n, 0, n + 1))
+        return k, np.where(inner, (e >= n) ^ self.rev[k], e == 2 * n)
+
+    def role(self, e: int) -> tuple[int, bool]:
+        """`roles` of one endpoint."""
+        n = self.n
+        if e >= 2 * n:
+            return (0, True) if e == 2 * n else (n + 1, False)
+        k = int(self.pos[e % n])
+        return k, (e >= n) != bool(self.rev[k])
+
+    def dist(self, px: FloatArray, py: FloatArray, qx: FloatArray, qy: FloatArray,
+             q: IntArray) -> FloatArray:
+        """|P − Q| where Q is at positions `q`: 0 to the park position if there is none."""
+        d = np.hypot(px - qx, py - qy)
+        if self.free_end:
+            d[q == self.n + 1] = 0.0
+        return d
+
+    def d1(self, px: float, py: float, qx: float, qy: float, q: int) -> float:
+        """`dist` of one pair."""
+        if self.free_end and q == self.n + 1:
+            return 0.0
+        return math.hypot(px - qx, py - qy)
+
+    def reverse(self, i: int, j: int) -> None:
+        """Reverse the block i..j (and each path in it)."""
+        s = slice(i, j + 1)
+        self.path[s] = self.path[s][::-1].copy()
+        self.rev[s] = ~self.rev[s][::-1]
+        ax, ay = self.ax[s][::-1].copy(), self.ay[s][::-1].copy()
+        self.ax[s], self.ay[s] = self.bx[s][::-1], self.by[s][::-1]
+        self.bx[s], self.by[s] = ax, ay
+        self.pos[self.path[s]] = np.arange(i, j + 1)
+
+    def move(self, i: int, j: int, k: int, r: bool) -> None:
+        """Move the block i..j after position k (k < i − 1 or k > j), reversed if `r`."""
+        blk = np.arange(i, j + 1)
+        if r:
+            blk = blk[::-1]
+        if k > j:
+            lo, hi, idx = i, k, np.concatenate((np.arange(j + 1, k + 1), blk))
+            b0 = k - (j - i)
+        else:
+            lo, hi, idx = k + 1, j, np.concatenate((blk, np.arange(k + 1, i)))
+            b0 = k + 1
+        s = slice(lo, hi + 1)
+        ax, ay, bx, by = self.ax[idx], self.ay[idx], self.bx[idx], self.by[idx]
+        rv = self.rev[idx]
+        if r:
+            b = slice(b0 - lo, b0 - lo + j - i + 1)
+            ax[b], bx[b] = bx[b].copy(), ax[b].copy()
+            ay[b], by[b] = by[b].copy(), ay[b].copy()
+            rv[b] = ~rv[b]
+        self.path[s] = self.path[idx]
+        self.rev[s] = rv
+        self.ax[s], self.ay[s], self.bx[s], self.by[s] = ax, ay, bx, by
+        self.pos[self.path[s]] = np.arange(lo, hi + 1)
+
+
+def _gain_2opt(t: Tour, i: IntArray, j: IntArray) -> FloatArray:
+    ax, ay, bx, by = t.ax, t.ay, t.bx, t.by
+    return (t.dist(bx[i - 1], by[i - 1], ax[i], ay[i], i)
+            + t.dist(bx[j], by[j], ax[j + 1], ay[j + 1], j + 1)
+            - t.dist(bx[i - 1], by[i - 1], bx[j], by[j], j)
+            - t.dist(ax[i], ay[i], ax[j + 1], ay[j + 1], j + 1))
+
+
+def _move_2opt(t: Tour, x: int, y: int) -> tuple[int, int, float] | None:
+    """The 2-opt move of the pair (x, y) now, and its gain (None: no valid move)."""
+    kx, ex = t.role(x)
+    ky, ey = t.role(y)
+    if kx == ky or ex != ey:
+        return None
+    i, j = (min(kx, ky) + 1, max(kx, ky)) if ex else (min(kx, ky), max(kx, ky) - 1)
+    if not 1 <= i <= j <= t.n:
+        return None
+    ax, ay, bx, by, d = t.ax, t.ay, t.bx, t.by, t.d1
+    g = (d(bx[i - 1], by[i - 1], ax[i], ay[i], i) + d(bx[j], by[j], ax[j + 1], ay[j + 1], j + 1)
+         - d(bx[i - 1], by[i - 1], bx[j], by[j], j)
+         - d(ax[i], ay[i], ax[j + 1], ay[j + 1], j + 1))
+    return i, j, g
+
+
+def round_2opt(t: Tour, x: IntArray, y: IntArray) -> list[int]:
+    """Improving 2-opt moves proposed by the pairs (x, y), taken best first, each checked
+    again on the tour as it is then; returns the paths whose edges or roles changed."""
+    n = t.n
+    if t.free_end:  # any exit may become the last: pair every exit with the last one
+        p, rv = t.path[:n], t.rev[:n]
+        ids = np.where(p < 0, 2 * n, p + np.where(rv, 0, n))
+        x = np.concatenate((x, ids))
+        y = np.concatenate((y, np.full(n, int(t.path[n]) + (0 if t.rev[n] else n))))
+    kx, ex = t.roles(x)
+    ky, ey = t.roles(y)
+    lo, hi = np.minimum(kx, ky), np.maximum(kx, ky)
+    same = (ex == ey) & (kx != ky)
+    i = np.where(ex, lo + 1, lo)
+    j = np.where(ex, hi, hi - 1)
+    ok = same & (i >= 1) & (i <= j) & (j <= n)
+    x, y, i, j = x[ok], y[ok], i[ok], j[ok]
+    gain = _gain_2opt(t, i, j)
+    good = np.flatnonzero(gain > EPS)
+    good = good[np.argsort(-gain[good], kind="stable")]
+    touched: list[int] = []
+    for xc, yc in zip(x[good].tolist(), y[good].tolist(), strict=True):
+        mv = _move_2opt(t, xc, yc)
+        if mv is None or mv[2] <= EPS:
+            continue
+        a, b, _ = mv
+        # a reversed block's endpoints change role (exit ↔ entry) against the rest
+        touched.extend(t.path[a - 1:b + 2].tolist())
+        t.reverse(a, b)
+    return touched
+
+
+def _oropt_of(kx: IntArray, ex: BoolArray, ky: IntArray, ey: BoolArray,
+              L: IntArray) -> tuple[IntArray, IntArray, IntArray, BoolArray]:
+    """Or-opt block i..j, insertion point k and reversal for pairs whose new edge is
+    B[k] → A[i] (exit x, entry y: forwards), B[k] → B[j] (exits: reversed), B[j] → A[k+1]
+    (entry x, exit y: forwards) or A[i] → A[k+1] (entries: reversed)."""
+    i = np.where(ey, ky - L + 1, ky)
+    j = np.where(ey, ky, ky + L - 1)
+    k = np.where(ex, kx, kx - 1)
+    return i, j, k, ex == ey
+
+
+def _gain_oropt(t: Tour, i: IntArray, j: IntArray, k: IntArray, r: BoolArray) -> FloatArray:
+    ax, ay, bx, by, d = t.ax, t.ay, t.bx, t.by, t.dist
+    rem = (d(bx[i - 1], by[i - 1], ax[i], ay[i], i) + d(bx[j], by[j], ax[j + 1], ay[j + 1], j + 1)
+           + d(bx[k], by[k], ax[k + 1], ay[k + 1], k + 1)
+           - d(bx[i - 1], by[i - 1], ax[j + 1], ay[j + 1], j + 1))
+    ins_f = d(bx[k], by[k], ax[i], ay[i], i) + d(bx[j], by[j], ax[k + 1], ay[k + 1], k + 1)
+    ins_r = d(bx[k], by[k], bx[j], by[j], j) + d(ax[i], ay[i], ax[k + 1], ay[k + 1], k + 1)
+    return rem - np.where(r, ins_r, ins_f)
+
+
+def _gain_oropt1(t: Tour, i: int, j: int, k: int, r: bool) -> float:
+    """`_gain_oropt` of one move."""
+    ax, ay, bx, by, d = t.ax, t.ay, t.bx, t.by, t.d1
+    rem = (d(bx[i - 1], by[i - 1], ax[i], ay[i], i) + d(bx[j], by[j], ax[j + 1], ay[j + 1], j + 1)
+           + d(bx[k], by[k], ax[k + 1], ay[k + 1], k + 1)
+           - d(bx[i - 1], by[i - 1], ax[j + 1], ay[j + 1], j + 1))
+    if r:
+        return rem - d(bx[k], by[k], bx[j], by[j], j) - d(ax[i], ay[i], ax[k + 1], ay[k + 1], k + 1)
+    return rem - d(bx[k], by[k], ax[i], ay[i], i) - d(bx[j], by[j], ax[k + 1], ay[k + 1], k + 1)
+
+
+def _long_blocks(t: Tour, nbr: IntArray, x: IntArray, y: IntArray, min_len: int
+                 ) -> tuple[IntArray, IntArray, IntArray, IntArray, IntArray, BoolArray]:
+    """Or-opt moves of blocks longer than `min_len` (or-3opt): the pair (x, y) gives the
+    insertion edge and one end of the block (i if y is an entry, else j); the other end is
+    where the closing edge B[i−1] → A[j+1] joins a near endpoint `z` of the block's outer
+    neighbour. Returns the index of the pair, z, i, j, k and the reversal per candidate."""
+    n = t.n
+    kx, ex = t.roles(x)
+    ky, ey = t.roles(y)
+    # the endpoint before the block (exit at i − 1) or after it (entry at j + 1)
+    q = np.where(ey, ky + 1, ky - 1)
+    pq = t.path[q]
+    rq = t.rev[q]
+    w = np.where(ey, np.where(pq < 0, 2 * n + 1, pq + np.where(rq, n, 0)),
+                 np.where(pq < 0, 2 * n, pq + np.where(rq, 0, n)))
+    kk = nbr.shape[1]
+    z = nbr[w].ravel()
+    sel = np.repeat(np.arange(x.shape[0]), kk)
+    has = z >= 0
+    z, sel = z[has], sel[has]
+    kz, ez = t.roles(z)
+    eyy = ey[sel]
+    # y entry (block starts at i = ky): z must be an entry after it, j = kz − 1;
+    # y exit (block ends at j = ky): z must be an exit before it, i = kz + 1
+    i = np.where(eyy, kz + 1, ky[sel])
+    j = np.where(eyy, ky[sel], kz - 1)
+    k = np.where(ex[sel], kx[sel], kx[sel] - 1)
+    ok = ((ez == eyy) & (j - i + 1 > min_len) & (i >= 1) & (j <= n) & (k >= 0) & (k <= n)
+          & ((k < i - 1) | (k > j)))
+    sel, z = sel[ok], z[ok]
+    return sel, z, i[ok], j[ok], k[ok], (ex == ey)[sel]
+
+
+def _oropt_now(t: Tour, x: int, y: int, L: int, z: int) -> tuple[int, int, int, bool] | None:
+    """The Or-opt move of candidate (x, y, L or z) on the tour as it is now (module doc)."""
+    n = t.n
+    kx, ex = t.role(x)
+    ky, ey = t.role(y)
+    k = kx if ex else kx - 1
+    if z < 0:
+        i, j = (ky, ky + L - 1) if not ey else (ky - L + 1, ky)
+    else:
+        kz, ez = t.role(z)
+        if ez != ey:
+            return None
+        i, j = (ky, kz - 1) if not ey else (kz + 1, ky)
+    if not (1 <= i <= j <= n and 0 <= k <= n and (k < i - 1 or k > j)):
+        return None
+    return i, j, k, ex == ey
+
+
+def round_oropt(t: Tour, x: IntArray, y: IntArray, nbr: IntArray | None = None,
+                max_len: int = 3) -> list[int]:
+    """Improving Or-opt moves proposed by the pairs (x, y): blocks of 1..`max_len` paths,
+    and with the neighbour table `nbr` longer blocks (`_long_blocks`); best first, each
+    checked again on the tour as it is then; returns the paths whose edges changed."""
+    n = t.n
+    kx, ex = t.roles(x)
+    ky, ey = t.roles(y)
+    m = x.shape[0]
+    xs, ys = np.tile(x, max_len), np.tile(y, max_len)
+    L = np.repeat(np.arange(1, max_len + 1), m)
+    i, j, k, r = _oropt_of(np.tile(kx, max_len), np.tile(ex, max_len), np.tile(ky, max_len),
+                           np.tile(ey, max_len), L)
+    ok = (i >= 1) & (j <= n) & (k >= 0) & (k <= n) & ((k < i - 1) | (k > j))
+    z = np.full(int(ok.sum()), -1, dtype=np.int64)
+    xs, ys, L, i, j, k, r = xs[ok], ys[ok], L[ok], i[ok], j[ok], k[ok], r[ok]
+    if nbr is not None:
+        sel, z2, i2, j2, k2, r2 = _long_blocks(t, nbr, x, y, max_len)
+        xs, ys = np.concatenate((xs, x[sel])), np.concatenate((ys, y[sel]))
+        i, j, k, r = (np.concatenate(v) for v in ((i, i2), (j, j2), (k, k2), (r, r2)))
+        L = np.concatenate((L, np.zeros(sel.size, dtype=np.int64)))
+        z = np.concatenate((z, z2))
+    gain = _gain_oropt(t, i, j, k, r)
+    good = np.flatnonzero(gain > EPS)
+    good = good[np.argsort(-gain[good], kind="stable")]
+    touched: list[int] = []
+    for c in good.tolist():
+        mv = _oropt_now(t, int(xs[c]), int(ys[c]), int(L[c]), int(z[c]))
+        if mv is None:
+            continue
+        ia, ja, ka, ra = mv
+        if _gain_oropt1(t, ia, ja, ka, ra) <= EPS:
+            continue
+        touched.extend(t.path[[ia - 1, ia, ja, ja + 1, ka, ka + 1]].tolist())
+        t.move(ia, ja, ka, ra)
+    return touched
+
+
+def _search(t: Tour, px: IntArray, py: IntArray, nbr: IntArray | None,
+            max_rounds: int, marked: BoolArray | None = None) -> None:
+    """Rounds of 2-opt and Or-opt until neither improves; each round only looks at pairs
+    with an endpoint whose edges changed since that kind of round last looked."""
+    n = t.n
+    m = 2 * n + 2
+    if marked is None:
+        marked = np.ones(m, dtype=bool)
+    look = [marked, marked.copy()]  # 2-opt, Or-opt
+    idle = 0
+    for rnd in range(max_rounds):
+        kind = rnd % 2
+        sel = look[kind][px] | look[kind][py]
+        look[kind] = np.zeros(m, dtype=bool)
+        touched: list[int] = []
+        if sel.any():
+            if kind == 0:
+                touched = round_2opt(t, px[sel], py[sel])
+            else:
+                touched = round_oropt(t, px[sel], py[sel], nbr)
+        if not touched:
+            idle += 1
+            if idle >= 2:
+                break
+            continue
+        idle = 0
+        tp = np.array(touched, dtype=np.int64)
+        tp = tp[tp >= 0]
+        for lk in look:
+            lk[tp] = lk[tp + n] = True
+            lk[2 * n:] = True
+
+
+def improve(starts: FloatArray, ends: FloatArray, order: IntArray, rev: BoolArray,
+            start: FloatArray, end: FloatArray | None, *, k: int = 8,
+            max_rounds: int = 200, long_blocks: bool = True) -> tuple[IntArray, BoolArray]:
+    """2-opt and Or-opt from the tour (`order`, `rev`) until neither improves (module doc)."""
+    n = order.shape[0]
+    if n < 2:
+        return order, rev
+    t = Tour(starts, ends, order, rev, start, end)
+    allp = np.concatenate((starts, ends, start[None], (start if end is None else end)[None]))
+    owner = np.concatenate((np.arange(n), np.arange(n), [n, n + 1]))
+    k = min(k, 2 * n)
+    px, py = neighbours(allp, k, owner)
+    if end is None:  # no park position: `round_2opt` pairs the last exit itself
+        keep = (py != 2 * n + 1) & (px != 2 * n + 1)
+        px, py = px[keep], py[keep]
+    nbr = None
+    if long_blocks:
+        nbr = np.full((2 * n + 2, k), -1, dtype=np.int64)
+        first = np.searchsorted(px, px, side="left")
+        nbr[px, np.arange(px.size) - first] = py
+    _search(t, px, py, nbr, max_rounds)
+    return t.path[1:n + 1].copy(), t.rev[1:n + 1].copy()
+
