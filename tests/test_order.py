@@ -87,21 +87,23 @@ def test_convex_case_reaches_the_known_optimum(seed: int) -> None:
 
 @settings(max_examples=40, deadline=None)
 @given(st.integers(min_value=2, max_value=300), st.integers(min_value=0, max_value=2**31),
-       st.booleans())
-def test_never_worse_than_nearest_neighbour(n: int, seed: int, park: bool) -> None:
+       st.booleans(), st.booleans())
+def test_never_worse_than_nearest_neighbour(n: int, seed: int, park: bool,
+                                            home_start: bool) -> None:
     rng = np.random.default_rng(seed)
     s = rng.uniform(0, 100, (n, 2))
     # clusters and coincident endpoints, as drawings have
     s = np.round(s / 10) * 10 if seed % 3 == 0 else s
     e = s + rng.normal(0, 4, (n, 2))
     home = np.array([0.0, 0.0])
+    start = home if home_start else None  # None: the tour may begin anywhere
     end = home if park else None
-    g_order, g_rev = _greedy(s, e, home)
-    greedy = travel_length(s, e, g_order, g_rev, home, end)
-    o = order_paths(s, e, home, end)
+    g_order, g_rev = _greedy(s, e, home if home_start else s[0])
+    greedy = travel_length(s, e, g_order, g_rev, start, end)
+    o = order_paths(s, e, start, end)
     assert sorted(o.order.tolist()) == list(range(n))
     assert o.travel_after_mm <= greedy + 1e-9
-    assert travel_length(s, e, o.order, o.reverse, home, end) == pytest.approx(
+    assert travel_length(s, e, o.order, o.reverse, start, end) == pytest.approx(
         o.travel_after_mm, abs=1e-9)
 
 
@@ -126,22 +128,23 @@ def test_tour_moves_keep_the_strokes_and_count_their_gain() -> None:
         n = int(rng.integers(2, 14))
         s = rng.uniform(0, 10, (n, 2))
         e = s + rng.normal(0, 2, (n, 2))
-        start = rng.uniform(0, 10, 2)
+        start = None if trial % 3 == 0 else rng.uniform(0, 10, 2)
         end = None if trial % 2 else rng.uniform(0, 10, 2)
         t = tour.Tour(s, e, rng.permutation(n), rng.random(n) < 0.5, start, end)
         for _ in range(15):
-            x, y = (int(v) for v in rng.integers(0, 2 * n + 1 + (end is not None), 2))
+            x, y, z = (int(v) for v in rng.integers(0, 2 * n + 1 + (end is not None), 3))
             mv = tour._move_2opt(t, x, y)
             if mv is not None:
                 before = t.length()
                 t.reverse(mv[0], mv[1])
                 assert before - t.length() == pytest.approx(mv[2], abs=1e-9)
-            mo = tour._oropt_now(t, x, y, int(rng.integers(1, 4)), -1)
-            if mo is not None:
-                g = tour._gain_oropt1(t, *mo)
-                before = t.length()
-                t.move(*mo)
-                assert before - t.length() == pytest.approx(g, abs=1e-9)
+            for mo in (tour._oropt_now(t, x, y, int(rng.integers(1, 4)), -1),
+                       tour._oropt_now(t, x, y, 0, z)):  # a short block, a long one
+                if mo is not None:
+                    g = tour._gain_oropt1(t, *mo)
+                    before = t.length()
+                    t.move(*mo)
+                    assert before - t.length() == pytest.approx(g, abs=1e-9)
             p = t.path[1:n + 1]
             assert sorted(p.tolist()) == list(range(n))
             assert (t.pos[p] == np.arange(1, n + 1)).all()

@@ -37,11 +37,12 @@ class Order:
 
 
 def travel_length(starts: FloatArray, ends: FloatArray, order: IntArray, reverse: BoolArray,
-                  start: FloatArray, end: FloatArray | None) -> float:
-    """Total pen-up distance of a tour (straight lines)."""
+                  start: FloatArray | None, end: FloatArray | None) -> float:
+    """Total pen-up distance of a tour (straight lines); without `start` (`end`) the move
+    to the first path (from the last) is not counted."""
     s = np.where(reverse[:, None], ends[order], starts[order])
     e = np.where(reverse[:, None], starts[order], ends[order])
-    total = float(np.hypot(*(s[0] - start))) if len(order) else 0.0
+    total = float(np.hypot(*(s[0] - start))) if len(order) and start is not None else 0.0
     total += float(np.hypot(*(s[1:] - e[:-1]).T).sum())
     if end is not None and len(order):
         total += float(np.hypot(*(e[-1] - end)))
@@ -100,20 +101,23 @@ def _greedy(starts: FloatArray, ends: FloatArray, start: FloatArray) -> tuple[In
     return order, rev
 
 
-def order_paths(starts: FloatArray, ends: FloatArray, start: FloatArray,
+def order_paths(starts: FloatArray, ends: FloatArray, start: FloatArray | None,
                 end: FloatArray | None = None, *, max_rounds: int = 200,
                 keep_order: bool = False) -> Order:
-    """Choose the drawing order and directions of paths with the given start/end points."""
+    """Choose the drawing order and directions of paths with the given start/end points,
+    from the pen's `start` and back to `end` (None: the tour may begin, or end, anywhere,
+    and that move is not counted; the nearest-neighbour stage then begins at the first
+    path's start)."""
     starts = np.asarray(starts, dtype=np.float64).reshape(-1, 2)
     ends = np.asarray(ends, dtype=np.float64).reshape(-1, 2)
-    start = np.asarray(start, dtype=np.float64)
+    start = None if start is None else np.asarray(start, dtype=np.float64)
     n = starts.shape[0]
     ident = np.arange(n, dtype=np.int64)
     fwd = np.zeros(n, dtype=bool)
     before = travel_length(starts, ends, ident, fwd, start, end)
     if keep_order or n < 2:
         return Order(ident, fwd, before, before)
-    order, rev = _greedy(starts, ends, start)
+    order, rev = _greedy(starts, ends, starts[0] if start is None else start)
     order, rev = tour.improve(starts, ends, order, rev, start, end, max_rounds=max_rounds)
     after = travel_length(starts, ends, order, rev, start, end)
     if after > before:  # never worse than the file's own order

@@ -1,24 +1,30 @@
 """Local search on a tour of reversible paths (`toolpath.order`'s second stage), numpy only.
 
 The tour is a sequence of positions 0..n+1: position 0 is the pen's start (only an exit
-point), positions 1..n are the paths, each entered at `A[k]` and left at `B[k]` (its start
-and end, swapped when it is drawn reversed), and position n+1 the park position (only an
-entry point; with no park position every distance to it is 0). The cost is the sum of the
-travel edges B[k] → A[k+1]. Two kinds of moves, both found through the K nearest endpoints
-of every endpoint (`neighbours`, a grid searched at growing cell sizes):
+point; with no start position every distance from it is 0: the tour may begin anywhere),
+positions 1..n are the paths, each entered at `A[k]` and left at `B[k]` (its start and end,
+swapped when it is drawn reversed), and position n+1 the park position (only an entry point;
+with no park position every distance to it is 0). The cost is the sum of the
+travel edges B[k] → A[k+1]. Two kinds of moves, both proposed by pairs of near endpoints
+(each endpoint with its K nearest, `neighbours`: a grid searched at growing cell sizes):
 
 - 2-opt: reverse the block i..j (and every path in it): the edges B[i−1] → A[i] and
   B[j] → A[j+1] become B[i−1] → B[j] and A[i] → A[j+1]. A pair of near exits (or of near
   entries) proposes it; a single path's reversal is the block i..i.
-- Or-opt: move the block i..j of 1–3 paths between k and k+1, forwards or reversed. A near
-  exit/entry pair (the new edge B[k] → A[i] or B[j] → A[k+1]) or a near pair of exits or
-  of entries (reversed insertion) proposes it.
+- Or-opt: move the block i..j between k and k+1, forwards or reversed. A near exit/entry
+  pair (the new edge B[k] → A[i] or B[j] → A[k+1]) or a near pair of exits or of entries
+  (reversed insertion) proposes it with the block's other end 1–3 paths away, or, for a
+  longer block (or-3opt), where the closing edge B[i−1] → A[j+1] joins near endpoints too.
 
-Each round computes the gain of every proposed move of one kind at once (vectorised), takes
-the improving moves best first while they touch disjoint positions (their gains then add
-up exactly), applies them together, and marks the endpoints whose edges changed; the next
-rounds only propose moves with a marked endpoint (don't-look bits). Rounds alternate
-between the kinds until neither improves.
+A round takes the pairs of one kind of move, computes every proposed move's gain at once
+(vectorised), then goes through the improving ones best first, each checked again on the
+tour as the moves before it left it (positions shift, blocks turn round) and applied if it
+still gains. Every applied move shortens the tour by its gain, so the search ends no longer
+than it began. Endpoints whose edges changed are marked, and the next round of that kind
+only looks at pairs with a marked endpoint (don't-look bits); reversing a block also turns
+its inner endpoints from exits into entries against the rest of the tour, which changes the
+2-opt moves they propose, so they are marked for 2-opt (and for Or-opt in blocks shorter
+than `OR_BLOCK`). Rounds alternate between the kinds until neither improves.
 """
 
 from __future__ import annotations
@@ -31,19 +37,23 @@ from kinematics.arrays import BoolArray, FloatArray, IntArray
 
 #: Moves gaining less than this (mm) are not taken (rounding noise).
 EPS = 1e-9
+#: A reversed block shorter than this marks its inner endpoints for Or-opt too.
+OR_BLOCK = 50
+#: Near endpoints per endpoint that may close a long Or-opt block.
+LONG_K = 4
 
 
 def neighbours(pts: FloatArray, k: int, owner: IntArray) -> tuple[IntArray, IntArray]:
     """Up to `k` nearest other points of every point (pairs (i, j), i's nearest first),
-    skipping points with the same `owner`. Points are binned in a square grid of about two
-    points per cell and each point's candidates are the points of its 3 × 3 block of cells
+    skipping points with the same `owner`. Points are binned in a square grid of about one
+    point per cell and each point's candidates are the points of its 3 × 3 block of cells
     (at most `4k + 8` from any one cell, so that many coincident points stay linear in work);
     points with fewer than `k` candidates are searched again in a grid twice as coarse, until
     every point has `k` or the grid covers the drawing."""
     m = pts.shape[0]
     lo = pts.min(axis=0)
     span = float(max(np.ptp(pts, axis=0).max(), 1e-9))
-    h = span / max(1.0, np.sqrt(m / 2.0))
+    h = span / max(1.0, np.sqrt(m))
     query = np.arange(m)
     out_i: list[IntArray] = []
     out_j: list[IntArray] = []
@@ -73,7 +83,9 @@ def neighbours(pts: FloatArray, k: int, owner: IntArray) -> tuple[IntArray, IntA
         ok = owner[pi] != owner[pj]
         pi, pj = pi[ok], pj[ok]
         d2 = ((pts[pi] - pts[pj]) ** 2).sum(axis=1)
-        srt2 = np.lexsort((d2, pi))
+        # by point, then distance: one float key (the point, plus its distance scaled into
+        # [0, 0.5)), sorted once — several times faster than a two-key sort
+        srt2 = np.argsort(pi + d2 / (2.0 * float(d2.max(initial=0.0)) + 1e-300))
         pi, pj = pi[srt2], pj[srt2]
         start = np.searchsorted(pi, pi, side="left")
         rank = np.arange(pi.size) - start
@@ -95,9 +107,12 @@ class Tour:
     exit (B) coordinates per position, and each path's position."""
 
     def __init__(self, starts: FloatArray, ends: FloatArray, order: IntArray, rev: BoolArray,
-                 start: FloatArray, end: FloatArray | None) -> None:
+                 start: FloatArray | None, end: FloatArray | None) -> None:
         self.n = n = order.shape[0]
+        self.free_start = start is None
         self.free_end = end is None
+        if start is None:  # a placeholder: every edge from it is free
+            start = starts[order[0]]
         self.path = np.concatenate(([-1], order, [-1])).astype(np.int64)
         self.rev = np.concatenate(([False], rev, [False]))
         r = rev[:, None]
@@ -112,6 +127,8 @@ class Tour:
     def length(self) -> float:
         """The tour's travel."""
         d = np.hypot(self.ax[1:] - self.bx[:-1], self.ay[1:] - self.by[:-1])
+        if self.free_start:
+            d[0] = 0.0
         if self.free_end:
             d[-1] = 0.0
         return float(d.sum())
@@ -134,16 +151,19 @@ class Tour:
         return k, (e >= n) != bool(self.rev[k])
 
     def dist(self, px: FloatArray, py: FloatArray, qx: FloatArray, qy: FloatArray,
-             q: IntArray) -> FloatArray:
-        """|P − Q| where Q is at positions `q`: 0 to the park position if there is none."""
+             p: IntArray, q: IntArray) -> FloatArray:
+        """|P − Q| for P at positions `p`, Q at positions `q`: 0 from the start position
+        or to the park position where the tour has none (free ends)."""
         d = np.hypot(px - qx, py - qy)
+        if self.free_start:
+            d[p == 0] = 0.0
         if self.free_end:
             d[q == self.n + 1] = 0.0
         return d
 
-    def d1(self, px: float, py: float, qx: float, qy: float, q: int) -> float:
+    def d1(self, px: float, py: float, qx: float, qy: float, p: int, q: int) -> float:
         """`dist` of one pair."""
-        if self.free_end and q == self.n + 1:
+        if (self.free_start and p == 0) or (self.free_end and q == self.n + 1):
             return 0.0
         return math.hypot(px - qx, py - qy)
 
@@ -184,10 +204,10 @@ class Tour:
 
 def _gain_2opt(t: Tour, i: IntArray, j: IntArray) -> FloatArray:
     ax, ay, bx, by = t.ax, t.ay, t.bx, t.by
-    return (t.dist(bx[i - 1], by[i - 1], ax[i], ay[i], i)
-            + t.dist(bx[j], by[j], ax[j + 1], ay[j + 1], j + 1)
-            - t.dist(bx[i - 1], by[i - 1], bx[j], by[j], j)
-            - t.dist(ax[i], ay[i], ax[j + 1], ay[j + 1], j + 1))
+    return (t.dist(bx[i - 1], by[i - 1], ax[i], ay[i], i - 1, i)
+            + t.dist(bx[j], by[j], ax[j + 1], ay[j + 1], j, j + 1)
+            - t.dist(bx[i - 1], by[i - 1], bx[j], by[j], i - 1, j)
+            - t.dist(ax[i], ay[i], ax[j + 1], ay[j + 1], i, j + 1))
 
 
 def _move_2opt(t: Tour, x: int, y: int) -> tuple[int, int, float] | None:
@@ -200,13 +220,14 @@ def _move_2opt(t: Tour, x: int, y: int) -> tuple[int, int, float] | None:
     if not 1 <= i <= j <= t.n:
         return None
     ax, ay, bx, by, d = t.ax, t.ay, t.bx, t.by, t.d1
-    g = (d(bx[i - 1], by[i - 1], ax[i], ay[i], i) + d(bx[j], by[j], ax[j + 1], ay[j + 1], j + 1)
-         - d(bx[i - 1], by[i - 1], bx[j], by[j], j)
-         - d(ax[i], ay[i], ax[j + 1], ay[j + 1], j + 1))
+    g = (d(bx[i - 1], by[i - 1], ax[i], ay[i], i - 1, i)
+         + d(bx[j], by[j], ax[j + 1], ay[j + 1], j, j + 1)
+         - d(bx[i - 1], by[i - 1], bx[j], by[j], i - 1, j)
+         - d(ax[i], ay[i], ax[j + 1], ay[j + 1], i, j + 1))
     return i, j, g
 
 
-def round_2opt(t: Tour, x: IntArray, y: IntArray) -> list[int]:
+def round_2opt(t: Tour, x: IntArray, y: IntArray) -> tuple[list[int], list[int], list[int]]:
     """Improving 2-opt moves proposed by the pairs (x, y), taken best first, each checked
     again on the tour as it is then; returns the paths whose edges or roles changed."""
     n = t.n
@@ -215,6 +236,11 @@ def round_2opt(t: Tour, x: IntArray, y: IntArray) -> list[int]:
         ids = np.where(p < 0, 2 * n, p + np.where(rv, 0, n))
         x = np.concatenate((x, ids))
         y = np.concatenate((y, np.full(n, int(t.path[n]) + (0 if t.rev[n] else n))))
+    if t.free_start:  # any entry may become the first: pair every entry with the first one
+        p, rv = t.path[2:], t.rev[2:]
+        ids = np.where(p < 0, 2 * n + 1, p + np.where(rv, n, 0))
+        x = np.concatenate((x, np.full(n, int(t.path[1]) + (n if t.rev[1] else 0))))
+        y = np.concatenate((y, ids))
     kx, ex = t.roles(x)
     ky, ey = t.roles(y)
     lo, hi = np.minimum(kx, ky), np.maximum(kx, ky)
@@ -227,15 +253,19 @@ def round_2opt(t: Tour, x: IntArray, y: IntArray) -> list[int]:
     good = np.flatnonzero(gain > EPS)
     good = good[np.argsort(-gain[good], kind="stable")]
     touched: list[int] = []
+    inner: list[int] = []
+    flipped: list[int] = []
     for xc, yc in zip(x[good].tolist(), y[good].tolist(), strict=True):
         mv = _move_2opt(t, xc, yc)
         if mv is None or mv[2] <= EPS:
             continue
         a, b, _ = mv
-        # a reversed block's endpoints change role (exit ↔ entry) against the rest
-        touched.extend(t.path[a - 1:b + 2].tolist())
+        touched.extend(t.path[[a - 1, a, b, b + 1]].tolist())
+        if b - a > 1:  # the block's endpoints change role (exit ↔ entry) against the rest
+            inner.extend(t.path[a + 1:b].tolist() if b - a < OR_BLOCK else [])
+            flipped.extend(t.path[a + 1:b].tolist())
         t.reverse(a, b)
-    return touched
+    return touched, inner, flipped
 
 
 def _oropt_of(kx: IntArray, ex: BoolArray, ky: IntArray, ey: BoolArray,
@@ -251,23 +281,29 @@ def _oropt_of(kx: IntArray, ex: BoolArray, ky: IntArray, ey: BoolArray,
 
 def _gain_oropt(t: Tour, i: IntArray, j: IntArray, k: IntArray, r: BoolArray) -> FloatArray:
     ax, ay, bx, by, d = t.ax, t.ay, t.bx, t.by, t.dist
-    rem = (d(bx[i - 1], by[i - 1], ax[i], ay[i], i) + d(bx[j], by[j], ax[j + 1], ay[j + 1], j + 1)
-           + d(bx[k], by[k], ax[k + 1], ay[k + 1], k + 1)
-           - d(bx[i - 1], by[i - 1], ax[j + 1], ay[j + 1], j + 1))
-    ins_f = d(bx[k], by[k], ax[i], ay[i], i) + d(bx[j], by[j], ax[k + 1], ay[k + 1], k + 1)
-    ins_r = d(bx[k], by[k], bx[j], by[j], j) + d(ax[i], ay[i], ax[k + 1], ay[k + 1], k + 1)
+    rem = (d(bx[i - 1], by[i - 1], ax[i], ay[i], i - 1, i)
+           + d(bx[j], by[j], ax[j + 1], ay[j + 1], j, j + 1)
+           + d(bx[k], by[k], ax[k + 1], ay[k + 1], k, k + 1)
+           - d(bx[i - 1], by[i - 1], ax[j + 1], ay[j + 1], i - 1, j + 1))
+    ins_f = (d(bx[k], by[k], ax[i], ay[i], k, i)
+             + d(bx[j], by[j], ax[k + 1], ay[k + 1], j, k + 1))
+    ins_r = (d(bx[k], by[k], bx[j], by[j], k, j)
+             + d(ax[i], ay[i], ax[k + 1], ay[k + 1], i, k + 1))
     return rem - np.where(r, ins_r, ins_f)
 
 
 def _gain_oropt1(t: Tour, i: int, j: int, k: int, r: bool) -> float:
     """`_gain_oropt` of one move."""
     ax, ay, bx, by, d = t.ax, t.ay, t.bx, t.by, t.d1
-    rem = (d(bx[i - 1], by[i - 1], ax[i], ay[i], i) + d(bx[j], by[j], ax[j + 1], ay[j + 1], j + 1)
-           + d(bx[k], by[k], ax[k + 1], ay[k + 1], k + 1)
-           - d(bx[i - 1], by[i - 1], ax[j + 1], ay[j + 1], j + 1))
+    rem = (d(bx[i - 1], by[i - 1], ax[i], ay[i], i - 1, i)
+           + d(bx[j], by[j], ax[j + 1], ay[j + 1], j, j + 1)
+           + d(bx[k], by[k], ax[k + 1], ay[k + 1], k, k + 1)
+           - d(bx[i - 1], by[i - 1], ax[j + 1], ay[j + 1], i - 1, j + 1))
     if r:
-        return rem - d(bx[k], by[k], bx[j], by[j], j) - d(ax[i], ay[i], ax[k + 1], ay[k + 1], k + 1)
-    return rem - d(bx[k], by[k], ax[i], ay[i], i) - d(bx[j], by[j], ax[k + 1], ay[k + 1], k + 1)
+        return (rem - d(bx[k], by[k], bx[j], by[j], k, j)
+                - d(ax[i], ay[i], ax[k + 1], ay[k + 1], i, k + 1))
+    return (rem - d(bx[k], by[k], ax[i], ay[i], k, i)
+            - d(bx[j], by[j], ax[k + 1], ay[k + 1], j, k + 1))
 
 
 def _long_blocks(t: Tour, nbr: IntArray, x: IntArray, y: IntArray, min_len: int
@@ -374,9 +410,11 @@ def _search(t: Tour, px: IntArray, py: IntArray, nbr: IntArray | None,
         sel = look[kind][px] | look[kind][py]
         look[kind] = np.zeros(m, dtype=bool)
         touched: list[int] = []
+        inner: list[int] = []
+        flipped: list[int] = []
         if sel.any():
             if kind == 0:
-                touched = round_2opt(t, px[sel], py[sel])
+                touched, inner, flipped = round_2opt(t, px[sel], py[sel])
             else:
                 touched = round_oropt(t, px[sel], py[sel], nbr)
         if not touched:
@@ -385,33 +423,40 @@ def _search(t: Tour, px: IntArray, py: IntArray, nbr: IntArray | None,
                 break
             continue
         idle = 0
-        tp = np.array(touched, dtype=np.int64)
-        tp = tp[tp >= 0]
-        for lk in look:
+        for lk, extra in ((look[0], flipped), (look[1], inner)):
+            tp = np.array(touched + extra, dtype=np.int64)
+            tp = tp[tp >= 0]
             lk[tp] = lk[tp + n] = True
             lk[2 * n:] = True
 
 
 def improve(starts: FloatArray, ends: FloatArray, order: IntArray, rev: BoolArray,
-            start: FloatArray, end: FloatArray | None, *, k: int = 8,
+            start: FloatArray | None, end: FloatArray | None, *, k: int = 8,
             max_rounds: int = 200, long_blocks: bool = True) -> tuple[IntArray, BoolArray]:
-    """2-opt and Or-opt from the tour (`order`, `rev`) until neither improves (module doc)."""
+    """2-opt and Or-opt from the tour (`order`, `rev`) until neither improves or after
+    `max_rounds` rounds (module doc); `k` near endpoints per endpoint propose the moves,
+    `long_blocks` adds the or-3opt moves. `start`/`end` None: that end of the tour is free."""
     n = order.shape[0]
     if n < 2:
         return order, rev
     t = Tour(starts, ends, order, rev, start, end)
-    allp = np.concatenate((starts, ends, start[None], (start if end is None else end)[None]))
+    ends_xy = [[t.bx[0], t.by[0]], [t.ax[n + 1], t.ay[n + 1]]]
+    allp = np.concatenate((starts, ends, np.array(ends_xy)))
     owner = np.concatenate((np.arange(n), np.arange(n), [n, n + 1]))
     k = min(k, 2 * n)
     px, py = neighbours(allp, k, owner)
-    if end is None:  # no park position: `round_2opt` pairs the last exit itself
-        keep = (py != 2 * n + 1) & (px != 2 * n + 1)
+    # a free end has no place: its edges cost nothing whatever is next to it (`round_2opt`
+    # pairs the last exit itself; a block moved to the front is proposed by the first entry)
+    free = [e for e, f in ((2 * n, start is None), (2 * n + 1, end is None)) if f]
+    if free:
+        keep = ~np.isin(px, free) & ~np.isin(py, free)
         px, py = px[keep], py[keep]
     nbr = None
     if long_blocks:
         nbr = np.full((2 * n + 2, k), -1, dtype=np.int64)
         first = np.searchsorted(px, px, side="left")
         nbr[px, np.arange(px.size) - first] = py
+        nbr = nbr[:, :LONG_K]
     _search(t, px, py, nbr, max_rounds)
     return t.path[1:n + 1].copy(), t.rev[1:n + 1].copy()
 
