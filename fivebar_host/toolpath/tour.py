@@ -41,6 +41,14 @@ EPS = 1e-9
 OR_BLOCK = 50
 #: Near endpoints per endpoint that may close a long Or-opt block.
 LONG_K = 4
+#: Above this many paths a move may span at most max(MIN_BLOCK, BIG_TOUR² / 10n) positions
+#: (a reversal or a shift costs its length): the search stays about linear in n.
+BIG_TOUR = 20_000
+MIN_BLOCK = 1000
+#: and the search stops once a 2-opt and an Or-opt round together gain less than this share.
+BIG_TOUR_GAIN = 0.005
+#: Pairs looked at per call of a round (bounds the vectorised temporaries).
+CHUNK = 1 << 17
 
 
 def neighbours(pts: FloatArray, k: int, owner: IntArray) -> tuple[IntArray, IntArray]:
@@ -109,6 +117,8 @@ class Tour:
     def __init__(self, starts: FloatArray, ends: FloatArray, order: IntArray, rev: BoolArray,
                  start: FloatArray | None, end: FloatArray | None) -> None:
         self.n = n = order.shape[0]
+        #: the longest block a 2-opt move reverses (a reversal costs its length)
+        self.max_block = n if n <= BIG_TOUR else max(MIN_BLOCK, BIG_TOUR * BIG_TOUR // n // 10)
         self.free_start = start is None
         self.free_end = end is None
         if start is None:  # a placeholder: every edge from it is free
@@ -217,7 +227,7 @@ def _move_2opt(t: Tour, x: int, y: int) -> tuple[int, int, float] | None:
     if kx == ky or ex != ey:
         return None
     i, j = (min(kx, ky) + 1, max(kx, ky)) if ex else (min(kx, ky), max(kx, ky) - 1)
-    if not 1 <= i <= j <= t.n:
+    if not (1 <= i <= j <= t.n and j - i < t.max_block):
         return None
     ax, ay, bx, by, d = t.ax, t.ay, t.bx, t.by, t.d1
     g = (d(bx[i - 1], by[i - 1], ax[i], ay[i], i - 1, i)
@@ -247,7 +257,7 @@ def round_2opt(t: Tour, x: IntArray, y: IntArray) -> tuple[list[int], list[int],
     same = (ex == ey) & (kx != ky)
     i = np.where(ex, lo + 1, lo)
     j = np.where(ex, hi, hi - 1)
-    ok = same & (i >= 1) & (i <= j) & (j <= n)
+    ok = same & (i >= 1) & (i <= j) & (j <= n) & (j - i < t.max_block)
     x, y, i, j = x[ok], y[ok], i[ok], j[ok]
     gain = _gain_2opt(t, i, j)
     good = np.flatnonzero(gain > EPS)
@@ -334,7 +344,8 @@ def _long_blocks(t: Tour, nbr: IntArray, x: IntArray, y: IntArray, min_len: int
     j = np.where(eyy, ky[sel], kz - 1)
     k = np.where(ex[sel], kx[sel], kx[sel] - 1)
     ok = ((ez == eyy) & (j - i + 1 > min_len) & (i >= 1) & (j <= n) & (k >= 0) & (k <= n)
-          & ((k < i - 1) | (k > j)))
+          & ((k < i - 1) | (k > j)) & (np.abs(k - i) < t.max_block)
+          & (j - i < t.max_block))
     sel, z = sel[ok], z[ok]
     return sel, z, i[ok], j[ok], k[ok], (ex == ey)[sel]
 
@@ -352,7 +363,8 @@ def _oropt_now(t: Tour, x: int, y: int, L: int, z: int) -> tuple[int, int, int, 
         if ez != ey:
             return None
         i, j = (ky, kz - 1) if not ey else (kz + 1, ky)
-    if not (1 <= i <= j <= n and 0 <= k <= n and (k < i - 1 or k > j)):
+    if not (1 <= i <= j <= n and 0 <= k <= n and (k < i - 1 or k > j)
+            and abs(k - i) < t.max_block and j - i < t.max_block):
         return None
     return i, j, k, ex == ey
 
@@ -370,7 +382,8 @@ def round_oropt(t: Tour, x: IntArray, y: IntArray, nbr: IntArray | None = None,
     L = np.repeat(np.arange(1, max_len + 1), m)
     i, j, k, r = _oropt_of(np.tile(kx, max_len), np.tile(ex, max_len), np.tile(ky, max_len),
                            np.tile(ey, max_len), L)
-    ok = (i >= 1) & (j <= n) & (k >= 0) & (k <= n) & ((k < i - 1) | (k > j))
+    ok = ((i >= 1) & (j <= n) & (k >= 0) & (k <= n) & ((k < i - 1) | (k > j))
+          & (np.abs(k - i) < t.max_block))
     z = np.full(int(ok.sum()), -1, dtype=np.int64)
     xs, ys, L, i, j, k, r = xs[ok], ys[ok], L[ok], i[ok], j[ok], k[ok], r[ok]
     if nbr is not None:
@@ -405,18 +418,29 @@ def _search(t: Tour, px: IntArray, py: IntArray, nbr: IntArray | None,
         marked = np.ones(m, dtype=bool)
     look = [marked, marked.copy()]  # 2-opt, Or-opt
     idle = 0
+    last = t.length()
     for rnd in range(max_rounds):
+        if n > BIG_TOUR and rnd % 2 == 0 and rnd:  # a large tour: stop when rounds gain little
+            now = t.length()
+            if now > last * (1 - BIG_TOUR_GAIN):
+                break
+            last = now
         kind = rnd % 2
         sel = look[kind][px] | look[kind][py]
         look[kind] = np.zeros(m, dtype=bool)
         touched: list[int] = []
         inner: list[int] = []
         flipped: list[int] = []
-        if sel.any():
+        xs, ys = px[sel], py[sel]
+        for c in range(0, xs.size, CHUNK):  # in chunks: bounded temporaries
+            x, y = xs[c:c + CHUNK], ys[c:c + CHUNK]
             if kind == 0:
-                touched, inner, flipped = round_2opt(t, px[sel], py[sel])
+                tc, ic, fc = round_2opt(t, x, y)
+                touched += tc
+                inner += ic
+                flipped += fc
             else:
-                touched = round_oropt(t, px[sel], py[sel], nbr)
+                touched += round_oropt(t, x, y, nbr)
         if not touched:
             idle += 1
             if idle >= 2:
