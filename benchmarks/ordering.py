@@ -74,6 +74,7 @@ def fivebar_sort(lines: list[FloatArray]) -> tuple[float, float]:
 
 
 def main() -> None:
+    """The table (module doc)."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("files", nargs="*", type=Path, default=DEFAULT)
     ap.add_argument("--repeat", type=int, default=3, help="runs of fivebar and vpype linesort")

@@ -3,12 +3,12 @@
 1. Read time: `fivebar_host.toolpath.svg.read_svg` (exact primitives) against
    `vpype.read_multilayer_svg` at `vpype read`'s default quantization (0.1 mm), on real
    drawings (benchmarks/drawings; no `<text>`, which vpype does not draw) and generated
-   files: line-heavy
-   (`<path>` polylines of `L` commands, `<polyline>` points, `<line>` elements) and
-   curve-heavy (cubic `C` commands, `A` arcs). CPU seconds (`time.process_time`: the
-   machine's other load does not count), the median of `--runs` reads of each, the two
-   readers interleaved; the ratio fivebar / vpype and µs per primitive read. Targets:
-   line-heavy files ≤ 1.0× vpype; curve-heavy files keep their advantage (< 1.0×).
+   files: line-heavy (`<path>` polylines of `L` commands, `<polyline>` points, `<line>`
+   elements) and curve-heavy (cubic `C` commands, `A` arcs). CPU seconds
+   (`time.process_time`: the machine's other load does not count), the median of `--runs`
+   reads of each, the two readers interleaved; the ratio fivebar / vpype and µs per
+   primitive read. Targets: line-heavy files ≤ 1.0× vpype; curve-heavy files keep their
+   advantage (< 1.0×).
 2. Memory per input byte: generated line-heavy drawings of 2, 20 and 200 MB (`--memory-mb`)
    read in a fresh process each; the peak resident memory (VmHWM) above the process after
    its imports, per input byte. Target ≤ 30 B/B.
@@ -48,6 +48,7 @@ def _walks(rng: np.random.Generator, n: int, pts: int) -> np.ndarray:
 
 
 def _fmt(a: np.ndarray) -> list[str]:
+    """Coordinates as SVG numbers (3 decimals)."""
     return [f"{x:.3f}" for x in a.ravel().tolist()]
 
 
@@ -104,6 +105,7 @@ def write_curves(path: Path, size: int, kind: str, seed: int = 1) -> None:
 
 
 def cpu(fn: Callable[[], object]) -> float:
+    """CPU seconds of one call."""
     t0 = time.process_time()
     fn()
     return time.process_time() - t0
@@ -138,6 +140,7 @@ def read_times(files: list[tuple[str, str, Path]], runs: int) -> None:
 
 
 def _fivebar_read(path: Path) -> object:
+    """fivebar's read of a file, as `fivebar` reads it (bytes, then the reader)."""
     return read_svg(path.read_bytes(), None, file=path.name)
 
 
@@ -182,6 +185,7 @@ def memory(sizes_mb: list[float]) -> None:
 
 
 def main() -> None:
+    """Both sections (module doc)."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--runs", type=int, default=5)
     ap.add_argument("--memory-mb", default="2,20,200")

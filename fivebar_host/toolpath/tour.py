@@ -213,6 +213,7 @@ class Tour:
 
 
 def _gain_2opt(t: Tour, i: IntArray, j: IntArray) -> FloatArray:
+    """How much reversing each block i..j shortens the tour."""
     ax, ay, bx, by = t.ax, t.ay, t.bx, t.by
     return (t.dist(bx[i - 1], by[i - 1], ax[i], ay[i], i - 1, i)
             + t.dist(bx[j], by[j], ax[j + 1], ay[j + 1], j, j + 1)
@@ -290,6 +291,7 @@ def _oropt_of(kx: IntArray, ex: BoolArray, ky: IntArray, ey: BoolArray,
 
 
 def _gain_oropt(t: Tour, i: IntArray, j: IntArray, k: IntArray, r: BoolArray) -> FloatArray:
+    """How much moving each block i..j after k (reversed where `r`) shortens the tour."""
     ax, ay, bx, by, d = t.ax, t.ay, t.bx, t.by, t.dist
     rem = (d(bx[i - 1], by[i - 1], ax[i], ay[i], i - 1, i)
            + d(bx[j], by[j], ax[j + 1], ay[j + 1], j, j + 1)
