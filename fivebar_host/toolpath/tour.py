@@ -136,12 +136,16 @@ class Tour:
 
     def length(self) -> float:
         """The tour's travel."""
-        d = np.hypot(self.ax[1:] - self.bx[:-1], self.ay[1:] - self.by[:-1])
+        return float(self.edges().sum())
+
+    def edges(self) -> FloatArray:
+        """The travel edges' lengths: edge k runs from B[k] to A[k+1] (k = 0..n)."""
+        d: FloatArray = np.hypot(self.ax[1:] - self.bx[:-1], self.ay[1:] - self.by[:-1])
         if self.free_start:
             d[0] = 0.0
         if self.free_end:
             d[-1] = 0.0
-        return float(d.sum())
+        return d
 
     def roles(self, e: IntArray) -> tuple[IntArray, BoolArray]:
         """Position and whether it is the exit, of endpoint ids (id < n: start of path id,
@@ -215,9 +219,8 @@ class Tour:
 def _gain_2opt(t: Tour, i: IntArray, j: IntArray) -> FloatArray:
     """How much reversing each block i..j shortens the tour."""
     ax, ay, bx, by = t.ax, t.ay, t.bx, t.by
-    return (t.dist(bx[i - 1], by[i - 1], ax[i], ay[i], i - 1, i)
-            + t.dist(bx[j], by[j], ax[j + 1], ay[j + 1], j, j + 1)
-            - t.dist(bx[i - 1], by[i - 1], bx[j], by[j], i - 1, j)
+    e = t.edges()
+    return (e[i - 1] + e[j] - t.dist(bx[i - 1], by[i - 1], bx[j], by[j], i - 1, j)
             - t.dist(ax[i], ay[i], ax[j + 1], ay[j + 1], i, j + 1))
 
 
@@ -238,9 +241,12 @@ def _move_2opt(t: Tour, x: int, y: int) -> tuple[int, int, float] | None:
     return i, j, g
 
 
-def round_2opt(t: Tour, x: IntArray, y: IntArray) -> tuple[list[int], list[int], list[int]]:
+def round_2opt(t: Tour, x: IntArray, y: IntArray, touched: BoolArray, inner: BoolArray,
+               flipped: BoolArray) -> int:
     """Improving 2-opt moves proposed by the pairs (x, y), taken best first, each checked
-    again on the tour as it is then; returns the paths whose edges or roles changed."""
+    again on the tour as it is then; marks (at path + 1) the paths whose edges changed
+    (`touched`), and those whose role changed (`flipped`; `inner` within short blocks).
+    Returns the number of moves."""
     n = t.n
     if t.free_end:  # any exit may become the last: pair every exit with the last one
         p, rv = t.path[:n], t.rev[:n]
@@ -263,20 +269,20 @@ def round_2opt(t: Tour, x: IntArray, y: IntArray) -> tuple[list[int], list[int],
     gain = _gain_2opt(t, i, j)
     good = np.flatnonzero(gain > EPS)
     good = good[np.argsort(-gain[good], kind="stable")]
-    touched: list[int] = []
-    inner: list[int] = []
-    flipped: list[int] = []
+    moves = 0
     for xc, yc in zip(x[good].tolist(), y[good].tolist(), strict=True):
         mv = _move_2opt(t, xc, yc)
         if mv is None or mv[2] <= EPS:
             continue
         a, b, _ = mv
-        touched.extend(t.path[[a - 1, a, b, b + 1]].tolist())
+        touched[t.path[[a - 1, a, b, b + 1]] + 1] = True
         if b - a > 1:  # the block's endpoints change role (exit ↔ entry) against the rest
-            inner.extend(t.path[a + 1:b].tolist() if b - a < OR_BLOCK else [])
-            flipped.extend(t.path[a + 1:b].tolist())
+            flipped[t.path[a + 1:b] + 1] = True
+            if b - a < OR_BLOCK:
+                inner[t.path[a + 1:b] + 1] = True
         t.reverse(a, b)
-    return touched, inner, flipped
+        moves += 1
+    return moves
 
 
 def _oropt_of(kx: IntArray, ex: BoolArray, ky: IntArray, ey: BoolArray,
@@ -293,15 +299,15 @@ def _oropt_of(kx: IntArray, ex: BoolArray, ky: IntArray, ey: BoolArray,
 def _gain_oropt(t: Tour, i: IntArray, j: IntArray, k: IntArray, r: BoolArray) -> FloatArray:
     """How much moving each block i..j after k (reversed where `r`) shortens the tour."""
     ax, ay, bx, by, d = t.ax, t.ay, t.bx, t.by, t.dist
-    rem = (d(bx[i - 1], by[i - 1], ax[i], ay[i], i - 1, i)
-           + d(bx[j], by[j], ax[j + 1], ay[j + 1], j, j + 1)
-           + d(bx[k], by[k], ax[k + 1], ay[k + 1], k, k + 1)
-           - d(bx[i - 1], by[i - 1], ax[j + 1], ay[j + 1], i - 1, j + 1))
-    ins_f = (d(bx[k], by[k], ax[i], ay[i], k, i)
-             + d(bx[j], by[j], ax[k + 1], ay[k + 1], j, k + 1))
-    ins_r = (d(bx[k], by[k], bx[j], by[j], k, j)
-             + d(ax[i], ay[i], ax[k + 1], ay[k + 1], i, k + 1))
-    return rem - np.where(r, ins_r, ins_f)
+    e = t.edges()
+    gain = e[i - 1] + e[j] + e[k] - d(bx[i - 1], by[i - 1], ax[j + 1], ay[j + 1], i - 1, j + 1)
+    f, b = np.flatnonzero(~r), np.flatnonzero(r)
+    i_f, j_f, k_f, i_b, j_b, k_b = i[f], j[f], k[f], i[b], j[b], k[b]
+    gain[f] -= (d(bx[k_f], by[k_f], ax[i_f], ay[i_f], k_f, i_f)
+                + d(bx[j_f], by[j_f], ax[k_f + 1], ay[k_f + 1], j_f, k_f + 1))
+    gain[b] -= (d(bx[k_b], by[k_b], bx[j_b], by[j_b], k_b, j_b)
+                + d(ax[i_b], ay[i_b], ax[k_b + 1], ay[k_b + 1], i_b, k_b + 1))
+    return gain
 
 
 def _gain_oropt1(t: Tour, i: int, j: int, k: int, r: bool) -> float:
@@ -371,11 +377,12 @@ def _oropt_now(t: Tour, x: int, y: int, L: int, z: int) -> tuple[int, int, int, 
     return i, j, k, ex == ey
 
 
-def round_oropt(t: Tour, x: IntArray, y: IntArray, nbr: IntArray | None = None,
-                max_len: int = 3) -> list[int]:
+def round_oropt(t: Tour, x: IntArray, y: IntArray, touched: BoolArray,
+                nbr: IntArray | None = None, max_len: int = 3) -> int:
     """Improving Or-opt moves proposed by the pairs (x, y): blocks of 1..`max_len` paths,
     and with the neighbour table `nbr` longer blocks (`_long_blocks`); best first, each
-    checked again on the tour as it is then; returns the paths whose edges changed."""
+    checked again on the tour as it is then; marks (at path + 1) the paths whose edges
+    changed. Returns the number of moves."""
     n = t.n
     kx, ex = t.roles(x)
     ky, ey = t.roles(y)
@@ -397,17 +404,20 @@ def round_oropt(t: Tour, x: IntArray, y: IntArray, nbr: IntArray | None = None,
     gain = _gain_oropt(t, i, j, k, r)
     good = np.flatnonzero(gain > EPS)
     good = good[np.argsort(-gain[good], kind="stable")]
-    touched: list[int] = []
-    for c in good.tolist():
-        mv = _oropt_now(t, int(xs[c]), int(ys[c]), int(L[c]), int(z[c]))
+    moves = 0
+    cand = zip(xs[good].tolist(), ys[good].tolist(), L[good].tolist(), z[good].tolist(),
+               strict=True)
+    for xc, yc, lc, zc in cand:
+        mv = _oropt_now(t, xc, yc, lc, zc)
         if mv is None:
             continue
         ia, ja, ka, ra = mv
         if _gain_oropt1(t, ia, ja, ka, ra) <= EPS:
             continue
-        touched.extend(t.path[[ia - 1, ia, ja, ja + 1, ka, ka + 1]].tolist())
+        touched[t.path[[ia - 1, ia, ja, ja + 1, ka, ka + 1]] + 1] = True
         t.move(ia, ja, ka, ra)
-    return touched
+        moves += 1
+    return moves
 
 
 def _search(t: Tour, px: IntArray, py: IntArray, nbr: IntArray | None,
@@ -430,28 +440,25 @@ def _search(t: Tour, px: IntArray, py: IntArray, nbr: IntArray | None,
         kind = rnd % 2
         sel = look[kind][px] | look[kind][py]
         look[kind] = np.zeros(m, dtype=bool)
-        touched: list[int] = []
-        inner: list[int] = []
-        flipped: list[int] = []
+        touched = np.zeros(n + 1, dtype=bool)  # at path + 1 (0: the start and the park)
+        inner = np.zeros(n + 1, dtype=bool)
+        flipped = np.zeros(n + 1, dtype=bool)
         xs, ys = px[sel], py[sel]
+        moves = 0
         for c in range(0, xs.size, CHUNK):  # in chunks: bounded temporaries
             x, y = xs[c:c + CHUNK], ys[c:c + CHUNK]
             if kind == 0:
-                tc, ic, fc = round_2opt(t, x, y)
-                touched += tc
-                inner += ic
-                flipped += fc
+                moves += round_2opt(t, x, y, touched, inner, flipped)
             else:
-                touched += round_oropt(t, x, y, nbr)
-        if not touched:
+                moves += round_oropt(t, x, y, touched, nbr)
+        if not moves:
             idle += 1
             if idle >= 2:
                 break
             continue
         idle = 0
         for lk, extra in ((look[0], flipped), (look[1], inner)):
-            tp = np.array(touched + extra, dtype=np.int64)
-            tp = tp[tp >= 0]
+            tp = np.flatnonzero((touched | extra)[1:])
             lk[tp] = lk[tp + n] = True
             lk[2 * n:] = True
 
