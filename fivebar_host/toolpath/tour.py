@@ -23,8 +23,9 @@ still gains. Every applied move shortens the tour by its gain, so the search end
 than it began. Endpoints whose edges changed are marked, and the next round of that kind
 only looks at pairs with a marked endpoint (don't-look bits); reversing a block also turns
 its inner endpoints from exits into entries against the rest of the tour, which changes the
-2-opt moves they propose, so they are marked for 2-opt (and for Or-opt in blocks shorter
-than `OR_BLOCK`). Rounds alternate between the kinds until neither improves.
+2-opt moves they propose, so they are marked for 2-opt in blocks shorter than `FLIP_BLOCK`
+(and for Or-opt in blocks shorter than `OR_BLOCK`). Rounds alternate between the kinds
+until neither improves.
 """
 
 from __future__ import annotations
@@ -39,6 +40,9 @@ from kinematics.arrays import BoolArray, FloatArray, IntArray
 EPS = 1e-9
 #: A reversed block shorter than this marks its inner endpoints for Or-opt too.
 OR_BLOCK = 50
+#: ... and shorter than this for 2-opt (longer reversals mark their ends only: the inner
+#: endpoints' new 2-opt moves are rarely worth looking at all of them again).
+FLIP_BLOCK = 2000
 #: Near endpoints per endpoint that may close a long Or-opt block.
 LONG_K = 4
 #: Above this many paths a move may span at most max(MIN_BLOCK, BIG_TOUR² / 10n) positions
@@ -277,7 +281,8 @@ def round_2opt(t: Tour, x: IntArray, y: IntArray, touched: BoolArray, inner: Boo
         a, b, _ = mv
         touched[t.path[[a - 1, a, b, b + 1]] + 1] = True
         if b - a > 1:  # the block's endpoints change role (exit ↔ entry) against the rest
-            flipped[t.path[a + 1:b] + 1] = True
+            if b - a < FLIP_BLOCK:
+                flipped[t.path[a + 1:b] + 1] = True
             if b - a < OR_BLOCK:
                 inner[t.path[a + 1:b] + 1] = True
         t.reverse(a, b)
