@@ -70,7 +70,7 @@ def _greedy(starts: FloatArray, ends: FloatArray, start: FloatArray) -> tuple[In
     ys = pts[:, 1].tolist()
     px, py = float(start[0]), float(start[1])
     lx, ly = float(lo[0]), float(lo[1])
-    ticker = progress.Ticker("ordering paths", n)
+    ticker = progress.Ticker("ordering paths", 2 * n)  # the first half; `tour` the second
     for k in range(n):
         ticker.tick(k)
         ci = min(max(int((px - lx) / h), 0), g - 1)

@@ -31,9 +31,11 @@ until neither improves.
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 
+from fivebar_host import progress
 from kinematics.arrays import BoolArray, FloatArray, IntArray
 
 #: Moves gaining less than this (mm) are not taken (rounding noise).
@@ -436,6 +438,7 @@ def _search(t: Tour, px: IntArray, py: IntArray, nbr: IntArray | None,
     look = [marked, marked.copy()]  # 2-opt, Or-opt
     idle = 0
     last = t.length()
+    told = time.monotonic()
     for rnd in range(max_rounds):
         if n > BIG_TOUR and rnd % 2 == 0 and rnd:  # a large tour: stop when rounds gain little
             now = t.length()
@@ -466,6 +469,9 @@ def _search(t: Tour, px: IntArray, py: IntArray, nbr: IntArray | None,
             tp = np.flatnonzero((touched | extra)[1:])
             lk[tp] = lk[tp + n] = True
             lk[2 * n:] = True
+        if progress.listening() and time.monotonic() >= told + 0.5:  # the second half
+            told = time.monotonic()
+            progress.report("ordering paths", 1.0 - 0.5 * float((look[0] | look[1]).mean()))
 
 
 def improve(starts: FloatArray, ends: FloatArray, order: IntArray, rev: BoolArray,
