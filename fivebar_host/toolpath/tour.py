@@ -55,6 +55,8 @@ MIN_BLOCK = 1000
 BIG_TOUR_GAIN = 0.005
 #: Pairs looked at per call of a round (bounds the vectorised temporaries).
 CHUNK = 1 << 17
+#: Points whose neighbours are looked for at once.
+QUERY_CHUNK = 1 << 13
 
 
 def neighbours(pts: FloatArray, k: int, owner: IntArray) -> tuple[IntArray, IntArray]:
@@ -63,57 +65,67 @@ def neighbours(pts: FloatArray, k: int, owner: IntArray) -> tuple[IntArray, IntA
     point per cell and each point's candidates are the points of its 3 × 3 block of cells
     (at most `4k + 8` from any one cell, so that many coincident points stay linear in work);
     points with fewer than `k` candidates are searched again in a grid twice as coarse, until
-    every point has `k` or the grid covers the drawing."""
+    every point has `k` or the grid covers the drawing. Queries go in chunks, so the
+    temporaries stay bounded whatever the number of points."""
     m = pts.shape[0]
     lo = pts.min(axis=0)
     span = float(max(np.ptp(pts, axis=0).max(), 1e-9))
     h = span / max(1.0, np.sqrt(m))
+    table = np.full((m, k), -1, dtype=np.int64)  # row i: i's neighbours, nearest first
     query = np.arange(m)
-    out_i: list[IntArray] = []
-    out_j: list[IntArray] = []
     while query.size:
         cells = np.floor((pts - lo) / h).astype(np.int64)
         g = int(cells.max()) + 3
         key = (cells[:, 0] + 1) * g + cells[:, 1] + 1
         srt = np.argsort(key, kind="stable")
-        ukey, first, count = np.unique(key[srt], return_index=True, return_counts=True)
-        pi_l: list[IntArray] = []
-        pj_l: list[IntArray] = []
-        qkey = key[query]
-        for dx in (-1, 0, 1):
-            for dy in (-1, 0, 1):
-                nk = qkey + dx * g + dy
-                c = np.searchsorted(ukey, nk)
-                c = np.minimum(c, ukey.size - 1)
-                hit = ukey[c] == nk
-                q, c = query[hit], c[hit]
-                cnt = np.minimum(count[c], 4 * k + 8)
-                rep = np.repeat(np.arange(q.size), cnt)
-                off = np.arange(rep.size) - np.repeat(np.cumsum(cnt) - cnt, cnt)
-                pi_l.append(q[rep])
-                pj_l.append(srt[first[c][rep] + off])
-        pi = np.concatenate(pi_l)
-        pj = np.concatenate(pj_l)
-        ok = owner[pi] != owner[pj]
-        pi, pj = pi[ok], pj[ok]
-        d2 = ((pts[pi] - pts[pj]) ** 2).sum(axis=1)
-        # by point, then distance: one float key (the point, plus its distance scaled into
-        # [0, 0.5)), sorted once — several times faster than a two-key sort
-        srt2 = np.argsort(pi + d2 / (2.0 * float(d2.max(initial=0.0)) + 1e-300))
-        pi, pj = pi[srt2], pj[srt2]
-        start = np.searchsorted(pi, pi, side="left")
-        rank = np.arange(pi.size) - start
-        keep = rank < k
-        found = np.bincount(pi[keep], minlength=m)
-        done = (found[query] >= k) | (h > 2 * span)
-        sel = keep & np.isin(pi, query[done])
-        out_i.append(pi[sel])
-        out_j.append(pj[sel])
-        query = query[~done]
+        grid = (key, g, srt, *np.unique(key[srt], return_index=True, return_counts=True))
+        left: list[IntArray] = []
+        for c in range(0, query.size, QUERY_CHUNK):
+            q = query[c:c + QUERY_CHUNK]
+            found = _nearest_in_grid(pts, owner, k, q, grid, table)
+            left.append(q[(found < k) & (h <= 2 * span)])
+        query = np.concatenate(left)
         h *= 2.0
-    pi, pj = np.concatenate(out_i), np.concatenate(out_j)
-    srt = np.argsort(pi, kind="stable")  # each point's pairs come from one pass, nearest first
-    return pi[srt], pj[srt]
+    pi = np.repeat(np.arange(m), (table >= 0).sum(axis=1))
+    return pi, table[table >= 0]
+
+
+def _nearest_in_grid(pts: FloatArray, owner: IntArray, k: int, q: IntArray,
+                     grid: tuple[IntArray, int, IntArray, IntArray, IntArray, IntArray],
+                     table: IntArray) -> IntArray:
+    """`neighbours` for the points `q` in one grid (keys, width, points sorted by key, the
+    occupied keys, their first index and count): writes each point's nearest (up to `k`) in
+    its 3 × 3 block of cells into its row of `table`; returns how many each has."""
+    key, g, srt, ukey, first, count = grid
+    pi_l: list[IntArray] = []
+    pj_l: list[IntArray] = []
+    qkey = key[q]
+    for dx in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            nk = qkey + dx * g + dy
+            c = np.minimum(np.searchsorted(ukey, nk), ukey.size - 1)
+            hit = ukey[c] == nk
+            qq, c = np.flatnonzero(hit), c[hit]
+            cnt = np.minimum(count[c], 4 * k + 8)
+            rep = np.repeat(np.arange(qq.size), cnt)
+            off = np.arange(rep.size) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+            pi_l.append(qq[rep])  # index into q
+            pj_l.append(srt[first[c][rep] + off])
+    pi = np.concatenate(pi_l)
+    pj = np.concatenate(pj_l)
+    ok = owner[q[pi]] != owner[pj]
+    pi, pj = pi[ok], pj[ok]
+    d2 = ((pts[q[pi]] - pts[pj]) ** 2).sum(axis=1)
+    # by point, then distance: one float key (the point, plus its distance scaled into
+    # [0, 0.5)), sorted once — several times faster than a two-key sort
+    order = np.argsort(pi + d2 / (2.0 * float(d2.max(initial=0.0)) + 1e-300))
+    pi, pj = pi[order], pj[order]
+    rank = np.arange(pi.size) - np.searchsorted(pi, pi, side="left")
+    keep = rank < k
+    found = np.bincount(pi[keep], minlength=q.size)
+    table[q] = -1  # a coarser grid's answer replaces a finer one's
+    table[q[pi[keep]], rank[keep]] = pj[keep]
+    return found
 
 
 class Tour:
@@ -451,14 +463,15 @@ def _search(t: Tour, px: IntArray, py: IntArray, nbr: IntArray | None,
         touched = np.zeros(n + 1, dtype=bool)  # at path + 1 (0: the start and the park)
         inner = np.zeros(n + 1, dtype=bool)
         flipped = np.zeros(n + 1, dtype=bool)
-        xs, ys = px[sel], py[sel]
         moves = 0
-        for c in range(0, xs.size, CHUNK):  # in chunks: bounded temporaries
-            x, y = xs[c:c + CHUNK], ys[c:c + CHUNK]
-            if kind == 0:
-                moves += round_2opt(t, x, y, touched, inner, flipped)
-            else:
-                moves += round_oropt(t, x, y, touched, nbr)
+        for b in range(0, px.size, 8 * CHUNK):  # in chunks: bounded temporaries
+            idx = np.flatnonzero(sel[b:b + 8 * CHUNK]) + b
+            for c in range(0, idx.size, CHUNK):
+                x, y = px[idx[c:c + CHUNK]], py[idx[c:c + CHUNK]]
+                if kind == 0:
+                    moves += round_2opt(t, x, y, touched, inner, flipped)
+                else:
+                    moves += round_oropt(t, x, y, touched, nbr)
         if not moves:
             idle += 1
             if idle >= 2:
