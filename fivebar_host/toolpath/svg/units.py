@@ -138,6 +138,11 @@ def number_prefix(text: str) -> tuple[list[float], int | None]:
     one comma, or by nothing where the grammar allows it (`1-2`, `.5.5`, `1e-1-1e2`)."""
     if text.isascii() and _LIST_RE.fullmatch(text):  # valid: the numbers at once
         return [float(x) for x in _NUMBER_RE.findall(text)], None
+    return _scan_numbers(text)
+
+
+def _scan_numbers(text: str) -> tuple[list[float], int | None]:
+    """`number_prefix` by the scanner, number by number up to the first error."""
     out: list[float] = []
     m0 = _WSP_RE.match(text)
     i, n = (m0.end() if m0 else 0), len(text)
