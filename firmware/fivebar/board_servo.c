@@ -40,19 +40,26 @@
 /* Timer2 overflows every 256 counts at F_CPU/8 */
 #define SV_TICK_CYCLES 2048u
 #define SV_FRAME_COUNTS ((uint16_t)(FB_F_CPU / 8UL / 1000UL * CFG_SERVO_FRAME_MS))
-#define SV_COM_A ((uint8_t)(1u << COM1A1))
-#define SV_COM_B ((uint8_t)(1u << COM1B1))
+/* arm B's frames start this many counts after arm A's (3 ms): the edges of
+ * the two never meet, and neither edge's interrupt waits for the other's */
+#define SV_B_OFFSET 6000u
+
+/* One arm servo's output. */
+typedef struct {
+	uint16_t rise;      /* Timer1 count of this frame's (or the next) rise */
+	uint16_t width;     /* this frame's pulse, counts (0 = none) */
+	uint8_t high;       /* the pin is high: the pending compare is the fall */
+} board_servo_arm_t;
 
 /* The servo build's interrupt state. */
 typedef struct {
+	board_servo_arm_t arm[2];
 	uint32_t next;      /* DDA timeline: cycle of the pending event */
 	uint32_t now;       /* DDA timeline: cycles at the last overflow */
 	uint32_t rem;       /* a paused timeline: cycles its event had left */
-	uint16_t width[2];  /* the pulse written for the next frame, counts (0 = none) */
 	uint8_t run;        /* the DDA's timer runs */
 	uint8_t paused;
 	uint8_t on;         /* M17 (1, the boot's) / M18 (0) */
-	uint8_t com;        /* the compare outputs connected (SV_COM_A/B) */
 } board_servo_t;
 
 static volatile board_servo_t board_servo = { .on = 1 };
@@ -64,14 +71,15 @@ void board_servo_init(void)
 	BOARD_PORT(PIN_SERVO_B_PORT) &= (uint8_t)~(1u << PIN_SERVO_B_BIT);
 	BOARD_DDR(PIN_SERVO_B_PORT) |= (uint8_t)(1u << PIN_SERVO_B_BIT);
 	TIMSK1 = 0;
-	TCCR1B = 0;
-	TCCR1A = (uint8_t)(1u << WGM11);
-	TCCR1B = (uint8_t)((1u << WGM13) | (1u << WGM12) | (1u << CS11));
-	ICR1 = (uint16_t)(SV_FRAME_COUNTS - 1u);
-	OCR1A = 0;
-	OCR1B = 0;
-	TIFR1 = (uint8_t)(1u << TOV1);
-	TIMSK1 = (uint8_t)(1u << TOIE1);
+	TCCR1A = 0;
+	TCCR1B = (uint8_t)(1u << CS11);  /* normal mode, F_CPU/8: 0.5 us */
+	uint16_t t = (uint16_t)(TCNT1 + 200u);
+	board_servo.arm[0].rise = t;
+	board_servo.arm[1].rise = (uint16_t)(t + SV_B_OFFSET);
+	OCR1A = t;
+	OCR1B = (uint16_t)(t + SV_B_OFFSET);
+	TIFR1 = (uint8_t)((1u << OCF1A) | (1u << OCF1B));
+	TIMSK1 = (uint8_t)((1u << OCIE1A) | (1u << OCIE1B));
 }
 
 void board_enable_motors(uint8_t on)
@@ -79,67 +87,74 @@ void board_enable_motors(uint8_t on)
 	board_servo.on = on;
 }
 
-/* A joint's pulse for the next frame, counts (0 = none). */
-static uint16_t frame_width(int32_t pos)
-{
-	if (!board_servo.on || pos < CFG_SERVO_ARM_MIN || pos > CFG_SERVO_ARM_MAX)
-		return 0;
-	return (uint16_t)pos;
-}
-
-/*
- * One output's next frame.  A pulse of w counts is OCR = w - 1.  An output
- * with no pulse is disconnected (its pin low), but only one frame after its
- * OCR went to 0, so that a pulse under way is never cut short: that frame
- * sends a one-count (0.5 us) spike, which no servo takes for a pulse.
- */
-static uint8_t frame_output(uint16_t w, volatile uint16_t *ocr, uint8_t com, uint8_t prev)
-{
-	if (w) {
-		*ocr = (uint16_t)(w - 1u);
-		return com;
-	}
-	if (*ocr == 0)
-		return 0;
-	*ocr = 0;
-	return (uint8_t)(prev & com);
-}
-
-/* A frame starts: its pulses (written last frame) are under way; write the
- * next frame's. */
-ISR(TIMER1_OVF_vect)
+/* A joint's pulse for the frame starting now, counts (0 = none). */
+static uint16_t frame_width(uint8_t i)
 {
 	int32_t pos[2];
 	mo_get_pos(pos);
-	uint16_t wa = frame_width(pos[0]), wb = frame_width(pos[1]);
-	uint8_t prev = board_servo.com;
-	uint8_t com = (uint8_t)(frame_output(wa, &OCR1A, SV_COM_A, prev) |
-				frame_output(wb, &OCR1B, SV_COM_B, prev));
-	board_servo.width[0] = wa;
-	board_servo.width[1] = wb;
-	if (com != prev) {
-		TCCR1A = (uint8_t)((TCCR1A & (uint8_t)~(SV_COM_A | SV_COM_B)) | com);
-		board_servo.com = com;
-	}
+	if (!board_servo.on || pos[i] < CFG_SERVO_ARM_MIN || pos[i] > CFG_SERVO_ARM_MAX)
+		return 0;
+	return (uint16_t)pos[i];
 }
 
-/* The step interrupt: every DDA event due by now, in order. */
-ISR(TIMER2_OVF_vect)
+/*
+ * An arm's compare: a rise (the pin goes high first thing when the frame
+ * has a pulse; its fall is armed width counts after the scheduled rise) or
+ * a fall (the pin goes low first thing, the next rise is armed a frame after
+ * this one's, and the next frame's width is taken: the joint's position
+ * now).  Both edges take the same path into the same interrupt, so a width
+ * is exact to the difference of the two entries' latencies.  A frame
+ * without a pulse takes the next width at its rise.
+ */
+#define SV_ARM_ISR(vect, i, port, bit, ocr) \
+	ISR(vect) \
+	{ \
+		volatile board_servo_arm_t *a = &board_servo.arm[i]; \
+		if (a->high) { \
+			BOARD_PORT(port) &= (uint8_t)~(1u << (bit)); \
+			a->high = 0; \
+		} else if (a->width) { \
+			BOARD_PORT(port) |= (uint8_t)(1u << (bit)); \
+			a->high = 1; \
+			ocr = (uint16_t)(a->rise + a->width); \
+			return; \
+		} \
+		a->rise = (uint16_t)(a->rise + SV_FRAME_COUNTS); \
+		ocr = a->rise; \
+		a->width = frame_width(i); \
+	}
+
+SV_ARM_ISR(TIMER1_COMPA_vect, 0, PIN_SERVO_A_PORT, PIN_SERVO_A_BIT, OCR1A)
+SV_ARM_ISR(TIMER1_COMPB_vect, 1, PIN_SERVO_B_PORT, PIN_SERVO_B_BIT, OCR1B)
+
+/*
+ * The step interrupt: every DDA event due by now, in order.  It lets the
+ * arm servos' compares in (ISR_NOBLOCK), with its own overflow and the
+ * receive interrupt (whose real-time commands call into fb_motion.c) masked
+ * while it runs mo_event().
+ */
+ISR(TIMER2_OVF_vect, ISR_NOBLOCK)
 {
+	uint8_t rx = (uint8_t)(UCSR0B & (1u << RXCIE0));
+	UCSR0B &= (uint8_t)~(1u << RXCIE0);
+	TIMSK2 &= (uint8_t)~(1u << TOIE2);
 	uint32_t now = board_servo.now + SV_TICK_CYCLES;
 	board_servo.now = now;
-	if (!board_servo.run)
-		return;
-	uint32_t next = board_servo.next;
-	while ((int32_t)(now - next) >= 0) {
-		uint16_t d = mo_event();
-		if (!d) {
-			board_servo.run = 0;
-			break;
+	if (board_servo.run) {
+		uint32_t next = board_servo.next;
+		while ((int32_t)(now - next) >= 0) {
+			uint16_t d = mo_event();
+			if (!d) {
+				board_servo.run = 0;
+				break;
+			}
+			next += d;
 		}
-		next += d;
+		board_servo.next = next;
 	}
-	board_servo.next = next;
+	__asm__ __volatile__("cli" ::: "memory");
+	TIMSK2 |= (uint8_t)(1u << TOIE2);
+	UCSR0B |= rx;
 }
 
 void board_timer_start(uint16_t delay_cycles)
