@@ -14,8 +14,8 @@ from pathlib import Path
 
 from fivebar_host.devices.sim import (
     BuildPaths,
-    EmulatorError,
     Emulator,
+    EmulatorError,
     FirmwareSession,
     SimDevice,
     firmware_dir,
