@@ -59,3 +59,15 @@ def test_no_pulses_before_the_position_is_set(tmp_path: Path) -> None:
     # a power-on's position 0 is outside 500..2500 µs: no arm pulse at all
     assert [p for p in frame_pulses(trace, 0) if p[0] > 0] == []
     assert [p for p in frame_pulses(trace, 1) if p[0] > 0] == []
+
+
+def test_the_servo_build_says_so_in_its_banner(tmp_path: Path) -> None:
+    dev = start_servo_device(ensure_servo_built(), tmp_path / "servo.trace")
+    try:
+        dev.session.realtime(b"\x18")  # Ctrl-X: the banner again
+        assert dev.session.wait_banner().joints == "servo"
+    finally:
+        dev.close()
+    line = "fivebar 1.0.0 proto:3 rx:128 queue:16 line:80 joints:servo"
+    assert protocol.parse_message(line) == protocol.Banner("1.0.0", 3, 128, 16, 80, "servo")
+    assert protocol.parse_message(line[:-13]).joints == "stepper"  # type: ignore[union-attr]
