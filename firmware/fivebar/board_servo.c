@@ -97,30 +97,45 @@ static uint16_t frame_width(uint8_t i)
 	return (uint16_t)pos[i];
 }
 
+/* An arm's compares come this many counts (20 us) before its edges, and the
+ * interrupt waits for the edge's exact count: the latency of its entry (the
+ * other interrupts' entries and exits, the main loop's interrupts-off
+ * sections: a few us) does not move the edge. */
+#define SV_EARLY 40u
+
+/* Wait until Timer1 reaches count t (interrupts off: a compare interrupt). */
+static inline void wait_count(uint16_t t)
+{
+	while ((int16_t)(TCNT1 - t) < 0)
+		;
+}
+
 /*
- * An arm's compare: a rise (the pin goes high first thing when the frame
- * has a pulse; its fall is armed width counts after the scheduled rise) or
- * a fall (the pin goes low first thing, the next rise is armed a frame after
- * this one's, and the next frame's width is taken: the joint's position
- * now).  Both edges take the same path into the same interrupt, so a width
- * is exact to the difference of the two entries' latencies.  A frame
- * without a pulse takes the next width at its rise.
+ * An arm's compare: a rise (the pin goes high at the frame's exact count
+ * when the frame has a pulse; its fall is armed width counts later) or a
+ * fall (the pin goes low at its exact count, the next rise is armed a frame
+ * after this one's, and the next frame's width is taken: the joint's
+ * position now).  Both edges wait for their count in the same way, so a
+ * width is exact to the timer's count (0.5 us) and the polling loop's few
+ * cycles.  A frame without a pulse takes the next width at its rise.
  */
 #define SV_ARM_ISR(vect, i, port, bit, ocr) \
 	ISR(vect) \
 	{ \
 		volatile board_servo_arm_t *a = &board_servo.arm[i]; \
 		if (a->high) { \
+			wait_count((uint16_t)(a->rise + a->width)); \
 			BOARD_PORT(port) &= (uint8_t)~(1u << (bit)); \
 			a->high = 0; \
 		} else if (a->width) { \
+			wait_count(a->rise); \
 			BOARD_PORT(port) |= (uint8_t)(1u << (bit)); \
 			a->high = 1; \
-			ocr = (uint16_t)(a->rise + a->width); \
+			ocr = (uint16_t)(a->rise + a->width - SV_EARLY); \
 			return; \
 		} \
 		a->rise = (uint16_t)(a->rise + SV_FRAME_COUNTS); \
-		ocr = a->rise; \
+		ocr = (uint16_t)(a->rise - SV_EARLY); \
 		a->width = frame_width(i); \
 	}
 

@@ -138,7 +138,7 @@ class FivebarController:
         opts = getattr(self.link.port, "options", None)
         true = getattr(opts, "true", None)
         return Recording(Path(trace), None if true is None else tuple(true),
-                         getattr(opts, "backlash", None))
+                         getattr(opts, "backlash", None), getattr(opts, "deadband", None))
 
     # ------------------------------------------------------------------ pose
     def ensure_pose(self, operator: Operator) -> Position:
