@@ -97,11 +97,12 @@ static uint16_t frame_width(uint8_t i)
 	return (uint16_t)pos[i];
 }
 
-/* An arm's compares come this many counts (20 us) before its edges, and the
+/* An arm's compares come this many counts (8 us) before its edges, and the
  * interrupt waits for the edge's exact count: the latency of its entry (the
  * other interrupts' entries and exits, the main loop's interrupts-off
- * sections: a few us) does not move the edge. */
-#define SV_EARLY 40u
+ * sections: a few us) does not move the edge, and the wait holds the pen
+ * servo's edges (Timer0, board_avr.c) off for no more than that. */
+#define SV_EARLY 16u
 
 /* Wait until Timer1 reaches count t (interrupts off: a compare interrupt). */
 static inline void wait_count(uint16_t t)
@@ -136,6 +137,9 @@ static inline void wait_count(uint16_t t)
 		} \
 		a->rise = (uint16_t)(a->rise + SV_FRAME_COUNTS); \
 		ocr = (uint16_t)(a->rise - SV_EARLY); \
+		/* the position (mo_get_pos: ~15 us) with interrupts on: this \
+		 * compare is a frame away, the other arm's 3 ms */ \
+		__asm__ __volatile__("sei" ::: "memory"); \
 		a->width = frame_width(i); \
 	}
 

@@ -23,19 +23,23 @@ from fivebar_host.devices.simtrace import Trace
 from fivebar_host.errors import FivebarError
 from fivebar_host.report.text.executed import ExecutedPath, _distance_to_request
 from kinematics.arrays import FloatArray, IntArray
-from kinematics.servo import hysteresis
+from kinematics.servo import PULSE_QUANTUM_US, hysteresis
 
-#: The arm servos' trace names and the servo firmware's pulse ticks per µs.
+#: The arm servos' trace names.
 PINS = ("svA", "svB")
+#: A measured pulse moves only once it leaves ± one quantum of where it was (Eq. S1 of
+#: this width): the firmware's edges jitter by under a quantum (benchmarks/servo.py), which
+#: rounds a still servo's width one quantum off now and then.
+FLICKER_US = 2 * PULSE_QUANTUM_US
 
 
 def servo_angles(trace: Trace, profile: Profile, deadband_deg: tuple[float, float] | None
                  ) -> tuple[FloatArray, FloatArray]:
-    """(times (E,) cycles, joint angles (E, 2) rad): each arm's pulses through the
-    profile's curve and the true dead band's hysteresis, each at the time its width was
-    taken (the arm's previous fall, board_servo.c), and both arms on the union of those
-    times, each interpolated linearly between its own samples (a servo moves on between
-    its frames, and arm B's frames start 3 ms after arm A's)."""
+    """(times (E,) cycles, joint angles (E, 2) rad): each arm's pulses (to the 0.5 µs
+    quantum) through the profile's curve and the true dead band's hysteresis, each at the
+    time its width was taken (the arm's previous fall, board_servo.c), and both arms on
+    the union of those times, each interpolated linearly between its own samples (a servo
+    moves on between its frames, and arm B's frames start 3 ms after arm A's)."""
     if profile.joints is None:
         raise FivebarError("the executed servo path needs a servo profile ([joints])")
     times, angles = [], []
@@ -46,14 +50,21 @@ def servo_angles(trace: Trace, profile: Profile, deadband_deg: tuple[float, floa
             return np.zeros(0), np.zeros((0, 2))
         curve = profile.joints.joints[j].curve
         lo, hi = curve.range_us
-        th = curve.angle(np.clip(pul[1:, 1] * 1e6 / trace.freq, lo, hi))
+        us = np.rint(pul[1:, 1] * 1e6 / trace.freq / PULSE_QUANTUM_US) * PULSE_QUANTUM_US
+        # a pulse one quantum off and back (the edges' sub-µs jitter) is no motion
+        us = hysteresis(us, FLICKER_US)
+        th = curve.angle(np.clip(us, lo, hi))
         if deadband_deg is not None and deadband_deg[j] > 0:
             th = hysteresis(th, math.radians(deadband_deg[j]))
         times.append(pul[:-1, 0] + pul[:-1, 1])  # the previous pulse's fall
         angles.append(th)
     t = np.unique(np.concatenate(times))
     t = t[(t >= max(x[0] for x in times)) & (t <= min(x[-1] for x in times))]
-    return t, np.stack([np.interp(t, times[j], angles[j]) for j in (0, 1)], axis=1)
+    th = np.stack([np.interp(t, times[j], angles[j]) for j in (0, 1)], axis=1)
+    # a frame that repeats the last pulses is no motion (the reports count motion events)
+    moved = np.ones(t.size, dtype=bool)
+    moved[1:] = (np.diff(th, axis=0) != 0).any(axis=1)
+    return t[moved], th[moved]
 
 
 def _line_distance(tgt: FloatArray, k: int, q: FloatArray) -> float:
@@ -65,20 +76,26 @@ def _line_distance(tgt: FloatArray, k: int, q: FloatArray) -> float:
 
 
 def _segment_of(job: Job, q: FloatArray, first: int) -> IntArray:
-    """Each frame's segment: from the last frame's one, the next segment while the frame
-    lies at least as near its joint-space line (segments run in order and a frame is a
+    """Each frame's segment: from the last frame's one, the next (non-empty) segment while
+    the frame lies nearer its joint-space line (segments run in order and a frame is a
     sample of a continuous path, so the walk never jumps to a far segment a travel passes)."""
     tgt = job.steps.astype(np.float64)
     n = job.n_segments
     seg = np.full(q.shape[0], -1, dtype=np.int64)
     k = min(first, n - 1)
+    empty = (tgt[1:] == tgt[:-1]).all(axis=1)
     for i in range(q.shape[0]):
         d = _line_distance(tgt, k, q[i])
-        while k + 1 < n:
-            d1 = _line_distance(tgt, k + 1, q[i])
-            if d1 > d:
+        while True:
+            j = k + 1
+            while j < n and empty[j]:
+                j += 1
+            if j >= n:
                 break
-            k, d = k + 1, d1
+            d1 = _line_distance(tgt, j, q[i])
+            if d1 >= d:  # a frame at a junction still belongs to the segment it ends
+                break
+            k, d = j, d1
         seg[i] = k
     return seg
 
