@@ -106,6 +106,11 @@ def executed_servo_path(job: Job, profile: Profile, trace: Trace, first_segment:
     t, th = servo_angles(trace, profile, deadband_deg)
     home = np.array(job.home_rad)
     q = (th - home) * (job.steps_per_rev / (2.0 * math.pi))  # on the step grid, unrounded
+    # an event is a frame whose position on the grid changed, as a step is one
+    grid = np.rint(q).astype(np.int64)
+    keep = np.ones(t.size, dtype=bool)
+    keep[1:] = (np.diff(grid, axis=0) != 0).any(axis=1)
+    t, th, q = t[keep], th[keep], q[keep]
     seg = _segment_of(job, q, first_segment)
     fwd = profile.geometry.forward_batch(th, "+" if job.assembly > 0 else "-")
     dev = np.full(t.size, np.nan)
@@ -114,5 +119,4 @@ def executed_servo_path(job: Job, profile: Profile, trace: Trace, first_segment:
         dev[draw] = _distance_to_request(job, fwd.points[draw], q[draw], seg[draw])
         dev[draw[~fwd.valid[draw]]] = np.inf
     completed = int(seg.max(initial=first_segment))
-    return ExecutedPath(t / trace.freq, np.rint(q).astype(np.int64), fwd.points, seg, dev,
-                        completed)
+    return ExecutedPath(t / trace.freq, grid[keep], fwd.points, seg, dev, completed)
