@@ -2,15 +2,17 @@
  * board_servo.c - the servo build's timers (make SERVO=1, -DFB_SERVO): the
  * arm servos' pulses and the interrupt that advances the DDA.
  *
- * Timer1  fast PWM, mode 14 (TOP = ICR1), F_CPU/8: one count is 0.5 us and
- *         a period of CFG_SERVO_FRAME_MS is one servo frame (40000 counts at
- *         50 Hz).  OC1A (D9) and OC1B (D10) rise at the frame's start and
- *         fall at the compare, all in hardware: a pulse is exactly OCR1x + 1
- *         counts wide whatever the interrupts do, so its width has no jitter
- *         at all (benchmarks/servo.py measures it in the simavr trace).
- *         OCR1A/OCR1B are double-buffered (written any time, taken at the
- *         frame's start): the overflow interrupt, at each frame's start,
- *         writes the next frame's widths, the joints' positions now.
+ * Timer1  normal mode, F_CPU/8: one count is 0.5 us; a frame is
+ *         CFG_SERVO_FRAME_MS (40000 counts at 50 Hz), arm B's 3 ms after arm
+ *         A's.  Compare A times arm A's edges on D9, compare B arm B's on D10:
+ *         each compare comes 8 us early and its interrupt waits for the edge's
+ *         exact count before it writes the pin, so a width is exact to the
+ *         count and a few cycles whatever the other interrupts' latency
+ *         (benchmarks/servo.py measures it in the simavr trace).  The pins
+ *         are OC1A/OC1B, so a hardware-compare form is possible; simavr 1.6
+ *         applies neither OCR1x in fast PWM (mode 14) nor the compare output
+ *         in normal mode as the chip does, so it could not be measured and the
+ *         edges are the interrupt's.
  * Timer2  the laser's 7.8 kHz PWM (board_avr.c) as it is; its overflow, every
  *         2048 cycles, is this build's step interrupt: it runs mo_event()
  *         for every event that is due on the DDA's timeline, kept in cycles
@@ -22,8 +24,8 @@
  * 0.5 us ticks (board_servo.h); a frame sends a pulse only while the
  * position lies in CFG_SERVO_ARM_MIN..MAX and the servos are enabled (M17,
  * the boot's state; M18 stops their pulses).  The DDA moves the position by
- * one tick per step, evenly spread over each segment: the width a frame
- * takes is the segment's pulse line at the frame's start, to a tick.
+ * one tick per step, evenly spread over each segment: a frame's width is
+ * the segment's pulse line when the arm's previous pulse fell, to a tick.
  *
  * Shared state: board_servo (below), one struct; written by the two
  * interrupts and by board_timer_*() / board_enable_motors() with interrupts
