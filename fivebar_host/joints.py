@@ -4,9 +4,9 @@ Host side only (issue 38): a servo profile declares each arm servo's pulse range
 direction, speed and dead band, the refresh rate, and a pulse ↔ angle curve (a measured
 table, a low-order fit of it, or a straight line through the centre); `ServoJoints.pulses`
 turns a job's joint angles into the pulse targets the servo firmware is to be sent (quantised
-to its 0.5 µs, dead band compensated, `kinematics.servo`). The firmware does not drive arm
-servos yet, so running a job on a servo profile is refused (`require_stepper_joints`); the
-dry run plans and previews it as today, in joint angles.
+to its 0.5 µs, dead band compensated, `kinematics.servo`). fivebar's servo firmware runs it
+(`controllers.fivebar.servo`: the step grid ↔ pulse ticks); another controller refuses it
+(`require_stepper_joints`); the dry run plans and previews it in joint angles.
 
 ```toml
 [joints]
@@ -161,7 +161,9 @@ def _parse_servos(t: Any) -> ServoJoints:
 
 
 def require_stepper_joints(joints: ServoJoints | None, source: str) -> None:
-    """Refuse to run a job on servo joints: the firmware does not drive arm servos yet."""
+    """Refuse to run a job on servo joints with a controller other than fivebar's (only
+    fivebar's servo build drives arm servos: docs/protocol.md 6.4)."""
     if joints is not None:
-        raise UsageError(f"{source}: [joints] kind = \"servo\": the firmware does not drive "
-                         "arm servos yet (issue 38); --dry-run plans and previews the job")
+        raise UsageError(f"{source}: [joints] kind = \"servo\": only fivebar's servo "
+                         "firmware drives arm servos (--controller fivebar, make -C firmware "
+                         "SERVO=1); --dry-run plans and previews the job")

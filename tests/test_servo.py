@@ -11,7 +11,7 @@ import pytest
 
 from fivebar_host.config import ConfigError, load_profile
 from fivebar_host.controllers import open_controller
-from fivebar_host.errors import UsageError
+from fivebar_host.errors import FivebarError, UsageError
 from kinematics.servo import (
     ServoCurve,
     ServoError,
@@ -89,7 +89,10 @@ def test_servo_profile_pulses_and_refusal(tmp_path: Path) -> None:
         got = hysteresis(j.curve.angle(pul[:, i]), j.dead_band_rad)
         slope = np.abs(np.diff(j.curve.angle_rad) / np.diff(j.curve.pulse_us)).max()
         assert np.abs(got - th[:, i]).max() <= 0.25 * slope + 1e-12
+    # GRBL drives no arm servo; fivebar's stepper firmware (the mock) is refused by banner
     with pytest.raises(UsageError, match="servo"):
+        open_controller("grbl", "fivebar-grbl://", prof)
+    with pytest.raises(FivebarError, match="servo build"):
         open_controller("fivebar", "fivebar-mock://", prof)
 
 

@@ -104,4 +104,19 @@
  * last, and uses this default only while the EEPROM holds none. */
 #define DEF_PEN_PARK        0
 
+/* ---- arm servos: the servo build (make SERVO=1, board_servo.c) -------------- */
+/* The arms' pulses come from Timer1's hardware compares: OC1A = D9 (arm A),
+ * OC1B = D10 (arm B), the X and Y limit headers of the CNC shield (the
+ * servo build has no endstops).  A joint's position is its pulse width in
+ * ticks of 0.5 us (F_CPU/8); a frame is CFG_SERVO_FRAME_MS. */
+#define PIN_SERVO_A_PORT    B
+#define PIN_SERVO_A_BIT     1     /* D9: OC1A */
+#define PIN_SERVO_B_PORT    B
+#define PIN_SERVO_B_BIT     2     /* D10: OC1B */
+#define CFG_SERVO_TICKS_US  2     /* position units (ticks) per us */
+/* A position outside these ticks sends no pulse (a power-on's 0: nothing is
+ * sent until the host's G92 sets the servos' positions). */
+#define CFG_SERVO_ARM_MIN   (CFG_SERVO_MIN_US * CFG_SERVO_TICKS_US)
+#define CFG_SERVO_ARM_MAX   (CFG_SERVO_MAX_US * CFG_SERVO_TICKS_US)
+
 #endif

@@ -37,6 +37,8 @@
  *                 controller as a powered machine keeps it (its RAM, as after
  *                 a DTR reset) and the arms where they stopped; the trace's
  *                 first line says where they start ("start=A,B")
+ *     -V          also trace the servo build's arm servo pins (make SERVO=1,
+ *                 config.h: OC1A/OC1B, D9/D10) as svA and svB
  *     -L          with -S: the controller lost power since the state was saved
  *                 (its SRAM comes back random; the arms stay where they were)
  *     -T          two timer corrections to simavr 1.6 for firmware that needs
@@ -226,9 +228,13 @@ static avr_cycle_count_t pending_since;
 static struct timespec frozen_at;
 
 /* last traced level of each output pin, to trace them low on a reset */
-enum { PIN_STEPA, PIN_STEPB, PIN_DIRA, PIN_DIRB, PIN_ENABLE, PIN_LASER, PIN_PEN, PIN_COUNT };
-static const char *const pin_names[PIN_COUNT] = { "stepA", "stepB", "dirA", "dirB", "enable", "laser", "pen" };
+enum { PIN_STEPA, PIN_STEPB, PIN_DIRA, PIN_DIRB, PIN_ENABLE, PIN_LASER, PIN_PEN, PIN_SVA, PIN_SVB,
+       PIN_COUNT };
+static const char *const pin_names[PIN_COUNT] = { "stepA", "stepB", "dirA", "dirB", "enable", "laser", "pen", "svA",
+						    "svB" };
 static int pin_level[PIN_COUNT];
+/* -V: trace the arm servo pins */
+static int servo_pins;
 
 /* cycle profile (-P): emulated cycles spent at each flash byte address,
  * written as "address cycles" lines at exit (map them with avr-nm) */
@@ -957,7 +963,7 @@ static void usage(void)
 {
 	fprintf(stderr, "usage: fbsim [-m mcu] [-f hz] [-t trace] [-w] [-g ms] [-c cycles] [-R] "
 			"[-a steps] [-b steps] [-D debug] [-P profile] [-C] [-T] [-B boot.hex] [-F dump] "
-			"[-H] [-X page] [-S state [-L]] firmware.elf|-\n");
+			"[-H] [-X page] [-S state [-L]] [-V] firmware.elf|-\n");
 	exit(2);
 }
 
@@ -972,7 +978,7 @@ int main(int argc, char **argv)
 	if (getppid() == 1)
 		return 1;
 
-	while ((opt = getopt(argc, argv, "m:f:t:wg:c:Ra:b:D:P:CTB:F:HX:S:L")) != -1) {
+	while ((opt = getopt(argc, argv, "m:f:t:wg:c:Ra:b:D:P:CTB:F:HX:S:LV")) != -1) {
 		switch (opt) {
 		case 'm': mcu = optarg; break;
 		case 'f': freq = strtoul(optarg, NULL, 10); break;
@@ -993,6 +999,7 @@ int main(int argc, char **argv)
 		case 'X': stuck_page = strtol(optarg, NULL, 10); break;
 		case 'S': state_path = optarg; break;
 		case 'L': power_lost = 1; break;
+		case 'V': servo_pins = 1; break;
 		default: usage();
 		}
 	}
@@ -1082,6 +1089,12 @@ int main(int argc, char **argv)
 				(void *)(intptr_t)PIN_LASER);
 	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_SERVO_PORT), PIN_SERVO_BIT), named_hook,
 				(void *)(intptr_t)PIN_PEN);
+	if (servo_pins) {
+		avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_SERVO_A_PORT), PIN_SERVO_A_BIT),
+					named_hook, (void *)(intptr_t)PIN_SVA);
+		avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_SERVO_B_PORT), PIN_SERVO_B_BIT),
+					named_hook, (void *)(intptr_t)PIN_SVB);
+	}
 	if (debug_path) {
 		dbg = fopen(debug_path, "w");
 		if (!dbg) {

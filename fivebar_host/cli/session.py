@@ -98,22 +98,32 @@ def write_executed(job: Job, prof: Profile, rec: Recording, preview_path: Path,
     )
 
     tr, true = read_trace(rec.path), rec.true
-    # the arms start where the emulated machine kept them (the trace's `start=`)
-    t, track = merge_axes(tr.positions("A", tr.start[0]), tr.positions("B", tr.start[1]),
-                          tr.start)
-    ex = executed_path(job, prof, t / tr.freq, track, report.start_segment,
-                       report.start_position, true=true_params(true), backlash=rec.backlash)
+    if prof.joints is not None:  # the servo build: the arms' pulses through the true servos
+        from fivebar_host.report.text.executed_servo import executed_servo_path
+
+        ex = executed_servo_path(job, prof, tr, report.start_segment, rec.deadband)
+        t_s, track = ex.time, ex.steps
+    else:
+        # the arms start where the emulated machine kept them (the trace's `start=`)
+        t, track = merge_axes(tr.positions("A", tr.start[0]),
+                              tr.positions("B", tr.start[1]), tr.start)
+        t_s = t / tr.freq
+        ex = executed_path(job, prof, t_s, track, report.start_segment,
+                           report.start_position, true=true_params(true),
+                           backlash=rec.backlash)
     out = preview_path.with_name(preview_path.stem + ".executed.csv")
     rows = ["t_s,a_steps,b_steps,x_mm,y_mm,segment,deviation_mm"]
     rows += [f"{ti:.6f},{a},{b},{x:.4f},{y:.4f},{sg},{'' if d != d else f'{d:.5f}'}"
-             for ti, (a, b), (x, y), sg, d in zip(t / tr.freq, track.tolist(),
+             for ti, (a, b), (x, y), sg, d in zip(t_s, track.tolist(),
                                                   ex.points.tolist(), ex.segment.tolist(),
                                                   ex.deviation_mm.tolist(), strict=True)]
     write_atomic(out, "\n".join(rows) + "\n")
-    given = [k for k, v in (("true=", true), ("backlash=", rec.backlash)) if v is not None]
+    given = [k for k, v in (("true=", true), ("backlash=", rec.backlash),
+                            ("deadband=", rec.deadband)) if v is not None]
     truth = bool(given)
     where = f" (drawn by the URL's {' and '.join(given)} machine)" if truth else ""
-    click.echo(f"executed path (from the emulator's step pulses{where}): {out}; drawing "
+    pulses = "servo" if prof.joints is not None else "step"
+    click.echo(f"executed path (from the emulator's {pulses} pulses{where}): {out}; drawing "
                f"segments' max deviation "
                f"{ex.max_deviation_mm:.4f} mm (bound {job.tolerance_mm:g} + step quantum "
                f"{job.step_quantum_mm:.4f} mm)")

@@ -60,6 +60,17 @@ def parse_board_option(opts: SimOptions, key: str, value: str, url: str) -> bool
         if m is None:
             raise ValueError(f"{url}: usb must be VID:PID in hex (2341:0043), got {value!r}")
         opts.usb = (int(m.group(1), 16), int(m.group(2), 16))
+    elif key == "servo":
+        opts.servo = _flag(value, key, url)
+    elif key == "deadband":
+        try:
+            da, db = (float(v) for v in value.split(","))
+        except ValueError:
+            da = db = -1.0
+        if not (0.0 <= da <= 30.0 and 0.0 <= db <= 30.0):
+            raise ValueError(f"{url}: deadband must be two angles A,B in 0..30 degrees, got "
+                             f"{value!r}")
+        opts.deadband = (da, db)
     elif key == "state":
         if not value:
             raise ValueError(f"{url}: state must be a directory or off")
@@ -78,7 +89,8 @@ def state_path(opts: SimOptions) -> Path | None:
     if where == "off":
         return None
     name = re.sub(r"[^A-Za-z0-9_.-]", "_", opts.machine or "default")
-    kind = f"{opts.bootloader}-{opts.chip}" if opts.bootloader else "firmware"
+    kind = (f"{opts.bootloader}-{opts.chip}" if opts.bootloader
+            else "servo" if opts.servo else "firmware")
     return Path(where).expanduser() / f"{name}-{kind}.state"
 
 

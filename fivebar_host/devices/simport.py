@@ -94,14 +94,14 @@ SCHEME = "fivebar-sim"
 
 #: Options that configure the harness process (fixed by a machine's first open).
 HARNESS_OPTIONS = ("trace", "realtime", "endstops", "bootloader", "chip", "app", "held",
-                   "stuck_page", "state")
+                   "stuck_page", "state", "servo")
 #: Fault options: what happens after the N-th line, and the harness command for it.
 FAULTS = {"disconnect_after": None, "reset_after": "reset", "power_cut_after": "power",
           "stall_after": "hang"}
 #: Line noise options (per-byte probabilities) and the seed of their generator.
 NOISE = ("drop", "corrupt")
 _KNOWN = (*HARNESS_OPTIONS, "machine", *FAULTS, *NOISE, "seed", "true", "backlash", "usb",
-          "power_loss", "fresh")
+          "power_loss", "fresh", "deadband")
 #: Real-time bytes pass untouched; a corruption never produces one (docs/protocol.md 2).
 _REALTIME = frozenset(b"?!~\x18")
 _CORRUPT_BYTES = bytes(c for c in range(0x20, 0x7F) if c not in _REALTIME)
@@ -124,6 +124,11 @@ class SimOptions:
     true: tuple[float, ...] | None = None
     #: Each motor's real slack in steps, where it differs from the profile's backlash.
     backlash: tuple[int, int] | None = None
+    #: The servo build (`servo=1`, docs/protocol.md 6.4; the servo controller adds it) and
+    #: the true servos' dead band, degrees per joint (`deadband=A,B`), where it differs
+    #: from none: the executed-path report reads the arms' pulses through them.
+    servo: bool = False
+    deadband: tuple[float, float] | None = None
     bootloader: str | None = None
     chip: str = "atmega328p"
     app: str = "empty"
@@ -296,7 +301,12 @@ def _new_emulator(opts: SimOptions) -> tuple[Emulator, Path]:
     """Build if needed and make (not start) a harness for ``opts``; returns it and its trace
     path."""
     try:
-        build = ensure_built(bootloaders=opts.bootloader is not None)
+        if opts.servo:
+            from fivebar_host.devices.simservo import ensure_servo_built
+
+            build = ensure_servo_built()
+        else:
+            build = ensure_built(bootloaders=opts.bootloader is not None)
     except EmulatorError as e:
         raise serial.SerialException(f"{SCHEME}: {e}") from e
     work = Path(tempfile.mkdtemp(prefix="fivebar-sim-"))
@@ -308,7 +318,8 @@ def _new_emulator(opts: SimOptions) -> tuple[Emulator, Path]:
         raise serial.SerialException(f"{SCHEME}: cannot keep the machine's state: {e}") from e
     # a bootloader's timeouts are wall-clock time for its programmer: run in real time
     emu = Emulator(build.elf if app else Path("-"), build.harness, trace, a, b,
-                   opts.realtime or opts.bootloader is not None, extra)
+                   opts.realtime or opts.bootloader is not None,
+                   [*extra, *(["-V"] if opts.servo else [])])
     emu.dump_path = work / "flash.bin"
     return emu, trace
 

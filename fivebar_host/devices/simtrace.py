@@ -160,9 +160,14 @@ class Trace:
     def pen_pulses(self) -> list[tuple[int, int]]:
         """(rising-edge cycle, high time in cycles) of every complete pulse of the pen
         servo's signal (D12: one pulse per 20 ms frame, its width the servo position)."""
+        return self.pulses("pen")
+
+    def pulses(self, name: str) -> list[tuple[int, int]]:
+        """(rising-edge cycle, high time in cycles) of every complete pulse on the traced
+        pin `name`: "pen", or the servo build's arm servos "svA" / "svB" (fbsim -V)."""
         out: list[tuple[int, int]] = []
         rise: int | None = None
-        for cycle, level in self.pin("pen"):
+        for cycle, level in self.pin(name):
             if level == 1:
                 rise = cycle
             elif rise is not None:
