@@ -20,7 +20,7 @@ UART times every byte from UBRR/U2X, so the baud rate binds as on hardware).
    capacity;
 4. `--noise`: miss rates of G6 lines under the mock's line noise (benchmarks/link_noise.py).
 
-Run: python benchmarks/link.py [--repeat 3] [--noise [--noise-lines N]] [--line-use]
+Run: python benchmarks/link.py [--repeat 3] [--noise [--noise-lines N]] [--line-use] [--dense]
 """
 
 from __future__ import annotations
@@ -222,6 +222,20 @@ def planned(repeat: int) -> None:
     print(" space and each corner is taken within the corner acceleration)")
 
 
+def dense(repeat: int) -> None:
+    """The wall-clock figure of tests/test_linkrate.py's dense job (the wobbly line at
+    300 mm/s, 2000 rad/s², planned for 115200 baud) on the emulator in real time: mid-path
+    underruns per run and their median. Host and emulator share the cores, so this depends
+    on the machine's load (the test checks the same job in emulated time instead)."""
+    bodies, segments, on_line, _ = planned_job(2000.0, 300.0, WOBBLE_MM, protocol.BASE_BAUD)
+    runs = [run_issue(bodies, True, protocol.BASE_BAUD, segments) for _ in range(repeat)]
+    under = [r.underruns for r in runs]
+    print(f"dense job: {segments} segments, the plan asks {on_line:.0f} segments/s on the "
+          f"line at 115200 baud; real time on the emulator, {repeat} runs")
+    print(f"  mid-path underruns per run: {under}; median {statistics.median(under):g}; "
+          f"segments/s median {statistics.median(r.seg_s for r in runs):.0f}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--segments", type=int, default=600, help="--line-use job size")
@@ -230,6 +244,8 @@ def main() -> None:
     ap.add_argument("--line-use", action="store_true", help="also the line-use table")
     ap.add_argument("--noise", action="store_true", help="only the G6 miss rates")
     ap.add_argument("--noise-lines", type=int, default=1_000_000)
+    ap.add_argument("--dense", action="store_true",
+                    help="only the dense job of tests/test_linkrate.py, in real time")
     args = ap.parse_args()
     register()  # the emulator's URL scheme
     if args.noise:
@@ -240,6 +256,9 @@ def main() -> None:
     why = toolchain_missing()
     if why:
         raise SystemExit(f"emulator unavailable: {why}")
+    if args.dense:
+        dense(args.repeat)
+        return
     issue(args.repeat)
     if args.issue_only:
         return

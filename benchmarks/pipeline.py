@@ -26,14 +26,24 @@ against segment count and measured deviation.
    Target ≤ 30 bytes per input byte (total) on large drawings. `--max-segments` is raised
    for these runs (the 200 MB drawing has 8.6 million path segments).
 
+5. `--against TREE_OR_COMMIT`: section 1's "SVG → steps" timed for this tree and another
+   (a source folder, or a commit of this repository, exported to a temporary folder),
+   interleaved in one run: every run a fresh process with the tree alone on PYTHONPATH,
+   the compile's CPU time (`time.process_time`: the machine's other load does not count)
+   without the imports; medians over `--against-runs` runs of each and their ratio. Only
+   `compile_job` and `CompileOptions` are called, from `fivebar_host.compile` or, in trees
+   older than that package, `fivebar_host.job`. Target: this tree ≤ 1.0× the other and
+   ≤ 1.5 s. With this option only this table is printed.
+
 Run: python benchmarks/pipeline.py [--repeat 3] [--paths 10000] [--dense-only]
-     [--memory-mb 2,20,200]
+     [--memory-mb 2,20,200] [--against 71543b2 [--against-runs 7]]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -241,6 +251,72 @@ def peak_memory(sizes_mb: list[float]) -> None:
               f"{'MET' if peak / size <= 30 else 'NOT MET'} (≤ 30 B/B total)")
 
 
+_CPU_RUN = """
+import json, sys, time
+try:
+    from fivebar_host.compile import CompileOptions, compile_job
+except ImportError:  # trees before the fivebar_host.compile package
+    from fivebar_host.job import CompileOptions, compile_job
+from fivebar_host.config import load_profile
+
+profile = load_profile()
+t0 = time.process_time()
+job = compile_job(sys.argv[1], profile, CompileOptions(validate=False))
+print(json.dumps({"cpu": time.process_time() - t0, "segments": int(job.n_segments)}))
+"""
+
+
+def tree_of(spec: str, tmp: Path) -> Path:
+    """The source folder `spec` names: a folder as given, else a commit of this repository
+    exported (`git archive`) into `tmp`."""
+    if Path(spec).is_dir():
+        return Path(spec).resolve()
+    out = tmp / "tree"
+    out.mkdir()
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", spec], check=True,
+                             capture_output=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(out)], input=archive, check=True)
+    return out
+
+
+def compile_cpu(tree: Path, svg: Path) -> tuple[float, int]:
+    """CPU seconds of one `compile_job` of `svg` in a fresh process importing only from
+    `tree` (alone on PYTHONPATH, so an installed copy of the project does not answer), and
+    the job's segment count."""
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    out = subprocess.run([sys.executable, "-c", _CPU_RUN, str(svg)], check=True, cwd=tree,
+                         env=env, capture_output=True, text=True).stdout
+    r = json.loads(out)
+    return float(r["cpu"]), int(r["segments"])
+
+
+def against(spec: str, n_paths: int, runs: int) -> None:
+    """Section 5 (module doc): this tree against `spec`, runs interleaved (this, other,
+    this, …) so drifts in the machine's load fall on both alike."""
+    with tempfile.TemporaryDirectory() as tmp:
+        other = tree_of(spec, Path(tmp))
+        svg = Path(tmp) / "big.svg"
+        svg.write_text(make_svg(n_paths))
+        trees = {"this tree": ROOT, spec: other}
+        cpu: dict[str, list[float]] = {name: [] for name in trees}
+        segs: dict[str, int] = {}
+        for _ in range(runs):
+            for name, tree in trees.items():
+                s, segs[name] = compile_cpu(tree, svg)
+                cpu[name].append(s)
+    print(f"SVG → steps, {n_paths} paths / {n_paths * 10} segments: CPU s of one compile per "
+          f"fresh process, {runs} runs of each interleaved")
+    print(f"  {'tree':<24} {'median':>7} {'min':>7} {'max':>7} {'segments':>9}")
+    for name in trees:
+        print(f"  {name:<24} {statistics.median(cpu[name]):>7.3f} {min(cpu[name]):>7.3f} "
+              f"{max(cpu[name]):>7.3f} {segs[name]:>9d}")
+    ratio = statistics.median(cpu["this tree"]) / statistics.median(cpu[spec])
+    ours = statistics.median(cpu["this tree"])
+    print(f"  ratio this/{spec}: {ratio:.3f}× (target ≤ 1.0×: "
+          f"{'MET' if ratio <= 1.0 else 'NOT MET'}); this tree {ours:.3f} s (target ≤ 1.5 s: "
+          f"{'MET' if ours <= 1.5 else 'NOT MET'})")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--repeat", type=int, default=3)
@@ -248,7 +324,14 @@ def main() -> None:
     ap.add_argument("--dense-only", action="store_true", help="only section 3 (dense input)")
     ap.add_argument("--memory-mb", default="2,20,200",
                     help="SVG sizes (MB) for the peak-memory figure; empty: skip")
+    ap.add_argument("--against", metavar="TREE_OR_COMMIT",
+                    help="only section 5: CPU time to steps against another source tree")
+    ap.add_argument("--against-runs", type=int, default=7,
+                    help="runs of each tree for --against")
     args = ap.parse_args()
+    if args.against:
+        against(args.against, args.paths, args.against_runs)
+        return
     prof = load_profile()
     if args.dense_only:
         with tempfile.TemporaryDirectory() as tmp:

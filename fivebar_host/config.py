@@ -12,14 +12,17 @@ import json
 import math
 import tomllib
 from collections.abc import Iterable
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from fivebar_host.errors import FivebarError
+from fivebar_host.errors import FivebarError, InputError
+from fivebar_host.joints import ServoJoints, parse_joints
 from fivebar_host.protocol import BASE_BAUD, BAUD_RATES
+from fivebar_host.toolpath.fonts.library import FontLibrary, TextConfig
+from kinematics.extension import ExtendedFiveBar
 from kinematics.fivebar import WORKING_MODES, FiveBar
 
 #: Assembly modes: "+" iff the pen lies left of the directed line R1→R2 (elbow to elbow).
@@ -41,6 +44,8 @@ class Motors:
     home_rad: tuple[float, float]
     limits_rad: tuple[tuple[float, float], tuple[float, float]]
     endstops: bool
+    #: each motor's slack in steps, taken up at its reversals (compile/backlash.py)
+    backlash_steps: tuple[int, int] = (0, 0)
 
     @property
     def steps_per_rev(self) -> float:
@@ -92,6 +97,8 @@ class Laser:
     on_command: str
     off_between_paths: bool
     silence_timeout_s: float
+    #: the width the beam burns, mm (optional, default 0.1): `--hatch`'s default spacing
+    spot_mm: float = 0.1
 
 
 @dataclass(frozen=True)
@@ -101,7 +108,8 @@ class Pen:
     Positions are percent of the servo's range like AxiDraw's (0 % = `servo_min_us`, 100 %
     = `servo_max_us`), rates percent of that range per second, delays the time the pen
     needs to settle after a move before the arms may move (ms). `z_threshold_mm`: G-code Z
-    above it means pen up."""
+    above it means pen up. `width_mm` (optional, default 0.5): the line the pen draws, the
+    default spacing of `--hatch`."""
 
     servo_min_us: int
     servo_max_us: int
@@ -112,6 +120,7 @@ class Pen:
     up_delay_ms: int
     down_delay_ms: int
     z_threshold_mm: float
+    width_mm: float = 0.5
 
     def pulse_us(self, position: float) -> int:
         """Servo pulse of a position in percent of the range, µs."""
@@ -156,6 +165,8 @@ class Profile:
     source: str
     tool: str = "laser"  # "pen" (a servo pen lift, `pen` set) or "laser"
     pen: Pen | None = None
+    text: TextConfig = field(default_factory=TextConfig)  # `[text]`: the fonts of SVG text
+    joints: ServoJoints | None = None  # `[joints]`: None = steppers (fivebar_host/joints.py)
 
 
 class _Table:
@@ -246,7 +257,11 @@ class _Table:
                               + did_you_mean(extra, self.used))
 
 
-KNOWN_TABLES = ("geometry", "motors", "kinematics", "motion", "laser", "serial", "tool", "pen")
+KNOWN_TABLES = ("geometry", "motors", "kinematics", "motion", "laser", "serial", "tool", "pen",
+                "text", "joints")
+#: `[text]` keys naming the font of each CSS generic family (TOML keys cannot hold "-").
+GENERIC_KEYS = {"serif": "serif", "sans_serif": "sans-serif", "cursive": "cursive",
+                "fantasy": "fantasy", "monospace": "monospace"}
 TOOLS = ("pen", "laser")
 #: Pulse range a hobby servo takes (the firmware refuses others).
 SERVO_RANGE_US = (500, 2500)
@@ -275,11 +290,56 @@ def _parse_pen(doc: dict[str, Any], source: str) -> tuple[str, Pen | None]:
     rates = {k: p.number(k, 0.0, 1e6, lo_open=True) for k in ("up_rate", "down_rate")}
     delays = {k: p.integer(k, 0, 10_000) for k in ("up_delay_ms", "down_delay_ms")}
     z = p.number("z_threshold_mm", -1e4, 1e4)
+    width = p.number("width_mm", 0.0, 100.0, lo_open=True) if "width_mm" in p.raw else 0.5
     p.done()
     if pos["up_position"] == pos["down_position"]:
         raise ConfigError(f"{p.where('down_position')}: must differ from up_position")
     return kind, Pen(smin, smax, pos["up_position"], pos["down_position"], rates["up_rate"],
-                     rates["down_rate"], delays["up_delay_ms"], delays["down_delay_ms"], z)
+                     rates["down_rate"], delays["up_delay_ms"], delays["down_delay_ms"], z,
+                     width)
+
+
+def _parse_text(doc: dict[str, Any], source: str) -> TextConfig:
+    """The `[text]` table (optional; docs/text.md): the font of each generic family, the
+    default family, the fallback face, more names (`aliases`) and `font_dirs`. Every name
+    must resolve to a bundled font or an existing SVG font file."""
+    if "text" not in doc:
+        return TextConfig(source=source)
+    t = _Table(doc, "text", source)
+    base = TextConfig()
+
+    def text_key(key: str, default: str) -> str:
+        if key not in t.raw:
+            return default
+        v = t.get(key)
+        if not isinstance(v, str):
+            raise ConfigError(f"{t.where(key)}: must be a string; got {v!r}")
+        return v
+
+    generic = {g: text_key(k, base.generic[g]) for k, g in GENERIC_KEYS.items()}
+    aliases = t.get("aliases") if "aliases" in t.raw else {}
+    dirs = t.get("font_dirs") if "font_dirs" in t.raw else []
+    if not isinstance(aliases, dict) or not all(isinstance(v, str) for v in aliases.values()):
+        raise ConfigError(f"{t.where('aliases')}: must be a table of names to fonts; got "
+                          f"{aliases!r}")
+    if not isinstance(dirs, list) or not all(isinstance(v, str) for v in dirs):
+        raise ConfigError(f"{t.where('font_dirs')}: must be a list of directories; got {dirs!r}")
+    cfg = TextConfig(generic, text_key("fallback", base.fallback),
+                     text_key("default", base.default), dict(aliases), tuple(dirs), source)
+    t.done()
+    lib = FontLibrary(cfg)
+    names = [(k, generic[g]) for k, g in GENERIC_KEYS.items()] + [
+        ("default", cfg.default), ("fallback", cfg.fallback)] + [
+        (f"aliases.{k}", v) for k, v in cfg.aliases.items()]
+    for key, name in names:
+        try:
+            ok = not name or lib.known(name)
+        except InputError as e:
+            raise ConfigError(f"{t.where(key)}: {e.detail}") from e
+        if not ok:
+            raise ConfigError(f"{t.where(key)} = {name!r} names no bundled font, [text] alias or "
+                              "SVG font file (docs/text.md lists the names)")
+    return cfg
 
 
 def require_tool(profile: Profile, laser: bool) -> None:
@@ -320,6 +380,22 @@ def did_you_mean(names: list[str], known: Iterable[str]) -> str:
     return ""
 
 
+def _parse_geometry(doc: dict[str, Any], source: str) -> FiveBar:
+    """`[geometry]`: five lengths and the pen's `extension` on b1 beyond the joint, turned by
+    `extension_angle_deg` from R1→joint (then a `kinematics.extension.ExtendedFiveBar`)."""
+    g = _Table(doc, "geometry", source)
+    lengths = {k: g.number(k, 0.0, 1e5, lo_open=True) for k in ("a1", "b1", "a2", "b2", "w")}
+    ext, ang = (g.number(k, lo, hi) if k in g.raw else 0.0 for k, lo, hi in
+                (("extension", 0.0, 1e5), ("extension_angle_deg", -180.0, 180.0)))
+    g.done()
+    try:
+        if ext > 0.0:
+            return ExtendedFiveBar(**lengths, extension=ext, extension_angle=math.radians(ang))
+        return FiveBar(**lengths)
+    except ValueError as e:
+        raise ConfigError(f"{source}: [geometry]: {e}") from e
+
+
 def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
     """Validate a parsed TOML document into a `Profile`."""
     unknown = sorted(set(doc) - set(KNOWN_TABLES))
@@ -328,13 +404,7 @@ def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
                           f"(known: {', '.join(KNOWN_TABLES)})"
                           + did_you_mean(unknown, KNOWN_TABLES))
 
-    g = _Table(doc, "geometry", source)
-    lengths = {k: g.number(k, 0.0, 1e5, lo_open=True) for k in ("a1", "b1", "a2", "b2", "w")}
-    g.done()
-    try:
-        geometry = FiveBar(**lengths)
-    except ValueError as e:
-        raise ConfigError(f"{source}: [geometry]: {e}") from e
+    geometry = _parse_geometry(doc, source)
 
     m = _Table(doc, "motors", source)
     full_steps = m.integer("full_steps", 1, 100_000)
@@ -359,10 +429,13 @@ def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
                               f"limits_deg[{i}] = [{lo:g}, {hi:g}]")
         lims.append((math.radians(lo), math.radians(hi)))
     endstops = m.boolean("endstops")
+    lash = m.pair("backlash_steps", 0, 10_000) if "backlash_steps" in m.raw else (0.0, 0.0)
+    if any(v != int(v) for v in lash):
+        raise ConfigError(f"{m.where('backlash_steps')}: must be whole steps; got {lash!r}")
     m.done()
     motors = Motors(full_steps, microsteps, gear_ratio,
                     (math.radians(home[0]), math.radians(home[1])),
-                    (lims[0], lims[1]), endstops)
+                    (lims[0], lims[1]), endstops, (int(lash[0]), int(lash[1])))
 
     k = _Table(doc, "kinematics", source)
     kin = KinematicsCfg(
@@ -400,6 +473,7 @@ def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
         la.choice("on_command", ("M3", "M4")),
         la.boolean("off_between_paths"),
         la.number("silence_timeout_s", 0.0, 3600.0, lo_open=True),
+        la.number("spot_mm", 0.0, 100.0, lo_open=True) if "spot_mm" in la.raw else 0.1,
     )
     la.done()
 
@@ -413,7 +487,12 @@ def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
     )
     se.done()
     tool, pen = _parse_pen(doc, source)
-    return Profile(geometry, motors, kin, motion, laser, serial, source, tool, pen)
+    try:
+        joints = parse_joints(_Table(doc, "joints", source) if "joints" in doc else None)
+    except FivebarError as e:
+        raise ConfigError(str(e)) from e
+    return Profile(geometry, motors, kin, motion, laser, serial, source, tool, pen,
+                   _parse_text(doc, source), joints)
 
 
 def _read_toml(p: Path) -> dict[str, Any]:
@@ -487,6 +566,8 @@ def _toml_value(v: Any) -> str:
         return json.dumps(v)
     if isinstance(v, list):
         return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{json.dumps(k)} = {_toml_value(x)}" for k, x in v.items()) + "}"
     return repr(v)
 
 
@@ -500,8 +581,8 @@ def describe(profile: Profile) -> str:
         lines.append(f"[{name}]")
         for f in fields(obj):
             v = getattr(obj, f.name)
-            if f.name.endswith("_rad") and isinstance(v, float):
-                lines.append(f"  {f.name[:-4]}_deg = {math.degrees(v):g}")
+            if f.name.endswith(("_rad", "_angle")) and isinstance(v, float):
+                lines.append(f"  {f.name.removesuffix('_rad')}_deg = {math.degrees(v):g}")
             elif f.name == "home_rad":
                 lines.append(f"  home_deg = [{', '.join(f'{math.degrees(x):g}' for x in v)}]")
             elif f.name == "limits_rad":
@@ -513,4 +594,9 @@ def describe(profile: Profile) -> str:
             mot = profile.motors
             lines.append(f"  # steps_per_rev = {mot.steps_per_rev:g} "
                          f"({math.degrees(mot.rad_per_step):.5f}° per step)")
+    tx = profile.text
+    lines.append("[text]")
+    lines.extend(f"  {k} = {tx.generic[g]!r}" for k, g in GENERIC_KEYS.items())
+    lines += [f"  default = {tx.default!r}", f"  fallback = {tx.fallback!r}",
+              f"  font_dirs = {list(tx.font_dirs)!r}", f"  aliases = {dict(tx.aliases)!r}"]
     return "\n".join(lines)

@@ -16,9 +16,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from kinematics.errors import FivebarError
+from kinematics.errors import FivebarError, bounded, shorten
 
-__all__ = ["FivebarError", "InputError", "JobError", "OptionError", "UsageError", "Where"]
+__all__ = ["FivebarError", "InputError", "JobError", "OptionError", "UsageError", "Where",
+           "bounded", "shorten"]
 
 
 class OptionError(FivebarError, ValueError):
@@ -103,3 +104,4 @@ class JobError(FivebarError, ValueError):
         self.where = where
         self.reason = reason
         self.detail = message
+

@@ -17,6 +17,7 @@ options is `CompileOptions(**values)` with no renaming on the way.
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import math
 import re
@@ -133,6 +134,14 @@ class Option:
     metavar: str = ""
     cli: bool = True
     percent: bool = False  # a float that may be written as a percentage ("50%")
+    #: a word that stands for the value 0 (`--hatch pen`: the profile's pen width); the
+    #: CLI flag may then be given without a value, meaning that word
+    word: str = ""
+    #: The web page's words: its label, its help where `help` speaks in flags or G-code
+    #: (empty: `help`), and an example value for the empty field.
+    label: str = ""
+    web_help: str = ""
+    example: str = ""
 
     # ------------------------------------------------------------------ parsing
     def parse(self, text: str) -> Any:
@@ -175,6 +184,8 @@ class Option:
 
     def _number(self, text: str) -> float:
         """The number of a float option's text, in its unit (ValueError when malformed)."""
+        if self.word and text.lower() == self.word:
+            return 0.0
         if self.unit == "mm":
             return parse_length(text)
         if self.unit == "mm/s":
@@ -348,6 +359,11 @@ JOB_OPTIONS: tuple[Option, ...] = (
     Option("no_pause", "--no-pause", "no_pause", "bool", default=False,
            help="Never stop for a pen change, not even before '!' layers (needed to plot "
            "such a drawing without a terminal to answer)."),
+    Option("gcode_strict", "--strict", "strict", "bool", default=False,
+           help="G-code: refuse every word the reader does not draw with, as fivebar did "
+           "before word classes (default: words that cannot change the drawn path, such as "
+           "coolant, $ queries or G64, are skipped with one note; M0/M6 become pen-change "
+           "stops; docs/gcode.md)."),
     Option("copies", "--copies", "copies", "int", lo=1, hi=9999, default=1, metavar="N",
            help="Plot the whole job N times, the pen up and the arms parked between copies."),
     Option("page_delay_s", "--page-delay", "page_delay", "float", unit="s", lo=0.0,
@@ -397,11 +413,99 @@ JOB_OPTIONS: tuple[Option, ...] = (
            help="Image: burn every scanline in the same direction (default: bidirectional)."),
     Option("passes", "--passes", "passes", "int", lo=1, hi=100, default=1, metavar="N",
            help="Image: burn it N times over."),
+    # fills (docs/fill.md)
+    Option("hatch_mm", "--hatch", "hatch", "float", unit="mm", lo=0.0, hi=100.0,
+           word="pen", metavar="SPACING",
+           help="Fill every filled shape with hatch lines this far apart on the paper: mm or "
+           "with units (0.4mm); 'pen' or the bare flag: the profile's pen width "
+           "([pen] width_mm, a laser's [laser] spot_mm). Exact fill-rule; text is not "
+           "hatched."),
+    Option("hatch_angle_deg", "--hatch-angle", "hatch_angle", "float", unit="degrees",
+           default=45.0, lo=-360.0, hi=360.0, metavar="DEGREES",
+           help="Hatch direction on the drawing, degrees counter-clockwise from its x axis."),
+    Option("crosshatch", "--crosshatch", "crosshatch", "bool", default=False,
+           help="Hatch a second time at right angles."),
+    Option("hatch_inset_mm", "--hatch-inset", "hatch_inset", "float", unit="mm", lo=0.0,
+           hi=100.0, default=0.0, metavar="DISTANCE",
+           help="Keep the hatch this far inside each shape's edge, mm or with units."),
+    Option("hatch_along", "--hatch-along", "hatch_along", "choice", default="lines",
+           choices=("lines", "arm1", "arm2"),
+           help="Hatch with straight lines, or along joint-iso arcs: arm1 holds motor 1 "
+           "still on a whole step while motor 2 swings the pen about arm 1's elbow (the "
+           "pen exactly on the arc, no step rounding across it); the gap between arcs "
+           "varies with the linkage's angles, at most the spacing, and the dry run says "
+           "how much. --crosshatch adds the other arm's arcs."),
+    Option("hiding", "--hiding", "hiding", "bool", default=False,
+           help="Hidden-line removal: a filled shape hides what lies beneath it (paint "
+           "order); strokes and hatches are cut where covered, fill-only shapes hide "
+           "without being outlined. A layer with '+nohide' in its name is left out."),
 )
 #: The options of a raster engraving (an image; `raster.job.RasterOptions`).
 RASTER_NAMES: tuple[str, ...] = ("width_mm", "height_mm", "dpi", "line_interval_mm",
                                  "image_mode", "power_min", "power_max", "gamma", "threshold",
                                  "negative", "scan_angle_deg", "one_way", "passes")
+#: The web page's words for each option (label, help in words where the CLI's help names
+#: flags, settings or G-code, an example): no option's API name reaches the page's text.
+_WORDS: dict[str, tuple[str, str, str]] = {
+    "mode": ("Working mode", "How the elbows bend; auto tries all four (default: the "
+             "machine's).", ""),
+    "tolerance_mm": ("Tolerance", "", "0.05mm or 0.002in"),
+    "origin_mm": ("Where the drawing goes (X,Y)", "Put the drawing's bottom-left corner "
+                  "there on the machine, in mm or with units (default: centred).",
+                  "10,95 or 1in,4in"),
+    "scale": ("Scale", "A factor or a percentage: 0.5 or 50% is half size, 2 or 200% "
+              "twice (default: as drawn).", "50% or 0.5"),
+    "rotate_deg": ("Rotation", "Degrees counter-clockwise.", "90"),
+    "fit": ("Fill the safe area", "Scale the drawing to fill the largest area the arms "
+            "reach safely.", ""),
+    "layers": ("Only these layers", "Inkscape layer names, comma separated (default: all).",
+               "black, red"),
+    "keep_order": ("Draw in file order", "Draw the paths in the file's order instead of "
+                   "the shortest travel.", ""),
+    "draw_feed_mm_s": ("Drawing speed", "Pen speed while drawing, per second or minute "
+                       "(default: the machine's).", "25mm/s or 1in/s"),
+    "travel_feed_mm_s": ("Travel speed", "Pen speed between strokes, pen up (default: the "
+                         "machine's).", "80mm/s"),
+    "accel_fraction": ("Acceleration", "A share of the machine's acceleration: 0.5 or 50% "
+                       "(default: all of it).", "50%"),
+    "max_segments": ("Most segments", "Refuse drawings with more segments than this "
+                     "(default 2 million, about 0.6 GB of memory).", "2000000"),
+    "laser": ("Laser on (burn)", "Without it the laser stays off on every line: a pen "
+              "job.", ""),
+    "pen_up_position": ("Pen up position", "", "60"),
+    "pen_down_position": ("Pen down position", "", "30"),
+    "pen_up_rate": ("Pen raising speed", "", ""),
+    "pen_down_rate": ("Pen lowering speed", "", ""),
+    "pen_up_delay_ms": ("Wait after raising the pen", "", "200"),
+    "pen_down_delay_ms": ("Wait after lowering the pen", "", "200"),
+    "layer_pause": ("Stop for a pen change between layers", "The pen goes up and the "
+                    "machine waits until you continue; layers are drawn in file order.",
+                    ""),
+    "no_pause": ("Never stop for a pen change", "Not even before layers whose name starts "
+                 "with '!'.", ""),
+    "copies": ("Copies", "Draw the whole job this many times, the pen up and the arms "
+               "parked between copies.", "1"),
+    "page_delay_s": ("Wait between copies", "Seconds, to change the paper.", "15"),
+    "confirm": ("The arms are at the home pose", "Tick if the machine may start from the "
+                "home pose without asking (first job after power-up).", ""),
+    "no_simplify": ("Keep every point", "Do not thin densely sampled lines (they are "
+                    "thinned within half the tolerance otherwise).", ""),
+    "hatch_mm": ("Fill shapes with hatch lines", "The distance between the lines on the "
+                 "paper; 'pen' for the pen's width (default: outlines only).",
+                 "0.4mm or pen"),
+    "hatch_angle_deg": ("Hatch angle", "Degrees counter-clockwise.", "45"),
+    "crosshatch": ("Cross-hatch", "Hatch a second time at right angles.", ""),
+    "hatch_inset_mm": ("Hatch inset", "Keep the hatch this far inside each shape's edge.",
+                       "0.2mm"),
+    "hatch_along": ("Hatch along", "Straight lines, or arcs that one motor draws alone "
+                    "(arm1: motor 1 still; arm2: motor 2 still).", ""),
+    "hiding": ("Hide what is covered", "Shapes filled in the drawing hide the lines "
+               "beneath them; shapes without an outline are not outlined.", ""),
+}
+JOB_OPTIONS = tuple(
+    dataclasses.replace(o, label=_WORDS[o.name][0], web_help=_WORDS[o.name][1],
+                        example=_WORDS[o.name][2]) if o.name in _WORDS else o
+    for o in JOB_OPTIONS)
 BY_NAME: dict[str, Option] = {o.name: o for o in JOB_OPTIONS}
 BY_QUERY: dict[str, Option] = {o.query: o for o in JOB_OPTIONS}
 #: The pen servo overrides (applied to the profile: config.with_pen_overrides).

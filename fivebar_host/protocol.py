@@ -398,6 +398,9 @@ class Banner:
     rx: int  # receive buffer bytes: the character-counting budget
     queue: int  # segment queue blocks
     line_max: int  # longest accepted line without its newline
+    #: "servo" for the servo build (`make SERVO=1`: a joint's steps are pulse ticks of
+    #: 0.5 µs, docs/protocol.md 6.3), else "stepper"
+    joints: str = "stepper"
 
 
 @dataclass(frozen=True)
@@ -422,7 +425,8 @@ _STATUS = re.compile(
     r"<(Idle|Run|Hold|Home|Alarm)(?::(\d+))?\|A:(-?\d+),B:(-?\d+)\|Q:(\d+)"
     r"\|Ln:(\d+),(\d+)\|L:(\d+)\|U:(\d+)\|H:([01])(?:\|P:(\d+))?>"
 )
-_BANNER = re.compile(r"fivebar (\S+) proto:(\d+) rx:(\d+) queue:(\d+) line:(\d+)")
+_BANNER = re.compile(r"fivebar (\S+) proto:(\d+) rx:(\d+) queue:(\d+) line:(\d+)"
+                     r"(?: joints:(servo))?")
 _BANNER_AT_END = re.compile(_BANNER.pattern + r"\Z")
 _ALARM = re.compile(r"ALARM:(\d+)")
 _SETTING = re.compile(r"\$(\d+)=(-?\d+)")
@@ -461,9 +465,7 @@ def parse_message(line: str) -> Message:
             pen=int(m.group(11)) if m.group(11) is not None else None,
         )
     if m := _BANNER.fullmatch(text):
-        return Banner(
-            m.group(1), int(m.group(2)), int(m.group(3)), int(m.group(4)), int(m.group(5))
-        )
+        return _banner(m)
     if m := _ALARM.fullmatch(text):
         return AlarmPush(int(m.group(1)))
     if m := _SETTING.fullmatch(text):
@@ -481,8 +483,13 @@ def trailing_banner(line: str) -> Banner | None:
     m = _BANNER_AT_END.search(line.rstrip("\r\n"))
     if m is None:
         return None
+    return _banner(m)
+
+
+def _banner(m: re.Match[str]) -> Banner:
+    """The Banner of a `_BANNER` match."""
     return Banner(m.group(1), int(m.group(2)), int(m.group(3)), int(m.group(4)),
-                  int(m.group(5)))
+                  int(m.group(5)), m.group(6) or "stepper")
 
 
 def is_reply(message: Message) -> bool:

@@ -350,6 +350,17 @@ class FiveBar:
             f"{at}: elbows are {lng:.12g} mm apart < |b1 − b2| = {abs(self.b1 - self.b2):.12g}"
             f" mm (by {excess:.3g} mm)", reason, where, excess)
 
+    def pen_from_joint(self, r1: FloatArray, j: FloatArray) -> FloatArray:
+        """The pen from elbow R1 and the joint J of the floating links (N, 2): the pen is
+        the joint here; `kinematics.extension.ExtendedFiveBar` puts it on link b1."""
+        del r1
+        return j
+
+    def joint_from_pen(self, r1: FloatArray, p: FloatArray) -> FloatArray:
+        """The joint of the floating links from elbow R1 and the pen (N, 2): the pen here."""
+        del r1
+        return p
+
     # ----------------------------------------------------------------- pose measures
     def pose(self, angles: ArrayLike, points: ArrayLike) -> Pose:
         """Bundle motor angles and end-effector points with the elbows they imply."""

@@ -331,10 +331,10 @@ def _crossings(fb: FiveBar, path: FloatArray, pen: FloatArray) -> list[tuple[int
         for k in np.flatnonzero(np.sign(m[:-1]) * np.sign(m[1:]) < 0):
             t = m[k] / (m[k] - m[k + 1])
             p = pen[k] + t * (pen[k + 1] - pen[k])
-            a, b = (fb.a1, fb.b1) if arm == 0 else (fb.a2, fb.b2)
+            lo, hi = fb.reach[arm]  # the arm's annulus (exact but for arm 2 off the joint)
             mx = 0.0 if arm == 0 else fb.w
             d = math.hypot(p[0] - mx, p[1])
-            kind = "stretched" if abs(d - (a + b)) < abs(d - abs(a - b)) else "folded"
+            kind = "stretched" if abs(d - hi) < abs(d - lo) else "folded"
             out.append((arm + 1, kind, float(p[0]), float(p[1])))
     return out
 

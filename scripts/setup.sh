@@ -5,7 +5,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-APT_PKGS=(gcc-avr avr-libc binutils-avr simavr libsimavr-dev libelf-dev arduino-core-avr make gcc pkg-config
+APT_PKGS=(gcc-avr avr-libc binutils-avr simavr libsimavr-dev libelf-dev arduino-core-avr avrdude make gcc pkg-config
           chromium chromium-driver)
 missing=()
 for p in "${APT_PKGS[@]}"; do

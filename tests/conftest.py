@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -10,6 +11,8 @@ import pytest
 from fivebar_host.devices import register, sim
 
 register()  # the test suite is an entry point: the emulator's and the mocks' URL schemes
+# Every `fivebar-sim://` machine is new (the tests that keep one between runs say where).
+os.environ["FIVEBAR_SIM_STATE"] = "off"
 
 
 @pytest.fixture

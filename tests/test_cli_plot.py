@@ -45,7 +45,7 @@ def test_convert_sends_power_only_with_laser(tmp_path: Path) -> None:
     g1 = [ln for ln in out.read_text().splitlines() if ln.startswith("G1 ")]
     assert {ln.rsplit(" ", 1)[1] for ln in g1} == {"S0", "S255"}
     code, text = run("plot", src, "--dry-run", "--preview", str(tmp_path / "p.png"))
-    assert code == 0 and "tool          pen: S0 on every line" in text
+    assert code == 0 and "tool          laser off: S0 on every line" in text
     code, text = run("plot", src, "--dry-run", "--laser", "--preview", str(tmp_path / "p.png"))
     assert code == 0 and "tool          laser: S up to 255" in text
 
@@ -82,7 +82,7 @@ def test_plot_without_port_or_dry_run_says_what_to_give() -> None:
 @pytest.mark.parametrize(("content", "suffix", "message"), [
     ("<svg xmlns='http://www.w3.org/2000/svg'><path d='M0 0 L1 1'></svg>", ".svg",
      "malformed XML"),
-    ("<svg xmlns='http://www.w3.org/2000/svg' width='10mm' height='10mm'><text>x</text></svg>",
+    ("<svg xmlns='http://www.w3.org/2000/svg' width='10mm' height='10mm'><text> </text></svg>",
      ".svg", "no strokes"),
     ("<svg xmlns='http://www.w3.org/2000/svg' width='10mm' height='10mm'>"
      "<path d='M0 0 L1e999 0'/></svg>", ".svg", "not finite or larger than"),
@@ -90,7 +90,7 @@ def test_plot_without_port_or_dry_run_says_what_to_give() -> None:
      "<path d='M0 0 L 1e12 0'/></svg>", ".svg", "not finite or larger than"),
     ("G1 X1\nG1 X2 A-1\n", ".gcode", ":2: unsupported axis word A-1"),
     ("G1 X1 Z0\nG1 X2 Z-1\n", ".gcode", ":2: Z-1 changes Z during a cut"),  # laser profile
-    ("G1 X1\nM7\n", ".gcode", ":2: unsupported M-code word M7"),
+    ("G1 X1\nM98 P100\n", ".gcode", ":2: M98: a subroutine call"),  # M7 is skipped now
 ])
 def test_bad_input_clear_error_and_no_output(tmp_path: Path, content: str, suffix: str,
                                              message: str) -> None:

@@ -104,10 +104,17 @@ def test_laser_z_that_changes_nothing_is_ignored_with_one_warning() -> None:
 def test_without_a_tool_z_is_refused_and_other_z_errors() -> None:
     with pytest.raises(InputError, match=r"z\.gcode:1: unsupported axis word Z5"):
         g("G0 Z5\n", None)
-    for text, what in (("Z5\n", "Z before any G0"), ("G0 X0\nG92 X0 Z1\n", "G92 with"),
-                       ("G1 X0\nG4 P1 Z1\n", "G4 and a Z move")):
+    for text, what in (("Z5\n", "Z before any G0"), ("G1 X0\nG4 P1 Z1\n", "G4 and a Z move")):
         with pytest.raises(InputError, match=what):
             g(text, "pen")
+    with pytest.raises(InputError, match="G92 with"):  # --strict: G92 Z refused, as before
+        read_gcode(b"G0 X0\nG92 X0 Z1\n", file="z.gcode", tool="pen", strict=True)
+
+
+def test_g92_z_sets_the_pen_threshold_in_work_coordinates() -> None:
+    # the pen is down at Z <= 0 as written: G92 Z0 at a machine Z of 5 makes Z0 mean 5
+    d = g("G0 Z5\nG92 Z0\nG0 X1 Y1\nG1 Z0\nG1 X9 Y1\nG1 Z2\nG1 X9 Y9\n", "pen")
+    assert d.kind.shape[0] == 1 and d.params[0, :4].tolist() == [1, 1, 9, 1]
 
 
 def test_compile_and_daemon_pass_the_profile(tmp_path: Path) -> None:

@@ -32,7 +32,9 @@ def test_query_round_trip_of_every_option() -> None:
               "max_segments": 3e6, "pen_up_position": 70.0,
               "pen_down_position": 20.5, "pen_up_rate": 300.0, "pen_down_rate": 150.0,
               "pen_up_delay_ms": 80.0, "pen_down_delay_ms": 120.0, "layer_pause": True,
-              "no_pause": False, "copies": 3, "page_delay_s": 2.5,
+              "no_pause": False, "copies": 3, "page_delay_s": 2.5, "gcode_strict": True,
+              "hatch_mm": 0.4, "hatch_angle_deg": 30.0, "crosshatch": True,
+              "hatch_inset_mm": 0.1, "hiding": True, "hatch_along": "arm1",
               # raster engraving (docs/raster.md)
               "width_mm": 40.0, "height_mm": 12.5, "dpi": 254.0, "line_interval_mm": 0.1,
               "image_mode": "jarvis", "power_min": 10, "power_max": 200, "gamma": 1.8,
@@ -62,6 +64,8 @@ def test_query_round_trip_of_every_option() -> None:
     ("origin", "1,nan", "finite"),
     ("mode", "+++", "one of"),
     ("fit", "maybe", "true or false"),
+    ("hatch", "thick", "must be a length such as"),
+    ("hatch", "-1mm", "within"),
     ("scael", "2", "did you mean 'scale'"),
     ("copies", "0", "within 1..9999"),
     ("copies", "10000", "within 1..9999"),
@@ -94,7 +98,11 @@ def test_client_refuses_unknown_and_out_of_range_before_sending() -> None:
                                                      "no_simplify": "false",
                                                      "layer_pause": "false",
                                                      "no_pause": "false", "copies": "1",
-                                                     "page_delay": "15.0",
+                                                     "page_delay": "15.0", "strict": "false",
+                                                     "hatch_angle": "45.0",
+                                                     "crosshatch": "false",
+                                                     "hatch_inset": "0.0", "hiding": "false",
+                                                     "hatch_along": "lines",
                                                      # the raster options' defaults
                                                      "image_mode": "grayscale",
                                                      "power_min": "0", "gamma": "1.0",
@@ -214,3 +222,19 @@ def test_speed_options_replace_the_profile_s_motion_values(tmp_path: Path) -> No
     assert (by_option.steps == by_profile.steps).all()
     default = compile_job(drawing, load_profile())
     assert by_option.total_time_s > 1.5 * default.total_time_s
+
+
+def test_hatch_takes_a_length_the_word_pen_or_nothing() -> None:
+    opt = next(o for o in JOB_OPTIONS if o.name == "hatch_mm")
+    assert opt.parse("0.4mm") == pytest.approx(0.4)
+    assert opt.parse("0.02in") == pytest.approx(0.508)
+    assert opt.parse("pen") == 0.0  # the profile's pen width
+    seen: dict[str, object] = {}
+
+    @click.command()
+    @click.option(opt.flag, opt.name, type=click.STRING, is_flag=False, flag_value="pen")
+    def cmd(hatch_mm: str | None) -> None:
+        seen["v"] = hatch_mm
+
+    CliRunner().invoke(cmd, ["--hatch"])
+    assert seen["v"] == "pen"

@@ -15,6 +15,7 @@ from fivebar_host.compile.planner import (
     check_plan,
     enforce_staircase,
     plan,
+    raise_staircase,
     ramp_fractions,
     staircase_ratios,
 )
@@ -132,6 +133,24 @@ def test_enforce_staircase_meets_both_limits_and_only_slows(n: int, seed: int) -
     assert wj <= 1.0 + 1e-9 and wa <= 1.0 + 1e-9
     jr, ar = staircase_ratios(d, out, stop, 60.0, 0.5)
     assert jr.max() == pytest.approx(wj) and ar.max() == pytest.approx(wa)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(min_value=1, max_value=80), st.integers(min_value=0, max_value=2**31))
+def test_raise_staircase_is_the_whole_staircase_again(n: int, seed: int) -> None:
+    """A staircase raised at a few segments and repaired near them is the staircase of the
+    raised durations, to the µs (the link floor's later passes, `compile.timing`)."""
+    rng = np.random.default_rng(seed)
+    d = rng.normal(0, 0.02, (n, 2))
+    d[rng.random(n) < 0.2] *= 0.05
+    d[rng.random(n) < 0.1] = 0.0  # segments without motion
+    stop = rng.random(n) < 0.15
+    out = enforce_staircase(d, rng.integers(100, 20_000, n), stop, 60.0, 0.5)
+    raised = np.flatnonzero((rng.random(n) < 0.1) & (np.abs(d).max(axis=1) > 0))
+    out[raised] += rng.integers(1, 50_000, raised.size)
+    whole = enforce_staircase(d, out, stop, 60.0, 0.5)
+    raise_staircase(d, out, raised, 60.0, 0.5)
+    assert np.array_equal(out, whole)
 
 
 def test_ramp_fractions_cut_ramps_into_short_pieces() -> None:

@@ -112,7 +112,8 @@ def test_error_reply_mid_job_then_exact_resume(tmp_path: Path) -> None:
 def test_the_executed_path_report_draws_with_the_true_machine(tmp_path: Path) -> None:
     """`fivebar-sim://?true=…` (calibration): the executed-path CSV holds where the machine
     as really built draws the recorded steps — checked against that machine's own forward
-    kinematics — and a 0.5 mm longer b1 shows as a deviation beyond the bound."""
+    kinematics — and a 0.5 mm longer b1 shows as a deviation beyond the bound, which fails
+    the run (exit 3, a message that says why)."""
     import csv
 
     from click.testing import CliRunner
@@ -127,7 +128,8 @@ def test_the_executed_path_report_draws_with_the_true_machine(tmp_path: Path) ->
     res = CliRunner().invoke(main, ["plot", str(Path(__file__).parents[1] / "examples" /
                                                  "simple.svg"), "--port", url, "--yes",
                                     "--preview", str(preview)])
-    assert res.exit_code == 0, res.output
+    assert res.exit_code == 3, res.output  # beyond the bound: a failed run
+    assert "error: the machine drew" in res.output and "differs from the profile" in res.output
     line = next(ln for ln in res.output.splitlines() if ln.startswith("executed path"))
     assert "true= machine" in line
     dev = float(line.split("max deviation ")[1].split(" mm")[0])

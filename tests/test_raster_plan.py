@@ -23,6 +23,8 @@ from fivebar_host.raster.runs import RasterRuns
 
 F_CPU = 16e6
 
+ROOT = Path(__file__).resolve().parent.parent
+
 
 def _fk(profile: Profile, th: np.ndarray) -> np.ndarray:
     """Pen (N, 2) of motor angles (N, 2): the floating links' circles intersected, the pen
@@ -186,3 +188,13 @@ def test_slow_scan_lines_keep_u_non_negative(tmp_path: Path) -> None:
     assert job.raster is not None
     assert job.raster.fit_residual_cycles <= 40
     assert _firmware_refusals(job, prof) == []
+
+
+def test_servo_joints_refuse_a_raster(tmp_path: Path) -> None:
+    """The servo build has no pixel interrupt and refuses G7: a raster on a servo profile
+    is refused before anything is planned, naming why."""
+    prof = load_profile(ROOT / "configs" / "plotclock.toml")
+    assert prof.joints is not None
+    with pytest.raises(JobError) as ei:
+        _compile(tmp_path, prof, np.ones((4, 10)), width_mm=10.0)
+    assert ei.value.reason == "servo_joints" and "stepper joints" in str(ei.value)

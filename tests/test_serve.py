@@ -397,19 +397,19 @@ def test_path_of_an_uncached_job_compiles_outside_the_streaming_daemon(
     c = ServerClient(d.url)
     running = c.submit(SQUARE.read_bytes(), "square.gcode", plot_options(confirm=True))
     waiting = c.submit(SIMPLE.read_bytes(), "simple.svg", plot_options(confirm=True))
-    assert d.worker is not None
-    d.worker.cache.drop(waiting["id"])
+    assert d.cache is not None
+    d.cache.drop(waiting["id"])
 
     def in_daemon(*args: Any) -> Any:
         raise AssertionError("compiled in the daemon")
 
-    monkeypatch.setattr("fivebar_host.server.machine.compile_upload", in_daemon)
+    monkeypatch.setattr("fivebar_host.server.stored.compile_upload", in_daemon)
     status, body = raw(d.url, "GET", f"/api/jobs/{waiting['id']}/path")
     assert status == 200, body
     job = compile_job(SIMPLE, load_profile(None), CompileOptions())
     step = max(1, -(-job.n_segments // 4000))
     assert len(body["points"]) == len(job.points_mm[::step])
     assert np.allclose([p[:2] for p in body["points"]], job.points_mm[::step], atol=0.006)
-    assert d.worker.cache.get(waiting["id"]) is not None  # the machine thread uses it
+    assert d.cache.get(waiting["id"]) is not None  # the machine thread uses it
     for j in (running, waiting):
         c.cancel(j["id"])

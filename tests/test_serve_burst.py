@@ -18,10 +18,10 @@ from serve_support import running_daemon, send
 
 from benchmarks.serve_burst import SMALL_GCODE, burst
 from fivebar_host.devices import mock
-from fivebar_host.server import app as app_module
 from fivebar_host.server import security
 from fivebar_host.server.client import ServerClient, ServerError, plot_options
 from fivebar_host.server.daemon import Daemon
+from fivebar_host.server.routes import submit as submit_module
 
 GCODE = {"Content-Type": "text/x-gcode"}
 
@@ -62,7 +62,7 @@ def test_past_the_upload_limit_the_refusal_is_json_busy_with_retry_after(
     been answered, exactly 20 are queued and 180 refused, each with the JSON answer."""
     gate = threading.Event()
     refusals = [0]
-    real_compile, real_busy = app_module.compile_upload, security._busy
+    real_compile, real_busy = submit_module.compile_upload, security._busy
 
     def slow_compile(*args: Any) -> Any:
         gate.wait(60)
@@ -76,7 +76,7 @@ def test_past_the_upload_limit_the_refusal_is_json_busy_with_retry_after(
 
     with running_daemon(tmp_path, "burst20", max_uploads=20, compile_processes=False) as d:
         first = queue_held_job(d)
-        monkeypatch.setattr(app_module, "compile_upload", slow_compile)
+        monkeypatch.setattr(submit_module, "compile_upload", slow_compile)
         monkeypatch.setattr(security, "_busy", counting_busy)
         r = burst(d.url, 200, SMALL_GCODE)
         gate.set()
@@ -97,21 +97,21 @@ def hold_compilation(monkeypatch: pytest.MonkeyPatch) -> tuple[threading.Event,
     """Make every compilation wait for `gate` (set `entered` when one starts); the daemon
     must compile in threads (`compile_processes=False`) for the replacement to apply."""
     gate, entered = threading.Event(), threading.Event()
-    real_compile = app_module.compile_upload
+    real_compile = submit_module.compile_upload
 
     def slow_compile(*args: Any) -> Any:
         entered.set()
         gate.wait(60)
         return real_compile(*args)
 
-    monkeypatch.setattr(app_module, "compile_upload", slow_compile)
+    monkeypatch.setattr(submit_module, "compile_upload", slow_compile)
     return gate, entered
 
 
 def test_a_submission_that_waits_too_long_for_a_slot_is_refused_busy(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     gate, entered = hold_compilation(monkeypatch)
-    monkeypatch.setattr(app_module, "SUBMIT_WAIT_S", 0.3)
+    monkeypatch.setattr(submit_module, "SUBMIT_WAIT_S", 0.3)
     with running_daemon(tmp_path, "wait", compile_slots=1, compile_processes=False) as d:
         answers: list[Any] = []
         holder = threading.Thread(target=lambda: answers.append(

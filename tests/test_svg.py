@@ -220,7 +220,7 @@ def test_malformed_xml_names_the_line(tmp_path: Path) -> None:
 
 def test_no_strokes() -> None:
     with pytest.raises(InputError, match="no strokes to draw"):
-        read_svg(svg('<text x="0" y="0">hello</text>'))
+        read_svg(svg('<text x="0" y="0"> \n </text><text x="0" y="9" fill="none">a</text>'))
 
 
 @pytest.mark.parametrize("d", ["M0 0 L1e400 0", "M0 0 L 1e9 0"])

@@ -329,10 +329,12 @@ def test_mask_grey_warns_and_gradient_is_refused() -> None:
 
 
 # --------------------------------------------------------------------------- text, paint
-def test_text_only_file_gets_the_convert_hint() -> None:
-    with pytest.raises(InputError, match=r"<text> at line\(s\) 2, 3\) is not drawn: convert "
-                                         r"text to paths.*Object to Path.*export-text-to-path"):
-        read_svg(svg('<text x="0" y="10">a</text>\n<text x="0" y="20">b</text>'))
+def test_flowed_text_only_file_gets_the_convert_hint() -> None:
+    flowed = '<flowRoot><flowRegion><rect width="9" height="9"/></flowRegion><flowPara>a' \
+             '</flowPara></flowRoot>'
+    with pytest.raises(InputError, match=r"<flowRoot> at line\(s\) 2, 3\) is not drawn: "
+                                         r"Inkscape's flowed text.*Text > Convert to Text"):
+        read_svg(svg(f"{flowed}\n{flowed}"))
 
 
 def test_partial_opacity_and_dashes_are_said_once_per_kind() -> None:

@@ -278,7 +278,9 @@ def _second_tab(d: Any, url: str) -> None:
     first = d.current_window_handle
     wait(d, lambda d: job_state(d, job) == "held", what="the held job")
     row = job_row(d, job)
-    assert "home pose" in row.text and "Yes — resume" in row.text  # the question, asked
+    assert "Waiting for your answer" in row.text  # the question itself: once, at the top
+    top = wait(d, lambda d: text(d, "#waiting"), what="the waiting reason")
+    assert "home pose" in top and "Yes, they are" in top
     d.switch_to.new_window("tab")
     open_page(d, url)
     click_job_button(d, job, "Cancel")

@@ -151,6 +151,7 @@ BOARD_INLINE void board_irq_restore(uint8_t state)
 	SREG = state;
 }
 
+#ifndef FB_SERVO
 BOARD_INLINE void board_enable_motors(uint8_t on)
 {
 	if (on)
@@ -158,6 +159,7 @@ BOARD_INLINE void board_enable_motors(uint8_t on)
 	else
 		BOARD_PORT(PIN_ENABLE_PORT) |= (uint8_t)(1u << PIN_ENABLE_BIT);
 }
+#endif
 
 BOARD_INLINE void board_laser(uint8_t power)
 {
@@ -182,6 +184,10 @@ BOARD_INLINE void board_laser(uint8_t power)
 	board_irq_restore(s);
 }
 
+#ifdef FB_SERVO
+/* the servo build (make SERVO=1): arm servos on Timer1, no step pins */
+#include "board_servo.h"
+#else
 BOARD_INLINE uint8_t board_endstops(void)
 {
 	uint8_t v = BOARD_PIN(PIN_ENDSTOP_PORT);
@@ -226,6 +232,7 @@ BOARD_INLINE void board_set_dirs(uint8_t neg_mask)
 }
 
 #define BOARD_FAST_PATH 1
+#endif
 #define BOARD_PSTR(s) PSTR(s)
 #define BOARD_PROGMEM PROGMEM
 static inline char board_pgm_char(const char *p) { return (char)pgm_read_byte(p); }

@@ -127,6 +127,9 @@ void board_init(void)
 	TCCR1A = 0;
 	TCCR1C = 0;
 	TCCR1B = (uint8_t)(1u << CS10);
+#ifdef FB_SERVO
+	board_servo_init();  /* Timer1: the arm servos' frames (board_servo.c) */
+#endif
 
 	TIMSK2 = 0;
 	TCCR2A = (uint8_t)((1u << WGM21) | (1u << WGM20));
@@ -355,9 +358,16 @@ void board_uart_baud(uint32_t baud)
 		;
 	/* the last byte leaves the shift register: 11 bit times at 115200 are
 	 * 1528 cycles (Timer1 runs free at F_CPU) */
+#ifdef FB_SERVO
+	/* Timer1 counts 0.5 us and wraps at the frame: the tick's counts */
+	uint8_t t0 = TCNT0;
+	while ((uint16_t)(TCNT0 + 250u - t0) % 250u < 40u)
+		;
+#else
 	uint16_t t0 = TCNT1;
 	while ((uint16_t)(TCNT1 - t0) < 1600u)
 		;
+#endif
 	uint16_t ubrr = (uint16_t)((FB_F_CPU + 4UL * baud) / (8UL * baud) - 1UL);
 	UCSR0A = (uint8_t)(1u << U2X0);  /* U2X before UBRR, as in board_init */
 	UBRR0H = (uint8_t)(ubrr >> 8);

@@ -56,8 +56,12 @@
 				 * such lines fit the receive ring, so one is on its way
 				 * while the other is parsed (G7 raster lines) */
 #define CFG_QUEUE_SIZE    16    /* segment queue, blocks (power of two) */
+#ifdef FB_SERVO
+#define CFG_PX_RING       16    /* the servo build refuses G7: the ring stays empty */
+#else
 #define CFG_PX_RING       128   /* raster pixel ring, bytes: G7 runs decoded, with their
 				 * 10-byte headers (power of two, at most 128) */
+#endif
 
 /* ---- motion ---------------------------------------------------------------- */
 #define CFG_MAX_RATE_LIMIT  60000L   /* hard cap of $0, steps/s per motor */
@@ -77,7 +81,13 @@
  * falls; at 62.5 kHz it holds 7.8 periods, and every change restarts the period
  * (board_laser), so a pixel's dose is its power within one period (16 us).  A laser
  * driver whose input cannot follow 62.5 kHz needs 8 (and slower scans). */
+#ifdef FB_SERVO
+/* The servo build runs no raster (G7 is refused, docs/protocol.md 6.5) and its DDA
+ * ticks on Timer2's overflow every 128 us (board_servo.c SV_TICK_CYCLES): 8. */
+#define CFG_LASER_PWM_DIV   8
+#else
 #define CFG_LASER_PWM_DIV   1
+#endif
 
 /* ---- pen servo (M280, $14) ---------------------------------------------- */
 /* Hobby servo: a pulse every CFG_SERVO_FRAME_MS (50 Hz) of 500-2500 us. */
@@ -117,5 +127,20 @@
  * The one setting kept in EEPROM: a boot parks the pen at the value stored
  * last, and uses this default only while the EEPROM holds none. */
 #define DEF_PEN_PARK        0
+
+/* ---- arm servos: the servo build (make SERVO=1, board_servo.c) -------------- */
+/* The arms' pulses come from Timer1's hardware compares: OC1A = D9 (arm A),
+ * OC1B = D10 (arm B), the X and Y limit headers of the CNC shield (the
+ * servo build has no endstops).  A joint's position is its pulse width in
+ * ticks of 0.5 us (F_CPU/8); a frame is CFG_SERVO_FRAME_MS. */
+#define PIN_SERVO_A_PORT    B
+#define PIN_SERVO_A_BIT     1     /* D9: OC1A */
+#define PIN_SERVO_B_PORT    B
+#define PIN_SERVO_B_BIT     2     /* D10: OC1B */
+#define CFG_SERVO_TICKS_US  2     /* position units (ticks) per us */
+/* A position outside these ticks sends no pulse (a power-on's 0: nothing is
+ * sent until the host's G92 sets the servos' positions). */
+#define CFG_SERVO_ARM_MIN   (CFG_SERVO_MIN_US * CFG_SERVO_TICKS_US)
+#define CFG_SERVO_ARM_MAX   (CFG_SERVO_MAX_US * CFG_SERVO_TICKS_US)
 
 #endif

@@ -32,8 +32,11 @@ static int32_t g6_p;
  * and of its last pixel change; the pending line: its record is in the ring,
  * it starts a scan */
 static int32_t g7_p, g7_t;
-static uint8_t g7_scan, g7_in_scan, g7_pushed, g7_new;
+static uint8_t g7_in_scan, g7_pushed;
+#ifndef FB_SERVO
+static uint8_t g7_scan, g7_new;
 static uint32_t g7_time, g7_last;
+#endif
 
 uint8_t exec_idle(void)
 {
@@ -243,6 +246,7 @@ static uint8_t exec_g6(const proto_cmd_t *c)
 	return FB_OK;
 }
 
+#ifndef FB_SERVO  /* the servo build has no pixel timer: G7 is refused below */
 /* Every segment of a G7 line against the G1 checks (the first one's P the
  * modal one), and its pixel run: at most what the ring holds, a period T of
  * at least PX_T_MIN_CYCLES, every change inside the line's segments. */
@@ -359,6 +363,7 @@ static uint8_t exec_g7(const proto_cmd_t *c)
 		g7_t = c->d;
 	return FB_OK;
 }
+#endif
 
 /* M280: a queued pen block (protocol section 6.2). */
 static uint8_t exec_pen(const proto_cmd_t *c)
@@ -394,7 +399,11 @@ static uint8_t execute(const proto_cmd_t *c)
 	case PROTO_CMD_G6:
 		return exec_g6(c);
 	case PROTO_CMD_G7:
+#ifdef FB_SERVO
+		return FB_ERR_UNKNOWN_COMMAND;  /* no raster on servo joints (docs/protocol.md 6.5) */
+#else
 		return exec_g7(c);
+#endif
 	case PROTO_CMD_G90:
 		absolute = 1;
 		return FB_OK;

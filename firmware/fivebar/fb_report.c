@@ -50,6 +50,9 @@ void report_banner(void)
 	report_u32(CFG_QUEUE_SIZE);
 	report_P(BOARD_PSTR(" line:"));
 	report_u32(CFG_LINE_MAX);
+#ifdef FB_SERVO
+	report_P(BOARD_PSTR(" joints:servo"));  /* the servo build: steps are pulse ticks */
+#endif
 	report_eol();
 }
 

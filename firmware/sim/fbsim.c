@@ -18,6 +18,29 @@
  *                 read (the step interrupt's entry) and write of OCR1A
  *     -C          control commands on stdin, one per line, each acknowledged
  *                 on stdout with "ok <command>" once done (see below)
+ *     -B HEX      boot a bootloader (Intel HEX, e.g. Debian's optiboot_atmega328.hex
+ *                 or ATmegaBOOT_168_atmega328.hex): it is loaded at its own
+ *                 address and every reset starts there (the BOOTRST fuse); a
+ *                 reset by "reset"/"open" (the DTR line) sets EXTRF in MCUSR,
+ *                 a power-on PORF, the watchdog WDRF, as the chip does, so the
+ *                 bootloader decides as on a board whether to wait for a
+ *                 programmer or start the application.  The firmware argument
+ *                 may then be "-": the application flash starts erased
+ *     -F FILE     where "dump" writes the flash (and FILE.eeprom the EEPROM)
+ *     -H          the CPU is held in reset (a shield or a wire holding RESET
+ *                 low): nothing runs, every byte from the client is lost
+ *     -X PAGE     the flash page PAGE (128 bytes) does not take a page write
+ *                 (worn or locked flash): self-programming leaves it as it was
+ *     -S FILE     the machine's state between runs: read at start when FILE
+ *                 exists (flash with -B, EEPROM, SRAM, the arms' step
+ *                 positions), written at exit, so the next run finds the
+ *                 controller as a powered machine keeps it (its RAM, as after
+ *                 a DTR reset) and the arms where they stopped; the trace's
+ *                 first line says where they start ("start=A,B")
+ *     -V          also trace the servo build's arm servo pins (make SERVO=1,
+ *                 config.h: OC1A/OC1B, D9/D10) as svA and svB
+ *     -L          with -S: the controller lost power since the state was saved
+ *                 (its SRAM comes back random; the arms stay where they were)
  *     -T          two timer corrections to simavr 1.6 for firmware that needs
  *                 them (GRBL 1.1h: benchmarks/grbl_firmware.py), off by default:
  *                 starting Timer0's clock (TCCR0B from no clock to a clock)
@@ -42,8 +65,9 @@
  * TCGETS2 on the master): while it differs from the UART's by more than 5 %,
  * every byte is lost both ways, as a UART sampling at the wrong rate sees
  * only framing errors ($B, docs/protocol.md 1.1).  A pty speed that is not a
- * link rate (250000, 500000, 1000000) counts as 115200: clients that never
- * set one (pyserial's default is 9600) talk at the boot rate.
+ * link rate (250000, 500000, 1000000) or a bootloader's (57600 for the old
+ * ATmegaBOOT, 19200) counts as 115200: clients that never set one
+ * (pyserial's default is 9600) talk at the boot rate.
  *
  * Control commands (-C):
  *   reset    a reset that leaves the RAM powered (the Uno's DTR reset, a
@@ -67,6 +91,8 @@
  *   stepoff  the step interrupt stops coming (OCIE1A cleared), the main
  *            loop runs on
  *   flush    write the trace file out
+ *   dump     write the flash to the -F file and the EEPROM to FILE.eeprom
+ *   cycle    acknowledged as "ok cycle N": the emulated cycle count now
  *   quit     stop
  * A reset, power cut or freeze first lets the bytes the client wrote before
  * the command reach the firmware (as on a real link, where they were on the
@@ -116,6 +142,8 @@
 #include <avr_uart.h>
 #include <avr_ioport.h>
 #include <avr_extint.h>
+#include <avr_flash.h>
+#include <avr_eeprom.h>
 
 #include "../fivebar/config.h"
 
@@ -159,6 +187,18 @@ static avr_run_t core_run;  /* avr->run as set up: another value is a watchdog r
 #define BIT_OCIE1A 1
 static int control, ctl_out = -1;
 
+/* bootloader (-B), dump (-F), reset held (-H), stuck page (-X), state (-S) */
+#define REG_MCUSR 0x54
+#define BIT_PORF 0
+#define BIT_EXTRF 1
+#define FLASH_PAGE 128u
+static int bootloader, held, power_lost;
+static long boot_start = -1;
+static const char *dump_path, *state_path, *boot_path;
+static long stuck_page = -1;
+static uint8_t stuck_copy[FLASH_PAGE];
+static int (*flash_ioctl_orig)(struct avr_io_t *, uint32_t, void *);
+
 /* simavr 1.6 timer corrections (-T) */
 static int timer_fix;
 #define REG_TCCR0B 0x45
@@ -188,9 +228,13 @@ static avr_cycle_count_t pending_since;
 static struct timespec frozen_at;
 
 /* last traced level of each output pin, to trace them low on a reset */
-enum { PIN_STEPA, PIN_STEPB, PIN_DIRA, PIN_DIRB, PIN_ENABLE, PIN_LASER, PIN_PEN, PIN_COUNT };
-static const char *const pin_names[PIN_COUNT] = { "stepA", "stepB", "dirA", "dirB", "enable", "laser", "pen" };
+enum { PIN_STEPA, PIN_STEPB, PIN_DIRA, PIN_DIRB, PIN_ENABLE, PIN_LASER, PIN_PEN, PIN_SVA, PIN_SVB,
+       PIN_COUNT };
+static const char *const pin_names[PIN_COUNT] = { "stepA", "stepB", "dirA", "dirB", "enable", "laser", "pen", "svA",
+						    "svB" };
 static int pin_level[PIN_COUNT];
+/* -V: trace the arm servo pins */
+static int servo_pins;
 
 /* cycle profile (-P): emulated cycles spent at each flash byte address,
  * written as "address cycles" lines at exit (map them with avr-nm) */
@@ -285,8 +329,9 @@ static int rates_agree(void)
 	if (master_fd < 0 || ioctl(master_fd, PTY_TCGETS2, &t) < 0)
 		return 1;
 	double host = t.c_ospeed;
-	if (t.c_ospeed != 250000 && t.c_ospeed != 500000 && t.c_ospeed != 1000000)
-		host = 115200;  /* not a link rate (a client that never set one): the base rate */
+	if (t.c_ospeed != 250000 && t.c_ospeed != 500000 && t.c_ospeed != 1000000 &&
+	    t.c_ospeed != 57600 && t.c_ospeed != 19200)
+		host = 115200;  /* not a link or bootloader rate (a client that never set one) */
 	unsigned ubrr = avr->data[REG_UBRR0L] | (unsigned)(avr->data[REG_UBRR0H] & 0x0F) << 8;
 	double avr_baud = (double)avr->frequency /
 			  ((avr->data[REG_UCSR0A] & 0x02 ? 8.0 : 16.0) * (ubrr + 1));
@@ -356,7 +401,7 @@ static void pump_io(void)
 		}
 		int agree = n > 0 ? rates_agree() : 1;
 		for (ssize_t i = 0; i < n; i++)
-			if (frozen || !agree)
+			if (frozen || held || !agree)
 				bytes_lost++;
 			else
 				ring_put(&to_avr, buf[i]);
@@ -391,6 +436,9 @@ static void ack(const char *cmd)
 		stop_req = 1;
 }
 
+static void dump_memories(void);
+static void set_reset_cause(int kind);
+
 static void run_command(const char *cmd)
 {
 	if (!strcmp(cmd, "reset")) {
@@ -420,6 +468,15 @@ static void run_command(const char *cmd)
 		if (trace)
 			fflush(trace);
 		ack(cmd);
+		return;
+	} else if (!strcmp(cmd, "dump")) {
+		dump_memories();
+		ack(cmd);
+		return;
+	} else if (!strcmp(cmd, "cycle")) {
+		char msg[64];
+		snprintf(msg, sizeof(msg), "cycle %llu", (unsigned long long)avr->cycle);
+		ack(msg);
 		return;
 	} else if (!strcmp(cmd, "quit")) {
 		stop_req = 1;
@@ -634,6 +691,7 @@ static void apply_reset(int kind)
 	} else {
 		memcpy(avr->data + lo, sram, n);
 	}
+	set_reset_cause(kind);
 	to_avr.len = 0;
 	setup_after_reset();
 	if (frozen) {
@@ -652,6 +710,199 @@ static void apply_reset(int kind)
 	pending_freeze = 0;
 	pending_fault = FAULT_NONE;
 	ack(reset_name);
+}
+
+/* ---- bootloader, memories and the state between runs ------------------------ */
+
+/* Load an Intel HEX file into the flash; returns its lowest address, or -1. */
+static long load_hex(const char *path)
+{
+	FILE *f = fopen(path, "r");
+	if (!f) {
+		fprintf(stderr, "fbsim: cannot read %s: %s\n", path, strerror(errno));
+		return -1;
+	}
+	char line[600];
+	uint32_t base = 0;
+	long lowest = -1;
+	int end = 0;
+	while (!end && fgets(line, sizeof(line), f)) {
+		size_t n = strcspn(line, "\r\n");
+		line[n] = 0;
+		if (!n)
+			continue;
+		uint8_t b[280];
+		int len = 0;
+		if (line[0] != ':' || (n - 1) % 2 || (n - 1) / 2 > sizeof(b))
+			goto bad;
+		for (size_t i = 1; i < n; i += 2) {
+			unsigned v;
+			if (sscanf(line + i, "%2x", &v) != 1)
+				goto bad;
+			b[len++] = (uint8_t)v;
+		}
+		uint8_t sum = 0;
+		for (int i = 0; i < len; i++)
+			sum = (uint8_t)(sum + b[i]);
+		if (len < 5 || b[0] + 5 != len || sum)
+			goto bad;
+		uint32_t addr = base + ((uint32_t)b[1] << 8 | b[2]);
+		switch (b[3]) {
+		case 0:
+			if (addr + b[0] > avr->flashend + 1u) {
+				fclose(f);
+				fprintf(stderr, "fbsim: %s has data at 0x%x-0x%x, past the end of the "
+					"flash (0x%x): it does not fit its boot section\n", path,
+					(unsigned)addr, (unsigned)(addr + b[0] - 1u), (unsigned)avr->flashend);
+				return -1;
+			}
+			memcpy(avr->flash + addr, b + 4, b[0]);
+			if (lowest < 0 || (long)addr < lowest)
+				lowest = (long)addr;
+			break;
+		case 1: end = 1; break;
+		case 2: base = ((uint32_t)b[4] << 8 | b[5]) << 4; break;
+		case 4: base = ((uint32_t)b[4] << 8 | b[5]) << 16; break;
+		default: break;  /* 3, 5: start addresses */
+		}
+	}
+	fclose(f);
+	if (!end || lowest < 0) {
+		fprintf(stderr, "fbsim: %s: no data or no end record\n", path);
+		return -1;
+	}
+	return lowest;
+bad:
+	fclose(f);
+	fprintf(stderr, "fbsim: %s is not a valid Intel HEX file (at '%.40s')\n", path, line);
+	return -1;
+}
+
+/* Every self-programming instruction, then the stuck page (-X) put back as it was. */
+static int flash_ioctl_hook(struct avr_io_t *io, uint32_t ctl, void *param)
+{
+	int r = flash_ioctl_orig(io, ctl, param);
+	if (ctl == AVR_IOCTL_FLASH_SPM && stuck_page >= 0)
+		memcpy(avr->flash + (size_t)stuck_page * FLASH_PAGE, stuck_copy, FLASH_PAGE);
+	return r;
+}
+
+static void hook_flash(void)
+{
+	for (avr_io_t *io = avr->io_port; io; io = io->next)
+		if (!strcmp(io->kind, "flash")) {
+			flash_ioctl_orig = io->ioctl;
+			io->ioctl = flash_ioctl_hook;
+			memcpy(stuck_copy, avr->flash + (size_t)stuck_page * FLASH_PAGE, FLASH_PAGE);
+			return;
+		}
+	fprintf(stderr, "fbsim: this core has no self-programming; -X ignored\n");
+}
+
+static uint8_t *eeprom_bytes(uint32_t *size)
+{
+	avr_eeprom_desc_t d = { .ee = NULL, .offset = 0, .size = avr->e2end + 1u };
+	avr_ioctl(avr, AVR_IOCTL_EEPROM_GET, &d);
+	*size = d.ee ? avr->e2end + 1u : 0;
+	return d.ee;
+}
+
+static int write_file(const char *path, const uint8_t *data, size_t n)
+{
+	FILE *f = fopen(path, "wb");
+	if (!f || fwrite(data, 1, n, f) != n) {
+		fprintf(stderr, "fbsim: cannot write %s: %s\n", path, strerror(errno));
+		if (f)
+			fclose(f);
+		return -1;
+	}
+	return fclose(f);
+}
+
+/* "dump": the flash to the -F file, the EEPROM to FILE.eeprom. */
+static void dump_memories(void)
+{
+	if (!dump_path) {
+		fprintf(stderr, "fbsim: dump needs -F FILE\n");
+		return;
+	}
+	write_file(dump_path, avr->flash, avr->flashend + 1u);
+	uint32_t ee_size;
+	uint8_t *ee = eeprom_bytes(&ee_size);
+	char ee_path[4096];
+	snprintf(ee_path, sizeof(ee_path), "%s.eeprom", dump_path);
+	if (ee)
+		write_file(ee_path, ee, ee_size);
+}
+
+/* The state file (-S): a header line, then the flash (with -B), EEPROM and SRAM. */
+#define STATE_MAGIC "fbsim-state 1"
+
+static void state_save(void)
+{
+	char tmp[4096];
+	snprintf(tmp, sizeof(tmp), "%s.tmp", state_path);
+	FILE *f = fopen(tmp, "wb");
+	if (!f) {
+		fprintf(stderr, "fbsim: cannot write %s: %s\n", tmp, strerror(errno));
+		return;
+	}
+	uint32_t ee_size;
+	uint8_t *ee = eeprom_bytes(&ee_size);
+	unsigned lo = (unsigned)avr->ioend + 1u, n = (unsigned)avr->ramend + 1u - lo;
+	unsigned flash = bootloader ? avr->flashend + 1u : 0;
+	fprintf(f, "%s %s pos=%ld,%ld flash=%u eeprom=%u sram=%u\n", STATE_MAGIC, avr->mmcu,
+		(long)pos[0], (long)pos[1], flash, ee ? ee_size : 0u, n);
+	int ok = fwrite(avr->flash, 1, flash, f) == flash &&
+		 (!ee || fwrite(ee, 1, ee_size, f) == ee_size) &&
+		 fwrite(avr->data + lo, 1, n, f) == n;
+	if (fclose(f) != 0 || !ok || rename(tmp, state_path) != 0)
+		fprintf(stderr, "fbsim: cannot write %s: %s\n", state_path, strerror(errno));
+}
+
+/* Returns 1 when a state was restored (the controller then starts as after a
+ * reset that kept its RAM), 0 when there was none, -1 when it is unusable. */
+static int state_load(void)
+{
+	FILE *f = fopen(state_path, "rb");
+	if (!f)
+		return 0;
+	char mcu[32];
+	long a, b;
+	unsigned flash, ee_n, sram_n;
+	uint32_t ee_size;
+	uint8_t *ee = eeprom_bytes(&ee_size);
+	unsigned lo = (unsigned)avr->ioend + 1u, n = (unsigned)avr->ramend + 1u - lo;
+	int ok = fscanf(f, STATE_MAGIC " %31s pos=%ld,%ld flash=%u eeprom=%u sram=%u", mcu, &a, &b,
+			&flash, &ee_n, &sram_n) == 6 && fgetc(f) == '\n' && !strcmp(mcu, avr->mmcu) &&
+		 (flash == 0 || flash == avr->flashend + 1u) && (!ee || ee_n == ee_size) &&
+		 sram_n == n;
+	uint8_t *buf = ok ? malloc(flash + ee_n + sram_n + 1u) : NULL;
+	ok = ok && buf && fread(buf, 1, flash + ee_n + sram_n, f) == flash + ee_n + sram_n;
+	fclose(f);
+	if (!ok) {
+		free(buf);
+		fprintf(stderr, "fbsim: %s is not a state of this machine; starting afresh\n", state_path);
+		return -1;
+	}
+	if (flash && bootloader)
+		memcpy(avr->flash, buf, flash);
+	if (ee && ee_n)
+		memcpy(ee, buf + flash, ee_n);
+	memcpy(avr->data + lo, buf + flash + ee_n, n);
+	free(buf);
+	pos[0] = (int32_t)a;
+	pos[1] = (int32_t)b;
+	return 1;
+}
+
+/* MCUSR after a reset of this kind, as the chip sets it (with -B; without a
+ * bootloader the harness leaves MCUSR as simavr has it). */
+static void set_reset_cause(int kind)
+{
+	if (!bootloader || kind == CTL_WATCHDOG)
+		return;  /* simavr's watchdog sets WDRF itself */
+	avr->data[REG_MCUSR] |= (uint8_t)(1u << (kind == CTL_POWER ? BIT_PORF : BIT_EXTRF));
 }
 
 /* The word address of a one-instruction loop ("rjmp .", 0xCFFF) in the
@@ -711,7 +962,8 @@ static void apply_pending(void)
 static void usage(void)
 {
 	fprintf(stderr, "usage: fbsim [-m mcu] [-f hz] [-t trace] [-w] [-g ms] [-c cycles] [-R] "
-			"[-a steps] [-b steps] [-D debug] [-P profile] [-C] [-T] firmware.elf\n");
+			"[-a steps] [-b steps] [-D debug] [-P profile] [-C] [-T] [-B boot.hex] [-F dump] "
+			"[-H] [-X page] [-S state [-L]] [-V] firmware.elf|-\n");
 	exit(2);
 }
 
@@ -726,7 +978,7 @@ int main(int argc, char **argv)
 	if (getppid() == 1)
 		return 1;
 
-	while ((opt = getopt(argc, argv, "m:f:t:wg:c:Ra:b:D:P:CT")) != -1) {
+	while ((opt = getopt(argc, argv, "m:f:t:wg:c:Ra:b:D:P:CTB:F:HX:S:LV")) != -1) {
 		switch (opt) {
 		case 'm': mcu = optarg; break;
 		case 'f': freq = strtoul(optarg, NULL, 10); break;
@@ -741,6 +993,13 @@ int main(int argc, char **argv)
 		case 'P': profile_path = optarg; break;
 		case 'C': control = 1; break;
 		case 'T': timer_fix = 1; break;
+		case 'B': boot_path = optarg; bootloader = 1; break;
+		case 'F': dump_path = optarg; break;
+		case 'H': held = 1; break;
+		case 'X': stuck_page = strtol(optarg, NULL, 10); break;
+		case 'S': state_path = optarg; break;
+		case 'L': power_lost = 1; break;
+		case 'V': servo_pins = 1; break;
 		default: usage();
 		}
 	}
@@ -758,7 +1017,8 @@ int main(int argc, char **argv)
 
 	elf_firmware_t fw;
 	memset(&fw, 0, sizeof(fw));
-	if (elf_read_firmware(argv[optind], &fw) != 0) {
+	int have_app = !(bootloader && !strcmp(argv[optind], "-"));
+	if (have_app && elf_read_firmware(argv[optind], &fw) != 0) {
 		fprintf(stderr, "fbsim: cannot read %s\n", argv[optind]);
 		return 1;
 	}
@@ -770,8 +1030,33 @@ int main(int argc, char **argv)
 		return 1;
 	}
 	avr_init(avr);
-	avr_load_firmware(avr, &fw);
+	if (have_app)
+		avr_load_firmware(avr, &fw);
 	avr->frequency = (uint32_t)freq;
+	if (bootloader) {
+		/* BOOTRST: every reset starts at the bootloader; the application
+		 * (or the erased flash) below it is code too */
+		boot_start = load_hex(boot_path);
+		if (boot_start < 0)
+			return 1;
+		avr->reset_pc = avr->pc = (avr_flashaddr_t)boot_start;
+		avr->codeend = avr->flashend;
+	}
+	if (stuck_page >= 0) {
+		if ((unsigned long)(stuck_page + 1) * FLASH_PAGE > avr->flashend + 1ul) {
+			fprintf(stderr, "fbsim: -X %ld: no such flash page\n", stuck_page);
+			return 1;
+		}
+		hook_flash();
+	}
+	int restored = state_path ? state_load() : 0;
+	if (restored > 0 && power_lost) {
+		unsigned lo = (unsigned)avr->ioend + 1u, n = (unsigned)avr->ramend + 1u - lo;
+		rng_state ^= (uint32_t)time(NULL);
+		for (unsigned i = 0; i < n; i++)
+			avr->data[lo + i] = random_byte();
+		restored = 0;  /* boots as at power-on; the arms' positions are kept */
+	}
 	avr->sleep = no_sleep;
 	core_run = avr->run;
 	pump_period = avr->frequency / 1000;
@@ -791,7 +1076,8 @@ int main(int argc, char **argv)
 			return 1;
 		}
 		setvbuf(trace, NULL, _IOFBF, 1 << 20);
-		fprintf(trace, "# fbsim trace v1 freq=%lu\n", freq);
+		fprintf(trace, "# fbsim trace v1 freq=%lu start=%ld,%ld\n", freq, (long)pos[0],
+			(long)pos[1]);
 	}
 	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_STEP_PORT), PIN_STEP_A_BIT), step_hook, (void *)0);
 	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_STEP_PORT), PIN_STEP_B_BIT), step_hook, (void *)1);
@@ -803,6 +1089,12 @@ int main(int argc, char **argv)
 				(void *)(intptr_t)PIN_LASER);
 	avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_SERVO_PORT), PIN_SERVO_BIT), named_hook,
 				(void *)(intptr_t)PIN_PEN);
+	if (servo_pins) {
+		avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_SERVO_A_PORT), PIN_SERVO_A_BIT),
+					named_hook, (void *)(intptr_t)PIN_SVA);
+		avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_SERVO_B_PORT), PIN_SERVO_B_BIT),
+					named_hook, (void *)(intptr_t)PIN_SVB);
+	}
 	if (debug_path) {
 		dbg = fopen(debug_path, "w");
 		if (!dbg) {
@@ -858,6 +1150,10 @@ int main(int argc, char **argv)
 	}
 
 	setup_after_reset();
+	if (restored > 0 && !bootloader)
+		avr->data[REG_MCUSR] = (uint8_t)(1u << BIT_EXTRF);  /* a DTR reset, RAM kept */
+	if (bootloader)  /* the client's open pulsed DTR: the bootloader waits for it */
+		avr->data[REG_MCUSR] = (uint8_t)(1u << BIT_EXTRF | (restored > 0 ? 0u : 1u << BIT_PORF));
 	clock_gettime(CLOCK_MONOTONIC, &wall_start);
 
 	if (profile_path && !(profile = calloc(PROFILE_WORDS, sizeof(*profile)))) {
@@ -866,6 +1162,17 @@ int main(int argc, char **argv)
 	}
 	int state = cpu_Running;
 	while (!stop_req) {
+		if (held) {
+			read_control();  /* a reset changes nothing while RESET is held low */
+			pump_io();
+			if (pending_reset)
+				ack(reset_name);
+			else if (pending_freeze | pending_fault)
+				ack(pending_freeze ? "freeze" : fault_names[pending_fault]);
+			pending_reset = pending_freeze = pending_fault = 0;
+			usleep(1000);
+			continue;
+		}
 		if (frozen) {
 			read_control();
 			pump_io();
@@ -894,6 +1201,8 @@ int main(int argc, char **argv)
 			apply_pending();
 	}
 	pump_io();
+	if (state_path)
+		state_save();
 	if (profile)
 		profile_write();
 	if (trace)

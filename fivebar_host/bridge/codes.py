@@ -8,35 +8,17 @@ fivebar's error:11 is a soft limit, GRBL's error:11 a line overflow).
 from __future__ import annotations
 
 from fivebar_host.errors import FivebarError
+from fivebar_host.gcode import GcodeError
 
 # error:N ----------------------------------------------------------------------------------
-EXPECTED_COMMAND_LETTER = 1
-BAD_NUMBER_FORMAT = 2
+# The numbers of refused G-code lines are the interpreter's (`fivebar_host.gcode.errors`);
+# these are the bridge's own (system commands, its states).
 INVALID_STATEMENT = 3
-NEGATIVE_VALUE = 4
 SETTING_DISABLED = 5  # homing not enabled
 NOT_IDLE = 8
 GCODE_LOCK = 9  # alarm or jog state
-LINE_OVERFLOW = 11
 TRAVEL_EXCEEDED = 15  # jog target beyond the machine's travel
 INVALID_JOG_COMMAND = 16
-UNSUPPORTED_COMMAND = 20
-MODAL_GROUP_VIOLATION = 21
-UNDEFINED_FEED_RATE = 22
-COMMAND_VALUE_NOT_INTEGER = 23
-AXIS_COMMAND_CONFLICT = 24
-WORD_REPEATED = 25
-NO_AXIS_WORDS = 26
-INVALID_LINE_NUMBER = 27
-VALUE_WORD_MISSING = 28
-UNSUPPORTED_COORD_SYS = 29
-G53_INVALID_MOTION_MODE = 30
-AXIS_WORDS_EXIST = 31
-NO_AXIS_WORDS_IN_PLANE = 32
-INVALID_TARGET = 33
-ARC_RADIUS_ERROR = 34
-NO_OFFSETS_IN_PLANE = 35
-UNUSED_WORDS = 36
 
 ERROR_TEXT = {
     1: "Expected command letter", 2: "Bad number format", 3: "Invalid statement",
@@ -63,14 +45,13 @@ FIRMWARE_ALARM = {30: ALARM_HARD_LIMIT, 31: ALARM_HOMING_FAIL_APPROACH,
                   32: ALARM_HOMING_FAIL_RESET}
 
 
-class GrblError(FivebarError, ValueError):
-    """A line refused with GRBL's `error:<code>`; the message says why (for logs and tests,
-    never sent: GRBL answers a refused line with the number only)."""
+class GrblError(GcodeError):
+    """A line the bridge itself refuses with GRBL's `error:<code>` (a `$` command, a lock);
+    the message says why (for logs and tests, never sent: GRBL answers a refused line with
+    the number only). Refused G-code is the interpreter's `GcodeError`, its base."""
 
     def __init__(self, code: int, why: str = "") -> None:
-        super().__init__(f"error:{code} {why or ERROR_TEXT.get(code, '')}".rstrip())
-        self.code = code
-        self.why = why
+        super().__init__(code, why or ERROR_TEXT.get(code, ""))
 
 
 class GrblAlarmError(FivebarError, ValueError):

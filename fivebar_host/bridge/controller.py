@@ -6,15 +6,29 @@ Bytes from the sender (any transport: `fivebar_host.bridge.serve`) go through
 wait for the bridge's own thread, which answers each with exactly one `ok` or `error:N`, in
 order, as GRBL does, so a sender's character counting against 128 bytes holds.
 
-A G-code line is parsed (`gcode`), run on a copy of the modal state (`interp`), and its moves
-are solved at once (`compile.incremental.OnlineCompiler.solve`: reach, joint limits,
-singularity margins,
+A G-code line is parsed and run on a copy of the modal state by fivebar's G-code interpreter
+(`fivebar_host.gcode`, read GRBL's way: `policy`), and its moves are solved at once
+(`compile.incremental.OnlineCompiler.solve`: reach, joint limits, singularity margins,
 joint-space segmentation). A refused move raises ALARM:2 with a `[MSG:…]` before anything of
 it moves: the machine is stopped (laser off), the look-ahead dropped, every later line gets
 `error:9` until `$X`. Accepted moves wait in the look-ahead buffer until `LOOKAHEAD_MOVES`
-are there, the sender pauses for `FLUSH_IDLE_S`, or something needs them run (dwell, pause,
-end of program, a `$` command); then they are planned as one batch and handed to the
-machine thread (`machine.MachineDriver`).
+are there, the sender pauses for `FLUSH_IDLE_S`, the machine stands idle, or something needs
+them run (dwell, pause, end of program, a `$` command); then they are planned as one batch
+and handed to the machine thread (`machine.MachineDriver`).
+
+`ok` is bounded as GRBL's is: GRBL answers a line once its block is in the 15-block planner,
+so a sender's count of `ok`s is at most 15 blocks (plus its 128-byte buffer) ahead of the
+motion. The bridge holds the `ok` of a line whose moves would put more than `ok_window`
+(default `OK_WINDOW` = 15) accepted moves ahead of those the machine has run to their end
+(`MachineDriver.moves_done`); meanwhile it reads no further line, as GRBL's parser waits for
+room in its planner. `ok_window=0` answers as soon as a line is in the look-ahead (up to
+`LOOKAHEAD_MOVES` ahead: smoother batches, untruthful progress).
+
+A sender that closes the port after complete lines (GRBL's `stream.py`, `cat file >
+port`: every fire-and-forget streamer) leaves the bridge to finish what it received, as GRBL
+does: the lines run, the laser under the job's own power. A close in the middle of a line
+(or after an overlong line) holds the machine with the laser off; so does every close with
+`hold_on_disconnect` (the behaviour before issue 35).
 """
 
 from __future__ import annotations
@@ -22,14 +36,12 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
-from fivebar_host.bridge import codes, views
+from fivebar_host.bridge import codes, policy, views
 from fivebar_host.bridge.codes import GrblAlarmError, GrblError, ascii_text
-from fivebar_host.bridge.gcode import parse, preparse
-from fivebar_host.bridge.interp import Dwell, ModalState, Move, ProgramFlow, Vec, execute
 from fivebar_host.bridge.machine import MachineDriver
 from fivebar_host.bridge.realtime import (
     RT_CYCLE_START,
@@ -51,9 +63,13 @@ from fivebar_host.compile.incremental import (
 )
 from fivebar_host.config import Profile
 from fivebar_host.controllers.fivebar.link import Link
+from fivebar_host.gcode import Dwell, GcodeError, ModalState, Move, ProgramFlow, Vec, preparse
+from fivebar_host.gcode import errors as gcode_errors
 from fivebar_host.program import Program
 
 FLUSH_IDLE_S = 0.05
+#: GRBL 1.1's planner: `ok` means the block is one of at most 15 not yet run.
+OK_WINDOW = 15
 UNLOCK_MSG = "[MSG:'$H'|'$X' to unlock]"
 
 
@@ -72,8 +88,12 @@ class Bridge:
 
     def __init__(self, link: Link, profile: Profile, *, laser: bool, tolerance_mm: float,
                  origin_mm: tuple[float, float] = (0.0, 0.0), mode: str | None = None,
-                 log: Callable[[str], None] | None = None) -> None:
+                 log: Callable[[str], None] | None = None, ok_window: int = OK_WINDOW,
+                 hold_on_disconnect: bool = False) -> None:
         self.profile = profile
+        self.ok_window = ok_window
+        self.hold_on_disconnect = hold_on_disconnect
+        self.moves_acked = 0  # accepted moves (not jogs) answered or being answered
         self.laser = laser
         self.log = log or (lambda _: None)
         self.settings = views.Settings()
@@ -151,16 +171,24 @@ class Bridge:
             self.send(UNLOCK_MSG)
 
     def detach(self, writer: Callable[[bytes], None]) -> None:
-        """The sender went away: hold the machine (laser off), forget its partial input."""
+        """The sender went away: after complete lines the bridge finishes what it received
+        (GRBL does); in the middle of a line, or with `hold_on_disconnect`, it holds the
+        machine (laser off) and forgets the input (module doc)."""
         with self._wlock:
             if self._writer != writer:  # bound methods compare equal, never identical
                 return
             self._writer = None
+        clean = self.input.drop_partial()
+        if clean and not self.hold_on_disconnect:
+            self.log("sender closed the port after complete lines: finishing them, as GRBL "
+                     "does")
+            return
         self.input.clear()
         if self.grbl_state() not in ("Idle", "Alarm", "Check"):
             self.held = True
             self.machine.hold()
-        self.log("sender disconnected: machine held, laser off")
+        self.log("sender disconnected" + ("" if clean else " in the middle of a line")
+                 + ": machine held, laser off")
 
     def send(self, text: str) -> None:
         with self._wlock:
@@ -255,17 +283,38 @@ class Bridge:
                 continue
             got = self.input.take(0.01 if self.pending else 0.1)
             if got is None:
-                if self.pending and time.monotonic() - self._last_line_at > FLUSH_IDLE_S:
+                if self.pending and (time.monotonic() - self._last_line_at > FLUSH_IDLE_S
+                                     or self.machine.idle):
                     self.flush()
                 continue
             self._last_line_at = time.monotonic()
-            self.send(self.handle_line(*got[:2]))
+            reply = self.handle_line(*got[:2])
+            if self._wait_window():
+                self.send(reply)
+
+    def _moves_ahead(self) -> int:
+        """Accepted moves the machine has not run to their end."""
+        return self.moves_acked - self.machine.moves_done
+
+    def _wait_window(self) -> bool:
+        """Hold the line's `ok` until at most `ok_window` accepted moves are ahead of the
+        motion, running the look-ahead when the machine has nothing else (module doc);
+        False when a reset, an alarm or the bridge's end came first (no reply then)."""
+        if not self.ok_window:
+            return True
+        while self._moves_ahead() > self.ok_window:
+            if self._reset_req.is_set() or self._stop.is_set() or self.alarm is not None:
+                return False
+            if self.pending and self.machine.batches.empty() and not self.machine.busy:
+                self.flush()
+            time.sleep(0.005)
+        return True
 
     def handle_line(self, raw: str, overflow: bool) -> str:
         """One line → its reply (`ok` / `error:N`); output it causes is sent before."""
         try:
             if overflow:
-                raise GrblError(codes.LINE_OVERFLOW, "line too long")
+                raise GrblError(gcode_errors.LINE_OVERFLOW, "line too long")
             text = preparse(raw)
             if not text:
                 return "ok"
@@ -273,8 +322,8 @@ class Bridge:
                 run_system(self, text)
             else:
                 self._gcode(text)
-        except GrblError as e:
-            self.log(f"{raw.strip()!r}: {e}")
+        except GcodeError as e:
+            self.log(f"{raw.strip()!r}: error:{e.code} {e.message}")
             return f"error:{e.code}"
         except GrblAlarmError as e:
             self.raise_alarm(e.code, e.message)
@@ -285,8 +334,7 @@ class Bridge:
     def _gcode(self, text: str) -> None:
         if self.alarm is not None or self.locked or self.machine.jogging:
             raise GrblError(codes.GCODE_LOCK, "alarm or jog state")
-        block = parse(text)
-        state, actions = execute(self.modal, block, self.compiler.tolerance_mm / 2)
+        state, actions = policy.run(self.modal, policy.parse(text))
         th = self.th
         items: list[Item] = []
         for act in actions:
@@ -303,12 +351,13 @@ class Bridge:
             items.append(PenSync(self._pen_wanted(state)))
         if not self.check_mode:
             self.pending += items
+            self.moves_acked += sum(isinstance(i, Solved) for i in items)
         for act in actions:
             if isinstance(act, ProgramFlow):
                 self._program_flow(act.code)
 
     def _pen_wanted(self, st: ModalState | Move) -> bool:
-        z = st.position[2] if isinstance(st, ModalState) else st.z
+        z = st.position[2] if isinstance(st, ModalState) else st.end[2]
         return (st.z_seen and z <= 0.0) or (st.spindle in (3, 4) and st.s > 0)
 
     def _power(self, s: float) -> int:
@@ -321,18 +370,18 @@ class Bridge:
         if mv.rapid:
             feed = self.profile.motion.travel_feed_mm_s * self.ov.rapid / 100
         else:
-            feed = min(mv.feed_mm_min * self.ov.feed / 100,
-                       self.settings.feed_cap_mm_min()) / 60.0
+            feed = min(mv.feed * self.ov.feed / 100, self.settings.feed_cap_mm_min()) / 60.0
         if self.laser:
             draw = mv.spindle in (3, 4) and self._power(mv.s) > 0
         else:
             draw = self._pen_wanted(mv)
         dynamic = mv.spindle == 4 and bool(self.settings.values[32])
+        points = mv.points(self.compiler.tolerance_mm / 2)  # arcs: half the budget
         try:
-            return self.compiler.solve(th, (mv.start[0], mv.start[1]), list(mv.points),
+            return self.compiler.solve(th, (mv.start[0], mv.start[1]), points,
                                        rapid=mv.rapid, draw=draw and not jog, feed_mm_s=feed,
                                        power=self._power(mv.s) if self.laser else 0,
-                                       dynamic=dynamic, arc=len(mv.points) > 1, jog=jog)
+                                       dynamic=dynamic, arc=len(points) > 1, jog=jog)
         except MoveRefusedError as e:  # a soft limit, GRBL's alarm 2
             raise GrblAlarmError(codes.ALARM_SOFT_LIMIT, ascii_text(str(e))) from None
 
@@ -399,25 +448,24 @@ class Bridge:
         """`$J=`: a checked move in mm at its own F, planned and sent at once."""
         if self.alarm is not None or self.locked:
             raise GrblError(codes.GCODE_LOCK, "jog in alarm")
-        block = parse(words)
+        block = policy.parse(words)
         extra_g = set(block.g) - {"units", "distance", "non_modal"}
         if (extra_g or block.m or block.g.get("non_modal", 530) != 530
                 or set(block.values) - set("XYZF")):
             raise GrblError(codes.INVALID_JOG_COMMAND, "only G20/G21/G90/G91/G53 X Y Z F")
         if "F" not in block.values:
-            raise GrblError(codes.UNDEFINED_FEED_RATE, "jog without F")
-        if not block.axes:
-            raise GrblError(codes.NO_AXIS_WORDS, "jog without axis words")
+            raise GrblError(gcode_errors.UNDEFINED_FEED_RATE, "jog without F")
+        if not any(a in block.values for a in "XYZ"):
+            raise GrblError(gcode_errors.NO_AXIS_WORDS, "jog without axis words")
         block.g["motion"] = 10
-        jog_state = replace(self.modal, spindle=5)
-        state, actions = execute(jog_state, block, self.compiler.tolerance_mm / 2)
+        state, actions = policy.run(self.modal._replace(spindle=5), block)
         mv = actions[0]
         assert isinstance(mv, Move)
         try:
             solved = self._solve(mv, self.th, jog=True)
         except GrblAlarmError as e:
             raise GrblError(codes.TRAVEL_EXCEEDED, e.message) from None
-        self.modal = replace(self.modal, position=state.position)
+        self.modal = self.modal._replace(position=state.position)
         if solved is not None and not self.check_mode:
             self.th = solved.th[-1]
             self.flush()
@@ -457,7 +505,7 @@ class Bridge:
     def _sync_position(self) -> None:
         p = self.compiler.point_of(self.th)
         if p is not None:
-            self.modal = replace(self.modal, position=(p[0], p[1], self.modal.position[2]))
+            self.modal = self.modal._replace(position=(p[0], p[1], self.modal.position[2]))
 
     def _resync(self) -> None:
         """After a stop: the parser and the planner start from where the machine is."""
@@ -471,6 +519,7 @@ class Bridge:
         """Stop now (firmware Ctrl-X: queue cleared, laser off, position kept)."""
         self.pending = []
         self.machine.reset()
+        self.moves_acked = self.machine.moves_done  # the rest will never run
         self.held = False
         self._resync()
 
@@ -481,7 +530,7 @@ class Bridge:
         """Ctrl-X: stop, GRBL's modal state to defaults, banner (alarm kept)."""
         self._reset_req.clear()
         self._stop_motion()
-        self.modal = replace(self.modal.after_reset(), g92=(0.0, 0.0, 0.0))
+        self.modal = self.modal.after_reset()._replace(g92=(0.0, 0.0, 0.0))
         self._resync()
         self.check_mode = False
         self.attach_banner()
@@ -508,6 +557,7 @@ class Bridge:
         """A machine-side fault (machine thread): GRBL's nearest alarm."""
         code = codes.FIRMWARE_ALARM.get(firmware_alarm or 0, codes.ALARM_ABORT_CYCLE)
         self.pending = []
+        self.moves_acked = self.machine.moves_done
         self.alarm = code
         self.send(f"ALARM:{code}")
         self.send(f"[MSG:machine: {message}]")

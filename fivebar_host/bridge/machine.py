@@ -10,7 +10,10 @@ Everything that touches the port happens on this thread; the GRBL side asks thro
   firmware's host-silence laser watchdog fed;
 * a reset stops the machine at once (firmware Ctrl-X: queue cleared, laser off, position
   kept) and drops every batch not yet sent;
-* a fault of the link (error reply, alarm, silence, disconnect) is handed to `on_fault`.
+* a fault of the link (error reply, alarm, silence, disconnect) is handed to `on_fault`;
+* `moves_done` counts the accepted G-code moves that have run to their end (from the
+  firmware's last finished line and the batch's move of each item, `moves_finished`), so the
+  GRBL side can hold its `ok`s within GRBL's window (`controller.OK_WINDOW`).
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ import time
 from collections.abc import Callable
 
 from fivebar_host import protocol
-from fivebar_host.compile.incremental import Batch
+from fivebar_host.compile.incremental import Batch, moves_finished
 from fivebar_host.controllers.fivebar.link import Link
 from fivebar_host.controllers.fivebar.stream import StreamProgress
 from fivebar_host.protocol import StatusReport
@@ -42,6 +45,10 @@ class MachineDriver:
         self.busy = False  # a batch is being streamed
         self.jogging = False
         self.hold_requested = False
+        self.moves_done = 0  # accepted moves (not jogs) run to their end, all batches
+        #: batches streamed and not yet run to their end: (batch, first line, moves before)
+        self._running: list[tuple[Batch, int, int]] = []
+        self._base = 0  # moves of every batch streamed before the newest
         self._resume = False
         self._reset = threading.Event()
         self._reset_done = threading.Event()
@@ -109,11 +116,13 @@ class MachineDriver:
                     try:
                         self._stream(self.batches.get_nowait())
                         self.status = self.link.status()
+                        self._count_done(self.status)
                     finally:
                         self.busy = False
                     continue
                 if time.monotonic() - last_poll >= POLL_S:
                     self.status = self.link.status()
+                    self._count_done(self.status)
                     last_poll = time.monotonic()
                     if not self.busy and self.status.state == "Idle":
                         self.jogging = False
@@ -137,6 +146,25 @@ class MachineDriver:
             self.link.realtime(protocol.RT_RESUME)
             self.status = self.link.status()
 
+    def _count_done(self, st: StatusReport | None) -> None:
+        """`moves_done` from the firmware's last finished line: each batch still running
+        maps its lines to its moves (`moves_finished`); one run to its end is dropped."""
+        if st is None:
+            return
+        while self._running:
+            batch, first, before = self._running[0]
+            done = moves_finished(batch.program, st.done_line - first + 1, batch.moves)
+            self.moves_done = max(self.moves_done, before + done)
+            if done < batch.moves:
+                break
+            self._running.pop(0)
+
+    def _settle(self) -> None:
+        """After a stop: what ran is done, the rest of the batches never will be."""
+        self._count_done(self.status)
+        self._running.clear()
+        self._base = self.moves_done
+
     def _do_reset(self) -> None:
         self._drop_batches()
         try:
@@ -146,10 +174,15 @@ class MachineDriver:
             with self._lock:
                 self.hold_requested = self._resume = False
             self.busy = self.jogging = False
+            self._settle()
             self._reset.clear()
             self._reset_done.set()
 
     def _stream(self, batch: Batch) -> None:
+        if not batch.jog and batch.moves:
+            self._running.append((batch, self.link.next_line, self._base))
+            self._base += batch.moves
+            self._count_done(self.status)  # an empty program's moves are done at once
         if not len(batch.program):
             return
         self.busy = True
@@ -158,6 +191,7 @@ class MachineDriver:
         def progress(p: StreamProgress) -> None:
             if p.status is not None:
                 self.status = p.status
+                self._count_done(p.status)
 
         def interrupt() -> bool:
             """Held inside a stream: wait for the sender's resume or reset."""
@@ -184,6 +218,7 @@ class MachineDriver:
         """A link fault: stop the machine (laser off) and tell the GRBL side."""
         self._drop_batches()
         self.busy = self.jogging = False
+        self._settle()
         with contextlib.suppress(LinkError):
             self.link.realtime(protocol.RT_HOLD)
         with contextlib.suppress(LinkError):

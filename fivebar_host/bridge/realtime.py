@@ -94,6 +94,17 @@ class InputBuffer:
             self._overflow = False
             self.cond.notify_all()
 
+    def drop_partial(self) -> bool:
+        """The sender went away: forget a line it did not finish; True when there was none
+        (it closed after complete lines, none of them overlong)."""
+        with self._lock:
+            clean = not self._partial and not self._overflow and not any(
+                over for _, over, _ in self.lines)
+            self._partial.clear()
+            self._partial_bytes = 0
+            self._overflow = False
+            return clean
+
     def pending_bytes(self) -> int:
         with self._lock:
             return sum(n for _, _, n in self.lines) + self._partial_bytes

@@ -2,15 +2,19 @@
 a symlink points at it) and a TCP port (network senders), served by one selector thread.
 
 One sender at a time drives the machine: a second connection gets a `[MSG:…]` saying the
-bridge is busy and is closed. A sender that connects gets GRBL's banner; one that goes away
-(the pty's last opener closes it: the master reads EIO / hangs up; a TCP peer closes) leaves
-the machine held with the laser off (`Bridge.detach`).
+bridge is busy and is closed. GRBL senders cannot send a token, so who may connect over TCP
+is an allow-list of client addresses (`Access`): loopback always, other addresses only when
+listed (or every address with `--insecure-listen`); a refused client gets a `[MSG:…]` saying
+so and is closed before the bridge reads a byte from it. A sender that connects gets GRBL's
+banner; one that goes away (the pty's last opener closes it: the master reads EIO / hangs up;
+a TCP peer closes) leaves the machine held with the laser off (`Bridge.detach`).
 """
 
 from __future__ import annotations
 
 import contextlib
 import errno
+import ipaddress
 import os
 import selectors
 import socket
@@ -21,21 +25,67 @@ from collections.abc import Callable
 from pathlib import Path
 
 from fivebar_host.bridge.controller import Bridge
-from fivebar_host.errors import UsageError
+from fivebar_host.errors import UsageError, shorten
 
 BUSY_MSG = b"[MSG:fivebar bridge busy: another sender is connected]\r\n"
+REFUSED_MSG = b"[MSG:fivebar bridge: this address may not connect (--allow)]\r\n"
+
+Network = ipaddress.IPv4Network | ipaddress.IPv6Network
 
 
 def parse_listen(text: str) -> tuple[str, int]:
-    """`HOST:PORT` or `PORT` (loopback) → (host, port)."""
+    """`HOST:PORT`, `[IPv6]:PORT` or `PORT` (loopback) → (host, port)."""
     host, _, port = text.rpartition(":")
     try:
         number = int(port)
     except ValueError:
-        raise UsageError(f"--listen must be HOST:PORT or PORT; got {text!r}") from None
+        raise UsageError(f"--listen must be HOST:PORT or PORT; got {shorten(text)!r}") from None
     if not 0 <= number <= 65535:
-        raise UsageError(f"--listen port out of range: {number}")
-    return (host or "127.0.0.1"), number
+        raise UsageError(f"--listen port out of range: {shorten(port)}")
+    return (host.strip("[]") or "127.0.0.1"), number
+
+
+def is_loopback(host: str) -> bool:
+    """127.0.0.0/8, ::1 or `localhost`."""
+    if host.lower() == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def parse_allow(text: str) -> Network:
+    """One `--allow` value: an address or a network (`192.168.1.20`, `192.168.1.0/24`)."""
+    try:
+        return ipaddress.ip_network(text.strip(), strict=False)
+    except ValueError:
+        raise UsageError(f"--allow takes an IP address or network such as 192.168.1.0/24; "
+                         f"got {shorten(text)!r}") from None
+
+
+class Access:
+    """Who may connect over TCP: loopback always; others when in `allow`, or anyone when
+    `allow` is None (`--insecure-listen`)."""
+
+    def __init__(self, allow: list[Network] | None) -> None:
+        self.allow = allow
+
+    def permits(self, address: str) -> bool:
+        """Whether a client at `address` may drive the machine."""
+        try:
+            ip = ipaddress.ip_address(address.split("%", 1)[0])
+        except ValueError:
+            return False
+        if isinstance(ip, ipaddress.IPv6Address) and ip.ipv4_mapped is not None:
+            ip = ip.ipv4_mapped
+        if ip.is_loopback or self.allow is None:
+            return True
+        return any(ip in net for net in self.allow)
+
+
+#: Only local processes: the default.
+LOOPBACK_ONLY = Access([])
 
 
 class _Pty:
@@ -84,13 +134,18 @@ class Server:
     """Serves `bridge` on a pty (`link`) and/or TCP (`listen`) until `stop`."""
 
     def __init__(self, bridge: Bridge, link: Path | None = None,
-                 listen: tuple[str, int] | None = None) -> None:
+                 listen: tuple[str, int] | None = None, access: Access = LOOPBACK_ONLY,
+                 log: Callable[[str], None] | None = None) -> None:
         self.bridge = bridge
+        self.access = access
+        self.log = log
+        self.refused = 0  # TCP clients refused by the allow-list
         self.sel = selectors.DefaultSelector()
         self.pty = _Pty(link) if link is not None else None
         self.sock: socket.socket | None = None
         if listen is not None:
-            self.sock = socket.create_server(listen, reuse_port=False)
+            family = socket.AF_INET6 if ":" in listen[0] else socket.AF_INET
+            self.sock = socket.create_server(listen, family=family, reuse_port=False)
             self.sock.setblocking(False)
             self.sel.register(self.sock, selectors.EVENT_READ, "accept")
         self.client: socket.socket | None = None
@@ -156,7 +211,15 @@ class Server:
 
     def _accept(self) -> None:
         assert self.sock is not None
-        conn, _ = self.sock.accept()
+        conn, peer = self.sock.accept()
+        if not self.access.permits(str(peer[0])):
+            self.refused += 1
+            if self.log is not None:
+                self.log(f"refused a TCP client at {peer[0]}: not in --allow")
+            with contextlib.suppress(OSError):
+                conn.sendall(REFUSED_MSG)
+            conn.close()
+            return
         if self.owner is not None:
             with contextlib.suppress(OSError):
                 conn.sendall(BUSY_MSG)

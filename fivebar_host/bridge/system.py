@@ -7,10 +7,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from fivebar_host.bridge import codes, views
+from fivebar_host.bridge import codes, policy, views
 from fivebar_host.bridge.codes import GrblError
-from fivebar_host.bridge.gcode import _NUMBER, parse
-from fivebar_host.bridge.interp import ModalState
+from fivebar_host.gcode import NUMBER, ModalState
+from fivebar_host.gcode import errors as gcode_errors
 
 if TYPE_CHECKING:
     from fivebar_host.bridge.controller import Bridge
@@ -86,7 +86,7 @@ def _startup(bridge: Bridge, cmd: str) -> None:
         raise GrblError(codes.INVALID_STATEMENT, f"${cmd}")
     text = cmd[3:]
     if text:
-        parse(text)  # refuse a line GRBL's parser would refuse
+        policy.parse(text)  # refuse a line GRBL's parser would refuse
     bridge.settings.startup[int(cmd[1])] = text
 
 
@@ -108,26 +108,26 @@ def _restore(bridge: Bridge, what: str) -> None:
 
 def _setting(bridge: Bridge, cmd: str) -> None:
     """`$<n>=<value>`: GRBL's number parse, then `=`, then the value."""
-    m = _NUMBER.match(cmd)
+    m = NUMBER.match(cmd)
     if m is None:
-        raise GrblError(codes.BAD_NUMBER_FORMAT if cmd[:1].isdigit() or cmd[:1] in "+-."
+        raise GrblError(gcode_errors.BAD_NUMBER_FORMAT if cmd[:1].isdigit() or cmd[:1] in "+-."
                         else codes.INVALID_STATEMENT, f"${cmd}")
     rest = cmd[m.end():]
     if not rest.startswith("="):
         raise GrblError(codes.INVALID_STATEMENT, f"${cmd}")
-    v = _NUMBER.fullmatch(rest[1:])
+    v = NUMBER.fullmatch(rest[1:])
     if v is None:
-        raise GrblError(codes.BAD_NUMBER_FORMAT, f"${cmd}")
+        raise GrblError(gcode_errors.BAD_NUMBER_FORMAT, f"${cmd}")
     number, value = float(m.group()), float(v.group())
     if number != int(number) or int(number) not in views.DEFAULTS:
         raise GrblError(codes.INVALID_STATEMENT, f"no setting ${m.group()}")
     if value < 0:
-        raise GrblError(codes.NEGATIVE_VALUE, f"${m.group()}={v.group()}")
+        raise GrblError(gcode_errors.NEGATIVE_VALUE, f"${m.group()}={v.group()}")
     n = int(number)
     if n in views.INTEGER:
         value = float(int(value))
     if n in views.BOOLEAN:
         value = 1.0 if value else 0.0
     if n in (30, 110, 111) and value <= 0:
-        raise GrblError(codes.NEGATIVE_VALUE, f"${n} must be positive")
+        raise GrblError(gcode_errors.NEGATIVE_VALUE, f"${n} must be positive")
     bridge.settings.values[n] = value

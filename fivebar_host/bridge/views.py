@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from fivebar_host.bridge.interp import MM_PER_INCH, WCS_NAMES, ModalState, Vec
+from fivebar_host.gcode import MM_PER_INCH, WCS_NAMES, ModalState, Vec
 
 VERSION = "1.1h"
 BANNER = f"Grbl {VERSION} ['$' for help]"
@@ -68,14 +68,13 @@ def fmt_vec(v: Vec, inches: bool = False) -> str:
     return ",".join(f"{c * s:.4f}" if inches else f"{c * s:.3f}" for c in v)
 
 
-def parser_state(st: ModalState, plane: str = "G17") -> str:
-    """`$G`: `[GC:G0 G54 G17 G21 G90 G94 M5 M9 T0 F0 S0]`."""
-    motion = {0: "G0", 10: "G1", 20: "G2", 30: "G3", 800: "G80"}[st.motion]
+def parser_state(st: ModalState) -> str:
+    """`$G`: `[GC:G0 G54 G17 G21 G90 G94 M5 M9 T0 F0 S0]` (G codes are kept as tenths)."""
     cool = " ".join(f"M{c}" for c in sorted(st.coolant)) or "M9"
     feed = st.feed / (MM_PER_INCH if st.units == 200 else 1.0)
-    return (f"[GC:{motion} {WCS_NAMES[st.wcs]} {plane} G{st.units // 10} "
-            f"G{st.distance // 10} G94 M{st.spindle} {cool} T{st.tool} F{feed:g} "
-            f"S{st.s:g}]")
+    return (f"[GC:G{st.motion // 10} {WCS_NAMES[st.wcs]} G{st.plane // 10} "
+            f"G{st.units // 10} G{st.distance // 10} G{st.feed_mode // 10} M{st.spindle} "
+            f"{cool} T{st.tool} F{feed:g} S{st.s:g}]")
 
 
 def parameters(st: ModalState, inches: bool) -> list[str]:

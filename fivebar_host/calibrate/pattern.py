@@ -30,11 +30,12 @@ from typing import Any
 import numpy as np
 
 from fivebar_host.compile import CompileOptions, Job, compile_job, write_atomic
-from fivebar_host.config import Profile
+from fivebar_host.config import ConfigError, Profile
 from fivebar_host.errors import FivebarError
 from kinematics.arrays import BoolArray, FloatArray
 from kinematics.calibration import MachineParams
 from kinematics.calibration_analysis import SafeGrid, design_marks, safe_grid
+from kinematics.extension import ExtendedFiveBar
 
 FORMAT = "fivebar-calibration-pattern/1"
 CROSS_MM = 1.5  # half the length of a cross arm
@@ -88,8 +89,12 @@ class Pattern:
 
 
 def nominal_params(profile: Profile) -> MachineParams:
-    """The profile's seven machine parameters."""
+    """The profile's seven machine parameters. A pen off the joint (`[geometry] extension`)
+    is refused: the calibration model has the pen at the joint (not done yet, issue 38)."""
     g = profile.geometry
+    if isinstance(g, ExtendedFiveBar) and g.extension > 0.0:
+        raise ConfigError(f"{profile.source}: calibration does not model a pen off the joint "
+                          "([geometry] extension) yet; measure and set the lengths by hand")
     return MachineParams(g.a1, g.b1, g.a2, g.b2, g.w, *profile.motors.home_rad)
 
 

@@ -12,6 +12,9 @@ OS error. Nothing else is caught, so a bug still shows its traceback.
 
 from __future__ import annotations
 
+import contextlib
+import io
+import os
 import sys
 from collections.abc import Callable
 from functools import wraps
@@ -24,8 +27,8 @@ from fivebar_host import __version__
 from fivebar_host.config import Profile, load_profile
 from fivebar_host.controllers import DEFAULT as DEFAULT_CONTROLLER
 from fivebar_host.controllers import names as controller_names
-from fivebar_host.errors import FivebarError, OptionError
-from fivebar_host.options import JOB_OPTIONS, Option, compile_values, parse_page
+from fivebar_host.errors import FivebarError, OptionError, bounded
+from fivebar_host.options import JOB_OPTIONS, Option, compile_values, parse_length, parse_page
 
 if TYPE_CHECKING:
     from fivebar_host.run.controller import Controller
@@ -35,16 +38,69 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="fivebar")
-def main() -> None:
+@click.pass_context
+def main(ctx: click.Context) -> None:
     """Drive a five-bar-linkage pen plotter or laser engraver from SVG or G-code."""
+    from fivebar_host.controllers import ports
     from fivebar_host.devices import register
 
     register()  # the emulator's and the mocks' URL schemes for every command
+    if not isinstance(sys.stdout, QuietPipe):
+        sys.stdout = QuietPipe(sys.stdout)  # `fivebar … | head` ends quietly
+    # how the lock file of a port this command opens names its holder ("fivebar plot")
+    ports.set_command(f"fivebar {ctx.invoked_subcommand or ''}".strip())
+
+
+class QuietPipe(io.TextIOBase):
+    """Standard output that goes quiet when its reader leaves (`fivebar plot … | head`):
+    the first write into a closed pipe points the descriptor at /dev/null and every later
+    write is dropped, so the command finishes (a plot on a machine is not cut short by its
+    output) without a traceback or an error line."""
+
+    def __init__(self, inner: Any) -> None:
+        super().__init__()
+        self.inner = inner
+        self.gone = False
+
+    @property
+    def encoding(self) -> str:  # type: ignore[override]
+        return str(getattr(self.inner, "encoding", "utf-8"))
+
+    def _quiet(self) -> None:
+        self.gone = True
+        with contextlib.suppress(OSError, ValueError):
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, self.inner.fileno())
+            os.close(devnull)
+
+    def write(self, text: str) -> int:
+        if not self.gone:
+            try:
+                self.inner.write(text)
+            except BrokenPipeError:
+                self._quiet()
+        return len(text)
+
+    def flush(self) -> None:
+        if not self.gone:
+            try:
+                self.inner.flush()
+            except BrokenPipeError:
+                self._quiet()
+
+    def isatty(self) -> bool:
+        return bool(self.inner.isatty())
+
+    def fileno(self) -> int:
+        return int(self.inner.fileno())
+
+    def writable(self) -> bool:
+        return True
 
 
 def fail(message: str, code: int = 2) -> None:
     """Print an error in one line on stderr and exit non-zero."""
-    click.echo(f"error: {message}", err=True)
+    click.echo(f"error: {bounded(message)}", err=True)
     sys.exit(code)
 
 
@@ -100,10 +156,29 @@ class OptionType(click.ParamType):  # type: ignore[type-arg]  # generic in click
             self.fail(e.why, param, ctx)
 
 
+class LengthType(click.ParamType):  # type: ignore[type-arg]  # generic in click 8.2+ only
+    """A length in mm, read as every job option's (`options.parse_length`: 5, 5mm, 0.5in)."""
+
+    name = "length"
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> float:
+        if isinstance(value, float):
+            return value
+        try:
+            return parse_length(str(value))
+        except ValueError as e:
+            self.fail(str(e), param, ctx)
+
+
 def click_option(opt: Option) -> Callable[[F], F]:
     """The click option generated from one job option definition."""
     if opt.kind == "bool":
         return click.option(opt.flag, opt.name, is_flag=True, help=opt.describe())
+    if opt.word:  # `--hatch` alone means `--hatch pen`
+        return click.option(opt.flag, opt.name, type=OptionType(opt), default=opt.default,
+                            is_flag=False, flag_value=opt.word,
+                            metavar=f"[{opt.metavar or 'VALUE'}]", help=opt.describe())
     return click.option(opt.flag, opt.name, type=OptionType(opt), default=opt.default,
                         multiple=opt.repeat, metavar=opt.metavar or None,
                         help=opt.describe())
@@ -126,17 +201,19 @@ def compile_from_cli(drawing: Path, config_path: Path | None,
                      values: dict[str, Any]) -> tuple[Profile, Any]:
     """Compile and check a drawing with the job option values a command received:
     (profile, Job). Raises the pipeline's errors."""
+    from fivebar_host.cli.progress import compile_progress
     from fivebar_host.compile import CompileOptions, compile_job
     from fivebar_host.config import require_tool, with_pen_overrides
     from fivebar_host.raster.image import is_image_file
 
     prof = with_pen_overrides(load(config_path), values)
     require_tool(prof, bool(values.get("laser")))
-    if is_image_file(drawing):
-        from fivebar_host.raster.job import compile_raster, raster_options
+    with compile_progress():  # a bar (TTY) or a line every few seconds for long compiles
+        if is_image_file(drawing):
+            from fivebar_host.raster.job import compile_raster, raster_options
 
-        return prof, compile_raster(drawing, prof, raster_options(values, prof))
-    return prof, compile_job(drawing, prof, CompileOptions(**compile_values(values)))
+            return prof, compile_raster(drawing, prof, raster_options(values, prof))
+        return prof, compile_job(drawing, prof, CompileOptions(**compile_values(values)))
 
 
 def pop_job_values(kwargs: dict[str, Any]) -> dict[str, Any]:

@@ -9,6 +9,7 @@ from typing import Any
 import click
 
 from fivebar_host.cli.common import (
+    LengthType,
     compile_from_cli,
     config_option,
     controller_option,
@@ -22,6 +23,8 @@ from fivebar_host.cli.common import (
     yes_option,
 )
 from fivebar_host.cli.operator import TerminalOperator
+
+LENGTH = LengthType()
 
 
 @main.command("home")
@@ -45,8 +48,10 @@ def home_cmd(port: str | None, yes: bool, controller: str, config_path: Path | N
 @click.option("--motor", type=click.Choice(["A", "B"]), default=None,
               help="Move one motor (with --steps).")
 @click.option("--steps", type=int, default=0, help="Steps for --motor (signed).")
-@click.option("--dx", type=float, default=0.0, help="Move the pen by this much in x, mm.")
-@click.option("--dy", type=float, default=0.0, help="Move the pen by this much in y, mm.")
+@click.option("--dx", type=LENGTH, default="0", metavar="LENGTH",
+              help="Move the pen by this much in x: mm, or with a unit (5mm, 0.5in, 1cm).")
+@click.option("--dy", type=LENGTH, default="0", metavar="LENGTH",
+              help="Move the pen by this much in y, like --dx.")
 @yes_option
 @controller_option
 @config_option

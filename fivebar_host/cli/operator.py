@@ -55,7 +55,14 @@ class TerminalOperator(QuietOperator):
         self._shown_s = -1
 
     # ------------------------------------------------------------------ questions
+    def _leave_bar(self) -> None:
+        """A question or a note while the progress bar is drawn on the terminal starts on
+        a line of its own (the bar is redrawn below it at the next update)."""
+        if self._show is not None and sys.stdout.isatty():
+            click.echo("")
+
     def confirm(self, question: str) -> bool:
+        self._leave_bar()
         if self.yes:
             click.echo(f"{question} yes (--yes)")
             return True
@@ -65,6 +72,7 @@ class TerminalOperator(QuietOperator):
         return click.confirm(question, default=False)
 
     def confirm_placed(self, question: str) -> bool:
+        self._leave_bar()
         if not terminal():
             click.echo(f"{question} (no terminal to ask; --yes does not answer this)"
                        if self.yes else f"{question} (no terminal to ask)", err=True)
@@ -74,6 +82,7 @@ class TerminalOperator(QuietOperator):
         return click.confirm(question, default=False)
 
     def note(self, text: str) -> None:
+        self._leave_bar()
         click.echo(text)
 
     # ------------------------------------------------------------------ holds and stops

@@ -76,6 +76,14 @@ def plot(drawing: Path, dry_run: bool, preview_path: Path, port: str | None, res
     off) and asks whether to resume or abort; a fault or an abort leaves a resume file, and
     the same command with --resume continues exactly where the machine stopped.
     """
+    plot_file(drawing, dry_run, preview_path, port, resume, yes, controller, config_path,
+              job_values)
+
+
+def plot_file(drawing: Path, dry_run: bool, preview_path: Path, port: str | None,
+              resume: bool, yes: bool, controller: str, config_path: Path | None,
+              job_values: dict[str, Any]) -> None:
+    """`fivebar plot` itself (also `fivebar text --dry-run/--port` on the file it wrote)."""
     if not dry_run and port is None:
         fail("give --port PORT to plot on a machine (e.g. /dev/ttyUSB0 or fivebar-sim:// "
              "for the emulator), or --dry-run for the preview and report")
@@ -85,6 +93,10 @@ def plot(drawing: Path, dry_run: bool, preview_path: Path, port: str | None, res
 
     laser = bool(job_values["laser"])
     copies = Copies(int(job_values["copies"]), float(job_values["page_delay_s"]))
+    if port is not None and not dry_run:
+        from fivebar_host.controllers.ports import refuse_if_held
+
+        refuse_if_held(port)  # before compiling: another process owns the machine
     prof, job = compile_from_cli(drawing, config_path, job_values)
     if dry_run and job.raster is not None:
         from fivebar_host.raster import preview
@@ -105,5 +117,3 @@ def plot(drawing: Path, dry_run: bool, preview_path: Path, port: str | None, res
     check_stops(job)
     plot_on_machine(Plot(drawing, port, controller, laser, resume, yes, copies, preview_path),
                     prof, job)
-
-

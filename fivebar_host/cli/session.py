@@ -110,20 +110,53 @@ def write_executed(job: Job, prof: Profile, rec: Recording, preview_path: Path,
                    f"boundary data {burned.with_suffix('.npz')}")
         return
     tr, true = read_trace(rec.path), rec.true
-    t, track = merge_axes(tr.positions("A"), tr.positions("B"))
-    ex = executed_path(job, prof, t / tr.freq, track, report.start_segment,
-                       report.start_position, true=true_params(true))
+    if prof.joints is not None:  # the servo build: the arms' pulses through the true servos
+        from fivebar_host.report.text.executed_servo import executed_servo_path
+
+        ex = executed_servo_path(job, prof, tr, report.start_segment, rec.deadband)
+        t_s, track = ex.time, ex.steps
+    else:
+        # the arms start where the emulated machine kept them (the trace's `start=`)
+        t, track = merge_axes(tr.positions("A", tr.start[0]),
+                              tr.positions("B", tr.start[1]), tr.start)
+        t_s = t / tr.freq
+        ex = executed_path(job, prof, t_s, track, report.start_segment,
+                           report.start_position, true=true_params(true),
+                           backlash=rec.backlash)
     out = preview_path.with_name(preview_path.stem + ".executed.csv")
     rows = ["t_s,a_steps,b_steps,x_mm,y_mm,segment,deviation_mm"]
     rows += [f"{ti:.6f},{a},{b},{x:.4f},{y:.4f},{sg},{'' if d != d else f'{d:.5f}'}"
-             for ti, (a, b), (x, y), sg, d in zip(t / tr.freq, track.tolist(),
+             for ti, (a, b), (x, y), sg, d in zip(t_s, track.tolist(),
                                                   ex.points.tolist(), ex.segment.tolist(),
                                                   ex.deviation_mm.tolist(), strict=True)]
     write_atomic(out, "\n".join(rows) + "\n")
-    where = " (drawn by the URL's true= machine)" if true is not None else ""
-    click.echo(f"executed path (from the emulator's step pulses{where}): {out}; drawing "
+    given = [k for k, v in (("true=", true), ("backlash=", rec.backlash),
+                            ("deadband=", rec.deadband)) if v is not None]
+    truth = bool(given)
+    where = f" (drawn by the URL's {' and '.join(given)} machine)" if truth else ""
+    pulses = "servo" if prof.joints is not None else "step"
+    click.echo(f"executed path (from the emulator's {pulses} pulses{where}): {out}; drawing "
                f"segments' max deviation "
                f"{ex.max_deviation_mm:.4f} mm (bound {job.tolerance_mm:g} + step quantum "
                f"{job.step_quantum_mm:.4f} mm)")
     if prof.pen is not None:
         click.echo(pen_report(job, prof, tr.pen_pulses(), tr.freq, ex).line())
+    check_deviation(ex.max_deviation_mm, job.tolerance_mm + job.step_quantum_mm, out, truth)
+
+
+def check_deviation(dev_mm: float, bound_mm: float, csv: Path, true_machine: bool) -> None:
+    """A drawing the machine drew farther off than the bound is a failed run, not a
+    report line: DeviationError (exit 3) says how far, and the likely causes."""
+    from fivebar_host.report.text.executed import DeviationError
+
+    if dev_mm <= bound_mm:
+        return
+    why = ("the machine as really built (the URL's true= or backlash=) differs from the "
+           "profile: calibrate it (docs/calibration.md) or set its [motors] backlash_steps "
+           "(docs/backlash.md)" if true_machine else
+           "the arms were not where the controller's count said: a power loss answered "
+           "'yes, they are where the job stopped' while they were elsewhere, or steps lost "
+           "to a stall")
+    raise DeviationError(f"the machine drew {dev_mm:.2f} mm off the drawing, beyond the "
+                         f"bound of {bound_mm:.4f} mm (tolerance + step quantum): {why}. "
+                         f"Every point is in {csv}")

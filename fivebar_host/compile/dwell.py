@@ -102,4 +102,5 @@ def insert_dwells(dwells: tuple[Dwell, ...], profile: Profile, pd: Planned) -> P
         length=np.insert(pd.length, ix, 0.0), perm=np.insert(pd.perm, ix, -1),
         power=np.insert(pd.power, ix, power), f0=np.insert(pd.f0, ix, 0.0),
         f1=np.insert(pd.f1, ix, 1.0), duration_us=np.insert(pd.duration_us, ix, dur),
-        dwell=np.insert(pd.dwell, ix, True))
+        dwell=np.insert(pd.dwell, ix, True),
+        slack=np.insert(pd.slack, ix, pd.slack[ix], axis=0) if pd.slack.shape[0] else pd.slack)

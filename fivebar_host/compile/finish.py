@@ -82,7 +82,7 @@ def _margins(su: Setup, routed: Routed, solved: Solved, tr: Travel,
         sl = slice(i, i + FINISH_BLOCK)
         tm = su.fb.singularity_margins(pd.th[sl], pd.pts[sl]) * sgn
         tm[leg, :2] = np.inf
-        tmin = np.minimum(tmin, tm.min(axis=0))
+        tmin = np.minimum(tmin, [tm[:, c].min() for c in range(3)])  # (min(axis=0) is slow)
     out: FloatArray = np.minimum(jmargin, tmin)
     return out
 
@@ -108,7 +108,10 @@ def _executed_mode_changes(su: Setup, file: str, home: Home, routed: Routed, tr:
         if not segs.size:
             continue
         s0, s1 = int(segs[0]), int(segs[-1]) + 1
-        q = steps.step_angles(pd.steps[s0:s1 + 1], mot.home_rad, mot.steps_per_rev)
+        st = pd.steps[s0:s1 + 1]
+        if pd.slack.shape[0]:  # the joints' steps: the counts less the backlash slack
+            st = st.astype(np.int64) - pd.slack[s0:s1 + 1]
+        q = steps.step_angles(st, mot.home_rad, mot.steps_per_rev)
         dense = densify_joint(q, math.radians(0.5))
         fk = fb.forward_batch(dense, asm)
         marg = (fb.singularity_margins(dense, fk.points)[:, 2] * assembly if fk.valid.all()
@@ -225,7 +228,7 @@ def finish(su: Setup, placed: Placed, home: Home, routed: Routed, solved: Solved
         path_modes=tuple(routed.path_mode.tolist()), home_mode=home.mode,
         mode_changes=tuple(mode_changes),
         tool_time_s=tool_time_s(tool_on, su.profile, break_switches(tool_on, pauses)),
-        dwell=pd.dwell, pauses=pauses,
+        dwell=pd.dwell, pauses=pauses, slack=pd.slack,
     )
     g.clear()
     if opts.validate:

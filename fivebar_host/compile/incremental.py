@@ -32,6 +32,7 @@ import numpy as np
 
 from fivebar_host import protocol
 from fivebar_host.compile import steps
+from fivebar_host.compile.backlash import take_up
 from fivebar_host.compile.model import MAX_STEP_RAD
 from fivebar_host.compile.segments import Segments, drop_zero_moves
 from fivebar_host.compile.timing import time_stepped
@@ -60,6 +61,14 @@ class MoveRefusedError(FivebarError):
         super().__init__(message)
         self.point = point
         self.reason = reason
+
+
+def moves_finished(program: Program, items_done: int, moves: int) -> int:
+    """How many of a batch's `moves` accepted moves have run to their end once its first
+    `items_done` items have (`Program.segment` of a move item is its move's index)."""
+    rest = program.segment[max(items_done, 0):]
+    ahead = rest[rest >= 0]
+    return moves if ahead.size == 0 else int(ahead[0])
 
 
 def pen_switch(down: bool) -> Program:
@@ -194,12 +203,16 @@ class OnlineCompiler:
                        line=np.repeat(np.arange(len(moves)), counts),
                        length=np.concatenate([m.length for m in moves]),
                        perm=np.arange(k))
-        sp = drop_zero_moves(mot, seg)
+        # backlash: take-ups at reversals; each batch ends with the slack taken up downward,
+        # so the counts equal the joints' steps between batches (compile.backlash)
+        sp = take_up(drop_zero_moves(mot, seg), mot.backlash_steps)
         end = (int(sp.steps[-1, 0]), int(sp.steps[-1, 1]))
         if sp.draw.shape[0] == 0:
             return Batch(Program.empty(), 0.0, end, moves[0].jog if moves else False, len(moves))
         mv = sp.line
         power = np.array([m.power for m in moves], dtype=np.uint8)[mv]
+        if sp.slack.shape[0]:  # a standing take-up burns nothing
+            power[(sp.slack[1:] != sp.slack[:-1]).any(axis=1)] = 0
         feed = np.array([m.feed_mm_s for m in moves])[mv]
         stop = np.zeros(mv.shape[0], dtype=bool)
         stop[:-1] = (sp.draw[1:] != sp.draw[:-1]) | (power[1:] != power[:-1])
@@ -210,16 +223,19 @@ class OnlineCompiler:
         speed = planned.length / np.maximum(planned.duration_us * 1e-6, 1e-9)
         scale = np.clip(speed / np.maximum(prog_feed, 1e-9), 0.0, 1.0)
         pw: IntArray = np.rint(np.where(dyn, base * scale, base)).astype(np.int64)
-        prog = self._program(planned.steps[1:], planned.duration_us, planned.draw, pw)
+        prog = self._program(planned.steps[1:], planned.duration_us, planned.draw, pw,
+                             planned.line)
         return Batch(prog, float(planned.duration_us.sum()) * 1e-6, end,
                      moves[0].jog, len(moves))
 
     def _program(self, st: IntArray, dur: IntArray, draw: BoolArray,
-                 power: IntArray) -> Program:
+                 power: IntArray, move: IntArray) -> Program:
         """The batch's items: laser `M3 S0` … `M5` around it with power on drawing segments
-        only; a pen down/up (`pen_switch`) where drawing starts/stops."""
+        only; a pen down/up (`pen_switch`) where drawing starts/stops. Each move item's
+        `segment` is the index of the accepted move it belongs to in the batch (how many
+        moves have run follows from the firmware's last finished line: `moves_finished`)."""
         s = np.where(draw, power, 0) if self.laser else np.zeros(len(dur), dtype=np.int64)
-        moves = Program.moves(st[:, 0], st[:, 1], dur, s)
+        moves = Program.moves(st[:, 0], st[:, 1], dur, s, move)
         if self.laser:
             return Program.join([Program.command(Kind.TOOL_ON, s=3), moves,
                                  Program.command(Kind.TOOL_OFF)])

@@ -33,6 +33,8 @@ the requested path; rounding to whole steps adds at most one step quantum (repor
     travel.plan_travel               → Travel (targets, margins, mode changes, notes)
     segments.assemble                → Segments (merged targets with provenance)
     segments.drop_zero_moves         → Stepped (absolute steps, zero moves dropped)
+    backlash.take_up                 → Stepped (motor counts; a take-up segment at every
+                                       reversal of a motor with backlash)
     timing.plan_timing               → Planned (ramp pieces, power, durations)
     finish.finish                    → Job (per-path bookkeeping, margins, validation)
 
@@ -50,6 +52,8 @@ from typing import Any
 
 import numpy as np
 
+from fivebar_host.compile import budget
+from fivebar_host.compile.backlash import take_up
 from fivebar_host.compile.finish import draw_geometry, finish, requested_rows
 from fivebar_host.compile.layers import sections
 from fivebar_host.compile.model import AUTO_ORDER, CompileOptions, Job, release_free_memory
@@ -60,6 +64,7 @@ from fivebar_host.compile.timing import plan_timing
 from fivebar_host.compile.travel import plan_travel
 from fivebar_host.config import Profile
 from fivebar_host.errors import InputError, JobError, OptionError, Where
+from fivebar_host.progress import report
 from fivebar_host.toolpath import layout
 from fivebar_host.toolpath.gcode import read_gcode
 from fivebar_host.toolpath.geometry import Drawing
@@ -80,16 +85,18 @@ def gcode_tool(profile: Profile | None) -> dict[str, Any]:
 
 
 def read_drawing(path: str | Path, layers: tuple[str, ...] = (),
-                 max_segments: float | None = None, profile: Profile | None = None) -> Drawing:
+                 max_segments: float | None = None, profile: Profile | None = None,
+                 strict: bool = False) -> Drawing:
     """Read an SVG or G-code file, chosen by suffix (or by content when unknown); an SVG
     with more than `max_segments` path segments (None: the reader's default) is refused.
-    `profile` gives G-code Z words their meaning (`gcode_tool`). The reader's own state
-    is freed before the drawing is returned (`_read_and_collect`)."""
-    return _read_and_collect(Path(path), layers, max_segments, profile)
+    `profile` gives G-code Z words their meaning (`gcode_tool`); `strict`: the G-code
+    reader's `--strict`. The reader's own state is freed before the drawing is returned
+    (`_read_and_collect`)."""
+    return _read_and_collect(Path(path), layers, max_segments, profile, strict)
 
 
 def _read_and_collect(p: Path, layers: tuple[str, ...], max_segments: float | None,
-                      profile: Profile | None) -> Drawing:
+                      profile: Profile | None, strict: bool = False) -> Drawing:
     """`read_drawing`, then one full garbage collection: the SVG reader's walker, element
     tree and drawing builder refer to each other, so their buffers (the builder's
     per-primitive arrays, the parser's nodes: about 25 bytes per primitive and more) would
@@ -97,7 +104,7 @@ def _read_and_collect(p: Path, layers: tuple[str, ...], max_segments: float | No
     which a numpy-heavy compile may never trigger. Only for drawings of at least
     `COLLECT_MIN_PRIMITIVES` primitives: a collection costs some 20–30 ms, more than a small
     drawing's reader state is worth."""
-    drawing = _read(p, layers, max_segments, profile)
+    drawing = _read(p, layers, max_segments, profile, strict)
     if drawing.kind.shape[0] >= COLLECT_MIN_PRIMITIVES:
         gc.collect()
     return drawing
@@ -108,23 +115,24 @@ COLLECT_MIN_PRIMITIVES = 1 << 16
 
 
 def _read(p: Path, layers: tuple[str, ...], max_segments: float | None,
-          profile: Profile | None) -> Drawing:
+          profile: Profile | None, strict: bool = False) -> Drawing:
     """`read_drawing` itself."""
     suffix = p.suffix.lower()
     limit = DEFAULT_MAX_SEGMENTS if max_segments is None else int(max_segments)
+    text = profile.text if profile is not None else None  # the fonts of SVG <text>
     if suffix == ".svg":
-        return read_svg(p, layers or None, max_segments=limit)
+        return read_svg(p, layers or None, max_segments=limit, text=text)
     if suffix in GCODE_SUFFIXES:
         if layers:
             raise InputError("--layer applies to SVG files only", str(p))
-        return read_gcode(p, **gcode_tool(profile))
+        return read_gcode(p, strict=strict, **gcode_tool(profile))
     try:
         head = p.read_bytes()[:512].lstrip()
     except OSError as e:
         raise InputError(f"cannot read file: {e.strerror or e}", str(p)) from e
     if head.startswith((b"<?xml", b"<svg", b"<!--", b"<!DOCTYPE")):
-        return read_svg(p, layers or None, max_segments=limit)
-    return read_gcode(p, **gcode_tool(profile))
+        return read_svg(p, layers or None, max_segments=limit, text=text)
+    return read_gcode(p, strict=strict, **gcode_tool(profile))
 
 
 def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
@@ -136,28 +144,37 @@ def _compile_mode(drawing: Drawing, profile: Profile, opts: CompileOptions,
     (module doc: the pipeline); each is slimmed to what the later stages read as soon as the
     next stage has its part, so a large drawing's intermediate arrays do not pile up
     (`consume`: the drawing is placed in place, `place.place`)."""
+    report("placing")
     su = setup(profile, opts, mode)
     placed = place(su, drawing, opts, consume)
     del drawing
     home = find_home(su, placed.drawing.file)
     secs = sections(placed.drawing, placed.poly.stroke, opts.layer_pause, opts.no_pause)
+    report("ordering paths", 0.0)
     routed = route(su, placed, home, opts.keep_order, plan_modes, not opts.no_simplify, secs)
     placed = placed.without_strokes()
     release_free_memory()
+    report("solving")
     solved = solve(su, placed, routed)
+    report("travel")
     tr = plan_travel(su, placed, home, routed, solved, plan_modes)
     solved = solved.summarised()
     release_free_memory()
+    report("segments")
     segments = assemble(placed, home, routed, solved, tr)
     rows = requested_rows(routed, solved)
     routed, solved = routed.per_path(), solved.per_path()
-    handed = [drop_zero_moves(profile.motors, segments)]  # timing empties it
+    # motor counts, with a take-up segment at every reversal of a motor with backlash
+    handed = [take_up(drop_zero_moves(profile.motors, segments),
+                      profile.motors.backlash_steps)]  # timing empties it
     del segments  # the stepped copy replaces it
     release_free_memory()
+    report("timing")
     planned = plan_timing(su, routed, solved, handed)
     geometry = draw_geometry(rows, planned)  # consumes `rows`
     planned = replace(planned, perm=_NO_INTS, f0=_NO_FLOATS, f1=_NO_FLOATS)
     release_free_memory()
+    report("validating")
     return finish(su, placed, home, routed, solved, tr, planned, geometry, opts)
 
 
@@ -167,10 +184,13 @@ _NO_FLOATS = np.zeros(0)
 
 def with_job_motion(profile: Profile, opts: CompileOptions) -> Profile:
     """The profile with the job's speed options in place of its [motion] values (the feeds,
-    and the acceleration limit scaled by `accel_fraction` ≤ 1: never above the profile's)."""
+    and the acceleration limit scaled by `accel_fraction` ≤ 1: never above the profile's);
+    on servo joints the joint speed at most the slower servo's rated speed."""
     mo = profile.motion
+    servo = profile.joints.max_joint_rad_s if profile.joints is not None else math.inf
     new = replace(mo, draw_feed_mm_s=opts.draw_feed_mm_s or mo.draw_feed_mm_s,
                   travel_feed_mm_s=opts.travel_feed_mm_s or mo.travel_feed_mm_s,
+                  max_joint_rad_s=min(mo.max_joint_rad_s, servo),
                   max_joint_rad_s2=mo.max_joint_rad_s2 * (opts.accel_fraction or 1.0))
     return profile if new == mo else replace(profile, motion=new)
 
@@ -180,6 +200,7 @@ def compile_drawing(drawing: Drawing, profile: Profile, opts: CompileOptions,
     """Compile an already-read drawing; `opts.mode` "auto" tries every working mode.
     `consume`: the caller no longer needs `drawing`, which may then be placed in place (its
     primitives become the job's, in machine mm) to save memory on large drawings."""
+    budget.before_compiling(drawing)
     profile = with_job_motion(profile, opts)
     mode = opts.mode or profile.kinematics.working_mode
     if mode != "auto":
@@ -240,5 +261,7 @@ def _compile_with_mode_changes(drawing: Drawing, profile: Profile,
 def compile_job(path: str | Path, profile: Profile, opts: CompileOptions | None = None) -> Job:
     """Read and compile a drawing file (see module doc). Raises `InputError` or `JobError`."""
     o = opts or CompileOptions()
-    drawing = read_drawing(path, o.layers, o.max_segments, profile)
+    budget.before_reading(Path(path))
+    report("reading", 0.0)
+    drawing = read_drawing(path, o.layers, o.max_segments, profile, o.gcode_strict)
     return compile_drawing(drawing, profile, o, consume=True)

@@ -103,6 +103,14 @@ class CompileOptions:
     max_segments: float | None = None  # None: `toolpath.svg.reader.DEFAULT_MAX_SEGMENTS`
     layer_pause: bool = False  # stop for a pen change between Inkscape layers
     no_pause: bool = False  # never stop for a pen change (not even before "!" layers)
+    gcode_strict: bool = False  # G-code: every word outside the honoured ones refused
+    # fills (`compile.fill`, docs/fill.md)
+    hatch_mm: float | None = None  # hatch spacing on the paper; 0: the profile's pen width
+    hatch_angle_deg: float = 45.0  # on the drawing, counter-clockwise from its x axis
+    crosshatch: bool = False  # a second pass at +90°
+    hatch_inset_mm: float = 0.0  # the hatch keeps this far inside each region's edge
+    hiding: bool = False  # hidden-line removal in paint order (AxiDraw's --hiding)
+    hatch_along: str = "lines"  # "arm1"/"arm2": joint-iso arcs, that motor still
 
 
 @dataclass(frozen=True)
@@ -232,6 +240,9 @@ class Job:
     #: a raster job (an image, `fivebar_host.raster`): its G7 segments, lines and pixel runs;
     #: None for a drawing
     raster: RasterRuns | None = None
+    #: per target, what the motor counts `steps` exceed the joint's steps by: the slack
+    #: taken up at reversals (`compile.backlash`; empty: no backlash, counts = joint)
+    slack: IntArray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
 
     # ------------------------------------------------------------------ derived
     @property
@@ -253,6 +264,12 @@ class Job:
     def dwell_time_s(self) -> float:
         """Planned time of the dwells, s (part of `total_time_s`)."""
         return float(self.duration_us[self.is_dwell].sum()) * 1e-6
+
+    @property
+    def joint_steps(self) -> IntArray:
+        """The joints' steps at every target (T+1, 2): `steps` less the `slack` (backlash);
+        what forward kinematics of the job reads."""
+        return self.steps if not self.slack.shape[0] else self.steps.astype(np.int64) - self.slack
 
     @property
     def relative_steps(self) -> IntArray:
@@ -293,7 +310,7 @@ class Job:
     def executed_points(self, fb: FiveBar, samples: int = 4) -> FloatArray:
         """Pen positions along the whole job from the quantised steps, `samples` per segment
         plus the final target (forward kinematics of the joint-space interpolation)."""
-        th = steps.step_angles(self.steps, self.home_rad, self.steps_per_rev)
+        th = steps.step_angles(self.joint_steps, self.home_rad, self.steps_per_rev)
         s = np.arange(samples) / samples
         dth = np.diff(th, axis=0)
         q = (th[:-1, None, :] + s[None, :, None] * dth[:, None, :]).reshape(-1, 2)

@@ -84,9 +84,9 @@ def type1_crossings(fb: FiveBar, th: FloatArray,
         for k in np.flatnonzero(np.sign(m[:-1]) * np.sign(m[1:]) < 0).tolist():
             t = m[k] / (m[k] - m[k + 1])
             q = pts[k] + t * (pts[k + 1] - pts[k])
-            a, b = (fb.a1, fb.b1) if arm == 0 else (fb.a2, fb.b2)
+            lo, hi = fb.reach[arm]  # the arm's annulus (exact but for arm 2 off the joint)
             d = math.hypot(float(q[0]) - (0.0 if arm == 0 else fb.w), float(q[1]))
-            kind = "stretched" if abs(d - (a + b)) < abs(d - abs(a - b)) else "folded"
+            kind = "stretched" if abs(d - hi) < abs(d - lo) else "folded"
             out.append((arm + 1, kind, float(q[0]), float(q[1])))
     return tuple(out)
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from fivebar_host.compile import fill
 from fivebar_host.compile.model import AUTO_ORDER, CompileOptions
 from fivebar_host.compile.modes import mode_at
 from fivebar_host.config import Profile
@@ -100,7 +101,11 @@ def place(su: Setup, drawing: Drawing, opts: CompileOptions, consume: bool = Fal
                       origin_mm=opts.origin_mm, scale=opts.scale, rotate_deg=opts.rotate_deg,
                       fit=opts.fit, assembly=su.asm)
     mdraw = drawing.transformed(pl.matrix, pl.offset)
-    if consume:
+    if fill.wanted(opts):
+        mdraw = fill.apply(mdraw, pl, su.tol, opts, su.profile, su.mode)
+        inv = np.asarray(np.linalg.inv(pl.matrix), dtype=np.float64)  # the twin messages read
+        drawing = mdraw.transformed(inv, -inv @ pl.offset)
+    elif consume:
         drawing.params = mdraw.params
     limit = DEFAULT_MAX_SEGMENTS if opts.max_segments is None else int(opts.max_segments)
     return Placed(drawing=drawing, pl=pl, mdraw=mdraw,

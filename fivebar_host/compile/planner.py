@@ -400,11 +400,14 @@ def _bound_after(a: FloatArray, b: FloatArray, p: FloatArray, jump: float,
     `jump` and `acc` (per µs and per µs²)."""
     pc = p[:, None]
     with np.errstate(divide="ignore", invalid="ignore"):
-        q_jump = a / (jump + b / pc)  # (3)
-        p_star = np.sqrt(2.0 * b / acc)
-        c = np.where(pc >= p_star, np.sqrt(2.0 * acc * b), b / pc + 0.5 * acc * pc)  # c(p̂)
+        c = b / pc
+        q_jump = a / (jump + c)  # (3)
+        c += 0.5 * acc * pc  # c(p̂) = b/p̂ + αp̂/2 with p̂ = p, where p < p* = √(2b/α)...
+        np.copyto(c, np.sqrt(2.0 * acc * b), where=pc >= np.sqrt(2.0 * b / acc))  # ...else c(p*)
         q_acc = 2.0 * a / (c + np.sqrt(c * c + 2.0 * acc * a))  # (4)
-    out: FloatArray = np.nan_to_num(np.maximum(q_jump, q_acc), nan=0.0).max(axis=1)
+    q = np.nan_to_num(np.maximum(q_jump, q_acc, out=q_jump), nan=0.0, copy=False)
+    # the joints' largest (numpy's max(axis=1) over 2 columns is slow)
+    out: FloatArray = np.maximum(q[:, 0], q[:, 1])
     return out
 
 
@@ -414,14 +417,14 @@ def _static_bounds(dth: FloatArray, lo: FloatArray, rest: BoolArray, act: IntArr
     the reversal bounds (5). Returns per boundary in `act` (between segments act and act + 1)
     and joint whether the joint reverses there (`_moves_at` zeroes its |Δθ|). The reversal
     bounds are worked out on the reversing boundaries only (memory on large jobs)."""
-    dist = np.abs(dth).max(axis=1)
-    lo[rest] = np.maximum.reduce([lo[rest], dist[rest] / jump, np.sqrt(2 * dist[rest] / acc)])
+    dist = _chebyshev(dth[rest])
+    lo[rest] = np.maximum(np.maximum(lo[rest], dist / jump), np.sqrt(2 * dist / acc))
     del dist
     rev = np.empty((act.shape[0], 2), dtype=bool)
     for i in range(0, act.shape[0], STAIRCASE_BLOCK):  # (no whole-job temporaries)
         c = act[i:i + STAIRCASE_BLOCK]
-        np.less(dth[c + 1] * dth[c], 0, out=rev[i:i + STAIRCASE_BLOCK])
-    r = np.flatnonzero(rev.any(axis=1))
+        rev[i:i + STAIRCASE_BLOCK] = _reverses(dth, c)
+    r = np.flatnonzero(rev[:, 0] | rev[:, 1])
     if r.size:
         rv, (ar, br) = rev[r], _moves_at(dth, act[r])
         both = np.where(rv, ar + br, 0.0).max(axis=1) / jump
@@ -430,6 +433,18 @@ def _static_bounds(dth: FloatArray, lo: FloatArray, rest: BoolArray, act: IntArr
         np.maximum.at(lo, act[r],
                       np.maximum(both, np.sqrt(2 * np.where(rv, br, 0.0).max(axis=1) / acc)))
     return rev
+
+
+def _chebyshev(dth: FloatArray) -> FloatArray:
+    """The Chebyshev joint distance D = max_j |Δθ_j| of each move (N, 2), column by column
+    (numpy's max over a 2-column axis is some 30× slower than one maximum of the columns)."""
+    return np.maximum(np.abs(dth[:, 0]), np.abs(dth[:, 1]))
+
+
+def _reverses(dth: FloatArray, left: IntArray) -> NDArray[np.bool_]:
+    """Per boundary after the segments `left`, and joint: whether the joint reverses there
+    (Δθ of opposite signs on its two sides)."""
+    return np.less(dth[left + 1] * dth[left], 0)
 
 
 def _moves_at(dth: FloatArray, left: IntArray,
@@ -462,7 +477,7 @@ def enforce_staircase(dtheta_rad: FloatArray, duration_us: IntArray,
     if k == 0:
         return p.astype(np.int64)
     acc, jump = float(max_joint_rad_s2) * 1e-12, float(junction_jump_rad_s) * 1e-6  # per µs
-    moving = np.abs(dth).max(axis=1) > 0
+    moving = _chebyshev(dth) > 0
     st = np.zeros(k, bool) if stop_after is None else np.asarray(stop_after, bool).copy()
     st[-1] = True
     st |= ~moving
@@ -484,22 +499,61 @@ def enforce_staircase(dtheta_rad: FloatArray, duration_us: IntArray,
 def _raise_to_least(p: FloatArray, act: IntArray, dth: FloatArray, rev: NDArray[np.bool_],
                     jump: float, acc: float) -> None:
     """Kleene's iteration (`enforce_staircase`): raise durations `p` (µs, in place) by the
-    bounds (3), (4) across the boundaries `act` until none changes; each round revisits only
-    the boundaries next to a segment that changed. A round measures its boundaries in blocks
-    (`_round_raises`) from the durations at its start and then applies the raises."""
-    if not act.size:
+    bounds (3), (4) across the boundaries `act` until none changes: a first round over
+    every boundary, then `_raise_near` the segments it changed. A round measures its
+    boundaries in blocks (`_round_raises`) from the durations at its start and then applies
+    the raises."""
+    if act.size:
+        _raise_near(p, _apply_raises(p, _round_raises(p, act, dth, rev, jump, acc)),
+                    dth, jump, acc)
+
+
+def _raise_near(p: FloatArray, changed: IntArray, dth: FloatArray, jump: float,
+                acc: float) -> None:
+    """Kleene's rounds (`_raise_to_least`) on durations `p` (µs, in place) whose boundaries
+    all meet bounds (3), (4) except perhaps those next to the segments `changed`: each round
+    revisits only the boundaries (between two moving segments) next to a segment that
+    changed, until none does. The boundaries are named by their left segment, their
+    reversals measured on the spot (no whole-job index arrays)."""
+    last = p.shape[0] - 1
+    while changed.size:
+        left = np.unique(np.concatenate((changed, changed - 1)))
+        left = left[(left >= 0) & (left < last)]
+        left = left[(_chebyshev(dth[left]) > 0) & (_chebyshev(dth[left + 1]) > 0)]
+        if not left.size:
+            return
+        changed = _apply_raises(p, _round_raises(p, left, dth, _reverses(dth, left), jump,
+                                                 acc))
+
+
+def _apply_raises(p: FloatArray, raises: tuple[_Raises, _Raises]) -> IntArray:
+    """Apply one round's raises (`_round_raises`) to `p` (in place); returns the segments
+    raised (with repeats)."""
+    (right, q_new), (left, p_new) = raises
+    p[right] = q_new  # each boundary has its own right segment...
+    p[left] = np.maximum(p[left], p_new)  # ...and its own left one
+    return np.concatenate((right, left))
+
+
+def raise_staircase(dtheta_rad: FloatArray, duration_us: IntArray, raised: IntArray,
+                    max_joint_rad_s2: float,
+                    junction_jump_rad_s: float = JUNCTION_JUMP_RAD_S) -> None:
+    """`enforce_staircase` again, in place, on durations it returned (for these moves, stops
+    and limits) that were then raised at the segments `raised` only: the same least
+    durations, found by revisiting only the boundaries near the raises. Why the same: the
+    rest and reversal bounds (2), (5) depend on the moves alone and were met already; every
+    boundary away from the raises still meets (3), (4); and Kleene's iteration from any
+    durations at least the input and at most the least fixed point reaches that fixed point
+    whatever the order of the boundaries it revisits (each raise stays below it, since every
+    bound is nondecreasing). `compile.timing`'s later link-floor passes raise a few hundred
+    of a job's segments; a whole `enforce_staircase` would measure every boundary again."""
+    if not raised.size:
         return
-    by_left = np.full(p.shape[0] + 1, -1, dtype=act.dtype)  # boundary by its left segment
-    by_left[act] = np.arange(act.shape[0], dtype=act.dtype)
-    todo: IntArray | None = None  # None: every boundary
-    while todo is None or todo.size:
-        (right, q_new), (left, p_new) = _round_raises(p, act, todo, dth, rev, jump, acc)
-        p[right] = q_new  # each boundary has its own right segment...
-        p[left] = np.maximum(p[left], p_new)  # ...and its own left one
-        changed = np.concatenate((right, left))
-        del right, q_new, left, p_new
-        near = np.concatenate((by_left[changed], by_left[changed - 1]))
-        todo = np.unique(near[near >= 0])
+    dth = np.asarray(dtheta_rad, dtype=np.float64).reshape(-1, 2)
+    acc, jump = float(max_joint_rad_s2) * 1e-12, float(junction_jump_rad_s) * 1e-6  # per µs
+    p = duration_us.astype(np.float64)
+    _raise_near(p, np.asarray(raised, dtype=np.int64), dth, jump, acc)
+    duration_us[...] = p
 
 
 #: Boundaries measured at a time by `_round_raises` (bounded temporaries on large jobs;
@@ -509,17 +563,16 @@ STAIRCASE_BLOCK = 1 << 16
 _Raises = tuple[IntArray, FloatArray]
 
 
-def _round_raises(p: FloatArray, act: IntArray, todo: IntArray | None, dth: FloatArray,
-                  rev: NDArray[np.bool_], jump: float, acc: float) -> tuple[_Raises, _Raises]:
-    """One round of `_raise_to_least` over the boundaries `todo` (None: all), from the
-    durations `p` (not changed here): the right segments whose least duration (µs, whole)
-    is above theirs, with that duration, and the same for the left segments; in blocks of
-    `STAIRCASE_BLOCK` (the joints' moves taken per block, `_moves_at`), keeping only the
-    raises."""
-    n = act.shape[0] if todo is None else todo.shape[0]
+def _round_raises(p: FloatArray, act: IntArray, dth: FloatArray, rev: NDArray[np.bool_],
+                  jump: float, acc: float) -> tuple[_Raises, _Raises]:
+    """One round of `_raise_to_least` over the boundaries after the segments `act`, whose
+    joints reverse where `rev`, from the durations `p` (not changed here): the right
+    segments whose least duration (µs, whole) is above theirs, with that duration, and the
+    same for the left segments; in blocks of `STAIRCASE_BLOCK` (the joints' moves taken per
+    block, `_moves_at`), keeping only the raises."""
     parts: list[list[NDArray[Any]]] = [[], [], [], []]
-    for i in range(0, n, STAIRCASE_BLOCK):
-        t = slice(i, i + STAIRCASE_BLOCK) if todo is None else todo[i:i + STAIRCASE_BLOCK]
+    for i in range(0, act.shape[0], STAIRCASE_BLOCK):
+        t = slice(i, i + STAIRCASE_BLOCK)
         lf = act[t]
         a, b = _moves_at(dth, lf, rev[t])
         q_new = np.ceil(_bound_after(a, b, p[lf], jump, acc) - _CEIL_SLACK_US)

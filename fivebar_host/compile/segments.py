@@ -9,7 +9,7 @@ move.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -41,9 +41,11 @@ class Segments:
 @dataclass(frozen=True)
 class Stepped(Segments):
     """`Segments` without the moves that round to zero steps, with the absolute `steps`
-    (T+1, 2) of the targets."""
+    (T+1, 2) of the targets: motor counts, which exceed the joint's steps by `slack`
+    (T+1, 2) after `compile.backlash.take_up` (empty: no backlash, counts = joint)."""
 
     steps: IntArray
+    slack: IntArray = field(default_factory=lambda: np.zeros((0, 2), np.int64), kw_only=True)
 
 
 def _travel_pieces(home: Home, routed: Routed, solved: Solved,

@@ -78,7 +78,8 @@ def cut_accel(profile: Profile) -> float:
 
 def _settings(profile: Profile, routed: Routed,
               sp: Stepped) -> tuple[NDArray[np.uint8], FloatArray, BoolArray]:
-    """Per segment: laser power (the path's fraction × the profile's power, 0 on travel),
+    """Per segment: laser power (the path's fraction × the profile's power, 0 on travel and
+    backlash take-ups),
     feed (the path's F, else the profile's draw feed; travel feed on travel), and whether the
     tool stops after it (pen switch or new power)."""
     ch, npath, motion = routed.ch, routed.npath, profile.motion
@@ -86,6 +87,8 @@ def _settings(profile: Profile, routed: Routed,
     power_frac = np.where(seg_draw, ch.power[np.minimum(seg_path, npath - 1)], 0.0)
     power = np.where(seg_draw, np.clip(np.rint(power_frac * profile.laser.power), 0, 255),
                      0).astype(np.uint8)
+    if sp.slack.shape[0]:  # a backlash take-up stands still: no power, or it burns a dot
+        power[(sp.slack[1:] != sp.slack[:-1]).any(axis=1)] = 0
     pfeed = ch.feed[np.minimum(seg_path, npath - 1)]
     feed = np.where(seg_draw, np.where(np.isnan(pfeed), motion.draw_feed_mm_s, pfeed),
                     motion.travel_feed_mm_s)
@@ -96,12 +99,13 @@ def _settings(profile: Profile, routed: Routed,
 
 def _cut_ramps(mot: Motors, checker: PoseChecker, sp: Stepped, counts: IntArray,
                f1: FloatArray
-               ) -> tuple[FloatArray, FloatArray, IntArray, IntArray, FloatArray, FloatArray]:
+               ) -> tuple[FloatArray, FloatArray, IntArray, IntArray, FloatArray, FloatArray,
+                          IntArray]:
     """Step 2: segment k cut into `counts[k]` pieces ending at fractions `f1` of it. Returns
     the new targets (angles, points, absolute steps; pieces that round to no move dropped),
-    and per piece its segment and its part [f0, f1] of it. The targets are written in job
-    order straight away (target k, then the inner piece ends of segment k: their fractions
-    ascend), each array once."""
+    per piece its segment and its part [f0, f1] of it, and the slack at every target. The
+    targets are written in job order straight away (target k, then the inner piece ends of
+    segment k: their fractions ascend), each array once."""
     th_all, pts_all = sp.th, sp.pts
     seg_of = np.repeat(np.arange(counts.shape[0]), counts)
     inner = np.ones(seg_of.shape[0], dtype=bool)  # not a segment's last piece
@@ -114,10 +118,15 @@ def _cut_ramps(mot: Motors, checker: PoseChecker, sp: Stepped, counts: IntArray,
     th[1:][inner] = th_all[k_in] + f1[inner, None] * (th_all[k_in + 1] - th_all[k_in])
     del k_in
     st = compact_steps(th, mot.home_rad, mot.steps_per_rev)
+    slack = sp.slack
+    if slack.shape[0]:  # motor counts = joint steps + slack (compile.backlash)
+        slack = _piece_slack(slack, seg_of, np.where(inner, f1, 1.0))
+        st = compact_ints(st + slack)
     keep = np.concatenate(([True], (np.diff(st, axis=0) != 0).any(axis=1)))
     every = bool(keep.all())
     if not every:
         st, th = st[keep], th[keep]
+        slack = slack[keep] if slack.shape[0] else slack
     kept_inner = inner[keep[1:]]
     pts = np.empty_like(th)
     pts[0] = pts_all[0]
@@ -131,7 +140,17 @@ def _cut_ramps(mot: Motors, checker: PoseChecker, sp: Stepped, counts: IntArray,
     f1[np.concatenate((seg_of[1:] != seg_of[:-1], [True]))] = 1.0
     f0 = np.where(np.concatenate(([True], seg_of[1:] != seg_of[:-1])), 0.0,
                   np.concatenate(([0.0], f1[:-1])))
-    return th, pts, st, seg_of, f0, f1
+    return th, pts, st, seg_of, f0, f1, slack
+
+
+def _piece_slack(slack: IntArray, seg_of: IntArray, frac: FloatArray) -> IntArray:
+    """The slack (compile.backlash) at every piece's end: constant along a segment but a
+    take-up, whose slack changes in whole steps along its pieces (its joint stands still)."""
+    s0, s1 = slack[seg_of], slack[seg_of + 1]
+    out = np.empty((seg_of.shape[0] + 1, 2), dtype=np.int64)
+    out[0] = slack[0]
+    out[1:] = s0 + np.rint(frac[:, None] * (s1 - s0)).astype(np.int64)
+    return out
 
 
 #: Targets converted at a time by `_step_deltas`.
@@ -197,7 +216,7 @@ def _time(profile: Profile, checker: PoseChecker, handed: list[Stepped],
     counts, f1 = planner.ramp_fractions(pln, dist, a_c, PLAN_PIECE_JUMP_SHARE * j_lim / a_c,
                                         PLAN_MIN_PIECE_STEPS * mot.rad_per_step)
     del pln, dist
-    th_all, pts_all, st, seg_of, f0, f1 = _cut_ramps(mot, checker, sp, counts, f1)
+    th_all, pts_all, st, seg_of, f0, f1, slack = _cut_ramps(mot, checker, sp, counts, f1)
     del counts
     seg_of = compact_ints(seg_of)
     seg_draw = sp.draw[seg_of]
@@ -223,40 +242,36 @@ def _time(profile: Profile, checker: PoseChecker, handed: list[Stepped],
                                          protocol.P_MIN_US)]
     if trim:
         release_free_memory()  # the per-segment settings' and the floors' inputs' holes
-    duration_us = compact_ints(_link_bound_staircase(profile, dq, floor_us, stop, st, power,
-                                                     trim))
+    duration_us = compact_ints(_link_bound_staircase(profile, dq, floor_us, stop, st, power))
     del dq, stop
     return Planned(th=th_all, pts=pts_all, draw=seg_draw, length=length, steps=st,
                    power=power, f0=f0, f1=f1, duration_us=duration_us,
-                   dwell=np.zeros(seg_draw.shape[0], dtype=bool), **kept)
+                   dwell=np.zeros(seg_draw.shape[0], dtype=bool), slack=slack, **kept)
 
 
 def _link_bound_staircase(profile: Profile, dq: FloatArray, handed: list[IntArray],
-                          stop: BoolArray, st: IntArray, power: NDArray[np.uint8],
-                          trim: bool) -> IntArray:
+                          stop: BoolArray, st: IntArray, power: NDArray[np.uint8]) -> IntArray:
     """Step 4 with the link's floor (`compile.linkrate`) on the floors in `handed` (emptied:
     the staircase frees them): the staircase on the floors raised to what the wire carries,
     again while a segment of its result is shorter than the floor its own durations give
     (an item that needs a `P` costs more bytes). A later pass starts from the durations
     before it, raised where short: the least durations above those floors are the least
-    above the raised floors (every pass's result is at least the one before), without
-    keeping the floors through the staircase (memory on large jobs); with `trim` the heap's
-    free pages go back after each pass (`_time`)."""
+    above the raised floors (every pass's result is at least the one before), and the
+    staircase is only measured again near the raised segments (`planner.raise_staircase`:
+    a few hundred of a large job's, where a whole staircase took some 70 ms a pass on
+    100k segments)."""
     j_lim = profile.motion.junction_jump_rad_s
     acc = profile.motion.max_joint_rad_s2
     linkrate.raise_to_link(handed[0], st, power, profile)
     duration_us = planner.enforce_staircase(dq, handed.pop(), stop, acc, j_lim)
     for _ in range(linkrate.LINK_PASSES - 1):
-        if not linkrate.any_short(st, power, duration_us, profile):
-            break
         need = linkrate.link_floor_us(st, power, duration_us, profile)
-        np.maximum(duration_us, need, out=duration_us)
+        short = np.flatnonzero(duration_us < need)
+        if not short.size:
+            break
+        duration_us[short] = need[short]
         del need
-        handed.append(duration_us)
-        del duration_us
-        if trim:
-            release_free_memory()  # the last pass's staircase temporaries
-        duration_us = planner.enforce_staircase(dq, handed.pop(), stop, acc, j_lim)
+        planner.raise_staircase(dq, duration_us, short, acc, j_lim)
     return duration_us
 
 

@@ -55,8 +55,10 @@ def _distance_blocks(job: Job, profile: Profile, samples: int, quantised: bool,
     """The distances of `_sample_distances` block by block: (first position in `di`, the
     distances of its `VALIDATE_BLOCK` segments × (samples + 1)). Only a block's angles are
     converted from steps, so no whole-job float copy is made."""
+    joint = job.joint_steps  # the joints' steps: the counts less the backlash slack
+
     def angles(rows: IntArray) -> FloatArray:
-        return (steps.step_angles(job.steps[rows], job.home_rad, job.steps_per_rev)
+        return (steps.step_angles(joint[rows], job.home_rad, job.steps_per_rev)
                 if quantised else job.angles_rad[rows])
 
     s = np.arange(samples + 1) / samples
@@ -150,7 +152,7 @@ def nbar_opinion(job: Job, profile: Profile, samples: int = 4,
         from kinematics.nbar.validate import validate_fivebar_path
     except ImportError:  # pragma: no cover - the n-bar package ships with the project
         return None
-    th = steps.step_angles(job.steps, job.home_rad, job.steps_per_rev)
+    th = steps.step_angles(job.joint_steps, job.home_rad, job.steps_per_rev)
     s = np.arange(samples) / samples
     q = (th[:-1, None, :] + s[None, :, None] * np.diff(th, axis=0)[:, None, :]).reshape(-1, 2)
     q = np.concatenate((q, th[-1:]))

@@ -40,5 +40,10 @@ def controller_for(name: str) -> type[Controller]:
 
 def open_controller(name: str, url: str, profile: Profile) -> Controller:
     """Open the machine at `url` (a device path, COM port or pyserial URL) with the
-    controller called `name`."""
+    controller called `name`. Servo joints need fivebar's servo build (docs/protocol.md
+    6.4): another controller refuses them."""
+    from fivebar_host.joints import require_stepper_joints
+
+    if name != DEFAULT:
+        require_stepper_joints(profile.joints, profile.source)
     return controller_for(name).open(url, profile)

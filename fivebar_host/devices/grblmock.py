@@ -98,9 +98,11 @@ class Board:
 _BOARDS: dict[str, Board] = {}
 
 
-def board(name: str) -> Board:
-    """The named board (created with GRBL's defaults on first use)."""
-    return _BOARDS.setdefault(name, Board(name))
+def board(name: str, defaults: dict[int, float] | None = None) -> Board:
+    """The named board (created with GRBL's defaults, or `defaults`, on first use)."""
+    if name not in _BOARDS:
+        _BOARDS[name] = Board(name, dict(DEFAULTS if defaults is None else defaults))
+    return _BOARDS[name]
 
 
 def forget_boards() -> None:
@@ -144,6 +146,11 @@ class GrblMock(serial.SerialBase):  # type: ignore[misc]  # pyserial has no type
     """The pyserial port (see the module docstring); thread-safe, writes never block."""
 
     opened: ClassVar[list[GrblMock]] = []
+    #: What a GRBL-family sibling (`devices.grblfamily`) says differently.
+    scheme: ClassVar[str] = SCHEME
+    banner: ClassVar[str] = BANNER
+    defaults: ClassVar[dict[int, float]] = DEFAULTS
+    build_info: ClassVar[str] = "[VER:1.1h.20190830:]\r\n[OPT:V,15,128]"
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         self.board = Board("")
@@ -155,9 +162,9 @@ class GrblMock(serial.SerialBase):  # type: ignore[misc]  # pyserial has no type
     def open(self) -> None:
         """Parse ``fivebar-grbl://NAME?speed=S`` and boot the board (a DTR reset)."""
         url = str(self._port)
-        if not url.startswith(SCHEME + "://"):
-            raise serial.SerialException(f"{url}: not a {SCHEME}:// URL")
-        rest = url[len(SCHEME) + 3:]
+        if not url.startswith(self.scheme + "://"):
+            raise serial.SerialException(f"{url}: not a {self.scheme}:// URL")
+        rest = url[len(self.scheme) + 3:]
         name, _, query = rest.partition("?")
         dtr_reset = True
         for item in filter(None, query.split("&")):
@@ -168,7 +175,8 @@ class GrblMock(serial.SerialBase):  # type: ignore[misc]  # pyserial has no type
                 self.speed = float(value)
             else:
                 dtr_reset = value != "0"
-        self.board = board(name or "default") if name else Board("")
+        self.board = board(f"{self.scheme}:{name}" if self.scheme != SCHEME else name,
+                           self.defaults) if name else Board("", dict(self.defaults))
         self._boot()
         if not dtr_reset and self.board.kept is not None:
             self._pos = list(self.board.kept)
@@ -249,7 +257,7 @@ class GrblMock(serial.SerialBase):  # type: ignore[misc]  # pyserial has no type
         if alarm is not None:
             self._send(f"ALARM:{alarm}")
         self._send("")
-        self._send(BANNER)
+        self._send(self.banner)
         if self._state == "Alarm":
             self._send("[MSG:'$H'|'$X' to unlock]")
 
@@ -372,7 +380,7 @@ class GrblMock(serial.SerialBase):  # type: ignore[misc]  # pyserial has no type
         """`$` commands (GRBL's system.c)."""
         idle = self._state in ("Idle", "Alarm") and not self._queue
         simple: dict[str, Callable[[], str]] = {
-            "$$": self._settings_text, "$I": lambda: "[VER:1.1h.20190830:]\r\n[OPT:V,15,128]",
+            "$$": self._settings_text, "$I": lambda: self.build_info,
             "$G": self._parser_state, "$#": self._offsets, "$N": lambda: "$N0=\r\n$N1="}
         if line in simple:
             if line == "$$" and not idle:
@@ -397,7 +405,7 @@ class GrblMock(serial.SerialBase):  # type: ignore[misc]  # pyserial has no type
         if not idle:
             return "error:8"
         n, v = int(m.group(1)), float(np.float32(m.group(2)))
-        if n not in DEFAULTS:
+        if n not in self.defaults:
             return "error:3"
         if v < 0:
             return "error:4"

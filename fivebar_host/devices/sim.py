@@ -79,8 +79,13 @@ class BuildPaths:
     size_report: str  # avr-size output printed by the build
 
 
-def ensure_built(directory: Path | None = None) -> BuildPaths:
-    """Build firmware and harness with make (a no-op when up to date).
+#: Where Debian's arduino-core-avr keeps the bootloaders' source and hex files.
+ARDUINO_BOOTLOADERS = Path("/usr/share/arduino/hardware/arduino/avr/bootloaders")
+
+
+def ensure_built(directory: Path | None = None, bootloaders: bool = False) -> BuildPaths:
+    """Build firmware and harness with make (a no-op when up to date); with `bootloaders`
+    also Optiboot and ATmegaBOOT for the emulator (`make bootloaders`, build/boot/).
 
     Raises EmulatorError with the build output when the toolchain is missing
     or the build fails.
@@ -88,9 +93,12 @@ def ensure_built(directory: Path | None = None) -> BuildPaths:
     reason = toolchain_missing()
     if reason:
         raise EmulatorError(reason)
+    if bootloaders and not (ARDUINO_BOOTLOADERS / "optiboot" / "optiboot.c").exists():
+        raise EmulatorError("the bootloaders' source is not installed (install: apt-get "
+                            "install arduino-core-avr)")
     fw = directory or firmware_dir()
     proc = subprocess.run(
-        ["make", "-s", "-C", str(fw), "all", "sim"],
+        ["make", "-s", "-C", str(fw), "all", "sim", *(["bootloaders"] if bootloaders else [])],
         capture_output=True,
         text=True,
         check=False,
@@ -102,7 +110,8 @@ def ensure_built(directory: Path | None = None) -> BuildPaths:
 
 
 #: The harness's control commands (firmware/sim/fbsim.c ``-C``).
-CONTROL_COMMANDS = ("reset", "open", "power", "freeze", "hang", "spin", "stepoff", "flush")
+CONTROL_COMMANDS = ("reset", "open", "power", "freeze", "hang", "spin", "stepoff", "flush",
+                    "dump")
 
 
 class Emulator:
@@ -127,8 +136,13 @@ class Emulator:
         endstop_a: int | None = None,
         endstop_b: int | None = None,
         realtime: bool = False,
+        extra: Sequence[str] = (),
     ) -> None:
         self.elf = elf
+        #: More harness options (firmware/sim/fbsim.c: -B bootloader, -F dump file, -H reset
+        #: held, -X stuck page, -S state file, -m chip); `elf` may then be "-" (erased flash).
+        self.extra = tuple(extra)
+        self.dump_path: Path | None = None  # the harness's -F file, where `dump` writes
         self.harness = harness
         self.trace = trace
         self.endstops = (endstop_a, endstop_b)
@@ -150,7 +164,7 @@ class Emulator:
                 cmd += [flag, str(value)]
         if self.realtime:
             cmd.append("-R")
-        cmd.append(str(self.elf))
+        cmd += [*self.extra, str(self.elf)]
         return cmd
 
     def start(self, timeout: float = 10.0) -> str:
@@ -212,6 +226,19 @@ class Emulator:
             line = self._read_line(timeout)
             if line != f"ok {command}":
                 raise EmulatorError(f"harness did not acknowledge {command!r} (got {line!r})")
+
+    def cycle(self, timeout: float = 10.0) -> int:
+        """The emulated CPU cycle count now (the harness's ``cycle`` command)."""
+        with self._lock:
+            proc = self.proc
+            if proc is None or proc.stdin is None or proc.poll() is not None:
+                raise EmulatorError("harness not running (command 'cycle')")
+            proc.stdin.write(b"cycle\n")
+            proc.stdin.flush()
+            line = self._read_line(timeout)
+        if not line.startswith("ok cycle "):
+            raise EmulatorError(f"harness did not answer 'cycle' (got {line!r})")
+        return int(line.split()[2])
 
     @property
     def running(self) -> bool:

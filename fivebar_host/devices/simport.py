@@ -32,6 +32,27 @@ URL options: `fivebar-sim://?trace=PATH&realtime=1&endstops=A,B&machine=NAME&res
 - `true=a1,b1,a2,b2,w,home1,home2` (mm, degrees): the machine as really built, where it
   differs from the profile; the executed-path report after `fivebar plot` then measures where
   that machine draws (calibration tests: docs/calibration.md);
+- `backlash=A,B` (steps): each motor's real slack (gears, belts), where it differs from the
+  profile's `[motors] backlash_steps`; the executed-path report draws through it
+  (`compile.backlash.play`; docs/backlash.md);
+- `bootloader=optiboot|atmegaboot`: the chip boots a real bootloader (firmware/Makefile
+  `bootloaders`: Optiboot at 115200 built from Debian's arduino-core-avr source, the old
+  ATmegaBOOT at 57600) at its boot section, as an Uno or an old Nano does, with its
+  application flash erased (`app=firmware`: already holding the fivebar firmware); `fivebar
+  flash` and avrdude program it over the pty, `port.flash_image()` reads the flash back.
+  Emulation then runs in real time (the bootloaders' timeouts are in wall-clock terms for
+  the programmer). `chip=atmega168` puts Optiboot on an ATmega168 (another signature);
+- `held=1`: the chip is held in reset (a shield or a wire on RESET): it never answers;
+  `stuck_page=N`: flash page N (128 bytes) does not take a write (worn or locked flash);
+  `usb=VID:PID` (hex): the USB ids the port reports, as a real adapter's (`fivebar flash`
+  and `doctor` read them: `fivebar_host.flash.boards`);
+- the machine between runs: a harness keeps its controller and arms in a state file when
+  it stops (`$FIVEBAR_SIM_STATE`, default `~/.local/state/fivebar/sim/`; `state=DIR`, or
+  `off` for a new machine every time, as the tests use): the next run (another command,
+  another process) finds the controller powered as it was (its RAM: position, `H`, `Ln`
+  done, as after the DTR reset of opening a port) and the arms where they stopped, as a
+  real machine that stayed on. `power_loss=1`: the controller lost power since (its RAM
+  is random, the arms stay); `fresh=1`: a new machine at the home pose;
 - `drop=P`, `corrupt=P`, `seed=N`: line noise, as on the mock: each host→device byte other than
   a real-time byte is lost with probability P, or replaced by another printable byte that is
   not a real-time byte (seeded generator, default seed 0); line counting for the options
@@ -61,18 +82,26 @@ from typing import Any
 import serial
 
 from fivebar_host.devices.sim import Emulator, EmulatorError, ensure_built
+from fivebar_host.devices.simboard import (
+    BOOTLOADERS,
+    dump_memories,
+    harness_args,
+    parse_board_option,
+)
 from fivebar_host.devices.simtrace import Trace, read_trace
 
 SCHEME = "fivebar-sim"
 
 #: Options that configure the harness process (fixed by a machine's first open).
-HARNESS_OPTIONS = ("trace", "realtime", "endstops")
+HARNESS_OPTIONS = ("trace", "realtime", "endstops", "bootloader", "chip", "app", "held",
+                   "stuck_page", "state", "servo")
 #: Fault options: what happens after the N-th line, and the harness command for it.
 FAULTS = {"disconnect_after": None, "reset_after": "reset", "power_cut_after": "power",
           "stall_after": "hang"}
 #: Line noise options (per-byte probabilities) and the seed of their generator.
 NOISE = ("drop", "corrupt")
-_KNOWN = (*HARNESS_OPTIONS, "machine", *FAULTS, *NOISE, "seed", "true")
+_KNOWN = (*HARNESS_OPTIONS, "machine", *FAULTS, *NOISE, "seed", "true", "backlash", "usb",
+          "power_loss", "fresh", "deadband")
 #: Real-time bytes pass untouched; a corruption never produces one (docs/protocol.md 2).
 _REALTIME = frozenset(b"?!~\x18")
 _CORRUPT_BYTES = bytes(c for c in range(0x20, 0x7F) if c not in _REALTIME)
@@ -93,6 +122,22 @@ class SimOptions:
     #: The machine as really built (a1, b1, a2, b2, w mm, home1, home2 degrees), where it
     #: differs from the profile: the executed-path report measures what it really draws.
     true: tuple[float, ...] | None = None
+    #: Each motor's real slack in steps, where it differs from the profile's backlash.
+    backlash: tuple[int, int] | None = None
+    #: The servo build (`servo=1`, docs/protocol.md 6.5; the servo controller adds it) and
+    #: the true servos' dead band, degrees per joint (`deadband=A,B`), where it differs
+    #: from none: the executed-path report reads the arms' pulses through them.
+    servo: bool = False
+    deadband: tuple[float, float] | None = None
+    bootloader: str | None = None
+    chip: str = "atmega328p"
+    app: str = "empty"
+    held: bool = False
+    stuck_page: int | None = None
+    usb: tuple[int, int] | None = None
+    state: str | None = None  # a directory, "off", or None: $FIVEBAR_SIM_STATE or the default
+    power_loss: bool = False
+    fresh: bool = False
     given: frozenset[str] = frozenset()  # the harness options the URL names
 
 
@@ -108,6 +153,15 @@ def parse_true_geometry(text: str, url: str) -> tuple[float, ...]:
         raise ValueError(f"{url}: true must be a1,b1,a2,b2,w,home1,home2 (positive mm, "
                          f"degrees within ±360), got {text!r}")
     return vals
+
+
+def parse_backlash(text: str, url: str) -> tuple[int, int]:
+    """`backlash=A,B`: each motor's real slack, two whole steps in 0–10000."""
+    parts = text.split(",")
+    if len(parts) != 2 or not all(p.strip().isdigit() and int(p) <= 10_000 for p in parts):
+        raise ValueError(f"{url}: backlash must be two step counts A,B in 0..10000, got "
+                         f"{text!r}")
+    return int(parts[0]), int(parts[1])
 
 
 def parse_sim_url(url: str) -> SimOptions:
@@ -156,8 +210,16 @@ def parse_sim_url(url: str) -> SimOptions:
             opts.seed = int(value)
         elif key == "true":
             opts.true = parse_true_geometry(value, url)
-        else:
+        elif key == "backlash":
+            opts.backlash = parse_backlash(value, url)
+        elif not parse_board_option(opts, key, value, url):
             raise ValueError(f"{url}: unknown option {key!r} (known: {', '.join(_KNOWN)})")
+    if opts.bootloader is None and (opts.chip != "atmega328p" or "app" in given):
+        raise ValueError(f"{url}: chip and app describe a chip with a bootloader: add "
+                         "bootloader=optiboot or bootloader=atmegaboot")
+    if opts.bootloader is not None and (opts.bootloader, opts.chip) not in BOOTLOADERS:
+        raise ValueError(f"{url}: no {opts.bootloader} for the {opts.chip} here (known: "
+                         + ", ".join(f"{b} on {c}" for b, c in BOOTLOADERS) + ")")
     opts.given = frozenset(given & set(HARNESS_OPTIONS))
     return opts
 
@@ -189,6 +251,10 @@ class SimMachine:
         live = self.running
         self.flush()
         return read_trace(self.trace_path, live=live)
+
+    def flash_image(self) -> tuple[bytes, bytes]:
+        """Its chip's flash and EEPROM now (with `bootloader=`)."""
+        return dump_memories(self.emulator, self.options)
 
     def power_cut(self) -> None:
         """Cut the controller's power and power it up: its RAM comes back random, so the
@@ -235,12 +301,26 @@ def _new_emulator(opts: SimOptions) -> tuple[Emulator, Path]:
     """Build if needed and make (not start) a harness for ``opts``; returns it and its trace
     path."""
     try:
-        build = ensure_built()
+        if opts.servo:
+            from fivebar_host.devices.simservo import ensure_servo_built
+
+            build = ensure_servo_built()
+        else:
+            build = ensure_built(bootloaders=opts.bootloader is not None)
     except EmulatorError as e:
         raise serial.SerialException(f"{SCHEME}: {e}") from e
-    trace = opts.trace or Path(tempfile.mkdtemp(prefix="fivebar-sim-")) / "pins.trace"
+    work = Path(tempfile.mkdtemp(prefix="fivebar-sim-"))
+    trace = opts.trace or work / "pins.trace"
     a, b = opts.endstops
-    emu = Emulator(build.elf, build.harness, trace, a, b, opts.realtime)
+    try:
+        extra, app = harness_args(opts, work)
+    except OSError as e:
+        raise serial.SerialException(f"{SCHEME}: cannot keep the machine's state: {e}") from e
+    # a bootloader's timeouts are wall-clock time for its programmer: run in real time
+    emu = Emulator(build.elf if app else Path("-"), build.harness, trace, a, b,
+                   opts.realtime or opts.bootloader is not None,
+                   [*extra, *(["-V"] if opts.servo else [])])
+    emu.dump_path = work / "flash.bin"
     return emu, trace
 
 
@@ -265,6 +345,24 @@ class Serial(serial.SerialBase):  # type: ignore[misc]  # pyserial has no type h
     def machine(self) -> SimMachine | None:
         """The named machine this port drives (None without ``machine=``)."""
         return self._machine
+
+    @property
+    def usb_id(self) -> tuple[int, int] | None:
+        """The USB vendor and product ids the URL's `usb=` gives this port (None: not a USB
+        adapter's), as `serial.tools.list_ports` reports a real one's."""
+        return self.options.usb
+
+    def flash_image(self) -> tuple[bytes, bytes]:
+        """The emulated chip's flash and EEPROM now (with `bootloader=`; the harness's
+        `dump`)."""
+        return dump_memories(self._emulator(), self.options)
+
+    def emulated_cycle(self) -> int:
+        """The emulated CPU's cycle count (its clock: 16 MHz)."""
+        try:
+            return self._emulator().cycle()
+        except EmulatorError as e:
+            raise serial.SerialException(f"{SCHEME}: {e}") from e
 
     def open(self) -> None:
         """Start the harness (or reset the named machine's AVR) and open its pty."""

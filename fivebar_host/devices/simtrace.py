@@ -41,6 +41,9 @@ class Trace:
     freq: int
     changes: dict[str, list[tuple[int, int]]] = field(default_factory=dict)
     dir_invert: tuple[bool, bool] = (False, False)
+    #: Where the arms stood (motor steps, the harness's count) when the trace began: (0, 0)
+    #: for a new machine, where the last run left them for one kept between runs (`-S`).
+    start: tuple[int, int] = (0, 0)
 
     def pin(self, name: str) -> list[tuple[int, int]]:
         """Changes of one pin, in time order (empty if it never changed)."""
@@ -157,9 +160,14 @@ class Trace:
     def pen_pulses(self) -> list[tuple[int, int]]:
         """(rising-edge cycle, high time in cycles) of every complete pulse of the pen
         servo's signal (D12: one pulse per 20 ms frame, its width the servo position)."""
+        return self.pulses("pen")
+
+    def pulses(self, name: str) -> list[tuple[int, int]]:
+        """(rising-edge cycle, high time in cycles) of every complete pulse on the traced
+        pin `name`: "pen", or the servo build's arm servos "svA" / "svB" (fbsim -V)."""
         out: list[tuple[int, int]] = []
         rise: int | None = None
-        for cycle, level in self.pin("pen"):
+        for cycle, level in self.pin(name):
             if level == 1:
                 rise = cycle
             elif rise is not None:
@@ -188,6 +196,9 @@ def parse_trace(text: str, dir_invert: tuple[bool, bool] = (False, False)) -> Tr
             for word in line.split():
                 if word.startswith("freq="):
                     trace.freq = int(word[5:])
+                elif word.startswith("start="):
+                    a, b = word[6:].split(",")
+                    trace.start = (int(a), int(b))
             continue
         parts = line.split()
         if len(parts) != 3 or not parts[0].isdigit() or parts[2] not in ("0", "1"):

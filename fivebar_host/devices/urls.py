@@ -24,10 +24,15 @@ def _install(scheme: str, module: ModuleType) -> None:
 
 
 def register() -> None:
-    """Register ``fivebar-mock://``, ``fivebar-sim://`` and ``fivebar-grbl://``; idempotent."""
-    from fivebar_host.devices import grblmock, mock, simport
+    """Register ``fivebar-mock://``, ``fivebar-sim://``, ``fivebar-grbl://``,
+    ``fivebar-grblhal://`` and ``fivebar-fluidnc://``; idempotent."""
+    from fivebar_host.devices import grblfamily, grblmock, mock, simport
 
     _install(grblmock.SCHEME, grblmock)
+    for scheme, port in grblfamily.PORTS.items():
+        handler = ModuleType(f"{PACKAGE}.protocol_{scheme}")
+        handler.Serial = port  # type: ignore[attr-defined]
+        _install(scheme, handler)
     _install(mock.SCHEME, mock)
     _install(simport.SCHEME, simport)
     if PACKAGE not in serial.protocol_handler_packages:

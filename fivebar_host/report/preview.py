@@ -136,9 +136,30 @@ def _singularities(ax: Axes, fb: FiveBar, used: list[str]) -> Handles:
 def _requested(ax: Axes, job: Job) -> Handles:
     """Requested path: the placed drawing flattened finely."""
     poly = flatten(job.drawing, max(job.tolerance_mm / 4, 1e-3))
-    req = _nan_join(poly.points, poly.offsets[:-1], poly.offsets[1:])
-    ax.plot(req[:, 0], req[:, 1], "-", color="black", lw=2.2, zorder=3)
+    hatch = np.array([s.role == "hatch" for s in job.drawing.sources], dtype=bool)
+    is_h = hatch[job.drawing.stroke_source[poly.stroke]] if hatch.size else \
+        np.zeros(poly.stroke.shape[0], bool)
+    for sel, colour, lw in ((~is_h, "black", 2.2), (is_h, "#3a3a8a", 1.2)):
+        if sel.any():
+            req = _nan_join(poly.points, poly.offsets[:-1][sel], poly.offsets[1:][sel])
+            ax.plot(req[:, 0], req[:, 1], "-", color=colour, lw=lw, zorder=3)
     return [Line2D([], [], color="black", lw=2.2, label="requested path")]
+
+
+def _hidden(ax: Axes, job: Job) -> Handles:
+    """What `--hiding` left out (faint, dotted), and the hatch lines in their own colour."""
+    from matplotlib.collections import LineCollection
+
+    f = job.drawing.fill
+    out: Handles = []
+    if f is not None and f.hidden.shape[0]:
+        ax.add_collection(LineCollection(list(f.hidden), colors="#9a9a9a", linewidths=0.8,
+                                         linestyles=":", zorder=2))
+        out.append(Line2D([], [], color="#9a9a9a", lw=0.8, ls=":",
+                          label="hidden (--hiding): not drawn"))
+    if f is not None and f.hatch:
+        out.append(Line2D([], [], color="#3a3a8a", lw=1.2, label="hatch (--hatch)"))
+    return out
 
 
 def _executed_points(fb: FiveBar, th: FloatArray, assembly: str, samples: int) -> FloatArray:
@@ -194,9 +215,13 @@ def _linkages(ax: Axes, fb: FiveBar, th: FloatArray, pose_pts: FloatArray) -> Ha
     for k in range(th.shape[0]):
         r1, r2 = fb.elbows(th[k].reshape(1, 2))
         p = pose_pts[k]
-        ax.plot([0.0, r1[0, 0], p[0], r2[0, 0], fb.w], [0.0, r1[0, 1], p[1], r2[0, 1], 0.0],
-                "-o", color="#1f77b4", lw=2.0, ms=3.5, alpha=0.9 if k == 0 else 0.45,
-                label=None, zorder=5)
+        j = fb.joint_from_pen(r1, p.reshape(1, 2))[0]  # the pen unless it is off the joint
+        xs = [0.0, r1[0, 0], j[0], r2[0, 0], fb.w]
+        ys = [0.0, r1[0, 1], j[1], r2[0, 1], 0.0]
+        if not np.array_equal(j, p):  # the extension of link 1 to the pen
+            xs[3:3], ys[3:3] = [p[0], r1[0, 0], j[0]], [p[1], r1[0, 1], j[1]]
+        ax.plot(xs, ys, "-o", color="#1f77b4", lw=2.0, ms=3.5,
+                alpha=0.9 if k == 0 else 0.45, label=None, zorder=5)
     return [Line2D([], [], color="#1f77b4", marker="o", lw=2.0, ms=3.5,
                    label="linkage (home, first, middle, last)")]
 
@@ -242,7 +267,7 @@ def draw_preview(job: Job, profile: Profile, out: str | Path, samples: int = 4,
     """Write the preview PNG (see module doc) atomically; returns the path."""
     fb = profile.geometry
     fig, ax = plt.subplots(figsize=(11.0, 8.0))
-    th = step_angles(job.steps, job.home_rad, job.steps_per_rev)
+    th = step_angles(job.joint_steps, job.home_rad, job.steps_per_rev)
     sel = _pose_indices(job)
     pose_pts = fb.forward_batch(th[sel], _assembly(job)).points
     box = _extent(job, fb, th[sel], pose_pts)
@@ -250,6 +275,7 @@ def draw_preview(job: Job, profile: Profile, out: str | Path, samples: int = 4,
     handles = _safe_regions(ax, job, profile, used, box)
     handles += _singularities(ax, fb, used)
     handles += _requested(ax, job)
+    handles += _hidden(ax, job)
     fk = _executed_points(fb, th, _assembly(job), samples)
     handles += _executed(ax, job, fk)
     handles += _mode_changes(ax, job, fk)

@@ -88,6 +88,10 @@ class Recording:
 
     path: Path
     true: tuple[float, ...] | None
+    #: each motor's real slack in steps (`?backlash=`), None: the profile's backlash
+    backlash: tuple[int, int] | None = None
+    #: each true arm servo's dead band, degrees (`?deadband=`), None: none
+    deadband: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)

@@ -11,13 +11,23 @@ Modules:
 - `store`: the SQLite database — the queue, each job's upload, options, progress and resume
   point, and what the daemon knows about the machine's pose.
 - `security`: the token file, the loopback rule, request size limits, Host/Origin checks.
-- `jobs`: submitted options and uploads → a compiled, checked `Job` (private temp dir).
-- `worker`: the thread that owns the `Link` and runs the queue (pause, resume, cancel,
-  SIGTERM stop at a segment boundary, recovery after a crash), composed of `machine` (shared
-  state, pose record, snapshot), `control` (pause / resume / cancel / stop requests),
-  `jobrun` (one job's run), `recovery` (after a crash) and `journal` (journalled link,
-  progress writer).
-- `app`: the FastAPI application (routes, JSON models, the OpenAPI description).
+- `jobs`: submitted options and uploads → a compiled, checked `Job` (private temp dir);
+  `compiler`: each compilation and dry run in a child process of its own.
+- `worker`: the machine thread, which owns the `Link` and runs the queue (pause, resume,
+  cancel, SIGTERM stop at a segment boundary, recovery after a crash). Its state is one
+  record only it writes (`state`: also the immutable snapshot other threads read); other
+  threads reach it through one request queue (`requests`: the requests and the
+  `WorkerHandle`). It composes one collaborator per concern: `jobrun` (one job's run),
+  `control` (pause / resume / cancel / overrides, the stop kind), `manual` (home, jog, pen,
+  motors off, clear alarm), `recovery` (after a restart or a lost link), `pose` (the pose
+  record, the motors, parking); `operator` (the run's operator and resume store), `stored`
+  (queued jobs compiled again) and `journal` (journalled link, progress writer) serve them.
+- `app`: the FastAPI application (error format, unknown-parameter check) over `routes`
+  (one `APIRouter` each: `status`, `jobs`, `submit`, `machine`, `page`), which take the
+  `context` (store, handle to the machine thread, compiled jobs, profile, compilation slots,
+  event hub) as the public dependency `Ctx`; `models` (the JSON shapes, the error answer),
+  `dryrun` (the dry run's report and preview) and `events` (the web page's event stream)
+  serve them.
 - `daemon`: wiring and lifecycle (uvicorn in a thread, signals, logging).
 - `client`: the stdlib HTTP client used by `fivebar plot --server`.
 - `ptydevice`: a `fivebar-mock://` machine served on a pseudo-terminal, a stand-in controller

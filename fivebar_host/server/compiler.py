@@ -27,12 +27,13 @@ from typing import Any, TypeVar, cast
 
 from starlette.concurrency import run_in_threadpool
 
+from fivebar_host import progress
 from fivebar_host.server.jobs import SubmitError
 
 T = TypeVar("T")
 
 #: Modules the forkserver imports once, so each compilation's process starts with them.
-PRELOAD = ["fivebar_host.server.jobs", "fivebar_host.server.web"]
+PRELOAD = ["fivebar_host.server.jobs", "fivebar_host.server.dryrun"]
 _START_LOCK = threading.Lock()
 
 
@@ -44,10 +45,17 @@ def _context() -> Any:
         return ctx
 
 
+#: What a compiling process sends before its answer: a progress report.
+PROGRESS = "progress"
+
+
 def _child(out: Connection, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
-    """A compilation's process: send (True, result) or (False, the exception)."""
+    """A compilation's process: send its progress reports (`PROGRESS`, event) as they come,
+    then (True, result) or (False, the exception)."""
     try:
-        result: tuple[bool, Any] = (True, fn(*args))
+        with progress.listening_with(lambda ev: out.send((PROGRESS, ev))):
+            value = fn(*args)
+        result: tuple[bool, Any] = (True, value)
     except BaseException as e:  # every failure goes back to the daemon
         try:
             out.send((False, e))
@@ -67,15 +75,19 @@ class Compiler:
         self._lock = threading.Lock()
         self._closed = False
 
-    async def run(self, fn: Callable[..., T], *args: Any) -> T:
+    async def run(self, fn: Callable[..., T], *args: Any,
+                  on_progress: progress.Listener | None = None) -> T:
         """`fn(*args)` in a child process (a module-level function: it is sent by name),
         or in a thread; its exception is raised here. A child that died (killed for its
-        memory, say) is a `SubmitError`."""
+        memory, say) is a `SubmitError`. Its progress reports go to `on_progress` (called
+        in a worker thread)."""
+        hear = on_progress or (lambda ev: None)
         if not self.processes:
-            return await run_in_threadpool(fn, *args)
-        return await run_in_threadpool(self._in_child, fn, args)
+            return await run_in_threadpool(_listening, hear, fn, args)
+        return await run_in_threadpool(self._in_child, fn, args, hear)
 
-    def _in_child(self, fn: Callable[..., T], args: tuple[Any, ...]) -> T:
+    def _in_child(self, fn: Callable[..., T], args: tuple[Any, ...],
+                  hear: progress.Listener) -> T:
         """Start the child, wait for its answer (in a thread: the wait holds no lock)."""
         ctx = _context()
         recv, send = ctx.Pipe(duplex=False)
@@ -89,7 +101,11 @@ class Compiler:
             self._running.add(proc)
         send.close()
         try:
-            ok, value = recv.recv()
+            while True:
+                ok, value = recv.recv()
+                if ok != PROGRESS:
+                    break
+                hear(value)
         except EOFError:
             proc.join(5.0)
             raise SubmitError("compile_failed", "the compiling process died (exit "
@@ -111,3 +127,9 @@ class Compiler:
             running = list(self._running)
         for proc in running:
             proc.terminate()
+
+
+def _listening(hear: progress.Listener, fn: Callable[..., T], args: tuple[Any, ...]) -> T:
+    """`fn(*args)` with its progress reports going to `hear` (the thread mode)."""
+    with progress.listening_with(hear):
+        return fn(*args)

@@ -19,6 +19,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 from types import FrameType
+from typing import Any
 
 import uvicorn
 
@@ -26,9 +27,11 @@ from fivebar_host.config import Profile, load_profile
 from fivebar_host.errors import FivebarError
 from fivebar_host.server.app import create_app
 from fivebar_host.server.compiler import Compiler
+from fivebar_host.server.connections import HEADER_TIMEOUT_S, protocol_class
 from fivebar_host.server.jobs import CompiledCache
-from fivebar_host.server.machine import WorkerConfig
 from fivebar_host.server.security import (
+    BODY_GRACE_S,
+    BODY_IDLE_S,
     MAX_IN_FLIGHT,
     MAX_UPLOAD_BYTES_PENDING,
     MAX_UPLOADS,
@@ -38,7 +41,9 @@ from fivebar_host.server.security import (
     is_loopback,
     load_or_create_token,
 )
+from fivebar_host.server.state import WorkerConfig
 from fivebar_host.server.store import JobStore
+from fivebar_host.server.stored import StoredJobs
 from fivebar_host.server.worker import Worker
 
 log = logging.getLogger("fivebar.serve")
@@ -91,6 +96,11 @@ class ServeConfig:
     max_uploads: int = MAX_UPLOADS
     max_in_flight: int = MAX_IN_FLIGHT
     compile_slots: int = 2
+    #: Slow clients (docs/serve.md, Limits): the deadline of a request's headers and the
+    #: pace a body must keep (`server.connections`, `security.Guard`).
+    header_timeout_s: float = HEADER_TIMEOUT_S
+    body_grace_s: float = BODY_GRACE_S
+    body_idle_s: float = BODY_IDLE_S
     #: Compile submissions in child processes (`server.compiler`), never in a thread of
     #: the process that streams; False: in a thread (tests that replace the compiler).
     compile_processes: bool = True
@@ -114,6 +124,12 @@ def _bind(host: str, port: int) -> socket.socket:
     return sock
 
 
+def _base_url(bound: tuple[Any, ...]) -> str:
+    """The API's base URL from a bound socket address (host, port, …)."""
+    shown = f"[{bound[0]}]" if ":" in bound[0] else bound[0]
+    return f"http://{shown}:{bound[1]}"
+
+
 class Daemon:
     """One running daemon (machine thread + HTTP thread); see the module docstring."""
 
@@ -129,7 +145,9 @@ class Daemon:
         self._thread: threading.Thread | None = None
         self.compiler: Compiler | None = None
         self.store: JobStore | None = None
+        self.cache: CompiledCache | None = None
         self.worker: Worker | None = None
+        self.guard: Guard | None = None  # the HTTP guard (its counters: benchmarks, tests)
 
     def start(self, timeout_s: float = 15.0) -> str:
         """Start everything; returns the base URL (http://host:port)."""
@@ -137,6 +155,25 @@ class Daemon:
 
         register()  # a daemon is an entry point: the emulator's and the mocks' URL schemes
         host, port = parse_listen(self.cfg.listen)
+        loopback = is_loopback(host)
+        self._open_state(need_token=self.cfg.require_token or not loopback)
+        sock = _bind(host, port)
+        worker, server = self._machine_and_http(loopback, _base_url(sock.getsockname()))
+        worker.start()
+        self._thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]},
+                                        name="fivebar-http", daemon=True)
+        self._thread.start()
+        deadline = time.monotonic() + timeout_s
+        while not server.started:
+            if not self._thread.is_alive() or time.monotonic() > deadline:
+                self.stop(hurry=True)
+                raise ServeError("the HTTP server did not start")
+            time.sleep(0.01)
+        self._announce(sock.getsockname(), loopback)
+        return self.url
+
+    def _open_state(self, need_token: bool) -> None:
+        """The state directory and the API token (made on the first start)."""
         try:
             self.state_dir.mkdir(mode=0o700, parents=True, exist_ok=True)
         except OSError as e:
@@ -145,23 +182,26 @@ class Daemon:
         token, self.token_path, created = load_or_create_token(self.state_dir)
         if created:
             log.info("created the API token: %s (mode 0600)", self.token_path)
-        loopback = is_loopback(host)
-        need_token = self.cfg.require_token or not loopback
         self.token = token if need_token else None
-        sock = _bind(host, port)
+
+    def _machine_and_http(self, loopback: bool, url: str) -> tuple[Worker, uvicorn.Server]:
+        """The database, the machine thread and the HTTP server over the guarded
+        application (neither started); `url` is where the API will answer."""
         self.store = JobStore(self.state_dir / "fivebar.db")
         pruned = self.store.prune()
         if pruned:
             log.info("forgot %d old finished jobs", pruned)
         ser = self.profile.serial
-        cache = CompiledCache()
+        self.cache = CompiledCache()
+        jobs = StoredJobs(self.store, self.cache, self.profile)
         self.worker = Worker(WorkerConfig(
-            port_url=self.cfg.port_url, profile=self.profile, state_dir=self.state_dir,
-            baud=ser.baud, banner_timeout_s=self.cfg.banner_timeout_s or ser.banner_timeout_s,
-            reply_timeout_s=ser.reply_timeout_s, auto_resume=self.cfg.auto_resume),
-            self.store, cache)
+            port_url=self.cfg.port_url, profile=self.profile, baud=ser.baud,
+            banner_timeout_s=self.cfg.banner_timeout_s or ser.banner_timeout_s,
+            reply_timeout_s=ser.reply_timeout_s, auto_resume=self.cfg.auto_resume,
+            port_hint=f"use `fivebar plot --server {url}` (or the page there)"),
+            self.store, jobs)
         self.compiler = Compiler(self.cfg.compile_processes)
-        app = create_app(store=self.store, worker=self.worker, cache=cache,
+        app = create_app(store=self.store, worker=self.worker.handle, jobs=jobs,
                          profile=self.profile, stopping=self.stopping,
                          compiler=self.compiler, compile_slots=self.cfg.compile_slots)
         guarded = Guard(app, Policy(token=self.token, loopback=loopback,
@@ -170,31 +210,30 @@ class Daemon:
                                     max_uploads=self.cfg.max_uploads,
                                     max_upload_bytes_pending=max(
                                         MAX_UPLOAD_BYTES_PENDING,
-                                        2 * self.cfg.max_upload_bytes)))
+                                        2 * self.cfg.max_upload_bytes),
+                                    body_grace_s=self.cfg.body_grace_s,
+                                    body_idle_s=self.cfg.body_idle_s))
+        self.guard = guarded
         # No limit_concurrency: uvicorn's cap counts open connections, idle ones included,
         # and refuses with a plain-text 503 — a burst of 200 connections was refused almost
         # whole. The Guard caps requests in flight and uploads instead, answering the
         # documented JSON `busy` with Retry-After; extra connections wait in the backlog.
+        # The protocol class adds a deadline for request headers and a cap on connections
+        # per client address (server.connections); the Guard one for bodies.
         config = uvicorn.Config(guarded, log_config=None, access_log=self.cfg.access_log,
                                 lifespan="off", limit_concurrency=None, backlog=LISTEN_BACKLOG,
+                                http=protocol_class(self.cfg.header_timeout_s),
                                 timeout_keep_alive=5, server_header=False,
                                 h11_max_incomplete_event_size=16 * 1024)
         self._server = uvicorn.Server(config)
-        self.worker.start()
-        self._thread = threading.Thread(target=self._server.run, kwargs={"sockets": [sock]},
-                                        name="fivebar-http", daemon=True)
-        self._thread.start()
-        deadline = time.monotonic() + timeout_s
-        while not self._server.started:
-            if not self._thread.is_alive() or time.monotonic() > deadline:
-                self.stop(hurry=True)
-                raise ServeError("the HTTP server did not start")
-            time.sleep(0.01)
-        bound = sock.getsockname()
-        shown = f"[{bound[0]}]" if ":" in bound[0] else bound[0]
-        self.url = f"http://{shown}:{bound[1]}"
+        return self.worker, self._server
+
+    def _announce(self, bound: tuple[Any, ...], loopback: bool) -> None:
+        """The base URL from the bound socket address (host, port, …), the log lines that
+        say where and how the daemon listens, and the ready file."""
+        self.url = _base_url(bound)
         log.info("listening on %s (%s); machine port %s; state %s", self.url,
-                 "token required" if need_token else "loopback, no token",
+                 "token required" if self.token is not None else "loopback, no token",
                  self.cfg.port_url, self.state_dir)
         if not loopback:
             log.warning("listening on a non-loopback address: every request needs the token "
@@ -203,7 +242,6 @@ class Daemon:
             tmp = self.cfg.ready_file.with_name(self.cfg.ready_file.name + ".tmp")
             tmp.write_text(self.url + "\n", encoding="utf-8")
             tmp.replace(self.cfg.ready_file)
-        return self.url
 
     def alive(self) -> bool:
         """Both threads still running."""
@@ -214,8 +252,9 @@ class Daemon:
         """Stop the running job (segment boundary, laser off), then the HTTP server."""
         self.stopping.set()
         if self.worker is not None:
-            self.worker.terminate(hurry)
-            self.worker.finished.wait(timeout_s)
+            self.worker.handle.terminate(hurry)
+            if self.worker.ident is not None:  # started
+                self.worker.join(timeout_s)
         if self._server is not None:
             self._server.should_exit = True
         if self._thread is not None:
@@ -247,7 +286,7 @@ def run_foreground(cfg: ServeConfig) -> int:
         signals.append(signum)
         wake.set()
         if len(signals) > 1 and daemon.worker is not None:
-            daemon.worker.terminate(hurry=True)
+            daemon.worker.handle.terminate(hurry=True)
 
     previous = {s: signal.signal(s, on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
     try:

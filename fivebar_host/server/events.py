@@ -1,11 +1,11 @@
 """Server-sent events for the web page: machine status, live progress and the queue, pushed.
 
-`GET /api/events` (server.web) answers `text/event-stream`. Nothing polls on a timer: the
-machine thread calls `EventHub.poke` on every status report and progress update
-(`JournalLink.on_status`, `MachineState.on_change`), and the store calls it after every
-committed write (`JobStore.listeners`). A poke wakes every open stream on the event loop
-(coalesced: at most one wake-up is pending at a time), and each stream sends what changed,
-at most once per `MIN_INTERVAL_S`:
+`GET /api/events` (server.routes.page) answers `text/event-stream`. Nothing polls on a timer:
+the machine thread calls `EventHub.poke` whenever it publishes a new snapshot of its state
+(every status report, progress update and request it carries out: `WorkerHandle.listeners`),
+and the store calls it after every committed write (`JobStore.listeners`). A poke wakes
+every open stream on the event loop (coalesced: at most one wake-up is pending at a time),
+and each stream sends what changed, at most once per `MIN_INTERVAL_S`:
 
 - `status`: the machine as last reported (the `/api/status` machine fields), the pen's
   point and the linkage pose in mm, the running job's live progress (segment n of m,
@@ -37,9 +37,12 @@ import numpy as np
 
 from fivebar_host.compile.steps import step_angles
 from fivebar_host.config import Profile
+from fivebar_host.progress import Event
+from fivebar_host.server.jobs import CompiledCache
 from fivebar_host.server.manual import pose_mm
+from fivebar_host.server.requests import WorkerHandle
+from fivebar_host.server.state import machine_view
 from fivebar_host.server.store import JobStore
-from fivebar_host.server.worker import Worker
 
 #: Shortest time between two `status` events of one stream, s (at most 25 a second).
 MIN_INTERVAL_S = 0.04
@@ -79,23 +82,47 @@ def sse(event: str, data: Any) -> bytes:
     return f"event: {event}\ndata: {json.dumps(data, separators=(',', ':'))}\n\n".encode()
 
 
+@dataclass
+class Compiling:
+    """A compilation under way, as its progress reports say (`fivebar_host.progress`)."""
+
+    name: str
+    started: float  # monotonic s
+    on_change: Callable[[], None] | None = None  # wakes the event streams
+    stage: str = "waiting for a compilation slot"
+    fraction: float | None = None
+    note: str | None = None
+
+    def heard(self, ev: Event) -> None:
+        """Take one progress report (from a compiling process, through its pipe)."""
+        if ev.note is not None:
+            self.note = ev.note
+        else:
+            self.stage, self.fraction = ev.stage, ev.fraction
+        if self.on_change is not None:
+            self.on_change()
+
+
 class EventHub:
     """Wakes the open event streams when something changed (module docstring)."""
 
-    def __init__(self, worker: Worker, store: JobStore, profile: Profile,
-                 stopping: threading.Event, jobs_view: Callable[[], dict[str, Any]]) -> None:
+    def __init__(self, worker: WorkerHandle, store: JobStore, cache: CompiledCache,
+                 profile: Profile, stopping: threading.Event,
+                 jobs_view: Callable[[], dict[str, Any]]) -> None:
         self.worker = worker
         self.store = store
+        self.cache = cache
         self.profile = profile
         self.stopping = stopping
         self.jobs_view = jobs_view
         self.trail = Trail()
+        self.compiling: dict[int, Compiling] = {}  # compilations under way, by id
         self._lock = threading.Lock()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._changed = asyncio.Event()
         self._pending = False
         self._draws: tuple[int, Any] | None = None  # (job id, its draw mask)
-        worker.on_change = self.poke
+        worker.listeners.append(self.poke)
         store.listeners.append(self.poke)
 
     # ------------------------------------------------------------------ any thread
@@ -113,8 +140,8 @@ class EventHub:
             loop.call_soon_threadsafe(self._fire)
 
     def _record_trail(self) -> None:
-        live, link = self.worker.live, self.worker.link
-        st = link.last_status if link is not None else None
+        snap = self.worker.snapshot()
+        live, st = snap.live, snap.status
         if live is None or st is None:
             return
         draws = self._draw_mask(live.job_id)
@@ -127,7 +154,7 @@ class EventHub:
         cached = self._draws
         if cached is not None and cached[0] == job_id:
             return cached[1]
-        job = self.worker.cache.get(job_id)
+        job = self.cache.get(job_id)
         mask = None if job is None else np.asarray(job.draw)
         self._draws = (job_id, mask)
         return mask
@@ -141,19 +168,18 @@ class EventHub:
 
     def status_event(self) -> dict[str, Any]:
         """The `status` event's data (without the trail)."""
-        w = self.worker
-        machine = w.machine()
-        link = w.link
+        snap = self.worker.snapshot()
+        machine = machine_view(snap, self.profile)
         changed_at = None
-        if link is not None and link.last_status is not None:
-            changed_at = time.time() - (time.monotonic() - link.status_at)
+        if snap.connected and snap.status is not None:
+            changed_at = time.time() - (time.monotonic() - snap.status_at)
         pos = machine.get("position")
         pose = None if pos is None else pose_mm(self.profile, pos["a"], pos["b"])
-        live = w.live
+        live = snap.live
         blk = self.store.blocking()
         return {
-            "machine": machine, "current_job": w.current, "stopping": self.stopping.is_set(),
-            "blocked_by": blk.id if blk is not None and blk.id != w.current else None,
+            "machine": machine, "current_job": snap.current, "stopping": self.stopping.is_set(),
+            "blocked_by": blk.id if blk is not None and blk.id != snap.current else None,
             "pose": None if pose is None else {"pen": pose.pen, "points": pose.points,
                                                "mode": pose.mode},
             "live": None if live is None else {
@@ -161,8 +187,10 @@ class EventHub:
                 "copy_number": live.copy,
                 "segments_total": live.segments_total, "elapsed_s": round(live.elapsed_s, 2),
                 "remaining_s": round(live.remaining_s, 2), "paused": live.paused,
-                "overrides": {"feed_pct": live.overrides.feed_pct,
-                              "power_pct": live.overrides.power_pct}},
+                "overrides": {"feed_pct": live.feed_pct, "power_pct": live.power_pct}},
+            "compiling": [{"name": c.name, "stage": c.stage, "progress": c.fraction,
+                           "elapsed_s": round(time.monotonic() - c.started, 1),
+                           "note": c.note} for c in list(self.compiling.values())],
             "changed_at": changed_at}
 
     def trail_since(self, serial: int, start: int

@@ -1,26 +1,29 @@
 """One job's run on the machine thread: prepare, stream through `run_job`, finish or stop.
 
-A run prepares the job (compiled again if it is not cached), parks the arms when they are
-known to be elsewhere, and runs it with `run.job.run_job` on the fivebar controller over the
-worker's journalled link, with the daemon's operator and resume store
-(`server.operator`): the store commits the stream record as each stream starts and loads the
-resume point from the job's row; the operator's progress keeps the live snapshot and the
-progress writer up to date and still stops the machine for a cancel or pause once all lines
-are sent; the pose questions are answered by `MachineState.answer`. The run ends done, or —
-after a fault, a cancel or a stop — with its resume point recorded in the database and the
-job held or cancelled, as its cause calls for (server.worker has the story).
+`JobRunner` is the worker's collaborator for one job at a time. A run prepares the job
+(compiled again if it is not cached, `server.stored`), records it as the machine thread's
+current job with its live progress, parks the arms when they are known to be elsewhere,
+and runs it with `run.job.run_job` on the connection's fivebar controller, with the
+daemon's operator and resume store (`server.operator`): the store commits the stream record
+as each stream starts and loads the resume point from the job's row; the operator's
+progress keeps the live progress and the progress writer up to date and still stops the
+machine for a cancel or pause once all lines are sent; the pose questions are answered by
+`PoseKeeper.answer`, the stop requests by `JobControl`. The run ends done, or — after a
+fault, a cancel or a stop — with its resume point recorded in the database and the job held
+or cancelled, as its cause calls for (server.worker has the story). A broken link is
+recorded like any fault and then raised again, for the worker to reconnect.
 """
 
 from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from fivebar_host import protocol
 from fivebar_host.compile import Job
 from fivebar_host.compile.model import LayerPause
-from fivebar_host.controllers.fivebar.controller import FivebarController
 from fivebar_host.run.errors import FaultKind, LinkError, LinkFaultError, SendError
 from fivebar_host.run.job import RunOptions, RunReport, run_job
 from fivebar_host.run.operator import Progress
@@ -28,12 +31,14 @@ from fivebar_host.run.overrides import Overrides
 from fivebar_host.run.resume import ResumePoint
 from fivebar_host.run.stops import planned_time_s
 from fivebar_host.server import store as st_
-from fivebar_host.server.control import Control
+from fivebar_host.server.control import JobControl
 from fivebar_host.server.jobs import JobOptions, SubmitError
-from fivebar_host.server.journal import JournalLink
-from fivebar_host.server.machine import Live
+from fivebar_host.server.journal import ProgressWriter
 from fivebar_host.server.operator import DaemonOperator, DatabaseStore
-from fivebar_host.server.store import JobRecord, ResumeRecord
+from fivebar_host.server.pose import PoseKeeper
+from fivebar_host.server.state import Connection, Live, MachineRecord
+from fivebar_host.server.store import JobRecord, JobStore, ResumeRecord
+from fivebar_host.server.stored import StoredJobs
 
 log = logging.getLogger("fivebar.serve")
 
@@ -42,7 +47,7 @@ log = logging.getLogger("fivebar.serve")
 class JobRun:
     """One run of a job: what its steps and `run_job`'s hooks share."""
 
-    link: JournalLink
+    conn: Connection
     rec: JobRecord
     job: Job
     opts: JobOptions
@@ -59,54 +64,69 @@ class JobRun:
     saved: ResumePoint | None = None  # where the run stopped, when it stopped early
 
 
-class JobRunner(Control):
-    """The worker's job run (machine thread; see the module docstring)."""
+class JobRunner:
+    """The worker's job run (module docstring); machine thread only. Writes the record's
+    current job, live progress and question; `changed` publishes the record."""
 
-    def _run(self, link: JournalLink, rec: JobRecord) -> None:
+    def __init__(self, record: MachineRecord, store: JobStore, jobs: StoredJobs,
+                 progress: ProgressWriter, pose: PoseKeeper, control: JobControl,
+                 changed: Callable[[], None]) -> None:
+        self.record = record
+        self.store = store
+        self.jobs = jobs
+        self.progress = progress
+        self.pose = pose
+        self.control = control
+        self.changed = changed
+
+    def run(self, conn: Connection, rec: JobRecord) -> None:
         """Run (or resume) one job to its end, a fault, a pause that ends in cancel, or stop."""
-        run = self._prepare(link, rec)
+        run = self._prepare(conn, rec)
         if run is None:
             return
         report = self._stream(run)
         if report is not None:
             self._finish(run, report)
 
-    def _prepare(self, link: JournalLink, rec: JobRecord) -> JobRun | None:
-        """Claim the job and write its resume file; None (job failed) if it cannot compile."""
+    def _prepare(self, conn: Connection, rec: JobRecord) -> JobRun | None:
+        """Make the job current with its live progress; None (job failed) if it cannot
+        compile."""
         try:
-            job = self._job(rec)
+            job = self.jobs.job(rec)
         except SubmitError as e:
             log.error("job %d: %s", rec.id, e)
             self.store.set_state(rec.id, st_.FAILED, message=str(e))
-            with self._cv:
-                self.current = None
+            self.record.current = None
+            self.changed()
             return None
         opts = JobOptions.from_json(rec.options)
         start = rec.resume.next_segment if rec.resume is not None else 0
-        with self._cv:
-            self.current = rec.id
-            self._question = None
-            user_confirm = self._confirm_once.pop(rec.id, False)
+        state = self.record
+        state.current = rec.id
+        state.question = None
+        user_confirm = state.confirm_once.pop(rec.id, False)
         overrides = Overrides()  # each run starts at 100 % (a resumed job too)
-        self.live = Live(rec.id, start, job.n_segments, 0.0,
-                         float(job.duration_us[start:].sum()) * 1e-6, overrides=overrides)
+        state.live = Live(rec.id, start, job.n_segments, 0.0,
+                          float(job.duration_us[start:].sum()) * 1e-6, overrides=overrides)
+        self.changed()
         self.store.update(rec.id, state=st_.RUNNING, message="", question=None,
                           started_at=rec.started_at or time.time())
         log.info("job %d (%s): %s at segment %d of %d", rec.id, rec.name,
                  "resuming" if rec.resume is not None else "starting", start, job.n_segments)
-        return JobRun(link, rec, job, opts, start, rec.resume is not None, user_confirm,
+        return JobRun(conn, rec, job, opts, start, rec.resume is not None, user_confirm,
                       time.monotonic(), rec.run_s, overrides=overrides)
 
     def _stream(self, run: JobRun) -> RunReport | None:
-        """Park, then `run_job`; its report, or None once a stop or fault is recorded."""
-        link = run.link
+        """Park, then `run_job`; its report, or None once a stop or fault is recorded (a
+        broken link is raised again once recorded)."""
+        conn = run.conn
         store = DatabaseStore(self.store, run)
         try:
-            self._motors_on(link)
+            self.pose.motors_on(conn.link)
             if not run.resume:
-                self._park(link, run.job)
-            return run_job(FivebarController(link, self.cfg.profile), run.job,
-                           DaemonOperator(self, run), store,
+                self.pose.park(conn, run.job)
+            return run_job(conn.controller, run.job,
+                           DaemonOperator(self, self.control, self.pose, run), store,
                            RunOptions(run.opts.laser, run.resume, run.opts.copies_plan(),
                                       run.overrides))
         except SendError as e:
@@ -116,19 +136,18 @@ class JobRunner(Control):
         except LinkError as e:
             self.progress.flush()
             self._after_error(run, SendError(str(e)))
-            self._disconnected(str(e))
-            return None
+            raise
         finally:
             self.progress.flush()
-            with self._cv:
-                self.current = None
-                self._request = None
-            self.live = None
+            self.record.current = None
+            self.record.request = None
+            self.record.live = None
+            self.changed()
 
     def _finish(self, run: JobRun, report: RunReport) -> None:
         """Record a job that ran to its end."""
         rec, job = run.rec, run.job
-        final = run.link.last_status
+        final = run.conn.link.last_status
         underruns = (max(0, final.underruns - run.underruns0 - 1)
                      if run.underruns0 is not None and final is not None else None)
         self.store.update(rec.id, segments_done=job.n_segments, remaining_s=0.0,
@@ -138,8 +157,8 @@ class JobRunner(Control):
             f"done: {report.segments} segments in {report.elapsed_s:.1f} s (planned "
             f"{planned:.1f} s), {report.bytes_sent} bytes sent, {report.resends} "
             f"resends; machine at A = {report.final[0]}, B = {report.final[1]}"))
-        self.cache.drop(rec.id)
-        self._set_pose(True, final)
+        self.jobs.cache.drop(rec.id)
+        self.pose.set(True, final)
         log.info("job %d done in %.1f s (%d resends, %s queue underruns mid-job)", rec.id,
                  report.elapsed_s, report.resends, "?" if underruns is None else underruns)
 
@@ -149,35 +168,35 @@ class JobRunner(Control):
         waits in the paused state, its reason naming the layer, until the resume request
         (True) or a cancel or stop (False: `run_job` records the exact resume point)."""
         self.store.set_stream(run.rec.id, None)  # the stream before the stop is over
-        return self._wait_paused(run.link, run.rec.id, f"pen change: {pause.describe()}; "
-                                 "the pen is up and the machine idle. Change the pen, then "
-                                 "resume the job")
+        return self.control.wait_paused(run.conn, run.rec.id, f"pen change: "
+                                        f"{pause.describe()}; the pen is up and the machine "
+                                        "idle. Change the pen, then resume the job")
 
     def on_copy(self, run: JobRun, copy: int) -> None:
         """A copy starts: its streams are recorded as this copy's (crash recovery)."""
         run.copy = copy
-        live = self.live
+        live = self.record.live
         if live is not None:
             live.copy = copy
-            self.on_change()
+            self.changed()
 
     def on_wait(self, left_s: float) -> None:
         """The page delay between copies: the live view's time left counts it down."""
-        live = self.live
+        live = self.record.live
         if live is not None:
             live.remaining_s = max(live.remaining_s, left_s)
-            self.on_change()
+            self.changed()
 
     def on_progress(self, run: JobRun, p: Progress) -> None:
-        """Keep the live snapshot and the recorded progress; stop a drained stream on request."""
-        link = run.link
+        """Keep the live progress and the recorded progress; stop a drained stream on request."""
+        link = run.conn.link
         now = time.monotonic()
-        live = self.live
+        live = self.record.live
         if live is not None:
             live.segments_done = p.segments_done
             live.elapsed_s = run.base_run + (now - run.t0)
             live.remaining_s = p.remaining_s
-            self.on_change()
+            self.changed()
         st = link.last_status
         if (st is not None and run.underruns0 is None and run.first_line is not None
                 and st.done_line >= run.first_line):
@@ -190,11 +209,12 @@ class JobRunner(Control):
             # All lines are sent; run_job waits for the machine to finish them. A
             # cancel (or a pause) still has to stop it: hold here, and give up by raising
             # the interrupt fault run_job handles like any other (hold, reset, record).
-            req = self._stop_kind()
+            req = self.control.pending_stop()
             if req in ("cancel", "pause"):
                 link.realtime(protocol.RT_HOLD)
-                if req == "cancel" or not self._wait_paused(link, run.rec.id):
-                    raise LinkFaultError(FaultKind.INTERRUPT, f"{link.url}: {self._why()}", -1,
+                if req == "cancel" or not self.control.wait_paused(run.conn, run.rec.id):
+                    raise LinkFaultError(FaultKind.INTERRUPT,
+                                         f"{link.url}: {self.control.why()}", -1,
                                          status=link.last_status)
                 link.realtime(protocol.RT_RESUME)
 
@@ -203,12 +223,12 @@ class JobRunner(Control):
         """Record where a job stopped and put it in the state its cause calls for."""
         cause = e.__cause__
         kind = cause.kind if isinstance(cause, LinkFaultError) else None
-        req = self._stop_kind()
+        req = self.control.stop_kind()
         rp = self._record_stop(run, kind, req)
         if rp is not None and kind not in (None, FaultKind.DISCONNECT):
-            self._set_pose(rp.position is not None, run.link.last_status)
+            self.pose.set(rp.position is not None, run.conn.link.last_status)
         elif kind is FaultKind.DISCONNECT:
-            self.pose_known = False
+            self.pose.forget()
         self._stopped_state(run.rec, rp, req, e)
 
     def _record_stop(self, run: JobRun, kind: str | None, req: str | None) -> ResumePoint | None:
@@ -240,18 +260,19 @@ class JobRunner(Control):
         if req == "cancel":
             self.store.set_state(rec.id, st_.CANCELLED,
                                  message=f"cancelled at {where}; laser off (held and reset)")
-            self.cache.drop(rec.id)
+            self.jobs.cache.drop(rec.id)
             log.info("job %d cancelled at %s", rec.id, where)
         elif req == "terminate":
             self.store.set_state(rec.id, st_.HELD, message=(
                 f"stopped when the daemon was told to stop, at {where}; laser off. Resume it "
                 "with POST /api/jobs/{}/resume".format(rec.id)))
             log.info("job %d stopped for shutdown at %s", rec.id, where)
-        elif self._question is not None:
-            self.store.set_state(rec.id, st_.HELD, question=self._question, message=(
-                f"waiting for a person: {self._question} Answer by resuming the job with "
-                "confirm=true once it is so (nothing has moved)."))
-            log.warning("job %d held: %s", rec.id, self._question)
+        elif (question := self.record.question) is not None:
+            self.store.set_state(rec.id, st_.HELD, question=question, message=(
+                f"waiting for a person: {question} Answer yes on the web page, or on a "
+                "terminal following it with `fivebar plot --server`, once it is so "
+                "(nothing has moved)."))
+            log.warning("job %d held: %s", rec.id, question)
         else:
             self.store.set_state(rec.id, st_.HELD, message=text + (
                 f"\nresume it with POST /api/jobs/{rec.id}/resume" if rp is not None else ""))

@@ -12,14 +12,16 @@ from __future__ import annotations
 
 import hashlib
 import re
+import sys
 import threading
+import unicodedata
 from collections import OrderedDict
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 from fivebar_host.compile import GCODE_SUFFIXES, CompileOptions, Job, compile_drawing, gcode_tool
 from fivebar_host.config import Profile, require_tool
-from fivebar_host.errors import FivebarError, InputError, JobError, OptionError
+from fivebar_host.errors import FivebarError, InputError, JobError, OptionError, shorten
 from fivebar_host.options import PEN_NAMES, check_values, compile_values
 from fivebar_host.raster.image import decode as decode_image
 from fivebar_host.raster.image import is_image_file
@@ -29,8 +31,32 @@ from fivebar_host.run.stops import Copies
 from fivebar_host.toolpath.gcode import read_gcode
 from fivebar_host.toolpath.svg import read_svg
 
-#: What a file name may look like: printable, no separators, at most 128 characters.
-_NAME = re.compile(r"^[^/\\\x00-\x1f]{1,128}$")
+
+def _invisible_ranges() -> str:
+    """The characters a shown name must not hold, as a regular-expression class body:
+    controls (C0, DEL, C1), format characters (bidi marks, embeddings, overrides and
+    isolates, zero-width characters, the BOM: a right-to-left override in a name makes
+    "gpj.svg" show as "gvs.jpg") and the line and paragraph separators."""
+    bad = [c for c in range(sys.maxunicode + 1)
+           if unicodedata.category(chr(c)) in ("Cc", "Cf", "Zl", "Zp")]
+    runs: list[tuple[int, int]] = []
+    for c in bad:
+        if runs and runs[-1][1] == c - 1:
+            runs[-1] = (runs[-1][0], c)
+        else:
+            runs.append((c, c))
+
+    def one(c: int) -> str:
+        return f"\\x{c:02x}" if c < 0x80 else chr(c)
+    return "".join(one(a) if a == b else f"{one(a)}-{one(b)}" for a, b in runs)
+
+
+#: What a file name may look like (also its OpenAPI pattern, so the two agree): 1 to 128
+#: characters, no directory separators, no control or format character, and no leading
+#: dot (no ".", "..", nor a hidden file's name).
+_INVISIBLE = _invisible_ranges()
+NAME_PATTERN = f"^[^./\\\\{_INVISIBLE}][^/\\\\{_INVISIBLE}]{{0,127}}$"
+_NAME = re.compile(NAME_PATTERN)
 SVG_SUFFIXES = frozenset({".svg"})
 
 
@@ -123,9 +149,11 @@ class JobOptions(CompileOptions):
 
 def check_name(name: str) -> str:
     """A client's file name, refused when it is a path or not printable."""
-    if not _NAME.match(name) or name in (".", ".."):
+    if not _NAME.match(name):
         raise SubmitError("bad_name", f"name must be a plain file name (no directories, "
-                          f"printable, at most 128 characters); got {name!r}", status=400)
+                          "no leading dot, at most 128 characters, no control, bidi or "
+                          f"other invisible characters); got {shorten(name)!a}",
+                          status=400)
     return name
 
 
@@ -141,14 +169,15 @@ def read_upload(data: bytes, name: str, layers: tuple[str, ...],
     if not data.strip():
         raise SubmitError("empty_upload", f"{name}: the upload is empty", status=400)
     suffix = _suffix(name)
+    text = profile.text if profile is not None else None  # the fonts of SVG <text>
     if suffix in SVG_SUFFIXES:
-        return read_svg(data, layers or None, file=name)
+        return read_svg(data, layers or None, file=name, text=text)
     if suffix in GCODE_SUFFIXES or not data.lstrip()[:512].startswith(
             (b"<?xml", b"<svg", b"<!--", b"<!DOCTYPE")):
         if layers:
             raise InputError("--layer applies to SVG files only", name)
         return read_gcode(data, file=name, **gcode_tool(profile))
-    return read_svg(data, layers or None, file=name)
+    return read_svg(data, layers or None, file=name, text=text)
 
 
 @dataclass(frozen=True)

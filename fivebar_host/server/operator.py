@@ -1,11 +1,12 @@
 """The daemon's operator and resume store: how a job's run (`run.job.run_job`) reaches the
 people behind the web page and the API, and where it keeps its resume point.
 
-- `DaemonOperator` answers a run's questions on behalf of the machine thread: the pose
-  questions from the daemon's own record or the person's confirmation given with the job or
-  the resume request (`MachineState.answer`), holds and cancels from the requests other
-  threads make (`Control`), pen changes by parking the job in the paused state until the
-  resume request, progress into the live snapshot and the database.
+- `DaemonOperator` answers a run's questions on behalf of the machine thread, through the
+  worker's collaborators: the pose questions from the daemon's own record or the person's
+  confirmation given with the job or the resume request (`PoseKeeper.answer`), holds and
+  cancels from the requests other threads make (`JobControl`), pen changes by parking the
+  job in the paused state until the resume request, progress into the live progress and the
+  database (`JobRunner`).
 - `DatabaseStore` keeps the run's resume point in the job's SQLite record (`server.store`)
   instead of a file beside the drawing, and records each stream as it starts (first line
   number, start segment, start position), so that after a crash the firmware's own `Ln`
@@ -25,7 +26,9 @@ from fivebar_host.run.store import StreamStart
 from fivebar_host.server.store import JobStore, StreamRecord
 
 if TYPE_CHECKING:
+    from fivebar_host.server.control import JobControl
     from fivebar_host.server.jobrun import JobRun, JobRunner
+    from fivebar_host.server.pose import PoseKeeper
 
 log = logging.getLogger("fivebar.serve")
 
@@ -35,16 +38,19 @@ class DaemonOperator:
 
     attended = True  # the web page and the API answer pen changes (the paused state)
 
-    def __init__(self, worker: JobRunner, run: JobRun) -> None:
-        self.worker = worker
+    def __init__(self, runner: JobRunner, control: JobControl, pose: PoseKeeper,
+                 run: JobRun) -> None:
+        self.runner = runner
+        self.control = control
+        self.pose = pose
         self.run = run
 
     def confirm(self, question: str) -> bool:
         # The person's confirmation given with the submission is for the job's first start;
         # after an interruption only the daemon's own record or a resume request answers.
         run = self.run
-        return self.worker.answer(run.link, question, run.opts.confirm and not run.resume,
-                                  run.user_confirm)
+        return self.pose.answer(run.conn.link, question, run.opts.confirm and not run.resume,
+                                run.user_confirm)
 
     def confirm_placed(self, question: str) -> bool:
         return self.confirm(question)
@@ -53,22 +59,22 @@ class DaemonOperator:
         log.warning("job %d: %s", self.run.rec.id, text)
 
     def progress(self, p: Progress) -> None:
-        self.worker.on_progress(self.run, p)
+        self.runner.on_progress(self.run, p)
 
     def should_stop(self) -> bool:
-        return self.worker.should_stop()
+        return self.control.should_stop()
 
     def interrupted(self) -> bool:
-        return self.worker.on_interrupt()
+        return self.control.on_interrupt(self.run.conn, self.run.rec.id)
 
     def pen_change(self, pause: LayerPause) -> bool:
-        return self.worker.on_pen_change(self.run, pause)
+        return self.runner.on_pen_change(self.run, pause)
 
     def waiting(self, left_s: float) -> None:
-        self.worker.on_wait(left_s)
+        self.runner.on_wait(left_s)
 
     def copy_started(self, copy: int) -> None:
-        self.worker.on_copy(self.run, copy)
+        self.runner.on_copy(self.run, copy)
 
 
 class DatabaseStore:

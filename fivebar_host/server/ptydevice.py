@@ -11,7 +11,8 @@ which is what the daemon's crash tests need, and a way to try the daemon without
 
 `--ledger FILE` writes, on SIGUSR1 and at exit, a JSON summary of what the machine executed
 (per-motor steps issued, final position, laser switch-ons, boots, blocks), from the mock's
-ledger.
+ledger, and the bytes it received; `--record FILE` keeps those bytes themselves (what every
+host that opened the pty wrote, in order: the port-ownership tests read it).
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ from fivebar_host.devices import urls
 from fivebar_host.devices.mock import MockSerial
 
 
-def ledger_summary(port: MockSerial) -> dict[str, Any]:
+def ledger_summary(port: MockSerial, bytes_in: int = 0) -> dict[str, Any]:
     """What the mock machine executed, in numbers a test can compare with a plan."""
     entries = port.ledger
     g1 = [e for e in entries if e.kind == "G1"]
@@ -50,10 +51,12 @@ def ledger_summary(port: MockSerial) -> dict[str, Any]:
         "laser_on_events": sum(1 for _, p in laser_log if p > 0),
         "boots": port.machine.boots,
         "lines": [e.line for e in g1],
+        "bytes_in": bytes_in,
     }
 
 
-def serve(url: str, link: Path, ledger: Path | None, poll_s: float = 0.001) -> int:
+def serve(url: str, link: Path, ledger: Path | None, poll_s: float = 0.001,
+          record: Path | None = None) -> int:
     """Run the mock behind a pty until SIGTERM/SIGINT (see the module docstring)."""
     urls.register()
     port = serial.serial_for_url(url, timeout=0)
@@ -68,11 +71,14 @@ def serve(url: str, link: Path, ledger: Path | None, poll_s: float = 0.001) -> i
     tmp.symlink_to(name)
     tmp.replace(link)
     stop = {"flag": False}
+    received = {"bytes": 0}
+    recording = record.open("ab", buffering=0) if record is not None else None
 
     def write_ledger() -> None:
         if ledger is not None:
             t = ledger.with_name(ledger.name + ".tmp")
-            t.write_text(json.dumps(ledger_summary(port)) + "\n", encoding="utf-8")
+            t.write_text(json.dumps(ledger_summary(port, received["bytes"])) + "\n",
+                         encoding="utf-8")
             t.replace(ledger)
 
     def on_term(signum: int, frame: Any) -> None:
@@ -94,6 +100,9 @@ def serve(url: str, link: Path, ledger: Path | None, poll_s: float = 0.001) -> i
                 except OSError:  # EAGAIN, or EIO while no client has the pty open
                     data = b""
                 if data:
+                    received["bytes"] += len(data)
+                    if recording is not None:
+                        recording.write(data)
                     port.write(data)
             out = port.read(port.in_waiting or 1)
             if out:
@@ -108,6 +117,8 @@ def serve(url: str, link: Path, ledger: Path | None, poll_s: float = 0.001) -> i
         os.close(master)
         os.close(slave)
         port.close()
+        if recording is not None:
+            recording.close()
     return 0
 
 
@@ -121,8 +132,10 @@ def main(argv: list[str] | None = None) -> int:
                     help="symlink to create, pointing at the pty device")
     ap.add_argument("--ledger", type=Path, default=None,
                     help="JSON summary of what was executed (on SIGUSR1 and at exit)")
+    ap.add_argument("--record", type=Path, default=None,
+                    help="append every byte received from the host to FILE")
     args = ap.parse_args(argv)
-    return serve(args.url, args.link, args.ledger)
+    return serve(args.url, args.link, args.ledger, record=args.record)
 
 
 if __name__ == "__main__":

@@ -17,6 +17,10 @@ copy of its last stream, so a job recovers in the copy it was drawing. A recover
 held at its resume point — the start of the next copy when a copy but not the last one had
 finished — or done, if it finished while the daemon was away; `--auto-resume` queues the
 held jobs again that need no person's answer.
+
+`Recovery` is the worker's collaborator for this, called once per connection before any
+job runs. It reads the controller's kept record on the link itself (the `Ln` counters and
+`H` are fivebar's firmware's) and records a pose it finds exact with `PoseKeeper`.
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ import time
 import numpy as np
 
 from fivebar_host.compile import Job
+from fivebar_host.config import Profile
 from fivebar_host.controllers.fivebar.kept import kept_resume_segment
 from fivebar_host.program import Program
 from fivebar_host.protocol import StatusReport
@@ -36,23 +41,33 @@ from fivebar_host.run.stops import later_copies_s, piece_end
 from fivebar_host.server import store as st_
 from fivebar_host.server.jobs import JobOptions, SubmitError
 from fivebar_host.server.journal import JournalLink
-from fivebar_host.server.machine import MachineState
-from fivebar_host.server.store import JobRecord, ResumeRecord, StreamRecord
+from fivebar_host.server.pose import PoseKeeper
+from fivebar_host.server.store import JobRecord, JobStore, ResumeRecord, StreamRecord
+from fivebar_host.server.stored import StoredJobs
 
 log = logging.getLogger("fivebar.serve")
 
 
-class Recovery(MachineState):
-    """The worker's crash recovery (machine thread; see the module docstring)."""
+class Recovery:
+    """The worker's crash recovery (module docstring); machine thread only."""
 
-    def _recover(self, link: JournalLink) -> None:
+    def __init__(self, store: JobStore, jobs: StoredJobs, profile: Profile, pose: PoseKeeper,
+                 drain_timeout_s: float, auto_resume: bool) -> None:
+        self.store = store
+        self.jobs = jobs
+        self.profile = profile
+        self.pose = pose
+        self.drain_timeout_s = drain_timeout_s
+        self.auto_resume = auto_resume
+
+    def recover(self, link: JournalLink) -> None:
         """After (re)connecting: settle jobs a crash or a lost link left unfinished."""
         for rec in self.store.list(states=(st_.RUNNING, st_.PAUSED)):
             self._recover_job(link, rec)
         for rec in self.store.list(states=(st_.HELD,)):
             if rec.stream is not None:
                 self._recover_job(link, rec)
-        if self.cfg.auto_resume:
+        if self.auto_resume:
             for rec in self.store.list(states=(st_.HELD,)):
                 if rec.resume is not None and rec.question is None:
                     log.info("job %d: resuming automatically (--auto-resume)", rec.id)
@@ -60,7 +75,7 @@ class Recovery(MachineState):
 
     def _settle(self, link: JournalLink) -> StatusReport:
         """Wait while the controller still runs lines it was given before the host died."""
-        deadline = time.monotonic() + self.cfg.drain_timeout_s
+        deadline = time.monotonic() + self.drain_timeout_s
         st = link.status()
         while st.state == "Run" and time.monotonic() < deadline:
             time.sleep(0.05)
@@ -70,7 +85,7 @@ class Recovery(MachineState):
     def _recover_job(self, link: JournalLink, rec: JobRecord) -> None:
         """Work out exactly where an interrupted job stopped and hold it there."""
         try:
-            job = self._job(rec)
+            job = self.jobs.job(rec)
         except SubmitError as e:
             self.store.set_state(rec.id, st_.FAILED, message=str(e))
             return
@@ -106,7 +121,7 @@ class Recovery(MachineState):
         if stream is None or not (not_reset or st.homed):
             return None
         try:
-            prog = build_program(job, self.cfg.profile, opts.laser, stream.start_segment,
+            prog = build_program(job, self.profile, opts.laser, stream.start_segment,
                                  stream.start_position, piece_end(job, stream.start_segment))
         except SendError as e:  # the profile's limits changed: no exact mapping
             log.warning("job %d: cannot rebuild its program (%s)", rec.id, e)
@@ -128,7 +143,7 @@ class Recovery(MachineState):
         exact = ResumeRecord(nxt, (st.a, st.b),
                              f"the daemon lost the machine mid-job; {why} (last "
                              f"line executed {st.done_line})", stream.copy)
-        self._set_pose(True, link.last_status)
+        self.pose.set(True, link.last_status)
         return exact
 
     def _kept_across_reset(self, rec: JobRecord, prog: Program, stream: StreamRecord,

@@ -16,13 +16,22 @@
 - **Query strings.** At most `MAX_QUERY_BYTES`, every `%` followed by two hex digits, UTF-8
   once decoded, no control characters; otherwise 422 `bad_query` (the framework would
   otherwise pass on replacement characters or a literal `%`).
-- **Load.** At most `Policy.max_in_flight` requests are handled at once and at most
-  `Policy.max_uploads` uploads (being read, waiting for a compilation slot or compiling)
-  holding at most `Policy.max_upload_bytes_pending` bytes between them; past that the
-  answer is 503 `busy` with `Retry-After`, before the body is read. Below these limits a
-  request waits its turn instead: connections are not capped here (the listen backlog and
-  the OS's file limit hold extra ones), because uvicorn's own cap answers a plain-text 503
-  and counts idle connections, so a burst of 200 connections was refused almost entirely.
+- **Load.** At most `Policy.max_in_flight` requests are handled at once; uploads hold at
+  most `Policy.max_upload_bytes_pending` bytes between them while they arrive, and at most
+  `Policy.max_uploads` of them, once whole, wait for a compilation slot or compile; past
+  that the answer is 503 `busy` with `Retry-After`. Below these limits a request waits its
+  turn instead: uvicorn's own cap answers a plain-text 503 and counts idle connections (a
+  burst of 200 connections was refused almost entirely), so connections are capped per
+  client by `server.connections` instead.
+- **Slow clients.** A body must keep coming: no gap longer than `Policy.body_idle_s`, and
+  after the first `Policy.body_grace_s` at least `Policy.body_min_rate` bytes a second on
+  average; otherwise 408 `timeout` and the connection is closed. A body that does not
+  arrive whole with its request counts, while it arrives, against its client address's
+  `Policy.max_slow_per_client` (503 `busy` past it). An upload takes one of the
+  `max_uploads` slots only once whole, so clients dribbling their bodies (256 of them
+  took every slot, one byte every 5 s) hold none, and are cut within seconds.
+  (The request headers have their deadline in `server.connections`.)
+- **nosniff.** Every answer carries `X-Content-Type-Options: nosniff`.
 
 The middleware is plain ASGI (no framework types), so it runs before routing and before any
 body parsing.
@@ -30,6 +39,7 @@ body parsing.
 
 from __future__ import annotations
 
+import asyncio
 import hmac
 import ipaddress
 import json
@@ -44,7 +54,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fivebar_host.errors import FivebarError
+from fivebar_host.errors import FivebarError, shorten
 
 log = logging.getLogger("fivebar.serve")
 
@@ -67,6 +77,15 @@ MAX_UPLOADS = 256
 MAX_UPLOAD_BYTES_PENDING = 256 * 1024 * 1024
 #: What a busy answer's Retry-After says, s.
 RETRY_AFTER_S = 2
+#: A body's first seconds, in which it need not keep `BODY_MIN_RATE`, s.
+BODY_GRACE_S = 10.0
+#: The average rate a body must keep after `BODY_GRACE_S`, bytes/s.
+BODY_MIN_RATE = 16 * 1024
+#: The longest gap between two pieces of a body, s.
+BODY_IDLE_S = 10.0
+#: Bodies one client address may have arriving at once (beyond the first piece).
+MAX_SLOW_PER_CLIENT = 32
+NOSNIFF = (b"x-content-type-options", b"nosniff")
 #: A '%' not followed by two hex digits.
 _BAD_PERCENT = re.compile(rb"%(?![0-9A-Fa-f]{2})")
 _CONTROL = re.compile(r"[\x00-\x1f\x7f]")
@@ -161,6 +180,10 @@ class Policy:
     max_in_flight: int = MAX_IN_FLIGHT
     max_uploads: int = MAX_UPLOADS
     max_upload_bytes_pending: int = MAX_UPLOAD_BYTES_PENDING
+    body_grace_s: float = BODY_GRACE_S
+    body_min_rate: float = BODY_MIN_RATE
+    body_idle_s: float = BODY_IDLE_S
+    max_slow_per_client: int = MAX_SLOW_PER_CLIENT
 
 
 def _header(scope: Scope, name: bytes) -> str | None:
@@ -200,8 +223,10 @@ class Guard:
         self.app = app
         self.policy = policy
         self.in_flight = 0  # requests past the checks, not yet answered
-        self.uploads = 0  # of which uploads
-        self.upload_bytes = 0  # bytes those uploads hold
+        self.uploads = 0  # uploads whole and waiting for a compilation slot or compiling
+        self.upload_bytes = 0  # bytes the uploads in flight hold
+        self.slow: dict[str, int] = {}  # per client address: bodies still arriving
+        self.cut = 0  # bodies cut for coming too slowly (408)
 
     def is_upload(self, scope: Scope) -> bool:
         """Whether a request is a job submission."""
@@ -228,16 +253,18 @@ class Guard:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
+        send = _nosniff(send)
         pol = self.policy
         host = _header(scope, b"host")
         if pol.loopback and (host is None or not is_loopback(_host_of(host))):
-            await _reject(send, 421, "bad_host", f"Host {host!r} is not a loopback address; "
-                          "this daemon only answers requests for 127.0.0.1 / localhost")
+            await _reject(send, 421, "bad_host", f"Host {shorten(host or '')!r} is not a "
+                          "loopback address; this daemon only answers requests for 127.0.0.1 "
+                          "/ localhost")
             return
         origin = _header(scope, b"origin")
         if origin is not None and (host is None or origin.split("://", 1)[-1] != host):
             await _reject(send, 403, "cross_origin", f"requests from web pages of another "
-                          f"origin ({origin}) are refused")
+                          f"origin ({shorten(origin)}) are refused")
             return
         if pol.token is not None and not self.is_public(scope):
             auth = _header(scope, b"authorization") or ""
@@ -272,46 +299,28 @@ class Guard:
             await _busy(send, f"the daemon is handling {self.in_flight} requests, its limit; "
                         "retry shortly")
             return
-        if upload and self.uploads >= pol.max_uploads:
-            await _busy(send, f"{self.uploads} submissions are being read or compiled, the "
-                        "limit; nothing was queued, submit again shortly")
-            return
         if self._over_budget(upload, max(n, 0), 0):
             await _busy(send, "the uploads in progress fill the daemon's upload memory; "
                         "nothing was queued, submit again shortly")
             return
         self.in_flight += 1
-        self.uploads += upload
-        held = 0
+        body = _Body(self, scope, upload, limit)
+        slot = False
         try:
-            # Read the whole body (bounded), then replay it to the application.
-            chunks: list[bytes] = []
-            size = 0
-            while True:
-                msg = await receive()
-                if msg["type"] == "http.disconnect":
+            if not await body.read(receive, send):
+                return
+            if upload:
+                if self.uploads >= pol.max_uploads:
+                    await _busy(send, f"{self.uploads} submissions wait for compilation or "
+                                "compile, the limit; nothing was queued, submit again shortly")
                     return
-                chunk = bytes(msg.get("body", b""))
-                size += len(chunk)
-                if size > limit:
-                    await _reject(send, 413, "too_large",
-                                  f"request body over the limit of {limit} bytes")
-                    return
-                if upload:
-                    if self._over_budget(upload, len(chunk), held):
-                        await _busy(send, "the uploads in progress fill the daemon's upload "
-                                    "memory; nothing was queued, submit again shortly")
-                        return
-                    held += len(chunk)
-                    self.upload_bytes += len(chunk)
-                chunks.append(chunk)
-                if not msg.get("more_body", False):
-                    break
-            await self._call(scope, receive, send, b"".join(chunks))
+                self.uploads += 1
+                slot = True
+            await self._call(scope, receive, send, b"".join(body.chunks))
         finally:
             self.in_flight -= 1
-            self.uploads -= upload
-            self.upload_bytes -= held
+            self.uploads -= slot
+            body.release()
 
     async def _call(self, scope: Scope, receive: Receive, send: Send, body: bytes) -> None:
         """Hand the request to the application with its body already read."""
@@ -325,3 +334,97 @@ class Guard:
             return await receive()
 
         await self.app(scope, replay, send)
+
+
+def _nosniff(send: Send) -> Send:
+    """`send` that adds `X-Content-Type-Options: nosniff` to every answer's headers."""
+
+    async def wrapped(message: Message) -> None:
+        if message["type"] == "http.response.start":
+            headers = list(message.get("headers", []))
+            if not any(bytes(k).lower() == NOSNIFF[0] for k, _ in headers):
+                headers.append(NOSNIFF)
+            message["headers"] = headers
+        await send(message)
+
+    return wrapped
+
+
+class _Body:
+    """One request's body as it arrives: bounded in size, in time (`Policy.body_*`), in the
+    uploads' byte budget and, while it keeps arriving, in its client's slow bodies."""
+
+    def __init__(self, guard: Guard, scope: Scope, upload: bool, limit: int) -> None:
+        self.guard = guard
+        self.upload = upload
+        self.limit = limit
+        client = scope.get("client")
+        self.who = str(client[0]) if client else "?"
+        self.chunks: list[bytes] = []
+        self.size = 0
+        self.held = 0  # bytes counted in the guard's upload budget
+        self.slow = False  # counted in the client's slow bodies
+
+    def _wait_s(self, start: float, last: float, now: float) -> float:
+        """How long the next piece may take: the gap limit, and after the grace period
+        the time by which the bytes so far fall below the minimum rate."""
+        pol = self.guard.policy
+        by_rate = start + pol.body_grace_s + self.size / pol.body_min_rate
+        return max(0.0, min(last + pol.body_idle_s, by_rate) - now)
+
+    async def read(self, receive: Receive, send: Send) -> bool:
+        """Read the whole body; False when it was refused (the answer is sent)."""
+        loop = asyncio.get_running_loop()
+        start = last = loop.time()
+        guard, pol = self.guard, self.guard.policy
+        while True:
+            try:
+                msg = await asyncio.wait_for(receive(), self._wait_s(start, last,
+                                                                     loop.time()))
+            except TimeoutError:
+                guard.cut += 1
+                took = loop.time() - start
+                await _reject(send, 408, "timeout", f"the request body came too slowly: "
+                              f"{self.size} bytes in {took:.1f} s (no gap over "
+                              f"{pol.body_idle_s:g} s and, after {pol.body_grace_s:g} s, at "
+                              f"least {pol.body_min_rate:g} bytes/s); nothing was queued")
+                return False
+            if msg["type"] == "http.disconnect":
+                return False
+            last = loop.time()
+            chunk = bytes(msg.get("body", b""))
+            self.size += len(chunk)
+            if self.size > self.limit:
+                await _reject(send, 413, "too_large",
+                              f"request body over the limit of {self.limit} bytes")
+                return False
+            if self.upload:
+                if guard._over_budget(True, len(chunk), self.held):
+                    await _busy(send, "the uploads in progress fill the daemon's upload "
+                                "memory; nothing was queued, submit again shortly")
+                    return False
+                self.held += len(chunk)
+                guard.upload_bytes += len(chunk)
+            self.chunks.append(chunk)
+            if not msg.get("more_body", False):
+                return True
+            if not self.slow:
+                if guard.slow.get(self.who, 0) >= pol.max_slow_per_client:
+                    await _busy(send, f"{pol.max_slow_per_client} request bodies from "
+                                f"{self.who} are still arriving, the limit for one client; "
+                                "nothing was queued, retry shortly")
+                    return False
+                guard.slow[self.who] = guard.slow.get(self.who, 0) + 1
+                self.slow = True
+
+    def release(self) -> None:
+        """Give back what the body held in the guard's counts."""
+        self.guard.upload_bytes -= self.held
+        self.held = 0
+        if self.slow:
+            left = self.guard.slow.get(self.who, 1) - 1
+            if left > 0:
+                self.guard.slow[self.who] = left
+            else:
+                self.guard.slow.pop(self.who, None)
+            self.slow = False

@@ -38,10 +38,27 @@ profile's `[tool] kind` and `[pen] z_threshold_mm`; without a tool they are refu
   move that burns (G1/G2/G3 with the laser on, `M3` S > 0) is refused with its line. The
   first Z word sets the reference height.
 
-Z follows G20/G21 and G90/G91 like X and Y; `G92 Z` is refused.
+Z follows G20/G21 and G90/G91 like X and Y; `G92 Z` sets the Z offset (the pen threshold
+applies to Z as written, in work coordinates).
 
-Anything else (other axes, G18/G19, G28, tool changes, unknown words, a bad number) is an
-`InputError` naming the file, the line and the word: it is refused, never ignored.
+Every other word has a class (`toolpath.gcode_words`, docs/gcode.md "Word classes"): words that
+cannot change the drawn path on this machine are skipped and told in one note naming their
+lines; `M0`/`M1` and `T…`/`M6` become pen-change stops before the next cut; `G28`/`G30` are a
+travel with the tool off (the stroke ends, the pen is up; fivebar plans the travel to the next
+cut itself and parks at the home pose at the end of the job); `M300` servo pens set the pen
+(their `G4 P` in milliseconds, RepRap's unit); what would change the path or the burn (other
+axes, other planes' arcs, cutter compensation, canned cycles, units changed after the first
+move, unknown words, a bad number) is an `InputError` naming the file, the line and the word
+(the whole token as written, shortened when long). `strict=True` (`--strict`) keeps the older
+reading: every word outside the honoured ones is refused.
+
+The file's bytes are UTF-8 (a byte-order mark is dropped) or UTF-16 with its mark, as an
+SVG may be.
+
+The lines go through fivebar's one G-code interpreter (`fivebar_host.gcode`: words, modal
+state, arcs) read the file reader's way (`RULES`: not GRBL's strict word checks, no feed
+needed, this reader's arc tolerances); what is here is the reader's policy: which words it
+honours (`_policy`), the checks above that GRBL does not make, and how moves become strokes.
 """
 
 from __future__ import annotations
@@ -52,6 +69,25 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from fivebar_host.errors import InputError
+from fivebar_host.gcode import (
+    ArcRules,
+    Block,
+    GcodeError,
+    ModalState,
+    Move,
+    Policy,
+    Rules,
+    Word,
+    check_target,
+    execute,
+    parse,
+    strip_file,
+)
+from fivebar_host.gcode import Dwell as Wait
+from fivebar_host.gcode.errors import UNSUPPORTED_COMMAND
+from fivebar_host.gcode.words import shorten, whole_token
+from fivebar_host.toolpath import gcode_words
+from fivebar_host.toolpath.gcode_words import Kind, Skipped
 from fivebar_host.toolpath.geometry import (
     ARC,
     LINE,
@@ -62,56 +98,47 @@ from fivebar_host.toolpath.geometry import (
     read_source,
 )
 
-_WORD = re.compile(r"([A-Za-z])\s*([+-]?(?:\d+\.?\d*|\.\d+))")
 _PAREN = re.compile(r"\([^)]*\)")
 _LASER_ON = re.compile(r"(?<![A-Za-z])[Mm]\s*0*[34](?![\d.])")
 
 #: G codes that are accepted; values are what they select.
 _G_OK = {0.0, 1.0, 2.0, 3.0, 4.0, 17.0, 20.0, 21.0, 90.0, 91.0, 90.1, 91.1, 92.0, 94.0, 54.0}
 _M_OK = {2.0, 3.0, 4.0, 5.0, 30.0}
-_MOTIONS = (0.0, 1.0, 2.0, 3.0)
+#: Motion commands as the interpreter numbers them (G tenths).
+_MOTIONS = (0, 10, 20, 30)
 #: Words that carry a value for this line (coordinates, arc centre or radius, feed, power).
 _VALUE_WORDS = ("X", "Y", "I", "J", "R", "F", "S", "P")
 #: Axis words of other machines: refused with a hint.
-_OTHER_AXES = ("Z", "A", "B", "C", "U", "V", "W")
+_OTHER_AXES = ("Z", "A", "B", "C", "U", "V", "W", "E")
+#: Value words a skipped command may own on its line (`gcode_words.Rule.owns`); set aside.
+_OWNABLE = frozenset("HTQ")
 
 #: An arc's end must lie on its circle to within this (absolute mm, or relative to r).
 ARC_END_TOL_MM = 0.005
 ARC_END_TOL_REL = 1e-3
 
-
-@dataclass
-class _Words:
-    """The words of one line, sorted by kind: value words, G codes and M codes in order."""
-
-    axes: dict[str, float] = field(default_factory=dict)
-    gs: list[float] = field(default_factory=list)
-    ms: list[float] = field(default_factory=list)
-
-    def has(self, *letters: str) -> bool:
-        """Whether any of ``letters`` is among the value words."""
-        return any(letter in self.axes for letter in letters)
+#: How this reader reads G-code (`fivebar_host.gcode.Rules`): not GRBL's strict word checks
+#: (this reader's own are below); arcs: the end within ARC_END_TOL_MM or ARC_END_TOL_REL of
+#: the circle, R as short as ARC_END_TOL_MM under half the chord, a chord under 1e-12 mm a
+#: full circle, no zero radius, no R with I/J.
+RULES = Rules(strict=False,
+              arcs=ArcRules(end_tol_mm=ARC_END_TOL_MM, end_tol_rel=ARC_END_TOL_REL,
+                            end_tol_cap_mm=math.inf, r_short_mm2=ARC_END_TOL_MM**2 + 1e-12,
+                            same_point_mm=0.0, full_circle_rad=0.0, full_circle_chord_mm=1e-12,
+                            zero_radius_ok=False, r_with_offsets_ok=False))
 
 
 @dataclass
 class _Reader:
-    """The reader's state while it goes through a file: the modal state of the G-code
-    interpreter (units, distance modes, motion mode, laser, feed, position, G92 offset), the
+    """The reader's state while it goes through a file: the interpreter's modal state, the
     stroke being drawn and the drawing being built."""
 
     builder: DrawingBuilder
     name: str
     has_laser: bool  # any M3/M4 in the file: only moves with the laser on draw
-    unit: float = 1.0  # mm per file unit
-    absolute: bool = True
-    arc_abs: bool = False
-    motion: float = -1.0  # no motion mode until the first G0-G3
-    laser_on: bool = False
-    laser_m4: bool = False  # M4 (dynamic power: off at rest, so during a dwell)
-    power_s: float = 0.0
-    feed_mm_s: float = math.nan
-    pos: tuple[float, float] = (0.0, 0.0)  # current position, mm, in the drawing frame
-    offset: tuple[float, float] = (0.0, 0.0)  # G92: drawing = file coordinate (mm) + offset
+    policy: Policy  # the words honoured (Z only with a tool)
+    # no motion mode (G80) until the first G0-G3; the feed is the profile's until an F word
+    state: ModalState = field(default_factory=lambda: ModalState(motion=800, feed=math.nan))
     stroke_open: bool = False
     stroke_key: tuple[float, float] | None = None
     max_s: float = 0.0
@@ -120,241 +147,332 @@ class _Reader:
     pending: list[tuple[Dwell, int]] = field(default_factory=list)  # not yet placed, line
     tool: str | None = None  # "pen", "laser", or None: Z words refused
     z_threshold_mm: float = 0.0  # pen: Z above this is pen up
-    z_mm: float | None = None  # the last Z, mm (None until a Z word)
     pen_down: bool | None = None  # pen: from Z (None until a Z word: Z does not decide)
     s_given: bool = False  # an S word was read
     z_warned: bool = False  # the laser's "Z ignored" warning was given
-
-
-def _strip(raw: str, file: str, ln: int) -> str:
-    """Remove comments, a checksum and the line number; return the words part."""
-    s = raw
-    if ";" in s:
-        s = s.split(";", 1)[0]
-    if "(" in s:
-        if s.count("(") != s.count(")"):
-            raise InputError("unbalanced parenthesis comment", file, ln)
-        s = _PAREN.sub(" ", s)
-    if "*" in s:
-        s = s.split("*", 1)[0]
-    return s.strip()
+    strict: bool = False  # every word outside the honoured ones refused (--strict)
+    skipped: Skipped = field(default_factory=Skipped)  # for the one note
+    layer: str | None = None  # the stop before the strokes now read ("!…": compile.layers)
+    stop_open: bool = False  # `layer` names a stop no stroke has followed yet
+    servo: tuple[float, float] | None = None  # an M300 servo pen: its (up, down) S values
+    moved: bool = False  # a move was read (G20/G21 after it change the units mid-file)
+    next_tool: str = ""  # the T word of the coming tool change
 
 
 def read_gcode(source: str | Path | bytes, file: str | None = None, tool: str | None = None,
-               z_threshold_mm: float = 0.0) -> Drawing:
+               z_threshold_mm: float = 0.0, strict: bool = False) -> Drawing:
     """Read a G-code file (path or bytes) into a `Drawing` in mm (frame as written, y up).
 
     `tool` ("pen" or "laser", the profile's `[tool] kind`) and `z_threshold_mm` (the
     profile's `[pen] z_threshold_mm`) decide what Z words mean (module doc); with no tool a Z
-    word is refused."""
+    word is refused. `strict`: refuse every word outside the honoured ones (module doc)."""
     if tool not in (None, "pen", "laser"):
         raise ValueError(f"tool must be 'pen', 'laser' or None; got {tool!r}")
     data, name = read_source(source, file, "<gcode>")
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as e:
-        raise InputError(f"not a text file (byte {e.start} is not UTF-8)", name) from e
+    text = decode_text(data, name)
     lines = text.splitlines()
-    has_laser = any(_LASER_ON.search(_strip_soft(s)) for s in lines)
-    rd = _Reader(DrawingBuilder(name), name, has_laser, tool=tool,
-                 z_threshold_mm=z_threshold_mm)
+    soft = [_strip_soft(s) for s in lines]
+    has_laser = any(_LASER_ON.search(s) for s in soft)
+    rd = _Reader(DrawingBuilder(name), name, has_laser,
+                 _POLICIES[strict, tool is not None], tool=tool, z_threshold_mm=z_threshold_mm,
+                 strict=strict)
+    if not strict and any(_SERVO_PEN.search(s) for s in soft):
+        rd.servo = gcode_words.unicorn_angles(text)
     for ln, raw in enumerate(lines, start=1):
         if _read_line(rd, raw, ln):
             break
     return _finish(rd)
 
 
+#: Byte-order marks → the codec that reads past them.
+_BOMS = ((b"\xef\xbb\xbf", "utf-8-sig"), (b"\xff\xfe", "utf-16"), (b"\xfe\xff", "utf-16"))
+
+
+def decode_text(data: bytes, name: str) -> str:
+    """The file's text: UTF-8 (its byte-order mark dropped), or UTF-16 with a byte-order
+    mark, or UTF-16 without one when every other byte of the start is NUL (ASCII G-code)."""
+    codec = next((c for bom, c in _BOMS if data.startswith(bom)), "utf-8")
+    head = data[:64]
+    if codec == "utf-8" and len(head) >= 4 and head[1::2].count(0) == len(head[1::2]):
+        codec = "utf-16-le"
+    elif codec == "utf-8" and len(head) >= 4 and head[0::2].count(0) == len(head[0::2]):
+        codec = "utf-16-be"
+    try:
+        return data.decode(codec)
+    except UnicodeDecodeError as e:
+        raise InputError(f"not a text file (byte {e.start} is not {codec.upper()})",
+                         name) from e
+
+
+def _policy(z_ok: bool, strict: bool) -> Policy:
+    """The words this reader honours (Z only with `z_ok`); without `strict`, the words of a
+    class in `gcode_words` are set aside for `_classify`; any other is refused, naming it."""
+    def check(w: Word) -> bool:
+        letter, value, tok = w
+        if not strict and (letter in _OWNABLE or gcode_words.rule_of(w) is not None):
+            return letter != "G" or round(value, 1) not in _G_KEPT
+        why_not = None if strict else gcode_words.refusal(w)
+        if why_not is not None:
+            raise GcodeError(UNSUPPORTED_COMMAND, why_not, tok)
+        if letter == "G":
+            if value in _G_OK or round(value, 1) in _G_OK or (
+                    not strict and round(value, 1) in _G_KEPT):
+                return False
+            why = (f"unsupported G-code word {tok} (supported: G0 G1 G2 G3 G4 G17 G20 G21 "
+                   "G54 G90 G91 G90.1 G91.1 G92 G94)")
+        elif letter == "M":
+            if value in _M_OK:
+                return False
+            why = f"unsupported M-code word {tok} (supported: M2 M3 M4 M5 M30)"
+        elif letter in _OTHER_AXES:
+            why = (f"unsupported axis word {tok}: this machine draws in X and Y only (the pen "
+                   "or laser follows M3/M5)")
+        elif letter == "K" and not strict:
+            why = (f"{tok}: K is the Z offset of an arc in the XZ or YZ plane; this machine "
+                   "draws arcs in the XY plane (G17) only")
+        else:
+            why = f"unsupported word {tok}"
+        raise GcodeError(UNSUPPORTED_COMMAND, why, tok)
+    return Policy(frozenset(("N", *_VALUE_WORDS, *(("Z",) if z_ok else ()))), check)
+
+
+#: G codes the interpreter runs for the reader outside strict mode: G28/G30 (home, the
+#: reader draws nothing there) and the G18/G19 planes (an arc in them is refused).
+_G_KEPT = {28.0, 30.0, 18.0, 19.0}
+#: (strict, with a tool) → the policy.
+_POLICIES = {(st, z): _policy(z, st) for st in (False, True) for z in (False, True)}
+#: An M300 without P: a servo pen (with P it is Marlin's beep).
+_SERVO_PEN = re.compile(r"(?<![A-Za-z])[Mm]\s*0*300(?![\d.])(?![^\n]*[Pp]\s*\d)")
+
+
 def _read_line(rd: _Reader, raw: str, ln: int) -> bool:
     """Interpret one line; True at the end of the program (M2/M30: later lines are ignored)."""
-    s = _strip(raw, rd.name, ln)
-    if not s or s == "%":
-        return False
-    w = _classify(_tokens(s, rd.name, ln), rd.name, ln, rd.tool is not None)
-    end_program = _apply_modal(rd, w, ln)
-    if 92.0 in w.gs:
-        _apply_g92(rd, w, ln)
-        return False
-    _select_motion(rd, w, ln)
-    if 4.0 in w.gs or "P" in w.axes:
-        if "Z" in w.axes:
-            raise InputError("G4 and a Z move on the same line", rd.name, ln)
-        _dwell(rd, w, ln)
-        return end_program
-    if "Z" in w.axes:
-        _z_move(rd, w, ln)
-    if not w.has("X", "Y", "I", "J", "R"):
-        return end_program
-    if rd.motion < 0:
-        raise InputError("coordinates before any G0/G1/G2/G3", rd.name, ln)
-    _move(rd, w, ln)
-    return end_program
+    text = ""
+    try:
+        if not rd.strict and gcode_words.message_line(raw):
+            rd.skipped.add("messages", raw.split()[0][:8], ln)
+            return False
+        text = strip_file(raw)
+        if not text:
+            return False
+        if not rd.strict:
+            what = gcode_words.system_line(text)
+            if what is not None:
+                rd.skipped.add(gcode_words.SYSTEM_KIND, what, ln)
+                return False
+        block = parse(text, False, rd.policy)
+        if block.skipped and _classify(rd, block, ln):
+            return False
+        return _run(rd, block, ln)
+    except GcodeError as e:
+        raise InputError(_message(text, e), rd.name, ln) from e
 
 
-def _tokens(s: str, file: str, ln: int) -> list[tuple[str, float, str]]:
-    """The words of a stripped line as (upper-case letter, value, word as written without
-    spaces); anything between or after the words is an error."""
-    words: list[tuple[str, float, str]] = []
-    pos_in = 0
-    for m in _WORD.finditer(s):
-        gap = s[pos_in:m.start()]
-        if gap.strip():
-            raise InputError(f"cannot read {gap.strip()!r}", file, ln)
-        words.append((m.group(1).upper(), float(m.group(2)), m.group(0).replace(" ", "")))
-        pos_in = m.end()
-    rest = s[pos_in:]
-    if rest.strip():
-        raise InputError(f"cannot read {rest.strip()!r}", file, ln)
-    return words
+def _message(text: str, e: GcodeError) -> str:
+    """The error's message, naming the whole token a bad number was written as (`X1e308`,
+    not `e308`), shortened when long."""
+    part = e.word
+    if part is None or not text:
+        return e.message
+    tok = whole_token(text, part)
+    if tok != part and any(c.isdigit() for c in tok):
+        return (f"cannot read {shorten(tok)!r}: a G-code number is digits with at most one "
+                "decimal point and a sign (no exponent, no second point)")
+    return e.message.replace(part, shorten(part)) if len(part) > 24 else e.message
 
 
-def _classify(words: list[tuple[str, float, str]], file: str, ln: int,
-              z_ok: bool = False) -> _Words:
-    """Sort a line's words into G codes, M codes and value words, refusing what this reader
-    does not honour (in the order the words appear; Z only with `z_ok`)."""
-    w = _Words()
-    for letter, value, tok in words:
-        if not math.isfinite(value):
-            raise InputError(f"{tok}: not a finite number", file, ln)
-        if letter == "N":
-            continue
-        if letter == "G":
-            w.gs.append(_g_code(value, tok, file, ln))
-        elif letter == "M":
-            w.ms.append(_m_code(value, tok, file, ln))
-        elif letter in _VALUE_WORDS or (letter == "Z" and z_ok):
-            if letter in w.axes:
-                raise InputError(f"word {letter} appears twice", file, ln)
-            w.axes[letter] = value
-        elif letter in _OTHER_AXES:
-            raise InputError(f"unsupported axis word {tok}: this machine draws in X and Y "
-                             "only (the pen or laser follows M3/M5)", file, ln)
+def _classify(rd: _Reader, block: Block, ln: int) -> bool:
+    """The line's words set aside by the policy (`gcode_words`): owned values taken off the
+    line, skipped kinds noted, stops and pens applied; True when nothing else is left on
+    the line to run."""
+    rules = [(w, r) for w in block.skipped
+             if (r := gcode_words.rule_of(w)) is not None]
+    owned = set("".join(r.owns for _, r in rules))
+    tool = next((w.text for w in block.skipped if w.letter == "T"), "")
+    for w in block.skipped:
+        if w.letter in _OWNABLE and w.letter not in owned and w.letter != "T":
+            raise GcodeError(UNSUPPORTED_COMMAND, f"unsupported word {w.text}", w.text)
+    owned_values = {k: block.values.pop(k) for k in "PS" if k in owned and k in block.values}
+    if tool and not any(r.kind is Kind.TOOL for _, r in rules):
+        rd.next_tool = tool
+        rd.skipped.add("tool select (the change is at M6)", tool, ln)
+    for w, r in rules:
+        if r.kind is Kind.SKIP:
+            rd.skipped.add(r.what, w.text, ln)
+        elif r.kind in (Kind.STOP, Kind.TOOL):
+            name = f"{tool or rd.next_tool} {w.text}".strip() if r.kind is Kind.TOOL else w.text
+            _stop(rd, f"{name} (line {ln}): {r.what}")
+        elif r.kind is Kind.HOME:
+            rd.skipped.add(f"{r.what}, a travel with the tool off,", w.text, ln)
+            _home(rd)
         else:
-            raise InputError(f"unsupported word {tok}", file, ln)
-    return w
+            _servo_pen(rd, w, owned_values, ln)
+    return not (block.g or block.m or block.values)
 
 
-def _g_code(value: float, tok: str, file: str, ln: int) -> float:
-    """A supported G code's number (rounded to one decimal: G90.1), else an error."""
-    g = round(value, 1)
-    if g not in _G_OK:
-        raise InputError(f"unsupported G-code word {tok} (supported: G0 G1 G2 G3 G4 "
-                         "G17 G20 G21 G54 G90 G91 G90.1 G91.1 G92 G94)", file, ln)
-    return g
+def _stop(rd: _Reader, label: str) -> None:
+    """A pen-change stop before the next cut (`compile.layers`: a layer named "!…"); stops
+    with no cut between them are one stop."""
+    if rd.stop_open and rd.layer is not None:
+        rd.layer += "; " + label
+    else:
+        rd.layer = "!" + label
+    rd.stop_open = True
+    rd.stroke_open = False
+    _leave(rd)
 
 
-def _m_code(value: float, tok: str, file: str, ln: int) -> float:
-    """A supported M code's number, else an error."""
-    if value not in _M_OK:
-        raise InputError(f"unsupported M-code word {tok} (supported: M2 M3 M4 M5 "
-                         "M30)", file, ln)
-    return value
+def _home(rd: _Reader) -> None:
+    """G28/G30 (or a vendor's go-home): travel with the tool off; the pen is up after it."""
+    rd.stroke_open = False
+    _leave(rd)
+    if rd.tool == "pen" or rd.servo is not None:
+        rd.pen_down = False
 
 
-def _apply_modal(rd: _Reader, w: _Words, ln: int) -> bool:
-    """Apply a line's modal words (G units and distance modes, F, S, M); True for M2/M30."""
-    for g in w.gs:
-        _apply_g_mode(rd, g)
-    if "F" in w.axes:
-        if w.axes["F"] <= 0:
-            raise InputError(f"feed F{w.axes['F']:g} must be positive", rd.name, ln)
-        rd.feed_mm_s = w.axes["F"] * rd.unit / 60.0
-    if "S" in w.axes:
-        if w.axes["S"] < 0:
-            raise InputError(f"power S{w.axes['S']:g} must not be negative", rd.name, ln)
-        rd.power_s = w.axes["S"]
-        rd.s_given = True
-        rd.max_s = max(rd.max_s, rd.power_s)
-    end_program = False
-    for mcode in w.ms:
-        if mcode in (3.0, 4.0):
-            rd.laser_on = True
-            rd.laser_m4 = mcode == 4.0
-        elif mcode == 5.0:
-            rd.laser_on = False
-        else:
-            end_program = True
-    return end_program
+def _servo_pen(rd: _Reader, w: Word, owned: dict[str, float], ln: int) -> None:
+    """`M300 S<v>`: the Unicorn servo pen down or up; with P a Marlin beep (skipped)."""
+    if "P" in owned or rd.servo is None:
+        rd.skipped.add("beep", w.text, ln)
+        return
+    s = owned.get("S")
+    up, down = rd.servo
+    if s == down:
+        rd.pen_down = True
+    elif s in (up, gcode_words.SERVO_OFF):
+        rd.pen_down = False
+        rd.stroke_open = False
+    else:
+        val = "no S" if s is None else f"S{s:g}"
+        raise GcodeError(UNSUPPORTED_COMMAND, f"{w.text} {val}: the servo pen's values in this "
+                         f"file are S{down:g} (down) and S{up:g} (up)", w.text)
 
 
-def _apply_g_mode(rd: _Reader, g: float) -> None:
-    """G20/G21 units, G90/G91 distances, G90.1/G91.1 arc centres; other G codes: nothing."""
-    if g == 20.0:
-        rd.unit = 25.4
-    elif g == 21.0:
-        rd.unit = 1.0
-    elif g == 90.0:
-        rd.absolute = True
-    elif g == 91.0:
-        rd.absolute = False
-    elif g == 90.1:
-        rd.arc_abs = True
-    elif g == 91.1:
-        rd.arc_abs = False
-
-
-def _apply_g92(rd: _Reader, w: _Words, ln: int) -> None:
-    """G92 X.. Y..: the current point now has these file coordinates."""
-    if not w.has("X", "Y"):
-        raise InputError("G92 needs X and/or Y", rd.name, ln)
-    pos, offset, unit = rd.pos, rd.offset, rd.unit
-    fx = w.axes.get("X", (pos[0] - offset[0]) / unit) * unit
-    fy = w.axes.get("Y", (pos[1] - offset[1]) / unit) * unit
-    rd.offset = (pos[0] - fx, pos[1] - fy)
-    if w.has("I", "J", "R", "Z"):
-        raise InputError("G92 with I, J, R or Z", rd.name, ln)
-    if any(g in _MOTIONS for g in w.gs):
-        raise InputError("G92 and a motion command on the same line", rd.name, ln)
-
-
-def _select_motion(rd: _Reader, w: _Words, ln: int) -> None:
-    """A G0-G3 word sets the motion mode (at most one per line)."""
-    motions = [g for g in w.gs if g in _MOTIONS]
-    if len(motions) > 1:
+def _run(rd: _Reader, block: Block, ln: int) -> bool:
+    """This reader's checks of a line, then the interpreter, then its actions: moves become
+    strokes or travel, dwells are placed; True for M2/M30 (the end: the reader stops there,
+    so the interpreter is not asked for the modal reset that follows them)."""
+    v = block.values
+    if "F" in v or "S" in v:
+        _check_values(rd, v, ln)
+    if 920 in block.gcodes:
+        _check_g92(rd, block, ln)
+    elif len(block.gcodes) > 1 and sum(c in _MOTIONS for c in block.gcodes) > 1:
         raise InputError("more than one motion command on one line", rd.name, ln)
-    if motions:
-        rd.motion = motions[0]
+    elif 40 in block.gcodes or "P" in v:
+        _check_dwell(rd, block, ln)
+    if not rd.strict:
+        _check_modes(rd, block, ln)
+    end = block.m.pop("stopping", None) is not None
+    before = rd.state
+    rd.state, actions = execute(before, block, RULES)
+    if block.g.get("non_modal") in (280, 300):
+        _home(rd)
+        rd.skipped.add("go home, a travel with the tool off,", f"G{block.g['non_modal'] // 10}", ln)
+        return end
+    for act in actions:
+        if isinstance(act, Move):
+            _move(rd, act, block, before, ln)
+        elif isinstance(act, Wait):
+            _dwell(rd, act.seconds / 1000.0 if rd.servo is not None else act.seconds, ln)
+    return end
 
 
-def _move(rd: _Reader, w: _Words, ln: int) -> None:
-    """A move to the line's X/Y in the current motion mode: drawn when it cuts, else travel
-    (which ends the stroke)."""
-    x = _target(w.axes, "X", rd.pos[0], rd.offset[0], rd.unit, rd.absolute)
-    y = _target(w.axes, "Y", rd.pos[1], rd.offset[1], rd.unit, rd.absolute)
-    if max(abs(x), abs(y)) > MAX_COORD_MM:
-        raise InputError(f"coordinate ({x:g}, {y:g}) mm is larger than {MAX_COORD_MM:g} "
-                         "mm", rd.name, ln)
-    motion = rd.motion
-    cutting = motion != 0.0 and _tool_on(rd)
-    if motion in (0.0, 1.0) and w.has("I", "J", "R"):
-        raise InputError(f"I, J or R on a G{int(motion)} move", rd.name, ln)
-    if cutting:
-        _draw(rd, w, (x, y), ln)
+def _check_modes(rd: _Reader, block: Block, ln: int) -> None:
+    """Units changed after the first move (every later number would mean another length)."""
+    units = block.g.get("units")
+    if units is not None and units != rd.state.units and rd.moved:
+        word = f"G{units // 10}"
+        raise InputError(f"{word} after the first move changes the units mid-file: the "
+                         "drawing would change scale part-way (write the whole file in one "
+                         "unit)", rd.name, ln)
+
+
+def _check_values(rd: _Reader, v: dict[str, float], ln: int) -> None:
+    """F positive, S not negative (and the file's largest S)."""
+    if "F" in v and v["F"] <= 0:
+        raise InputError(f"feed F{v['F']:g} must be positive", rd.name, ln)
+    if "S" in v:
+        if v["S"] < 0:
+            raise InputError(f"power S{v['S']:g} must not be negative", rd.name, ln)
+        rd.s_given = True
+        rd.max_s = max(rd.max_s, v["S"])
+
+
+def _check_g92(rd: _Reader, block: Block, ln: int) -> None:
+    """G92 X.. Y.. (and Z, but for `strict`) alone. Only its modal words and the offset act:
+    a G4, P or M2/M30 on a G92 line is ignored, as this reader always did."""
+    v = block.values
+    if "X" not in v and "Y" not in v and (rd.strict or "Z" not in v):
+        raise InputError("G92 needs X and/or Y" + ("" if rd.strict else " or Z"), rd.name, ln)
+    if "I" in v or "J" in v or "R" in v or ("Z" in v and rd.strict):
+        raise InputError("G92 with I, J, R or Z", rd.name, ln)
+    if any(c in _MOTIONS for c in block.gcodes):
+        raise InputError("G92 and a motion command on the same line", rd.name, ln)
+    block.g["non_modal"] = 920
+    block.m.pop("stopping", None)  # not the end either
+
+
+def _check_dwell(rd: _Reader, block: Block, ln: int) -> None:
+    """`G4 P<seconds>` alone on its line (module doc)."""
+    v = block.values
+    if "Z" in v:
+        raise InputError("G4 and a Z move on the same line", rd.name, ln)
+    if 40 not in block.gcodes:
+        raise InputError("P word without G4 (P is the dwell time of G4)", rd.name, ln)
+    if "P" not in v:
+        raise InputError("G4 needs P, the dwell time in seconds (GRBL 1.1; S is the laser "
+                         "power here, not a time)", rd.name, ln)
+    if any(a in v for a in "XYIJR") or any(c in _MOTIONS for c in block.gcodes):
+        raise InputError("G4 and a move on the same line", rd.name, ln)
+    if v["P"] < 0:
+        raise InputError(f"dwell P{v['P']:g} must not be negative", rd.name, ln)
+
+
+def _move(rd: _Reader, mv: Move, block: Block, before: ModalState, ln: int) -> None:
+    """A move: its Z word first (the pen state changes at the start of the move), then the
+    X/Y move, drawn when it cuts, else travel (which ends the stroke)."""
+    v = block.values
+    if "Z" in v:
+        _z_move(rd, mv, before, v["Z"], ln)
+    if not ("X" in v or "Y" in v or "I" in v or "J" in v or "R" in v):
+        return
+    rd.moved = True
+    check_target(mv.end, MAX_COORD_MM, None)  # Z is a pen state here, not a position
+    motion = mv.motion
+    if motion in (0, 10) and ("I" in v or "J" in v or "R" in v):
+        raise InputError(f"I, J or R on a G{motion // 10} move", rd.name, ln)
+    if motion in (20, 30) and before.plane != 170:
+        raise InputError(f"G{motion // 10} arc in the G{before.plane // 10} plane: this "
+                         "machine draws arcs in the XY plane (G17) only", rd.name, ln)
+    if motion != 0 and _tool_on(rd):
+        _draw(rd, mv, ln)
     else:
         rd.stroke_open = False
-        if (x, y) != rd.pos:
+        if mv.end[0] != mv.start[0] or mv.end[1] != mv.start[1]:
             _leave(rd)
-    rd.pos = (x, y)
 
 
-def _draw(rd: _Reader, w: _Words, end: tuple[float, float], ln: int) -> None:
+def _draw(rd: _Reader, mv: Move, ln: int) -> None:
     """Add a cutting G1/G2/G3 move to the drawing, starting a stroke when the power or the
     feed changed (or none is open)."""
-    key = (rd.power_s, rd.feed_mm_s)
+    st = rd.state
+    key = (st.s, st.feed)
     b = rd.builder
     if not rd.stroke_open or key != rd.stroke_key:
-        src = b.add_source(None, ln, "gcode")
-        b.begin_stroke(src, power=rd.power_s, feed_mm_s=rd.feed_mm_s)
+        src = b.add_source(None, ln, "gcode", rd.layer)
+        rd.stop_open = False
+        b.begin_stroke(src, power=st.s, feed_mm_s=st.feed / 60.0)
         rd.stroke_open = True
         rd.stroke_key = key
-    pos = rd.pos
-    if rd.motion == 1.0:
-        if end == pos:
+    (x0, y0, _), (x1, y1, _) = mv.start, mv.end
+    if mv.motion == 10:
+        if (x1, y1) == (x0, y0):
             return
-        b.add(LINE, (pos[0], pos[1], end[0], end[1]), ln)
+        b.add(LINE, (x0, y0, x1, y1), ln)
     else:
-        prim = _arc(pos, end, w.axes, rd.unit, rd.arc_abs, rd.offset, rd.motion == 2.0,
-                    rd.name, ln)
-        b.add(ARC, prim, ln)
+        a = mv.exact_arc()
+        b.add(ARC, (a.cx, a.cy, a.radius, 0.0, 0.0, a.radius, a.theta0, a.sweep), ln)
     stroke = len(b.stroke_source) - 1
     if stroke != rd.last_stroke:  # the stroke's first primitive: it starts here
         b.dwells += [replace(d, stroke=stroke, after=False) for d, _ in rd.pending]
@@ -369,51 +487,41 @@ def _tool_on(rd: _Reader, dwell: bool = False) -> bool:
     and the pen down by Z once Z was read (module doc)."""
     on = True
     if rd.has_laser:
-        powered = rd.power_s > 0 or (rd.pen_down is not None and not rd.s_given)
-        on = rd.laser_on and powered and not (dwell and rd.laser_m4)
+        st = rd.state
+        powered = st.s > 0 or (rd.pen_down is not None and not rd.s_given)
+        on = st.spindle in (3, 4) and powered and not (dwell and st.spindle == 4)
     return on and rd.pen_down is not False
 
 
-def _z_move(rd: _Reader, w: _Words, ln: int) -> None:
+def _z_move(rd: _Reader, mv: Move, before: ModalState, z_word: float, ln: int) -> None:
     """A Z word, before the line's X/Y move (if any): the pen state on a pen machine; on a
     laser machine ignored (one warning) unless it changes Z during a cut (module doc)."""
-    if rd.motion < 0:
-        raise InputError("Z before any G0/G1/G2/G3", rd.name, ln)
-    v = w.axes["Z"] * rd.unit
-    z = v if rd.absolute or rd.z_mm is None else rd.z_mm + v
-    if rd.tool == "pen":
-        down = z <= rd.z_threshold_mm
+    z = mv.end[2]
+    if rd.servo is not None:
+        rd.skipped.add("Z words (the pen follows M300)", "", ln)
+    elif rd.tool == "pen":
+        down = z - before.work_offset()[2] <= rd.z_threshold_mm  # Z as written
         if not down:
             rd.stroke_open = False  # a lift ends the stroke, even where it started again
         rd.pen_down = down
-    elif rd.z_mm is not None and z != rd.z_mm and rd.motion != 0.0 and _tool_on(rd):
-        raise InputError(f"Z{w.axes['Z']:g} changes Z during a cut with the laser on: a "
+    elif before.z_seen and z != before.position[2] and mv.motion != 0 and _tool_on(rd):
+        raise InputError(f"Z{z_word:g} changes Z during a cut with the laser on: a "
                          "laser cannot follow Z (turn it off with M5 before moving Z, or "
                          "remove the Z words)", rd.name, ln)
     elif not rd.z_warned:
         rd.z_warned = True
         rd.builder.warnings.append(f"{rd.name}:{ln}: Z words ignored: a laser machine has "
                                    "no Z axis (Z may change only while the laser is off)")
-    rd.z_mm = z
 
 
-def _dwell(rd: _Reader, w: _Words, ln: int) -> None:
+def _dwell(rd: _Reader, seconds: float, ln: int) -> None:
     """`G4 P<seconds>`: a dwell with the tool as it is now (module doc), placed after the
     stroke that ends here, or kept until the next stroke starts or the tool travels away."""
-    if 4.0 not in w.gs:
-        raise InputError("P word without G4 (P is the dwell time of G4)", rd.name, ln)
-    if "P" not in w.axes:
-        raise InputError("G4 needs P, the dwell time in seconds (GRBL 1.1; S is the laser "
-                         "power here, not a time)", rd.name, ln)
-    if w.has("X", "Y", "I", "J", "R") or any(g in _MOTIONS for g in w.gs):
-        raise InputError("G4 and a move on the same line", rd.name, ln)
-    seconds = w.axes["P"]
-    if seconds < 0:
-        raise InputError(f"dwell P{seconds:g} must not be negative", rd.name, ln)
     if seconds == 0:
         return
-    tool_on = rd.motion in (1.0, 2.0, 3.0) and _tool_on(rd, dwell=True)
-    power = (rd.power_s if rd.has_laser else 1.0) if tool_on else 0.0
+    st = rd.state
+    tool_on = st.motion in (10, 20, 30) and _tool_on(rd, dwell=True)
+    power = (st.s if rd.has_laser else 1.0) if tool_on else 0.0
     d = Dwell(rd.last_stroke, True, seconds, tool_on, power, ln)
     if rd.at_stroke_end:
         rd.builder.dwells.append(d)
@@ -427,6 +535,12 @@ def _leave(rd: _Reader) -> None:
     stroke before them (or before the next stroke when none was drawn yet); one with the
     tool on has no cut to burn at and is refused."""
     rd.at_stroke_end = False
+    if not rd.strict and rd.tool == "pen" and any(d.tool_on for d, _ in rd.pending):
+        for d, ln in rd.pending:  # a spindle's warm-up: no dot to burn with a pen
+            if d.tool_on:
+                rd.skipped.add("dwells with the spindle on where no cut starts or ends "
+                               "(warm-up)", "G4", ln)
+        rd.pending = [(d, ln) for d, ln in rd.pending if not d.tool_on]
     for d, ln in rd.pending:
         if d.tool_on:
             raise InputError("G4 with the tool on (laser burning, pen down) where no cut "
@@ -443,6 +557,12 @@ def _finish(rd: _Reader) -> Drawing:
     power is full scale); an error when nothing cuts."""
     if rd.pending:
         _leave(rd)
+    if rd.stop_open and rd.layer is not None:
+        rd.skipped.add("a stop after the last cut (nothing left to stop before):",
+                       rd.layer[1:], 0)
+    note = rd.skipped.note(rd.name)
+    if note is not None:
+        rd.builder.warnings.append(note)
     drawing = rd.builder.build()
     if drawing.kind.shape[0] == 0:
         raise InputError("no cutting moves to draw (G1/G2/G3 with the laser on, M3/M4 S>0)",
@@ -457,81 +577,7 @@ def _finish(rd: _Reader) -> Drawing:
     return drawing
 
 
-def _target(axes: dict[str, float], letter: str, cur: float, off: float, unit: float,
-            absolute: bool) -> float:
-    """New coordinate (mm, drawing frame) of one axis for a move."""
-    if letter not in axes:
-        return cur
-    v = axes[letter] * unit
-    return v + off if absolute else cur + v
-
-
 def _strip_soft(raw: str) -> str:
+    """A line without its comments, for the look for M3/M4 before reading (no errors)."""
     s = raw.split(";", 1)[0]
     return _PAREN.sub(" ", s)
-
-
-def _arc(p0: tuple[float, float], p1: tuple[float, float], axes: dict[str, float], unit: float,
-         arc_abs: bool, offset: tuple[float, float], clockwise: bool, file: str,
-         ln: int) -> tuple[float, ...]:
-    """G2/G3 arc from p0 to p1 (mm) as an ARC primitive (c, r·I, θ0, Δθ)."""
-    if "R" in axes:
-        if "I" in axes or "J" in axes:
-            raise InputError("arc with both R and I/J", file, ln)
-        cx, cy, radius = _r_centre(p0, p1, axes["R"], unit, clockwise, file, ln)
-    else:
-        if "I" not in axes and "J" not in axes:
-            raise InputError("arc without I/J or R", file, ln)
-        cx, cy, radius = _ij_centre(p0, p1, axes, unit, arc_abs, offset, file, ln)
-    x0, y0 = p0
-    x1, y1 = p1
-    th0 = math.atan2(y0 - cy, x0 - cx)
-    th1 = math.atan2(y1 - cy, x1 - cx)
-    dth = -((th0 - th1) % (2 * math.pi)) if clockwise else (th1 - th0) % (2 * math.pi)
-    if dth == 0.0 or (math.hypot(x1 - x0, y1 - y0) < 1e-12):
-        dth = -2 * math.pi if clockwise else 2 * math.pi
-    return (cx, cy, radius, 0.0, 0.0, radius, th0, dth)
-
-
-def _r_centre(p0: tuple[float, float], p1: tuple[float, float], r_word: float, unit: float,
-              clockwise: bool, file: str, ln: int) -> tuple[float, float, float]:
-    """Centre and radius of an R-form arc (R < 0: the long way round)."""
-    x0, y0 = p0
-    x1, y1 = p1
-    r = r_word * unit
-    dx, dy = x1 - x0, y1 - y0
-    chord = math.hypot(dx, dy)
-    if chord == 0:
-        raise InputError("R-form arc with end = start (a full circle needs I/J)", file, ln)
-    h2 = r * r - chord * chord / 4
-    if h2 < -(ARC_END_TOL_MM**2) - 1e-12:
-        raise InputError(f"arc radius R{r_word:g} is smaller than half the chord "
-                         f"({chord / 2:.6g} mm)", file, ln)
-    h = math.sqrt(max(h2, 0.0))
-    # Centre left of p0→p1 for a counter-clockwise short arc; R < 0 takes the long way.
-    side = (1.0 if not clockwise else -1.0) * (1.0 if r > 0 else -1.0)
-    cx = (x0 + x1) / 2 - side * h * dy / chord
-    cy = (y0 + y1) / 2 + side * h * dx / chord
-    return cx, cy, abs(r)
-
-
-def _ij_centre(p0: tuple[float, float], p1: tuple[float, float], axes: dict[str, float],
-               unit: float, arc_abs: bool, offset: tuple[float, float], file: str,
-               ln: int) -> tuple[float, float, float]:
-    """Centre and radius of an I/J-form arc (offsets from the start, or absolute with
-    G90.1); its end must lie on the circle through its start."""
-    x0, y0 = p0
-    x1, y1 = p1
-    i, j = axes.get("I", 0.0) * unit, axes.get("J", 0.0) * unit
-    if arc_abs:
-        cx, cy = i + offset[0], j + offset[1]
-    else:
-        cx, cy = x0 + i, y0 + j
-    radius = math.hypot(x0 - cx, y0 - cy)
-    r_end = math.hypot(x1 - cx, y1 - cy)
-    if radius == 0:
-        raise InputError("arc with zero radius", file, ln)
-    if abs(radius - r_end) > max(ARC_END_TOL_MM, ARC_END_TOL_REL * radius):
-        raise InputError(f"arc end is {abs(radius - r_end):.4g} mm off the circle through "
-                         f"its start (r = {radius:.6g} mm)", file, ln)
-    return cx, cy, radius

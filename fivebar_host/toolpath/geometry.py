@@ -26,6 +26,7 @@ import math
 from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, NoReturn
 
 import numpy as np
 from numpy.typing import NDArray
@@ -33,12 +34,17 @@ from numpy.typing import NDArray
 from fivebar_host.errors import InputError
 from kinematics.arrays import FloatArray, IntArray
 
+if TYPE_CHECKING:
+    from fivebar_host.toolpath.fill.assemble import FillResult
+    from fivebar_host.toolpath.fill.paint import PaintTable
+
 LINE = 0
 CUBIC = 1
 ARC = 2
 
 #: Largest coordinate accepted anywhere, mm. Anything larger is a unit mistake or garbage.
 MAX_COORD_MM = 1.0e6
+_PAD = (0.0,) * 8  # primitive parameters are padded to 8
 
 
 @dataclass(frozen=True)
@@ -50,6 +56,26 @@ class SourceInfo:
     line: int | None  # 1-based line in the input file
     tag: str  # "path", "circle", ..., or "gcode"
     layer: str | None = None
+    #: "" for the element's own outline; "hatch" for the hatch lines of its fill
+    #: (`toolpath.fill`), which share its id, line and layer
+    role: str = ""
+
+
+@dataclass(frozen=True)
+class TextInfo:
+    """One drawn SVG `<text>` element, for the dry run: its source (index into
+    `Drawing.sources`), element and line, the text (shortened), the faces that drew it (in
+    order of first use; the profile's fallback marked), the font-size in the drawing's mm,
+    and its glyph and stroke counts."""
+
+    source: int
+    element: str
+    line: int
+    text: str
+    fonts: tuple[str, ...]
+    size_mm: float
+    glyphs: int
+    strokes: int
 
 
 @dataclass(frozen=True)
@@ -75,7 +101,7 @@ class Drawing:
     int64 (source line, 0 if unknown). Per stroke: `stroke_source` (S,) index into `sources`,
     `stroke_power` (S,) laser power as a fraction 0..1 of the profile's power, `stroke_feed_mm_s`
     (S,) requested feed (NaN: the profile's draw feed). `dwells`: the G-code dwells, in file
-    order (none for an SVG).
+    order (none for an SVG). `texts`: the SVG text elements drawn (`TextInfo`).
     """
 
     file: str
@@ -91,6 +117,11 @@ class Drawing:
     page_size_mm: tuple[float, float] | None = None
     warnings: list[str] = field(default_factory=list)
     dwells: list[Dwell] = field(default_factory=list)
+    texts: list[TextInfo] = field(default_factory=list)
+    #: per source: fill rule, stroke painted, clipped fill regions (SVG; `fill.paint`)
+    paint: PaintTable | None = None
+    #: what hatching and hidden-line removal did (`fill.assemble`; None: neither ran)
+    fill: FillResult | None = None
 
     @property
     def n_strokes(self) -> int:
@@ -108,7 +139,9 @@ class Drawing:
         return Drawing(self.file, self.kind, transform(self.kind, self.params, a, b),
                        self.stroke, self.line, self.stroke_source, self.stroke_power,
                        self.stroke_feed_mm_s, self.sources, self.page_height_mm,
-                       self.page_size_mm, self.warnings, self.dwells)
+                       self.page_size_mm, self.warnings, self.dwells, self.texts,
+                       None if self.paint is None else self.paint.transformed(a, b),
+                       None if self.fill is None else self.fill.transformed(a, b))
 
 
 class DrawingBuilder:
@@ -134,6 +167,7 @@ class DrawingBuilder:
         self.sources: list[SourceInfo] = []
         self.warnings: list[str] = []
         self.dwells: list[Dwell] = []
+        self.texts: list[TextInfo] = []
         self.matrices: list[NDArray[np.float64]] = []
         self.matrix_ids = array("q")
         self._open = False
@@ -155,8 +189,21 @@ class DrawingBuilder:
         self._open = True
 
     def add(self, kind: int, params: tuple[float, ...], line: int) -> None:
-        """Append one primitive to the open stroke (params padded to 8)."""
-        self.add_many([(kind, params)], line)
+        """Append one primitive to the open stroke (params padded to 8): `add_many` of one,
+        without its lists (the G-code reader adds one a line)."""
+        if not self._open:
+            raise RuntimeError("add() before begin_stroke()")
+        if self.limit is not None and len(self.kinds) >= self.limit:
+            self._over_limit(line)
+        self.kinds.append(kind)
+        self.params.extend(params + _PAD[len(params):])
+        self.strokes.append(len(self.stroke_source) - 1)
+        self.lines.append(line)
+        self.matrix_ids.append(-1)
+
+    def _over_limit(self, line: int) -> NoReturn:
+        raise InputError(f"the drawing has more than {self.limit:,} path segments (lines, "
+                         f"curves, arcs), the limit{self.limit_hint}", self.file, line)
 
     def add_many(self, prims: list[tuple[int, tuple[float, ...]]], line: int,
                  matrix: int = -1) -> None:
@@ -166,16 +213,42 @@ class DrawingBuilder:
             raise RuntimeError("add() before begin_stroke()")
         n = len(prims)
         if self.limit is not None and len(self.kinds) + n > self.limit:
-            raise InputError(f"the drawing has more than {self.limit:,} path segments (lines, "
-                             f"curves, arcs), the limit{self.limit_hint}", self.file, line)
+            self._over_limit(line)
         stroke = len(self.stroke_source) - 1
-        pad = (0.0,) * 8
         for kind, p in prims:
             self.kinds.append(kind)
-            self.params.extend(p + pad[:8 - len(p)] if len(p) < 8 else p)
+            self.params.extend(p + _PAD[len(p):])
         self.strokes.extend([stroke] * n)
         self.lines.extend([line] * n)
         self.matrix_ids.extend([matrix] * n)
+
+    def add_strokes(self, source: int, kinds: NDArray[np.int8], params: FloatArray,
+                    starts: IntArray, line: int, matrix: int) -> None:
+        """Append whole strokes at once (a placed glyph): primitives `kinds` (N,), `params`
+        (N, 8), stroke `starts` (S,) into them, all from source line `line` and mapped by
+        `self.matrices[matrix]` at `build`; each stroke has at least one primitive."""
+        n = int(kinds.shape[0])
+        if n == 0:
+            return
+        if self.limit is not None and len(self.kinds) + n > self.limit:
+            raise InputError(f"the drawing has more than {self.limit:,} path segments (lines, "
+                             f"curves, arcs), the limit{self.limit_hint}", self.file, line)
+        if self._open and (not self.strokes or self.strokes[-1] != len(self.stroke_source) - 1):
+            self.stroke_source.pop()  # an empty stroke left open before
+            self.stroke_power.pop()
+            self.stroke_feed.pop()
+        first = len(self.stroke_source)
+        s = int(starts.shape[0])
+        self.stroke_source.extend([source] * s)
+        self.stroke_power.extend([1.0] * s)
+        self.stroke_feed.extend([math.nan] * s)
+        ids = first + np.repeat(np.arange(s), np.diff(np.append(starts, n)))
+        self.kinds.frombytes(np.ascontiguousarray(kinds, dtype=np.int8).tobytes())
+        self.params.frombytes(np.ascontiguousarray(params, dtype=np.float64).tobytes())
+        self.strokes.frombytes(ids.astype(np.int64).tobytes())
+        self.lines.frombytes(np.full(n, line, dtype=np.int64).tobytes())
+        self.matrix_ids.frombytes(np.full(n, matrix, dtype=np.int64).tobytes())
+        self._open = True
 
     def build(self, page_height_mm: float | None = None,
               page_size_mm: tuple[float, float] | None = None) -> Drawing:
@@ -206,6 +279,7 @@ class DrawingBuilder:
             page_size_mm=page_size_mm,
             warnings=self.warnings,
             dwells=self.dwells,
+            texts=self.texts,
         )
 
 
@@ -429,36 +503,6 @@ def flatten(drawing: Drawing, tol_mm: float, max_points: int | None = None) -> P
     offsets = np.append(starts, total).astype(np.int64)
     return Polylines(pts, offsets, prim_out, t_out, t0_out,
                      drawing.stroke[first].astype(np.int64))
-
-
-def bbox(drawing: Drawing, rel_tol: float = 1e-4) -> tuple[float, float, float, float]:
-    """Bounding box (xmin, ymin, xmax, ymax) of the curves, mm, tight to within a relative
-    `rel_tol` of the control-point extent (flattened, then inflated by that tolerance so the
-    box always contains the curves)."""
-    if drawing.kind.shape[0] == 0:
-        raise ValueError("empty drawing has no bounding box")
-    ctrl = drawing.params.reshape(-1, 4, 2)
-    arc = drawing.kind == ARC
-    ext_pts = ctrl[~arc].reshape(-1, 2)
-    if arc.any():
-        p = drawing.params[arc]
-        r = np.linalg.svd(p[:, 2:6].reshape(-1, 2, 2), compute_uv=False)[:, 0]
-        ext_pts = np.concatenate((ext_pts, p[:, 0:2] + r[:, None], p[:, 0:2] - r[:, None]))
-    span = float(np.ptp(ext_pts, axis=0).max()) if ext_pts.size else 0.0
-    tol = max(span * rel_tol, 1e-9)
-    line = drawing.kind == LINE
-    pts = [drawing.params[line][:, 0:4].reshape(-1, 2)]  # exact end points
-    if (~line).any():
-        curves = Drawing(drawing.file, drawing.kind[~line], drawing.params[~line],
-                         np.arange(int((~line).sum()), dtype=np.int64),
-                         drawing.line[~line], drawing.stroke_source, drawing.stroke_power,
-                         drawing.stroke_feed_mm_s, drawing.sources)
-        poly = flatten(curves, tol).points
-        pts += [poly - tol, poly + tol]  # chords are within tol of the curves
-    allp = np.concatenate(pts)
-    lo = allp.min(axis=0)
-    hi = allp.max(axis=0)
-    return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
 
 
 def nearest_distance(kind: NDArray[np.int8], params: FloatArray, q: FloatArray,

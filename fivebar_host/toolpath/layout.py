@@ -27,7 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from fivebar_host.errors import JobError, UsageError, Where
-from fivebar_host.toolpath.geometry import Drawing, bbox
+from fivebar_host.toolpath.extent import bbox
+from fivebar_host.toolpath.geometry import Drawing
 from kinematics.arrays import FloatArray
 from kinematics.fivebar import FiveBar
 from kinematics.workspace import NoSafeRegionError, PageFit, Rect, find_page_rectangle

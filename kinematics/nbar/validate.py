@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from kinematics.arrays import FloatArray
+from kinematics.extension import ExtendedFiveBar
 from kinematics.fivebar import FiveBar
 from kinematics.nbar.build import build_mechanism
 from kinematics.nbar.model import Mechanism, MechanismError
@@ -78,6 +79,11 @@ def fivebar_mechanism(geometry: FiveBar, angles0: ArrayLike, assembly: str | int
                       ) -> Mechanism:
     """The five-bar robot as a `Mechanism`, assembled at motor angles `angles0` in `assembly`.
 
+    With the pen on an extension of link 1 (`ExtendedFiveBar`, extension > 0) the assembled
+    joint is renamed J and link b1 becomes the rigid link R1–J–K–P (K a construction point
+    off the line R1J) whose pen point P is put
+    where the extension's definition says (e beyond J, turned by γ from R1→J) — not through
+    the closed form's Eq. X1 — so the solver carries the rigid triangle on its own.
     Raises MechanismError if the pose does not assemble or lands in the other assembly mode.
     """
     mech = build_mechanism(fivebar_spec(geometry, angles0, assembly))
@@ -86,6 +92,21 @@ def fivebar_mechanism(geometry: FiveBar, angles0: ArrayLike, assembly: str | int
     cross = float((r2 - r1)[0] * (p - r1)[1] - (r2 - r1)[1] * (p - r1)[0])
     if cross * _sign(assembly) <= 0.0:
         raise MechanismError(f"the first pose did not assemble in mode {assembly!r}")
+    if isinstance(geometry, ExtendedFiveBar) and geometry.extension > 0.0:
+        spec = fivebar_spec(geometry, angles0, assembly)
+        u = (p - r1) / geometry.b1
+        g = geometry.extension_angle
+        pen = p + geometry.extension * np.array([math.cos(g) * u[0] - math.sin(g) * u[1],
+                                                 math.sin(g) * u[0] + math.cos(g) * u[1]])
+        spec["joints"]["J"] = {"type": "revolute", "at": p.tolist()}
+        spec["joints"]["P"] = {"type": "point", "at": pen.tolist()}
+        # A construction point off the line R1J keeps the rigid body well posed when the
+        # extension is straight (R1, J, P collinear give dependent distance gradients).
+        off = r1 + 0.5 * np.array([-(p - r1)[1], (p - r1)[0]])
+        spec["joints"]["K"] = {"type": "point", "at": off.tolist()}
+        spec["links"]["b1"] = ["R1", "J", "K", "P"]
+        spec["links"]["b2"] = {"joints": ["R2", "J"], "length": geometry.b2}
+        mech = build_mechanism(spec)
     return mech
 
 

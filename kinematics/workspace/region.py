@@ -116,8 +116,9 @@ def safe_mask(fb: FiveBar, mode: str, xs: ArrayLike, ys: ArrayLike, min_type1_ra
 
 def workspace_bounds(fb: FiveBar) -> tuple[float, float, float, float]:
     """Box (x_min, x_max, y_min, y_max) mm that contains every reachable point: the union
-    of the two outer reach circles |P − M_i| ≤ a_i + b_i (their intersection is smaller)."""
-    r1, r2 = fb.a1 + fb.b1, fb.a2 + fb.b2
+    of the two outer reach circles |P − M_i| ≤ a_i + b_i (their intersection is smaller;
+    `FiveBar.reach`, which widens them for a pen off the joint)."""
+    r1, r2 = fb.reach[0][1], fb.reach[1][1]
     x_min = max(-r1, fb.w - r2)
     x_max = min(r1, fb.w + r2)
     r = min(r1, r2)

@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from kinematics.arrays import BoolArray, FloatArray
+from kinematics.extension import ExtendedFiveBar
 from kinematics.fivebar import FiveBar
 
 __all__ = ["SingularityTrace", "type1_circles", "type2_traces"]
@@ -75,8 +76,10 @@ def _mode_strings(s1: FloatArray, s2: FloatArray) -> NDArray[np.str_]:
 
 def _modes_from_pose(fb: FiveBar, p: FloatArray, r1: FloatArray,
                      r2: FloatArray) -> NDArray[np.str_]:
+    """Working modes of pen points p with elbows r1, r2 (arm 2 reaches the joint)."""
+    j = fb.joint_from_pen(r1, p)
     c1 = p[:, 0] * r1[:, 1] - p[:, 1] * r1[:, 0]
-    c2 = (p[:, 0] - fb.w) * r2[:, 1] - p[:, 1] * (r2[:, 0] - fb.w)
+    c2 = (j[:, 0] - fb.w) * r2[:, 1] - j[:, 1] * (r2[:, 0] - fb.w)
     return _mode_strings(c1, c2)
 
 
@@ -112,7 +115,7 @@ def type2_traces(fb: FiveBar, n: int = 1440) -> list[SingularityTrace]:
                            r1[:, 1] + along * dy + branch * across * dx), axis=1)
             u = (r2 - r1) / L
             sgn = -1.0 if (kind == "1b-II" and fb.b1 < fb.b2) else 1.0
-            p = r1 + sgn * fb.b1 * u
+            p = fb.pen_from_joint(r1, r1 + sgn * fb.b1 * u)
             pts = p[ok]
             if pts.shape[0] < 2:
                 continue
@@ -125,8 +128,8 @@ def type2_traces(fb: FiveBar, n: int = 1440) -> list[SingularityTrace]:
     if fb.b1 == fb.b2:
         for centre in _circle_intersections((0.0, 0.0), fb.a1, (fb.w, 0.0), fb.a2):
             c = np.asarray(centre)
-            p = c + fb.b1 * np.stack((np.cos(t), np.sin(t)), axis=1)
-            r = np.broadcast_to(c, p.shape).copy()
+            r = np.broadcast_to(c, (n, 2)).copy()
+            p = fb.pen_from_joint(r, c + fb.b1 * np.stack((np.cos(t), np.sin(t)), axis=1))
             modes = _modes_from_pose(fb, p, r, r)
             breaks = np.zeros(n, dtype=bool)
             out.append(SingularityTrace("1b-I", p, modes, breaks))
@@ -151,9 +154,16 @@ def _circle_intersections(c1: tuple[float, float], r1: float, c2: tuple[float, f
 def type1_circles(fb: FiveBar) -> list[tuple[int, str, tuple[float, float], float]]:
     """Type-1 singularity loci (thesis "Mode 2"): for each arm i, the circles about M_i of
     radius a_i + b_i (stretched) and |a_i − b_i| (folded; absent when a_i = b_i). They bound
-    the workspace of every working mode. Returns (arm, "stretched"/"folded", centre, radius)."""
+    the workspace of every working mode. Returns (arm, "stretched"/"folded", centre, radius).
+
+    With the pen on an extension of link 1 (`ExtendedFiveBar`) arm 1's circles have the pen
+    link d for b1; arm 2's locus (|J − M2| = a2 ± b2) is no circle in pen coordinates and is
+    not listed (the safe region, `point_safety`, still checks its margin)."""
     out: list[tuple[int, str, tuple[float, float], float]] = []
-    for arm, (a, b, cx) in enumerate(((fb.a1, fb.b1, 0.0), (fb.a2, fb.b2, fb.w)), start=1):
+    arms = [(1, fb.a1, fb.b1, 0.0), (2, fb.a2, fb.b2, fb.w)]
+    if isinstance(fb, ExtendedFiveBar) and fb.extension > 0.0:
+        arms = [(1, fb.a1, fb.pen_link, 0.0)]
+    for arm, a, b, cx in arms:
         out.append((arm, "stretched", (cx, 0.0), a + b))
         if a != b:
             out.append((arm, "folded", (cx, 0.0), abs(a - b)))

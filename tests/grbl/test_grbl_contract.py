@@ -173,17 +173,48 @@ def test_check_mode_moves_nothing(grbl: GrblClient) -> None:
     grbl.wait_for(lambda s: s.startswith("Grbl"), start=n)
 
 
-def test_disconnect_holds_with_laser_off(bridge: Running) -> None:
+def _wait_machine(bridge: Running, state: str, timeout: float = 5.0) -> str:
+    deadline = time.monotonic() + timeout
+    while bridge.core.machine.status.state != state and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return bridge.core.machine.status.state
+
+
+def test_disconnect_in_mid_line_holds_with_laser_off(bridge: Running) -> None:
+    c = bridge.client()
+    c.command("$X")
+    c.stream(["M3 S1000", "G1 X0 Y0 F60"])
+    c.wait_state("Run", 5)
+    c.write(b"G1 X5")  # a broken line: the sender died while writing it
+    c.close()
+    assert _wait_machine(bridge, "Hold") == "Hold"
+    assert bridge.core.machine.status.laser == 0
+    c2 = bridge.client()
+    assert c2.status().startswith("<Hold:0|")
+    c2.close()
+
+
+def test_close_after_complete_lines_finishes_them(bridge: Running) -> None:
+    """GRBL's stream.py and every fire-and-forget streamer close the port after the last
+    line: GRBL runs what it received, and so does the bridge."""
+    c = bridge.client()
+    c.command("$X")
+    c.write(b"M3 S1000\nG1 X0 Y0 F300\nG1 X5 Y5\nM5\n")
+    c.close()
+    _wait_machine(bridge, "Run")
+    assert _wait_machine(bridge, "Idle", 60) == "Idle"
+    c2 = bridge.client()
+    x, y, _ = mpos(c2.wait_state("Idle", 30))
+    assert math.hypot(x - (ORIGIN[0] + 5), y - (ORIGIN[1] + 5)) < 0.05 + 0.02
+    c2.close()
+
+
+def test_hold_on_disconnect_keeps_the_old_behaviour(bridge: Running) -> None:
+    bridge.core.hold_on_disconnect = True
     c = bridge.client()
     c.command("$X")
     c.stream(["M3 S1000", "G1 X0 Y0 F60"])
     c.wait_state("Run", 5)
     c.close()
-    deadline = time.monotonic() + 5
-    while bridge.core.machine.status.state != "Hold" and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert bridge.core.machine.status.state == "Hold"
+    assert _wait_machine(bridge, "Hold") == "Hold"
     assert bridge.core.machine.status.laser == 0
-    c2 = bridge.client()
-    assert c2.status().startswith("<Hold:0|")
-    c2.close()

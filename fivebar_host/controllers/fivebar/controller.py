@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import ClassVar
+from typing import Any, ClassVar
 
 from fivebar_host import protocol
 from fivebar_host.compile import Job
@@ -84,15 +84,21 @@ class FivebarController:
         self.profile = profile
         self.url = link.url
         #: What the user should know about the connection (a faster rate refused).
-        self.notice = link.baud_warning
+        self.notice = "; ".join(n for n in (link.baud_warning, link.lock and link.lock.note)
+                                if n) or None
 
     @classmethod
     def open(cls, url: str, profile: Profile) -> FivebarController:
         """Open `url` at the profile's rates and wait for the firmware's banner."""
         ser = profile.serial
-        return cls(Link.open(url, baud=ser.baud, banner_timeout_s=ser.banner_timeout_s,
-                             reply_timeout_s=ser.reply_timeout_s, link_baud=ser.link_baud),
-                   profile)
+        opts: dict[str, Any] = {
+            "baud": ser.baud, "banner_timeout_s": ser.banner_timeout_s,
+            "reply_timeout_s": ser.reply_timeout_s, "link_baud": ser.link_baud}
+        if profile.joints is not None:  # servo joints: the servo build (servo.py)
+            from .servo import open_servo_link
+
+            return cls(open_servo_link(url, profile, profile.joints, **opts), profile)
+        return cls(Link.open(url, **opts), profile)
 
     @classmethod
     def convert(cls, job: Job, profile: Profile, laser: bool, relative: bool) -> Converted:
@@ -131,8 +137,10 @@ class FivebarController:
         trace = getattr(self.link.port, "trace_path", None)
         if trace is None:
             return None
-        true = getattr(getattr(self.link.port, "options", None), "true", None)
-        return Recording(Path(trace), None if true is None else tuple(true))
+        opts = getattr(self.link.port, "options", None)
+        true = getattr(opts, "true", None)
+        return Recording(Path(trace), None if true is None else tuple(true),
+                         getattr(opts, "backlash", None), getattr(opts, "deadband", None))
 
     # ------------------------------------------------------------------ pose
     def ensure_pose(self, operator: Operator) -> Position:

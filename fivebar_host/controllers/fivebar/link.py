@@ -21,7 +21,9 @@ from typing import Any
 import serial
 
 from fivebar_host import protocol, wire
+from fivebar_host.controllers import ports
 from fivebar_host.controllers.fivebar.stream import Streamer, StreamProgress, StreamResult
+from fivebar_host.controllers.ports import PortLock
 from fivebar_host.program import Program
 from fivebar_host.protocol import Banner, ErrorReply, Message, Ok, ProtocolError, StatusReport
 from fivebar_host.run.errors import (
@@ -42,8 +44,9 @@ class Link:
     """A protocol session on one open port (anything with pyserial's Serial interface)."""
 
     def __init__(self, port: Any, *, url: str = "", reply_timeout_s: float = 10.0,
-                 poll_interval_s: float = 0.05) -> None:
+                 poll_interval_s: float = 0.05, lock: PortLock | None = None) -> None:
         self.port = port
+        self.lock = lock  # the port held for this process (`controllers.ports`)
         self.url = url or str(getattr(port, "port", "?"))
         self.reply_timeout_s = reply_timeout_s
         self.poll_interval_s = poll_interval_s
@@ -60,19 +63,23 @@ class Link:
     # ------------------------------------------------------------------ opening
     @classmethod
     def open(cls, url: str, *, baud: int = 115200, banner_timeout_s: float = 5.0,
-             reply_timeout_s: float = 10.0, link_baud: int | None = None) -> Link:
-        """Open `url` (a device path, COM port or pyserial URL) and wait for the banner.
+             reply_timeout_s: float = 10.0, link_baud: int | None = None,
+             command: str | None = None, hint: str | None = None) -> Link:
+        """Hold the port (`controllers.ports`: refused, naming the owner, before anything is
+        opened or sent when another process holds it), open `url` (a device path, COM port
+        or pyserial URL) and wait for the banner.
 
         `link_baud` (the profile's `[serial] link_baud`): a faster rate to switch to with
         `set_baud` once connected; if the switch fails the link stays at the base rate and
-        `baud_warning` says why."""
+        `baud_warning` says why. `command` and `hint` go into the port's lock file."""
         try:
-            port = serial.serial_for_url(url, baudrate=baud, timeout=0.02, write_timeout=5.0)
+            port, lock = ports.open_port(url, command=command, hint=hint, baudrate=baud,
+                                         timeout=0.02, write_timeout=5.0)
         except ValueError as e:
             raise LinkError(f"{url}: {e}") from e
         except (serial.SerialException, OSError) as e:
             raise LinkError(f"{url}: cannot open the port: {e}") from e
-        link = cls(port, url=url, reply_timeout_s=reply_timeout_s)
+        link = cls(port, url=url, reply_timeout_s=reply_timeout_s, lock=lock)
         try:
             link.handshake(banner_timeout_s)
             if link_baud is not None and link_baud != link.port.baudrate:
@@ -131,9 +138,8 @@ class Link:
         return self.banner
 
     def close(self) -> None:
-        """Close the port (idempotent)."""
-        with contextlib.suppress(serial.SerialException, OSError):
-            self.port.close()
+        """Close the port and give it up (idempotent)."""
+        ports.close_port(self.port, self.lock)
 
     def __enter__(self) -> Link:
         return self

@@ -33,6 +33,7 @@ import numpy as np
 
 from fivebar_host.compile import Job
 from fivebar_host.config import Profile
+from fivebar_host.controllers.grbl import dialects
 from fivebar_host.controllers.grbl.link import (
     GrblError,
     GrblLink,
@@ -45,7 +46,6 @@ from fivebar_host.controllers.grbl.program import (
     GrblProgram,
     from_program,
     job_program,
-    settings_differences,
     steps_per_degree,
     tool_lines,
     work_offset_line,
@@ -91,13 +91,17 @@ class GrblController:
         self.link = link
         self.profile = profile
         self.url = link.url
-        self.notice: str | None = None
-        diff = settings_differences(profile, link.settings())
+        self.notice: str | None = link.lock.note if link.lock is not None else None
+        diff = dialects.differences(link, profile)
         if diff:
+            how = ("set each item in its config.yaml or with `$/item=value`"
+                   if link.dialect == dialects.FLUIDNC else "send each line to the board")
             raise GrblSettingsError(
-                f"{link.url}: the board's settings differ from what the profile needs "
-                f"(`fivebar grbl-settings` prints them; send each line to the board):\n  "
+                f"{link.url}: the {link.dialect} board's settings differ from what the "
+                f"profile needs (`fivebar grbl-settings` prints them; {how}):\n  "
                 + "\n  ".join(diff))
+        if link.dialect == dialects.FLUIDNC:
+            self.notice = f"FluidNC: check by hand that {dialects.FLUIDNC_MANUAL}"
 
     @classmethod
     def open(cls, url: str, profile: Profile) -> GrblController:

@@ -19,6 +19,8 @@ from typing import Any
 
 import serial
 
+from fivebar_host.controllers import ports
+from fivebar_host.controllers.ports import PortLock
 from fivebar_host.run.errors import SendError
 
 RX_BUFFER = 128
@@ -89,41 +91,53 @@ class GrblStreamError(GrblError):
 class GrblLink:
     """An open GRBL board."""
 
-    def __init__(self, port: Any, url: str, reply_timeout_s: float = 10.0) -> None:
+    def __init__(self, port: Any, url: str, reply_timeout_s: float = 10.0,
+                 lock: PortLock | None = None) -> None:
         self.port = port
+        self.lock = lock  # the port held for this process (`controllers.ports`)
         self.url = url
         self.reply_timeout_s = reply_timeout_s
         self.messages: list[str] = []  # [MSG:…] and other feedback, in order
         self._buf = b""
         self._skipped: deque[str] = deque()  # lines passed over while waiting for another
+        self.dialect = "GRBL 1.1"  # `dialects.detect` of the banner
+        self.banner = ""
 
     @classmethod
     def open(cls, url: str, *, baud: int = 115200, banner_timeout_s: float = 5.0,
              reply_timeout_s: float = 10.0) -> GrblLink:
-        """Open the port and wait for GRBL's banner (opening an Uno resets it); without one,
-        a Ctrl-X asks for it. A board that never says `Grbl 1.1` is refused."""
+        """Hold the port (`controllers.ports`: refused, naming the owner, before anything is
+        opened when another process holds it), open it and wait for GRBL's banner (opening
+        an Uno resets it); without one, a Ctrl-X asks for it. A board that never says
+        `Grbl 1.1` is refused."""
         try:
-            port = serial.serial_for_url(url, baudrate=baud, timeout=0.05)
-        except (serial.SerialException, ValueError) as e:
+            port, lock = ports.open_port(url, baudrate=baud, timeout=0.05)
+        except (serial.SerialException, ValueError, OSError) as e:
             raise GrblError(f"{url}: cannot open the port: {e}") from e
-        link = cls(port, url, reply_timeout_s)
+        from fivebar_host.controllers.grbl.dialects import detect
+
+        link = cls(port, url, reply_timeout_s, lock)
         for attempt in range(2):
-            line = link._wait_line(lambda s: s.startswith("Grbl "), banner_timeout_s)
+            line = link._wait_line(lambda s: s.startswith(("Grbl ", "GrblHAL ")),
+                                   banner_timeout_s)
             if line is not None:
-                if not line.startswith("Grbl 1.1"):
-                    port.close()
+                dialect = detect(line)
+                if dialect is None:
+                    link.close()
                     raise GrblError(f"{url}: the board says {line!r}; --controller grbl "
-                                    "needs GRBL 1.1")
+                                    "needs GRBL 1.1, grblHAL or FluidNC")
+                link.dialect = dialect
+                link.banner = line
                 return link
             if attempt == 0:
                 port.write(b"\x18")
-        port.close()
+        link.close()
         raise GrblError(f"{url}: no GRBL banner within {banner_timeout_s:g} s (wrong port, "
                         "baud rate or firmware?)")
 
     def close(self) -> None:
-        """Close the port."""
-        self.port.close()
+        """Close the port and give it up."""
+        ports.close_port(self.port, self.lock)
 
     # ------------------------------------------------------------------ lines
     def _readline(self, timeout_s: float) -> str | None:

@@ -113,6 +113,7 @@ class Machine:
     firmware: MockFirmware | None = None
     port: MockSerial | None = None
     true: tuple[float, ...] | None = None  # URL option true=: the real geometry (mm, deg)
+    backlash: tuple[int, int] | None = None  # URL option backlash=: the real slack, steps
 
     @property
     def laser(self) -> int:

@@ -97,6 +97,7 @@ class MockOptions:
     proto: int = protocol.PROTOCOL_VERSION
     machine: str | None = None
     true: tuple[float, ...] | None = None
+    backlash: tuple[int, int] | None = None  # the real slack of each motor, steps
 
 
 def _int_option(key: str, value: str, lo: int, hi: int) -> int:
@@ -162,6 +163,16 @@ def _true_option(key: str, value: str) -> tuple[float, ...]:
     return vals
 
 
+def backlash_option(key: str, value: str) -> tuple[int, int]:
+    """`backlash=A,B`: each motor's real slack in steps (0–10000), where it differs from
+    the profile's `[motors] backlash_steps`: the executed-path report draws through it."""
+    parts = value.split(",")
+    if len(parts) != 2:
+        raise MockURLError(f"{SCHEME}: {key} must be two step counts 'A,B'; got {value!r}")
+    a, b = (_int_option(key, p.strip(), 0, 10_000) for p in parts)
+    return a, b
+
+
 #: Each option's parser, (key, text) → value; the order is the one error messages list.
 _PARSERS: dict[str, Callable[[str, str], Any]] = {
     "speed": lambda k, v: _float_option(k, v, 0.0, 1e9),
@@ -183,6 +194,7 @@ _PARSERS: dict[str, Callable[[str, str], Any]] = {
     "proto": lambda k, v: _int_option(k, v, 0, 2**16),
     "machine": _machine_option,
     "true": _true_option,
+    "backlash": backlash_option,
 }
 _KNOWN = tuple(_PARSERS)
 

@@ -77,6 +77,7 @@ class MockSerial(serial.SerialBase):  # type: ignore[misc]  # pyserial has no ty
             kept = m.firmware.power_off(now) if m.firmware is not None else None
             self.machine = m
             m.true = self.options.true
+            m.backlash = self.options.backlash
             self._rng = random.Random(self.options.seed)
             self.firmware = MockFirmware(self.options, m, now, kept)
             m.firmware = self.firmware

@@ -14,6 +14,7 @@ import numpy as np
 from fivebar_host import protocol
 from fivebar_host.compile import Job, NbarOpinion, linkrate
 from fivebar_host.config import Profile
+from fivebar_host.errors import FivebarError
 from fivebar_host.run.stops import Copies, plan_text
 
 
@@ -49,9 +50,9 @@ def tool_line(job: Job, laser: bool, profile: Profile | None = None) -> str:
         return ("tool          laser: S up to "
                 f"{int(job.power.max(initial=0))} while drawing, S0 on travel (--laser)")
     pen = profile.pen if profile is not None else None
-    if pen is None:
-        return ("tool          pen: S0 on every line (no laser power without --laser); pen "
-                "down/up = M3/M5 around drawing strokes")
+    if pen is None:  # a laser profile (the bundled default): without --laser it stays off
+        return ("tool          laser off: S0 on every line (power only with --laser); "
+                "M3/M5 mark each drawing stroke (a pen lift on M3 draws it)")
     return (f"tool          pen servo (profile [tool] pen): down {pen.down_position:g} % "
             f"({pen.pulse_us(pen.down_position)} µs) in {pen.move_ms(True)} ms + "
             f"{pen.down_delay_ms} ms settle, up {pen.up_position:g} % "
@@ -81,6 +82,77 @@ def link_lines(job: Job, profile: Profile) -> list[str]:
             f"the queue never runs dry{faster}"]
 
 
+#: Text elements listed one by one in the report; the rest are counted.
+TEXTS_LISTED = 8
+
+
+def text_lines(job: Job) -> list[str]:
+    """One line per drawn SVG `<text>` (the first `TEXTS_LISTED`): the element, its line,
+    its text, the faces that drew it and its size on the machine (font-size, after the
+    placement's scale)."""
+    texts = job.drawing.texts
+    out = []
+    for t in texts[:TEXTS_LISTED]:
+        size = t.size_mm * job.placement.scale
+        src = f" (source #{t.source})" if t.source >= 0 else ""
+        out.append(f"text          {t.element} line {t.line}{src}: {t.text!r} in "
+                   f"{', '.join(t.fonts) or 'no font (nothing drawn)'}, {size:.1f} mm, "
+                   f"{t.glyphs} glyphs, {t.strokes} strokes")
+    if len(texts) > TEXTS_LISTED:
+        rest = texts[TEXTS_LISTED:]
+        out.append(f"text          … and {len(rest)} more text elements "
+                   f"({sum(t.glyphs for t in rest)} glyphs)")
+    return out
+
+
+def joint_lines(job: Job, profile: Profile) -> list[str]:
+    """The backlash take-ups (compile.backlash) and, on servo joints, the pulse targets."""
+    lines = []
+    lash = profile.motors.backlash_steps
+    if any(lash) and job.slack.shape[0]:
+        still = (np.diff(job.joint_steps, axis=0) == 0).all(axis=1)
+        piece = still & (np.diff(job.steps.astype(np.int64), axis=0) != 0).any(axis=1)
+        runs = int(piece[:1].sum()) + int((piece[1:] & ~piece[:-1]).sum())
+        t = float(job.duration_us[piece].sum()) * 1e-6
+        lines.append(f"backlash      {runs} take-up(s) of A {lash[0]}, B {lash[1]} steps at "
+                     f"reversals, {t:.2f} s (the pen stays put while a motor takes up)")
+    if profile.joints is not None:
+        try:
+            pul = profile.joints.pulses(job.angles_rad)
+            lines.append(f"servo joints  pulses A {pul[:, 0].min():g}–{pul[:, 0].max():g} µs, "
+                         f"B {pul[:, 1].min():g}–{pul[:, 1].max():g} µs (0.5 µs steps, dead "
+                         "band compensated); runs on the servo firmware, docs/protocol.md 6.5")
+        except FivebarError as e:
+            lines.append(f"servo joints  {e}")
+    return lines
+
+
+def fill_lines(job: Job) -> list[str]:
+    """What hatching and hidden-line removal did (`--hatch`, `--hiding`): how much of the
+    drawing is hatch, how much was hidden, and the pen lifts."""
+    f = job.drawing.fill
+    if f is None:
+        return []
+    hatch_src = np.array([s.role == "hatch" for s in job.drawing.sources] + [False])
+    seg = job.draw & (job.source >= 0)
+    hatch_mm = float(job.length_mm[seg & hatch_src[job.source]].sum())
+    total = job.draw_length_mm
+    out = []
+    if f.hatch:
+        out.append(f"hatch         {hatch_mm:.1f} mm of the {total:.1f} mm drawn "
+                   f"({100 * hatch_mm / total if total else 0:.0f} %): {f.hatch}; "
+                   f"{f.regions} regions ({f.simple_regions} simple, in "
+                   f"{f.hatch_runs_simple} pen-down runs), {f.link_mm:.1f} mm of links "
+                   "inside them")
+    if f.hiding:
+        out.append(f"hidden        {f.hidden_mm:.1f} mm of lines under later fills, "
+                   f"{f.unstroked_mm:.1f} mm of fill-only outlines not drawn (--hiding)")
+    incl = ", hatch included" if f.hatch else ""
+    out.append(f"pen lifts     {job.pen_downs} (pen-down runs{incl})")
+    out.extend(f"note          {n}" for n in f.notes)
+    return out
+
+
 def report_lines(job: Job, nbar: NbarOpinion | None = None, laser: bool = False,
                  profile: Profile | None = None, copies: Copies | None = None) -> list[str]:
     """The dry-run report: paths, segments, lengths, time, deviation, margins, mode, tool (pen,
@@ -106,6 +178,7 @@ def report_lines(job: Job, nbar: NbarOpinion | None = None, laser: bool = False,
         f"segments      {job.n_segments} ({int(job.draw.sum())} drawing, "
         f"{int((~job.draw).sum())} travel)",
         f"drawing       {job.draw_length_mm:.1f} mm",
+        *fill_lines(job),
         f"travel        {job.travel_length_mm:.1f} mm (pen-up straight-line estimate "
         f"{job.travel_before_mm:.1f} mm in file order → {job.travel_after_mm:.1f} mm "
         "reordered)",
@@ -128,6 +201,8 @@ def report_lines(job: Job, nbar: NbarOpinion | None = None, laser: bool = False,
                  f"{deg(mm[2]):.1f}°")
     if profile is not None:
         lines.extend(link_lines(job, profile))
+        lines.extend(joint_lines(job, profile))
+    lines.extend(text_lines(job))
     lines.extend(pause_lines(job))
     lines.extend(f"mode change {k:<2d}{mc.describe(job.n_paths)}"
                  for k, mc in enumerate(job.mode_changes, start=1))

@@ -22,11 +22,21 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from fivebar_host.compile import Job, distance_to_request
+from fivebar_host.compile.backlash import play
 from fivebar_host.compile.steps import step_angles
 from fivebar_host.config import Profile
+from fivebar_host.errors import FivebarError
 from fivebar_host.program import line_param
 from kinematics.arrays import FloatArray, IntArray
 from kinematics.calibration import MachineParams
+from kinematics.extension import ExtendedFiveBar
+from kinematics.fivebar import FiveBar
+
+
+class DeviationError(FivebarError):
+    """The executed path left the drawing by more than its bound (a failed run)."""
+
+    exit_code = 3
 
 
 @dataclass(frozen=True)
@@ -75,6 +85,15 @@ def true_params(values: Sequence[float] | None) -> MachineParams | None:
     return MachineParams(a1, b1, a2, b2, w, math.radians(h1), math.radians(h2))
 
 
+def true_geometry(true: MachineParams, profile_geometry: FiveBar) -> FiveBar:
+    """The true machine's five-bar: its lengths, with the profile's pen extension if any
+    (`true=` gives the five lengths; the pen's place on link 1 is the profile's)."""
+    if isinstance(profile_geometry, ExtendedFiveBar):
+        return ExtendedFiveBar(true.a1, true.b1, true.a2, true.b2, true.w,
+                               profile_geometry.extension, profile_geometry.extension_angle)
+    return true.fivebar()
+
+
 def ledger_track(ledger: Sequence[Any]) -> tuple[FloatArray, IntArray]:
     """(time, positions) of a mock's ledger: the start and the end of every G1 block."""
     g1 = [e for e in ledger if e.kind == "G1"]
@@ -87,7 +106,8 @@ def ledger_track(ledger: Sequence[Any]) -> tuple[FloatArray, IntArray]:
 
 def executed_path(job: Job, profile: Profile, time: FloatArray, track: IntArray,
                   first_segment: int = 0, start_steps: ArrayLike | None = None,
-                  true: MachineParams | None = None) -> ExecutedPath:
+                  true: MachineParams | None = None,
+                  backlash: tuple[int, int] | None = None) -> ExecutedPath:
     """Assign recorded positions to the job's segments and measure each drawing point.
 
     The run started at `start_steps` (default: the start of `first_segment`). A resumed run
@@ -95,7 +115,10 @@ def executed_path(job: Job, profile: Profile, time: FloatArray, track: IntArray,
     that starts elsewhere (after homing) first travels back to the segment's start, laser
     off: those events belong to no segment (−1) and are not measured against the drawing.
     Assignment walks the events once: an event belongs to the segment being executed, and a
-    segment ends at the event whose position equals its target.
+    segment ends at the event whose position equals its target. The pen points are those of
+    the joints behind the motor counts (`compile.backlash.play`): with the machine's real
+    slack `backlash` (steps per motor; None: the profile's `[motors] backlash_steps`), from
+    the slack the job planned at the start.
     """
     tgt = job.steps
     n = job.n_segments
@@ -121,8 +144,14 @@ def executed_path(job: Job, profile: Profile, time: FloatArray, track: IntArray,
             k = skip_empty(k + 1)
     completed = k
     home = job.home_rad if true is None else true.home_rad
-    fb = profile.geometry if true is None else true.fivebar()
-    th = step_angles(track, home, job.steps_per_rev)
+    fb = profile.geometry if true is None else true_geometry(true, profile.geometry)
+    lash = profile.motors.backlash_steps if backlash is None else backlash
+    joint = track
+    if any(lash) or job.slack.shape[0]:
+        row = min(first_segment, job.steps.shape[0] - 1)
+        start = job.slack[row] if job.slack.shape[0] else (0, 0)
+        joint = play(track, lash, np.minimum(start, lash))
+    th = step_angles(joint, home, job.steps_per_rev)
     fwd = fb.forward_batch(th, "+" if job.assembly > 0 else "-")
     dev = np.full(track.shape[0], np.nan)
     draw_idx = np.flatnonzero((seg >= 0) & job.draw[np.maximum(seg, 0)])

@@ -27,8 +27,11 @@ def summary_lines(rep: WorkspaceReport, fb: FiveBar) -> list[str]:
     """The figures `fivebar workspace` prints."""
     st = rep.stats
     r = rep.fit.rect
-    lines = [f"geometry a1={fb.a1:g} b1={fb.b1:g} a2={fb.a2:g} b2={fb.b2:g} w={fb.w:g} mm; "
-             f"grid {rep.fit.resolution_mm:.3g} mm"]
+    ext = getattr(fb, "extension", 0.0)
+    pen = (f" extension={ext:g} mm at {math.degrees(getattr(fb, 'extension_angle', 0.0)):g}°"
+           if ext else "")
+    lines = [f"geometry a1={fb.a1:g} b1={fb.b1:g} a2={fb.a2:g} b2={fb.b2:g} w={fb.w:g} mm"
+             f"{pen}; grid {rep.fit.resolution_mm:.3g} mm"]
     for m in WORKING_MODES:
         f = rep.fits[m]
         mark = "*" if m == rep.mode else " "
@@ -86,7 +89,9 @@ def summary_dict(rep: WorkspaceReport, fb: FiveBar) -> dict[str, Any]:
     """The printed figures as a JSON-ready dict (lengths mm, areas mm², angles deg)."""
     st = rep.stats
     return {
-        "geometry": {"a1": fb.a1, "b1": fb.b1, "a2": fb.a2, "b2": fb.b2, "w": fb.w},
+        "geometry": {"a1": fb.a1, "b1": fb.b1, "a2": fb.a2, "b2": fb.b2, "w": fb.w,
+                     "extension": getattr(fb, "extension", 0.0),
+                     "extension_angle_deg": math.degrees(getattr(fb, "extension_angle", 0.0))},
         "working_mode": rep.mode,
         "assembly": rep.fit.assembly,
         "grid_mm": rep.fit.resolution_mm,

@@ -68,12 +68,11 @@ function showError(err, what) {
   const msg = document.createElement('span');
   msg.className = 'message';
   msg.textContent = err.message;
-  const key = document.createElement('small');
-  key.textContent = ' (' + (err.status ? err.status + ' ' : '') + err.key + ')';
+  box.dataset.key = err.key;  // for the tests and the curious, not shown
   const close = document.createElement('button');
   close.type = 'button'; close.textContent = '×'; close.setAttribute('aria-label', 'dismiss');
   close.onclick = () => box.remove();
-  box.append(close, title, msg, key);
+  box.append(close, title, msg);
   const list = $('#errors');
   list.prepend(box);
   while (list.children.length > 4) list.lastChild.remove();
@@ -133,40 +132,44 @@ function setupToken() {
 }
 
 // ------------------------------------------------------------------ upload form
+// One form field in words: its label, the field, and its help visible under it (a phone
+// has no hover). Values with units are text, sent as typed: the daemon reads them with the
+// CLI's parser ("50%" is half size, "1in" 25.4 mm), so the page never guesses a unit.
 function optionField(o) {
   const id = 'opt-' + o.query;
+  const wrap = el('div', 'field');
+  const help = el('small', 'help', o.page_help);
+  help.id = id + '-help';
   if (o.kind === 'bool') {
     const label = el('label', 'check');
     const input = el('input'); input.type = 'checkbox'; input.id = id; input.name = o.query;
     input.checked = !!o.default;
-    label.append(input, document.createTextNode(' ' + o.query));
-    label.title = o.description;
-    return label;
+    input.setAttribute('aria-describedby', help.id);
+    label.append(input, document.createTextNode(' ' + o.label));
+    wrap.append(label, help);
+    return wrap;
   }
   const label = el('label');
-  label.append(document.createTextNode(o.query + (o.unit ? ' (' + o.unit + ')' : '')));
-  label.title = o.description;
+  label.htmlFor = id;
+  label.textContent = o.label;
   let input;
   if (o.kind === 'choice') {
     input = el('select');
-    input.append(new Option('default', ''));
+    input.append(new Option('as the machine says', ''));
     for (const c of o.choices) input.append(new Option(c, c));
   } else {
     input = el('input');
-    const numeric = o.kind === 'float' || o.kind === 'int';
-    input.type = numeric ? 'number' : 'text';
-    if (numeric) {
-      input.step = o.kind === 'int' ? '1' : 'any';
-      if (o.min !== null) input.min = o.min;
-      if (o.max !== null) input.max = o.max;
-    }
-    input.placeholder = o.kind === 'xy' ? 'X,Y' : o.repeat ? 'names, comma separated'
-      : (o.default !== null && o.default !== undefined ? String(o.default) : 'default');
+    input.type = o.kind === 'int' ? 'number' : 'text';
+    if (o.kind === 'int') { input.step = '1'; if (o.min !== null) input.min = o.min; if (o.max !== null) input.max = o.max; }
+    input.autocomplete = 'off';
+    input.spellcheck = false;
+    input.placeholder = o.example ? 'e.g. ' + o.example
+      : (o.default !== null && o.default !== undefined ? String(o.default) : '');
   }
   input.id = id; input.name = o.query;
-  label.append(input);
-  if (o.range) label.append(el('small', 'muted', o.range));
-  return label;
+  input.setAttribute('aria-describedby', help.id);
+  wrap.append(label, input, help);
+  return wrap;
 }
 // The options this machine takes from the page: the daemon jobs use its own profile's pen
 // settings (the pen overrides are refused), and a pen machine has no laser.
@@ -357,9 +360,21 @@ function renderStatus() {
   $('#m-fw').textContent = m.firmware ? m.firmware.version + ' (protocol ' + m.firmware.protocol + ')' : '–';
   $('#alarm').hidden = !m.alarm;
   $('#alarm-text').textContent = m.alarm ? 'Alarm — ' + m.alarm : '';
-  $('#at-home-row').hidden = !!S.features.endstops;
+  renderCompiling(st.compiling || []);
   const p = st.pose;
   $('#pos').textContent = p ? 'x ' + p.pen[0].toFixed(2) + ' mm, y ' + p.pen[1].toFixed(2) + ' mm (mode ' + p.mode + ')' : '–';
+}
+// drawings being compiled (no job yet): "compiling x.svg: ordering paths 45% (12 s)"
+function renderCompiling(list) {
+  const ul = $('#compiling');
+  ul.hidden = !list.length;
+  ul.replaceChildren(...list.map(c => {
+    const li = document.createElement('li');
+    li.textContent = 'compiling ' + c.name + ': ' + c.stage +
+      (c.progress === null ? '' : ' ' + Math.round(100 * c.progress) + '%') +
+      ' (' + Math.round(c.elapsed_s) + ' s)' + (c.note ? ' — ' + c.note : '');
+    return li;
+  }));
 }
 // 'copy 2 of 3 · ' for a job that draws several copies (its options.copies), else ''
 function copyOf(n, job) {
@@ -428,10 +443,7 @@ function jobButtons(j, waitingIndex, waiting) {
   const out = [];
   if (j.state === 'running') out.push(button('Pause', () => act(j.id, 'pause')));
   if (j.state === 'paused') out.push(button('Resume', () => act(j.id, 'resume'), 'primary'));
-  if (j.state === 'held') {
-    out.push(j.question ? button('Yes — resume', () => act(j.id, 'resume', 'confirm=true'), 'primary')
-      : button('Resume', () => act(j.id, 'resume'), 'primary'));
-  }
+  if (j.state === 'held' && !j.question) out.push(button('Resume', () => act(j.id, 'resume'), 'primary'));
   if (j.state === 'queued' && waitingIndex >= 0) {
     const up = button('↑', () => act(j.id, 'move', 'index=' + (waitingIndex - 1)));
     up.disabled = waitingIndex === 0; up.setAttribute('aria-label', 'run earlier');
@@ -466,8 +478,8 @@ function jobItem(j, eta, waitingIndex, waiting) {
     const bar = el('progress');
     bar.max = 1;
     li.append(top, bar, el('div', 'eta'));
-    if (j.question) li.append(el('div', 'question', j.question));
-    if (j.message) li.append(el('div', 'msg', j.message));
+    if (j.question) li.append(el('div', 'question', 'Waiting for your answer: see the top of the page.'));
+    else if (j.message) li.append(el('div', 'msg', j.message));
     const btns = el('div', 'buttons');
     btns.append(...jobButtons(j, waitingIndex, waiting));
     li.append(btns);
@@ -477,7 +489,35 @@ function jobItem(j, eta, waitingIndex, waiting) {
   li.querySelector('.eta').textContent = jobInfo(j, eta);
   return li;
 }
+// Why a job waits, at the top of the first screen: the question the machine needs a person
+// to answer (asked here only), or the pen change it stopped for, with the buttons.
+function renderWaiting() {
+  const j = S.jobs.find((x) => x.state === 'held' || x.state === 'paused');
+  const box = $('#waiting');
+  const shape = j ? JSON.stringify([j.id, j.state, j.question, j.message]) : '';
+  $('#at-home-row').hidden = !!S.features.endstops || !!(j && j.question);
+  if (box.dataset.shape === shape) return;
+  box.dataset.shape = shape;
+  box.hidden = !j;
+  if (!j) { box.replaceChildren(); return; }
+  const what = el('p', 'why');
+  const name = 'Job #' + j.id + ' (' + j.name + ')';
+  const btns = el('div', 'buttons');
+  if (j.question) {
+    what.textContent = name + ' waits for your answer: ' + j.question;
+    btns.append(button('Yes, they are', () => act(j.id, 'resume', 'confirm=true'), 'primary'),
+      button('Cancel the job', () => act(j.id, 'cancel')));
+  } else if (j.state === 'paused' && /^pen change/.test(j.message || '')) {
+    what.textContent = name + ' waits for a pen change: ' + j.message.replace(/^pen change:\s*/, '');
+    btns.append(button('Continue', () => act(j.id, 'resume'), 'primary'), button('Cancel the job', () => act(j.id, 'cancel')));
+  } else {
+    what.textContent = name + (j.state === 'paused' ? ' is paused' : ' is held') + (j.message ? ': ' + j.message : '.');
+    btns.append(button('Resume', () => act(j.id, 'resume'), 'primary'), button('Cancel the job', () => act(j.id, 'cancel')));
+  }
+  box.replaceChildren(what, btns);
+}
 function renderJobs() {
+  renderWaiting();
   const [active, queued, done] = jobOrder();
   let eta = active.reduce((t, j) => t + (j.remaining_s || 0), 0);
   const waiting = queued.filter((j) => !j.started_at);

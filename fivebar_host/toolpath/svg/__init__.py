@@ -16,6 +16,11 @@ something other than what the file shows. Modules:
   Inkscape layers.
 - `clip`, `masking`: `clip-path`, `mask` and viewport overflow as regions (shapely); pen
   lines are cut exactly where they leave a region.
+- `markers`: `marker-start`/`-mid`/`-end` drawn at the shapes' vertices, as browsers do.
+- `undrawn`: what is not drawn (images, foreign objects, filters), counted for one note.
+- `text` with `textcontent`, `textlayout`, `textpath`, `textdeco`: `<text>` laid out as
+  browsers do and drawn with single-stroke fonts (`toolpath.fonts`); `lettering`: lines of
+  text as an SVG document (`fivebar text`).
 - `reader`: `read_svg`, the page, warnings and the final checks.
 """
 

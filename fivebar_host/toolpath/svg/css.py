@@ -24,7 +24,22 @@ from fivebar_host.toolpath.svg.xmltree import Node
 #: Properties the reader uses (others do not change which outlines a pen draws).
 PROPS = frozenset({"display", "visibility", "stroke", "fill", "stroke-width", "opacity",
                    "fill-opacity", "stroke-opacity", "clip-path", "mask", "clip-rule",
-                   "fill-rule", "font-size", "stroke-dasharray", "overflow"})
+                   "fill-rule", "font-size", "stroke-dasharray", "overflow",
+                   # text (svg.text): fonts, spacing, anchoring, baselines, decoration
+                   "font-family", "font-weight", "font-style", "text-anchor",
+                   "dominant-baseline", "alignment-baseline", "baseline-shift",
+                   "letter-spacing", "word-spacing", "white-space", "font-kerning",
+                   "text-decoration", "text-decoration-line", "text-transform", "direction",
+                   "writing-mode", "font-variant", "unicode-bidi", "font-stretch"}
+                  # counted when not drawn (`undrawn.PROPERTIES`)
+                  | {"marker-start", "marker-mid", "marker-end", "marker", "filter"})
+#: The `font` shorthand's parts (CSS Fonts 4 §2.8): style, variant, weight and stretch
+#: keywords, then size[/line-height] and the family list.
+_FONT_STYLE = {"italic", "oblique"}
+_FONT_WEIGHT = {"bold", "bolder", "lighter"}
+_FONT_KEYWORD = {"normal", "small-caps", "condensed", "expanded", "semi-condensed",
+                 "semi-expanded", "ultra-condensed", "extra-condensed", "extra-expanded",
+                 "ultra-expanded"}
 _DYNAMIC = frozenset({"hover", "active", "focus", "visited", "link", "focus-within",
                       "focus-visible", "target"})
 _COMMENT = re.compile(r"/\*.*?\*/", re.S)
@@ -174,9 +189,36 @@ def declarations(text: str) -> list[Decl]:
         if imp:
             v = re.sub(r"!\s*important\s*$", "", v, flags=re.I).strip()
         k = k.strip().lower()
-        if k and v:
+        if k == "font":
+            out.extend((name, val, imp) for name, val in font_shorthand(v))
+        elif k and v:
             out.append((k, v, imp))
     return out
+
+
+def font_shorthand(value: str) -> list[tuple[str, str]]:
+    """The longhands the `font` shorthand sets (CSS Fonts 4 §2.8): style, weight, size and
+    family (variant and stretch keywords are accepted and left at normal); [] when the
+    value is not a font shorthand (a system font keyword such as `caption`)."""
+    words = value.replace("/", " / ").split()
+    style, weight = "normal", "normal"
+    for i, w in enumerate(words):
+        lw = w.lower()
+        if lw in _FONT_STYLE:
+            style = lw
+        elif lw in _FONT_WEIGHT or (lw.isdigit() and 1 <= int(lw) <= 1000):
+            weight = lw
+        elif lw not in _FONT_KEYWORD:
+            size = w
+            rest = words[i + 1:]
+            if rest[:1] == ["/"]:
+                rest = rest[2:]  # line-height: no lines to space in SVG text
+            family = " ".join(rest)
+            if not family:
+                return []
+            return [("font-style", style), ("font-weight", weight), ("font-size", size),
+                    ("font-family", family)]
+    return []
 
 
 def _split_outside(text: str, sep: str) -> Iterator[str]:
@@ -268,9 +310,8 @@ class StyleSheet:
             if prop in PROPS and (prop not in ranked or key >= ranked[prop][0]):
                 ranked[prop] = (key, value.strip())
 
-        for prop in PROPS:
-            v = n.get(prop)
-            if v is not None and v.strip():
+        for prop, v in n.attrs.items():  # an element has few attributes; PROPS has many
+            if prop in PROPS and v.strip():
                 offer(prop, v, (0, 0, (0, 0, 0), 0))
         if self.by_key:
             for r in self.matching(n):

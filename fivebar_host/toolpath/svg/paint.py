@@ -15,7 +15,18 @@ from dataclasses import dataclass
 #: Inherited properties (CSS/SVG) and their initial values.
 INHERITED = {"visibility": "visible", "stroke": "none", "fill": "black", "stroke-width": "1",
              "fill-opacity": "1", "stroke-opacity": "1", "clip-rule": "nonzero",
-             "fill-rule": "nonzero", "stroke-dasharray": "none"}
+             "fill-rule": "nonzero", "stroke-dasharray": "none",
+             "marker-start": "none", "marker-mid": "none", "marker-end": "none"}
+#: Inherited text properties and their initial values (CSS Fonts 4, CSS Text 3, SVG 2 §11).
+#: They enter an element's properties only where some element sets them (`text_prop`
+#: reads the initial value otherwise), so drawings without text copy no more per element.
+#: font-family "" is the profile's default family (CSS leaves the initial value to the UA);
+#: white-space "" defers to `xml:space`.
+TEXT_INHERITED = {"font-family": "", "font-weight": "normal", "font-style": "normal",
+                  "text-anchor": "start", "dominant-baseline": "auto",
+                  "letter-spacing": "normal", "word-spacing": "normal", "white-space": "",
+                  "font-kerning": "auto", "text-transform": "none", "direction": "ltr",
+                  "writing-mode": "horizontal-tb", "font-variant": "normal"}
 
 _NAMED = {"black": (0, 0, 0), "white": (255, 255, 255), "red": (255, 0, 0),
           "lime": (0, 255, 0), "green": (0, 128, 0), "blue": (0, 0, 255),
@@ -31,10 +42,16 @@ def inherit(parent: dict[str, str], specified: dict[str, str]) -> dict[str, str]
     (`inherit` takes the parent's, `initial` the initial value)."""
     out = dict(parent)
     for k, v in specified.items():
-        if k not in INHERITED or v == "inherit":
+        initial = INHERITED.get(k, TEXT_INHERITED.get(k))
+        if initial is None or v == "inherit":
             continue
-        out[k] = INHERITED[k] if v == "initial" else v
+        out[k] = initial if v == "initial" else v
     return out
+
+
+def text_prop(props: dict[str, str], key: str) -> str:
+    """An inherited text property (its initial value where no element set it)."""
+    return props.get(key, TEXT_INHERITED[key]).strip()
 
 
 def number_or_percent(text: str | None, default: float = 1.0) -> float:

@@ -7,9 +7,10 @@ the origin, with a warning (with `--fit` the page size does not matter). The Dra
 y up, origin at the page's bottom-left corner (the page's y-down frame is flipped here).
 
 Told once per kind (`Drawing.warnings`, printed by the dry-run report): ignored elements,
-hidden elements, text (with the hint to convert it to paths), invalid path data (drawn up to
-the error), partial opacity and dashes (drawn solid), unsupported CSS, masks that are not
-opaque. A text-only file is refused with the same hint.
+hidden elements, Inkscape's flowed text (with the hint to convert it to text), invalid path
+data (drawn up to the error), partial opacity and dashes (drawn solid), unsupported CSS,
+masks that are not opaque, and what text drawing says (`svg.text`). `<text>` is drawn with
+single-stroke fonts (`fonts`), chosen through the profile's `[text]` table (`text`).
 """
 
 from __future__ import annotations
@@ -20,15 +21,18 @@ from pathlib import Path
 import numpy as np
 
 from fivebar_host.errors import InputError
-from fivebar_host.toolpath.geometry import MAX_COORD_MM, Drawing, bbox, read_source
+from fivebar_host.toolpath.extent import bbox
+from fivebar_host.toolpath.fonts.library import FontLibrary, TextConfig
+from fivebar_host.toolpath.geometry import MAX_COORD_MM, Drawing, read_source
 from fivebar_host.toolpath.svg.masking import Masking
 from fivebar_host.toolpath.svg.stream import StreamTree, scan
+from fivebar_host.toolpath.svg.text import CharLayout
 from fivebar_host.toolpath.svg.units import MM_PER_PX, Lengths, parse_length, viewport_transform
 from fivebar_host.toolpath.svg.walk import Ctx, Walker, root_props
 from fivebar_host.toolpath.svg.xmltree import Node, parse_xml
 
-TEXT_HINT = ("convert text to paths first (Inkscape: Path > Object to Path, or "
-             "`inkscape --export-text-to-path`)")
+FLOWED_HINT = ("Inkscape's flowed text (<flowRoot>) is not SVG and browsers do not show it: "
+               "convert it to text first (Inkscape: Text > Convert to Text)")
 
 
 def _page_size(r: Walker, root: Node, name: str) -> tuple[float, float, bool]:
@@ -59,20 +63,27 @@ LIMIT_HINT = ("; raise it with --max-segments (job option max_segments) if the m
 
 def read_svg(source: str | Path | bytes, layers: Sequence[str] | None = None,
              file: str | None = None, language: str = "en",
-             max_segments: int | None = DEFAULT_MAX_SEGMENTS) -> Drawing:
+             max_segments: int | None = DEFAULT_MAX_SEGMENTS,
+             text: TextConfig | FontLibrary | None = None,
+             layouts: list[CharLayout] | None = None) -> Drawing:
     """Read an SVG file (path or bytes) into a `Drawing` in mm, y up, page bottom-left at 0.
 
     `layers`: Inkscape layer labels or ids to draw (None: everything visible). `language`:
     the user language `<switch>`'s `systemLanguage` is matched against. `max_segments`: the
     most path segments drawn (None: no limit); more is an `InputError` raised while reading.
-    The document is walked while it is parsed where its references allow (`stream`).
+    `text`: the profile's `[text]` table (or a library built from one) that chooses the
+    fonts of `<text>` (None: the built-in choices); `layouts`, when given, receives each
+    drawn text element's character layout (`svg.text.CharLayout`). The document is walked
+    while it is parsed where its references allow (`stream`).
     """
     data, name = read_source(source, file, "<svg>")
     sc = scan(data, name)
-    r = Walker(name, layers, language, max_segments, LIMIT_HINT)
+    fonts = text if isinstance(text, FontLibrary) else FontLibrary(text)
+    r = Walker(name, layers, language, max_segments, LIMIT_HINT, fonts)
+    r.layouts = layouts
     Masking(r)
-    for text, line in sc.sheets:
-        r.sheet.add_sheet(text, f"<style> at line {line}")
+    for sheet, line in sc.sheets:
+        r.sheet.add_sheet(sheet, f"<style> at line {line}")
     page: list[float] = []
 
     def on_root(root: Node) -> Ctx | None:
@@ -94,6 +105,7 @@ def read_svg(source: str | Path | bytes, layers: Sequence[str] | None = None,
     _check_layers(r, name)
     r.b.warnings.extend(_warnings(r))
     drawing = r.b.build(page_height_mm=height_mm, page_size_mm=(width_mm, height_mm))
+    drawing.paint = r.paint.table(len(drawing.sources))
     _check_coordinates(drawing, name)
     if drawing.kind.shape[0] == 0:
         raise InputError(_nothing_message(r), name)
@@ -144,12 +156,12 @@ def _warnings(r: Walker) -> list[str]:
     for tag, n in sorted(r.ignored_tags.items()):
         out.append(f"ignored {n} <{tag}> element(s)")
     if r.text_nodes:
-        out.append(f"ignored {len(r.text_nodes)} text element(s) (first: "
-                   f"{_where(r.text_nodes[0])}): only outlines of shapes are drawn; "
-                   f"{TEXT_HINT}")
+        out.append(f"ignored {len(r.text_nodes)} flowed text element(s) (first: "
+                   f"{_where(r.text_nodes[0])}): {FLOWED_HINT}")
     if r.skipped_hidden:
         out.append(f"skipped {r.skipped_hidden} hidden element(s)")
-    return out + _notes(r)
+    undrawn = r.undrawn.note()
+    return out + _notes(r) + ([undrawn] if undrawn else [])
 
 
 def _notes(r: Walker) -> list[str]:
@@ -161,12 +173,12 @@ def _notes(r: Walker) -> list[str]:
 def _nothing_message(r: Walker) -> str:
     what = f" in layer(s) {', '.join(r.layers)}" if r.layers else ""
     msg = (f"no strokes to draw{what}: the file has no visible path, line, polyline, polygon, "
-           "rect, circle or ellipse with a non-zero extent")
+           "rect, circle, ellipse or text with a non-zero extent") + r.undrawn.only()
     if r.text_nodes:
         lines = ", ".join(str(n.line) for n in r.text_nodes[:5])
         more = ", ..." if len(r.text_nodes) > 5 else ""
-        msg += (f"; its text (<{r.text_nodes[0].tag}> at line(s) {lines}{more}) is not drawn: "
-                f"{TEXT_HINT}")
+        msg += (f"; its flowed text (<{r.text_nodes[0].tag}> at line(s) {lines}{more}) is not "
+                f"drawn: {FLOWED_HINT}")
     notes = _notes(r)
     if notes:
         msg += "; " + "; ".join(notes)

@@ -35,7 +35,9 @@ from fivebar_host.toolpath.svg.xmltree import (
     SVG_NS,
     XLINK_NS,
     Node,
+    add_chars,
     clean_attrs,
+    keeps_text,
     new_parser,
     run_parser,
     too_deep,
@@ -124,6 +126,7 @@ class _Frame:
     ctx: Ctx | None  # a streaming container's context; None: built whole
     pinned: bool  # holds a referenced id: kept in the tree
     hidden: bool = False  # a container entered here whose opacity is 0: never walked
+    text: bool = False  # in <text>: its character data is kept (xmltree)
 
 
 class StreamTree:
@@ -145,7 +148,7 @@ class StreamTree:
         parser.StartElementHandler = self._start
         parser.EndElementHandler = self._end
         parser.CharacterDataHandler = self._chars
-        run_parser(parser, data, file)
+        run_parser(parser, data, file, stage="reading")
         assert self.root is not None  # scan refused a file without one
         return self.root
 
@@ -165,7 +168,7 @@ class StreamTree:
         parent = self.stack[-1]
         node.parent = parent.node
         parent.node.children.append(node)
-        fr = _Frame(node, None, pinned)
+        fr = _Frame(node, None, pinned, text=parent.text or keeps_text(node))
         if parent.ctx is not None and not pinned:
             self._enter_container(fr, parent.ctx)
         self.stack.append(fr)
@@ -201,7 +204,5 @@ class StreamTree:
             parent.node.children[-1] = GONE
 
     def _chars(self, text: str) -> None:
-        if self.stack:
-            node = self.stack[-1].node
-            if len(node.text) < 1_000_000:
-                node.text += text
+        if self.stack and self.stack[-1].text:
+            add_chars(self.stack[-1].node, text)

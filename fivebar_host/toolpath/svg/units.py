@@ -31,6 +31,10 @@ _LENGTH_RE = re.compile(rf"\s*({NUMBER})\s*([a-zA-Z%]*)\s*$")
 _NUMBER_RE = re.compile(NUMBER)
 _SEP_RE = re.compile(r"\s*,?\s*")
 _WSP_RE = re.compile(r"\s*")
+#: A number list `number_prefix` reads to the end without an error: every number and
+#: separator an atomic group and the repeat possessive, so each takes what the loop's own
+#: match takes (a separator's comma must be followed by a number). ASCII text only.
+_LIST_RE = re.compile(rf"\s*(?:(?>{NUMBER})(?:(?>\s*(?:,\s*)?)(?>{NUMBER}))*+\s*)?")
 DEFAULT_FONT_PX = 16.0
 
 #: Which viewport dimension a percentage of an attribute refers to (SVG 2 §8.9).
@@ -132,6 +136,13 @@ def number_prefix(text: str) -> tuple[list[float], int | None]:
     """The numbers of an SVG number list up to its first error, and the 0-based column of
     that error (None: the whole list is valid). Numbers are separated by whitespace and/or
     one comma, or by nothing where the grammar allows it (`1-2`, `.5.5`, `1e-1-1e2`)."""
+    if text.isascii() and _LIST_RE.fullmatch(text):  # valid: the numbers at once
+        return [float(x) for x in _NUMBER_RE.findall(text)], None
+    return _scan_numbers(text)
+
+
+def _scan_numbers(text: str) -> tuple[list[float], int | None]:
+    """`number_prefix` by the scanner, number by number up to the first error."""
     out: list[float] = []
     m0 = _WSP_RE.match(text)
     i, n = (m0.end() if m0 else 0), len(text)

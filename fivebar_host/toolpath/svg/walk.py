@@ -23,11 +23,17 @@ import numpy as np
 from shapely.geometry.base import BaseGeometry
 
 from fivebar_host.errors import InputError
-from fivebar_host.toolpath.geometry import DrawingBuilder
+from fivebar_host.toolpath.fill.paint import PaintRecorder
+from fivebar_host.toolpath.fonts.library import FontLibrary
+from fivebar_host.toolpath.geometry import DrawingBuilder, TextInfo
 from fivebar_host.toolpath.svg import clip
 from fivebar_host.toolpath.svg.css import StyleSheet
+from fivebar_host.toolpath.svg.markers import Markers, expand_shorthand
 from fivebar_host.toolpath.svg.paint import INHERITED, inherit, number_or_percent, painted
+from fivebar_host.toolpath.svg.paintorder import record_shape
 from fivebar_host.toolpath.svg.shapes import SHAPES, shape_subpaths
+from fivebar_host.toolpath.svg.text import CharLayout, draw_text
+from fivebar_host.toolpath.svg.undrawn import Undrawn
 from fivebar_host.toolpath.svg.units import Lengths, numbers, viewport_transform
 from fivebar_host.toolpath.svg.xmltree import INKSCAPE_NS, XLINK_NS, Node
 
@@ -35,7 +41,8 @@ from fivebar_host.toolpath.svg.xmltree import INKSCAPE_NS, XLINK_NS, Node
 NOT_RENDERED = {"defs", "symbol", "clipPath", "mask", "marker", "pattern", "metadata", "title",
                 "desc", "style", "script", "linearGradient", "radialGradient", "filter",
                 "namedview", "foreignObject"}
-TEXT = ("text", "flowRoot")
+#: Text the reader does not draw: Inkscape's flowed text (not SVG; browsers show nothing).
+FLOWED = ("flowRoot",)
 #: Elements instantiated through `<use>` before the file is refused (exponential nesting).
 MAX_USE_VISITS = 500_000
 
@@ -62,8 +69,12 @@ class Collected:
 
 class Walker:
     def __init__(self, file: str, layers: Sequence[str] | None, language: str,
-                 max_segments: int | None = None, limit_hint: str = "") -> None:
+                 max_segments: int | None = None, limit_hint: str = "",
+                 fonts: FontLibrary | None = None) -> None:
         self.file = file
+        self.fonts = fonts or FontLibrary()
+        #: each drawn text element's character layout, when a caller asks (`read_svg`)
+        self.layouts: list[CharLayout] | None = None
         self.layers = [s for s in (layers or []) if s]
         self.language = language.lower()
         self.found_layers: list[tuple[str | None, str | None]] = []
@@ -76,9 +87,17 @@ class Walker:
         self.ignored_tags: dict[str, int] = {}
         self.text_nodes: list[Node] = []
         self.notes: dict[str, tuple[str, Node, int]] = {}
+        self.undrawn = Undrawn()  # element kinds and properties not drawn (one note)
+        self.markers = Markers(self)
         self.collector: list[Collected] | None = None
         self.collect_all_paint = False
         self.region: Callable[[Node, dict[str, str], Ctx], Ctx] | None = None
+        self.paint = PaintRecorder()  # each drawn shape's fill rule and stroke, by source
+
+    @property
+    def texts(self) -> list[TextInfo]:
+        """The text elements drawn so far (`svg.text`), kept by the builder."""
+        return self.b.texts
 
     # ---------------------------------------------------------------- bookkeeping
     def note(self, kind: str, node: Node, message: str) -> None:
@@ -137,12 +156,16 @@ class Walker:
             n = n.parent
         props = root_props()
         for a in reversed(chain):
-            props = inherit(props, self.sheet.cascade(a))
+            props = inherit(props, expand_shorthand(self.sheet.cascade(a)))
         return props
 
     # ---------------------------------------------------------------- traversal
     def walk(self, node: Node, ctx: Ctx) -> None:
-        if not node.is_svg or node.tag in NOT_RENDERED:
+        if not node.is_svg:
+            return
+        if self.collector is None and self.undrawn.element(node):
+            return
+        if node.tag in NOT_RENDERED:
             return
         if self.use_depth:
             self.use_visits += 1
@@ -157,6 +180,8 @@ class Walker:
         if c.opacity <= 0.0:
             self.skipped_hidden += self.collector is None
             return
+        if self.collector is None:
+            self.undrawn.properties(node, spec)
         self.dispatch(node, c)
 
     def enter(self, node: Node, spec: dict[str, str], ctx: Ctx, own_transform: bool) -> Ctx:
@@ -176,7 +201,8 @@ class Walker:
         font = ctx.lengths.font_size(spec.get("font-size"), self.file, node.line) \
             if "font-size" in spec else ctx.lengths.font_px
         lengths = replace(ctx.lengths, font_px=font)
-        c = Ctx(m, inherit(ctx.props, spec), lengths, layer, selected, ctx.clip,
+        c = Ctx(m, inherit(ctx.props, expand_shorthand(spec)), lengths, layer, selected,
+                ctx.clip,
                 ctx.opacity * number_or_percent(spec.get("opacity")))
         if self.region is not None and ("clip-path" in spec or "mask" in spec):
             c = self.region(node, spec, c)
@@ -198,7 +224,9 @@ class Walker:
             self.walk_use(node, c)
         elif tag in SHAPES:
             self.shape(node, c)
-        elif tag in TEXT:
+        elif tag == "text":
+            draw_text(self, node, c)
+        elif tag in FLOWED:
             if self.collector is None and c.props["visibility"] == "visible":
                 self.text_nodes.append(node)
         elif self.collector is None:
@@ -301,8 +329,14 @@ class Walker:
     def shape(self, node: Node, c: Ctx) -> None:
         if not c.selected and self.collector is None:
             return
+        painted_too = True
         if self.collector is None or not self.collect_all_paint:
-            if not self.visible(node, c):
+            painted_too = self.visible(node, c)
+            marked = self.collector is None and any(
+                c.props.get(p, "none").strip() not in ("none", "") for p in
+                ("marker-start", "marker-mid", "marker-end"))
+            if not painted_too and not (marked and c.props["visibility"].strip().lower()
+                                        not in ("hidden", "collapse")):
                 self.skipped_hidden += self.collector is None
                 return
         elif c.props["visibility"].strip().lower() in ("hidden", "collapse"):
@@ -321,14 +355,24 @@ class Walker:
             clip.check_finite(subs, self.file, node.line, node.tag)
             self.collector.append(Collected(node, c, subs))
             return
-        self.emit(node, c, res.subpaths)
+        if painted_too:
+            record_shape(self, node, c, res.subpaths, self.emit(node, c, res.subpaths))
+        self.markers.draw(node, c, res.subpaths)
 
-    def emit(self, node: Node, c: Ctx, subpaths: clip.Subpaths) -> None:
-        src = self.b.add_source(node.get("id"), node.line, node.tag, c.layer)
+    def emit(self, node: Node, c: Ctx, subpaths: clip.Subpaths, tag: str | None = None) -> int:
+        """Draw an element's subpaths (user units) as one source, clipped by the context's
+        region; into the collector when one is set. The source's index, −1 for none."""
+        if self.collector is not None:
+            subs = clip.transform_subpaths(subpaths, c.matrix)
+            clip.check_finite(subs, self.file, node.line, node.tag)
+            self.collector.append(Collected(node, c, subs))
+            return -1
+        src = self.b.add_source(node.get("id"), node.line, tag or node.tag, c.layer)
         n0 = len(self.b.kinds)
         if c.clip is None:
             mats = self.b.matrices
-            if not mats or not np.array_equal(mats[-1], c.matrix):
+            # (the same context's matrix is the same object: no element-wise comparison)
+            if not mats or (mats[-1] is not c.matrix and not np.array_equal(mats[-1], c.matrix)):
                 mats.append(c.matrix)
             mid = len(mats) - 1
         else:
@@ -342,6 +386,8 @@ class Walker:
             self.b.add_many(sub, node.line, mid)
         if len(self.b.kinds) == n0:
             self.b.sources.pop()
+            return -1
+        return src
 
 
 def root_props() -> dict[str, str]:

@@ -3,7 +3,9 @@
 Parsed with expat (not ElementTree) because every error must name the line; external entities
 are never fetched (expat does not load them unless asked) and libexpat ≥ 2.4 refuses billion-
 laughs amplification, which surfaces here as a malformed-XML `InputError` like any other.
-Text content is kept (for `<style>` sheets and to name `<text>` elements in the no-strokes hint).
+Character data is kept inside `<text>` only (the style sheets come from the reader's first
+pass): as ElementTree keeps it, an element's `text` is what comes before its first child and
+a child's `tail` what follows it, so `<text>a<tspan>b</tspan>c</text>` keeps its order.
 """
 
 from __future__ import annotations
@@ -11,10 +13,12 @@ from __future__ import annotations
 import xml.parsers.expat
 from dataclasses import dataclass, field
 
+from fivebar_host import progress
 from fivebar_host.errors import InputError
 
 SVG_NS = "http://www.w3.org/2000/svg"
 XLINK_NS = "http://www.w3.org/1999/xlink"
+XML_NS = "http://www.w3.org/XML/1998/namespace"
 INKSCAPE_NS = "http://www.inkscape.org/namespaces/inkscape"
 #: Deepest element nesting read (the tree is walked recursively).
 MAX_DEPTH = 256
@@ -23,7 +27,8 @@ MAX_DEPTH = 256
 @dataclass(eq=False)
 class Node:
     """A parsed XML element: local tag, namespace, attributes (local names; foreign
-    namespaces as 'ns local'), children, parent, its text and its 1-based source line."""
+    namespaces as 'ns local'), children, parent, its 1-based source line, and inside `<text>`
+    its character data before the first child (`text`) and after its own end (`tail`)."""
 
     tag: str
     ns: str
@@ -32,6 +37,7 @@ class Node:
     children: list[Node] = field(default_factory=list)
     parent: Node | None = None
     text: str = ""
+    tail: str = ""
 
     def get(self, key: str, default: str | None = None) -> str | None:
         return self.attrs.get(key, default)
@@ -62,15 +68,47 @@ def new_parser() -> xml.parsers.expat.XMLParserType:
     return xml.parsers.expat.ParserCreate(namespace_separator=" ")
 
 
-def run_parser(parser: xml.parsers.expat.XMLParserType, data: bytes, file: str) -> None:
-    """Parse all of `data`; XML and decoding errors become `InputError`s naming the line."""
+#: Bytes parsed between two progress reports (`run_parser`'s `stage`).
+PROGRESS_CHUNK = 1 << 20
+
+
+def run_parser(parser: xml.parsers.expat.XMLParserType, data: bytes, file: str,
+               stage: str | None = None) -> None:
+    """Parse all of `data`; XML and decoding errors become `InputError`s naming the line.
+    With `stage`, the bytes parsed are reported (`fivebar_host.progress`) as they go."""
     try:
-        parser.Parse(data, True)
+        if stage is None or len(data) <= PROGRESS_CHUNK or not progress.listening():
+            parser.Parse(data, True)
+            return
+        view = memoryview(data)
+        for at in range(0, len(data), PROGRESS_CHUNK):
+            parser.Parse(bytes(view[at:at + PROGRESS_CHUNK]), False)
+            progress.report(stage, min(1.0, (at + PROGRESS_CHUNK) / len(data)))
+        parser.Parse(b"", True)
     except xml.parsers.expat.ExpatError as e:
         raise InputError(f"malformed XML: {xml.parsers.expat.ErrorString(e.code)} "
                          f"(line {e.lineno}, column {e.offset + 1})", file, e.lineno) from e
     except (LookupError, UnicodeError) as e:  # an XML declaration naming an unknown encoding
         raise InputError(f"cannot decode the file: {e}", file) from e
+
+
+#: Most characters kept per text piece (a text element's content is bounded anyway).
+MAX_TEXT = 1_000_000
+
+
+def keeps_text(node: Node) -> bool:
+    """Whether character data in this element is kept: `<text>` and what it contains."""
+    return node.is_svg and node.tag == "text"
+
+
+def add_chars(node: Node, text: str) -> None:
+    """Character data met while `node` is the innermost open element (see module doc)."""
+    if node.children:
+        last = node.children[-1]
+        if len(last.tail) < MAX_TEXT:
+            last.tail += text
+    elif len(node.text) < MAX_TEXT:
+        node.text += text
 
 
 def too_deep(file: str, line: int) -> InputError:
@@ -82,6 +120,7 @@ def parse_xml(data: bytes, file: str) -> Node:
     parser = new_parser()
     root: list[Node] = []
     stack: list[Node] = []
+    keep: list[bool] = [False]  # per open element: inside <text>
 
     def start(name: str, attrs: dict[str, str]) -> None:
         ns, _, local = name.rpartition(" ")
@@ -94,13 +133,15 @@ def parse_xml(data: bytes, file: str) -> Node:
         else:
             root.append(node)
         stack.append(node)
+        keep.append(keep[-1] or keeps_text(node))
 
     def end(name: str) -> None:
         stack.pop()
+        keep.pop()
 
     def chars(text: str) -> None:
-        if stack and len(stack[-1].text) < 1_000_000:
-            stack[-1].text += text
+        if stack and keep[-1]:
+            add_chars(stack[-1], text)
 
     parser.StartElementHandler = start
     parser.EndElementHandler = end

@@ -1,0 +1,47 @@
+"""Issue 38's goal on the emulator: `fivebar plot examples/fivebar_text.svg --config
+configs/plotclock.toml --fit --port fivebar-sim:// --yes` runs the Plotclock's servo profile
+on the servo build of the firmware (`servo=1`, added by the servo controller), and the
+executed path, measured from the arms' servo pulses through the true servos (the profile's
+curve), lies within the stated bound; true servos with a 2° dead band (`?deadband=2,2`) draw
+off it and fail the run (exit 3)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from fivebar_host.cli import main
+from fivebar_host.devices.sim import toolchain_missing
+
+pytestmark = pytest.mark.skipif(toolchain_missing() is not None,
+                                reason=f"emulator unavailable: {toolchain_missing()}")
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _plot(tmp_path: Path, query: str) -> tuple[int, float, float, str]:
+    res = CliRunner().invoke(main, [
+        "plot", str(ROOT / "examples" / "fivebar_text.svg"), "--config",
+        str(ROOT / "configs" / "plotclock.toml"), "--fit", "--port",
+        f"fivebar-sim://?state=off{query}", "--yes", "--preview", str(tmp_path / "p.png")])
+    line = next(ln for ln in res.output.splitlines() if ln.startswith("executed path"))
+    assert "servo pulses" in line, res.output
+    dev = float(line.split("max deviation ")[1].split(" mm")[0])
+    bound = float(line.split("(bound ")[1].split(" +")[0]) + float(
+        line.split("step quantum ")[1].split(" mm")[0])
+    return res.exit_code, dev, bound, res.output
+
+
+def test_plotclock_servo_run_within_its_bound(tmp_path: Path) -> None:
+    code, dev, bound, out = _plot(tmp_path, "")
+    assert code == 0 and 0.0 < dev <= bound, out
+    csv = (tmp_path / "p.executed.csv").read_text().splitlines()
+    assert len(csv) > 500  # one row per moving frame of the 32 s job
+
+
+def test_true_servos_with_a_dead_band_draw_off_the_bound(tmp_path: Path) -> None:
+    code, dev, bound, out = _plot(tmp_path, "&deadband=2,2")
+    assert code == 3 and dev > bound, out
+    assert "deadband= machine" in out
