@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from typing import Any, NoReturn
 
 from fivebar_host.errors import OptionError
+from fivebar_host.option_words import WORDS as _WORDS
 
 #: Text forms of a boolean in a query string (as FastAPI/pydantic read them).
 _TRUE = frozenset({"true", "1", "yes", "on"})
@@ -439,69 +440,16 @@ JOB_OPTIONS: tuple[Option, ...] = (
            help="Hidden-line removal: a filled shape hides what lies beneath it (paint "
            "order); strokes and hatches are cut where covered, fill-only shapes hide "
            "without being outlined. A layer with '+nohide' in its name is left out."),
+    Option("fill", "--fill", "fill", "choice", default="outline", choices=("outline", "scan"),
+           help="Laser: outline engraves the paths (and --hatch lines); scan burns the "
+           "filled shapes by scanlines like an image (--line-interval, default the "
+           "profile's [laser] spot_mm; --scan-angle, --one-way, --passes; --power-max); "
+           "strokes are then not engraved (docs/fill.md)."),
 )
 #: The options of a raster engraving (an image; `raster.job.RasterOptions`).
 RASTER_NAMES: tuple[str, ...] = ("width_mm", "height_mm", "dpi", "line_interval_mm",
                                  "image_mode", "power_min", "power_max", "gamma", "threshold",
-                                 "negative", "scan_angle_deg", "one_way", "passes")
-#: The web page's words for each option (label, help in words where the CLI's help names
-#: flags, settings or G-code, an example): no option's API name reaches the page's text.
-_WORDS: dict[str, tuple[str, str, str]] = {
-    "mode": ("Working mode", "How the elbows bend; auto tries all four (default: the "
-             "machine's).", ""),
-    "tolerance_mm": ("Tolerance", "", "0.05mm or 0.002in"),
-    "origin_mm": ("Where the drawing goes (X,Y)", "Put the drawing's bottom-left corner "
-                  "there on the machine, in mm or with units (default: centred).",
-                  "10,95 or 1in,4in"),
-    "scale": ("Scale", "A factor or a percentage: 0.5 or 50% is half size, 2 or 200% "
-              "twice (default: as drawn).", "50% or 0.5"),
-    "rotate_deg": ("Rotation", "Degrees counter-clockwise.", "90"),
-    "fit": ("Fill the safe area", "Scale the drawing to fill the largest area the arms "
-            "reach safely.", ""),
-    "layers": ("Only these layers", "Inkscape layer names, comma separated (default: all).",
-               "black, red"),
-    "keep_order": ("Draw in file order", "Draw the paths in the file's order instead of "
-                   "the shortest travel.", ""),
-    "draw_feed_mm_s": ("Drawing speed", "Pen speed while drawing, per second or minute "
-                       "(default: the machine's).", "25mm/s or 1in/s"),
-    "travel_feed_mm_s": ("Travel speed", "Pen speed between strokes, pen up (default: the "
-                         "machine's).", "80mm/s"),
-    "accel_fraction": ("Acceleration", "A share of the machine's acceleration: 0.5 or 50% "
-                       "(default: all of it).", "50%"),
-    "max_segments": ("Most segments", "Refuse drawings with more segments than this "
-                     "(default 2 million, about 0.6 GB of memory).", "2000000"),
-    "laser": ("Laser on (burn)", "Without it the laser stays off on every line: a pen "
-              "job.", ""),
-    "pen_up_position": ("Pen up position", "", "60"),
-    "pen_down_position": ("Pen down position", "", "30"),
-    "pen_up_rate": ("Pen raising speed", "", ""),
-    "pen_down_rate": ("Pen lowering speed", "", ""),
-    "pen_up_delay_ms": ("Wait after raising the pen", "", "200"),
-    "pen_down_delay_ms": ("Wait after lowering the pen", "", "200"),
-    "layer_pause": ("Stop for a pen change between layers", "The pen goes up and the "
-                    "machine waits until you continue; layers are drawn in file order.",
-                    ""),
-    "no_pause": ("Never stop for a pen change", "Not even before layers whose name starts "
-                 "with '!'.", ""),
-    "copies": ("Copies", "Draw the whole job this many times, the pen up and the arms "
-               "parked between copies.", "1"),
-    "page_delay_s": ("Wait between copies", "Seconds, to change the paper.", "15"),
-    "confirm": ("The arms are at the home pose", "Tick if the machine may start from the "
-                "home pose without asking (first job after power-up).", ""),
-    "no_simplify": ("Keep every point", "Do not thin densely sampled lines (they are "
-                    "thinned within half the tolerance otherwise).", ""),
-    "hatch_mm": ("Fill shapes with hatch lines", "The distance between the lines on the "
-                 "paper; 'pen' for the pen's width (default: outlines only).",
-                 "0.4mm or pen"),
-    "hatch_angle_deg": ("Hatch angle", "Degrees counter-clockwise.", "45"),
-    "crosshatch": ("Cross-hatch", "Hatch a second time at right angles.", ""),
-    "hatch_inset_mm": ("Hatch inset", "Keep the hatch this far inside each shape's edge.",
-                       "0.2mm"),
-    "hatch_along": ("Hatch along", "Straight lines, or arcs that one motor draws alone "
-                    "(arm1: motor 1 still; arm2: motor 2 still).", ""),
-    "hiding": ("Hide what is covered", "Shapes filled in the drawing hide the lines "
-               "beneath them; shapes without an outline are not outlined.", ""),
-}
+                                 "negative", "scan_angle_deg", "one_way", "passes", "fill")
 JOB_OPTIONS = tuple(
     dataclasses.replace(o, label=_WORDS[o.name][0], web_help=_WORDS[o.name][1],
                         example=_WORDS[o.name][2]) if o.name in _WORDS else o

@@ -162,13 +162,30 @@ def _grid(file: str, g: image.Gray, ro: RasterOptions, profile: Profile, mode: s
 def _compile(file: str, profile: Profile, ro: RasterOptions, gray: image.Gray | None) -> Job:
     g = gray if gray is not None else image.load(file)
     notes = list(g.notes)
-    su = setup(profile, CompileOptions(), profile.kinematics.working_mode)
-    mode = su.mode if su.mode != "auto" else find_home(su, file).mode
-    checker = _checker(profile, mode)
+    mode = raster_mode(profile, file)
     grid = _grid(file, g, ro, profile, mode)
+    how = "origin" if ro.origin_mm is not None else "centred"
+    return burn_grid(file, profile, mode, grid, ro, notes, _placement(grid, how),
+                     "nothing to burn: every pixel is white at these settings")
+
+
+def raster_mode(profile: Profile, file: str) -> str:
+    """The working mode a raster job runs in: the profile's, else the homed pose's."""
+    su = setup(profile, CompileOptions(), profile.kinematics.working_mode)
+    return su.mode if su.mode != "auto" else find_home(su, file).mode
+
+
+def burn_grid(file: str, profile: Profile, mode: str, grid: gridmod.ScanGrid,
+              ro: RasterOptions, notes: list[str], placement: layout.Placement,
+              empty: str) -> Job:
+    """The job that burns a scan grid's powers (the part every raster route shares: an
+    image, `raster.fill`'s filled shapes): its scanlines (`ro`'s direction and passes)
+    planned at one pen speed, the G7 pieces, `RasterRuns` and the job's segments, placed
+    by `placement`; `empty` is the `InputError` when no cell burns."""
+    checker = _checker(profile, mode)
     lines = gridmod.scanlines(grid, ro.bidirectional, ro.passes)
     if not lines:
-        raise InputError("nothing to burn: every pixel is white at these settings", file)
+        raise InputError(empty, file)
     v0 = ro.speed_mm_s if ro.speed_mm_s is not None else profile.motion.draw_feed_mm_s
     ctx = motion.RasterCtx(profile, checker, grid, v0, CHORD_SHARE * profile.motion.tolerance_mm,
                            K_MAX)
@@ -184,9 +201,8 @@ def _compile(file: str, profile: Profile, ro: RasterOptions, gray: image.Gray | 
                       (float(grid.u[0]), float(grid.u[1])), (float(grid.n[0]), float(grid.n[1])),
                       grid.pitch, grid.interval, grid.powers, pl.ctx.v,
                       min(sm.accel for sm in pl.scans), residual, file, tuple(notes))
-    how = "origin" if ro.origin_mm is not None else "centred"
     return assemble.build_job(profile, checker, file, mode, home_steps, seg, info,
-                              _placement(grid, how), notes)
+                              placement, notes)
 
 
 def raster_options(values: Mapping[str, Any], profile: Profile) -> RasterOptions:

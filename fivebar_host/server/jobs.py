@@ -115,6 +115,8 @@ class JobOptions(CompileOptions):
     scan_angle_deg: float = 0.0
     one_way: bool = False
     passes: int = 1
+    #: `--fill scan`: a drawing's filled shapes burned by scanlines (`raster.fill`).
+    fill: str = "outline"
 
     def copies_plan(self) -> Copies:
         """The copies and page delay as the sender takes them."""
