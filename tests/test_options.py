@@ -39,7 +39,7 @@ def test_query_round_trip_of_every_option() -> None:
               "width_mm": 40.0, "height_mm": 12.5, "dpi": 254.0, "line_interval_mm": 0.1,
               "image_mode": "jarvis", "power_min": 10, "power_max": 200, "gamma": 1.8,
               "threshold": 0.4, "negative": True, "scan_angle_deg": 45.0, "one_way": True,
-              "passes": 2}
+              "passes": 2, "fill": "scan"}
     assert set(values) == {o.name for o in JOB_OPTIONS}
     q = to_query(values)
     pairs = [(k, v) for k, vs in q.items() for v in (vs if isinstance(vs, list) else [vs])]
@@ -108,7 +108,7 @@ def test_client_refuses_unknown_and_out_of_range_before_sending() -> None:
                                                      "power_min": "0", "gamma": "1.0",
                                                      "threshold": "0.5", "negative": "false",
                                                      "scan_angle": "0.0", "one_way": "false",
-                                                     "passes": "1"}
+                                                     "passes": "1", "fill": "outline"}
 
 
 def _cli_params(command: str) -> dict[str, click.Parameter]:
