@@ -13,8 +13,8 @@ from PIL import Image
 
 from fivebar_host.config import load_profile
 from fivebar_host.options import parse_query
-from fivebar_host.server.jobs import JobOptions, SubmitError, compile_upload
 from fivebar_host.server.dryrun import dry_run_upload
+from fivebar_host.server.jobs import JobOptions, SubmitError, compile_upload
 
 
 def _png(a: np.ndarray) -> bytes:

@@ -213,6 +213,10 @@ def compile_from_cli(drawing: Path, config_path: Path | None,
             from fivebar_host.raster.job import compile_raster, raster_options
 
             return prof, compile_raster(drawing, prof, raster_options(values, prof))
+        if values.get("fill") == "scan":
+            from fivebar_host.raster.fill import compile_fill_scan
+
+            return prof, compile_fill_scan(drawing, prof, values)
         return prof, compile_job(drawing, prof, CompileOptions(**compile_values(values)))
 
 

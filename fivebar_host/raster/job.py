@@ -130,16 +130,21 @@ def compile_raster(path: str | Path, profile: Profile, ro: RasterOptions,
     """Read and compile an image (module docstring); `gray` when it is already read (an
     SVG `<image>`). Raises `InputError`, `JobError` or `OptionError`."""
     file = str(path)
-    if profile.joints is not None:  # servo joints: the servo build has no pixel timer
-        raise JobError("raster engraving needs stepper joints: the servo build of the firmware "
-                       "has no pixel interrupt and refuses G7 (docs/protocol.md 6.5)",
-                       Where(file=file), "servo_joints")
+    refuse_servo(profile, file)
     try:
         return _compile(file, profile, ro, gray)
     except JobError as e:
         if e.where is None:
             raise JobError(e.detail, Where(file=file), e.reason) from None
         raise
+
+
+def refuse_servo(profile: Profile, file: str) -> None:
+    """`JobError` on servo joints: the servo build has no pixel timer."""
+    if profile.joints is not None:
+        raise JobError("raster engraving needs stepper joints: the servo build of the firmware "
+                       "has no pixel interrupt and refuses G7 (docs/protocol.md 6.5)",
+                       Where(file=file), "servo_joints")
 
 
 def _grid(file: str, g: image.Gray, ro: RasterOptions, profile: Profile, mode: str

@@ -23,6 +23,8 @@ from fivebar_host.compile import GCODE_SUFFIXES, CompileOptions, Job, compile_dr
 from fivebar_host.config import Profile, require_tool
 from fivebar_host.errors import FivebarError, InputError, JobError, OptionError, shorten
 from fivebar_host.options import PEN_NAMES, check_values, compile_values
+from fivebar_host.raster.fill import compile_fill_scan
+from fivebar_host.raster.fill import refuse as refuse_fill
 from fivebar_host.raster.image import decode as decode_image
 from fivebar_host.raster.image import is_image_file
 from fivebar_host.raster.job import compile_raster, raster_options
@@ -203,6 +205,10 @@ def compile_upload(data: bytes, name: str, opts: JobOptions, profile: Profile) -
         if is_image_file(name):  # raster engraving (docs/raster.md), like the CLI
             job = compile_raster(name, profile, raster_options(asdict(opts), profile),
                                  gray=decode_image(data, name))
+        elif opts.fill == "scan":  # a drawing's fills by scanlines (docs/fill.md)
+            refuse_fill(name, asdict(opts), profile)
+            job = compile_fill_scan(name, profile, asdict(opts),
+                                    read_upload(data, name, opts.layers, profile))
         else:
             drawing = read_upload(data, name, opts.layers, profile)
             job = compile_drawing(drawing, profile, opts.compile_options())
