@@ -59,6 +59,9 @@ def plot_on_machine(plot: Plot, profile: Profile, job: Job) -> RunReport:
                if job.raster is not None else f"max deviation {job.max_dev_mm:.4f} mm")
     click.echo(f"job: {job.n_segments} segments, {job.n_paths} paths, mode {job.mode}, "
                f"{plan_text(job, plot.copies, format_duration)}, {quality}")
+    if job.raster is not None:  # what a burn leaves out (--fill scan: the strokes) is said
+        for n in job.notes:
+            click.echo(f"note: {n}")
     if profile.pen is not None:
         click.echo("pen plot: the servo lifts the pen (M280) between strokes; laser output "
                    "stays at 0")
