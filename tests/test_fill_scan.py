@@ -170,3 +170,16 @@ def test_dry_run_prints_the_raster_report_and_the_strokes_note(tmp_path: Path) -
     assert "scanlines" in res.output and "burn" in res.output
     # the stroked rect and the stroke-only line are left out, and said so
     assert "2 stroked elements not engraved" in res.output
+
+
+def test_the_daemon_compiles_a_scan_fill(tmp_path: Path) -> None:
+    from fivebar_host.server.jobs import JobOptions, SubmitError, compile_upload
+
+    prof = load_profile(None)
+    data = _svg(tmp_path, "star_evenodd").read_bytes()
+    opts = JobOptions.from_values({"laser": True, "fill": "scan", "line_interval_mm": 0.5})
+    job = compile_upload(data, "star.svg", opts, prof).job
+    assert job.raster is not None and (job.raster.target > 0).any()
+    with pytest.raises(SubmitError) as ei:
+        compile_upload(data, "star.svg", JobOptions.from_values({"fill": "scan"}), prof)
+    assert ei.value.code == "bad_option"
