@@ -388,7 +388,8 @@ JOB_OPTIONS: tuple[Option, ...] = (
            "(default: the file's own, else 96)."),
     Option("line_interval_mm", "--line-interval", "line_interval", "float", unit="mm",
            lo=0.005, hi=10.0, metavar="LENGTH", help="Image: the burn's pixel size, mm "
-           "(0.1 = 10 px/mm); the image is resampled to it (default: its own pixels)."),
+           "(0.1 = 10 px/mm); the image is resampled to it (default: its own pixels; with "
+           "--fill scan the rows' spacing, default the profile's [laser] spot_mm)."),
     Option("image_mode", "--image-mode", "image_mode", "choice", default="grayscale",
            choices=("grayscale", "threshold", "floyd", "jarvis", "stucki", "atkinson",
                     "bayer"), help="Image: grayscale (power per pixel between --power-min "
