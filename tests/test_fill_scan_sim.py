@@ -28,7 +28,8 @@ def test_even_odd_star_scan_filled_on_the_emulator(tmp_path: Path) -> None:
                  'viewBox="0 0 100 100"><path d="M50 5 L76.5 86.5 L7.2 36.1 L92.8 36.1 '
                  'L23.5 86.5 Z" fill="black" stroke="black" fill-rule="evenodd"/></svg>')
     r = CliRunner().invoke(main, ["plot", str(p), "--laser", "--fill", "scan", "--yes",
-                                  "--line-interval", "0.25mm", "--port", "fivebar-sim://"])
+                                  "--line-interval", "0.25mm", "--port", "fivebar-sim://",
+                                  "--preview", str(tmp_path / "pv.png")])
     assert r.exit_code == 0, r.output
     assert "done:" in r.output
     assert "1 stroked element not engraved" in r.output
