@@ -62,4 +62,29 @@ WORDS: dict[str, tuple[str, str, str]] = {
                "beneath them; shapes without an outline are not outlined.", ""),
     "fill": ("Laser fill", "Outline: engrave the lines; scan: burn the filled shapes line "
              "by line like a photo (outlines are then not engraved).", ""),
+    # raster engraving of an image (docs/raster.md)
+    "width_mm": ("Image width", "The picture's width on the machine; the height follows its "
+                 "shape unless given too.", "40mm or 1.5in"),
+    "height_mm": ("Image height", "The picture's height on the machine.", "30mm"),
+    "dpi": ("Image resolution", "Pixels per inch, when no width or height is given "
+            "(default: the file's own, else 96).", "254"),
+    "line_interval_mm": ("Burn pixel size", "The distance between scanlines and between "
+                         "pixels along them (default: the image's own pixels; for a scan "
+                         "fill, the laser's spot).", "0.1mm"),
+    "image_mode": ("Image mode", "Grayscale burns each pixel at its own power; threshold "
+                   "and the dithering kinds burn dots at full power.", ""),
+    "power_min": ("Lightest power", "The power of the lightest pixel that burns, 0 to 255 "
+                  "(grayscale).", "10"),
+    "power_max": ("Darkest power", "The power of black and of every dithered dot, 0 to "
+                  "255 (default: the machine's laser power).", "200"),
+    "gamma": ("Power curve", "Above 1 keeps light tones lighter, below 1 darkens them.",
+              "1.8"),
+    "threshold": ("Threshold", "How dark a pixel must be to burn (threshold mode).",
+                  "50% or 0.5"),
+    "negative": ("Negative", "Burn the light parts instead of the dark ones.", ""),
+    "scan_angle_deg": ("Scan angle", "The scanlines' direction, degrees counter-clockwise; "
+                       "the picture stays upright.", "45"),
+    "one_way": ("Burn in one direction", "Every scanline the same way (slower; default: "
+                "back and forth).", ""),
+    "passes": ("Passes", "Burn the picture this many times over.", "2"),
 }
