@@ -16,9 +16,12 @@
   recorded step pulses), each line's mean offset across the hatch direction, and the
   distance between neighbouring lines against the nominal spacing; plus the executed
   hatch points outside the region by more than the tolerance + step quantum;
+* `--scan`: the laser scan fill (`--fill scan`) against headless Chromium — per corpus file
+  the area its scan grid burns (0.1 mm cells, lit where the centre is inside the painted
+  region) against the browser's inked area;
 * `--pictures DIR`: docs/fill.md's pictures (outline only, hatched, hidden lines).
 
-Run: python benchmarks/fill.py [--corpus] [--lifts] [--speed] [--occult] [--spacing CSV
+Run: python benchmarks/fill.py [--corpus] [--scan] [--lifts] [--speed] [--occult] [--spacing CSV
 --file F --hatch 0.4mm ...] [--pictures docs]
 """
 
@@ -38,7 +41,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from benchmarks.fillcorpus import CORPUS, SPACING, hatched, measure  # noqa: E402
+from benchmarks.fillcorpus import CORPUS, MM_PER_PX, SPACING, hatched, measure  # noqa: E402
 from fivebar_host.compile.fill import Hatch, fill_drawing  # noqa: E402
 from fivebar_host.toolpath.svg import read_svg  # noqa: E402
 
@@ -72,6 +75,29 @@ def corpus() -> None:
                   f"{f.hatch_mm2:9.1f} mm²  {100 * f.error:+7.3f} %  off the ink: "
                   f"{f.far_points}")
     print(f"  worst area difference {100 * worst:.3f} % (goal 1 %)")
+
+
+def scan_corpus() -> None:
+    sys.path.insert(0, str(ROOT / "tests"))
+    from web_support import browser_missing, chromium
+
+    from benchmarks.fillcorpus import render, scan_area
+
+    why = browser_missing()
+    if why:
+        print(f"scan: skipped ({why})")
+        return
+    print("laser scan fill (0.1 mm cells) against headless Chromium:")
+    worst = 0.0
+    with tempfile.TemporaryDirectory() as tmp, chromium(Path(tmp)) as driver:
+        for path in sorted(CORPUS.glob("*.svg")):
+            browser = float(render(driver, path.read_text()).sum()) * MM_PER_PX ** 2
+            burned, exact = scan_area(path)
+            err = (burned - browser) / browser
+            worst = max(worst, abs(err))
+            print(f"  {path.stem:18s} browser {browser:9.1f} mm²  scan {burned:9.1f} mm²  "
+                  f"{100 * err:+7.3f} %  (exact region {exact:9.1f} mm²)")
+    print(f"  worst area difference {100 * worst:.3f} %")
 
 
 def lifts() -> None:
@@ -186,6 +212,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--corpus", action="store_true")
+    ap.add_argument("--scan", action="store_true")
     ap.add_argument("--lifts", action="store_true")
     ap.add_argument("--speed", action="store_true")
     ap.add_argument("--occult", action="store_true")
@@ -194,9 +221,12 @@ def main() -> None:
                     help="an emulator run's executed CSV; without one the run is made")
     ap.add_argument("--pictures", type=Path, metavar="DIR")
     a, rest = ap.parse_known_args()
-    everything = not (a.corpus or a.lifts or a.speed or a.occult or a.spacing or a.pictures)
+    everything = not (a.corpus or a.scan or a.lifts or a.speed or a.occult or a.spacing
+                      or a.pictures)
     if a.corpus or everything:
         corpus()
+    if a.scan or everything:
+        scan_corpus()
     if a.lifts or everything:
         lifts()
     if a.speed or everything:

@@ -100,3 +100,15 @@ def measure(driver: Any, path: Path, far_px: float = 1.5) -> Figures:
     far = dist[ij[:, 0], ij[:, 1]]
     return Figures(path.stem, browser, mine, int((far > far_px).sum()),
                    float(far.max(initial=0.0)))
+
+
+def scan_area(path: Path, cell_mm: float = 0.1) -> tuple[float, float]:
+    """(mm² the `--fill scan` grid burns, mm² of the painted region) of a corpus file in its
+    own frame: the painted region (`raster.fill.painted_region`, white erasing) on a scan
+    grid of `cell_mm` cells, each lit when its centre is inside (what `burn_grid` burns)."""
+    from fivebar_host.raster.fill import fill_grid, painted_region
+
+    region = painted_region(read_svg(path), TOL)
+    grid = fill_grid(region, cell_mm, cell_mm, 0.0, 255)
+    return float((grid.powers > 0).sum()) * cell_mm * cell_mm, float(region.area)
+

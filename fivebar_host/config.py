@@ -82,6 +82,11 @@ class Motion:
     max_joint_rad_s: float
     max_joint_rad_s2: float
     tolerance_mm: float
+    #: The largest instantaneous joint-speed change at a segment boundary (the firmware runs
+    #: each segment at one rate: its velocity staircase jumps there), rad/s; optional key,
+    #: 0.5 when absent (`compile.planner.JUNCTION_JUMP_RAD_S`).  Raster turnarounds of a
+    #: few ms need a larger one (configs/raster-fast.toml).
+    junction_jump_rad_s: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -457,6 +462,8 @@ def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
         mo.number("max_joint_rad_s", 0.0, 1_000.0, lo_open=True),
         mo.number("max_joint_rad_s2", 0.0, 1e6, lo_open=True),
         mo.number("tolerance_mm", 1e-4, 10.0),
+        mo.number("junction_jump_rad_s", 0.0, 1_000.0, lo_open=True)
+        if "junction_jump_rad_s" in mo.raw else 0.5,
     )
     mo.done()
 

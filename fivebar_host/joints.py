@@ -162,7 +162,7 @@ def _parse_servos(t: Any) -> ServoJoints:
 
 def require_stepper_joints(joints: ServoJoints | None, source: str) -> None:
     """Refuse to run a job on servo joints with a controller other than fivebar's (only
-    fivebar's servo build drives arm servos: docs/protocol.md 6.4)."""
+    fivebar's servo build drives arm servos: docs/protocol.md 6.5)."""
     if joints is not None:
         raise UsageError(f"{source}: [joints] kind = \"servo\": only fivebar's servo "
                          "firmware drives arm servos (--controller fivebar, make -C firmware "

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from typing import Any, NoReturn
 
 from fivebar_host.errors import OptionError
+from fivebar_host.option_words import WORDS as _WORDS
 
 #: Text forms of a boolean in a query string (as FastAPI/pydantic read them).
 _TRUE = frozenset({"true", "1", "yes", "on"})
@@ -375,6 +376,45 @@ JOB_OPTIONS: tuple[Option, ...] = (
     Option("no_simplify", "--no-simplify", "no_simplify", "bool", default=False,
            help="Keep every vertex of densely sampled straight-line input (default: runs of "
            "lines are simplified within half the tolerance, the drawn path still within it)."),
+    # raster engraving of an image (PNG, JPEG, BMP, GIF, TIFF, WebP; docs/raster.md)
+    Option("width_mm", "--width", "width", "float", unit="mm", lo=0.0, lo_open=True,
+           hi=10_000.0, metavar="LENGTH", help="Image: its width on the machine, mm or with "
+           "units (40, 40mm, 1.5in); the height follows the image's shape unless --height."),
+    Option("height_mm", "--height", "height", "float", unit="mm", lo=0.0, lo_open=True,
+           hi=10_000.0, metavar="LENGTH", help="Image: its height on the machine, like "
+           "--width."),
+    Option("dpi", "--dpi", "dpi", "float", lo=0.0, lo_open=True, hi=100_000.0,
+           help="Image: its resolution, pixels per inch, when neither --width nor --height "
+           "(default: the file's own, else 96)."),
+    Option("line_interval_mm", "--line-interval", "line_interval", "float", unit="mm",
+           lo=0.005, hi=10.0, metavar="LENGTH", help="Image: the burn's pixel size, mm "
+           "(0.1 = 10 px/mm); the image is resampled to it (default: its own pixels; with "
+           "--fill scan the rows' spacing, default the profile's [laser] spot_mm)."),
+    Option("image_mode", "--image-mode", "image_mode", "choice", default="grayscale",
+           choices=("grayscale", "threshold", "floyd", "jarvis", "stucki", "atkinson",
+                    "bayer"), help="Image: grayscale (power per pixel between --power-min "
+           "and --power-max), threshold, or dithering (Floyd-Steinberg, Jarvis, Stucki, "
+           "Atkinson, ordered Bayer 8x8)."),
+    Option("power_min", "--power-min", "power_min", "int", lo=0, hi=255, default=0,
+           help="Image: the power of the lightest non-white pixel (grayscale), 0..255."),
+    Option("power_max", "--power-max", "power_max", "int", lo=0, hi=255,
+           help="Image: the power of black (and of every dithered dot), 0..255 (default: "
+           "the profile's [laser] power)."),
+    Option("gamma", "--gamma", "gamma", "float", lo=0.05, hi=20.0, default=1.0,
+           help="Image: power curve, darkness^gamma (grayscale); above 1 keeps light tones "
+           "lighter."),
+    Option("threshold", "--threshold", "threshold", "float", lo=0.0, lo_open=True, hi=1.0,
+           percent=True, default=0.5, help="Image: darkness from which a pixel burns "
+           "(threshold mode): 0.5 or 50%."),
+    Option("negative", "--negative", "negative", "bool", default=False,
+           help="Image: invert it (burn the light parts)."),
+    Option("scan_angle_deg", "--scan-angle", "scan_angle", "float", unit="degrees",
+           lo=-360.0, hi=360.0, default=0.0, help="Image: the scanlines' direction, degrees "
+           "counter-clockwise from +x (the image stays upright)."),
+    Option("one_way", "--one-way", "one_way", "bool", default=False,
+           help="Image: burn every scanline in the same direction (default: bidirectional)."),
+    Option("passes", "--passes", "passes", "int", lo=1, hi=100, default=1, metavar="N",
+           help="Image: burn it N times over."),
     # fills (docs/fill.md)
     Option("hatch_mm", "--hatch", "hatch", "float", unit="mm", lo=0.0, hi=100.0,
            word="pen", metavar="SPACING",
@@ -401,65 +441,16 @@ JOB_OPTIONS: tuple[Option, ...] = (
            help="Hidden-line removal: a filled shape hides what lies beneath it (paint "
            "order); strokes and hatches are cut where covered, fill-only shapes hide "
            "without being outlined. A layer with '+nohide' in its name is left out."),
+    Option("fill", "--fill", "fill", "choice", default="outline", choices=("outline", "scan"),
+           help="Laser: outline engraves the paths (and --hatch lines); scan burns the "
+           "filled shapes by scanlines like an image (--line-interval, default the "
+           "profile's [laser] spot_mm; --scan-angle, --one-way, --passes; --power-max); "
+           "strokes are then not engraved (docs/fill.md)."),
 )
-#: The web page's words for each option (label, help in words where the CLI's help names
-#: flags, settings or G-code, an example): no option's API name reaches the page's text.
-_WORDS: dict[str, tuple[str, str, str]] = {
-    "mode": ("Working mode", "How the elbows bend; auto tries all four (default: the "
-             "machine's).", ""),
-    "tolerance_mm": ("Tolerance", "", "0.05mm or 0.002in"),
-    "origin_mm": ("Where the drawing goes (X,Y)", "Put the drawing's bottom-left corner "
-                  "there on the machine, in mm or with units (default: centred).",
-                  "10,95 or 1in,4in"),
-    "scale": ("Scale", "A factor or a percentage: 0.5 or 50% is half size, 2 or 200% "
-              "twice (default: as drawn).", "50% or 0.5"),
-    "rotate_deg": ("Rotation", "Degrees counter-clockwise.", "90"),
-    "fit": ("Fill the safe area", "Scale the drawing to fill the largest area the arms "
-            "reach safely.", ""),
-    "layers": ("Only these layers", "Inkscape layer names, comma separated (default: all).",
-               "black, red"),
-    "keep_order": ("Draw in file order", "Draw the paths in the file's order instead of "
-                   "the shortest travel.", ""),
-    "draw_feed_mm_s": ("Drawing speed", "Pen speed while drawing, per second or minute "
-                       "(default: the machine's).", "25mm/s or 1in/s"),
-    "travel_feed_mm_s": ("Travel speed", "Pen speed between strokes, pen up (default: the "
-                         "machine's).", "80mm/s"),
-    "accel_fraction": ("Acceleration", "A share of the machine's acceleration: 0.5 or 50% "
-                       "(default: all of it).", "50%"),
-    "max_segments": ("Most segments", "Refuse drawings with more segments than this "
-                     "(default 2 million, about 0.6 GB of memory).", "2000000"),
-    "laser": ("Laser on (burn)", "Without it the laser stays off on every line: a pen "
-              "job.", ""),
-    "pen_up_position": ("Pen up position", "", "60"),
-    "pen_down_position": ("Pen down position", "", "30"),
-    "pen_up_rate": ("Pen raising speed", "", ""),
-    "pen_down_rate": ("Pen lowering speed", "", ""),
-    "pen_up_delay_ms": ("Wait after raising the pen", "", "200"),
-    "pen_down_delay_ms": ("Wait after lowering the pen", "", "200"),
-    "layer_pause": ("Stop for a pen change between layers", "The pen goes up and the "
-                    "machine waits until you continue; layers are drawn in file order.",
-                    ""),
-    "no_pause": ("Never stop for a pen change", "Not even before layers whose name starts "
-                 "with '!'.", ""),
-    "copies": ("Copies", "Draw the whole job this many times, the pen up and the arms "
-               "parked between copies.", "1"),
-    "page_delay_s": ("Wait between copies", "Seconds, to change the paper.", "15"),
-    "confirm": ("The arms are at the home pose", "Tick if the machine may start from the "
-                "home pose without asking (first job after power-up).", ""),
-    "no_simplify": ("Keep every point", "Do not thin densely sampled lines (they are "
-                    "thinned within half the tolerance otherwise).", ""),
-    "hatch_mm": ("Fill shapes with hatch lines", "The distance between the lines on the "
-                 "paper; 'pen' for the pen's width (default: outlines only).",
-                 "0.4mm or pen"),
-    "hatch_angle_deg": ("Hatch angle", "Degrees counter-clockwise.", "45"),
-    "crosshatch": ("Cross-hatch", "Hatch a second time at right angles.", ""),
-    "hatch_inset_mm": ("Hatch inset", "Keep the hatch this far inside each shape's edge.",
-                       "0.2mm"),
-    "hatch_along": ("Hatch along", "Straight lines, or arcs that one motor draws alone "
-                    "(arm1: motor 1 still; arm2: motor 2 still).", ""),
-    "hiding": ("Hide what is covered", "Shapes filled in the drawing hide the lines "
-               "beneath them; shapes without an outline are not outlined.", ""),
-}
+#: The options of a raster engraving (an image; `raster.job.RasterOptions`).
+RASTER_NAMES: tuple[str, ...] = ("width_mm", "height_mm", "dpi", "line_interval_mm",
+                                 "image_mode", "power_min", "power_max", "gamma", "threshold",
+                                 "negative", "scan_angle_deg", "one_way", "passes", "fill")
 JOB_OPTIONS = tuple(
     dataclasses.replace(o, label=_WORDS[o.name][0], web_help=_WORDS[o.name][1],
                         example=_WORDS[o.name][2]) if o.name in _WORDS else o
@@ -473,7 +464,8 @@ RUN_NAMES: tuple[str, ...] = ("copies", "page_delay_s")
 #: The options that shape the compiled job (everything but laser, confirm, the pen's and
 #: the run's).
 COMPILE_NAMES: tuple[str, ...] = tuple(
-    o.name for o in JOB_OPTIONS if o.name not in ("laser", "confirm", *PEN_NAMES, *RUN_NAMES))
+    o.name for o in JOB_OPTIONS
+    if o.name not in ("laser", "confirm", *PEN_NAMES, *RUN_NAMES, *RASTER_NAMES))
 
 
 def defaults() -> dict[str, Any]:

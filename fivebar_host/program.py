@@ -4,15 +4,22 @@ wire.
 A `Program` is a sequence of items in parallel arrays, one row an item:
 
 =========  ===============================================================================
-kind       `MOVE`, `DWELL`, `PEN`, `TOOL_ON`, `TOOL_OFF`, `ABSOLUTE`, `PEN_PARK`, `TEXT`
-a, b       MOVE: the absolute targets, steps from the homed pose (docs/protocol.md 6).
-           PEN: the servo's move time (R) and settle time (D), ms
-p_us       MOVE, DWELL: the duration, µs
+kind       `MOVE`, `DWELL`, `PEN`, `TOOL_ON`, `TOOL_OFF`, `ABSOLUTE`, `PEN_PARK`, `TEXT`,
+           `RASTER`
+a, b       MOVE, RASTER: the absolute targets, steps from the homed pose (docs/protocol.md
+           6). PEN: the servo's move time (R) and settle time (D), ms
+p_us       MOVE, DWELL, RASTER: the duration, µs
 s          MOVE, DWELL: the laser power 0-255. PEN, PEN_PARK: the servo pulse, µs.
            TOOL_ON: 3 or 4, the enable command (M3 or M4, always at S0).
-           TEXT: the index of its line in `texts`
+           TEXT: the index of its line in `texts`.
+           RASTER: the index of its G7 line's pixel run in `runs` when the item starts a
+           line, −1 for the line's further segments
 segment    the job segment the item executes (−1: none)
 =========  ===============================================================================
+
+RASTER items are the segments of G7 lines (docs/protocol.md 6.4): a line is the item with
+a run and the RASTER items with −1 after it; its run puts `PixelRun.powers[i]` on the laser
+at `u + i·t` cycles after the line's first segment starts.
 
 `ABSENT` in a, b or s of a move or a dwell: the word is left out (a hand-written line,
 `wire.read_lines`: `G1 A10 P1000` keeps B where it is); the host's own programs give every
@@ -52,6 +59,16 @@ class Kind(IntEnum):
     ABSOLUTE = 5
     PEN_PARK = 6
     TEXT = 7
+    RASTER = 8
+
+
+@dataclass(frozen=True)
+class PixelRun:
+    """A G7 line's pixels: powers[i] at u + i·t cycles after its first segment starts."""
+
+    u: int
+    t: int
+    powers: bytes
 
 
 #: A word a hand-written line leaves out (module doc).
@@ -71,6 +88,7 @@ class Program:
     s: IntArray
     segment: IntArray
     texts: tuple[str, ...] = ()
+    runs: tuple[PixelRun, ...] = ()
 
     def __len__(self) -> int:
         return int(self.kind.shape[0])
@@ -83,8 +101,9 @@ class Program:
                 self.s.tolist())
 
     def __eq__(self, other: object) -> bool:
-        return isinstance(other, Program) and self.texts == other.texts and all(
-            np.array_equal(getattr(self, f), getattr(other, f)) for f in FIELDS)
+        return (isinstance(other, Program) and self.texts == other.texts
+                and self.runs == other.runs
+                and all(np.array_equal(getattr(self, f), getattr(other, f)) for f in FIELDS))
 
     __hash__ = None  # type: ignore[assignment]
 
@@ -127,15 +146,19 @@ class Program:
         if not parts:
             return Program.empty()
         texts: list[str] = []
+        runs: list[PixelRun] = []
         shifted = []
-        for p in parts:  # TEXT items index the joined table
+        for p in parts:  # TEXT and RASTER items index the joined tables
             s = p.s
             if p.texts:
                 s = np.where(p.kind == Kind.TEXT, s + len(texts), s)
                 texts += p.texts
+            if p.runs:
+                s = np.where((p.kind == Kind.RASTER) & (s >= 0), s + len(runs), s)
+                runs += p.runs
             shifted.append(s)
         cols = {f: np.concatenate([getattr(p, f) for p in parts]) for f in FIELDS if f != "s"}
-        return Program(s=np.concatenate(shifted), texts=tuple(texts), **cols)
+        return Program(s=np.concatenate(shifted), texts=tuple(texts), runs=tuple(runs), **cols)
 
     def __add__(self, other: Program) -> Program:
         return Program.join([self, other])
@@ -143,13 +166,13 @@ class Program:
     def take(self, index: IntArray | slice) -> Program:
         """The items at `index`, in that order."""
         return Program(self.kind[index], self.a[index], self.b[index], self.p_us[index],
-                       self.s[index], self.segment[index], self.texts)
+                       self.s[index], self.segment[index], self.texts, self.runs)
 
     # ------------------------------------------------------------------ reading
     @property
     def is_motion(self) -> BoolArray:
         """Items that move the arms."""
-        out: BoolArray = self.kind == Kind.MOVE
+        out: BoolArray = (self.kind == Kind.MOVE) | (self.kind == Kind.RASTER)
         return out
 
     def starts_at_rest(self) -> BoolArray:

@@ -22,12 +22,26 @@ from fivebar_host.errors import FivebarError
 
 #: The protocol version this module implements: docs/protocol.md, the banner's ``proto:``.
 #: Version 2 replaced the CRC-8 line checksum with a CRC-16 and the body's length
-#: (docs/protocol.md 5.1 and 14).
-PROTOCOL_VERSION: Final = 3
+#: (docs/protocol.md 5.1 and 14); version 4 added G7 raster lines (6.4).
+PROTOCOL_VERSION: Final = 4
 
-#: The longest body a checksummed line can have: the length in its checksum field has at
-#: most 2 digits (the banner's ``line`` limit, 80 bytes for the whole line, is lower).
-CHECKSUM_BODY_MAX: Final = 99
+#: The longest body a checksummed line can have: the firmware reads lines of at most 255
+#: bytes (the banner's ``line`` limit, 128 bytes for the whole line, is lower), so the
+#: length in the checksum field has at most 3 digits.
+CHECKSUM_BODY_MAX: Final = 255
+
+#: G7 pixel data (docs/protocol.md 6.4): one byte a power, except the bytes a line cannot
+#: carry — newline, CR, the real-time bytes, the checksum's ``*`` — and the escape itself,
+#: each sent as PX_ESC, then the byte XOR PX_XOR.
+PX_ESC: Final = 0x7D
+PX_XOR: Final = 0x40
+PX_ESCAPED: Final = frozenset(b"\n\r\x18!*?~}")
+#: The G7 pixel period's least and a first change's and a period's largest value, cycles.
+PX_T_MIN: Final = 400
+PX_T_MAX: Final = 16_000_000
+PX_U_MAX: Final = 1_600_000_000
+#: The record header a run takes in the firmware's pixel ring (fb_raster.h PX_HEAD).
+PX_HEAD: Final = 10
 
 #: The link's rate at every boot, reset and Ctrl-X (docs/protocol.md 1).
 BASE_BAUD: Final = 115200
@@ -157,12 +171,161 @@ def checksum_field(body: bytes) -> bytes:
 
     The length makes every byte lost from or added to the body a mismatch, which the CRC
     alone would miss about once in 65536.  Raises ProtocolError for a body longer than
-    CHECKSUM_BODY_MAX bytes, whose length would not fit the field's two digits.
+    CHECKSUM_BODY_MAX bytes, which the firmware could not hold.
     """
     if len(body) > CHECKSUM_BODY_MAX:
         raise ProtocolError(f"line body of {len(body)} bytes: a checksummed body has at most "
                             f"{CHECKSUM_BODY_MAX}")
     return b"*%d/%d" % (crc16(body), len(body))
+
+
+def escape_pixels(powers: bytes) -> bytes:
+    """G7 pixel data for these powers (docs/protocol.md 6.4): the escape first, so the
+    escapes the others add stay single."""
+    out = powers.replace(b"}", b"}=")
+    for c in b"\n\r\x18!*?~":
+        out = out.replace(bytes((c,)), bytes((PX_ESC, c ^ PX_XOR)))
+    return out
+
+
+def unescape_pixels(data: bytes) -> bytes:
+    """The powers in G7 pixel data; ProtocolError for a byte that must be escaped or a
+    malformed escape (the firmware's error 5)."""
+    out = bytearray()
+    it = iter(data)
+    for c in it:
+        if c == PX_ESC:
+            nxt = next(it, None)
+            if nxt is None or (nxt ^ PX_XOR) not in PX_ESCAPED:
+                raise ProtocolError("G7 pixel data: a malformed escape")
+            out.append(nxt ^ PX_XOR)
+        elif c in PX_ESCAPED:
+            raise ProtocolError(f"G7 pixel data: byte {c:#04x} must be escaped")
+        else:
+            out.append(c)
+    return bytes(out)
+
+
+def escaped_length(powers: bytes) -> int:
+    """Bytes the powers take as G7 pixel data."""
+    return len(powers) + sum(powers.count(c) for c in PX_ESCAPED)
+
+
+class G7FormatError(ProtocolError):
+    """Malformed G7 data; `kind` is the firmware's reading of it: "escape" (error 5),
+    "number" (a cut or too long varint: error 3), "range" (error 7), "form" (error 5)."""
+
+    def __init__(self, message: str, kind: str) -> None:
+        super().__init__(message)
+        self.kind = kind
+
+
+@dataclass(frozen=True)
+class G7Data:
+    """A G7 line's data (docs/protocol.md 6.4): its segments (P µs or None where the segment
+    carries none, ΔA, ΔB steps), U and T (cycles; None: not given) and its pixel powers."""
+
+    items: tuple[tuple[int | None, int, int], ...]
+    u: int | None
+    t: int | None
+    powers: bytes
+
+
+def _varint(v: int) -> bytes:
+    out = bytearray()
+    while True:
+        b = v & 0x7F
+        v >>= 7
+        out.append(b | (0x80 if v else 0))
+        if not v:
+            return bytes(out)
+
+
+def write_g7(g: G7Data) -> bytes:
+    """The escaped data of a G7 line, after its ``G7:``: the head (segments − 1, whether U
+    and T follow), U, T, the P mask, the items (P, then ΔA and ΔB zigzag), the powers."""
+    n = len(g.items)
+    if not 1 <= n <= 32:
+        raise ProtocolError(f"a G7 line has 1..32 segments; got {n}")
+    out = bytearray([(n - 1) | (0x20 if g.u is not None else 0) | (0x40 if g.t is not None
+                                                                   else 0)])
+    for v in (g.u, g.t):
+        if v is not None:
+            out += _varint(v)
+    mask = sum(1 << i for i, (p, _, _) in enumerate(g.items) if p is not None)
+    out += mask.to_bytes((n + 7) // 8, "little")
+    for p, da, db in g.items:
+        if p is not None:
+            out += _varint(p)
+        for d in (da, db):
+            out += _varint(2 * d if d >= 0 else -2 * d - 1)  # zigzag
+    return escape_pixels(bytes(out) + g.powers)
+
+
+def read_g7(data: bytes) -> G7Data:
+    """The G7 data written by `write_g7`, checked as the firmware checks it (fb_g7.c);
+    G7FormatError for a malformed or out-of-range one."""
+    try:
+        raw = unescape_pixels(data)
+    except ProtocolError as e:
+        raise G7FormatError(str(e), "escape") from e
+    pos = 0
+
+    def byte() -> int:
+        nonlocal pos
+        if pos >= len(raw):
+            raise G7FormatError("G7 data ends early", "number")
+        pos += 1
+        return raw[pos - 1]
+
+    def varint() -> int:
+        x = 0
+        for k in range(5):
+            b = byte()
+            if k == 4 and b > 0x0F:
+                raise G7FormatError("a varint past 32 bits", "number")
+            x |= (b & 0x7F) << (7 * k)
+            if not b & 0x80:
+                return x
+        raise G7FormatError("a varint of more than 5 bytes", "number")
+
+    if not raw:
+        raise G7FormatError("G7 data without a head", "form")
+    h = byte()
+    if h & 0x80:
+        raise G7FormatError("G7 head bit 7 set", "form")
+    n = (h & 0x1F) + 1
+    u = varint() if h & 0x20 else None
+    t = varint() if h & 0x40 else None
+    if (u is not None and u > PX_U_MAX) or (t is not None and t > PX_T_MAX):
+        raise G7FormatError("G7 U or T out of range", "range")
+    if pos + (n + 7) // 8 > len(raw):
+        raise G7FormatError("G7 P mask cut", "form")
+    mask = int.from_bytes(raw[pos:pos + (n + 7) // 8], "little")
+    pos += (n + 7) // 8
+    if mask >> n:
+        raise G7FormatError("a P bit of a segment the line does not have", "form")
+    items = []
+    for i in range(n):
+        p = varint() if mask >> i & 1 else None
+        if p is not None and not P_MIN_US <= p <= P_MAX_US:
+            raise G7FormatError(f"P{p} out of range", "range")
+        d = []
+        for _ in range(2):
+            z = varint()
+            v = (z >> 1) ^ -(z & 1)
+            if abs(v) > POS_LIMIT:
+                raise G7FormatError(f"a move of {v} steps", "range")
+            d.append(v)
+        items.append((p, d[0], d[1]))
+    return G7Data(tuple(items), u, t, raw[pos:])
+
+
+def encode_bytes_line(body: bytes, line_number: int) -> bytes:
+    """A numbered line whose body holds bytes (a G7's pixel data): ``N<n> <body>*<crc>/<len>``
+    and the newline.  The text part is the caller's; nothing here reads it."""
+    raw = b"N%d %s" % (line_number, body)
+    return raw + checksum_field(raw) + b"\n"
 
 
 _FORBIDDEN = re.compile(r"[^\x20-\x7e\t]|[*?!~;]")

@@ -103,6 +103,9 @@ def body(prog: Program, i: int, p_us: int | None = None, s: int | None = None) -
         return f"$14={sv}"
     if k == Kind.TEXT:
         return prog.texts[sv]
+    if k == Kind.RASTER:  # for messages: a G7 line's data is bytes (g7_line writes it)
+        run = f" run {sv}" if sv >= 0 else ""
+        return f"G7 segment A{int(prog.a[i])} B{int(prog.b[i])} P{p}{run}"
     raise ProtocolError(f"item {i}: unknown kind {k}")
 
 
@@ -232,6 +235,8 @@ def pack_line(prog: Program, start: int, number: int, absolute: bool, limit_byte
     within `limit_bytes`; a line of one item is the classic `N<n> <body>*<crc>/<len>`."""
     values = value_at or record_values(prog)
     kind, a_col, b_col = prog.rows[0], prog.rows[1], prog.rows[2]
+    if kind[start] == Kind.RASTER:
+        return g7_line(prog, start, number)
     p_head, s_head = values(start)
     total = len(kind)
     a, b = a_col[start], b_col[start]
@@ -320,6 +325,89 @@ def segment_bytes(steps: IntArray, power: NDArray[np.integer[Any]], duration_us:
     pw = np.asarray(power[max(start - 1, 0):stop], dtype=np.int64)
     new_line = pw[1:] != pw[:-1] if start > 0 else np.concatenate(([True], pw[1:] != pw[:-1]))
     return np.where(new_line, LINE_OVERHEAD_B, b)
+
+
+# ------------------------------------------------------------------ fivebar: G7 raster lines
+#: The line numbers a G7 line's size is reckoned with at compile time (`raster.pixels`): 6
+#: digits, enough for a million lines in one stream.
+G7_NUMBER_DIGITS = 6
+
+
+def g7_body(items: Sequence[tuple[int, int, int]], u: int, t: int, powers: bytes,
+            p_prev: int | None, t_prev: int | None) -> bytes:
+    """A G7 line's body after its `N<n> ` (docs/protocol.md 6.4): `G7:` and the binary data
+    (`protocol.write_g7`) of the items (P µs, ΔA, ΔB) — each P only where the duration
+    differs from the segment before (`p_prev` for the first; None: written) — with U when
+    not 0, T when the run has two pixels or more and `t` is not the firmware's modal T
+    (`t_prev`; None: unknown, written), and the powers."""
+    out = []
+    prev = p_prev
+    for p, da, db in items:
+        if not P_MIN_US <= p <= P_MAX_US:
+            raise ProtocolError(f"G7 segment duration P{p} outside {P_MIN_US}..{P_MAX_US} us")
+        out.append((None if p == prev else p, da, db))
+        prev = p
+    g = protocol.G7Data(tuple(out), u or None, t if len(powers) > 1 and t != t_prev else None,
+                        powers)
+    return b"G7:" + protocol.write_g7(g)
+
+
+def g7_modal(prog: Program, start: int) -> tuple[int | None, int | None]:
+    """The firmware's modal P and T when the G7 line of item `start` comes: unknown (None)
+    at a scan's first line (the stream may start there), else the P of the segment before
+    and the T of the scan's last run with two pixels or more."""
+    kind, p_col, s_col = prog.rows[0], prog.rows[3], prog.rows[4]
+    if start == 0 or kind[start - 1] != Kind.RASTER:
+        return None, None
+    t_prev: int | None = None
+    i = start - 1
+    while i >= 0 and kind[i] == Kind.RASTER:
+        r = s_col[i]
+        if r >= 0 and len(prog.runs[r].powers) > 1:
+            t_prev = prog.runs[r].t
+            break
+        i -= 1
+    return p_col[start - 1], t_prev
+
+
+def _target_before(prog: Program, start: int) -> tuple[int, int]:
+    """The absolute target of the last move before item `start`: where a G7 line's first
+    (relative) segment starts from."""
+    kind, a_col, b_col = prog.rows[0], prog.rows[1], prog.rows[2]
+    for i in range(start - 1, -1, -1):
+        if kind[i] in (Kind.MOVE, Kind.RASTER) and a_col[i] != ABSENT and b_col[i] != ABSENT:
+            return a_col[i], b_col[i]
+    raise ProtocolError(f"item {start}: a G7 line needs a move with both targets before it")
+
+
+def g7_line(prog: Program, start: int, number: int, power_pct: int = 100) -> tuple[bytes, int]:
+    """The G7 line of the RASTER items from `start` (which has the run) and how many it
+    covers: the item and the RASTER items after it without a run (docs/protocol.md 6.4).
+    `power_pct` scales the pixel powers (the live power override)."""
+    kind, a_col, b_col, p_col, s_col = prog.rows
+    run = prog.runs[s_col[start]]
+    total = len(kind)
+    end = start + 1
+    while end < total and kind[end] == Kind.RASTER and s_col[end] < 0:
+        end += 1
+    a0, b0 = _target_before(prog, start)
+    items = []
+    for j in range(start, end):
+        items.append((p_col[j], a_col[j] - a0, b_col[j] - b0))
+        a0, b0 = a_col[j], b_col[j]
+    powers = run.powers
+    if power_pct < 100:
+        powers = bytes(p * power_pct // 100 for p in powers)
+    p_prev, t_prev = g7_modal(prog, start)
+    raw = b"N%d " % number + g7_body(items, run.u, run.t, powers, p_prev, t_prev)
+    return raw + protocol.checksum_field(raw) + b"\n", end - start
+
+
+def g7_line_bytes(body: bytes, number_digits: int = G7_NUMBER_DIGITS) -> int:
+    """Bytes on the wire of a G7 line with this body: `N<n> `, the body, `*<crc>/<len>` (at
+    most), the newline."""
+    head = 1 + number_digits + 1
+    return head + len(body) + 1 + 5 + 1 + len(str(head + len(body))) + 1
 
 
 # ------------------------------------------------------------------ GRBL's dialect

@@ -141,10 +141,10 @@ def test_two_replacements_apart_get_through_only_by_the_crc16_odds() -> None:
 
 
 def test_the_longest_g1_line_fits_the_line_limit() -> None:
-    """The banner's ``line`` limit (80) counts the whole line without its newline, checksum
-    field included.  The longest line the host can send for a segment: the widest value of
-    every word of protocol.g1, the widest line number, and the widest field (a 5-digit CRC,
-    a 2-digit length)."""
+    """The banner's ``line`` limit (128 since protocol 4) counts the whole line without its
+    newline, checksum field included.  The longest line the host can send for a segment:
+    the widest value of every word of protocol.g1, the widest line number, and the widest
+    field (a 5-digit CRC, a 2-digit length: a G1 body is under 100 bytes)."""
     def widest(lo: int, hi: int) -> int:
         return max(lo, hi, key=lambda v: len(str(v)))
     body = wire.g1(widest(-protocol.POS_LIMIT, protocol.POS_LIMIT),
@@ -159,12 +159,13 @@ def test_the_longest_g1_line_fits_the_line_limit() -> None:
     assert m is not None
     limit = int(m[1])
     assert body == "G1 A-100000000 B-100000000 P100000000 S255"
-    assert len(line) <= longest == 63 <= limit == mock.MockOptions().line == 80
+    assert len(line) <= longest == 63 <= limit == mock.MockOptions().line == 128
     assert outcome(0xFFFFFFFF, line) == "accepted"
 
 
 def test_a_body_too_long_for_the_length_field_is_not_encoded() -> None:
-    body = "G1 A1 P1000" + " " * 88
-    assert protocol.encode_line(body, checksum=True).endswith(b"/99\n")
+    """Protocol 4: the length has up to 3 digits, the firmware reads at most 255 bytes."""
+    body = "G1 A1 P1000" + " " * (protocol.CHECKSUM_BODY_MAX - 11)
+    assert protocol.encode_line(body, checksum=True).endswith(b"/255\n")
     with pytest.raises(protocol.ProtocolError):
         protocol.encode_line(body + " ", checksum=True)

@@ -12,7 +12,7 @@ from fivebar_host.devices import mock, urls
 from fivebar_host.protocol import Banner
 from fivebar_host.run.errors import FaultKind, FirmwareMismatchError, LinkFaultError
 
-BANNER = Banner("1.0.0", protocol.PROTOCOL_VERSION, 128, 16, 80)
+BANNER = Banner("1.1.0", protocol.PROTOCOL_VERSION, 255, 16, 128)
 
 
 def test_handshake_with_a_device_left_in_numbered_mode() -> None:
@@ -60,7 +60,7 @@ def test_hardware_reset_revives_a_hung_controller_and_restarts_the_numbering() -
         port.close()
 
 
-@pytest.mark.parametrize("proto", [2, 4])
+@pytest.mark.parametrize("proto", [3, 5])
 def test_the_host_accepts_only_the_protocol_it_speaks(proto: int) -> None:
     urls.register()
     with pytest.raises(FirmwareMismatchError) as e:
@@ -74,7 +74,7 @@ class ResetCutsTransmission(mock.MockSerial):
 
     The mock puts whole lines out at once; here, once, the line sent just before a reset's
     banner loses everything after its first byte, newline included, so the banner arrives
-    glued to it (``ok`` + banner → ``ofivebar 1.0.0 proto:2 ...``).
+    glued to it (``ok`` + banner → ``ofivebar 1.1.0 proto:2 ...``).
     """
 
     cut: bytes | None = None  # the glued line as it was sent, once cut
@@ -109,7 +109,7 @@ def test_a_banner_glued_to_a_cut_reply_is_a_restart_while_streaming() -> None:
         link.handshake(3.0)
         with pytest.raises(LinkFaultError) as e:
             link.stream([f"G1 A{10 * i} P10000" for i in range(1, 9)])
-        assert port.cut is not None and port.cut.startswith(b"ofivebar 1.0.0 proto:")
+        assert port.cut is not None and port.cut.startswith(b"ofivebar 1.1.0 proto:")
         assert e.value.kind is FaultKind.RESET, e.value
         assert e.value.acked == 2  # line 3's ok was cut away
         assert link.banner == BANNER
@@ -127,11 +127,11 @@ def test_a_banner_glued_to_a_cut_status_report_answers_a_reset() -> None:
         link.wait_idle(1.0)
         port.write(protocol.RT_STATUS)
         assert link.reset() == BANNER
-        assert port.cut is not None and port.cut.startswith(b"<fivebar 1.0.0 proto:")
+        assert port.cut is not None and port.cut.startswith(b"<fivebar 1.1.0 proto:")
         port.cut = None
         port.write(protocol.RT_STATUS)
         assert link.hardware_reset()
-        assert port.cut is not None and port.cut.startswith(b"<fivebar 1.0.0 proto:")
+        assert port.cut is not None and port.cut.startswith(b"<fivebar 1.1.0 proto:")
         assert link.next_line == 1
         st = link.status()
         assert (st.a, st.b, st.homed, st.accepted_line) == (5, 6, True, 0)

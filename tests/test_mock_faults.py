@@ -18,7 +18,7 @@ from fivebar_host.devices import mock, urls
 from fivebar_host.devices.mock import MockSerial, MockURLError, parse_mock_url
 from fivebar_host.protocol import Banner, ErrorReply, Message, Ok, StatusReport
 
-BANNER = "fivebar 1.0.0 proto:3 rx:128 queue:16 line:80"
+BANNER = "fivebar 1.1.0 proto:4 rx:255 queue:16 line:128"
 
 
 def open_mock(options: str = "", timeout: float | None = 0.2) -> MockSerial:
@@ -275,7 +275,7 @@ def _reset_mid_segment(fault: str) -> tuple[MockSerial, StatusReport]:
     time.sleep(0.05)  # line 5 runs (0.1 s at speed 10)
     # line 6, then the reset; line 7 is lost with the rest of the write
     port.write(protocol.encode_line("G1 A2110 P1000000", 6) + protocol.encode_line("G90", 7))
-    assert messages(port) == [Ok(), Banner("1.0.0", protocol.PROTOCOL_VERSION, 128, 16, 80)]
+    assert messages(port) == [Ok(), Banner("1.1.0", protocol.PROTOCOL_VERSION, 255, 16, 128)]
     assert messages(port, 0.03) == []
     entries = [e for e in port.ledger if e.kind == "G1"]
     assert [e.line for e in entries] == [4, 5]
@@ -322,11 +322,11 @@ def test_dtr_reset_keeps_position_h_and_done_while_ctrl_x_zeroes_ln() -> None:
     assert status(port).done_line == 2
     port.dtr = False
     port.dtr = True
-    assert messages(port) == [Banner("1.0.0", protocol.PROTOCOL_VERSION, 128, 16, 80)]
+    assert messages(port) == [Banner("1.1.0", protocol.PROTOCOL_VERSION, 255, 16, 128)]
     st = status(port)
     assert (st.a, st.b, st.homed, st.done_line, st.accepted_line) == (20, -3, True, 2, 0)
     port.write(b"\x18")
-    assert messages(port) == [Banner("1.0.0", protocol.PROTOCOL_VERSION, 128, 16, 80)]
+    assert messages(port) == [Banner("1.1.0", protocol.PROTOCOL_VERSION, 255, 16, 128)]
     st = status(port)
     assert (st.a, st.b, st.homed, st.done_line, st.accepted_line) == (20, -3, True, 0, 0)
 
@@ -504,7 +504,7 @@ def test_power_cut_of_a_named_machine_between_opens_and_while_open() -> None:
     assert reply(again, "G1 A2005 P100000000") == Ok()
     time.sleep(0.05)
     mock.machine("pc").power_cut()  # while open: it boots again at once, as at power-on
-    assert messages(again) == [Banner("1.0.0", protocol.PROTOCOL_VERSION, 128, 16, 80)]
+    assert messages(again) == [Banner("1.1.0", protocol.PROTOCOL_VERSION, 255, 16, 128)]
     st = status(again)
     assert (st.a, st.b, st.homed, st.done_line, st.laser) == (0, 0, False, 0, 0)
     assert mock.machine("pc").laser == 0

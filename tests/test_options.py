@@ -34,7 +34,12 @@ def test_query_round_trip_of_every_option() -> None:
               "pen_up_delay_ms": 80.0, "pen_down_delay_ms": 120.0, "layer_pause": True,
               "no_pause": False, "copies": 3, "page_delay_s": 2.5, "gcode_strict": True,
               "hatch_mm": 0.4, "hatch_angle_deg": 30.0, "crosshatch": True,
-              "hatch_inset_mm": 0.1, "hiding": True, "hatch_along": "arm1"}
+              "hatch_inset_mm": 0.1, "hiding": True, "hatch_along": "arm1",
+              # raster engraving (docs/raster.md)
+              "width_mm": 40.0, "height_mm": 12.5, "dpi": 254.0, "line_interval_mm": 0.1,
+              "image_mode": "jarvis", "power_min": 10, "power_max": 200, "gamma": 1.8,
+              "threshold": 0.4, "negative": True, "scan_angle_deg": 45.0, "one_way": True,
+              "passes": 2, "fill": "scan"}
     assert set(values) == {o.name for o in JOB_OPTIONS}
     q = to_query(values)
     pairs = [(k, v) for k, vs in q.items() for v in (vs if isinstance(vs, list) else [vs])]
@@ -97,7 +102,13 @@ def test_client_refuses_unknown_and_out_of_range_before_sending() -> None:
                                                      "hatch_angle": "45.0",
                                                      "crosshatch": "false",
                                                      "hatch_inset": "0.0", "hiding": "false",
-                                                     "hatch_along": "lines"}
+                                                     "hatch_along": "lines",
+                                                     # the raster options' defaults
+                                                     "image_mode": "grayscale",
+                                                     "power_min": "0", "gamma": "1.0",
+                                                     "threshold": "0.5", "negative": "false",
+                                                     "scan_angle": "0.0", "one_way": "false",
+                                                     "passes": "1", "fill": "outline"}
 
 
 def _cli_params(command: str) -> dict[str, click.Parameter]:

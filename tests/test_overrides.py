@@ -149,7 +149,7 @@ def test_stream_applies_overrides_to_later_lines_only() -> None:
     assert slowed > 50
 
 
-@pytest.mark.parametrize("when", [20, 50])  # wire lines of 95 (G6 packing)
+@pytest.mark.parametrize("when", [12, 20])  # wire lines of about 28 (G6 lines up to 127 B)
 def test_resume_after_an_override_is_exact(tmp_path: Path, when: int) -> None:
     drawing = tmp_path / "simple.svg"
     shutil.copy(EXAMPLES / "simple.svg", drawing)

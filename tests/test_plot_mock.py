@@ -144,10 +144,10 @@ def resume_and_check(drawing: Path, m: mock.Machine, name: str, profile: Path | 
 # The faults count wire lines: the job here is about 270 segments in about 90 lines (G6 packing,
 # docs/protocol.md 6.3), so line 50 is mid-job; each test asserts the fault fired mid-job.
 @pytest.mark.parametrize(("fault", "word"), [
-    ("error_on=60", "refused: error:11"),
-    ("stall_after=50&watchdog=0", "went silent"),  # no watchdog: the reply timeout
-    ("stall_after=50", "the firmware restarted"),  # the watchdog reset it (protocol 9)
-    ("reset_after=70", "the firmware restarted"),
+    ("error_on=15", "refused: error:11"),
+    ("stall_after=12&watchdog=0", "went silent"),  # no watchdog: the reply timeout
+    ("stall_after=12", "the firmware restarted"),  # the watchdog reset it (protocol 9)
+    ("reset_after=18", "the firmware restarted"),
 ])
 def test_fault_then_resume_completes_exactly(drawing: Path, quick_profile: Path, fault: str,
                                              word: str) -> None:
@@ -180,7 +180,7 @@ def test_disconnect_then_resume_reads_the_kept_record(drawing: Path, wait: bool)
     the exact segment — after the queue ran out, or mid-segment when the reopen cut it."""
     # At real speed the queue still runs when the resume reopens the port at once.
     code, out = run("plot", str(drawing), "--port",
-                    url("d", "disconnect_after=50", speed=20 if wait else 1), "--laser",
+                    url("d", "disconnect_after=18", speed=20 if wait else 1), "--laser",
                     "--yes")
     assert code == 3, out
     assert "device gone" in out and "resume file" in out
@@ -201,7 +201,7 @@ def test_disconnect_then_resume_reads_the_kept_record(drawing: Path, wait: bool)
     assert np.array_equal(all_steps(m), planned_steps(drawing))  # no travel back either
 
 
-@pytest.mark.parametrize("fault", ["power_cut_after=70", "disconnect_after=50"])
+@pytest.mark.parametrize("fault", ["power_cut_after=18", "disconnect_after=18"])
 def test_power_lost_falls_back_to_the_last_confirmed_segment(drawing: Path,
                                                              fault: str) -> None:
     """A controller that lost power (H:0) kept nothing: home, resume after the last
@@ -229,7 +229,7 @@ def test_power_lost_falls_back_to_the_last_confirmed_segment(drawing: Path,
     assert np.all(drawn_steps(m) >= planned_draw_steps(drawing))  # nothing lost
 
 
-@pytest.mark.parametrize("fault", ["power_cut_after=70", "disconnect_after=70"])
+@pytest.mark.parametrize("fault", ["power_cut_after=18", "disconnect_after=18"])
 def test_resume_yes_after_a_power_loss_is_refused(drawing: Path, fault: str) -> None:
     """Issue 16.2: `--yes` never stands in for a homing or for a person's word that the arms
     were placed after a power loss. The resume refuses, exits 3, says what to do, and
@@ -259,7 +259,7 @@ def test_kept_record_of_another_stream_falls_back(drawing: Path) -> None:
     """Between the fault and the resume, another session moved the arms: the controller's
     record is not the interrupted stream's, so the resume starts from the last confirmed
     segment, from the position the controller knows, and says so."""
-    code, _ = run("plot", str(drawing), "--port", url("k", "disconnect_after=70"), "--laser",
+    code, _ = run("plot", str(drawing), "--port", url("k", "disconnect_after=18"), "--laser",
                   "--yes")
     assert code == 3
     m = mock.machine("k")
@@ -275,7 +275,7 @@ def test_kept_record_of_another_stream_falls_back(drawing: Path) -> None:
 
 
 def test_resume_of_another_job_is_refused(drawing: Path) -> None:
-    code, _ = run("plot", str(drawing), "--port", url("x", "error_on=40"), "--laser", "--yes")
+    code, _ = run("plot", str(drawing), "--port", url("x", "error_on=10"), "--laser", "--yes")
     assert code == 3
     code, out = run("plot", str(drawing), "--port", url("x"), "--laser", "--yes", "--resume",
                     "--scale", "0.5")

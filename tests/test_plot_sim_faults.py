@@ -65,12 +65,12 @@ def settled_trace(machine: simport.SimMachine, timeout: float = 10.0) -> Trace:
 
 
 @pytest.mark.parametrize(("fault", "says"), [
-    ("disconnect_after=40", ("device gone", "position not known yet")),
-    ("reset_after=55", ("the firmware restarted", "stopped at A = ")),
+    ("disconnect_after=12", ("device gone", "position not known yet")),
+    ("reset_after=16", ("the firmware restarted", "stopped at A = ")),
     # the firmware hangs; its watchdog resets it (docs/protocol.md 9), the host sees the banner
     # (wire lines are counted: G6 packs several segments in one, so every fault comes early;
-    # the job is about 270 segments in about 90 lines)
-    ("stall_after=30", ("the firmware restarted", "stopped at A = ")),
+    # the job is about 270 segments in about 28 lines of up to 127 bytes)
+    ("stall_after=10", ("the firmware restarted", "stopped at A = ")),
 ])
 def test_fault_then_resume_draws_every_step_once(tmp_path: Path, quick_profile: Path,
                                                  monkeypatch: pytest.MonkeyPatch, fault: str,
@@ -135,7 +135,7 @@ def test_resume_yes_after_a_power_cut_is_refused(tmp_path: Path, quick_profile: 
     trace = tmp_path / "pins.trace"
     cfg = ("--config", str(quick_profile))
     code, out = run("plot", str(drawing), "--port",
-                    f"fivebar-sim://?machine=pc&trace={trace}&power_cut_after=55", "--laser",
+                    f"fivebar-sim://?machine=pc&trace={trace}&power_cut_after=16", "--laser",
                     "--yes", *cfg)
     assert code == 3 and "position unknown" in out, out
     machine = simport.machine("pc")

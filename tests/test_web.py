@@ -64,6 +64,14 @@ def css(driver: Any, sel: str) -> Any:
     return driver.find_element("css selector", sel)
 
 
+def press(driver: Any, sel: str) -> None:
+    """Click `sel` as a person would: scrolled to the middle of the window first (the page's
+    sticky header covers the top rows when the browser scrolls a control to the edge)."""
+    el = css(driver, sel)
+    driver.execute_script("arguments[0].scrollIntoView({block: 'center'})", el)
+    el.click()
+
+
 def text(driver: Any, sel: str) -> str:
     return str(css(driver, sel).text)
 
@@ -196,7 +204,7 @@ def test_pause_resume_reorder_cancel_delete(browser: Any, tmp_path: Path) -> Non
         wait(d, lambda d: d.execute_script("return fivebar.status && fivebar.status.live "
                                            "&& fivebar.status.live.segments_done > 10"),
              what="the job under way")
-        css(d, "#live-buttons button").click()  # Pause
+        press(d, "#live-buttons button")  # Pause
         wait(d, lambda d: job_state(d, job1) == "paused", what="paused")
         assert text(d, "#seg").startswith("copy 1 of 2 · segment "), text(d, "#seg")
         c = ServerClient(dm.url)
@@ -298,7 +306,7 @@ def test_machine_panel_fault_and_resume(browser: Any, tmp_path: Path) -> None:
     """Home, jog the pen and a motor, motors off, an alarm and its clearing; a job held by a
     fault and resumed from the page to done."""
     d = browser
-    with daemon(tmp_path / "state", "fivebar-mock://?speed=10&machine=web4&error_on=40") as dm:
+    with daemon(tmp_path / "state", "fivebar-mock://?speed=10&machine=web4&error_on=12") as dm:
         open_page(d, dm.url)
         css(d, "#at-home").click()
         css(d, "#home").click()
@@ -383,11 +391,11 @@ def test_emulated_firmware_progress_pause_resume(browser: Any, tmp_path: Path) -
         wait(d, lambda d: d.execute_script("return fivebar.status && fivebar.status.live "
                                            "&& fivebar.status.live.segments_done > 15"),
              what="the job under way")
-        css(d, "#live-buttons button").click()
+        press(d, "#live-buttons button")
         wait(d, lambda d: job_state(d, job) == "paused", what="paused")
         wait(d, lambda d: "machine Hold" in text(d, "#mstate"), what="held")
         shot(d, "16-sim-paused")
-        css(d, "#live-buttons button").click()
+        press(d, "#live-buttons button")
         progress = []
         # a 7.4 s job in real time; the deadline allows a busy machine's emulator to run
         # several times slower than real time

@@ -47,7 +47,7 @@ def test_doctor_reads_the_board_and_says_what_is_wrong(sim_build: object) -> Non
     assert "12800 steps per motor revolution" in ok.output
     assert "home pose θ1 = 120°, θ2 = 60°" in ok.output
     assert "board: Arduino Uno R3 (USB 2341:0043)" in ok.output
-    assert "firmware: fivebar 1.0.0" in ok.output and "position: unknown" in ok.output
+    assert "firmware: fivebar 1.1.0" in ok.output and "position: unknown" in ok.output
     empty = r.invoke(main, ["doctor", "--port", "fivebar-sim://?bootloader=optiboot"])
     assert empty.exit_code == 3
     assert "problem:" in empty.output and "fivebar flash --port" in empty.output

@@ -72,6 +72,20 @@ void board_timer_stop(void);
 /* Freeze the step timeline where it is (hold) and continue it later. */
 void board_timer_pause(void);
 void board_timer_resume(void);
+/*
+ * Pixel timer (raster scans, fb_raster.h): the same free-running timer as
+ * the steps, its own compare (Timer1 compare B on the AVR).  arm: call fb's
+ * px_event() at timer time t (a time already past: at once, the events
+ * after it still counted from t), then again after each delay it returns
+ * until it returns 0.  The step timer's pause
+ * and resume (a hold) freeze and move it with the step timeline.  sched is
+ * the time of the pending event, now the timer's count.  Interrupts off or
+ * in an interrupt.
+ */
+void board_px_arm(uint16_t t);
+void board_px_stop(void);
+uint16_t board_px_sched(void);
+uint16_t board_px_now(void);
 /* Called while the core busy-waits for the step generator (homing): nothing
  * to do on the AVR, where the interrupt makes progress; the host fake runs
  * its simulated timer here. */
@@ -103,6 +117,7 @@ void board_wdt_feed(void);
  *   void board_set_dirs(uint8_t neg_mask);   bit set = that motor steps negative
  *   void board_enable_motors(uint8_t on);
  *   void board_laser(uint8_t power);         0 = pin low, 255 = high, else PWM
+ *                                            whose period restarts at once
  *   uint8_t board_endstops(void);            mask of the switches pressed now
  *   uint8_t board_irq_save(void);            mask interrupts, return old state
  *   void board_irq_restore(uint8_t state);
@@ -156,8 +171,15 @@ BOARD_INLINE void board_laser(uint8_t power)
 		else
 			BOARD_PORT(PIN_LASER_PORT) &= (uint8_t)~(1u << PIN_LASER_BIT);
 	} else {
+		/* OCR2A is double-buffered in fast PWM (taken at BOTTOM): TCNT2 at
+		 * MAX - 1 makes the second timer tick BOTTOM, so the new duty and
+		 * its period start within two ticks, not up to a period later.  Not
+		 * MAX: simavr takes a write of TOP as a write of 0 and starts the
+		 * period a whole period later (the pin trace shows it); MAX - 1 is
+		 * the same on the chip and in the emulator. */
 		OCR2A = power;
 		TCCR2A |= (uint8_t)(1u << COM2A1);
+		TCNT2 = 0xfe;
 	}
 	board_irq_restore(s);
 }

@@ -6,7 +6,8 @@
  *                  against the Arduino core); its compare B times both
  *                  edges of the pen servo pulse on D12 (see servo below)
  *          Timer1  free-running at F_CPU; OCR1A schedules step events
- *          Timer2  8-bit fast PWM at F_CPU/8/256 = 7.8 kHz on OC2A (laser)
+ *          Timer2  8-bit fast PWM at F_CPU/CFG_LASER_PWM_DIV/256 on OC2A (laser):
+ *                  62.5 kHz (config.h)
  * UART0 115200 8N1 with U2X (set before UBRR: simavr latches the baud rate
  * when UBRR0L is written), interrupt-driven receive and transmit;
  * board_uart_baud() switches it to 250000/500000/1000000 ($B).
@@ -132,7 +133,13 @@ void board_init(void)
 
 	TIMSK2 = 0;
 	TCCR2A = (uint8_t)((1u << WGM21) | (1u << WGM20));
+#if CFG_LASER_PWM_DIV == 1
+	TCCR2B = (uint8_t)(1u << CS20);
+#elif CFG_LASER_PWM_DIV == 8
 	TCCR2B = (uint8_t)(1u << CS21);
+#else
+#error "CFG_LASER_PWM_DIV must be 1 or 8"
+#endif
 	wdt_enable(WDT_TIMEOUT);
 	sei();
 }

@@ -11,7 +11,9 @@
  * kept record's left[]: a block's steps go into the kept position when it
  * starts), the next time (16-bit time + 16-bit fraction, no division, no
  * compare of remainders), the pick of the next event, and the switch to the
- * next block when it is fast too and keeps the laser power (Ln done, its
+ * next block when it is fast too, of the same kind (fb_motion.h MO_FAST_*:
+ * plain moves, or a scan's blocks)
+ * and keeps the laser power (Ln done, its
  * steps into the kept position, direction pins, its times).  When the other
  * motor's step follows within FAST_PAIR_CYCLES (too close to leave and come
  * back) the pick marks a pair (GPIOR0 BOARD_FL_PAIR, its time in
@@ -493,6 +495,8 @@ fp_block_end:
 	add r18, r26
 	adc r19, r27                    /* r18:r19 = the block's end */
 	ldd r25, Z+BLK_POWER
+	ldd r24, Z+BLK_FAST
+	out GP2, r24                    /* this block's MO_FAST_* (GPIOR2: no pair pends at a block's end) */
 	movw r26, r30                   /* X = this block */
 	adiw r30, BLK_SIZE              /* Z = the next one */
 	ldi r24, hi8(QUEUE_END)
@@ -502,11 +506,15 @@ fp_block_end:
 	ldi r30, lo8(QUEUE)
 	ldi r31, hi8(QUEUE)
 1:
-	ldd r24, Z+BLK_FAST
-	sbrs r24, 0
-	rjmp fp_to_c
 	ldd r24, Z+BLK_POWER
 	cpse r24, r25
+	rjmp fp_to_c
+	in r25, GP2
+	ldd r24, Z+BLK_FAST
+	sbrs r24, MO_FAST_SWITCH_BIT    /* a fast block the fast path may enter (not a scan's first) */
+	rjmp fp_to_c
+	eor r25, r24
+	sbrc r25, MO_FAST_RASTER_BIT    /* of the same kind: plain, or raster (fb_motion.h) */
 	rjmp fp_to_c
 	lds r24, Q_TAIL
 	inc r24

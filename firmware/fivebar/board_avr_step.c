@@ -27,6 +27,7 @@
 #include "config.h"
 #include "fb_fast.h"
 #include "fb_motion.h"
+#include "fb_raster.h"
 
 /* C path: the pins go low at least this many cycles after its event starts
  * (>= 2.5 us high, measured in the simavr trace). */
@@ -49,6 +50,11 @@
 board_step_t board_step;
 static uint16_t paused_rem;
 static uint8_t paused;
+/* the pixel timer (compare B): its pending event's exact time, and while
+ * paused (a hold) the cycles it had left; px_paused: it was on */
+static uint16_t px_sched, px_paused_rem;
+static uint8_t px_paused;
+static void board_px_shift(uint16_t delta);
 
 /* simavr 1.6 arms a compare at OCR1A < ~5 only if it handles the timer
  * overflow within that many cycles, and otherwise misses it by a whole
@@ -65,11 +71,14 @@ static uint8_t step_pins(uint8_t motors)
 			 ((motors & 2u) ? (1u << STEP_B_BIT) : 0u));
 }
 
-/* Start the fast block mo_event() just started at timer time base. */
-static void fast_start(uint16_t base)
+/* Start the fast block mo_event() just started at timer time base; returns
+ * how much later it really starts (0, or the shift of a start from a stop
+ * whose first step the C path had run past). */
+static uint16_t fast_start(uint16_t base)
 {
 	fast_event_t e;
 	uint8_t rest = mo_fast_begin(base, &e);
+	uint16_t shift = 0;
 	uint16_t t = e.t, t2 = e.t2;
 	uint8_t pins = step_pins(e.bits), flags = 0;
 	GPIOR2 = step_pins(e.bits2);
@@ -114,11 +123,13 @@ static void fast_start(uint16_t base)
 			t = (uint16_t)(t + delta);
 			t2 = (uint16_t)(t2 + delta);
 			arm = t;
+			shift = delta;
 		}
 	}
 	board_step.t2 = t2;
 	board_step.sched = t;
 	OCR1A = ocr_value(arm);
+	return shift;
 }
 
 /* The C path: a complete interrupt of its own, entered by a jump from the
@@ -142,8 +153,15 @@ void __vector_fb_step_slow(void)
 			TIMSK1 &= (uint8_t)~(1u << OCIE1A);
 			break;
 		}
+		/* a scan's first block starts at t: the pixel timeline first, so that
+		 * fast_start() arms the steps after its cycles (a compare armed in
+		 * the past waits a whole timer period) */
+		if (px_state.pending)
+			px_start(t);
 		if (d == MO_FAST) {
-			fast_start(t);
+			uint16_t shift = fast_start(t);
+			if (shift)
+				board_px_shift(shift);  /* the block starts later: its pixels too */
 			break;
 		}
 		t = (uint16_t)(t + d);
@@ -156,6 +174,77 @@ void __vector_fb_step_slow(void)
 			;
 	}
 }
+
+/*
+ * The pixel interrupt (raster scans, fb_raster.c): Timer1 compare B at the
+ * exact time of a pixel change or a chained wait.  An event its own delay
+ * or a step interrupt made late is handled at once, and one due within
+ * PX_NEAR cycles too (a compare armed at or before TCNT1 would wait a whole
+ * timer period).  OC1B's pin (D10, endstop B) stays disconnected: only the
+ * interrupt is used.
+ */
+#define PX_NEAR 24
+
+static void px_arm_at(uint16_t t)
+{
+	px_sched = t;
+	OCR1B = ocr_value(t);
+}
+
+ISR(TIMER1_COMPB_vect)
+{
+	for (;;) {
+		uint16_t d = px_event();
+		if (!d) {
+			TIMSK1 &= (uint8_t)~(1u << OCIE1B);
+			return;
+		}
+		uint16_t t = (uint16_t)(px_sched + d);
+		if ((int16_t)(t - TCNT1) >= PX_NEAR) {
+			px_arm_at(t);
+			return;
+		}
+		/* too close to leave: handled here.  OCR1B is not written for it: a
+		 * compare the timer passes while we wait would set the flag and run
+		 * the event a second time after the return */
+		px_sched = t;
+		while ((int16_t)(TCNT1 - t) < 0)
+			;
+	}
+}
+
+void board_px_arm(uint16_t t)
+{
+	uint8_t s = board_irq_save();
+	/* the schedule keeps t (the events after it follow from it); the compare
+	 * comes at once when t is past or too close */
+	uint16_t at = (int16_t)(t - TCNT1) < PX_NEAR ? (uint16_t)(TCNT1 + PX_NEAR) : t;
+	px_sched = t;
+	OCR1B = ocr_value(at);
+	TIFR1 = (uint8_t)(1u << OCF1B);
+	TIMSK1 |= (uint8_t)(1u << OCIE1B);
+	px_paused = 0;
+	board_irq_restore(s);
+}
+
+void board_px_stop(void)
+{
+	uint8_t s = board_irq_save();
+	TIMSK1 &= (uint8_t)~(1u << OCIE1B);
+	px_paused = 0;
+	board_irq_restore(s);
+}
+
+/* The pixel timeline moves delta cycles later (its scan's first block was
+ * started later, fast_start). */
+static void board_px_shift(uint16_t delta)
+{
+	if (TIMSK1 & (1u << OCIE1B))
+		px_arm_at((uint16_t)(px_sched + delta));
+}
+
+uint16_t board_px_sched(void) { return px_sched; }
+uint16_t board_px_now(void) { return TCNT1; }
 
 void board_timer_start(uint16_t delay_cycles)
 {
@@ -173,7 +262,8 @@ void board_timer_start(uint16_t delay_cycles)
 void board_timer_stop(void)
 {
 	uint8_t s = board_irq_save();
-	TIMSK1 &= (uint8_t)~(1u << OCIE1A);
+	TIMSK1 &= (uint8_t)~((1u << OCIE1A) | (1u << OCIE1B));
+	px_paused = 0;
 	paused = 0;
 	GPIOR0 = (uint8_t)(1u << BOARD_FL_SLOW);
 	GPIOR1 = 0;
@@ -191,6 +281,14 @@ void board_timer_pause(void)
 			rem = 0;  /* due now (or matched already) */
 		paused_rem = rem;
 		paused = 1;
+		if (TIMSK1 & (1u << OCIE1B)) {
+			TIMSK1 &= (uint8_t)~(1u << OCIE1B);
+			rem = (uint16_t)(px_sched - TCNT1);
+			if ((TIFR1 & (1u << OCF1B)) || (int16_t)rem < 0)
+				rem = 0;
+			px_paused_rem = rem;
+			px_paused = 1;
+		}
 	}
 	board_irq_restore(s);
 }
@@ -209,6 +307,13 @@ void board_timer_resume(void)
 		OCR1A = ocr_value(t);
 		TIFR1 = (uint8_t)(1u << OCF1A);
 		TIMSK1 |= (uint8_t)(1u << OCIE1A);
+		if (px_paused) {
+			/* the pixel timeline moves with the steps' (same delta) */
+			px_paused = 0;
+			px_arm_at((uint16_t)(t + (uint16_t)(px_paused_rem - paused_rem)));
+			TIFR1 = (uint8_t)(1u << OCF1B);
+			TIMSK1 |= (uint8_t)(1u << OCIE1B);
+		}
 	}
 	board_irq_restore(s);
 }

@@ -219,4 +219,12 @@ void board_timer_resume(void)
 	board_irq_restore(s);
 }
 
+/* The pixel interrupt of raster scans (board.h) is not part of this build: G7
+ * is refused (fb_exec.c), so no pixel is ever armed.  The core still clears the
+ * (empty) pixel ring when a motion queue starts or stops (px_init, px_end),
+ * which asks for the pixel interrupt to stop: there is none running. */
+void board_px_stop(void)
+{
+}
+
 #endif

@@ -10,8 +10,8 @@
 #ifndef FB_CONFIG_H
 #define FB_CONFIG_H
 
-#define FB_VERSION        "1.0.0"
-#define FB_PROTOCOL       3
+#define FB_VERSION        "1.1.0"
+#define FB_PROTOCOL       4
 
 #define FB_F_CPU          16000000UL
 #define FB_BAUD           115200UL
@@ -49,10 +49,19 @@
 #define CFG_ENDSTOP_ACTIVE_LOW   1
 
 /* ---- buffer sizes (reported in the banner) -------------------------------- */
-#define CFG_RX_SIZE       128   /* receive ring, bytes: the character-counting budget */
+#define CFG_RX_SIZE       255   /* receive ring, bytes: the character-counting budget (a
+				 * 256-byte ring with 8-bit indices holds 255) */
 #define CFG_TX_SIZE       64    /* transmit ring, bytes */
-#define CFG_LINE_MAX      80    /* longest accepted line, bytes, without the newline */
+#define CFG_LINE_MAX      128   /* longest accepted line, bytes, without the newline: two
+				 * such lines fit the receive ring, so one is on its way
+				 * while the other is parsed (G7 raster lines) */
 #define CFG_QUEUE_SIZE    16    /* segment queue, blocks (power of two) */
+#ifdef FB_SERVO
+#define CFG_PX_RING       16    /* the servo build refuses G7: the ring stays empty */
+#else
+#define CFG_PX_RING       128   /* raster pixel ring, bytes: G7 runs decoded, with their
+				 * 10-byte headers (power of two, at most 128) */
+#endif
 
 /* ---- motion ---------------------------------------------------------------- */
 #define CFG_MAX_RATE_LIMIT  60000L   /* hard cap of $0, steps/s per motor */
@@ -64,6 +73,21 @@
  * streamed job does not stutter on its first segments. */
 #define CFG_START_BLOCKS    4
 #define CFG_START_DELAY_MS  20
+
+/* ---- laser ------------------------------------------------------------------ */
+/* Timer2 fast PWM on OC2A: F_CPU / CFG_LASER_PWM_DIV / 256.  1: 62.5 kHz, a 16 us
+ * period; 8: 7.8 kHz, 128 us (GRBL's).  A raster pixel at 8000 px/s lasts 125 us,
+ * less than one 7.8 kHz period, so its dose would depend on where the period
+ * falls; at 62.5 kHz it holds 7.8 periods, and every change restarts the period
+ * (board_laser), so a pixel's dose is its power within one period (16 us).  A laser
+ * driver whose input cannot follow 62.5 kHz needs 8 (and slower scans). */
+#ifdef FB_SERVO
+/* The servo build runs no raster (G7 is refused, docs/protocol.md 6.5) and its DDA
+ * ticks on Timer2's overflow every 128 us (board_servo.c SV_TICK_CYCLES): 8. */
+#define CFG_LASER_PWM_DIV   8
+#else
+#define CFG_LASER_PWM_DIV   1
+#endif
 
 /* ---- pen servo (M280, $14) ---------------------------------------------- */
 /* Hobby servo: a pulse every CFG_SERVO_FRAME_MS (50 Hz) of 500-2500 us. */

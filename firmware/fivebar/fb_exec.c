@@ -13,6 +13,7 @@
 #include "fb_settings.h"
 #include "fb_state.h"
 #include "fb_motion.h"
+#include "fb_raster.h"
 #include "board.h"
 #include "config.h"
 #include "status.h"
@@ -25,6 +26,17 @@ static uint32_t first_queued_ms;
  * 1: its head), where its next item starts, its current duration */
 static uint8_t g6_checked, g6_queued, g6_at;
 static int32_t g6_p;
+/* G7 (protocol 6.4): the modal P and T of G7 lines; the scan being queued: its
+ * id (in its blocks' power), whether the last block queued was one of its,
+ * the scan time (cycles from its start) at the end of its last block queued
+ * and of its last pixel change; the pending line: its record is in the ring,
+ * it starts a scan */
+static int32_t g7_p, g7_t;
+static uint8_t g7_in_scan, g7_pushed;
+#ifndef FB_SERVO
+static uint8_t g7_scan, g7_new;
+static uint32_t g7_time, g7_last;
+#endif
 
 uint8_t exec_idle(void)
 {
@@ -41,6 +53,9 @@ void exec_reset(void)
 {
 	g6_checked = 0;
 	g6_queued = 0;
+	g7_pushed = 0;
+	g7_in_scan = 0;
+	g7_p = g7_t = 0;
 	absolute = 1;
 	laser_on = 0;
 	laser_s = 0;
@@ -75,6 +90,7 @@ static uint8_t commit_block(void)
 	if (ok) {
 		if (!mo_running() && mo_queue_count() == 0)
 			first_queued_ms = board_ms();
+		g7_in_scan = mo_slot_raster();
 		mo_push();
 	}
 	board_irq_restore(sreg);
@@ -230,6 +246,125 @@ static uint8_t exec_g6(const proto_cmd_t *c)
 	return FB_OK;
 }
 
+#ifndef FB_SERVO  /* the servo build has no pixel timer: G7 is refused below */
+/* Every segment of a G7 line against the G1 checks (the first one's P the
+ * modal one), and its pixel run: at most what the ring holds, a period T of
+ * at least PX_T_MIN_CYCLES, every change inside the line's segments. */
+#define PX_T_MIN_CYCLES 400u
+static uint8_t g7_check(const proto_cmd_t *c)
+{
+	int32_t from[2] = { plan[0], plan[1] }, t[2] = { plan[0], plan[1] }, d[2];
+	int32_t p = g7_p;
+	uint8_t at = c->g6_at, st = FB_OK;
+	uint32_t total = 0;
+	for (uint8_t k = 0; st == FB_OK && k <= c->g6_count; k++) {
+		if (!proto_g7_next(fb_state.line, &at, c->g6_end, (uint8_t)((c->g7_pmask >> k) & 1u),
+				   &p, d))
+			return FB_ERR_BAD_WORD;  /* not reached: the line was parsed */
+		if (!p)
+			return FB_ERR_MISSING_WORD;  /* no P yet */
+		from[0] = t[0];
+		from[1] = t[1];
+		t[0] += d[0];
+		t[1] += d[1];
+		st = check_target(from, t, p);
+		uint32_t cyc = (uint32_t)p * (FB_F_CPU / 1000000UL);
+		total = total + cyc < total ? 0xffffffffUL : total + cyc;
+	}
+	if (st != FB_OK || !c->px_n)
+		return st;
+	uint32_t per = (c->has & PROTO_W_T) ? (uint32_t)c->d : (uint32_t)g7_t;
+	if (c->px_n > CFG_PX_RING - PX_HEAD)
+		return FB_ERR_OUT_OF_RANGE;
+	if (c->px_n > 1 && !per)
+		return FB_ERR_MISSING_WORD;
+	if (c->px_n > 1 && per < PX_T_MIN_CYCLES)
+		return FB_ERR_OUT_OF_RANGE;
+	uint32_t last = (uint32_t)c->r + (uint32_t)(c->px_n - 1u) * per;  /* <= 1.6e9 + 117 * 1.6e7 */
+	return last < total ? FB_OK : FB_ERR_OUT_OF_RANGE;
+}
+
+/* The pending G7 line's run into the ring (when it has pixels) and whether it
+ * starts a scan: the first G7 block after any other block, or on an idle
+ * machine.  EXEC_WAIT while the ring or the queue has no room. */
+static uint8_t g7_push(const proto_cmd_t *c)
+{
+	uint8_t need = c->px_n ? (uint8_t)(PX_HEAD + c->px_n) : 0u;
+	if (!slot_free())
+		return EXEC_WAIT;
+	if (px_room() < need) {
+		if (exec_idle())
+			px_init();  /* nothing left to burn: a broken scan's leftovers */
+		px_drop_broken();
+		if (px_room() < need)
+			return EXEC_WAIT;
+	}
+	g7_new = !g7_in_scan || exec_idle();
+	if (g7_new) {
+		g7_scan = (uint8_t)(g7_scan + 1u) ? (uint8_t)(g7_scan + 1u) : 1u;
+		g7_time = g7_last = 0;
+	}
+	if (c->px_n) {
+		uint32_t per = (c->has & PROTO_W_T) ? (uint32_t)c->d : (uint32_t)g7_t;
+		uint32_t first = g7_time + (uint32_t)c->r;
+		px_push(g7_scan, c->px_n, first - g7_last, per, fb_state.line + c->px_at,
+			(uint8_t)(c->px_end - c->px_at), !laser_on);
+		g7_last = first + (uint32_t)(c->px_n - 1u) * per;
+	}
+	g7_pushed = 1;
+	return FB_OK;
+}
+
+/* G7: its run, then one block per segment as slots free (EXEC_WAIT in
+ * between keeps the line pending, as a G6's); blocks get the numbers
+ * first..first+count; the first of a new scan is its MO_BLK_SCAN. */
+static uint8_t exec_g7(const proto_cmd_t *c)
+{
+	if (!g6_checked) {
+		uint8_t st = g7_check(c);
+		if (st != FB_OK)
+			return st;
+		g6_checked = 1;
+		g6_at = c->g6_at;
+		g6_p = g7_p;
+	}
+	if (!g7_pushed) {
+		uint8_t st = g7_push(c);
+		if (st != FB_OK)
+			return st;
+	}
+	uint32_t first = fb_state.lines.last - c->g6_count;
+	while (g6_queued <= c->g6_count) {
+		if (!slot_free())
+			return EXEC_WAIT;
+		uint8_t at = g6_at;
+		int32_t p = g6_p, d[2];
+		if (!proto_g7_next(fb_state.line, &at, c->g6_end,
+				   (uint8_t)((c->g7_pmask >> g6_queued) & 1u), &p, d))
+			return FB_ERR_BAD_WORD;  /* not reached: the line was checked */
+		mo_block_t *blk = mo_slot();
+		uint8_t st = mo_prepare(blk, d[0], d[1], (uint32_t)p, fb_state.min_interval);
+		if (st != FB_OK)
+			return st;  /* not reached: g7_check ran the same test */
+		blk->type = (g7_new && !g6_queued) ? MO_BLK_SCAN : MO_BLK_RASTER;
+		blk->power = g7_scan;
+		blk->line = first + g6_queued;
+		if (!commit_block())
+			return EXEC_WAIT;
+		g7_time += blk->cycles;
+		g6_at = at;
+		g6_p = p;
+		plan[0] += d[0];
+		plan[1] += d[1];
+		g6_queued++;
+	}
+	g7_p = g6_p;
+	if (c->has & PROTO_W_T)
+		g7_t = c->d;
+	return FB_OK;
+}
+#endif
+
 /* M280: a queued pen block (protocol section 6.2). */
 static uint8_t exec_pen(const proto_cmd_t *c)
 {
@@ -263,6 +398,12 @@ static uint8_t execute(const proto_cmd_t *c)
 		return exec_g1(c);
 	case PROTO_CMD_G6:
 		return exec_g6(c);
+	case PROTO_CMD_G7:
+#ifdef FB_SERVO
+		return FB_ERR_UNKNOWN_COMMAND;  /* no raster on servo joints (docs/protocol.md 6.5) */
+#else
+		return exec_g7(c);
+#endif
 	case PROTO_CMD_G90:
 		absolute = 1;
 		return FB_OK;
@@ -323,6 +464,7 @@ uint8_t exec_command(const proto_cmd_t *c)
 	if (st != EXEC_WAIT) {
 		g6_checked = 0;
 		g6_queued = 0;
+		g7_pushed = 0;
 	}
 	return st;
 }

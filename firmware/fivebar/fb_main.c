@@ -22,15 +22,18 @@
 #include "config.h"
 #include "status.h"
 
-#if CFG_RX_SIZE != 128 && CFG_RX_SIZE != 64 && CFG_RX_SIZE != 32
-#error "CFG_RX_SIZE must be 32, 64 or 128"
+/* the ring's bytes: a power of two up to 256 (8-bit free-running indices);
+ * it holds CFG_RX_SIZE of them, at most one less than its size when 256 */
+#define RX_BUF 256u
+#if CFG_RX_SIZE > 255 || CFG_RX_SIZE > RX_BUF || (CFG_RX_SIZE < RX_BUF && CFG_RX_SIZE * 2 <= RX_BUF)
+#error "CFG_RX_SIZE must be 129..255 for a 256-byte ring"
 #endif
-#define RX_MASK (CFG_RX_SIZE - 1u)
+#define RX_MASK (RX_BUF - 1u)
 
 #define CTRL_X 0x18
 
-/* receive ring: free-running indices, so all CFG_RX_SIZE bytes are usable */
-static volatile uint8_t rx_buf[CFG_RX_SIZE];
+/* receive ring: free-running 8-bit indices over all 256 bytes; CFG_RX_SIZE of them used */
+static volatile uint8_t rx_buf[RX_BUF];
 static volatile uint8_t rx_head, rx_tail, rx_discard, rx_overflow;
 static volatile uint32_t last_rx_ms;
 /* a '~' lowered a parked pen again: the timeline resumes at this board_ms()

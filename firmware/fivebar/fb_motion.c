@@ -15,6 +15,7 @@
  */
 #include <string.h>
 #include "fb_motion.h"
+#include "fb_raster.h"
 #include "board.h"
 #include "status.h"
 
@@ -196,8 +197,14 @@ void mo_init(void)
 	s_held = 0;
 	s_laser = 0;
 	s_underruns = 0;
+	px_init();
 	board_laser(0);
 	pen_park_now(0);
+}
+
+static uint8_t is_raster(uint8_t type)
+{
+	return type == MO_BLK_RASTER || type == MO_BLK_SCAN;
 }
 
 uint8_t mo_queue_count(void) { return (uint8_t)((mo_state.head - mo_state.tail) & 0xffu); }
@@ -212,9 +219,12 @@ mo_block_t *mo_slot(void)
 }
 void mo_push(void) { mo_state.head = (uint8_t)(mo_state.head + 1u); }
 
+uint8_t mo_slot_raster(void) { return is_raster(mo_state.queue[mo_state.head & QMASK].type); }
+
 void mo_clear_queue(void)
 {
 	mo_state.tail = mo_state.head;
+	px_init();  /* the dropped G7 blocks' runs */
 }
 
 static uint8_t prep_axis(mo_block_t *b, uint8_t i, int32_t d, uint32_t min_interval)
@@ -258,7 +268,7 @@ uint8_t mo_prepare_cycles(mo_block_t *b, int32_t da, int32_t db, uint32_t cycles
 
 uint8_t mo_fast_form(const mo_block_t *b, fast_t *f)
 {
-	if (b->type != MO_BLK_MOVE || s_es_enabled)
+	if ((b->type != MO_BLK_MOVE && !is_raster(b->type)) || s_es_enabled)
 		return 0;
 	uint32_t n[2], q[2], m[2];
 	for (uint8_t i = 0; i < 2; i++) {
@@ -277,7 +287,8 @@ void mo_seal(mo_block_t *b)
 		return;
 	b->f = f;
 	b->pdirs = board_dir_bits(b->dirs);
-	b->fast = 1;
+	b->fast = b->type == MO_BLK_SCAN ? MO_FAST_SCAN
+		  : b->type == MO_BLK_RASTER ? MO_FAST_RASTER : MO_FAST_PLAIN;
 }
 
 void mo_prepare_pen(mo_block_t *b, uint16_t from_us, uint16_t to_us, uint16_t move_ms,
@@ -309,6 +320,8 @@ BOARD_INLINE void set_laser(uint8_t p)
 	board_laser(p);
 }
 
+void mo_set_laser(uint8_t p) { set_laser(p); }
+
 void mo_start(void)
 {
 	uint8_t sreg = board_irq_save();
@@ -338,6 +351,7 @@ void mo_stop(void)
 		mo_state.cur = 0;
 	}
 	s_due = 0;
+	px_end();
 	set_laser(0);
 	pen_park_now(0);
 	board_irq_restore(sreg);
@@ -360,7 +374,8 @@ void mo_resume(void)
 	uint8_t sreg = board_irq_save();
 	if (s_running) {
 		if (mo_state.cur)
-			set_laser(mo_state.cur->power);
+			set_laser(is_raster(mo_state.cur->type) ? (px_state.run ? px_state.power : 0u)
+								: mo_state.cur->power);
 		s_held = 0;
 		board_timer_resume();
 	}
@@ -384,6 +399,7 @@ BOARD_INLINE mo_block_t *boundary(void)
 			mo_state.tail = t;
 			s_running = 0;
 			s_underruns++;
+			px_end();
 			set_laser(0);
 			return 0;
 		}
@@ -417,7 +433,17 @@ BOARD_INLINE mo_block_t *boundary(void)
 					(b->next[1] != MO_NEVER ? 2u : 0u));
 		s_now = 0;
 		mo_state.cur = b;
-		set_laser(b->power);
+		if (b->type == MO_BLK_SCAN) {
+			px_begin(b->power);  /* the board's px_start() gives its time */
+			set_laser(0);
+		} else if (b->type != MO_BLK_RASTER) {
+			px_end();
+			set_laser(b->power);
+		} else if (s_rest || !px_state.run) {
+			/* a scan's later block after a stop: its timeline is lost */
+			px_break(b->power);
+			set_laser(0);
+		}
 		return b;
 	}
 }

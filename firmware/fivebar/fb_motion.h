@@ -21,8 +21,23 @@ enum mo_block_type {
 	MO_BLK_SETPOS,     /* G92: position := n[] (as int32) */
 	MO_BLK_ENABLE,     /* M17 */
 	MO_BLK_DISABLE,    /* M18 */
-	MO_BLK_PEN         /* M280: servo to q[0] us at q[1] per frame, then a dwell */
+	MO_BLK_PEN,        /* M280: servo to q[0] us at q[1] per frame, then a dwell */
+	MO_BLK_RASTER,     /* G7: a MOVE of a raster scan; the pixel interrupt owns the
+			    * laser (fb_raster.h); power holds the scan's id */
+	MO_BLK_SCAN        /* G7: the first MOVE of a scan (its timeline starts here) */
 };
+
+/* mo_block_t.fast: 0 the C form; else the fast form.  The fast path switches
+ * from a running fast block into the next only when the next has
+ * MO_FAST_SWITCH_BIT, both have the same MO_FAST_RASTER_BIT and the same
+ * power (board_avr_step.S): plain moves into plain moves, a scan's blocks
+ * into its later blocks (power holds the scan id).  A scan's first block
+ * starts through the C path, which tells the pixel interrupt its time. */
+#define MO_FAST_SWITCH_BIT 0
+#define MO_FAST_RASTER_BIT 2
+#define MO_FAST_PLAIN 1u    /* switch bit */
+#define MO_FAST_SCAN 4u     /* raster bit: entered through the C path */
+#define MO_FAST_RASTER 5u   /* both */
 
 /*
  * One queue entry.  The main loop fills every field (all divisions happen
@@ -47,7 +62,7 @@ typedef struct {
 	uint8_t type;      /* enum mo_block_type */
 	uint8_t dirs;      /* bit set = motor steps negative */
 	uint8_t power;     /* laser power during the segment */
-	uint8_t fast;      /* 1 = the fast form above is filled, not next..den */
+	uint8_t fast;      /* nonzero: the fast form above is filled, not next..den (MO_FAST_*) */
 	uint8_t pdirs;     /* fast form: the direction pins' port bits */
 } mo_block_t;
 
@@ -68,8 +83,11 @@ uint8_t mo_queue_count(void);
 uint8_t mo_queue_free(void);
 mo_block_t *mo_slot(void);
 void mo_push(void);
+/* Whether the filled slot is a G7 block (MO_BLK_RASTER or MO_BLK_SCAN). */
+uint8_t mo_slot_raster(void);
 /* The fast form (fb_fast.h) of a filled block, 1 when it takes one: a plain
- * MOVE that fast_form() accepts, with endstop supervision ($7) off. */
+ * MOVE (or a G7 block) that fast_form() accepts, with endstop supervision
+ * ($7) off. */
 uint8_t mo_fast_form(const mo_block_t *b, fast_t *f);
 /* Give a filled block its fast form when it takes one and the board runs
  * fast blocks (BOARD_FAST_PATH); main loop, before mo_push, with interrupts
@@ -222,6 +240,9 @@ void mo_set_pos(const int32_t pos[2]);
 /* Ln done := 0 (Ctrl-X). */
 void mo_clear_done(void);
 uint8_t mo_laser(void);
+/* Set the laser output now (the pixel interrupt's changes; the status
+ * report's L follows). */
+void mo_set_laser(uint8_t p);
 /* mo_status_t.homed: the position was set since power-on: a G92 block
  * executed (set here, in the step interrupt) or a homing completed (fb_main).
  * mo_init() keeps it, as a Ctrl-X keeps the position, and so does a reset that

@@ -3,7 +3,8 @@
  *
  * A line is: [N<n>] <command> [words] [;comment] [*<crc16>/<len>]
  * G6 (protocol 3) carries several segments: a G1 head, then relative items
- * "[P<us>]<+|-><a><+|-><b>", each one more segment and one more line number.
+ * "[P<us>]<+|-><a><+|-><b>", each one more segment and one more line number;
+ * G7 (protocol 4) binary segments and pixels (fb_g7.c).
  * The checksum field covers every byte before the last '*' (the body): its
  * CRC-16 and its length in bytes.  Numbers are decimal integers; there are no
  * floats anywhere in the firmware.
@@ -92,7 +93,7 @@ static uint8_t field_ok(const char *line, uint8_t end, uint8_t len)
 			i++;
 		}
 	}
-	if (num[1] > 99u || num[1] != end || skip_ws(line, i, len) < len)
+	if (num[1] > 255u || num[1] != end || skip_ws(line, i, len) < len)
 		return 0;
 	return proto_crc16(line, end) == num[0];
 }
@@ -223,6 +224,7 @@ static uint8_t command_kind(char letter, uint32_t code)
 		switch (code) {
 		case 1: return PROTO_CMD_G1;
 		case 6: return PROTO_CMD_G6;
+		case 7: return PROTO_CMD_G7;
 		case 90: return PROTO_CMD_G90;
 		case 91: return PROTO_CMD_G91;
 		case 92: return PROTO_CMD_G92;
@@ -322,6 +324,21 @@ static uint8_t g6_items(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cmd)
 	return FB_OK;
 }
 
+/* Whether the command at s[i] (after blanks) is G7: the index past its code,
+ * else 0.  A G7's code may end at its data's ':' (not only where other numbers
+ * end). */
+static uint8_t g7_code_end(const char *s, uint8_t i, uint8_t end)
+{
+	i = skip_ws(s, i, end);
+	if (i >= end || upper(s[i]) != 'G')
+		return 0;
+	uint32_t code = 0;
+	uint8_t j = (uint8_t)(i + 1u);
+	while (j < end && is_digit(s[j]) && code < 1000u)
+		code = code * 10u + (uint32_t)(s[j++] - '0');
+	return (code == 7u && j > i + 1u && (j >= end || !is_digit(s[j]))) ? j : 0;
+}
+
 static uint8_t check_ranges(proto_cmd_t *cmd)
 {
 	if ((cmd->has & PROTO_W_A) && (cmd->a > CFG_POS_LIMIT || cmd->a < -CFG_POS_LIMIT))
@@ -350,9 +367,19 @@ static uint8_t check_ranges(proto_cmd_t *cmd)
 	return FB_OK;
 }
 
-/* Parse the command part of a line: s[i..end) with the checksum removed. */
+/* Parse the command part of a line: s[i..end) with the checksum removed.  A
+ * G7 is its code, blanks, ':' and binary data to the end (fb_g7.c): only its
+ * code is text. */
 static uint8_t parse_body(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cmd)
 {
+	uint8_t g7 = g7_code_end(s, i, end);
+	if (g7) {
+		cmd->kind = PROTO_CMD_G7;
+		uint8_t k = skip_ws(s, g7, end);
+		if (k >= end || s[k] != ':')
+			return FB_ERR_MISSING_WORD;  /* no data: a G7 has at least one segment */
+		return proto_g7_parse(s, (uint8_t)(k + 1u), end, cmd);
+	}
 	for (uint8_t k = i; k < end; k++) {
 		uint8_t c = (uint8_t)s[k];
 		if ((c < 0x20u || c > 0x7eu) && c != '\t')

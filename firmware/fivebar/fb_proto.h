@@ -28,11 +28,12 @@ enum proto_cmd_kind {
 	PROTO_CMD_SET,        /* $<n>=<v> */
 	PROTO_CMD_M280,       /* pen servo: S<us> [R<ms>] [D<ms>] (queued) */
 	PROTO_CMD_G6,         /* several segments: a G1 head, then relative +a+b [P] items */
-	PROTO_CMD_BAUD        /* $B=<baud>: the link's rate after this line's ok */
+	PROTO_CMD_BAUD,       /* $B=<baud>: the link's rate after this line's ok */
+	PROTO_CMD_G7          /* raster: binary segments and pixels after ':' (protocol 4, fb_g7.c) */
 };
-/* How many command kinds there are (keep PROTO_CMD_BAUD last, or move this): the
+/* How many command kinds there are (keep PROTO_CMD_G7 last, or move this): the
  * fuzz target's oracle refuses any other kind. */
-#define PROTO_CMD_KINDS (PROTO_CMD_BAUD + 1)
+#define PROTO_CMD_KINDS (PROTO_CMD_G7 + 1)
 
 /* Word presence bits in proto_cmd_t.has */
 #define PROTO_W_A 0x01u
@@ -41,6 +42,17 @@ enum proto_cmd_kind {
 #define PROTO_W_S 0x08u
 #define PROTO_W_R 0x10u
 #define PROTO_W_D 0x20u
+#define PROTO_W_U 0x40u
+#define PROTO_W_T 0x80u
+
+/* G7 data (docs/protocol.md 6.4, fb_g7.c): bytes, except those a line cannot
+ * carry (newline, CR, the real-time bytes ! ? ~ Ctrl-X, the checksum's '*') and
+ * the escape itself, each sent as PROTO_PX_ESC then the byte XOR PROTO_PX_XOR. */
+#define PROTO_PX_ESC 0x7du
+#define PROTO_PX_XOR 0x40u
+/* Longest G7 pixel period T and first-change offset U, cycles (1 s, 100 s). */
+#define PROTO_PX_T_MAX 16000000L
+#define PROTO_PX_U_MAX 1600000000L
 
 typedef struct {
 	uint8_t kind;       /* enum proto_cmd_kind */
@@ -49,12 +61,18 @@ typedef struct {
 	uint8_t setting;    /* PROTO_CMD_SET: setting number */
 	uint32_t n;         /* line number when has_n */
 	int32_t a, b, p, s; /* word values */
-	int32_t r, d;       /* M280: move and settle time, ms */
+	int32_t r, d;       /* M280: move and settle time, ms; G7: U and T, cycles */
 	int32_t value;      /* PROTO_CMD_SET: value */
 	uint8_t g6_count;   /* PROTO_CMD_G6: segments after the head (the line uses
 			     * 1 + g6_count line numbers) */
 	uint8_t g6_at;      /* PROTO_CMD_G6: index of its first item in the line */
 	uint8_t g6_end;     /* PROTO_CMD_G6: end of its items (the '*', ';' or line end) */
+	/* PROTO_CMD_G7 (fb_g7.c): its items from line[g6_at] (g6_count = items - 1:
+	 * the line uses 1 + g6_count numbers), bit i of g7_pmask set when item i
+	 * carries its P, its powers line[px_at..px_end) (escaped), px_n of them;
+	 * U in r and T in d (PROTO_W_U, PROTO_W_T in has) */
+	uint8_t px_at, px_end, px_n;
+	uint32_t g7_pmask;
 } proto_cmd_t;
 
 /* Line-number state shared by consecutive lines. */
@@ -98,6 +116,24 @@ uint8_t proto_parse_line(proto_lines_t *lines, const char *line, uint8_t len, pr
  * proto_parse_line has refused before), else 1.
  */
 uint8_t proto_g6_next(const char *line, uint8_t *at, uint8_t end, int32_t *p, int32_t d[2]);
+
+/* Whether byte c must be escaped in G7 data (and may follow the escape, XORed). */
+uint8_t proto_px_escaped(uint8_t c);
+
+/* A reader of escaped G7 data line[at..end). */
+typedef struct {
+	const char *s;
+	uint8_t at, end;
+} proto_rd_t;
+/* The next data byte, unescaped: 1, or 0 at the end or a malformed escape (a
+ * byte that must be escaped sent as it is, or an escape of another byte). */
+uint8_t proto_rd_byte(proto_rd_t *r, uint8_t *b);
+/* Parse a G7's data line[at..end) into cmd (fb_g7.c): FB_OK or an error. */
+uint8_t proto_g7_parse(const char *s, uint8_t at, uint8_t end, proto_cmd_t *cmd);
+/* The next item of a G7 line already checked by proto_g7_parse, from line[*at]:
+ * its P (into *p, when has_p) and move (d).  Advances *at; 0 when malformed. */
+uint8_t proto_g7_next(const char *line, uint8_t *at, uint8_t end, uint8_t has_p, int32_t *p,
+		      int32_t d[2]);
 
 /* True when a reply code asks the host to resend. */
 static inline uint8_t proto_is_resend(uint8_t code)

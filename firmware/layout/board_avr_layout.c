@@ -61,6 +61,9 @@ void board_avr_layout(void)
 	FIELD(STEP_SCHED, board_step_t, sched);
 	FIELD(STEP_T2, board_step_t, t2);
 	FIELD(STEP_GAP, board_step_t, gap);
+	/* the fast path's switch between blocks (fb_motion.h) */
+	LAYOUT(MO_FAST_SWITCH_BIT, MO_FAST_SWITCH_BIT);
+	LAYOUT(MO_FAST_RASTER_BIT, MO_FAST_RASTER_BIT);
 	/* the pick's pairs (fb_fast.h) */
 	LAYOUT(FAST_PAIR_CYCLES, FAST_PAIR_CYCLES);
 	LAYOUT(FAST_CLOSE_CYCLES, FAST_CLOSE_CYCLES);

@@ -6,6 +6,7 @@
 #include "board.h"
 #include "board_uart.h"
 #include "fb_motion.h"
+#include "fb_raster.h"
 
 uint64_t fake_now;
 uint32_t fake_ms;
@@ -28,6 +29,10 @@ uint16_t fake_ee_park = 0xffffu;
 uint16_t fake_pen_pulse;
 uint32_t fake_pen_frames;
 static uint64_t next_frame;
+int fake_px_on;
+uint64_t fake_px_at;
+uint64_t fake_laser_at;
+void (*fake_laser_hook)(uint8_t power);
 #define FRAME_CYCLES (16000ULL * CFG_SERVO_FRAME_MS)
 static uint8_t irq_on = 1;
 static char tx_copy[65536];
@@ -56,6 +61,10 @@ void fake_reset(void)
 	fake_pen_pulse = 0;
 	fake_pen_frames = 0;
 	next_frame = FRAME_CYCLES;
+	fake_px_on = 0;
+	fake_px_at = 0;
+	fake_laser_at = 0;
+	fake_laser_hook = 0;
 }
 
 uint16_t board_pen_park_load(void) { return fake_ee_park; }
@@ -102,14 +111,27 @@ void board_timer_stop(void)
 	fake_timer_paused = 0;
 }
 
+static uint64_t paused_at;
+/* the exact time of the pending pixel event (fake_px_at: when it runs, at once
+ * when that time is past) */
+static uint64_t px_sched;
+
 void board_timer_pause(void)
 {
-	if (fake_timer_on)
+	if (fake_timer_on && !fake_timer_paused) {
 		fake_timer_paused = 1;
+		paused_at = fake_now;
+	}
 }
 
+/* The whole timeline moves by the time held: the step event is relative to
+ * fake_now already, the pixel timer's is absolute. */
 void board_timer_resume(void)
 {
+	if (fake_timer_paused && fake_px_on) {
+		fake_px_at += fake_now - paused_at;
+		px_sched += fake_now - paused_at;
+	}
 	fake_timer_paused = 0;
 }
 
@@ -122,20 +144,59 @@ void board_idle(void)
 		mo_stop();
 }
 
+/* The pixel timer: the same 16-bit timer as the steps, fake_now's low bits. */
+void board_px_arm(uint16_t t)
+{
+	int16_t ahead = (int16_t)(uint16_t)(t - (uint16_t)fake_now);
+	px_sched = (uint64_t)((int64_t)fake_now + ahead);
+	fake_px_at = ahead < 0 ? fake_now : px_sched;  /* a time already past: at once */
+	fake_px_on = 1;
+}
+
+void board_px_stop(void) { fake_px_on = 0; }
+uint16_t board_px_sched(void) { return (uint16_t)px_sched; }
+uint16_t board_px_now(void) { return (uint16_t)fake_now; }
+
+/* The pixel events due before the next step event (which comes first at an
+ * equal time, as Timer1's compare A beats compare B), then 1 when that step
+ * event is in the limit. */
+static int px_until(uint64_t step_at, uint64_t limit)
+{
+	while (fake_px_on && !fake_timer_paused && fake_px_at < step_at && fake_px_at <= limit) {
+		fake_now = fake_px_at;
+		uint16_t d = px_event();
+		if (!d) {
+			fake_px_on = 0;
+		} else {
+			px_sched += d;
+			fake_px_at = px_sched > fake_now ? px_sched : fake_now;
+		}
+	}
+	return step_at <= limit;
+}
+
 size_t fake_run(uint64_t max_cycles)
 {
 	size_t events = 0;
 	uint64_t limit = fake_now + max_cycles;
-	while (fake_timer_on && !fake_timer_paused && fake_now + fake_timer_delay <= limit &&
-	       fake_budget) {
+	while (fake_timer_on && !fake_timer_paused && fake_budget) {
+		uint64_t step_at = fake_now + fake_timer_delay;
+		if (!px_until(step_at, limit)) {
+			/* the next step event is past the limit: time runs to it */
+			fake_timer_delay = (uint16_t)(step_at - limit);
+			fake_now = limit;
+			break;
+		}
 		fake_budget--;
-		fake_now += fake_timer_delay;
+		fake_now = step_at;
 		while (fake_now >= next_frame) {
 			fake_pen_pulse = mo_pen_frame();
 			fake_pen_frames++;
 			next_frame += FRAME_CYCLES;
 		}
 		uint16_t d = mo_event();
+		if (px_state.pending)
+			px_start((uint16_t)fake_now);
 		events++;
 		if (!d) {
 			fake_timer_on = 0;
@@ -165,7 +226,13 @@ void board_set_dirs(uint8_t neg_mask) { fake_dirs = neg_mask; }
  * fast block, BOARD_FAST_PATH 0, so no block keeps them) */
 uint8_t board_dir_bits(uint8_t neg_mask) { return neg_mask; }
 void board_enable_motors(uint8_t on) { fake_enabled = on; }
-void board_laser(uint8_t power) { fake_laser = power; }
+void board_laser(uint8_t power)
+{
+	fake_laser = power;
+	fake_laser_at = fake_now;
+	if (fake_laser_hook)
+		fake_laser_hook(power);
+}
 uint8_t board_endstops(void) { return fake_endstops; }
 uint8_t board_irq_save(void)
 {

@@ -60,6 +60,14 @@ extern uint16_t fake_ee_park;
 extern uint16_t fake_pen_pulse;
 extern uint32_t fake_pen_frames;
 
+/* The pixel timer (board_px_arm): on, and the cycle of its next event;
+ * fake_run() runs its events in time order with the step events'. */
+extern int fake_px_on;
+extern uint64_t fake_px_at;
+/* fake_now at the last board_laser(), and a hook called with every power set. */
+extern uint64_t fake_laser_at;
+extern void (*fake_laser_hook)(uint8_t power);
+
 void fake_reset(void);
 /* Run the step timer until it stops or max_cycles pass; returns events run. */
 size_t fake_run(uint64_t max_cycles);

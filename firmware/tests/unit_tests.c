@@ -20,7 +20,7 @@
 
 static int failures, checks;
 
-#define BANNER "fivebar " FB_VERSION " proto:3 rx:128 queue:16 line:80\r\n"
+#define BANNER "fivebar " FB_VERSION " proto:4 rx:255 queue:16 line:128\r\n"
 
 #define CHECK(cond, ...) do { checks++; if (!(cond)) { failures++; \
 	printf("FAIL %s:%d: ", __FILE__, __LINE__); printf(__VA_ARGS__); printf("\n"); } } while (0)
@@ -711,8 +711,8 @@ static void test_app(void)
 	fake_reset();
 	mo_set_pos(zero);
 	fb_setup();
-	expect("", "fivebar " FB_VERSION " proto:3 rx:128 queue:16 line:80\r\n");
-	expect("$I\n", "fivebar " FB_VERSION " proto:3 rx:128 queue:16 line:80\r\nok\r\n");
+	expect("", BANNER);
+	expect("$I\n", BANNER "ok\r\n");
 	expect("?", "<Idle|A:0,B:0|Q:0|Ln:0,1|L:0|U:0|H:0|P:0>\r\n");
 	expect("G1 A10 B-4 P1000\n", "ok\r\n");
 	tick(100);
@@ -722,8 +722,8 @@ static void test_app(void)
 	expect("?", "<Idle|A:15,B:-4|Q:0|Ln:4,5|L:0|U:2|H:0|P:0>\r\n");
 	expect("G1 A200000 P100000\n", "error:11\r\n");
 	expect("G1 A10 P100\n", "error:12\r\n");
-	memset(buf, 'A', 100);
-	strcpy(buf + 100, "\n");
+	memset(buf, 'A', CFG_LINE_MAX + 20);
+	strcpy(buf + CFG_LINE_MAX + 20, "\n");
 	expect(buf, "error:2\r\n");
 	expect("G1 A1 P1000\x01\n", "error:1\r\n");
 	expect("FOO\n", "error:4\r\n");
@@ -741,7 +741,8 @@ static void test_app(void)
 	/* numbered mode: a line too long for the buffer (two lines merged by a
 	 * lost newline) is refused with a resend, as a checksum error */
 	framed(buf, sizeof buf, "N2 G1 A-100000000 B-100000000 P100000000 S255");
-	framed(buf + strlen(buf), sizeof buf - strlen(buf), "N3 G1 A5 B5 P1000 S9");
+	framed(buf + strlen(buf), sizeof buf - strlen(buf), "N3 G1 A-100000000 B-100000000 P100000000 S255");
+	framed(buf + strlen(buf), sizeof buf - strlen(buf), "N4 G1 A5 B5 P1000 S9");
 	strcat(buf, "\n");
 	CHECK(strlen(buf) > CFG_LINE_MAX + 1, "merged lines too long");
 	expect(buf, "error:8 resend:2\r\n");
@@ -773,14 +774,14 @@ static void test_app(void)
 	fake_ms += 100;
 	fb_poll();
 	fake_run(16u * 10000u);
-	expect("G7\n", "error:4\r\n");
+	expect("G8\n", "error:4\r\n");
 	CHECK(fake_laser == 0, "laser off after an error");
 	expect("?", "<Hold:2|A:90,B:0|Q:0|Ln:3,5|L:0|U:4|H:0|P:0>\r\n");
 
 	/* reset: banner, queue dropped, position kept */
 	send("\x18");
 	CHECK(fake_laser == 0 && !fake_timer_on, "reset stops at once");
-	expect("", "fivebar " FB_VERSION " proto:3 rx:128 queue:16 line:80\r\n");
+	expect("", BANNER);
 	expect("?", "<Idle|A:90,B:0|Q:0|Ln:0,0|L:0|U:0|H:0|P:0>\r\n");
 
 	/* the laser watchdog */
@@ -794,14 +795,14 @@ static void test_app(void)
 	CHECK(fake_laser == 0, "laser off after host silence");
 	expect("?", "<Hold:1|A:90,B:0|Q:0|Ln:0,2|L:0|U:0|H:0|P:0>\r\n");
 	send("\x18");
-	expect("", "fivebar " FB_VERSION " proto:3 rx:128 queue:16 line:80\r\n");
+	expect("", BANNER);
 
 	/* settings */
 	expect("$0=70000\n", "error:7\r\n");
 	expect("$77=1\n", "error:17\r\n");
 	expect("$5=0\nG1 A200000 P10000000\n", "ok\r\nok\r\n");
 	send("\x18");
-	expect("", "fivebar " FB_VERSION " proto:3 rx:128 queue:16 line:80\r\n");
+	expect("", BANNER);
 	expect("$5=1\n$H\n", "ok\r\nerror:16\r\n");
 	expect("M18\nG1 A0 P1000\n", "ok\r\nerror:15\r\n");
 	send("\x18");
@@ -825,7 +826,7 @@ static void test_app(void)
 	CHECK(poll_out(5)[0] == 0, "no reply before the newline");
 	send("\n");
 	CHECK(strncmp(poll_out(50), "error:18", 8) == 0, "overflow reported");
-	expect("$I\n", "fivebar " FB_VERSION " proto:3 rx:128 queue:16 line:80\r\nok\r\n");
+	expect("$I\n", BANNER "ok\r\n");
 }
 
 static int count_of(const char *hay, const char *needle)

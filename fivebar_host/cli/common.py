@@ -204,10 +204,19 @@ def compile_from_cli(drawing: Path, config_path: Path | None,
     from fivebar_host.cli.progress import compile_progress
     from fivebar_host.compile import CompileOptions, compile_job
     from fivebar_host.config import require_tool, with_pen_overrides
+    from fivebar_host.raster.image import is_image_file
 
     prof = with_pen_overrides(load(config_path), values)
     require_tool(prof, bool(values.get("laser")))
     with compile_progress():  # a bar (TTY) or a line every few seconds for long compiles
+        if is_image_file(drawing):
+            from fivebar_host.raster.job import compile_raster, raster_options
+
+            return prof, compile_raster(drawing, prof, raster_options(values, prof))
+        if values.get("fill") == "scan":
+            from fivebar_host.raster.fill import compile_fill_scan
+
+            return prof, compile_fill_scan(drawing, prof, values)
         return prof, compile_job(drawing, prof, CompileOptions(**compile_values(values)))
 
 

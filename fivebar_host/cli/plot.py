@@ -98,6 +98,14 @@ def plot_file(drawing: Path, dry_run: bool, preview_path: Path, port: str | None
 
         refuse_if_held(port)  # before compiling: another process owns the machine
     prof, job = compile_from_cli(drawing, config_path, job_values)
+    if dry_run and job.raster is not None:
+        from fivebar_host.raster import preview
+
+        for line in preview.report_lines(job):
+            click.echo(line)
+        preview.draw_preview(job, preview_path)
+        click.echo(f"preview       {preview_path}")
+        return
     if dry_run:
         for line in report_lines(job, nbar_opinion(job, prof), laser=laser, profile=prof,
                                  copies=copies):

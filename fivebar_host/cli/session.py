@@ -55,9 +55,13 @@ def plot_on_machine(plot: Plot, profile: Profile, job: Job) -> RunReport:
     copies with their countdown, the final report (module doc)."""
     from fivebar_host.report.text.dryrun import format_duration
 
+    quality = (f"{job.raster.n_pixels} px at {job.raster.speed_mm_s:.1f} mm/s"
+               if job.raster is not None else f"max deviation {job.max_dev_mm:.4f} mm")
     click.echo(f"job: {job.n_segments} segments, {job.n_paths} paths, mode {job.mode}, "
-               f"{plan_text(job, plot.copies, format_duration)}, max deviation "
-               f"{job.max_dev_mm:.4f} mm")
+               f"{plan_text(job, plot.copies, format_duration)}, {quality}")
+    if job.raster is not None:  # what a burn leaves out (--fill scan: the strokes) is said
+        for n in job.notes:
+            click.echo(f"note: {n}")
     if profile.pen is not None:
         click.echo("pen plot: the servo lifts the pen (M280) between strokes; laser output "
                    "stays at 0")
@@ -97,6 +101,17 @@ def write_executed(job: Job, prof: Profile, rec: Recording, preview_path: Path,
         true_params,
     )
 
+    if job.raster is not None:
+        from fivebar_host.raster.dose import figures, read_pins
+        from fivebar_host.raster.preview import save_burned
+
+        fig = figures(job, prof, read_pins(rec.path))
+        click.echo(fig.line())
+        burned = preview_path.with_name(preview_path.stem + ".burned.png")
+        save_burned(fig, burned)
+        click.echo(f"burned image (dose from the step pulses and the laser pin): {burned}; "
+                   f"boundary data {burned.with_suffix('.npz')}")
+        return
     tr, true = read_trace(rec.path), rec.true
     if prof.joints is not None:  # the servo build: the arms' pulses through the true servos
         from fivebar_host.report.text.executed_servo import executed_servo_path

@@ -67,6 +67,8 @@ def job_program(job: Job, profile: Profile, laser: bool, first: int = 0,
     each run of drawing segments (and dwells with the tool on, `Job.tool_on`; `pen_item`).
     A dwell (`compile.dwell`) is a DWELL item. `partial` replaces the first segment's move
     (a segment finished from where the machine stopped inside it, `run.moves`)."""
+    if job.raster is not None:
+        return raster_program(job, profile, laser, first, end)
     n = job.n_segments if end is None else end
     k = np.arange(first, n, dtype=np.int64)
     m = k.shape[0]
@@ -86,6 +88,54 @@ def job_program(job: Job, profile: Profile, laser: bool, first: int = 0,
     if laser:
         return Program.join([tool_on_item(profile), body, Program.command(Kind.TOOL_OFF)])
     return _bracket_pen(body, job.tool_on[first:n], profile)
+
+
+#: The firmware's boot value of `$0`, the steps a second each motor may make (config.h).
+DEFAULT_MAX_RATE = 20000
+
+
+def raster_program(job: Job, profile: Profile, laser: bool, first: int = 0,
+                   end: int | None = None, reached: int | None = None,
+                   lead: Program | None = None) -> Program:
+    """The items of a raster job's segments `first` … `end` − 1 (`first` a G7 line's first
+    segment or a travel segment): RASTER items for the G7 segments (the line's first
+    carries its run's index), MOVE items for the moves between scanlines. With `laser` the
+    laser is enabled (`M3 S0`) first — without it the firmware burns no G7 pixel — and off
+    (`M5`) at the end. A raster faster than the firmware's boot step rate (`$0`) sets it
+    first (the setting needs an idle machine: a program starts on one).  `reached`: a
+    resumed run got as far as that segment; the pixels changed before it are burned at 0
+    (`RasterRuns.runs_after`).  `lead` (a resume's travel back) runs after the `$0`
+    setting, which needs the machine idle, and before the laser is enabled."""
+    r = job.raster
+    assert r is not None
+    runs = r.runs if reached is None else r.runs_after(first, reached, job.duration_us)
+    n = job.n_segments if end is None else end
+    g7 = r.g7[first:n]
+    body = Program(np.where(g7, Kind.RASTER, Kind.MOVE).astype(np.int64),
+                   job.steps[first + 1:n + 1, 0].astype(np.int64),
+                   job.steps[first + 1:n + 1, 1].astype(np.int64),
+                   job.duration_us[first:n].astype(np.int64),
+                   np.where(g7, r.run[first:n], 0).astype(np.int64),
+                   np.arange(first, n, dtype=np.int64), runs=runs)
+    parts = []
+    rate = max_step_rate(job, first, n)
+    if rate > DEFAULT_MAX_RATE:
+        parts.append(Program.text(f"$0={min(60000, int(rate * 1.02) + 1)}"))
+    if lead is not None:
+        parts.append(lead)
+    if laser:
+        parts.append(tool_on_item(profile))
+    parts += [body, Program.command(Kind.TOOL_OFF)]
+    return Program.join(parts)
+
+
+def max_step_rate(job: Job, first: int = 0, end: int | None = None) -> float:
+    """The most steps a second either motor makes in segments `first` … `end` − 1."""
+    n = job.n_segments if end is None else end
+    d = np.abs(np.diff(job.steps[first:n + 1].astype(np.int64), axis=0)).max(axis=1, initial=0)
+    t = job.duration_us[first:n].astype(np.float64) * 1e-6
+    moving = t > 0
+    return float((d[moving] / t[moving]).max()) if moving.any() else 0.0
 
 
 def _bracket_pen(body: Program, draw: BoolArray, profile: Profile) -> Program:

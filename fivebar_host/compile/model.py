@@ -15,7 +15,7 @@ import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import cast
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -77,6 +77,9 @@ def compact_steps(angles_rad: FloatArray, home_rad: tuple[float, float],
             return steps.absolute_steps(angles_rad, home_rad, steps_per_rev)
         out[i:i + STEPS_BLOCK] = st
     return cast(IntArray, out)  # int32: the same values (IntArray names any int width here)
+
+if TYPE_CHECKING:
+    from fivebar_host.raster.runs import RasterRuns
 
 
 @dataclass(frozen=True)
@@ -234,6 +237,9 @@ class Job:
     dwell: BoolArray = field(default_factory=lambda: np.zeros(0, bool))
     #: pen-change stops, by segment (`compile.layers`; empty: the job runs through)
     pauses: tuple[LayerPause, ...] = ()
+    #: a raster job (an image, `fivebar_host.raster`): its G7 segments, lines and pixel runs;
+    #: None for a drawing
+    raster: RasterRuns | None = None
     #: per target, what the motor counts `steps` exceed the joint's steps by: the slack
     #: taken up at reversals (`compile.backlash`; empty: no backlash, counts = joint)
     slack: IntArray = field(default_factory=lambda: np.zeros((0, 2), np.int64))

@@ -71,7 +71,7 @@ def cut_accel(profile: Profile) -> float:
     cap. The factor 1/4 is measured: it keeps all 440 seeded random jobs and limit pairs of
     tests/test_plan_monotone.py monotone, where 0.35 left one ×1.002 and 1 left ×1.65."""
     d_min_rad = PLAN_MIN_PIECE_STEPS * profile.motors.rad_per_step
-    j_lim = planner.JUNCTION_JUMP_RAD_S
+    j_lim = profile.motion.junction_jump_rad_s
     return min(PLAN_ACCEL_SHARE * profile.motion.max_joint_rad_s2,
                0.25 * j_lim * j_lim / d_min_rad)
 
@@ -206,7 +206,7 @@ def _time(profile: Profile, checker: PoseChecker, handed: list[Stepped],
     per_seg.clear()
     mot, motion = profile.motors, profile.motion
     a_c = cut_accel(profile)
-    j_lim = planner.JUNCTION_JUMP_RAD_S
+    j_lim = profile.motion.junction_jump_rad_s
     prof_kw = {"junction_jump_rad_s": j_lim, "min_duration_s": protocol.P_MIN_US * 1e-6}
     dq = _step_deltas(sp.steps, mot)
     pln = planner.plan(dq, sp.length, feed, motion.max_joint_rad_s, a_c, stop_after=stop,
@@ -260,7 +260,7 @@ def _link_bound_staircase(profile: Profile, dq: FloatArray, handed: list[IntArra
     staircase is only measured again near the raised segments (`planner.raise_staircase`:
     a few hundred of a large job's, where a whole staircase took some 70 ms a pass on
     100k segments)."""
-    j_lim = planner.JUNCTION_JUMP_RAD_S
+    j_lim = profile.motion.junction_jump_rad_s
     acc = profile.motion.max_joint_rad_s2
     linkrate.raise_to_link(handed[0], st, power, profile)
     duration_us = planner.enforce_staircase(dq, handed.pop(), stop, acc, j_lim)

@@ -124,7 +124,7 @@ class SimOptions:
     true: tuple[float, ...] | None = None
     #: Each motor's real slack in steps, where it differs from the profile's backlash.
     backlash: tuple[int, int] | None = None
-    #: The servo build (`servo=1`, docs/protocol.md 6.4; the servo controller adds it) and
+    #: The servo build (`servo=1`, docs/protocol.md 6.5; the servo controller adds it) and
     #: the true servos' dead band, degrees per joint (`deadband=A,B`), where it differs
     #: from none: the executed-path report reads the arms' pulses through them.
     servo: bool = False

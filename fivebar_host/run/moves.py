@@ -19,11 +19,12 @@ from numpy.typing import ArrayLike
 
 from fivebar_host import protocol
 from fivebar_host.compile import Job
-from fivebar_host.compile.emit import job_program, setup, tool_on_item
+from fivebar_host.compile.emit import job_program, raster_program, setup, tool_on_item
 from fivebar_host.compile.steps import absolute_steps, step_angles
 from fivebar_host.config import Profile
 from fivebar_host.program import Kind, Program, line_param
 from fivebar_host.run.errors import SendError
+from kinematics.arrays import IntArray
 
 #: Share of the joint speed and acceleration limits used by moves the host adds itself
 #: (travel back on resume, jogs, framing): they are not timed by the job planner.
@@ -145,6 +146,8 @@ def build_program(job: Job, profile: Profile, laser: bool, start_segment: int,
     k = start_segment
     steps = job.steps
     pos = np.asarray(position, dtype=np.int64)
+    if job.raster is not None:
+        return Program.join([*parts, *_raster_rest(job, profile, laser, k, pos, end_segment)])
     partial: Program | None = None
     if k < job.n_segments and not np.array_equal(pos, steps[k]):
         t = line_param(steps[k], steps[k + 1], pos)
@@ -158,6 +161,22 @@ def build_program(job: Job, profile: Profile, laser: bool, start_segment: int,
                                 f"travel back to segment {k + 1}"))
     parts.append(job_program(job, profile, laser, k, end_segment, partial))
     return Program.join(parts)
+
+
+def _raster_rest(job: Job, profile: Profile, laser: bool, k: int, pos: IntArray,
+                 end_segment: int | None) -> list[Program]:
+    """A raster job resumed at segment `k`: inside a scanline it restarts at the scanline's
+    start (its overscan: the pen at scan speed again before its next pixel) with the pixels
+    it had already reached at power 0, so nothing is burned twice (docs/raster.md)."""
+    r = job.raster
+    assert r is not None
+    k0 = r.restart_segment(k) if k < job.n_segments else k
+    lead = None
+    if k0 < job.n_segments and not np.array_equal(pos, job.steps[k0]):
+        lead = travel(profile, job.assembly, pos, job.steps[k0],
+                      f"travel back to segment {k0 + 1}")
+    return [raster_program(job, profile, laser, k0, end_segment, k if k0 < k else None,
+                           lead)]
 
 
 # ------------------------------------------------------------------ framing and jogging

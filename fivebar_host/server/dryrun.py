@@ -52,6 +52,13 @@ def _dry_run(job: Job, profile: Profile, laser: bool,
     the run's copies and page delay, in the time line)."""
     from fivebar_host.report.preview import draw_preview  # matplotlib only in report/
 
+    if job.raster is not None:  # an image: the raster report and the burn as planned
+        from fivebar_host.raster import preview
+
+        with tempfile.TemporaryDirectory(prefix="fivebar-preview-") as d, _PREVIEW_LOCK:
+            path = Path(d) / "preview.png"
+            preview.draw_preview(job, path)
+            return preview.report_lines(job), path.read_bytes()
     lines = report_lines(job, nbar_opinion(job, profile), laser=laser, profile=profile,
                          copies=copies)
     with tempfile.TemporaryDirectory(prefix="fivebar-preview-") as d, _PREVIEW_LOCK:

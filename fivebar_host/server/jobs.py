@@ -23,6 +23,11 @@ from fivebar_host.compile import GCODE_SUFFIXES, CompileOptions, Job, compile_dr
 from fivebar_host.config import Profile, require_tool
 from fivebar_host.errors import FivebarError, InputError, JobError, OptionError, shorten
 from fivebar_host.options import PEN_NAMES, check_values, compile_values
+from fivebar_host.raster.fill import compile_fill_scan
+from fivebar_host.raster.fill import refuse as refuse_fill
+from fivebar_host.raster.image import decode as decode_image
+from fivebar_host.raster.image import is_image_file
+from fivebar_host.raster.job import compile_raster, raster_options
 from fivebar_host.run.resume import fingerprint
 from fivebar_host.run.stops import Copies
 from fivebar_host.toolpath.gcode import read_gcode
@@ -97,6 +102,23 @@ class JobOptions(CompileOptions):
     #: The run's copies and the wait between them, s (`run.stops`; not compiled).
     copies: int = 1
     page_delay_s: float = 15.0
+    #: Raster engraving of an uploaded image (fivebar_host.options RASTER_NAMES;
+    #: `raster.job.raster_options` reads them; ignored for drawings).
+    width_mm: float | None = None
+    height_mm: float | None = None
+    dpi: float | None = None
+    line_interval_mm: float | None = None
+    image_mode: str = "grayscale"
+    power_min: int = 0
+    power_max: int | None = None
+    gamma: float = 1.0
+    threshold: float = 0.5
+    negative: bool = False
+    scan_angle_deg: float = 0.0
+    one_way: bool = False
+    passes: int = 1
+    #: `--fill scan`: a drawing's filled shapes burned by scanlines (`raster.fill`).
+    fill: str = "outline"
 
     def copies_plan(self) -> Copies:
         """The copies and page delay as the sender takes them."""
@@ -180,8 +202,16 @@ def compile_upload(data: bytes, name: str, opts: JobOptions, profile: Profile) -
                           "the daemon; set them in its profile's [pen] table")
     try:
         require_tool(profile, opts.laser)
-        drawing = read_upload(data, name, opts.layers, profile)
-        job = compile_drawing(drawing, profile, opts.compile_options())
+        if is_image_file(name):  # raster engraving (docs/raster.md), like the CLI
+            job = compile_raster(name, profile, raster_options(asdict(opts), profile),
+                                 gray=decode_image(data, name))
+        elif opts.fill == "scan":  # a drawing's fills by scanlines (docs/fill.md)
+            refuse_fill(name, asdict(opts), profile)
+            job = compile_fill_scan(name, profile, asdict(opts),
+                                    read_upload(data, name, opts.layers, profile))
+        else:
+            drawing = read_upload(data, name, opts.layers, profile)
+            job = compile_drawing(drawing, profile, opts.compile_options())
     except SubmitError:
         raise
     except InputError as e:

@@ -42,7 +42,7 @@ def test_receive_overflow_is_reported_on_the_next_line(device: Device) -> None:
     s = device.session
     fill_queue(device)
     device.port.write(b"G1 P1000\n")  # waits for a slot; the main loop stops reading
-    flood = b"G1 P1000000\n" * 12  # 144 bytes > rx: the last 16 are lost
+    flood = b"G1 P1000000\n" * (device.banner.rx // 12 + 2)  # > rx: the last bytes are lost
     assert len(flood) > device.banner.rx
     device.port.write(flood)
     assert s.read_reply() == Ok()  # the waiting line, once a block ends
@@ -60,8 +60,10 @@ def test_overflow_is_reported_before_line_too_long(device: Device) -> None:
     s = device.session
     fill_queue(device)
     device.port.write(b"G1 P1000\n")  # waits for a slot
-    device.port.write(b"G1 P1000 " + b"A1" * 70)  # 149 bytes, no newline: 21 lost
-    assert s.read_reply() == Ok()  # a slot frees; the 128 bytes go into the line: too long
+    long = b"G1 P1000 " + b"A1" * (device.banner.rx // 2 + 10)  # no newline: > rx, some lost
+    assert len(long) > device.banner.rx > device.banner.line_max
+    device.port.write(long)
+    assert s.read_reply() == Ok()  # a slot frees; the rx bytes go into the line: too long
     device.port.write(b"\n")
     assert s.read_reply() == ErrorReply(18)
     s.realtime(protocol.RT_RESET)
@@ -118,7 +120,8 @@ def test_lines_merged_by_a_lost_newline_ask_for_resend_without_holding_the_job(
     assert s.send("G1 A1000 P1000000", line_number=2) == Ok()
     poll(device, lambda r: r.a > 0, what="moving")
     widest = protocol.encode_line(wire.g1(-100_000_000, -100_000_000, 100_000_000, 255), 3)
-    merged = widest[:-1] + protocol.encode_line("G1 A1010 P10000", 4)
+    widest4 = protocol.encode_line(wire.g1(-100_000_000, -100_000_000, 100_000_000, 255), 4)
+    merged = widest[:-1] + widest4[:-1] + protocol.encode_line("G1 A1010 P10000", 5)
     assert len(merged) - 1 > device.banner.line_max
     assert s.send_raw(merged) == ErrorReply(8, resend=3)
     short = protocol.encode_line("G90", 3)[:-1] + protocol.encode_line("G90", 4)

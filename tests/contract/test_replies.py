@@ -24,7 +24,7 @@ from fivebar_host.protocol import Banner, ErrorReply, Ok, StatusReport
 def test_banner_and_info(device: Device) -> None:
     b = device.banner
     assert (b.version, b.proto, b.rx, b.queue, b.line_max) == (
-        "1.0.0", protocol.PROTOCOL_VERSION, 128, 16, 80)
+        "1.1.0", protocol.PROTOCOL_VERSION, 255, 16, 128)
     device.port.write(b"$I\n")
     assert device.session.read_message() == b
     assert device.session.read_reply() == Ok()

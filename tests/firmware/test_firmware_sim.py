@@ -127,7 +127,7 @@ def test_boot_banner_and_info(device: Device) -> None:
     banner = device.session.banner
     assert banner is not None
     assert (banner.proto, banner.rx, banner.queue, banner.line_max) == (
-        protocol.PROTOCOL_VERSION, 128, 16, 80)
+        protocol.PROTOCOL_VERSION, 255, 16, 128)
     device.port.write(b"$I\n")
     assert device.session.read_message() == banner
     assert device.session.read_reply() == Ok()

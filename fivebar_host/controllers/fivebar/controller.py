@@ -106,16 +106,18 @@ class FivebarController:
         from fivebar_host.compile import encode_lines, mode_sequence
 
         lines = encode_lines(job, profile, relative=relative, laser=laser)
-        tool = (f"laser (power up to S{int(job.power.max(initial=0))})" if laser
-                else "pen (S0, no laser power)")
+        top = (int(job.raster.target.max(initial=0)) if job.raster is not None
+               else int(job.power.max(initial=0)))  # a raster's powers are its pixels'
+        tool = f"laser (power up to S{top})" if laser else "pen (S0, no laser power)"
         changes = (f" ({len(job.mode_changes)} pen-up mode changes)" if job.mode_changes
                    else "")
         pauses = ("; the file runs through its pen-change stops (`fivebar plot` stops "
                   "there): " + ", ".join(f"segment {p.segment} before {p.describe()}"
                                          for p in job.pauses) if job.pauses else "")
         return Converted(lines, f"{job.n_segments} segments, mode {mode_sequence(job)}"
-                         f"{changes}, {tool}, ≈ {job.total_time_s:.1f} s, max deviation "
-                         f"{job.max_dev_mm:.4f} mm{pauses}")
+                         f"{changes}, {tool}, ≈ {job.total_time_s:.1f} s, "
+                         + (f"{job.raster.n_pixels} px" if job.raster is not None
+                            else f"max deviation {job.max_dev_mm:.4f} mm") + pauses)
 
     def close(self) -> None:
         self.link.close()

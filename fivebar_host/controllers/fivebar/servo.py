@@ -1,4 +1,4 @@
-"""fivebar's servo firmware (`make -C firmware SERVO=1`, docs/protocol.md 6.4) behind the
+"""fivebar's servo firmware (`make -C firmware SERVO=1`, docs/protocol.md 6.5) behind the
 same `Link`: the host plans a servo profile's job on the `[motors]` step grid as for
 steppers (steps from the home pose), and `ServoLink` turns every position it sends into
 the firmware's steps — pulse ticks of 0.5 µs — and every position it reads back into
@@ -130,6 +130,6 @@ def open_servo_link(url: str, profile: Profile, joints: ServoJoints, **kwargs: A
         link.close()
         raise FivebarError(f"{url}: the profile's joints are servos ([joints] kind = "
                            "\"servo\") but the firmware is the stepper build: flash the "
-                           "servo build (make -C firmware SERVO=1, docs/protocol.md 6.4)")
+                           "servo build (make -C firmware SERVO=1, docs/protocol.md 6.5)")
     link.servo = ServoMap.of(joints, profile)
     return link

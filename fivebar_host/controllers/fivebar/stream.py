@@ -35,7 +35,7 @@ from enum import Enum
 from typing import TYPE_CHECKING
 
 from fivebar_host import protocol, wire
-from fivebar_host.program import Program
+from fivebar_host.program import Kind, Program
 from fivebar_host.protocol import (
     AlarmPush,
     Banner,
@@ -288,13 +288,14 @@ class Streamer:
         item after a G6 (read to see whether it joins) stays untaken."""
         got = self.wire.get(index)
         if got is None:
-            if self.absolute is None:
+            if self.absolute is None and self.program.rows[0][index] != Kind.RASTER:
                 p, s = self._values(index)
                 got = protocol.encode_line(wire.body(self.program, index, p, s),
                                            self.first + index), 1
             else:
-                got = wire.pack_line(self.program, index, self.first + index,
-                                     bool(self.absolute[index]), self.limit, self._values)
+                absolute = self.absolute is not None and bool(self.absolute[index])
+                got = wire.pack_line(self.program, index, self.first + index, absolute,
+                                     self.limit, self._values)
                 if self.encoder is not None and len(self.sent_values) > index + got[1]:
                     self._unbuild(index + got[1])
             self.wire[index] = got

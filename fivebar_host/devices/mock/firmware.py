@@ -20,7 +20,6 @@ from fivebar_host import protocol
 from fivebar_host.devices.mock.baud import UartRate
 from fivebar_host.devices.mock.codes import (
     A_ENDSTOP,
-    CYCLES_PER_US,
     DEFAULT_SETTINGS,
     E_ALARM_LOCK,
     E_BUSY,
@@ -28,35 +27,27 @@ from fivebar_host.devices.mock.codes import (
     E_HOMING_DISABLED,
     E_LINE_TOO_LONG,
     E_MOTORS_OFF,
-    E_NO_PEN,
     E_OUT_OF_RANGE,
     E_RX_OVERFLOW,
-    E_SOFT_LIMIT,
-    E_TOO_FAST,
     E_UNKNOWN_SETTING,
     OK,
-    S_A_MAX,
-    S_A_MIN,
-    S_B_MAX,
-    S_B_MIN,
     S_HOMING,
-    S_MAX_RATE,
     S_PEN_PARK,
-    S_SOFT,
     WAIT,
 )
-from fivebar_host.devices.mock.hardware import Block, KeptRecord, Machine, step_interval
+from fivebar_host.devices.mock.commands import MotionCommands
+from fivebar_host.devices.mock.hardware import Block, KeptRecord, Machine
 from fivebar_host.devices.mock.homing import Homing
-from fivebar_host.devices.mock.motion import MotionCore
 from fivebar_host.devices.mock.options import MockOptions
 from fivebar_host.devices.mock.parser import Command, parse_line
-from fivebar_host.protocol import EOL, POS_LIMIT, RESEND_CODES, SETTINGS
+from fivebar_host.devices.mock.raster import ScanPlan
+from fivebar_host.protocol import EOL, RESEND_CODES, SETTINGS
 
 _RT_STATUS, _RT_HOLD, _RT_RESUME, _RT_RESET = (ord(b) for b in ("?", "!", "~", "\x18"))
 _NL, _CR = 0x0A, 0x0D
 
 
-class MockFirmware(MotionCore):
+class MockFirmware(MotionCommands):
     """The firmware's state machine, driven by bytes and by a clock in seconds.
 
     Pure simulation, no I/O: ``receive`` takes host bytes, ``advance`` runs the device up
@@ -118,6 +109,7 @@ class MockFirmware(MotionCore):
         self.line_over = False
         self.pending: Command | None = None
         self.g6_queued = 0  # segments of the pending G6 queued so far (1: its head)
+        self.scan = ScanPlan()  # G7: modal P and T, the scan being queued (mock/raster.py)
         self.held = False
         self.hold_reason = 0
         self.resume_at = None
@@ -409,6 +401,7 @@ class MockFirmware(MotionCore):
             return False
         self.pending = None
         self.g6_queued = 0
+        self.scan.line_done()
         self._finish(st)
         self.uart.after_reply(self.t)
         return True
@@ -423,6 +416,8 @@ class MockFirmware(MotionCore):
             return self._exec_g1(c)
         if k == "G6":
             return self._exec_g6(c)
+        if k == "G7":
+            return self._exec_g7(c)
         if k in ("G90", "G91"):
             self.absolute = k == "G90"
             return OK
@@ -467,105 +462,6 @@ class MockFirmware(MotionCore):
         if k == "$B":
             return self.uart.request(c.value)
         return OK  # empty line, M110
-
-    def _queue_full(self) -> bool:
-        """The queue's slots hold the waiting blocks and the one executing (fb_motion.c)."""
-        return len(self.queue) + (self.cur is not None) >= self.opt.queue
-
-    def _push(self, blk: Block) -> None:
-        if not self.running and not self.queue:
-            self.first_queued = self.t
-        self.queue.append(blk)
-
-    def _check_segment(self, frm: list[int], t: list[int], p: int) -> int:
-        """The G1 checks of a segment from ``frm`` to ``t`` in ``p`` µs, in the firmware's
-        order (protocol section 6): range, soft limits, motors off, step rate."""
-        if any(abs(v) > POS_LIMIT for v in t):
-            return E_OUT_OF_RANGE
-        s = self.settings
-        if s[S_SOFT] and not (s[S_A_MIN] <= t[0] <= s[S_A_MAX]
-                              and s[S_B_MIN] <= t[1] <= s[S_B_MAX]):
-            return E_SOFT_LIMIT
-        if not self.motors_on and t != frm:
-            return E_MOTORS_OFF
-        cycles = p * CYCLES_PER_US
-        min_interval = step_interval(s[S_MAX_RATE])
-        for d in (t[0] - frm[0], t[1] - frm[1]):
-            if d and cycles // abs(d) < min_interval:
-                return E_TOO_FAST
-        return OK
-
-    def _head_target(self, c: Command) -> list[int]:
-        w = c.words
-        t = list(self.plan)
-        for i, axis in enumerate("AB"):
-            if axis in w:
-                t[i] = w[axis] if self.absolute else self.plan[i] + w[axis]
-        return t
-
-    def _exec_g1(self, c: Command, line: int | None = None) -> int:
-        """G1 (and a G6's head, numbered `line`): one block, checked first."""
-        if self._queue_full():
-            return WAIT
-        w = c.words
-        t = self._head_target(c)
-        p = w["P"]
-        st = self._check_segment(self.plan, t, p)
-        if st != OK:
-            return st
-        cycles = p * CYCLES_PER_US
-        delta = (t[0] - self.plan[0], t[1] - self.plan[1])
-        if "S" in w:
-            self.laser_s = w["S"]
-        power = self.laser_s if self.laser_on else 0
-        self._push(Block("G1", self.last if line is None else line, delta, (cycles, cycles),
-                         float(p), power, p))
-        self.plan = t
-        return OK
-
-    def _exec_g6(self, c: Command) -> int:
-        """G6 (fb_exec.c exec_g6): every segment checked before any is queued, then the head
-        as a G1 and one block per item as slots free, numbered from the line's N."""
-        first = (self.last - len(c.items)) & 0xFFFFFFFF
-        if not self.g6_queued:
-            frm, t, p = list(self.plan), self._head_target(c), c.words["P"]
-            st = self._check_segment(frm, t, p)
-            for da, db, p in c.items:
-                if st != OK:
-                    break
-                frm, t = t, [t[0] + da, t[1] + db]
-                st = self._check_segment(frm, t, p)
-            if st != OK:
-                return st
-            st = self._exec_g1(c, first)
-            if st != OK:
-                return st
-            self.g6_queued = 1
-        while self.g6_queued <= len(c.items):
-            if self._queue_full():
-                return WAIT
-            da, db, p = c.items[self.g6_queued - 1]
-            cycles = p * CYCLES_PER_US
-            power = self.laser_s if self.laser_on else 0
-            self._push(Block("G1", (first + self.g6_queued) & 0xFFFFFFFF, (da, db),
-                             (cycles, cycles), float(p), power, p))
-            self.plan = [self.plan[0] + da, self.plan[1] + db]
-            self.g6_queued += 1
-        self.g6_queued = 0
-        return OK
-
-    def _exec_pen(self, c: Command) -> int:
-        """M280: a queued pen block, a dwell of its move + settle time (fb_exec.c)."""
-        if not self.settings[S_PEN_PARK]:
-            return E_NO_PEN
-        if self._queue_full():
-            return WAIT
-        w = c.words
-        move, settle = w.get("R", 0), w.get("D", 0)
-        dur = (move + settle) * 1000
-        self._push(Block("M280", self.last, duration_us=float(dur), p_us=dur,
-                         pen=(w["S"], move, settle)))
-        return OK
 
     def _exec_set(self, c: Command) -> int:
         if c.setting not in SETTINGS:

@@ -52,6 +52,11 @@ class Block:
     power: int = 0
     p_us: int = 0  # commanded duration (G1)
     pen: tuple[int, int, int] = (0, 0, 0)  # M280: pulse µs, move ms, settle ms
+    #: G7 (mock/raster.py): its scan's id (0: not a G7 block), whether it starts the scan,
+    #: and its pixel changes: µs from its start, power, the ring bytes each frees
+    scan: int = 0
+    scan_start: bool = False
+    changes: tuple[tuple[float, int, int], ...] = ()
 
 
 @dataclass

@@ -63,6 +63,13 @@ class MotionCore:
     first_queued: float  # when the first block of an idle queue was queued
     last_rx: float  # when the last byte arrived (laser silence timeout)
     resume_at: float | None  # a '~' lowered a parked pen: the hold ends then
+    # G7 scans (fb_raster.c): a scan's timeline runs, its id, its power now, the running
+    # block's next change, the pixel ring's bytes in use (mock/raster.py)
+    px_run: bool = False
+    px_scan: int = 0
+    px_power: int = 0
+    px_next: int = 0
+    ring_used: int = 0
 
     @property
     def pen_down(self) -> bool:
@@ -96,15 +103,47 @@ class MotionCore:
             out.append(k if blk.delta[i] >= 0 else -k)
         return out[0], out[1]
 
-    def _set_laser(self, power: int) -> None:
+    def _set_laser(self, power: int, at: float | None = None) -> None:
         if power != self.laser:
             self.laser = power
-            self._log_laser(self.t)
+            self._log_laser(self.t if at is None else at)
 
     def _log_laser(self, now: float) -> None:
         log = self.machine.laser_log
         if not log or log[-1][1] != self.laser:
             log.append((now, self.laser))
+
+    def _scan_begins(self, blk: Block, from_rest: bool) -> None:
+        """A block starts (fb_motion.c boundary): a G7 scan's first block starts its
+        timeline at laser 0; its later blocks keep it running, unless they start from a stop
+        (an underrun broke the timeline: dark until the next scan, their runs dropped); any
+        other block ends the scan and sets its own power."""
+        self.px_next = 0
+        if not blk.scan:
+            self.px_run = False
+            self._set_laser(blk.power)
+        elif blk.scan_start:
+            self.px_run, self.px_scan, self.px_power = True, blk.scan, 0
+            self._set_laser(0)
+        elif from_rest or not self.px_run or blk.scan != self.px_scan:
+            self.px_run = False
+            self.ring_used -= sum(nb for _, _, nb in blk.changes)
+            self.px_next = len(blk.changes)
+            self._set_laser(0)
+
+    def _pixels_until(self, elapsed_us: float) -> None:
+        """The running G7 block's changes up to ``elapsed_us``, each at its own clock time
+        (the pixel interrupt's; motion runs ``speed`` times faster than the firmware's)."""
+        blk = self.cur
+        if blk is None or not blk.changes:
+            return
+        while self.px_next < len(blk.changes) and blk.changes[self.px_next][0] <= elapsed_us:
+            off, power, nbytes = blk.changes[self.px_next]
+            self.px_next += 1
+            self.ring_used -= nbytes
+            if self.px_run:
+                self.px_power = power
+                self._set_laser(power, self._wall_until(off))
 
     def _pressed(self, axis: int, phys: int) -> bool:
         e = self.opt.endstops[axis]
@@ -122,7 +161,7 @@ class MotionCore:
             return self.t
         return self.t + max(0.0, elapsed_us - self.cur_elapsed) / (1e6 * self.opt.speed)
 
-    def _load(self, blk: Block) -> None:
+    def _load(self, blk: Block, from_rest: bool = False) -> None:
         """Start executing a motion block now (fb_motion.c load_next for a MOVE/HOME)."""
         self.cur = blk
         self.cur_elapsed = 0.0
@@ -135,7 +174,7 @@ class MotionCore:
                                      int(blk.p_us or round(blk.duration_us)), 0.0,
                                      started_s=self.t)
         self.machine.ledger.append(self.cur_entry)
-        self._set_laser(blk.power)
+        self._scan_begins(blk, from_rest)
 
     def _plan_endstop_alarm(self, blk: Block) -> None:
         """Find the first step towards a switch that leaves it pressed (alarm 30).
@@ -191,7 +230,7 @@ class MotionCore:
         self.machine.ledger.append(LedgerEntry(self.boot, kind, line, start, end, (0, 0), 0, 0,
                                                1.0, started_s=self.t))
 
-    def _load_next(self) -> bool:
+    def _load_next(self, from_rest: bool = False) -> bool:
         """Segment boundary: run synchronous blocks, load the next segment (fb_motion.c)."""
         while self.queue:
             blk = self.queue.popleft()
@@ -215,23 +254,26 @@ class MotionCore:
                 self.motors_enabled = blk.kind == "M17"
                 self.done_line = blk.line
                 continue
-            self._load(blk)
+            self._load(blk, from_rest)
             return True
         self.running = False
         self.underruns += 1
+        self.px_run = False
         self._set_laser(0)
         return False
 
     def _start(self) -> None:
         if not self.running and self.queue:
             self.running = True
-            self._load_next()
+            self._load_next(from_rest=True)
 
     def _stop(self, why: str) -> None:
         """Stop at once: no further step, laser off, the running block dropped (mo_stop)."""
         if self.cur is not None:
             self._retire(why)
         self.running = False
+        self.px_run = False
+        self.ring_used = 0
         self._set_laser(0)
         self.machine.pen.park_now(self.t, keep=False)
 
@@ -255,7 +297,8 @@ class MotionCore:
         self.held = False
         self.resume_at = None
         if self.cur is not None:
-            self._set_laser(self.cur.power)
+            self._set_laser((self.px_power if self.px_run else 0) if self.cur.scan
+                            else self.cur.power)
 
     def _error_hold(self) -> None:
         if not self.held and (self.running or self.queue):
@@ -285,8 +328,9 @@ class MotionCore:
         if t <= self.t:
             return
         if self.cur is not None and not self.held:
-            self.cur_elapsed = min(self.cur_stop_us,
-                                   self.cur_elapsed + self._speed_us(t - self.t))
+            elapsed = min(self.cur_stop_us, self.cur_elapsed + self._speed_us(t - self.t))
+            self._pixels_until(elapsed)
+            self.cur_elapsed = elapsed
         self.t = t
 
     def _maybe_start(self) -> None:

@@ -38,8 +38,8 @@ fault-free device.
   reply timeout is what notices it.
 - ``endstops=A,B``: switch A (B) is pressed while motor A's (B's) physical position is at
   most A (B) steps — the simavr harness's ``-a``/``-b`` semantics; either may be empty.
-- ``rx=N`` (128), ``queue=N`` (16), ``line=N`` (80): buffer sizes, reported in the banner.
-- ``version=S`` (1.0.0), ``proto=N`` (2): what the banner claims (for "unknown firmware"
+- ``rx=N`` (255), ``queue=N`` (16), ``line=N`` (128): buffer sizes, reported in the banner.
+- ``version=S`` (1.1.0), ``proto=N`` (4): what the banner claims (for "unknown firmware"
   tests).
 - ``machine=NAME``: ports opened with the same name drive one physical machine: its
   physical position, ledger and laser log survive a close/reopen, and opening the port is
@@ -90,10 +90,10 @@ class MockOptions:
     watchdog: int = 256
     power_cut_after: int | None = None
     endstops: tuple[int | None, int | None] = (None, None)
-    rx: int = 128
+    rx: int = 255
     queue: int = 16
-    line: int = 80
-    version: str = "1.0.0"
+    line: int = 128
+    version: str = "1.1.0"
     proto: int = protocol.PROTOCOL_VERSION
     machine: str | None = None
     true: tuple[float, ...] | None = None

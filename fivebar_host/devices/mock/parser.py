@@ -34,10 +34,13 @@ from fivebar_host.protocol import POS_LIMIT, crc16
 class Command:
     """One parsed line: command kind (``""`` for an empty line), words, line number."""
 
-    kind: str = ""  # "", G1 G6 G90 G91 G92 M3 M5 M17 M18 M110 M280 $I $$ $H $X $= $B
+    kind: str = ""  # "", G1 G6 G7 G90 G91 G92 M3 M5 M17 M18 M110 M280 $I $$ $H $X $= $B
     words: dict[str, int] = field(default_factory=dict)
-    #: G6: the segments after its head, (ΔA, ΔB, P µs) each; one line number each
+    #: G6: the segments after its head, (ΔA, ΔB, P µs) each; one line number each.
+    #: G7: all its segments (P 0 where none was given yet: the modal one applies)
     items: list[tuple[int, int, int]] = field(default_factory=list)
+    #: G7: the pixel powers (its data, unescaped)
+    pixels: bytes = b""
     n: int | None = None
     setting: int = 0
     value: int = 0
@@ -94,7 +97,7 @@ def _parse_int(s: bytes, i: int, end: int) -> tuple[int, int, int]:
 
 
 _ALLOWED = {"G1": "ABPS", "G6": "ABPS", "G92": "AB", "M3": "S", "M280": "SRD"}
-_G_CODES = {1: "G1", 6: "G6", 90: "G90", 91: "G91", 92: "G92"}
+_G_CODES = {1: "G1", 6: "G6", 7: "G7", 90: "G90", 91: "G91", 92: "G92"}
 _M_CODES = {3: "M3", 5: "M5", 17: "M17", 18: "M18", 110: "M110", 280: "M280"}
 
 
@@ -158,7 +161,44 @@ def _check_ranges(cmd: Command) -> int:
     return OK
 
 
+def _g7_code_end(s: bytes, i: int, end: int) -> int:
+    """The index past the command's code when it is G7, else 0 (fb_proto.c g7_code_end):
+    a G7's code may end at its data's ``:``."""
+    i = _skip_ws(s, i, end)
+    if i >= end or _upper(s[i]) != ord("G"):
+        return 0
+    code, j = 0, i + 1
+    while j < end and _is_digit(s[j]) and code < 1000:
+        code = code * 10 + s[j] - 0x30
+        j += 1
+    return j if code == 7 and j > i + 1 and (j >= end or not _is_digit(s[j])) else 0
+
+
+def _parse_g7(data: bytes, cmd: Command) -> int:
+    """A G7's binary data (fb_g7.c proto_g7_parse, docs/protocol.md 6.4) into the command:
+    its items (P 0 where the segment carries none: the modal one applies), U and T, its
+    pixels; the firmware's error for a malformed or out-of-range one."""
+    try:
+        g = protocol.read_g7(data)
+    except protocol.G7FormatError as e:
+        return {"number": E_BAD_NUMBER, "range": E_OUT_OF_RANGE}.get(e.kind, E_BAD_WORD)
+    cmd.items = [(da, db, p or 0) for p, da, db in g.items]
+    if g.u is not None:
+        cmd.words["U"] = g.u
+    if g.t is not None:
+        cmd.words["T"] = g.t
+    cmd.pixels = g.powers
+    return OK
+
+
 def _parse_body(s: bytes, i: int, end: int, cmd: Command) -> int:
+    g7 = _g7_code_end(s, i, end)
+    if g7:
+        cmd.kind = "G7"
+        k = _skip_ws(s, g7, end)
+        if k >= end or s[k] != ord(":"):
+            return E_MISSING_WORD  # no data: a G7 has at least one segment
+        return _parse_g7(s[k + 1:end], cmd)
     for k in range(i, end):
         if (s[k] < 0x20 or s[k] > 0x7E) and s[k] != 0x09:
             return E_INVALID_CHAR
@@ -177,7 +217,7 @@ def _parse_body(s: bytes, i: int, end: int, cmd: Command) -> int:
     if st != OK:
         return E_UNKNOWN_COMMAND if st == E_OUT_OF_RANGE else st
     kind = (_G_CODES if c == ord("G") else _M_CODES).get(code)
-    if kind is None:
+    if kind is None or kind == "G7":
         return E_UNKNOWN_COMMAND
     cmd.kind = kind
     st = _parse_words(s, i, end, cmd)
@@ -191,8 +231,9 @@ def _parse_words(s: bytes, i: int, end: int, cmd: Command) -> int:
         i = _skip_ws(s, i, end)
         if i >= end:
             return OK
-        # a G6's items start at a sign, or at a second P
-        if cmd.kind == "G6" and (s[i] in b"+-" or (_upper(s[i]) == ord("P") and "P" in cmd.words)):
+        # a G6's items start at a sign, or at a second P; a G7's at a sign or a P
+        if cmd.kind == "G6" and (s[i] in b"+-" or (_upper(s[i]) == ord("P")
+                                                   and "P" in cmd.words)):
             return _g6_items(s, i, end, cmd)
         w = chr(_upper(s[i]))
         if w not in "ABPSRD" or w not in allowed or w in cmd.words:
@@ -275,7 +316,7 @@ class Parsed:
 def _checksum_field_ok(line: bytes, end: int) -> bool:
     """Whether the checksum field after the last ``*`` (at ``end``) is right (fb_proto.c
     field_ok): ``<crc16>/<len>`` then only spaces or tabs, both decimal without a leading
-    zero, the CRC-16 (0..65535) that of the body ``line[:end]`` and the length (0..99)
+    zero, the CRC-16 (0..65535) that of the body ``line[:end]`` and the length (0..255)
     ``end``, the body's — the length catches every byte the body lost or gained."""
     nums: list[int] = []
     i = end + 1
@@ -294,8 +335,8 @@ def _checksum_field_ok(line: bytes, end: int) -> bool:
                 return False
             i += 1
     crc, body_len = nums
-    return (body_len <= 99 and body_len == end and _skip_ws(line, i, len(line)) == len(line)
-            and crc16(line[:end]) == crc)
+    return (body_len <= protocol.CHECKSUM_BODY_MAX and body_len == end
+            and _skip_ws(line, i, len(line)) == len(line) and crc16(line[:end]) == crc)
 
 
 def _lost_number(line: bytes, i: int, end: int, star: int) -> bool:
@@ -349,7 +390,8 @@ def parse_line(last: int, line: bytes, numbered: bool = False) -> Parsed:
     st = _parse_body(line, i, end, cmd)
     if st != OK:  # a line accepted with its parse error uses one line number
         cmd.items.clear()
-    extra = len(cmd.items)  # a G6 uses one line number per segment
+    # a G6 uses one line number per segment (its head's and its items'), a G7 one per item
+    extra = max(len(cmd.items) - (cmd.kind == "G7"), 0)
     if st == OK and cmd.kind == "M110":
         return Parsed(OK, cmd.n if cmd.n is not None else 0, True, cmd, cmd.n is not None)
     if cmd.n is not None:

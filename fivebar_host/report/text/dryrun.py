@@ -121,7 +121,7 @@ def joint_lines(job: Job, profile: Profile) -> list[str]:
             pul = profile.joints.pulses(job.angles_rad)
             lines.append(f"servo joints  pulses A {pul[:, 0].min():g}–{pul[:, 0].max():g} µs, "
                          f"B {pul[:, 1].min():g}–{pul[:, 1].max():g} µs (0.5 µs steps, dead "
-                         "band compensated); runs on the servo firmware, docs/protocol.md 6.4")
+                         "band compensated); runs on the servo firmware, docs/protocol.md 6.5")
         except FivebarError as e:
             lines.append(f"servo joints  {e}")
     return lines

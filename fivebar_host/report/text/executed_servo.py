@@ -1,6 +1,6 @@
 """The executed path of a run on the servo firmware, measured from the arms' pulses.
 
-The servo build sends each arm one pulse per 20 ms frame (docs/protocol.md 6.4); the
+The servo build sends each arm one pulse per 20 ms frame (docs/protocol.md 6.5); the
 emulator traces them (`svA`, `svB`). Each pulse goes through a *true* servo — the
 profile's curve (the default), and a dead band (`?deadband=A,B` degrees: the hysteresis
 of `kinematics.servo`, Eq. S1) — to the angle the horn really turns to, the two arms'

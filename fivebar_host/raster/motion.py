@@ -1,0 +1,321 @@
+"""Each scanline as joint-space segments: a ramp up, the image at one constant pen speed,
+a ramp down.
+
+A scanline is the straight Cartesian line P(σ) = P₀ + σ·d (d = ±u, σ mm from the entry
+boundary of its first burned pixel to L at the exit of its last).  The five-bar moves the
+pen along it through joint space, so the joint rates are g(σ)·v with g = dθ/dσ = J⁻¹d
+(rad/mm, both motors changing along the line) — the firmware runs each segment at constant
+joint rates, so the line is cut into *pieces*, each a joint-space chord between the inverse
+kinematics of two points on the line, quantised to steps once:
+
+* **scan pieces** cover [0, L], k pixels each (the last the rest), k the largest for which
+  every chord stays within `RasterCtx.chord_mm` of the line (the pen's bow between its
+  ends) and the piece's pixels fit one G7 line; each lasts k·h/v: constant pen speed over
+  the image, so every pixel gets the same dose;
+* **overscan**: a ramp from rest up to v before σ = 0 and down after L, at a Cartesian
+  acceleration a chosen so that the joints' accelerations g·a + (dg/dσ)·v² stay within
+  `ACCEL_SHARE` of `max_joint_rad_s2`; the overscan distance is v²/2a, so every pixel is
+  burned at the scan speed.  Each ramp is N pieces of equal time t_r/N (t_r = v/a), N
+  enough that the joint-speed step between neighbours (≈ g·v/N) stays within
+  `JUMP_SHARE` of the junction jump and at least `protocol.P_MIN_US` each.
+
+The chain is then checked on the staircase the firmware runs (`compile.planner.
+staircase_ratios`: the jump and the average acceleration at every boundary, from rest to
+rest); where it fails, a is lowered by `RELAX` and the scanline planned again.  Every
+target is checked like a drawing's (reach, joint limits, both singularity margins:
+`toolpath.segment.PoseChecker`); a failure names the scanline's row and the pixel column.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from fivebar_host import protocol
+from fivebar_host.compile import planner
+from fivebar_host.compile.steps import absolute_steps, step_angles
+from fivebar_host.config import Profile
+from fivebar_host.errors import JobError
+from fivebar_host.raster.grid import ScanGrid, Scanline
+from fivebar_host.toolpath.segment import (
+    REASON_KEY,
+    CheckFailedError,
+    PoseChecker,
+    wrap_to_limits,
+)
+from kinematics.arrays import FloatArray, IntArray
+
+#: Share of the joint acceleration limit the ramps plan with (the rest absorbs the step
+#: quantisation of the staircase).
+ACCEL_SHARE = 0.8
+#: Share of the junction jump between neighbouring ramp pieces.
+JUMP_SHARE = 0.6
+#: Factor on the acceleration when the staircase check fails, and how often.
+RELAX = 0.8
+TRIES = 12
+#: Step of the line samples the joint gains are read from, mm.
+SAMPLE_MM = 0.5
+#: Piece kinds.
+RAMP_IN, SCAN, RAMP_OUT = 0, 1, 2
+
+
+@dataclass(frozen=True)
+class RasterCtx:
+    """What every scanline is planned with."""
+
+    profile: Profile
+    checker: PoseChecker
+    grid: ScanGrid
+    v: float  # scan speed, mm/s
+    chord_mm: float  # the largest bow of a scan piece's chord off the line
+    k_max: int  # the most pixels of one scan piece (what one G7 line carries)
+
+    @property
+    def home(self) -> tuple[float, float]:
+        return self.profile.motors.home_rad
+
+    @property
+    def spr(self) -> float:
+        return self.profile.motors.steps_per_rev
+
+
+@dataclass(frozen=True)
+class ScanMotion:
+    """One scanline planned: piece ends (K+1) as ideal points, along-track σ and absolute
+    steps; per piece its duration (µs) and kind (RAMP_IN, SCAN, RAMP_OUT); the line's
+    start P₀ and direction d, its pixel count and the acceleration it was planned with."""
+
+    line: Scanline
+    p0: FloatArray
+    d: FloatArray
+    sigma: FloatArray
+    points: FloatArray
+    steps: IntArray
+    duration_us: IntArray
+    kind: IntArray
+    n_px: int
+    accel: float
+
+    @property
+    def time_us(self) -> int:
+        return int(self.duration_us.sum())
+
+
+def line_frame(grid: ScanGrid, sl: Scanline) -> tuple[FloatArray, FloatArray, float]:
+    """P₀, d and L of a scanline (module docstring)."""
+    h = grid.pitch
+    s_entry = sl.c0 * h if sl.sign > 0 else sl.c1 * h
+    p0 = grid.point(s_entry, sl.row)
+    return p0, sl.sign * grid.u, (sl.c1 - sl.c0) * h
+
+
+class LineGeo:
+    """One scanline's frame and its inverse kinematics, each point solved once: the pixel
+    boundaries' angles, the samples' every `SAMPLE_MM` (grown as the overscan asks), the
+    ramp acceleration once found.  Unchecked: `check` checks a planned scanline's points
+    (its piece ends and the samples over its extent) at once."""
+
+    def __init__(self, ctx: RasterCtx, sl: Scanline) -> None:
+        self.ctx, self.sl = ctx, sl
+        self.p0, self.d, self.length = line_frame(ctx.grid, sl)
+        self.n_px = sl.c1 - sl.c0
+        self._bounds: FloatArray | None = None
+        self._k0, self._th = 0, np.zeros((0, 2))
+        self.accel: float | None = None
+
+    @property
+    def bounds(self) -> FloatArray:
+        """Joint angles of the pixel boundaries (n_px + 1)."""
+        if self._bounds is None:
+            self._bounds = self.ik(np.arange(self.n_px + 1, dtype=np.float64)
+                                   * self.ctx.grid.pitch)
+        return self._bounds
+
+    def ik(self, sigma: FloatArray) -> FloatArray:
+        """Joint angles (wrapped into the limits) of the line's points at σ; an unreachable
+        one is the checked JobError (`_inverse`)."""
+        c = self.ctx.checker
+        inv = c.fb.inverse_batch(self.p0 + np.multiply.outer(sigma, self.d), c.mode)
+        if not inv.valid.all():
+            _inverse(self.ctx, self.sl, self.p0, self.d, sigma)
+        return wrap_to_limits(inv.angles, self.ctx.profile.motors.limits_rad)[0]
+
+    def samples(self, lo: float, hi: float) -> tuple[FloatArray, FloatArray]:
+        """σ and angles of the samples k·`SAMPLE_MM` covering [lo, hi]."""
+        k_lo, k_hi = math.floor(lo / SAMPLE_MM), math.ceil(hi / SAMPLE_MM)
+        k_hi = max(k_hi, k_lo + 2)
+        have_hi = self._k0 + self._th.shape[0]
+        if not self._th.shape[0]:
+            self._k0, have_hi = k_lo, k_lo
+        if k_lo < self._k0:
+            new = self.ik(np.arange(k_lo, self._k0, dtype=np.float64) * SAMPLE_MM)
+            self._th, self._k0 = np.concatenate((new, self._th)), k_lo
+        if k_hi + 1 > have_hi:
+            new = self.ik(np.arange(have_hi, k_hi + 1, dtype=np.float64) * SAMPLE_MM)
+            self._th = np.concatenate((self._th, new))
+        i = k_lo - self._k0
+        th = self._th[i:i + k_hi - k_lo + 1]
+        return np.arange(k_lo, k_hi + 1, dtype=np.float64) * SAMPLE_MM, th
+
+    def gains(self, lo: float, hi: float) -> tuple[float, float]:
+        """Largest |g| (rad/mm) and |dg/dσ| (rad/mm²) of either motor on σ ∈ [lo, hi]."""
+        sig, th = self.samples(lo, hi)
+        g = np.diff(th, axis=0) / np.diff(sig)[:, None]
+        dg = np.abs(np.diff(g, axis=0)) / SAMPLE_MM
+        return float(np.abs(g).max()), float(dg.max()) if dg.size else 0.0
+
+    def check(self, sigma: FloatArray, th: FloatArray) -> None:
+        """A planned scanline's points and the samples over its extent checked like a
+        drawing's (module docstring); JobError naming the row and column of the first
+        failing one."""
+        ss, ts = self.samples(float(sigma.min()), float(sigma.max()))
+        sig = np.concatenate((sigma, ss))
+        ang = np.concatenate((th, ts))
+        pts = self.p0 + np.multiply.outer(sig, self.d)
+        code, m = self.ctx.checker.codes(ang, pts)
+        bad = np.flatnonzero(code)
+        if bad.size:
+            i = int(bad[np.argmin(sig[bad])])
+            c = int(code[i])
+            msg = self.ctx.checker.explain(c, ang[i], pts[i], m[i])
+            raise _named(self.ctx, self.sl, CheckFailedError(
+                i, (float(pts[i, 0]), float(pts[i, 1])), REASON_KEY[c], msg), float(sig[i]))
+
+
+def _named(ctx: RasterCtx, sl: Scanline, e: CheckFailedError, s: float) -> JobError:
+    """The JobError of a failing point σ = s of the scanline: its row and pixel column."""
+    col = sl.c0 + s / ctx.grid.pitch if sl.sign > 0 else sl.c1 - s / ctx.grid.pitch
+    where = ("in the overscan before" if s < 0 else "in the overscan after"
+             if s > (sl.c1 - sl.c0) * ctx.grid.pitch else "at")
+    return JobError(f"scanline of row {sl.row}: {where} column {col:.1f} "
+                    f"({e.point[0]:.2f}, {e.point[1]:.2f}) mm: {e.message}", None, e.reason)
+
+
+def _inverse(ctx: RasterCtx, sl: Scanline, p0: FloatArray, d: FloatArray,
+             sigma: FloatArray) -> FloatArray:
+    """Checked joint angles of the line's points at σ; a failing point is a JobError naming
+    the row and the pixel column."""
+    pts = p0 + np.multiply.outer(sigma, d)
+    try:
+        return ctx.checker.inverse(pts)
+    except CheckFailedError as e:
+        raise _named(ctx, sl, e, float(sigma[e.index])) from None
+
+
+def gains(ctx: RasterCtx, sl: Scanline, lo: float, hi: float) -> tuple[float, float]:
+    """Largest |g| (rad/mm) and |dg/dσ| (rad/mm²) of either motor on σ ∈ [lo, hi]."""
+    return LineGeo(ctx, sl).gains(lo, hi)
+
+
+def ramp_accel(geo: LineGeo) -> float:
+    """The Cartesian acceleration of the scanline's ramps (module docstring)."""
+    ctx, sl, length = geo.ctx, geo.sl, geo.length
+    alpha = ACCEL_SHARE * ctx.profile.motion.max_joint_rad_s2
+    a, v = math.inf, ctx.v
+    for _ in range(3):  # the overscan's own gains count too
+        over = 0.0 if math.isinf(a) else v * v / (2 * a)
+        g, dg = geo.gains(-over - SAMPLE_MM, length + over + SAMPLE_MM)
+        room = alpha - dg * v * v
+        if room <= 0.1 * alpha:
+            raise JobError(f"scanline of row {sl.row}: at {v:.0f} mm/s the joints' "
+                           "acceleration along the line alone exceeds max_joint_rad_s2; "
+                           "lower --speed", None, "too_fast")
+        a = room / g
+    return a
+
+
+def _piece_ends(n_px: int, k: int) -> IntArray:
+    """Pixel boundaries that end the scan pieces (k pixels each, the last the rest)."""
+    return np.asarray([*range(0, n_px, k), n_px], dtype=np.int64)
+
+
+def scan_k(geo: LineGeo) -> int:
+    """The most pixels a scan piece may hold (module docstring: its chord's bow)."""
+    ctx = geo.ctx
+    k = min(ctx.k_max, geo.n_px)
+    while k > 1:
+        ends = _piece_ends(geo.n_px, k)
+        mids = 0.5 * (ends[:-1] + ends[1:]) * ctx.grid.pitch
+        th = geo.bounds[ends]
+        pts, _ = ctx.checker.forward(0.5 * (th[:-1] + th[1:]))
+        off = pts - geo.p0
+        across = np.abs(off[:, 0] * geo.d[1] - off[:, 1] * geo.d[0])
+        along = np.abs(off @ geo.d - mids)
+        if float(np.maximum(across, along).max()) <= ctx.chord_mm:
+            return k
+        k = max(1, k * 3 // 4)
+    return 1
+
+
+def _ramp_sigma(v: float, a: float, n: int) -> tuple[FloatArray, FloatArray]:
+    """Ramp-in piece ends: σ (−v²/2a … 0) and times (0 … t_r) at n equal steps of time."""
+    t_r = v / a
+    t = np.linspace(0.0, t_r, n + 1)
+    return 0.5 * a * t * t - v * v / (2 * a), t
+
+
+def _cum_us(times_s: FloatArray) -> IntArray:
+    """Whole-µs durations between consecutive times, rounded on the running time (no drift)."""
+    us = np.rint(np.asarray(times_s) * 1e6).astype(np.int64)
+    return np.diff(us)
+
+
+def plan_scanline(geo: LineGeo, k: int, a: float) -> ScanMotion:
+    """The scanline at ramp acceleration `a` with scan pieces of k pixels (module docstring),
+    not yet checked on the staircase."""
+    ctx, sl, p0, d, length = geo.ctx, geo.sl, geo.p0, geo.d, geo.length
+    v, jump = ctx.v, ctx.profile.motion.junction_jump_rad_s
+    g, _ = geo.gains(-v * v / (2 * a), length + v * v / (2 * a))
+    n = max(1, math.ceil(g * v / (JUMP_SHARE * jump)))
+    t_r = v / a
+    if t_r / n < protocol.P_MIN_US * 1e-6:  # pieces of at least the shortest P
+        n = max(1, math.floor(t_r / (protocol.P_MIN_US * 1e-6)))
+    s_in, t_in = _ramp_sigma(v, a, n)
+    ends = _piece_ends(geo.n_px, k)
+    scan = ends * ctx.grid.pitch
+    s_out = length - s_in[::-1]
+    sigma = np.concatenate((s_in, scan[1:], s_out[1:]))
+    kind = np.concatenate((np.full(n, RAMP_IN), np.full(scan.shape[0] - 1, SCAN),
+                           np.full(n, RAMP_OUT))).astype(np.int64)
+    th = np.concatenate((geo.ik(s_in), geo.bounds[ends[1:]], geo.ik(s_out[1:])))
+    steps = absolute_steps(th, ctx.home, ctx.spr)
+    # the scan pieces last what the pen really travels along the line between their
+    # quantised ends, at v: every pixel boundary is crossed at σ/v from one time origin,
+    # across pieces too, so one G7 line's U + i·T spans several pieces
+    pts, _ = ctx.checker.forward(step_angles(steps[n:n + scan.shape[0]], ctx.home, ctx.spr))
+    s_exec = (pts - p0) @ d
+    times = np.concatenate((t_in, t_in[-1] + (s_exec[1:] - s_exec[0]) / v))
+    times = np.concatenate((times, times[-1] + t_in[1:]))
+    dur = np.maximum(_cum_us(times), protocol.P_MIN_US)
+    return ScanMotion(sl, p0, d, sigma, p0 + np.multiply.outer(sigma, d), steps, dur, kind,
+                      geo.n_px, a)
+
+
+def staircase_ok(ctx: RasterCtx, sm: ScanMotion) -> bool:
+    """Whether the firmware's staircase of the scanline keeps the jump and acceleration
+    limits at every boundary, from rest to rest."""
+    th = step_angles(sm.steps, ctx.home, ctx.spr)
+    jump, acc = planner.staircase_ratios(np.diff(th, axis=0), sm.duration_us, None,
+                                         ctx.profile.motion.max_joint_rad_s2,
+                                         ctx.profile.motion.junction_jump_rad_s)
+    rate = np.abs(np.diff(th, axis=0)).max(axis=1) / (sm.duration_us * 1e-6)
+    return (float(jump.max()) <= 1.0 and float(acc.max()) <= 1.0
+            and float(rate.max()) <= ctx.profile.motion.max_joint_rad_s * (1 + 1e-9))
+
+
+def plan(geo: LineGeo, k: int) -> ScanMotion:
+    """The scanline planned with scan pieces of k pixels and checked (module docstring)."""
+    ctx = geo.ctx
+    a = geo.accel if geo.accel is not None else ramp_accel(geo)
+    for _ in range(TRIES):
+        sm = plan_scanline(geo, k, a)
+        if staircase_ok(ctx, sm):
+            geo.accel = a
+            geo.check(sm.sigma, step_angles(sm.steps, ctx.home, ctx.spr))
+            return sm
+        a *= RELAX
+    raise JobError(f"scanline of row {geo.sl.row}: no ramp keeps the joints within "
+                   f"max_joint_rad_s2 and the junction jump at {ctx.v:.0f} mm/s; lower --speed",
+                   None, "too_fast")
