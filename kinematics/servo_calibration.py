@@ -127,7 +127,7 @@ class ServoMachine:
                    ) -> FloatArray:
         """Pulses (N, 2) µs whose curve angles are `angles` (N, 2) rad (taken within half a turn
         of each curve's centre angle c_k0), by bisection over `range_us` (each cubic taken as
-        monotone there); an angle the range cannot reach gets the nearer end."""
+        monotone there); NaN where the range cannot reach the angle."""
         th = np.asarray(angles, dtype=np.float64).reshape(-1, 2)
         c0 = self.coeffs[:, 0]
         th = c0 + (th - c0 + math.pi) % (2.0 * math.pi) - math.pi  # the turn nearest c_k0
@@ -143,7 +143,13 @@ class ServoMachine:
             below = (f < th) == rising
             lo = np.where(below, mid, lo)
             hi = np.where(below, hi, mid)
-        return np.asarray(cu + 0.5 * (lo + hi) * PULSE_SCALE_US, dtype=np.float64)
+        u = 0.5 * (lo + hi)
+        ends = ((np.asarray(range_us)[:, None] - cu) / PULSE_SCALE_US)  # (2 ends, 2 servos)
+        f_ends = np.array([[np.polynomial.polynomial.polyval(ends[e, k], self.coeffs[k])
+                            for k in range(2)] for e in range(2)])
+        tol = 1e-9
+        inside = ((th >= f_ends.min(axis=0) - tol) & (th <= f_ends.max(axis=0) + tol))
+        return np.asarray(np.where(inside, cu + u * PULSE_SCALE_US, np.nan), dtype=np.float64)
 
     def curve(self, k: int, range_us: tuple[float, float], samples: int = 17) -> ServoCurve:
         """Servo k's cubic as a `ServoCurve` table over `range_us` (raises `ServoError` if it
@@ -209,7 +215,7 @@ def commanded_pulses(model: ServoMachine, points: ArrayLike, approach: ArrayLike
                      ) -> FloatArray:
     """The pulses (N, 2) µs a model sends to draw `points` (N, 2) after moves of sign
     `approach`: the IK angles overshot by s·w/2 (the dead-band take-up) through the inverse
-    curves."""
+    curves (NaN outside 500–2500 µs; raises `UnreachableError` off the model's reach)."""
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     th = np.asarray(model.fivebar().inverse_batch(pts, mode).require(pts))
     s = np.asarray(approach, dtype=np.float64).reshape(-1, 2)
@@ -219,9 +225,13 @@ def commanded_pulses(model: ServoMachine, points: ArrayLike, approach: ArrayLike
 def pattern_shape_error(true: ServoMachine, model: ServoMachine, points: ArrayLike,
                         approach: ArrayLike, mode: str, assembly: str) -> FloatArray:
     """|aligned drawn − intended| (N,) mm when `model` draws `points` on the machine `true`
-    (module doc)."""
+    (module doc); NaN where the model's pulses or the true machine cannot reach a point."""
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    drawn = true.pen_points(commanded_pulses(model, pts, approach, mode), approach, assembly)
+    s = np.asarray(approach, dtype=np.float64).reshape(-1, 2)
+    pulses = commanded_pulses(model, pts, s, mode)
+    drawn = np.full_like(pts, np.nan)
+    have = np.isfinite(pulses).all(axis=1)
+    drawn[have] = true.pen_points(pulses[have], s[have], assembly)
     ok = np.isfinite(drawn).all(axis=1)
     phi, t = rigid_fit(drawn[ok], pts[ok])
     err = np.full(pts.shape[0], np.nan)
