@@ -40,7 +40,7 @@ from fivebar_host.calibrate.pattern import (
     svg_text,
 )
 from fivebar_host.compile import CompileOptions, compile_job, write_atomic
-from fivebar_host.config import ConfigError, Profile, parse_profile
+from fivebar_host.config import ConfigError, Profile, load_profile
 from fivebar_host.joints import ServoJoints
 from kinematics.arrays import FloatArray
 from kinematics.calibration import CalibrationError
@@ -318,14 +318,18 @@ def fitted_servo_text(profile: Profile, profile_text: str, res: ServoFit, note: 
 
 def write_fitted_servo(path: Path, profile: Profile, cal: ServoCalibration, note: str
                        ) -> Profile:
-    """Write the fitted servo profile after parsing it back (it must be a valid profile)."""
-    import tomllib
+    """Write the fitted servo profile after loading it back (it must be a valid profile,
+    partial ones with the bundled default's keys, as `load_profile` reads them)."""
+    import tempfile
 
     text = fitted_servo_text(profile, Path(profile.source).read_text(encoding="utf-8"),
                              cal.result, note)
     try:
-        fitted = parse_profile(tomllib.loads(text), str(path))
-    except (ConfigError, tomllib.TOMLDecodeError) as e:
+        with tempfile.TemporaryDirectory() as tmp:
+            check = Path(tmp) / path.name
+            check.write_text(text, encoding="utf-8")
+            fitted = load_profile(check)
+    except ConfigError as e:
         raise CalibrationError(f"the fitted values do not make a valid profile ({e}); "
                                "nothing was written") from e
     write_atomic(path, text)
