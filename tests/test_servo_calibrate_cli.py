@@ -83,3 +83,24 @@ def test_servo_pattern_and_fit(tmp_path: Path) -> None:
         assert m is not None
         assert abs(float(m.group(1)) - want) <= 3.0 * float(m.group(2))
         assert getattr(prof.geometry, name) == pytest.approx(float(m.group(1)), abs=1e-4)
+
+
+def test_cnc_shield_profile_loads_and_dry_runs(tmp_path: Path) -> None:
+    """configs/servo-cnc-shield.toml: a servo profile whose wiring comment names the pins the
+    servo build drives (firmware/fivebar/config.h), and it dry-runs an example."""
+    path = ROOT / "configs" / "servo-cnc-shield.toml"
+    prof = load_profile(path)
+    assert prof.joints is not None
+    cfg = (ROOT / "firmware" / "fivebar" / "config.h").read_text()
+    text = path.read_text()
+    for macro in ("PIN_SERVO_A_BIT", "PIN_SERVO_B_BIT", "PIN_SERVO_BIT"):
+        m = re.search(rf"#define {macro}\s+\d+\s+/\* (D\d+)", cfg)
+        assert m is not None and m.group(1) in text, macro
+    # the curve covers the joint limits (every pose the profile allows has a pulse)
+    for j, (lo, hi) in zip(prof.joints.joints, prof.motors.limits_rad, strict=True):
+        a, b = j.curve.range_rad
+        assert a <= lo and hi <= b
+    code, out = run("plot", str(ROOT / "examples" / "fivebar_text.svg"), "--config",
+                    str(path), "--fit", "--dry-run", "--preview", str(tmp_path / "p.png"))
+    assert code == 0, out
+    assert "servo joints" in out
