@@ -12,7 +12,7 @@ import json
 import math
 import tomllib
 from collections.abc import Iterable
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -484,8 +484,23 @@ def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
         joints = parse_joints(_Table(doc, "joints", source) if "joints" in doc else None)
     except FivebarError as e:
         raise ConfigError(str(e)) from e
+    if joints is not None:
+        motors = _servo_slack(motors, joints, source)
     return Profile(geometry, motors, kin, motion, laser, serial, source, tool, pen,
                    _parse_text(doc, source), joints)
+
+
+def _servo_slack(motors: Motors, joints: ServoJoints, source: str) -> Motors:
+    """A servo's dead band is its backlash on the step grid: its output lies within ±w/2 of
+    the command (kinematics.servo Eq. S1), i.e. within [m − B, m] of a count m = command +
+    B/2, B = w in steps (compile/backlash.py Eq. B1). So a servo profile's `backlash_steps`
+    are its dead bands, rounded to whole steps, taken up at every reversal like a stepper's;
+    `ServoMap` sends each count less B/2 (controllers/fivebar/servo.py)."""
+    if any(motors.backlash_steps):
+        raise ConfigError(f"{source}: [motors] backlash_steps: a servo profile's slack is "
+                          "its [joints] dead_band_deg (leave backlash_steps at [0, 0])")
+    lash = [round(j.dead_band_rad / motors.rad_per_step) for j in joints.joints]
+    return replace(motors, backlash_steps=(lash[0], lash[1]))
 
 
 def _read_toml(p: Path) -> dict[str, Any]:
