@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from fivebar_host.errors import FivebarError, InputError
-from fivebar_host.joints import ServoJoints, parse_joints
+from fivebar_host.joints import ServoJoints, parse_joints, servo_backlash_steps
 from fivebar_host.protocol import BASE_BAUD, BAUD_RATES
 from fivebar_host.toolpath.fonts.library import FontLibrary, TextConfig
 from kinematics.extension import ExtendedFiveBar
@@ -482,25 +482,13 @@ def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
     tool, pen = _parse_pen(doc, source)
     try:
         joints = parse_joints(_Table(doc, "joints", source) if "joints" in doc else None)
+        if joints is not None:  # a servo's dead band is its slack (fivebar_host/joints.py)
+            motors = replace(motors, backlash_steps=servo_backlash_steps(joints, motors, source))
     except FivebarError as e:
         raise ConfigError(str(e)) from e
-    if joints is not None:
-        motors = _servo_slack(motors, joints, source)
     return Profile(geometry, motors, kin, motion, laser, serial, source, tool, pen,
                    _parse_text(doc, source), joints)
 
-
-def _servo_slack(motors: Motors, joints: ServoJoints, source: str) -> Motors:
-    """A servo's dead band is its backlash on the step grid: its output lies within ±w/2 of
-    the command (kinematics.servo Eq. S1), i.e. within [m − B, m] of a count m = command +
-    B/2, B = w in steps (compile/backlash.py Eq. B1). So a servo profile's `backlash_steps`
-    are its dead bands, rounded to whole steps, taken up at every reversal like a stepper's;
-    `ServoMap` sends each count less B/2 (controllers/fivebar/servo.py)."""
-    if any(motors.backlash_steps):
-        raise ConfigError(f"{source}: [motors] backlash_steps: a servo profile's slack is "
-                          "its [joints] dead_band_deg (leave backlash_steps at [0, 0])")
-    lash = [round(j.dead_band_rad / motors.rad_per_step) for j in joints.joints]
-    return replace(motors, backlash_steps=(lash[0], lash[1]))
 
 
 def _read_toml(p: Path) -> dict[str, Any]:

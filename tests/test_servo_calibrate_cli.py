@@ -16,7 +16,7 @@ from click.testing import CliRunner
 
 from fivebar_host.calibrate.servo import servo_nominal
 from fivebar_host.cli import main
-from fivebar_host.config import load_profile
+from fivebar_host.config import ConfigError, load_profile
 from kinematics.calibration import rotation
 from kinematics.servo_calibration import ServoMachine
 
@@ -104,3 +104,28 @@ def test_cnc_shield_profile_loads_and_dry_runs(tmp_path: Path) -> None:
                     str(path), "--fit", "--dry-run", "--preview", str(tmp_path / "p.png"))
     assert code == 0, out
     assert "servo joints" in out
+
+
+def test_servo_dead_band_is_the_profile_slack(tmp_path: Path) -> None:
+    """A servo profile's dead bands are its backlash_steps (1° on a 0.1125° grid: 9 steps),
+    and ServoMap sends each count less half of it: a count m is the command m − B/2, whose
+    output band [command − w/2, command + w/2] is the play [m − B, m] (to the grid's
+    rounding of w); T2∘T1 stays the identity."""
+    from fivebar_host.controllers.fivebar.servo import ServoMap
+
+    prof = load_profile(PLOTCLOCK)
+    assert prof.joints is not None
+    assert prof.motors.backlash_steps == (9, 9)
+    smap = ServoMap.of(prof.joints, prof)
+    q = prof.motors.rad_per_step
+    steps = np.arange(-300, 301, 7)
+    for j in range(2):
+        ticks = smap.ticks(j, steps)
+        want = prof.joints.joints[j].curve.pulse(prof.motors.home_rad[j] + (steps - 4.5) * q)
+        np.testing.assert_allclose(ticks / 2.0, want, atol=0.25)
+        assert [smap.steps(j, int(t)) for t in ticks] == steps.tolist()
+    bad = tmp_path / "bad.toml"
+    bad.write_text(PLOTCLOCK.read_text().replace("endstops = false",
+                                                 "endstops = false\nbacklash_steps = [4, 4]"))
+    with pytest.raises(ConfigError, match="dead_band_deg"):
+        load_profile(bad)
