@@ -141,7 +141,7 @@ def _layout_ticks(profile: Profile, model: ServoMachine, m: str, count: int
 
 
 def make_servo_pattern(profile: Profile, svg_path: Path, *, mode: str | None = None,
-                       count: int = 30) -> tuple[Pattern, list[dict[str, list[float]]]]:
+                       count: int = 60) -> tuple[Pattern, list[dict[str, list[float]]]]:
     """Lay out the ticks, write the SVG and compile it the way `fivebar plot` will; the
     pattern and each mark's servo fields (`servo_mark_fields`)."""
     m = pattern_mode(profile, mode)

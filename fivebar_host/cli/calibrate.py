@@ -30,12 +30,13 @@ def calibrate() -> None:
               required=True, help="The pattern drawing (SVG) to plot.")
 @click.option("--marks", "marks_path", type=click.Path(dir_okay=False, path_type=Path),
               required=True, help="Where to write the marks file (JSON).")
-@click.option("--count", type=click.IntRange(25, 200), default=30, show_default=True,
-              help="Number of marks.")
+@click.option("--count", type=click.IntRange(25, 200), default=None,
+              help="Number of marks (default: 30; 60 ticks on a servo profile, which fits "
+              "twice the unknowns).")
 @click.option("--mode", type=click.Choice(["++", "+-", "-+", "--"]), default=None,
               help="Working mode (default: the profile's).")
 @handle_errors
-def pattern_cmd(config_path: Path | None, output: Path, marks_path: Path, count: int,
+def pattern_cmd(config_path: Path | None, output: Path, marks_path: Path, count: int | None,
                 mode: str | None) -> None:
     """Write a test pattern of numbered marks over the safe region and its marks file."""
     from fivebar_host.calibrate.pattern import (
@@ -49,7 +50,7 @@ def pattern_cmd(config_path: Path | None, output: Path, marks_path: Path, count:
     if prof.joints is not None:  # servos: ticks with planned approaches (calibrate/servo.py)
         from fivebar_host.calibrate.servo import make_servo_pattern, servo_plot_command
 
-        pat, fields = make_servo_pattern(prof, output, mode=mode, count=count)
+        pat, fields = make_servo_pattern(prof, output, mode=mode, count=count or 60)
         doc = marks_document(prof, pat, output)
         doc["plot_command"] = servo_plot_command(output, prof, pat)
         for mk, f in zip(doc["marks"], fields, strict=True):
@@ -61,7 +62,7 @@ def pattern_cmd(config_path: Path | None, output: Path, marks_path: Path, count:
         click.echo("then measure each numbered tick's end (where the pen stopped) and write "
                    "a CSV with the header id,x_mm,y_mm")
         return
-    pat = make_pattern(prof, output, mode=mode, count=count)
+    pat = make_pattern(prof, output, mode=mode, count=count or 30)
     write_marks(marks_path, marks_document(prof, pat, output))
     click.echo(f"wrote {output} ({len(pat.marks)} marks, {pat.page_mm[0]:g} × "
                f"{pat.page_mm[1]:g} mm page, working mode {pat.mode}) and {marks_path}")
