@@ -39,14 +39,14 @@ from fivebar_host.calibrate.pattern import (
     pattern_mode,
     svg_text,
 )
-from fivebar_host.compile import CompileOptions, compile_job, write_atomic
+from fivebar_host.compile import CompileOptions, Job, compile_job, write_atomic
 from fivebar_host.config import ConfigError, Profile, load_profile
 from fivebar_host.joints import ServoJoints
 from kinematics.arrays import FloatArray
 from kinematics.calibration import CalibrationError
 from kinematics.calibration_analysis import SafeGrid
 from kinematics.extension import ExtendedFiveBar
-from kinematics.servo import ServoError, quantise_us
+from kinematics.servo import ServoError
 from kinematics.servo_calibration import (
     SERVO_PARAM_NAMES,
     ServoFit,
@@ -166,7 +166,7 @@ def make_servo_pattern(profile: Profile, svg_path: Path, *, mode: str | None = N
             raise PatternError(f"tick {n} at ({c[0]:.3f}, {c[1]:.3f}) mm is not a target of "
                                "the compiled pattern")
         i = int(hit[0])
-        fields.append(servo_mark_fields(profile, job.angles_rad, i))
+        fields.append(servo_mark_fields(profile, job, i))
         if fields[-1]["approach"] != list(signs[n - 1]):
             raise PatternError(f"tick {n}: the compiled pattern comes into it from the other "
                                "side than planned")
@@ -184,15 +184,17 @@ def servo_plot_command(svg: Path, profile: Profile, pattern: Pattern) -> str:
             "--keep-order --port PORT")
 
 
-def servo_mark_fields(profile: Profile, angles_rad: FloatArray, row: int
-                      ) -> dict[str, list[float]]:
-    """`pulses_us` and `approach` of the job row `row` (angles (T+1, 2) rad): the pulses the
-    servo firmware is sent there and the sign of each joint's last move into it."""
-    j = servo_joints(profile)
+def servo_mark_fields(profile: Profile, job: Job, row: int) -> dict[str, list[float]]:
+    """`pulses_us` and `approach` of the job's target `row`: the pulses the servo firmware
+    is sent there (`ServoMap`: the motor counts, the dead band's take-up included, through
+    the curves) and the sign of each joint's last move into it."""
+    from fivebar_host.controllers.fivebar.servo import TICKS_PER_US, ServoMap
+
+    smap = ServoMap.of(servo_joints(profile), profile)
     out_p, out_s = [], []
-    for k, joint in enumerate(j.joints):
-        out_p.append(float(quantise_us(joint.curve.pulse(angles_rad[row, k]))))
-        d = np.diff(angles_rad[: row + 1, k])
+    for k in range(2):
+        out_p.append(float(smap.ticks(k, job.steps[row:row + 1, k])[0]) / TICKS_PER_US)
+        d = np.diff(job.angles_rad[: row + 1, k])
         moved = d[np.abs(d) > 1e-12]
         out_s.append(float(np.sign(moved[-1])) if moved.size else 0.0)
     return {"pulses_us": out_p, "approach": out_s}
