@@ -21,7 +21,8 @@ if TYPE_CHECKING:
 
 @main.group("calibrate")
 def calibrate() -> None:
-    """Calibrate link lengths and home angles from a drawn test pattern."""
+    """Calibrate link lengths and home angles (servos: curves and dead bands) from a drawn
+    test pattern."""
 
 
 @calibrate.command("pattern")
@@ -86,7 +87,8 @@ def pattern_cmd(config_path: Path | None, output: Path, marks_path: Path, count:
 @handle_errors
 def fit_cmd(measured: Path, marks_path: Path, config_path: Path | None, output: Path,
             sigma: float | None, max_iterations: int) -> None:
-    """Fit a1, b1, a2, b2, w and the home angles to MEASURED (CSV id,x_mm,y_mm)."""
+    """Fit a1, b1, a2, b2, w and the home angles (servos: the curves and dead bands) to
+    MEASURED (CSV id,x_mm,y_mm)."""
     from fivebar_host.calibrate.fit import calibrate as run_fit
     from fivebar_host.calibrate.fit import report_lines, write_fitted
     from fivebar_host.calibrate.measure import read_measured, read_pattern
