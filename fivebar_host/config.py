@@ -12,14 +12,14 @@ import json
 import math
 import tomllib
 from collections.abc import Iterable
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from fivebar_host.errors import FivebarError, InputError
-from fivebar_host.joints import ServoJoints, parse_joints
+from fivebar_host.joints import ServoJoints, parse_joints, servo_backlash_steps
 from fivebar_host.protocol import BASE_BAUD, BAUD_RATES
 from fivebar_host.toolpath.fonts.library import FontLibrary, TextConfig
 from kinematics.extension import ExtendedFiveBar
@@ -489,10 +489,13 @@ def parse_profile(doc: dict[str, Any], source: str = "<profile>") -> Profile:
     tool, pen = _parse_pen(doc, source)
     try:
         joints = parse_joints(_Table(doc, "joints", source) if "joints" in doc else None)
+        if joints is not None:  # a servo's dead band is its slack (fivebar_host/joints.py)
+            motors = replace(motors, backlash_steps=servo_backlash_steps(joints, motors, source))
     except FivebarError as e:
         raise ConfigError(str(e)) from e
     return Profile(geometry, motors, kin, motion, laser, serial, source, tool, pen,
                    _parse_text(doc, source), joints)
+
 
 
 def _read_toml(p: Path) -> dict[str, Any]:

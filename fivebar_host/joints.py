@@ -160,6 +160,20 @@ def _parse_servos(t: Any) -> ServoJoints:
     return ServoJoints((joints[0], joints[1]), refresh)
 
 
+def servo_backlash_steps(joints: ServoJoints, motors: Any, source: str) -> tuple[int, int]:
+    """A servo profile's `[motors] backlash_steps`: its dead bands on the step grid. A servo's
+    output stays within ±w/2 of its command (kinematics.servo Eq. S1): the play j ∈ [m − B,
+    m] of a count m = command + B/2 with B = w in steps (compile/backlash.py Eq. B1). So the
+    dead bands, rounded to whole steps, are taken up at every reversal like a stepper's
+    slack, and `ServoMap` sends each count less B/2 (controllers/fivebar/servo.py).
+    `motors` (a `config.Motors`) must have its own backlash_steps (0, 0)."""
+    if any(motors.backlash_steps):
+        raise FivebarError(f"{source}: [motors] backlash_steps: a servo profile's slack is "
+                           "its [joints] dead_band_deg (leave backlash_steps at [0, 0])")
+    b = [round(j.dead_band_rad / motors.rad_per_step) for j in joints.joints]
+    return b[0], b[1]
+
+
 def require_stepper_joints(joints: ServoJoints | None, source: str) -> None:
     """Refuse to run a job on servo joints with a controller other than fivebar's (only
     fivebar's servo build drives arm servos: docs/protocol.md 6.5)."""

@@ -2,8 +2,10 @@
 configs/plotclock.toml --fit --port fivebar-sim:// --yes` runs the Plotclock's servo profile
 on the servo build of the firmware (`servo=1`, added by the servo controller), and the
 executed path, measured from the arms' servo pulses through the true servos (the profile's
-curve), lies within the stated bound; true servos with a 2° dead band (`?deadband=2,2`) draw
-off it and fail the run (exit 3)."""
+curve and the profile's 1° dead band, which the run compensates), lies within the stated
+bound; so does it with the dead band given in the URL (`?deadband=1,1`, issue 38's dead-band
+command); true servos with no dead band (`?deadband=0,0`: the compensation overshoots) or a
+2° one (`?deadband=2,2`: half of it left) draw off it and fail the run (exit 3)."""
 
 from __future__ import annotations
 
@@ -41,7 +43,15 @@ def test_plotclock_servo_run_within_its_bound(tmp_path: Path) -> None:
     assert len(csv) > 500  # one row per moving frame of the 32 s job
 
 
-def test_true_servos_with_a_dead_band_draw_off_the_bound(tmp_path: Path) -> None:
-    code, dev, bound, out = _plot(tmp_path, "&deadband=2,2")
+def test_dead_band_compensated_within_its_bound(tmp_path: Path) -> None:
+    code, dev, bound, out = _plot(tmp_path, "&deadband=1,1")
+    assert code == 0 and 0.0 < dev <= bound, out
+    assert "deadband= machine" in out
+
+
+@pytest.mark.parametrize("band", ["0,0", "2,2"])
+def test_true_servos_with_another_dead_band_draw_off_the_bound(tmp_path: Path,
+                                                               band: str) -> None:
+    code, dev, bound, out = _plot(tmp_path, f"&deadband={band}")
     assert code == 3 and dev > bound, out
     assert "deadband= machine" in out

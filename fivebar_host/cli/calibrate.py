@@ -1,5 +1,6 @@
 """`fivebar calibrate pattern|fit|check`: find the machine's real link lengths and home angles
-from a drawn test pattern (docs/calibration.md). Thin wrappers over
+(for a servo profile: each servo's pulse ↔ angle curve and dead band, and the link lengths,
+`fivebar_host.calibrate.servo`) from a drawn test pattern (docs/calibration.md). Thin wrappers over
 `fivebar_host.calibrate` (pipeline steps) and `kinematics.calibration` (the math)."""
 
 from __future__ import annotations
@@ -7,15 +8,21 @@ from __future__ import annotations
 import json
 from datetime import date
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from fivebar_host.cli.common import config_option, handle_errors, load, main
 
+if TYPE_CHECKING:
+    from fivebar_host.calibrate.measure import Measured, PatternMarks
+    from fivebar_host.config import Profile
+
 
 @main.group("calibrate")
 def calibrate() -> None:
-    """Calibrate link lengths and home angles from a drawn test pattern."""
+    """Calibrate link lengths and home angles (servos: curves and dead bands) from a drawn
+    test pattern."""
 
 
 @calibrate.command("pattern")
@@ -24,12 +31,13 @@ def calibrate() -> None:
               required=True, help="The pattern drawing (SVG) to plot.")
 @click.option("--marks", "marks_path", type=click.Path(dir_okay=False, path_type=Path),
               required=True, help="Where to write the marks file (JSON).")
-@click.option("--count", type=click.IntRange(25, 200), default=30, show_default=True,
-              help="Number of marks.")
+@click.option("--count", type=click.IntRange(25, 200), default=None,
+              help="Number of marks (default: 30; 60 ticks on a servo profile, which fits "
+              "twice the unknowns).")
 @click.option("--mode", type=click.Choice(["++", "+-", "-+", "--"]), default=None,
               help="Working mode (default: the profile's).")
 @handle_errors
-def pattern_cmd(config_path: Path | None, output: Path, marks_path: Path, count: int,
+def pattern_cmd(config_path: Path | None, output: Path, marks_path: Path, count: int | None,
                 mode: str | None) -> None:
     """Write a test pattern of numbered marks over the safe region and its marks file."""
     from fivebar_host.calibrate.pattern import (
@@ -40,7 +48,22 @@ def pattern_cmd(config_path: Path | None, output: Path, marks_path: Path, count:
     )
 
     prof = load(config_path)
-    pat = make_pattern(prof, output, mode=mode, count=count)
+    if prof.joints is not None:  # servos: ticks with planned approaches (calibrate/servo.py)
+        from fivebar_host.calibrate.servo import make_servo_pattern, servo_plot_command
+
+        pat, fields = make_servo_pattern(prof, output, mode=mode, count=count or 60)
+        doc = marks_document(prof, pat, output)
+        doc["plot_command"] = servo_plot_command(output, prof, pat)
+        for mk, f in zip(doc["marks"], fields, strict=True):
+            mk.update(f)
+        write_marks(marks_path, doc)
+        click.echo(f"wrote {output} ({len(pat.marks)} ticks, {pat.page_mm[0]:g} × "
+                   f"{pat.page_mm[1]:g} mm page, working mode {pat.mode}) and {marks_path}")
+        click.echo(f"plot it 1:1 with: {doc['plot_command']}")
+        click.echo("then measure each numbered tick's end (where the pen stopped) and write "
+                   "a CSV with the header id,x_mm,y_mm")
+        return
+    pat = make_pattern(prof, output, mode=mode, count=count or 30)
     write_marks(marks_path, marks_document(prof, pat, output))
     click.echo(f"wrote {output} ({len(pat.marks)} marks, {pat.page_mm[0]:g} × "
                f"{pat.page_mm[1]:g} mm page, working mode {pat.mode}) and {marks_path}")
@@ -64,7 +87,8 @@ def pattern_cmd(config_path: Path | None, output: Path, marks_path: Path, count:
 @handle_errors
 def fit_cmd(measured: Path, marks_path: Path, config_path: Path | None, output: Path,
             sigma: float | None, max_iterations: int) -> None:
-    """Fit a1, b1, a2, b2, w and the home angles to MEASURED (CSV id,x_mm,y_mm)."""
+    """Fit a1, b1, a2, b2, w and the home angles (servos: the curves and dead bands) to
+    MEASURED (CSV id,x_mm,y_mm)."""
     from fivebar_host.calibrate.fit import calibrate as run_fit
     from fivebar_host.calibrate.fit import report_lines, write_fitted
     from fivebar_host.calibrate.measure import read_measured, read_pattern
@@ -72,6 +96,9 @@ def fit_cmd(measured: Path, marks_path: Path, config_path: Path | None, output: 
     prof = load(config_path)
     pat = read_pattern(marks_path)
     meas = read_measured(measured, pat)
+    if prof.joints is not None:
+        _fit_servo(prof, pat, meas, measured, marks_path, output, sigma, max_iterations)
+        return
     cal = run_fit(prof, pat, meas, sigma=sigma, max_iterations=max_iterations)
     for line in report_lines(cal, prof):
         click.echo(line)
@@ -80,6 +107,26 @@ def fit_cmd(measured: Path, marks_path: Path, config_path: Path | None, output: 
             f"(pattern {marks_path}), starting from {prof.source}; rms residual "
             f"{cal.result.rms_after_mm:.4f} mm")
     write_fitted(output, prof, cal, note)
+    click.echo(f"wrote {output}")
+
+
+def _fit_servo(prof: Profile, pat: PatternMarks, meas: Measured, measured: Path, marks_path: Path,
+               output: Path, sigma: float | None, max_iterations: int) -> None:
+    """`calibrate fit` on a servo profile: curves, dead bands and geometry."""
+    from fivebar_host.calibrate.servo import (
+        calibrate_servo,
+        servo_report_lines,
+        write_fitted_servo,
+    )
+
+    cal = calibrate_servo(prof, pat, meas, sigma=sigma, max_iterations=max_iterations)
+    for line in servo_report_lines(cal):
+        click.echo(line)
+    note = (f"[geometry] and [joints] curves and dead bands fitted by `fivebar calibrate "
+            f"fit` on {date.today().isoformat()}\nfrom {meas.ids.size} marks of {measured} "
+            f"(pattern {marks_path}), starting from {prof.source}; rms residual "
+            f"{cal.result.rms_after_mm:.4f} mm")
+    write_fitted_servo(output, prof, cal, note)
     click.echo(f"wrote {output}")
 
 

@@ -154,9 +154,9 @@ def check_deviation(dev_mm: float, bound_mm: float, csv: Path, true_machine: boo
 
     if dev_mm <= bound_mm:
         return
-    why = ("the machine as really built (the URL's true= or backlash=) differs from the "
-           "profile: calibrate it (docs/calibration.md) or set its [motors] backlash_steps "
-           "(docs/backlash.md)" if true_machine else
+    why = ("the machine as really built (the URL's true=, backlash= or deadband=) differs "
+           "from the profile: calibrate it (docs/calibration.md) or set its [motors] "
+           "backlash_steps (docs/backlash.md) or [joints] dead_band_deg" if true_machine else
            "the arms were not where the controller's count said: a power loss answered "
            "'yes, they are where the job stopped' while they were elsewhere, or steps lost "
            "to a stall")

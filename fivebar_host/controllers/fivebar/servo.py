@@ -4,15 +4,22 @@ steppers (steps from the home pose), and `ServoLink` turns every position it sen
 the firmware's steps — pulse ticks of 0.5 µs — and every position it reads back into
 steps again, so the controller, the stream, exact resume and the reports are unchanged.
 
-    ticks = rint(2 · curve.pulse(θ_home + steps · rad_per_step))                        (T1)
-    steps = rint((curve.angle(ticks / 2) − θ_home) / rad_per_step)                     (T2)
+    ticks = rint(2 · curve.pulse(θ_home + (steps − B/2) · rad_per_step))                (T1)
+    steps = rint((curve.angle(ticks / 2) − θ_home) / rad_per_step + B/2)               (T2)
 
 A segment is a straight line in ticks between its two targets (the firmware's DDA), a
 chord of the servo curve: on a straight-line curve exactly the planned joint line, on a
 table or a fit within the curve's bend over one segment. T2∘T1 is the identity while one
 step is at least a tick's angle (the `[motors]` grid no finer than the pulse quantum), so
-a position read back is the one sent. The dead band is not compensated on a run (the dry
-run's `ServoJoints.pulses` plans the overshoot; a run sends each target's own pulse).
+a position read back is the one sent.
+
+The dead band is compensated on a run as a stepper's backlash is: a servo's output stays
+within ±w/2 of its command (kinematics.servo Eq. S1), which is the play j ∈ [m − B, m]
+(compile/backlash.py Eq. B1) of a count m = command + B/2 with B = w in steps. The profile
+makes the dead bands its `[motors] backlash_steps` (config.py), the compiler takes the slack
+up at every reversal (the counts step by ±B while the arm stays), and T1/T2 shift by B/2: a
+joint that last moved up is sent its target + w/2, one that last moved down its target −
+w/2, the overshoot `kinematics.servo.dead_band_commands` plans.
 """
 
 from __future__ import annotations
@@ -51,18 +58,23 @@ class ServoMap:
     curves: tuple[ServoCurve, ServoCurve]
     home_rad: tuple[float, float]
     rad_per_step: float
+    #: B/2 per joint, steps: the counts exceed the command by half the dead band (T1, T2)
+    offset_steps: tuple[float, float] = (0.0, 0.0)
 
     @classmethod
     def of(cls, joints: ServoJoints, profile: Profile) -> ServoMap:
-        """The map of a servo profile."""
+        """The map of a servo profile (its dead bands as `[motors] backlash_steps`)."""
         c = (joints.joints[0].curve, joints.joints[1].curve)
-        return cls(c, profile.motors.home_rad, profile.motors.rad_per_step)
+        b = profile.motors.backlash_steps
+        return cls(c, profile.motors.home_rad, profile.motors.rad_per_step,
+                   (0.5 * b[0], 0.5 * b[1]))
 
     def ticks(self, joint: int, steps: IntArray) -> IntArray:
         """T1: the pulse ticks of positions in steps (ABSENT stays ABSENT)."""
         s = np.asarray(steps, dtype=np.int64)
         keep = s == ABSENT
-        th = self.home_rad[joint] + np.where(keep, 0, s) * self.rad_per_step
+        th = self.home_rad[joint] + (np.where(keep, 0, s) - self.offset_steps[joint]) * (
+            self.rad_per_step)
         try:
             us = self.curves[joint].pulse(th)
         except ServoError as e:
@@ -74,7 +86,8 @@ class ServoMap:
         lo, hi = self.curves[joint].range_us
         us = min(max(ticks / TICKS_PER_US, lo), hi)
         th = float(self.curves[joint].angle(us))
-        return math.floor((th - self.home_rad[joint]) / self.rad_per_step + 0.5)
+        return math.floor((th - self.home_rad[joint]) / self.rad_per_step
+                          + self.offset_steps[joint] + 0.5)
 
     def program(self, prog: Program) -> Program:
         """A program with its moves' targets and its `G92` texts in ticks."""

@@ -2,18 +2,21 @@
 
 The servo build sends each arm one pulse per 20 ms frame (docs/protocol.md 6.5); the
 emulator traces them (`svA`, `svB`). Each pulse goes through a *true* servo — the
-profile's curve (the default), and a dead band (`?deadband=A,B` degrees: the hysteresis
-of `kinematics.servo`, Eq. S1) — to the angle the horn really turns to, the two arms'
-angles are merged in time and forward kinematics (the pen off the joint included) gives
-where the pen was. A frame is a sample, not a target: it belongs to the segment whose
-joint-space line it lies nearest, walking forward from the last one (segments are
-executed in order), and a frame on a drawing segment is measured against its requested
-curve as the stepper report measures a step (`executed.executed_path`).
+profile's curve (the default), and a dead band (the profile's `dead_band_deg`, or
+`?deadband=A,B` degrees: the hysteresis of `kinematics.servo`, Eq. S1) — to the angle
+the horn really turns to, the two arms' angles are merged in time and forward kinematics
+(the pen off the joint included) gives where the pen was. A frame is a sample, not a
+target: it belongs to the segment whose joint-space line it lies nearest (on the joints'
+steps: the counts less the dead-band slack the run takes up, compile/backlash.py), walking
+forward from the last one (segments are executed in order), and a frame on a drawing
+segment is measured against its requested curve as the stepper report measures a step
+(`executed.executed_path`).
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -42,6 +45,9 @@ def servo_angles(trace: Trace, profile: Profile, deadband_deg: tuple[float, floa
     moves on between its frames, and arm B's frames start 3 ms after arm A's)."""
     if profile.joints is None:
         raise FivebarError("the executed servo path needs a servo profile ([joints])")
+    if deadband_deg is None:  # no `?deadband=`: the true servos have the profile's
+        deadband_deg = (math.degrees(profile.joints.joints[0].dead_band_rad),
+                        math.degrees(profile.joints.joints[1].dead_band_rad))
     times, angles = [], []
     for j, name in enumerate(PINS):
         pul = np.array([(c, w) for c, w in trace.pulses(name) if c > 0],
@@ -104,6 +110,8 @@ def executed_servo_path(job: Job, profile: Profile, trace: Trace, first_segment:
                         deadband_deg: tuple[float, float] | None = None) -> ExecutedPath:
     """The executed path of a servo run from its traced pulses (module doc)."""
     t, th = servo_angles(trace, profile, deadband_deg)
+    if job.slack.shape[0]:  # frames are where the arms are: the joints' steps, not counts
+        job = replace(job, steps=job.joint_steps, slack=job.slack[:0])
     home = np.array(job.home_rad)
     q = (th - home) * (job.steps_per_rev / (2.0 * math.pi))  # on the step grid, unrounded
     # an event is a frame whose position on the grid changed, as a step is one

@@ -1,0 +1,131 @@
+"""`fivebar calibrate pattern|fit` on a servo profile: the pattern's ticks come into their
+marks from the planned sides, and a fit of ticks drawn by a known true servo machine (its
+curves bowed, a 1° and 1.5° dead band) writes a profile whose curves and dead bands are the
+truth's within the reported uncertainty."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from fivebar_host.calibrate.servo import servo_nominal
+from fivebar_host.cli import main
+from fivebar_host.config import ConfigError, load_profile
+from kinematics.calibration import rotation
+from kinematics.servo_calibration import ServoMachine
+
+ROOT = Path(__file__).resolve().parent.parent
+PLOTCLOCK = ROOT / "configs" / "plotclock.toml"
+
+
+def run(*args: str) -> tuple[int, str]:
+    res = CliRunner().invoke(main, list(args), catch_exceptions=False)
+    return res.exit_code, res.output
+
+
+def truth() -> ServoMachine:
+    base = servo_nominal(load_profile(PLOTCLOCK))
+    g = np.array(base.geometry)
+    g[:5] += [0.25, -0.3, -0.2, 0.3, 0.2]
+    co = base.coeffs.copy()
+    co[:, 0] += np.radians([0.8, -1.0])
+    co[:, 2] += np.radians([1.5, -2.0])
+    co[:, 3] += np.radians([-2.0, 1.0])
+    return ServoMachine(tuple(g), co, base.centre_us, (math.radians(1.0), math.radians(1.5)))
+
+
+def test_servo_pattern_and_fit(tmp_path: Path) -> None:
+    svg, marks = tmp_path / "pat.svg", tmp_path / "pat.json"
+    code, out = run("calibrate", "pattern", "--config", str(PLOTCLOCK), "-o", str(svg),
+                    "--marks", str(marks), "--count", "40")
+    assert code == 0, out
+    assert "--keep-order" in out
+    doc = json.loads(marks.read_text())
+    p = np.array([m["pulses_us"] for m in doc["marks"]])
+    s = np.array([m["approach"] for m in doc["marks"]])
+    # every joint comes into the marks from both sides
+    assert {tuple(r) for r in s.tolist()} == {(1, 1), (-1, -1), (1, -1), (-1, 1)}
+    true = truth()
+    rng = np.random.default_rng(3)
+    y = true.pen_points(p, s, "+")
+    assert np.isfinite(y).all()
+    y = y @ rotation(-0.4).T + [100.0, 30.0] + rng.normal(0.0, 0.05, y.shape)
+    csv = tmp_path / "measured.csv"
+    csv.write_text("id,x_mm,y_mm\n" + "".join(
+        f"{m['id']},{x:.4f},{v:.4f}\n" for m, (x, v) in zip(doc["marks"], y, strict=True)))
+    fitted = tmp_path / "fitted.toml"
+    code, out = run("calibrate", "fit", str(csv), "--marks", str(marks), "--config",
+                    str(PLOTCLOCK), "-o", str(fitted), "--sigma", "0.05")
+    assert code == 0, out
+    assert "dead band 1" in out
+    prof = load_profile(fitted)
+    assert prof.joints is not None
+    dead = [math.degrees(j.dead_band_rad) for j in prof.joints.joints]
+    np.testing.assert_allclose(dead, [1.0, 1.5], atol=0.2)
+    # the written curves match the truth over the measured pulses within 3 reported σ (plus
+    # the 9-node table's interpolation, < 0.05°)
+    sig = [float(v) for v in re.findall(r"curve over .*\(1σ ≤ ([0-9.]+)°\)", out)]
+    assert len(sig) == 2
+    for k, j in enumerate(prof.joints.joints):
+        q = np.linspace(p[:, k].min(), p[:, k].max(), 7)
+        want = true.curve_angles(np.column_stack((q, q)))[:, k]
+        np.testing.assert_allclose(np.degrees(j.curve.angle(q)), np.degrees(want),
+                                   atol=3.0 * sig[k] + 0.05)
+    # the lengths within 3 reported σ
+    for name, want in zip(("a1", "b1", "a2", "b2", "w"), true.geometry[:5], strict=True):
+        m = re.search(rf"{name}\s+=\s+([0-9.]+) mm ± ([0-9.]+) mm", out)
+        assert m is not None
+        assert abs(float(m.group(1)) - want) <= 3.0 * float(m.group(2))
+        assert getattr(prof.geometry, name) == pytest.approx(float(m.group(1)), abs=1e-4)
+
+
+def test_cnc_shield_profile_loads_and_dry_runs(tmp_path: Path) -> None:
+    """configs/servo-cnc-shield.toml: a servo profile whose wiring comment names the pins the
+    servo build drives (firmware/fivebar/config.h), and it dry-runs an example."""
+    path = ROOT / "configs" / "servo-cnc-shield.toml"
+    prof = load_profile(path)
+    assert prof.joints is not None
+    cfg = (ROOT / "firmware" / "fivebar" / "config.h").read_text()
+    text = path.read_text()
+    for macro in ("PIN_SERVO_A_BIT", "PIN_SERVO_B_BIT", "PIN_SERVO_BIT"):
+        m = re.search(rf"#define {macro}\s+\d+\s+/\* (D\d+)", cfg)
+        assert m is not None and m.group(1) in text, macro
+    # the curve covers the joint limits (every pose the profile allows has a pulse)
+    for j, (lo, hi) in zip(prof.joints.joints, prof.motors.limits_rad, strict=True):
+        a, b = j.curve.range_rad
+        assert a <= lo and hi <= b
+    code, out = run("plot", str(ROOT / "examples" / "fivebar_text.svg"), "--config",
+                    str(path), "--fit", "--dry-run", "--preview", str(tmp_path / "p.png"))
+    assert code == 0, out
+    assert "servo joints" in out
+
+
+def test_servo_dead_band_is_the_profile_slack(tmp_path: Path) -> None:
+    """A servo profile's dead bands are its backlash_steps (1° on a 0.1125° grid: 9 steps),
+    and ServoMap sends each count less half of it: a count m is the command m − B/2, whose
+    output band [command − w/2, command + w/2] is the play [m − B, m] (to the grid's
+    rounding of w); T2∘T1 stays the identity."""
+    from fivebar_host.controllers.fivebar.servo import ServoMap
+
+    prof = load_profile(PLOTCLOCK)
+    assert prof.joints is not None
+    assert prof.motors.backlash_steps == (9, 9)
+    smap = ServoMap.of(prof.joints, prof)
+    q = prof.motors.rad_per_step
+    steps = np.arange(-300, 301, 7)
+    for j in range(2):
+        ticks = smap.ticks(j, steps)
+        want = prof.joints.joints[j].curve.pulse(prof.motors.home_rad[j] + (steps - 4.5) * q)
+        np.testing.assert_allclose(ticks / 2.0, want, atol=0.25)
+        assert [smap.steps(j, int(t)) for t in ticks] == steps.tolist()
+    bad = tmp_path / "bad.toml"
+    bad.write_text(PLOTCLOCK.read_text().replace("endstops = false",
+                                                 "endstops = false\nbacklash_steps = [4, 4]"))
+    with pytest.raises(ConfigError, match="dead_band_deg"):
+        load_profile(bad)
