@@ -10,7 +10,8 @@ import click
 import numpy as np
 
 from fivebar_host.cli.common import config_option, handle_errors, load, main
-from fivebar_host.config import describe, load_profile, show_lines
+from fivebar_host.config import load_profile
+from fivebar_host.config_show import describe, show_lines
 
 
 @main.group()
