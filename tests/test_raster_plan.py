@@ -198,3 +198,18 @@ def test_servo_joints_refuse_a_raster(tmp_path: Path) -> None:
     with pytest.raises(JobError) as ei:
         _compile(tmp_path, prof, np.ones((4, 10)), width_mm=10.0)
     assert ei.value.reason == "servo_joints" and "stepper joints" in str(ei.value)
+
+
+def test_without_laser_every_pixel_is_sent_at_power_zero(tmp_path: Path) -> None:
+    """As a pen job without --laser sends S0 on every line, a raster without --laser sends
+    every pixel at 0 (and no M3): only --laser puts a power above 0 on the wire."""
+    from fivebar_host.compile.emit import raster_program
+    from fivebar_host.program import Kind
+
+    prof = load_profile(None)
+    job = _compile(tmp_path, prof, np.random.default_rng(3).random((3, 30)), width_mm=6.0)
+    burn, rehearse = raster_program(job, prof, True), raster_program(job, prof, False)
+    assert any(any(r.powers) for r in burn.runs)
+    assert rehearse.runs and not any(any(r.powers) for r in rehearse.runs)
+    assert [len(r.powers) for r in rehearse.runs] == [len(r.powers) for r in burn.runs]
+    assert Kind.TOOL_ON in burn.kind.tolist() and Kind.TOOL_ON not in rehearse.kind.tolist()

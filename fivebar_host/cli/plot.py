@@ -101,7 +101,7 @@ def plot_file(drawing: Path, dry_run: bool, preview_path: Path, port: str | None
     if dry_run and job.raster is not None:
         from fivebar_host.raster import preview
 
-        for line in preview.report_lines(job):
+        for line in preview.report_lines(job, laser):
             click.echo(line)
         preview.draw_preview(job, preview_path)
         click.echo(f"preview       {preview_path}")

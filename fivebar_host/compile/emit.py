@@ -7,6 +7,8 @@ daemon (`run.moves.build_program`); written as text only by `fivebar_host.wire`.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from fivebar_host.compile.model import Job
@@ -100,8 +102,10 @@ def raster_program(job: Job, profile: Profile, laser: bool, first: int = 0,
     """The items of a raster job's segments `first` … `end` − 1 (`first` a G7 line's first
     segment or a travel segment): RASTER items for the G7 segments (the line's first
     carries its run's index), MOVE items for the moves between scanlines. With `laser` the
-    laser is enabled (`M3 S0`) first — without it the firmware burns no G7 pixel — and off
-    (`M5`) at the end. A raster faster than the firmware's boot step rate (`$0`) sets it
+    laser is enabled (`M3 S0`) first and off (`M5`) at the end; without it every pixel is
+    sent at power 0 (and the firmware, the laser not enabled, would burn none anyway): the
+    scan is rehearsed, as a pen job without `--laser` sends S0 on every line.
+    A raster faster than the firmware's boot step rate (`$0`) sets it
     first (the setting needs an idle machine: a program starts on one).  `reached`: a
     resumed run got as far as that segment; the pixels changed before it are burned at 0
     (`RasterRuns.runs_after`).  `lead` (a resume's travel back) runs after the `$0`
@@ -109,6 +113,8 @@ def raster_program(job: Job, profile: Profile, laser: bool, first: int = 0,
     r = job.raster
     assert r is not None
     runs = r.runs if reached is None else r.runs_after(first, reached, job.duration_us)
+    if not laser:  # a rehearsal: nothing above power 0 leaves the host without --laser
+        runs = tuple(replace(run, powers=bytes(len(run.powers))) for run in runs)
     n = job.n_segments if end is None else end
     g7 = r.g7[first:n]
     body = Program(np.where(g7, Kind.RASTER, Kind.MOVE).astype(np.int64),

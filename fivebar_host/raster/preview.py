@@ -29,8 +29,9 @@ def raster_of(job: Job) -> RasterRuns:
     return r
 
 
-def report_lines(job: Job) -> list[str]:
-    """The dry run's report of a raster job (module docstring)."""
+def report_lines(job: Job, laser: bool) -> list[str]:
+    """The dry run's report of a raster job (module docstring); without `laser` it says the
+    scan is a rehearsal, every pixel at power 0 (`compile.emit.raster_program`)."""
     r = raster_of(job)
     rows, cols = r.target.shape
     total_s = float(np.sum(job.duration_us)) * 1e-6
@@ -49,6 +50,9 @@ def report_lines(job: Job) -> list[str]:
         f"time          {total_s:.1f} s (scanlines with overscan {scan_s:.1f} s, "
         f"moves {total_s - scan_s:.1f} s)",
     ]
+    if not laser:
+        out.append("tool          laser off: every pixel sent at power 0, the scan only "
+                   "rehearsed (burn with --laser)")
     out += [f"note          {n}" for n in job.notes]
     return out
 
