@@ -15,7 +15,7 @@ Inverse kinematics (closed form; the seeds' thesis covers only the pen at the jo
 equations are derived here and the thesis numbers refer to the plain arm they reuse):
  1. arm 1 first, on the extended link: R1 lies at a1 from M1 and d from P — the circle
     intersection of the thesis' Eq. 18 (law of cosines) with b1 replaced by d, in Heron form
-    (`_arm_inverse`);
+    (`arm_inverse`);
  2. then J = R1 + (P − R1)/m (X1), and arm 2 is the plain arm (a2, b2) reaching J.
 Forward kinematics: J is the plain five-bar's forward solution (circles about R1, R2 of radii
 b1, b2), then P = R1 + m·(J − R1) (X1).
@@ -51,10 +51,10 @@ from kinematics.fivebar import (
     InverseResult,
     Reason,
     UnreachableError,
-    _arm_inverse,
-    _as_points,
-    _cross,
-    _signs,
+    arm_inverse,
+    as_points,
+    cross2d,
+    mode_signs,
 )
 
 __all__ = ["ExtendedFiveBar"]
@@ -114,22 +114,22 @@ class ExtendedFiveBar(FiveBar):
 
     def joints(self, angles: ArrayLike, points: ArrayLike) -> FloatArray:
         """The joint J (N, 2) of link b1 and b2 for motor angles and pen points."""
-        th, _ = _as_points(angles, "angles")
-        p, _ = _as_points(points, "points")
+        th, _ = as_points(angles, "angles")
+        p, _ = as_points(points, "points")
         r1, _ = self.elbows(th)
         return self.joint_from_pen(r1, p)
 
     # ---------------------------------------------------------------- inverse kinematics
     def _inverse_batch(self, pts: FloatArray, mode: str) -> InverseResult:
-        s1, s2 = _signs(mode, "working mode")
+        s1, s2 = mode_signs(mode, "working mode")
         x, y = pts[:, 0], pts[:, 1]
         d = self.pen_link
         # 1. Arm 1 on the extended link: R1 at a1 from M1 and d from P (Eq. 18 with b1 → d).
-        th1, k1, c1sq = _arm_inverse(x, y, self.a1, d, s1)
+        th1, k1, c1sq = arm_inverse(x, y, self.a1, d, s1)
         r1 = np.stack((self.a1 * np.cos(th1), self.a1 * np.sin(th1)), axis=1)
         # 2. The joint J from the pen (Eq. X1), then arm 2 reaching J.
         j = self.joint_from_pen(r1, pts)
-        th2, k2, c2sq = _arm_inverse(j[:, 0] - self.w, j[:, 1], self.a2, self.b2, s2)
+        th2, k2, c2sq = arm_inverse(j[:, 0] - self.w, j[:, 1], self.a2, self.b2, s2)
         with np.errstate(invalid="ignore"):
             ok1 = (k1 >= 0.0) & (c1sq > 0.0)
             ok2 = (k2 >= 0.0) & (c2sq > 0.0)
@@ -157,7 +157,7 @@ class ExtendedFiveBar(FiveBar):
     def inverse(self, points: ArrayLike, mode: str) -> FloatArray | InverseResult:
         """As `FiveBar.inverse`; a single unreachable point raises naming arm 2's reach at
         the joint J."""
-        pts, single = _as_points(points, "points")
+        pts, single = as_points(points, "points")
         res = self._inverse_batch(pts, mode)
         if not single:
             return res
@@ -178,8 +178,8 @@ class ExtendedFiveBar(FiveBar):
             a, b, c, what = self.a1, self.pen_link, math.hypot(p[0], p[1]), "|P − M1|"
             names = "a1 + d"
         else:
-            s1 = _signs(mode, "working mode")[0]
-            th1 = float(_arm_inverse(np.array([p[0]]), np.array([p[1]]), self.a1,
+            s1 = mode_signs(mode, "working mode")[0]
+            th1 = float(arm_inverse(np.array([p[0]]), np.array([p[1]]), self.a1,
                                      self.pen_link, s1)[0][0])
             r1 = np.array([[self.a1 * math.cos(th1), self.a1 * math.sin(th1)]])
             j = self.joint_from_pen(r1, p.reshape(1, 2))[0]
@@ -212,8 +212,8 @@ class ExtendedFiveBar(FiveBar):
         """Working-mode signs (N, 2): arm 1 the side of R1 of M1→P, arm 2 of R2 of M2→J."""
         ps = self.pose(angles, points)
         j = self.joint_from_pen(ps.r1, ps.p)
-        c1 = _cross(ps.p[:, 0], ps.p[:, 1], ps.r1[:, 0], ps.r1[:, 1])
-        c2 = _cross(j[:, 0] - self.w, j[:, 1], ps.r2[:, 0] - self.w, ps.r2[:, 1])
+        c1 = cross2d(ps.p[:, 0], ps.p[:, 1], ps.r1[:, 0], ps.r1[:, 1])
+        c2 = cross2d(j[:, 0] - self.w, j[:, 1], ps.r2[:, 0] - self.w, ps.r2[:, 1])
         return np.stack((np.sign(c1), np.sign(c2)), axis=1).astype(np.int8)
 
     def assembly_of(self, angles: ArrayLike, points: ArrayLike) -> NDArray[np.int8]:
@@ -222,7 +222,7 @@ class ExtendedFiveBar(FiveBar):
         j = self.joint_from_pen(ps.r1, ps.p)
         d = ps.r2 - ps.r1
         e = j - ps.r1
-        return np.sign(_cross(d[:, 0], d[:, 1], e[:, 0], e[:, 1])).astype(np.int8)
+        return np.sign(cross2d(d[:, 0], d[:, 1], e[:, 0], e[:, 1])).astype(np.int8)
 
     def transmission_angles(self, angles: ArrayLike, points: ArrayLike) -> FloatArray:
         """μ_i = ∠M_i R_i J in [0, π] (Eq. 23 at the joint: force goes through the links)."""
@@ -232,7 +232,7 @@ class ExtendedFiveBar(FiveBar):
         for i, (r, mx) in enumerate(((ps.r1, 0.0), (ps.r2, self.w))):
             ux, uy = mx - r[:, 0], -r[:, 1]
             vx, vy = j[:, 0] - r[:, 0], j[:, 1] - r[:, 1]
-            out[:, i] = np.arctan2(np.abs(_cross(ux, uy, vx, vy)), ux * vx + uy * vy)
+            out[:, i] = np.arctan2(np.abs(cross2d(ux, uy, vx, vy)), ux * vx + uy * vy)
         return out
 
     def singularity_margins(self, angles: ArrayLike, points: ArrayLike) -> FloatArray:
@@ -245,10 +245,10 @@ class ExtendedFiveBar(FiveBar):
         for i, (r, mx, tip) in enumerate(((ps.r1, 0.0, ps.p), (ps.r2, self.w, j))):
             ux, uy = mx - r[:, 0], -r[:, 1]
             vx, vy = tip[:, 0] - r[:, 0], tip[:, 1] - r[:, 1]
-            out[:, i] = np.arctan2(_cross(ux, uy, vx, vy), np.abs(ux * vx + uy * vy))
+            out[:, i] = np.arctan2(cross2d(ux, uy, vx, vy), np.abs(ux * vx + uy * vy))
         ux, uy = ps.r1[:, 0] - j[:, 0], ps.r1[:, 1] - j[:, 1]
         vx, vy = ps.r2[:, 0] - j[:, 0], ps.r2[:, 1] - j[:, 1]
-        out[:, 2] = np.arctan2(_cross(ux, uy, vx, vy), np.abs(ux * vx + uy * vy))
+        out[:, 2] = np.arctan2(cross2d(ux, uy, vx, vy), np.abs(ux * vx + uy * vy))
         return out
 
     def jacobians(self, angles: ArrayLike, points: ArrayLike) -> tuple[FloatArray, FloatArray]:
@@ -268,8 +268,8 @@ class ExtendedFiveBar(FiveBar):
         # Qᵀ·v is conj(q)·v in complex form.
         a[:, 1, 0] = qr * e2[:, 0] + qi * e2[:, 1]
         a[:, 1, 1] = qr * e2[:, 1] - qi * e2[:, 0]
-        b[:, 0, 0] = _cross(ps.r1[:, 0], ps.r1[:, 1], e1[:, 0], e1[:, 1])
-        b[:, 1, 1] = _cross(ps.r2[:, 0] - self.w, ps.r2[:, 1], e2[:, 0], e2[:, 1])
+        b[:, 0, 0] = cross2d(ps.r1[:, 0], ps.r1[:, 1], e1[:, 0], e1[:, 1])
+        b[:, 1, 1] = cross2d(ps.r2[:, 0] - self.w, ps.r2[:, 1], e2[:, 0], e2[:, 1])
         px, py = -ps.r1[:, 1], ps.r1[:, 0]  # (R1 − M1)⊥ = dR1/dθ1
         # (I − Q)·v with Q·v = q·v in complex form.
         wx = px - (qr * px - qi * py)

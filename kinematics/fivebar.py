@@ -69,14 +69,14 @@ class DegenerateError(KinematicsError):
     """The pose is reachable but the answer is not unique (a free degree of freedom)."""
 
 
-def _signs(mode: str, kind: str) -> tuple[float, float]:
+def mode_signs(mode: str, kind: str) -> tuple[float, float]:
     """Parse a working mode "s1s2" into two ±1 floats, with a clear error."""
     if mode not in WORKING_MODES:
         raise ValueError(f"{kind} must be one of {', '.join(WORKING_MODES)}; got {mode!r}")
     return (1.0 if mode[0] == "+" else -1.0, 1.0 if mode[1] == "+" else -1.0)
 
 
-def _as_points(values: ArrayLike, what: str) -> tuple[FloatArray, bool]:
+def as_points(values: ArrayLike, what: str) -> tuple[FloatArray, bool]:
     """Return an (N, 2) float array and whether the input was a single (2,) row."""
     arr = np.asarray(values, dtype=np.float64)
     if arr.shape == (2,):
@@ -183,7 +183,7 @@ class FiveBar:
         `DegenerateError` naming the point, the limit and by how much. An (N, 2) batch
         returns an `InverseResult` with a validity mask and a reason per point.
         """
-        pts, single = _as_points(points, "points")
+        pts, single = as_points(points, "points")
         res = self._inverse_batch(pts, mode)
         if single:
             if not res.valid[0]:
@@ -194,16 +194,16 @@ class FiveBar:
 
     def inverse_batch(self, points: ArrayLike, mode: str) -> InverseResult:
         """Like `inverse` for an (N, 2) batch, typed to always return an `InverseResult`."""
-        pts, _ = _as_points(points, "points")
+        pts, _ = as_points(points, "points")
         return self._inverse_batch(pts, mode)
 
     def _inverse_batch(self, pts: FloatArray, mode: str) -> InverseResult:
-        s1, s2 = _signs(mode, "working mode")
+        s1, s2 = mode_signs(mode, "working mode")
         x = pts[:, 0]
         y = pts[:, 1]
-        th1, k1, c1sq = _arm_inverse(x, y, self.a1, self.b1, s1)
+        th1, k1, c1sq = arm_inverse(x, y, self.a1, self.b1, s1)
         x2 = x - self.w
-        th2, k2, c2sq = _arm_inverse(x2, y, self.a2, self.b2, s2)
+        th2, k2, c2sq = arm_inverse(x2, y, self.a2, self.b2, s2)
         valid = (k1 >= 0.0) & (k2 >= 0.0) & (c1sq > 0.0) & (c2sq > 0.0)
         angles = np.stack((th1, th2), axis=1)
         reason = np.zeros(pts.shape[0], dtype=np.int8)
@@ -265,7 +265,7 @@ class FiveBar:
     # ----------------------------------------------------------------- forward kinematics
     def elbows(self, angles: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """Elbow positions R1, R2 (each (N, 2)) for motor angles (Eqs. 1–4)."""
-        th, _ = _as_points(angles, "angles")
+        th, _ = as_points(angles, "angles")
         r1 = np.stack((self.a1 * np.cos(th[:, 0]), self.a1 * np.sin(th[:, 0])), axis=1)
         r2 = np.stack((self.w + self.a2 * np.cos(th[:, 1]), self.a2 * np.sin(th[:, 1])), axis=1)
         return r1, r2
@@ -276,7 +276,7 @@ class FiveBar:
         `assembly` is "+" / "-" or a per-row array of ±1. A single (2,) pair returns a (2,)
         point or raises; an (N, 2) batch returns a `ForwardResult` with mask and reasons.
         """
-        th, single = _as_points(angles, "angles")
+        th, single = as_points(angles, "angles")
         res = self._forward_batch(th, assembly)
         if single:
             if not res.valid[0]:
@@ -287,7 +287,7 @@ class FiveBar:
 
     def forward_batch(self, angles: ArrayLike, assembly: str | ArrayLike) -> ForwardResult:
         """Like `forward` for an (N, 2) batch, typed to always return a `ForwardResult`."""
-        th, _ = _as_points(angles, "angles")
+        th, _ = as_points(angles, "angles")
         return self._forward_batch(th, assembly)
 
     def _forward_batch(self, th: FloatArray, assembly: str | ArrayLike) -> ForwardResult:
@@ -364,8 +364,8 @@ class FiveBar:
     # ----------------------------------------------------------------- pose measures
     def pose(self, angles: ArrayLike, points: ArrayLike) -> Pose:
         """Bundle motor angles and end-effector points with the elbows they imply."""
-        th, _ = _as_points(angles, "angles")
-        p, _ = _as_points(points, "points")
+        th, _ = as_points(angles, "angles")
+        p, _ = as_points(points, "points")
         r1, r2 = self.elbows(th)
         return Pose(th, r1, r2, p)
 
@@ -374,8 +374,8 @@ class FiveBar:
         s_i = sign(cross(P − M_i, R_i − M_i))."""
         ps = self.pose(angles, points)
         m2x = self.w
-        c1 = _cross(ps.p[:, 0], ps.p[:, 1], ps.r1[:, 0], ps.r1[:, 1])
-        c2 = _cross(ps.p[:, 0] - m2x, ps.p[:, 1], ps.r2[:, 0] - m2x, ps.r2[:, 1])
+        c1 = cross2d(ps.p[:, 0], ps.p[:, 1], ps.r1[:, 0], ps.r1[:, 1])
+        c2 = cross2d(ps.p[:, 0] - m2x, ps.p[:, 1], ps.r2[:, 0] - m2x, ps.r2[:, 1])
         return np.stack((np.sign(c1), np.sign(c2)), axis=1).astype(np.int8)
 
     def assembly_of(self, angles: ArrayLike, points: ArrayLike) -> NDArray[np.int8]:
@@ -383,7 +383,7 @@ class FiveBar:
         ps = self.pose(angles, points)
         d = ps.r2 - ps.r1
         e = ps.p - ps.r1
-        return np.sign(_cross(d[:, 0], d[:, 1], e[:, 0], e[:, 1])).astype(np.int8)
+        return np.sign(cross2d(d[:, 0], d[:, 1], e[:, 0], e[:, 1])).astype(np.int8)
 
     def transmission_angles(self, angles: ArrayLike, points: ArrayLike) -> FloatArray:
         """μ_i = ∠M_i R_i P in [0, π] (Eq. 23, computed with atan2 rather than arccos)."""
@@ -392,7 +392,7 @@ class FiveBar:
         for i, (r, mx) in enumerate(((ps.r1, 0.0), (ps.r2, self.w))):
             ux, uy = mx - r[:, 0], -r[:, 1]
             vx, vy = ps.p[:, 0] - r[:, 0], ps.p[:, 1] - r[:, 1]
-            out[:, i] = np.arctan2(np.abs(_cross(ux, uy, vx, vy)), ux * vx + uy * vy)
+            out[:, i] = np.arctan2(np.abs(cross2d(ux, uy, vx, vy)), ux * vx + uy * vy)
         return out
 
     def singularity_margins(self, angles: ArrayLike, points: ArrayLike) -> FloatArray:
@@ -409,11 +409,11 @@ class FiveBar:
             # cross(M−R, P−R) = cross(P−M, R−M): positive iff s_i = "+".
             ux, uy = mx - r[:, 0], -r[:, 1]
             vx, vy = ps.p[:, 0] - r[:, 0], ps.p[:, 1] - r[:, 1]
-            out[:, i] = np.arctan2(_cross(ux, uy, vx, vy), np.abs(ux * vx + uy * vy))
+            out[:, i] = np.arctan2(cross2d(ux, uy, vx, vy), np.abs(ux * vx + uy * vy))
         # cross(R1−P, R2−P) = cross(R2−R1, P−R1): positive iff assembly "+".
         ux, uy = ps.r1[:, 0] - ps.p[:, 0], ps.r1[:, 1] - ps.p[:, 1]
         vx, vy = ps.r2[:, 0] - ps.p[:, 0], ps.r2[:, 1] - ps.p[:, 1]
-        out[:, 2] = np.arctan2(_cross(ux, uy, vx, vy), np.abs(ux * vx + uy * vy))
+        out[:, 2] = np.arctan2(cross2d(ux, uy, vx, vy), np.abs(ux * vx + uy * vy))
         return out
 
     def jacobians(self, angles: ArrayLike, points: ArrayLike) -> tuple[FloatArray, FloatArray]:
@@ -430,7 +430,7 @@ class FiveBar:
         for i, (r, mx) in enumerate(((ps.r1, 0.0), (ps.r2, self.w))):
             e = ps.p - r
             a[:, i, :] = e
-            b[:, i, i] = _cross(r[:, 0] - mx, r[:, 1], e[:, 0], e[:, 1])
+            b[:, i, i] = cross2d(r[:, 0] - mx, r[:, 1], e[:, 0], e[:, 1])
         return a, b
 
     def jacobian(self, angles: ArrayLike, points: ArrayLike) -> FloatArray:
@@ -453,12 +453,12 @@ class FiveBar:
                 (abs(self.a2 - self.b2), self.a2 + self.b2))
 
 
-def _cross(ax: FloatArray, ay: FloatArray, bx: FloatArray, by: FloatArray) -> FloatArray:
+def cross2d(ax: FloatArray, ay: FloatArray, bx: FloatArray, by: FloatArray) -> FloatArray:
     """z-component of the 2-D cross product a × b, elementwise."""
     return np.asarray(ax * by - ay * bx, dtype=np.float64)
 
 
-def _arm_inverse(dx: FloatArray, dy: FloatArray, a: float, b: float,
+def arm_inverse(dx: FloatArray, dy: FloatArray, a: float, b: float,
                  s: float) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Motor angle of one arm whose motor sits at the origin of (dx, dy).
 

@@ -207,7 +207,7 @@ def report_lines(cal: Calibration, profile: Profile) -> list[str]:
 
 
 # ----------------------------------------------------------------- fitted.toml
-def _replace_value(text: str, table: str, key: str, value: str) -> str:
+def replace_value(text: str, table: str, key: str, value: str) -> str:
     """Replace `key = …` inside `[table]` keeping the line's comment."""
     lines = text.splitlines(keepends=True)
     current = None
@@ -230,9 +230,9 @@ def fitted_profile_text(profile_text: str, m: MachineParams, note: str) -> str:
     """The profile text with [geometry] and [motors] home_deg replaced (module doc)."""
     text = profile_text
     for key in ("a1", "b1", "a2", "b2", "w"):
-        text = _replace_value(text, "geometry", key, f"{getattr(m, key):.4f}")
+        text = replace_value(text, "geometry", key, f"{getattr(m, key):.4f}")
     home = f"[{math.degrees(m.home1):.5f}, {math.degrees(m.home2):.5f}]"
-    text = _replace_value(text, "motors", "home_deg", home)
+    text = replace_value(text, "motors", "home_deg", home)
     header = "".join(f"# {line}\n" for line in note.splitlines())
     return header + text
 

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fivebar_host.calibrate.fit import _replace_value
+from fivebar_host.calibrate.fit import replace_value
 from fivebar_host.calibrate.measure import Measured, MeasurementError, PatternMarks
 from fivebar_host.calibrate.pattern import (
     DIGIT_GAP,
@@ -278,7 +278,7 @@ def _measured_range(cal: ServoCalibration, k: int) -> tuple[float, float]:
 def _set_value(text: str, table: str, key: str, value: str) -> str:
     """Replace `key = …` inside `[table]`, or add it right after the table's header."""
     try:
-        return _replace_value(text, table, key, value)
+        return replace_value(text, table, key, value)
     except ConfigError:
         pass
     head = re.search(rf"^\s*\[{re.escape(table)}\][^\n]*\n", text, flags=re.MULTILINE)

@@ -156,13 +156,13 @@ def executed_path(job: Job, profile: Profile, time: FloatArray, track: IntArray,
     dev = np.full(track.shape[0], np.nan)
     draw_idx = np.flatnonzero((seg >= 0) & job.draw[np.maximum(seg, 0)])
     if draw_idx.size:
-        dev[draw_idx] = _distance_to_request(job, fwd.points[draw_idx], track[draw_idx],
+        dev[draw_idx] = distance_on_segments(job, fwd.points[draw_idx], track[draw_idx],
                                              seg[draw_idx])
         dev[draw_idx[~fwd.valid[draw_idx]]] = np.inf
     return ExecutedPath(time, track, fwd.points, seg, dev, completed)
 
 
-def _distance_to_request(job: Job, e: FloatArray, pos: IntArray, seg: IntArray) -> FloatArray:
+def distance_on_segments(job: Job, e: FloatArray, pos: IntArray, seg: IntArray) -> FloatArray:
     """Distance of pen points `e` on draw segments `seg` to the requested curves, with the
     progress along the segment's dominant axis as the curve-parameter guess."""
     rank = (np.cumsum(job.draw) - 1)[seg]  # index among the draw segments

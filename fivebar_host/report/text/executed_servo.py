@@ -24,7 +24,7 @@ from fivebar_host.compile import Job
 from fivebar_host.config import Profile
 from fivebar_host.devices.simtrace import Trace
 from fivebar_host.errors import FivebarError
-from fivebar_host.report.text.executed import ExecutedPath, _distance_to_request
+from fivebar_host.report.text.executed import ExecutedPath, distance_on_segments
 from kinematics.arrays import FloatArray, IntArray
 from kinematics.servo import PULSE_QUANTUM_US, hysteresis
 
@@ -124,7 +124,7 @@ def executed_servo_path(job: Job, profile: Profile, trace: Trace, first_segment:
     dev = np.full(t.size, np.nan)
     draw = np.flatnonzero((seg >= 0) & job.draw[np.maximum(seg, 0)])
     if draw.size:
-        dev[draw] = _distance_to_request(job, fwd.points[draw], q[draw], seg[draw])
+        dev[draw] = distance_on_segments(job, fwd.points[draw], q[draw], seg[draw])
         dev[draw[~fwd.valid[draw]]] = np.inf
     completed = int(seg.max(initial=first_segment))
     return ExecutedPath(t / trace.freq, grid[keep], fwd.points, seg, dev, completed)
