@@ -149,3 +149,33 @@ def test_a_mixed_file_is_refused_on_the_command_line(tmp_path: Path) -> None:
     assert r.exit_code != 0
     assert "mixes raster images (<image> at line 1) with drawn vector elements (<path " \
            "id='frame'> at line 1)" in r.output
+
+
+def test_the_daemon_burns_an_uploaded_svg_of_images() -> None:
+    """An upload (`server.jobs.compile_upload`) takes the raster route too; its relative
+    file hrefs are refused (an upload has no folder)."""
+    from fivebar_host.server.jobs import JobOptions, SubmitError, compile_upload
+
+    prof = load_profile(None)
+    data = svg(BODY.format(attr="href", href=data_uri(pattern()))).encode()
+    job = compile_upload(data, "poster.svg", JobOptions.from_values({"laser": True}), prof).job
+    assert job.raster is not None and job.raster.target.shape == (12, 16)
+    data = svg(BODY.format(attr="href", href="f.png")).encode()
+    with pytest.raises(SubmitError, match="uploaded SVG has no folder"):
+        compile_upload(data, "poster.svg", JobOptions.from_values({"laser": True}), prof)
+
+
+def test_empty_or_collapsed_images_burn_nothing() -> None:
+    uri = data_uri(pattern())
+    body = (f'<image href="{uri}" width="0" height="40"/>'
+            f'<image href="{uri}" width="-5" height="40"/>'
+            f'<image href="{uri}" width="50" height="40" transform="scale(0 1)"/>')
+    with pytest.raises(InputError, match="nothing to burn: every <image> has an empty"):
+        _job({}, body)
+
+
+def test_a_grid_too_fine_is_refused_naming_the_option() -> None:
+    from fivebar_host.errors import JobError
+
+    with pytest.raises(JobError, match="more than 50,000,000: give a coarser --line-interval"):
+        _job({"line_interval_mm": 0.001})

@@ -161,8 +161,11 @@ def load_images(d: Drawing, base: Path | None) -> list[Placed]:
     for ref in d.images:
         data, name = image_bytes(ref, d.file, base)
         gray = image.decode(data, name)
-        if ref.width == 0 or ref.height == 0:
-            continue  # a zero-size viewport shows nothing (SVG: rendering disabled)
+        lin = np.asarray(ref.matrix, dtype=np.float64)[:2, :2]
+        if (ref.width is not None and ref.width <= 0) or (ref.height is not None
+                                                           and ref.height <= 0) \
+                or not abs(float(np.linalg.det(lin))) > 1e-12:
+            continue  # an empty viewport or a collapsed transform shows nothing (as in SVG)
         m, vp = image_map(ref, gray.shape)
         out.append(Placed(ref, gray, m, vp))
     return out
@@ -209,6 +212,10 @@ def images_grid(imgs: list[Placed], pl: layout.Placement, powers: list[Any],
     s0, t0 = float(s.min()), float(t.min())
     cols = max(1, math.ceil((float(s.max()) - s0) / pitch - 1e-9))
     rows = max(1, math.ceil((float(t.max()) - t0) / pitch - 1e-9))
+    if rows * cols > image.MAX_PIXELS:
+        raise JobError(f"the images' scan grid would be {rows} × {cols} cells at "
+                       f"{pitch:g} mm, more than {image.MAX_PIXELS:,}: give a coarser "
+                       "--line-interval or a smaller --scale", None, "does_not_fit")
     origin = s0 * u + t0 * n
     out = np.zeros((rows, cols), dtype=np.uint8)
     sc = (np.arange(cols) + 0.5) * pitch
@@ -246,9 +253,21 @@ def compile_svg_images(d: Drawing, profile: Profile, values: Mapping[str, Any],
     `JobError`, `OptionError`."""
     file = d.file
     refuse_servo(profile, file)
+    try:
+        return _compile(d, profile, values, base)
+    except JobError as e:
+        if e.where is None:
+            raise JobError(e.detail, Where(file=file), e.reason) from None
+        raise
+
+
+def _compile(d: Drawing, profile: Profile, values: Mapping[str, Any], base: Path | None
+             ) -> Job:
+    file = d.file
     imgs = load_images(d, base)
     if not imgs:
-        raise InputError("nothing to burn: every <image> has a zero width or height", file)
+        raise InputError("nothing to burn: every <image> has an empty width or height or a "
+                         "collapsed transform", file)
     given = values.get("mode")
     mode = str(given) if given not in (None, "auto") else raster_mode(profile, file)
     opts = CompileOptions(**compile_values(values))
