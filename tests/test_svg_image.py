@@ -179,3 +179,18 @@ def test_a_grid_too_fine_is_refused_naming_the_option() -> None:
 
     with pytest.raises(JobError, match="more than 50,000,000: give a coarser --line-interval"):
         _job({"line_interval_mm": 0.001})
+
+
+def test_layers_separate_images_from_paths() -> None:
+    """`--layer` picks one side of a mixed file: the images' layer burns, the paths' draws."""
+    ink = 'xmlns:inkscape="http://www.inkscape.org/namespaces/inkscape"'
+    text = svg(f'<g {ink} inkscape:groupmode="layer" inkscape:label="photo">'
+               + BODY.format(attr="href", href=data_uri(pattern())) + '</g>'
+               f'<g {ink} inkscape:groupmode="layer" inkscape:label="frame">'
+               '<path d="M0 0 H100" stroke="black"/></g>')
+    with pytest.raises(InputError, match="mixes raster images"):
+        read_svg(text.encode(), file="t.svg")
+    photo = read_svg(text.encode(), ["photo"], file="t.svg")
+    frame = read_svg(text.encode(), ["frame"], file="t.svg")
+    assert len(photo.images) == 1 and photo.n_strokes == 0
+    assert not frame.images and frame.n_strokes == 1

@@ -202,7 +202,8 @@ def _mixed_message(r: Walker, drawing: Drawing) -> str:
     return (f"the file mixes raster images ({', '.join(imgs)}{more_i}) with drawn vector "
             f"elements ({', '.join(vecs)}{more_v}): one job burns either a raster or "
             "vector paths; split it into two files (one with the images, one with the "
-            "drawing) and run them one after the other")
+            "drawing) and run them one after the other, or pick one with --layer when they "
+            "are in separate layers")
 
 
 def _check_coordinates(drawing: Drawing, name: str) -> None:
