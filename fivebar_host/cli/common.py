@@ -213,11 +213,33 @@ def compile_from_cli(drawing: Path, config_path: Path | None,
             from fivebar_host.raster.job import compile_raster, raster_options
 
             return prof, compile_raster(drawing, prof, raster_options(values, prof))
+        if Path(drawing).suffix.lower() == ".svg":
+            return prof, _compile_svg(drawing, prof, values)
         if values.get("fill") == "scan":
             from fivebar_host.raster.fill import compile_fill_scan
 
             return prof, compile_fill_scan(drawing, prof, values)
         return prof, compile_job(drawing, prof, CompileOptions(**compile_values(values)))
+
+
+def _compile_svg(path: Path, prof: Profile, values: dict[str, Any]) -> Any:
+    """An SVG's job: its `<image>` elements burned as a raster (`raster.svgimage`), its
+    fills scanned (`--fill scan`), or its drawing compiled."""
+    from fivebar_host.compile import CompileOptions
+    from fivebar_host.compile.job import compile_drawing, read_drawing
+    from fivebar_host.progress import report
+
+    report("reading", 0.0)
+    d = read_drawing(path, tuple(values.get("layers") or ()), values.get("max_segments"), prof)
+    if d.images:
+        from fivebar_host.raster.svgimage import compile_svg_images
+
+        return compile_svg_images(d, prof, values, path.parent)
+    if values.get("fill") == "scan":
+        from fivebar_host.raster.fill import compile_fill_scan
+
+        return compile_fill_scan(path, prof, values, d)
+    return compile_drawing(d, prof, CompileOptions(**compile_values(values)), consume=True)
 
 
 def pop_job_values(kwargs: dict[str, Any]) -> dict[str, Any]:

@@ -200,6 +200,10 @@ def compile_drawing(drawing: Drawing, profile: Profile, opts: CompileOptions,
     """Compile an already-read drawing; `opts.mode` "auto" tries every working mode.
     `consume`: the caller no longer needs `drawing`, which may then be placed in place (its
     primitives become the job's, in machine mm) to save memory on large drawings."""
+    if drawing.images:
+        raise InputError(f"the file's drawn content is {len(drawing.images)} <image> "
+                         "element(s): a raster, burned by `fivebar plot FILE.svg` "
+                         "(docs/raster.md), not drawn as paths", drawing.file)
     budget.before_compiling(drawing)
     profile = with_job_motion(profile, opts)
     mode = opts.mode or profile.kinematics.working_mode

@@ -28,6 +28,7 @@ from fivebar_host.raster.fill import refuse as refuse_fill
 from fivebar_host.raster.image import decode as decode_image
 from fivebar_host.raster.image import is_image_file
 from fivebar_host.raster.job import compile_raster, raster_options
+from fivebar_host.raster.svgimage import compile_svg_images
 from fivebar_host.run.resume import fingerprint
 from fivebar_host.run.stops import Copies
 from fivebar_host.toolpath.gcode import read_gcode
@@ -205,13 +206,15 @@ def compile_upload(data: bytes, name: str, opts: JobOptions, profile: Profile) -
         if is_image_file(name):  # raster engraving (docs/raster.md), like the CLI
             job = compile_raster(name, profile, raster_options(asdict(opts), profile),
                                  gray=decode_image(data, name))
-        elif opts.fill == "scan":  # a drawing's fills by scanlines (docs/fill.md)
-            refuse_fill(name, asdict(opts), profile)
-            job = compile_fill_scan(name, profile, asdict(opts),
-                                    read_upload(data, name, opts.layers, profile))
         else:
             drawing = read_upload(data, name, opts.layers, profile)
-            job = compile_drawing(drawing, profile, opts.compile_options())
+            if drawing.images:  # an SVG's <image> elements burned (docs/raster.md)
+                job = compile_svg_images(drawing, profile, asdict(opts), None)
+            elif opts.fill == "scan":  # a drawing's fills by scanlines (docs/fill.md)
+                refuse_fill(name, asdict(opts), profile)
+                job = compile_fill_scan(name, profile, asdict(opts), drawing)
+            else:
+                job = compile_drawing(drawing, profile, opts.compile_options())
     except SubmitError:
         raise
     except InputError as e:

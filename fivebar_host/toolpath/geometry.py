@@ -26,7 +26,7 @@ import math
 from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
 from numpy.typing import NDArray
@@ -122,6 +122,8 @@ class Drawing:
     paint: PaintTable | None = None
     #: what hatching and hidden-line removal did (`fill.assemble`; None: neither ran)
     fill: FillResult | None = None
+    #: SVG: the drawn `<image>` elements (`svg.walk.ImageRef`), burned by `raster.svgimage`
+    images: list[Any] = field(default_factory=list)
 
     @property
     def n_strokes(self) -> int:

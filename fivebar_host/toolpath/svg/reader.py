@@ -107,6 +107,11 @@ def read_svg(source: str | Path | bytes, layers: Sequence[str] | None = None,
     drawing = r.b.build(page_height_mm=height_mm, page_size_mm=(width_mm, height_mm))
     drawing.paint = r.paint.table(len(drawing.sources))
     _check_coordinates(drawing, name)
+    drawing.images = list(r.images)
+    if r.images and drawing.kind.shape[0] > 0:
+        raise InputError(_mixed_message(r, drawing), name, r.images[0].line)
+    if r.images:
+        return drawing
     if drawing.kind.shape[0] == 0:
         raise InputError(_nothing_message(r), name)
     if not known:
@@ -183,6 +188,22 @@ def _nothing_message(r: Walker) -> str:
     if notes:
         msg += "; " + "; ".join(notes)
     return msg
+
+
+def _mixed_message(r: Walker, drawing: Drawing) -> str:
+    """The refusal of a file that holds both raster images and drawn vector elements."""
+    def name(tag: str, ident: str | None, line: int | None) -> str:
+        return f"<{tag}{f' id={ident!r}' if ident else ''}> at line {line}"
+
+    imgs = [name("image", i.ident, i.line) for i in r.images[:3]]
+    vecs = [name(s.tag, s.ident, s.line) for s in drawing.sources[:3]]
+    more_i = f" and {len(r.images) - 3} more" if len(r.images) > 3 else ""
+    more_v = f" and {len(drawing.sources) - 3} more" if len(drawing.sources) > 3 else ""
+    return (f"the file mixes raster images ({', '.join(imgs)}{more_i}) with drawn vector "
+            f"elements ({', '.join(vecs)}{more_v}): one job burns either a raster or "
+            "vector paths; split it into two files (one with the images, one with the "
+            "drawing) and run them one after the other, or pick one with --layer when they "
+            "are in separate layers")
 
 
 def _check_coordinates(drawing: Drawing, name: str) -> None:

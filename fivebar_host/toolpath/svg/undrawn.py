@@ -1,6 +1,7 @@
 """What the SVG reader does not draw, counted for ONE note (`Undrawn.note`) and named when a
 file has nothing else (`Undrawn.only`): one table entry per kind, so a kind that becomes
-drawn (raster images, markers did) leaves the table and nothing else changes.
+drawn (markers and raster images did: `<image>` goes to `raster.svgimage`) leaves the
+table and nothing else changes.
 
 Elements (`ELEMENTS`) are counted where the walk meets them; properties (`PROPERTIES`: a
 filter on an element that is drawn without it) where the element's own style sets them.
@@ -16,7 +17,6 @@ from fivebar_host.toolpath.svg.xmltree import Node
 
 #: Elements not drawn, and why.
 ELEMENTS: dict[str, str] = {
-    "image": "raster image (not engraved yet)",
     "foreignObject": "foreign content (HTML)",
     "video": "video",
     "audio": "audio",

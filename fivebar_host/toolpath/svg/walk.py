@@ -93,6 +93,7 @@ class Walker:
         self.collect_all_paint = False
         self.region: Callable[[Node, dict[str, str], Ctx], Ctx] | None = None
         self.paint = PaintRecorder()  # each drawn shape's fill rule and stroke, by source
+        self.images: list[ImageRef] = []  # the drawn <image> elements, in paint order
 
     @property
     def texts(self) -> list[TextInfo]:
@@ -226,6 +227,8 @@ class Walker:
             self.shape(node, c)
         elif tag == "text":
             draw_text(self, node, c)
+        elif tag == "image":
+            self.image(node, c)
         elif tag in FLOWED:
             if self.collector is None and c.props["visibility"] == "visible":
                 self.text_nodes.append(node)
@@ -303,6 +306,28 @@ class Walker:
             self.use_depth -= 1
 
     # ---------------------------------------------------------------- shapes
+    def image(self, node: Node, c: Ctx) -> None:
+        """An `<image>`: its box and href kept for the raster route (`raster.svgimage`)."""
+        if self.collector is not None or not c.selected:
+            return
+        if c.props["visibility"].strip().lower() in ("hidden", "collapse"):
+            self.skipped_hidden += 1
+            return
+        f, ln, lg = self.file, node.line, c.lengths
+
+        def size(attr: str) -> float | None:
+            text = node.get(attr)
+            if text is None or text.strip() in ("", "auto"):
+                return None
+            return lg.user(text, f, ln, attr)
+
+        href = node.get("href") or node.get(f"{XLINK_NS} href") or ""
+        self.images.append(ImageRef(node.line, node.get("id"), href.strip(),
+                                    lg.user(node.get("x"), f, ln, "x"),
+                                    lg.user(node.get("y"), f, ln, "y"), size("width"),
+                                    size("height"), node.get("preserveAspectRatio"),
+                                    c.matrix, c.clip))
+
     def visible(self, node: Node, c: Ctx) -> bool:
         """Whether a shape paints anything; warns about what a pen cannot show."""
         p = c.props
@@ -388,6 +413,24 @@ class Walker:
             self.b.sources.pop()
             return -1
         return src
+
+
+@dataclass(frozen=True)
+class ImageRef:
+    """An `<image>` as met by the walk: its line and id, href, x/y/width/height in user
+    units (None: the image's own size), preserveAspectRatio, the 3×3 map of its user units
+    to the drawing frame (mm, y up) and the clip region of its ancestors (drawing frame)."""
+
+    line: int
+    ident: str | None
+    href: str
+    x: float
+    y: float
+    width: float | None
+    height: float | None
+    par: str | None
+    matrix: np.ndarray
+    clip: BaseGeometry | None
 
 
 def root_props() -> dict[str, str]:
