@@ -435,6 +435,12 @@ def start_device(
     a host streaming in wall time meets the link at its real rate.
     """
     emu = Emulator(build.elf, build.harness, trace_path, endstop_a, endstop_b, realtime)
+    return boot(emu, trace_path, timeout)
+
+
+def boot(emu: Emulator, trace_path: Path, timeout: float) -> SimDevice:
+    """Start `emu`, open its pty and read the boot banner: the device, or the emulator
+    stopped and the error raised (the stepper and the servo builds alike)."""
     try:
         port = open_port(emu.start(), timeout=0.5)
     except Exception:

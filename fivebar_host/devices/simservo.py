@@ -16,10 +16,9 @@ from fivebar_host.devices.sim import (
     BuildPaths,
     Emulator,
     EmulatorError,
-    FirmwareSession,
     SimDevice,
+    boot,
     firmware_dir,
-    open_port,
     toolchain_missing,
 )
 from fivebar_host.devices.simtrace import Trace
@@ -56,19 +55,7 @@ def start_servo_device(build: BuildPaths, trace_path: Path, timeout: float = 10.
     """Start the harness on the servo build with its arm servo pins traced, open its pty and
     read the boot banner."""
     emu = Emulator(build.elf, build.harness, trace_path, realtime=realtime, extra=("-V",))
-    try:
-        port = open_port(emu.start(), timeout=0.5)
-    except Exception:
-        emu.stop()
-        raise
-    session = FirmwareSession(port, timeout=timeout)
-    device = SimDevice(emu, port, session, trace_path)
-    try:
-        session.wait_banner()
-    except Exception:
-        device.close()
-        raise
-    return device
+    return boot(emu, trace_path, timeout)
 
 
 def frame_pulses(trace: Trace, joint: int) -> list[tuple[int, float]]:

@@ -21,6 +21,7 @@ import shapely
 from shapely.geometry.base import BaseGeometry
 
 from fivebar_host.errors import InputError
+from fivebar_host.toolpath.fill.regions import winding
 from fivebar_host.toolpath.geometry import ARC, CUBIC, LINE, MAX_COORD_MM, evaluate, piece_counts
 from fivebar_host.toolpath.svg.pathdata import Prim
 from kinematics.arrays import FloatArray
@@ -89,20 +90,6 @@ def tolerance(box: tuple[float, float, float, float] | None) -> float:
     return max(1e-6, 1e-5 * max(box[2] - box[0], box[3] - box[1]))
 
 
-def _winding(points: FloatArray, rings: list[FloatArray]) -> np.ndarray:
-    """Winding number of each point with respect to closed rings (crossing rule)."""
-    wn = np.zeros(points.shape[0], dtype=np.int64)
-    px, py = points[:, 0:1], points[:, 1:2]
-    for r in rings:
-        a, b = r[:-1], r[1:]
-        ax, ay, bx, by = a[:, 0], a[:, 1], b[:, 0], b[:, 1]
-        left = (bx - ax) * (py - ay) - (px - ax) * (by - ay)
-        up = (ay <= py) & (by > py) & (left > 0)
-        down = (ay > py) & (by <= py) & (left < 0)
-        wn += up.sum(axis=1) - down.sum(axis=1)
-    return wn
-
-
 def fill_region(subpaths: Subpaths, rule: str, tol: float) -> BaseGeometry:
     """The area a renderer fills for these subpaths (each closed implicitly) under `rule`."""
     rings: list[FloatArray] = []
@@ -125,7 +112,7 @@ def fill_region(subpaths: Subpaths, rule: str, tol: float) -> BaseGeometry:
     if not faces:
         return shapely.Polygon()
     reps = np.array([f.representative_point().coords[0] for f in faces])
-    wn = _winding(reps, rings)
+    wn = winding(reps, rings)
     keep = wn % 2 == 1 if rule == "evenodd" else wn != 0
     return shapely.union_all([f for f, k in zip(faces, keep, strict=True) if k])
 
