@@ -15,6 +15,7 @@ more often than the glyphs have strokes.
 
 from __future__ import annotations
 
+import functools
 from xml.sax.saxutils import escape
 
 import numpy as np
@@ -35,17 +36,19 @@ SIZE = 10.0
 
 def glyph_doubles(font: str, text: str) -> int:
     """Retraced chord pairs inside the glyphs themselves (the font's data) at SIZE."""
-    f = FontLibrary().load(font)
-    total = 0
-    for ch in set(text):
-        g = f.glyph(ch)
-        if g is None or g.n_strokes == 0:
-            continue
-        d = read_svg(f'<svg xmlns="http://www.w3.org/2000/svg" width="100mm" height="50mm" '
-                     f'viewBox="0 0 100 50"><text x="10" y="30" font-family="\'{font}\'" '
-                     f'font-size="{SIZE}">{escape(ch)}</text></svg>'.encode())
-        total += text.count(ch) * _doubles(d)
-    return total
+    return sum(text.count(ch) * char_doubles(font, ch) for ch in set(text))
+
+
+@functools.cache
+def char_doubles(font: str, ch: str) -> int:
+    """Retraced chord pairs inside one glyph alone (0 for a missing or empty glyph)."""
+    g = FontLibrary().load(font).glyph(ch)
+    if g is None or g.n_strokes == 0:
+        return 0
+    d = read_svg(f'<svg xmlns="http://www.w3.org/2000/svg" width="100mm" height="50mm" '
+                 f'viewBox="0 0 100 50"><text x="10" y="30" font-family="\'{font}\'" '
+                 f'font-size="{SIZE}">{escape(ch)}</text></svg>'.encode())
+    return _doubles(d)
 
 
 def _doubles(d: object) -> int:
