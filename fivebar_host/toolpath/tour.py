@@ -487,21 +487,33 @@ def _search(t: Tour, px: IntArray, py: IntArray, nbr: IntArray | None,
             progress.report("ordering paths", 1.0 - 0.5 * float((look[0] | look[1]).mean()))
 
 
+def candidates(starts: FloatArray, ends: FloatArray, start: FloatArray | None,
+               end: FloatArray | None, k: int = 8) -> tuple[IntArray, IntArray]:
+    """The near pairs (x, y) of endpoint ids (`Tour.roles`) that propose moves: each
+    endpoint with its `k` nearest of other paths (`neighbours`), the start and park
+    positions included (a placeholder point where that end of the tour is free)."""
+    n = starts.shape[0]
+    first = starts[0] if start is None else start
+    park = first if end is None else end
+    allp = np.concatenate((starts, ends, np.array([first, park], dtype=np.float64)))
+    owner = np.concatenate((np.arange(n), np.arange(n), [n, n + 1]))
+    return neighbours(allp, min(k, 2 * n), owner)
+
+
 def improve(starts: FloatArray, ends: FloatArray, order: IntArray, rev: BoolArray,
             start: FloatArray | None, end: FloatArray | None, *, k: int = 8,
-            max_rounds: int = 200, long_blocks: bool = True) -> tuple[IntArray, BoolArray]:
+            max_rounds: int = 200, long_blocks: bool = True,
+            pairs: tuple[IntArray, IntArray] | None = None) -> tuple[IntArray, BoolArray]:
     """2-opt and Or-opt from the tour (`order`, `rev`) until neither improves or after
-    `max_rounds` rounds (module doc); `k` near endpoints per endpoint propose the moves,
-    `long_blocks` adds the or-3opt moves. `start`/`end` None: that end of the tour is free."""
+    `max_rounds` rounds (module doc); `k` near endpoints per endpoint propose the moves
+    (`pairs`: `candidates` computed already), `long_blocks` adds the or-3opt moves.
+    `start`/`end` None: that end of the tour is free."""
     n = order.shape[0]
     if n < 2:
         return order, rev
     t = Tour(starts, ends, order, rev, start, end)
-    ends_xy = [[t.bx[0], t.by[0]], [t.ax[n + 1], t.ay[n + 1]]]
-    allp = np.concatenate((starts, ends, np.array(ends_xy)))
-    owner = np.concatenate((np.arange(n), np.arange(n), [n, n + 1]))
     k = min(k, 2 * n)
-    px, py = neighbours(allp, k, owner)
+    px, py = candidates(starts, ends, start, end, k) if pairs is None else pairs
     # a free end has no place: its edges cost nothing whatever is next to it (`round_2opt`
     # pairs the last exit itself; a block moved to the front is proposed by the first entry)
     free = [e for e, f in ((2 * n, start is None), (2 * n + 1, end is None)) if f]
@@ -516,4 +528,3 @@ def improve(starts: FloatArray, ends: FloatArray, order: IntArray, rev: BoolArra
         nbr = nbr[:, :LONG_K]
     _search(t, px, py, nbr, max_rounds)
     return t.path[1:n + 1].copy(), t.rev[1:n + 1].copy()
-
