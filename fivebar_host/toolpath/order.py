@@ -36,6 +36,8 @@ from kinematics.arrays import BoolArray, FloatArray, IntArray
 
 #: Up to this many paths both starting tours are improved (module doc, step 1).
 TWO_STARTS = 5000
+#: Direction programmes (each followed by local search around the turned paths) per tour.
+DIRECTION_ROUNDS = 3
 
 
 @dataclass(frozen=True)
@@ -122,19 +124,40 @@ def _improved_tour(starts: FloatArray, ends: FloatArray, start: FloatArray | Non
     pairs = tour.candidates(starts, ends, start, end)  # found once, used by every stage
     ge = greedy_edge(starts, ends, start, pairs)
     best: tuple[float, IntArray, BoolArray] | None = None
-    for order, rev in ((ge, nn) if n <= TWO_STARTS else (ge,)):
-        order, rev = tour.improve(starts, ends, order, rev, start, end, max_rounds=max_rounds,
-                                  pairs=pairs)
-        rev = best_directions(starts, ends, order, start, end)
+    for first in ((ge, nn) if n <= TWO_STARTS else (ge,)):
+        order, rev = _local_search(starts, ends, first, start, end, max_rounds, pairs)
         length = travel_length(starts, ends, order, rev, start, end)
         if best is None or length < best[0]:
             best = (length, order, rev)
     assert best is not None
     if best[0] > travel_length(starts, ends, *nn, start, end):  # never longer than NN
-        order, rev = tour.improve(starts, ends, *nn, start, end, max_rounds=max_rounds,
-                                  pairs=pairs)
-        return order, best_directions(starts, ends, order, start, end)
+        return _local_search(starts, ends, nn, start, end, max_rounds, pairs)
     return best[1], best[2]
+
+
+def _local_search(starts: FloatArray, ends: FloatArray, first: tuple[IntArray, BoolArray],
+                  start: FloatArray | None, end: FloatArray | None, max_rounds: int,
+                  pairs: tuple[IntArray, IntArray]) -> tuple[IntArray, BoolArray]:
+    """Local search from the tour `first`, then the best directions for its order; where
+    those turned paths round, local search again around them (they propose new moves),
+    until the directions stay (at most `DIRECTION_ROUNDS` times). Each step only
+    shortens the tour."""
+    n = starts.shape[0]
+    order, rev = tour.improve(starts, ends, *first, start, end, max_rounds=max_rounds,
+                              pairs=pairs)
+    for _ in range(DIRECTION_ROUNDS):
+        best = best_directions(starts, ends, order, start, end)
+        turned = np.flatnonzero(best != rev)
+        rev = best
+        if not turned.size:
+            break
+        near = np.unique(np.clip(np.concatenate((turned - 1, turned, turned + 1)), 0, n - 1))
+        look = np.zeros(2 * n + 2, dtype=bool)
+        look[order[near]] = look[order[near] + n] = True
+        look[2 * n:] = True
+        order, rev = tour.improve(starts, ends, order, rev, start, end, max_rounds=max_rounds,
+                                  pairs=pairs, look=look)
+    return order, rev
 
 
 def order_paths(starts: FloatArray, ends: FloatArray, start: FloatArray | None,
