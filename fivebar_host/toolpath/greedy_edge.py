@@ -26,6 +26,8 @@ from kinematics.arrays import BoolArray, FloatArray, IntArray
 
 #: Nearest free endpoints of other chains per free endpoint, per pass.
 K = 8
+#: Candidate joins handled at once (bounds the temporaries and the Python lists).
+CHUNK = 1 << 16
 
 
 def _link(starts: FloatArray, ends: FloatArray,
@@ -56,17 +58,23 @@ def _link(starts: FloatArray, ends: FloatArray,
             pi, pj = tour.neighbours(pts[free], min(K, free.size - 1), chain)
             keep = pi < pj  # each pair once
             pi, pj = free[pi[keep]], free[pj[keep]]
-        d = np.hypot(*(pts[pi] - pts[pj]).T)
-        by_length = np.argsort(d, kind="stable")
-        for a, b in zip(pi[by_length].tolist(), pj[by_length].tolist(), strict=True):
-            if link[a] >= 0 or link[b] >= 0:
-                continue
-            ra, rb = find(a % n), find(b % n)
-            if ra == rb:  # would close a cycle
-                continue
-            parent[ra] = rb
-            link[a], link[b] = b, a
-            chains -= 1
+        d = np.empty(pi.size)
+        for c in range(0, pi.size, CHUNK):  # in chunks: bounded temporaries
+            a, b = pi[c:c + CHUNK], pj[c:c + CHUNK]
+            d[c:c + CHUNK] = (pts[a, 0] - pts[b, 0]) ** 2 + (pts[a, 1] - pts[b, 1]) ** 2
+        by_length = np.argsort(d, kind="stable")  # squared lengths: the same order
+        del d
+        for c in range(0, by_length.size, CHUNK):
+            sel = by_length[c:c + CHUNK]
+            for a, b in zip(pi[sel].tolist(), pj[sel].tolist(), strict=True):
+                if link[a] >= 0 or link[b] >= 0:
+                    continue
+                ra, rb = find(a % n), find(b % n)
+                if ra == rb:  # would close a cycle
+                    continue
+                parent[ra] = rb
+                link[a], link[b] = b, a
+                chains -= 1
         free = np.flatnonzero(np.array(link) < 0)
         chain = np.array([find(int(x) % n) for x in free.tolist()], dtype=np.int64)
     return link
