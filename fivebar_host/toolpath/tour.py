@@ -538,9 +538,9 @@ def improve(starts: FloatArray, ends: FloatArray, order: IntArray, rev: BoolArra
         px, py = px[keep], py[keep]
     nbr = None
     if long_blocks:
-        nbr = np.full((2 * n + 2, k), -1, dtype=np.int64)
-        first = np.searchsorted(px, px, side="left")
-        nbr[px, np.arange(px.size) - first] = py
-        nbr = nbr[:, :LONG_K]
+        nbr = np.full((2 * n + 2, LONG_K), -1, dtype=np.int64)
+        rank = np.arange(px.size) - np.searchsorted(px, px, side="left")
+        near = rank < LONG_K  # each endpoint's nearest (pairs come nearest first)
+        nbr[px[near], rank[near]] = py[near]
     _search(t, px, py, nbr, max_rounds, look)
     return t.path[1:n + 1].copy(), t.rev[1:n + 1].copy()
