@@ -1,9 +1,9 @@
 """Pen-up travel of fivebar's path ordering against vpype's `linesort` (issue 39), side by
 side in one run, on real line drawings:
 
-- benchmarks/drawings/*.svg: plotter drawings from vpype's test data (benchmarks/drawings/
-  SOURCES.md), examples/birthday_card.svg, and tests/gcode_corpus/mrbeam-heart.gco (a
-  real laser job).
+- benchmarks/drawings/*.svg: 16 plotter drawings from vpype's test data, examples and
+  documentation figures (benchmarks/drawings/SOURCES.md), examples/birthday_card.svg,
+  and tests/gcode_corpus/mrbeam-heart.gco (a real laser job).
 
 Each drawing is read and flattened as `fivebar` does (0.05 mm), and the same polylines go
 to both orderers: `toolpath.order.order_paths` and vpype's `linesort` and `linesort
@@ -13,8 +13,10 @@ its two-opt may put any line first; fivebar's tour is given no start and no park
 (`order_paths(starts, ends, None, None)`), so both figures are the pen-up length between
 consecutive paths of a route through every path that begins and ends anywhere. Times are
 wall seconds of the ordering alone (best of `--repeat` runs; vpype's two-opt once unless
-`--repeat-vpype`). Target: fivebar ≤ 0.95×
-`linesort --two-opt` on at least 5 drawings, in no more time.
+`--repeat-vpype`). Target (issue 39): fivebar ≤ 0.95× `linesort --two-opt` on at least 5
+drawings, in no more time than vpype's on each of them; every drawing is printed, the
+ones it is not met on too. Layers are not separated here (both sides get the same one
+set of polylines).
 
 Run: python benchmarks/ordering.py [--repeat 3] [--repeat-vpype 1] [FILES...]
 """
@@ -86,7 +88,7 @@ def main() -> None:
     print(f"  {'drawing':<22} {'paths':>6} {'fivebar':>9} {'linesort':>9} {'2-opt':>9} "
           f"{'ratio':>6} {'fivebar s':>9} {'2-opt s':>8} {'linesort s':>10}")
     ratios: list[float] = []
-    slower = 0
+    slower = ok_fast = 0
     for f in args.files:
         lines = polylines(f)
         fb = [fivebar_sort(lines) for _ in range(args.repeat)]
@@ -97,13 +99,14 @@ def main() -> None:
         ratio = mine / ref if ref > 0 else 1.0
         ratios.append(ratio)
         slower += t_mine > t_ref
+        ok_fast += ratio <= 0.95 and t_mine <= t_ref
         print(f"  {f.name:<22} {len(lines):>6d} {mine:>9.1f} {ls[0][0]:>9.1f} {ref:>9.1f} "
               f"{ratio:>6.3f} {t_mine:>9.3f} {t_ref:>8.3f} {min(t for _, t in ls):>10.3f}")
     ok = sum(r <= 0.95 for r in ratios)
     print(f"  ratio fivebar / linesort --two-opt: median {statistics.median(ratios):.3f}, "
-          f"max {max(ratios):.3f}; {ok} of {len(ratios)} drawings ≤ 0.95 "
-          f"({'MET' if ok >= 5 and ok == len(ratios) else 'NOT MET'}); fivebar slower than "
-          f"--two-opt on {slower}")
+          f"max {max(ratios):.3f}; {ok} of {len(ratios)} drawings ≤ 0.95, {ok_fast} of them "
+          f"in no more time than --two-opt (target ≥ 5: {'MET' if ok_fast >= 5 else 'NOT MET'})"
+          f"; fivebar slower than --two-opt on {slower} of {len(ratios)}")
 
 
 if __name__ == "__main__":

@@ -128,6 +128,16 @@ def _nearest_in_grid(pts: FloatArray, owner: IntArray, k: int, q: IntArray,
     return found
 
 
+def _norm(dx: FloatArray, dy: FloatArray) -> FloatArray:
+    """sqrt(dx² + dy²) in place of dx (a temporary): three times faster than np.hypot,
+    whose overflow guard millimetre coordinates do not need."""
+    dx *= dx
+    dy *= dy
+    dx += dy
+    out: FloatArray = np.sqrt(dx, out=dx)
+    return out
+
+
 class Tour:
     """The tour's mutable state (module doc): path and reversal per position, entry (A) and
     exit (B) coordinates per position, and each path's position."""
@@ -149,8 +159,14 @@ class Tour:
         b = np.concatenate((start[None], np.where(r, starts[order], ends[order]), a[-1:]))
         self.ax, self.ay = a[:, 0].copy(), a[:, 1].copy()
         self.bx, self.by = b[:, 0].copy(), b[:, 1].copy()
-        self.pos = np.empty(n, dtype=np.int64)
+        # each path's position, then 0 and n + 1 for the start and the park (`roles`)
+        self.posx = np.concatenate((np.empty(n, dtype=np.int64), [0, n + 1]))
+        self.pos = self.posx[:n]  # a view: `reverse` and `move` keep both up to date
         self.pos[order] = np.arange(1, n + 1)
+        #: per endpoint id: its path (n, n + 1: the start, the park), and whether it is the
+        #: exit of an unreversed path (the start position is an exit, the park an entry)
+        self.owner = np.concatenate((np.arange(n), np.arange(n), [n, n + 1]))
+        self.side = np.concatenate((np.zeros(n, bool), np.ones(n, bool), [True, False]))
 
     def length(self) -> float:
         """The tour's travel."""
@@ -158,7 +174,7 @@ class Tour:
 
     def edges(self) -> FloatArray:
         """The travel edges' lengths: edge k runs from B[k] to A[k+1] (k = 0..n)."""
-        d: FloatArray = np.hypot(self.ax[1:] - self.bx[:-1], self.ay[1:] - self.by[:-1])
+        d = _norm(self.ax[1:] - self.bx[:-1], self.ay[1:] - self.by[:-1])
         if self.free_start:
             d[0] = 0.0
         if self.free_end:
@@ -168,11 +184,8 @@ class Tour:
     def roles(self, e: IntArray) -> tuple[IntArray, BoolArray]:
         """Position and whether it is the exit, of endpoint ids (id < n: start of path id,
         n ≤ id < 2n: end of path id − n, 2n: the start position, 2n + 1: the park)."""
-        n = self.n
-        inner = e < 2 * n
-        k = np.where(inner, self.pos[np.where(inner, e % n, 0)],
-                     np.where(e == 2 * n, 0, n + 1))
-        return k, np.where(inner, (e >= n) ^ self.rev[k], e == 2 * n)
+        k = self.posx[self.owner[e]]
+        return k, self.side[e] ^ self.rev[k]  # rev is False at 0 and n + 1
 
     def role(self, e: int) -> tuple[int, bool]:
         """`roles` of one endpoint."""
@@ -186,7 +199,7 @@ class Tour:
              p: IntArray, q: IntArray) -> FloatArray:
         """|P − Q| for P at positions `p`, Q at positions `q`: 0 from the start position
         or to the park position where the tour has none (free ends)."""
-        d = np.hypot(px - qx, py - qy)
+        d = _norm(px - qx, py - qy)
         if self.free_start:
             d[p == 0] = 0.0
         if self.free_end:
@@ -487,21 +500,36 @@ def _search(t: Tour, px: IntArray, py: IntArray, nbr: IntArray | None,
             progress.report("ordering paths", 1.0 - 0.5 * float((look[0] | look[1]).mean()))
 
 
+def candidates(starts: FloatArray, ends: FloatArray, start: FloatArray | None,
+               end: FloatArray | None, k: int = 8) -> tuple[IntArray, IntArray]:
+    """The near pairs (x, y) of endpoint ids (`Tour.roles`) that propose moves: each
+    endpoint with its `k` nearest of other paths (`neighbours`), the start and park
+    positions included (a placeholder point where that end of the tour is free)."""
+    n = starts.shape[0]
+    first = starts[0] if start is None else start
+    park = first if end is None else end
+    allp = np.concatenate((starts, ends, np.array([first, park], dtype=np.float64)))
+    owner = np.concatenate((np.arange(n), np.arange(n), [n, n + 1]))
+    return neighbours(allp, min(k, 2 * n), owner)
+
+
 def improve(starts: FloatArray, ends: FloatArray, order: IntArray, rev: BoolArray,
             start: FloatArray | None, end: FloatArray | None, *, k: int = 8,
-            max_rounds: int = 200, long_blocks: bool = True) -> tuple[IntArray, BoolArray]:
+            max_rounds: int = 200, long_blocks: bool = True,
+            pairs: tuple[IntArray, IntArray] | None = None,
+            look: BoolArray | None = None) -> tuple[IntArray, BoolArray]:
     """2-opt and Or-opt from the tour (`order`, `rev`) until neither improves or after
-    `max_rounds` rounds (module doc); `k` near endpoints per endpoint propose the moves,
-    `long_blocks` adds the or-3opt moves. `start`/`end` None: that end of the tour is free."""
+    `max_rounds` rounds (module doc); `k` near endpoints per endpoint propose the moves
+    (`pairs`: `candidates` computed already), `long_blocks` adds the or-3opt moves.
+    `start`/`end` None: that end of the tour is free. `look`: the endpoint ids whose moves
+    are looked at first (don't-look bits; None: all), for a tour already improved except
+    around them."""
     n = order.shape[0]
     if n < 2:
         return order, rev
     t = Tour(starts, ends, order, rev, start, end)
-    ends_xy = [[t.bx[0], t.by[0]], [t.ax[n + 1], t.ay[n + 1]]]
-    allp = np.concatenate((starts, ends, np.array(ends_xy)))
-    owner = np.concatenate((np.arange(n), np.arange(n), [n, n + 1]))
     k = min(k, 2 * n)
-    px, py = neighbours(allp, k, owner)
+    px, py = candidates(starts, ends, start, end, k) if pairs is None else pairs
     # a free end has no place: its edges cost nothing whatever is next to it (`round_2opt`
     # pairs the last exit itself; a block moved to the front is proposed by the first entry)
     free = [e for e, f in ((2 * n, start is None), (2 * n + 1, end is None)) if f]
@@ -510,10 +538,9 @@ def improve(starts: FloatArray, ends: FloatArray, order: IntArray, rev: BoolArra
         px, py = px[keep], py[keep]
     nbr = None
     if long_blocks:
-        nbr = np.full((2 * n + 2, k), -1, dtype=np.int64)
-        first = np.searchsorted(px, px, side="left")
-        nbr[px, np.arange(px.size) - first] = py
-        nbr = nbr[:, :LONG_K]
-    _search(t, px, py, nbr, max_rounds)
+        nbr = np.full((2 * n + 2, LONG_K), -1, dtype=np.int64)
+        rank = np.arange(px.size) - np.searchsorted(px, px, side="left")
+        near = rank < LONG_K  # each endpoint's nearest (pairs come nearest first)
+        nbr[px[near], rank[near]] = py[near]
+    _search(t, px, py, nbr, max_rounds, look)
     return t.path[1:n + 1].copy(), t.rev[1:n + 1].copy()
-
