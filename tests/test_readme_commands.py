@@ -5,12 +5,16 @@ person is asked, as the README's reader would), against the emulated Uno.
 What the reader would change, and only that: the port `/dev/ttyUSB0` is the emulated Uno
 with Optiboot (`fivebar-sim://?bootloader=optiboot`, kept between commands like a real board:
 `fivebar flash` writes the firmware into it first, later commands find it there); the
-drawing placeholders (`drawing.svg`, `art.svg`) are examples/simple.svg, `mine.toml` the
-default profile and `my.toml` a machine made for the 200x150 page the README asks of it
-(`fivebar design --page 200x150 -o my.toml`, as the README's next command makes one);
-`--hold 30` holds 1 s. Commands with `…` (elisions), the long-running
-services (`serve`, `bridge`, `plot --server`) and `calibrate fit` (it needs a ruler's
-measurements) are not run; the test lists them so none is dropped silently."""
+drawing placeholders (`drawing.svg`, `art.svg`) are the reader's own drawing, a small one
+here (`MINE_SVG`, 24x12 mm: a rectangle, a circle and a path — the emulator draws at the
+machine's real speed, and the suite's time matters), `mine.toml` the default profile and
+`my.toml` a machine made for the 200x150 page the README asks of it (`fivebar design --page
+200x150 -o my.toml`, as the README's next command makes one); `--hold 30` holds 1 s; the
+real-time photo demo (`?realtime=1`, 20 s of the full photo, measured by
+`benchmarks/raster.py`) burns the photo 8 mm wide at 0.1 mm (its `raster:` line still
+printed from the pin trace). Commands with `…` (elisions), the long-running services
+(`serve`, `bridge`, `plot --server`) and `calibrate fit` (it needs a ruler's measurements)
+are not run; the test lists them so none is dropped silently."""
 
 from __future__ import annotations
 
@@ -58,8 +62,17 @@ def pasted(cmd: str) -> str:
     """What the reader runs (module doc)."""
     cmd = cmd.replace("/dev/ttyUSB0", PORT).replace("--hold 30", "--hold 1")
     for name in ("drawing.svg", "art.svg"):
-        cmd = cmd.replace(name, "simple.svg")
+        cmd = cmd.replace(name, "mine.svg")
+    if "realtime=1" in cmd and "photo.png" in cmd:
+        cmd += " --width 8mm --line-interval 0.1mm"
     return cmd
+
+
+#: The reader's drawing (module doc).
+MINE_SVG = """<svg xmlns="http://www.w3.org/2000/svg" width="24mm" height="12mm"
+viewBox="0 0 24 12"><g fill="none" stroke="black"><rect x="1" y="1" width="22" height="10" rx="1"/>
+<circle cx="7" cy="6" r="3"/><path d="M 13 9 L 16 3 L 19 9 Z"/></g></svg>
+"""
 
 
 def on_terminal(argv: list[str], cwd: Path, env: dict[str, str], timeout_s: float = 240
@@ -97,7 +110,7 @@ def test_the_readme_commands_pasted_as_written_succeed(sim_build: object, tmp_pa
                                                        ) -> None:
     for d in ("examples", "configs"):
         (tmp_path / d).symlink_to(ROOT / d)
-    shutil.copy(ROOT / "examples" / "simple.svg", tmp_path / "simple.svg")
+    (tmp_path / "mine.svg").write_text(MINE_SVG)
     shutil.copy(ROOT / "configs" / "default.toml", tmp_path / "mine.toml")
     env = {**os.environ, "PYTHONPATH": str(ROOT), "FIVEBAR_SIM_STATE": str(tmp_path / "sim"),
            "TERM": "dumb", "COLUMNS": "100"}
