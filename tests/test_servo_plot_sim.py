@@ -41,7 +41,7 @@ def _plot(tmp_path: Path, query: str) -> tuple[int, float, float, str]:
 
 
 def _pulse_quantum_mm(csv: Path) -> float:
-    """The pen displacement of half a 0.5 µs tick on each arm, largest over the poses the
+    """The pen displacement of a whole 0.5 µs tick on each arm, largest over the poses the
     run passed (the executed CSV's steps on the profile's grid): by finite differences of
     forward kinematics, not the report's Jacobian."""
     import math
@@ -58,7 +58,7 @@ def _pulse_quantum_mm(csv: Path) -> float:
     q = np.zeros(th.shape[0])
     for j in (0, 1):
         d = np.zeros(2)
-        d[j] = tick / 2
+        d[j] = tick
         q += np.hypot(*(prof.geometry.forward_batch(th + d, "+").points - p0.points).T)
     return float(q[p0.valid].max())
 

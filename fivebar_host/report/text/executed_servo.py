@@ -19,11 +19,17 @@ made every moving arm lag its pulses by a quantum: up to a pulse quantum of extr
 at the pen, 0.1298 against 0.1095 mm on the same trace of the Plotclock text.)
 
 The bound (issue 38): the tolerance plus the *pulse quantum* at the pen, `pulse_quantum_mm`:
-rounding each arm to half a 0.5 µs tick, the tick's angle the steepest of its curve, mapped
+one whole 0.5 µs tick on each arm, the tick's angle the steepest of its curve, mapped
 through the Jacobian as the step quantum is (compile/steps.py), the largest over the job's
-targets. The plan's own rounding is the `[motors]` grid's step quantum; a servo profile
-planned on a grid no finer than the tick (configs/plotclock.toml: one step = one tick) makes
-the two equal, and the run is checked against the tolerance plus the larger of them.
+targets. A whole tick, not the half a stepper's rounding to the nearest step costs: a frame's
+width is the arm's DDA count when its previous pulse fell, the segment's tick line
+*truncated* (a step is taken at its time, up to 128 µs late, and the frame reads the count
+between steps), so each arm lags its line by up to one tick. Measured on the Plotclock text
+over ~60 runs: 0.093–0.150 mm against 0.1 + 0.0744 mm; a half-tick bound (0.1372 mm) was
+exceeded in 2 of them, by a single frame of one arm 2.5 ticks off its line.
+The plan's own rounding is the `[motors]` grid's step quantum (half a grid step); a servo
+profile planned on a grid of ticks (configs/plotclock.toml: one step = one tick) makes it
+half the pulse quantum, and the run is checked against the tolerance plus the larger.
 """
 
 from __future__ import annotations
@@ -59,8 +65,8 @@ def tick_rad(profile: Profile) -> tuple[float, float]:
 
 
 def pulse_quantum_mm(job: Job, profile: Profile) -> float:
-    """The pulse quantum at the pen, mm: the largest pen displacement from rounding each
-    arm by half a pulse tick, ‖J·δθ‖ ≤ (‖J[:, 0]‖·t₀ + ‖J[:, 1]‖·t₁)/2 (triangle
+    """The pulse quantum at the pen, mm: the largest pen displacement from each arm off by
+    one pulse tick (module doc), ‖J·δθ‖ ≤ ‖J[:, 0]‖·t₀ + ‖J[:, 1]‖·t₁ (triangle
     inequality, as `compile.steps.step_quantum_mm`), over the job's targets."""
     t0, t1 = tick_rad(profile)
     th = np.asarray(job.home_rad) + job.joint_steps * (2.0 * math.pi / job.steps_per_rev)
@@ -70,7 +76,7 @@ def pulse_quantum_mm(job: Job, profile: Profile) -> float:
         return 0.0
     jac = profile.geometry.jacobian(th[ok], fwd.points[ok])
     q = np.hypot(jac[:, 0, 0], jac[:, 1, 0]) * t0 + np.hypot(jac[:, 0, 1], jac[:, 1, 1]) * t1
-    return float(q.max()) / 2.0
+    return float(q.max())
 
 
 def servo_angles(trace: Trace, profile: Profile, deadband_deg: tuple[float, float] | None
