@@ -107,7 +107,8 @@ def test_cnc_shield_profile_loads_and_dry_runs(tmp_path: Path) -> None:
 
 
 def test_servo_dead_band_is_the_profile_slack(tmp_path: Path) -> None:
-    """A servo profile's dead bands are its backlash_steps (1° on a 0.1125° grid: 9 steps),
+    """A servo profile's dead bands are its backlash_steps (1° on the Plotclock's grid of
+    0.5 µs pulse ticks, 0.04407°: 23 steps),
     and ServoMap sends each count less half of it: a count m is the command m − B/2, whose
     output band [command − w/2, command + w/2] is the play [m − B, m] (to the grid's
     rounding of w); T2∘T1 stays the identity."""
@@ -115,13 +116,13 @@ def test_servo_dead_band_is_the_profile_slack(tmp_path: Path) -> None:
 
     prof = load_profile(PLOTCLOCK)
     assert prof.joints is not None
-    assert prof.motors.backlash_steps == (9, 9)
+    assert prof.motors.backlash_steps == (23, 23)
     smap = ServoMap.of(prof.joints, prof)
     q = prof.motors.rad_per_step
     steps = np.arange(-300, 301, 7)
     for j in range(2):
         ticks = smap.ticks(j, steps)
-        want = prof.joints.joints[j].curve.pulse(prof.motors.home_rad[j] + (steps - 4.5) * q)
+        want = prof.joints.joints[j].curve.pulse(prof.motors.home_rad[j] + (steps - 11.5) * q)
         np.testing.assert_allclose(ticks / 2.0, want, atol=0.25)
         assert [smap.steps(j, int(t)) for t in ticks] == steps.tolist()
     bad = tmp_path / "bad.toml"

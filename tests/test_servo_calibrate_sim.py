@@ -16,7 +16,6 @@ from click.testing import CliRunner
 
 from fivebar_host.cli import main
 from fivebar_host.devices.sim import toolchain_missing
-from fivebar_host.report.text.executed_servo import FLICKER_US
 
 pytestmark = pytest.mark.skipif(toolchain_missing() is not None,
                                 reason=f"emulator unavailable: {toolchain_missing()}")
@@ -58,10 +57,10 @@ def test_pattern_on_the_emulator_recovers_the_true_dead_band(tmp_path: Path) -> 
                      str(PLOTCLOCK), "-o", str(fitted)], catch_exceptions=False)
     assert res.exit_code == 0, res.output
     out = res.output
-    # the executed-path report holds a pulse that flickers by one quantum (a hysteresis of
-    # FLICKER_US on the pulse, executed_servo.py): on the Plotclock's 11.345 µs per degree
-    # it widens the measured dead band by FLICKER_US / 11.345 µs = 0.088°
-    true_band = 1.5 + FLICKER_US / 11.345
+    # the executed-path report takes the widths as traced (to the cycle), so the measured
+    # band is the true servos' own (it held a one-quantum flicker before, which widened it
+    # by 0.5 µs / 11.345 µs per degree = 0.044° a side)
+    true_band = 1.5
     for k in (1, 2):
         line = next(ln for ln in out.splitlines() if f"dead band {k}" in ln)
         val, sd = (float(v) for v in line.split("=")[1].replace("°", "").split("±"))

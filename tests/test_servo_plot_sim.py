@@ -31,9 +31,36 @@ def _plot(tmp_path: Path, query: str) -> tuple[int, float, float, str]:
     line = next(ln for ln in res.output.splitlines() if ln.startswith("executed path"))
     assert "servo pulses" in line, res.output
     dev = float(line.split("max deviation ")[1].split(" mm")[0])
-    bound = float(line.split("(bound ")[1].split(" +")[0]) + float(
-        line.split("step quantum ")[1].split(" mm")[0])
+    # the Plotclock plans on a grid of pulse ticks: the bound is the tolerance plus the pulse
+    # quantum, computed here independently from the curve's slope and the Jacobian
+    assert "(bound 0.1 + pulse quantum " in line, line
+    bound = 0.1 + float(line.split("pulse quantum ")[1].split(" mm")[0])
+    assert bound - 0.1 == pytest.approx(_pulse_quantum_mm(tmp_path / "p.executed.csv"),
+                                        rel=0.03), line
     return res.exit_code, dev, bound, res.output
+
+
+def _pulse_quantum_mm(csv: Path) -> float:
+    """The pen displacement of a whole 0.5 µs tick on each arm, largest over the poses the
+    run passed (the executed CSV's steps on the profile's grid): by finite differences of
+    forward kinematics, not the report's Jacobian."""
+    import math
+
+    import numpy as np
+
+    from fivebar_host.config import load_profile
+
+    prof = load_profile(ROOT / "configs" / "plotclock.toml")
+    tick = math.radians(0.5 / 11.345)  # the profile's straight line: 11.345 µs per degree
+    rows = np.loadtxt(csv, delimiter=",", skiprows=1, usecols=(1, 2), ndmin=2)
+    th = np.asarray(prof.motors.home_rad) + rows * prof.motors.rad_per_step
+    p0 = prof.geometry.forward_batch(th, "+")
+    q = np.zeros(th.shape[0])
+    for j in (0, 1):
+        d = np.zeros(2)
+        d[j] = tick
+        q += np.hypot(*(prof.geometry.forward_batch(th + d, "+").points - p0.points).T)
+    return float(q[p0.valid].max())
 
 
 def test_plotclock_servo_run_within_its_bound(tmp_path: Path) -> None:

@@ -62,6 +62,8 @@ typedef struct {
 	uint8_t run;        /* the DDA's timer runs */
 	uint8_t paused;
 	uint8_t on;         /* M17 (1, the boot's) / M18 (0) */
+	uint8_t dda;        /* the step interrupt is inside mo_event() */
+	uint8_t defer;      /* bit i: arm i's next width waits for mo_event() */
 } board_servo_t;
 
 static volatile board_servo_t board_servo = { .on = 1 };
@@ -139,6 +141,14 @@ static inline void wait_count(uint16_t t)
 		} \
 		a->rise = (uint16_t)(a->rise + SV_FRAME_COUNTS); \
 		ocr = (uint16_t)(a->rise - SV_EARLY); \
+		/* this fall preempted mo_event(), which may be halfway through \
+		 * the kept record (a block's counts in, its directions not yet: \
+		 * the position 2 x a count off): the step interrupt takes the \
+		 * width when mo_event() returns, tens of us from now */ \
+		if (board_servo.dda) { \
+			board_servo.defer |= (uint8_t)(1u << (i)); \
+			return; \
+		} \
 		/* the position (mo_get_pos: ~15 us) with interrupts on: this \
 		 * compare is a frame away, the other arm's 3 ms */ \
 		__asm__ __volatile__("sei" ::: "memory"); \
@@ -163,6 +173,7 @@ ISR(TIMER2_OVF_vect, ISR_NOBLOCK)
 	board_servo.now = now;
 	if (board_servo.run) {
 		uint32_t next = board_servo.next;
+		board_servo.dda = 1;
 		while ((int32_t)(now - next) >= 0) {
 			uint16_t d = mo_event();
 			if (!d) {
@@ -172,6 +183,16 @@ ISR(TIMER2_OVF_vect, ISR_NOBLOCK)
 			next += d;
 		}
 		board_servo.next = next;
+		board_servo.dda = 0;
+		/* the widths of falls that came while mo_event() ran (their
+		 * arms' rises are a frame away) */
+		uint8_t s = board_irq_save();
+		uint8_t defer = board_servo.defer;
+		board_servo.defer = 0;
+		board_irq_restore(s);
+		for (uint8_t i = 0; i < 2; i++)
+			if (defer & (1u << i))
+				board_servo.arm[i].width = frame_width(i);
 	}
 	__asm__ __volatile__("cli" ::: "memory");
 	TIMSK2 |= (uint8_t)(1u << TOIE2);

@@ -5,7 +5,8 @@ drawing-shape error of the old profile on the fitted machine
 (`kinematics.calibration_analysis.shape_errors`: commanded by the old numbers, drawn by the
 fitted ones, compared with the intended drawing after the best rigid alignment of the whole
 region, since the paper may sit anywhere). The map is drawn by
-`fivebar_host.report.calibration.draw_error_map`.
+`fivebar_host.report.calibration.draw_error_map`. Servo profiles map through their
+pulse ↔ angle curves and dead bands instead (`servo_check`).
 """
 
 from __future__ import annotations
@@ -41,7 +42,12 @@ class ErrorMap:
 def error_map(fitted: Profile, old: Profile, mode: str | None = None,
               pitch_mm: float = 1.0) -> ErrorMap:
     """The old profile's predicted drawing-shape error over the fitted profile's safe
-    region (module doc)."""
+    region (module doc). Servo profiles: `servo_check.servo_error_map` (their curves and
+    dead bands; both profiles must be servo ones)."""
+    if fitted.joints is not None or old.joints is not None:
+        from fivebar_host.calibrate.servo_check import servo_error_map
+
+        return servo_error_map(fitted, old, mode, pitch_mm)
     m = pattern_mode(fitted, mode)
     k = fitted.kinematics
     true = nominal_params(fitted)

@@ -113,11 +113,22 @@ def write_executed(job: Job, prof: Profile, rec: Recording, preview_path: Path,
                    f"boundary data {burned.with_suffix('.npz')}")
         return
     tr, true = read_trace(rec.path), rec.true
+    # the bound's quantum: a step's rounding, or on servos a pulse tick's (the plan's grid
+    # step's when that is coarser: executed_servo's module doc)
+    quantum, q_name = job.step_quantum_mm, "step quantum"
     if prof.joints is not None:  # the servo build: the arms' pulses through the true servos
-        from fivebar_host.report.text.executed_servo import executed_servo_path
+        from fivebar_host.report.text.executed_servo import (
+            executed_servo_path,
+            pulse_quantum_mm,
+        )
 
         ex = executed_servo_path(job, prof, tr, report.start_segment, rec.deadband)
         t_s, track = ex.time, ex.steps
+        pulse_q = pulse_quantum_mm(job, prof)
+        if job.step_quantum_mm <= pulse_q * (1.0 + 1e-3):  # a grid of ticks (to its 8168.4)
+            quantum, q_name = max(pulse_q, job.step_quantum_mm), "pulse quantum"
+        else:
+            q_name = f"grid step quantum (the pulse quantum {pulse_q:.4f} mm is finer)"
     else:
         # the arms start where the emulated machine kept them (the trace's `start=`)
         t, track = merge_axes(tr.positions("A", tr.start[0]),
@@ -140,14 +151,15 @@ def write_executed(job: Job, prof: Profile, rec: Recording, preview_path: Path,
     pulses = "servo" if prof.joints is not None else "step"
     click.echo(f"executed path (from the emulator's {pulses} pulses{where}): {out}; drawing "
                f"segments' max deviation "
-               f"{ex.max_deviation_mm:.4f} mm (bound {job.tolerance_mm:g} + step quantum "
-               f"{job.step_quantum_mm:.4f} mm)")
+               f"{ex.max_deviation_mm:.4f} mm (bound {job.tolerance_mm:g} + {q_name} "
+               f"{quantum:.4f} mm)")
     if prof.pen is not None:
         click.echo(pen_report(job, prof, tr.pen_pulses(), tr.freq, ex).line())
-    check_deviation(ex.max_deviation_mm, job.tolerance_mm + job.step_quantum_mm, out, truth)
+    check_deviation(ex.max_deviation_mm, job.tolerance_mm + quantum, out, truth, q_name)
 
 
-def check_deviation(dev_mm: float, bound_mm: float, csv: Path, true_machine: bool) -> None:
+def check_deviation(dev_mm: float, bound_mm: float, csv: Path, true_machine: bool,
+                    quantum: str = "step quantum") -> None:
     """A drawing the machine drew farther off than the bound is a failed run, not a
     report line: DeviationError (exit 3) says how far, and the likely causes."""
     from fivebar_host.report.text.executed import DeviationError
@@ -161,5 +173,6 @@ def check_deviation(dev_mm: float, bound_mm: float, csv: Path, true_machine: boo
            "'yes, they are where the job stopped' while they were elsewhere, or steps lost "
            "to a stall")
     raise DeviationError(f"the machine drew {dev_mm:.2f} mm off the drawing, beyond the "
-                         f"bound of {bound_mm:.4f} mm (tolerance + step quantum): {why}. "
+                         f"bound of {bound_mm:.4f} mm (tolerance + {quantum.split(' (')[0]})"
+                         f": {why}. "
                          f"Every point is in {csv}")

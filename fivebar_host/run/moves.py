@@ -130,6 +130,22 @@ def travel(profile: Profile, job_assembly: int, start: ArrayLike, end: ArrayLike
     return _ramped(profile, start, end)
 
 
+def slack_travel(profile: Profile, job_assembly: int, start: ArrayLike, end: ArrayLike,
+                 end_slack: ArrayLike, what: str) -> Program:
+    """`travel` to motor counts `end` whose last move takes each motor's slack up the way
+    `end_slack` says (compile/backlash.py Eq. B1): B, the motor last moved up, so it comes
+    into `end` from B below; 0, from B above. Whatever the slack was at `start` (a fault may
+    stop a motor anywhere in it), a monotone move of B leaves the joint at `end` less
+    `end_slack`, as the job (or the rest convention, 0) assumes. No slack: `travel`."""
+    b = np.asarray(profile.motors.backlash_steps, dtype=np.int64)
+    e = np.asarray(end, dtype=np.int64)
+    if not b.any():
+        return travel(profile, job_assembly, start, e, what)
+    via = e - np.where(np.asarray(end_slack, dtype=np.int64) > 0, b, -b)
+    return Program.join([travel(profile, job_assembly, start, via, what),
+                         travel(profile, job_assembly, via, e, f"{what} (slack take-up)")])
+
+
 def build_program(job: Job, profile: Profile, laser: bool, start_segment: int,
                   position: ArrayLike, end_segment: int | None = None) -> Program:
     """The lines that run segments `start_segment`… `end_segment` − 1 (None: to the job's
@@ -156,9 +172,10 @@ def build_program(job: Job, profile: Profile, laser: bool, start_segment: int,
             at_end = np.array_equal(pos, steps[k + 1])
             pw = int(job.power[k]) if laser and not at_end else 0
             partial = Program.moves(steps[k + 1, 0], steps[k + 1, 1], rest, pw, k)
-        else:
-            parts.append(travel(profile, job.assembly, pos, steps[k],
-                                f"travel back to segment {k + 1}"))
+        else:  # ends with the slack the job has there (Job.slack; none: taken down)
+            slack = job.slack[k] if job.slack.shape[0] else np.zeros(2, dtype=np.int64)
+            parts.append(slack_travel(profile, job.assembly, pos, steps[k], slack,
+                                      f"travel back to segment {k + 1}"))
     parts.append(job_program(job, profile, laser, k, end_segment, partial))
     return Program.join(parts)
 
@@ -234,8 +251,12 @@ def jog_program(profile: Profile, assembly: int, mode: str, position: Sequence[i
         target = pos.copy()
         target["AB".index(motor)] += steps
         what = f"jog motor {motor} by {steps} steps"
-        if not checked:
-            return Program.command(Kind.ABSOLUTE) + _ramped(profile, pos, target)
+        if not checked:  # slack taken up downward, as at rest (slack_travel)
+            b = np.asarray(profile.motors.backlash_steps, dtype=np.int64)
+            return Program.join([Program.command(Kind.ABSOLUTE),
+                                 _ramped(profile, pos, target + b), _ramped(profile,
+                                                                            target + b,
+                                                                            target)])
     else:
         assert dxy_mm is not None
         fb = profile.geometry
@@ -251,4 +272,6 @@ def jog_program(profile: Profile, assembly: int, mode: str, position: Sequence[i
                             f"working mode {mode}")
         target = absolute_steps(inv.angles, mo.home_rad, mo.steps_per_rev)[0]
         what = f"jog the pen to ({goal[0]:.2f}, {goal[1]:.2f}) mm"
-    return Program.command(Kind.ABSOLUTE) + travel(profile, assembly, pos, target, what)
+    # the slack left taken up downward, the rest convention a job starts from (backlash.py)
+    return Program.command(Kind.ABSOLUTE) + slack_travel(profile, assembly, pos, target,
+                                                         (0, 0), what)

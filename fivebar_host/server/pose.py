@@ -21,7 +21,7 @@ from fivebar_host.config import Profile
 from fivebar_host.program import Kind, Program
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import LinkError
-from fivebar_host.run.moves import travel
+from fivebar_host.run.moves import slack_travel
 from fivebar_host.server.journal import JournalLink
 from fivebar_host.server.state import Connection, MachineRecord
 from fivebar_host.server.store import JobStore
@@ -129,8 +129,9 @@ class PoseKeeper:
         st = conn.controller.status()
         if not self.record.pose_known or st.position == (0, 0) or st.state != "Idle":
             return
-        moves = travel(self.profile, job.assembly, st.position, (0, 0),
-                       "park the arms at the home pose before the next job")
+        # the slack taken up downward: the next job starts from that (compile/backlash.py)
+        moves = slack_travel(self.profile, job.assembly, st.position, (0, 0), (0, 0),
+                             "park the arms at the home pose before the next job")
         log.info("parking: travel from A = %d, B = %d to the home pose", *st.position)
         conn.controller.run_moves(Program.join([Program.command(Kind.ABSOLUTE),
                                                 Program.command(Kind.TOOL_OFF), moves]),

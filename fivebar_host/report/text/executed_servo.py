@@ -11,6 +11,25 @@ steps: the counts less the dead-band slack the run takes up, compile/backlash.py
 forward from the last one (segments are executed in order), and a frame on a drawing
 segment is measured against its requested curve as the stepper report measures a step
 (`executed.executed_path`).
+
+Widths are taken as traced, to the emulated CPU's cycle (1/16 µs): that is the pulse the
+servo receives, the firmware's sub-tick edge error (≤ 0.4 µs, benchmarks/servo.py)
+included. (They were rounded to the 0.5 µs quantum with a one-quantum flicker held, which
+made every moving arm lag its pulses by a quantum: up to a pulse quantum of extra deviation
+at the pen, 0.1298 against 0.1095 mm on the same trace of the Plotclock text.)
+
+The bound (issue 38): the tolerance plus the *pulse quantum* at the pen, `pulse_quantum_mm`:
+one whole 0.5 µs tick on each arm, the tick's angle the steepest of its curve, mapped
+through the Jacobian as the step quantum is (compile/steps.py), the largest over the job's
+targets. A whole tick, not the half a stepper's rounding to the nearest step costs: a frame's
+width is the arm's DDA count when its previous pulse fell, the segment's tick line
+*truncated* (a step is taken at its time, up to 128 µs late, and the frame reads the count
+between steps), so each arm lags its line by up to one tick. Measured on the Plotclock text
+over ~60 runs: 0.093–0.150 mm against 0.1 + 0.0744 mm; a half-tick bound (0.1372 mm) was
+exceeded in 2 of them, by a single frame of one arm 2.5 ticks off its line.
+The plan's own rounding is the `[motors]` grid's step quantum (half a grid step); a servo
+profile planned on a grid of ticks (configs/plotclock.toml: one step = one tick) makes it
+half the pulse quantum, and the run is checked against the tolerance plus the larger.
 """
 
 from __future__ import annotations
@@ -30,16 +49,40 @@ from kinematics.servo import PULSE_QUANTUM_US, hysteresis
 
 #: The arm servos' trace names.
 PINS = ("svA", "svB")
-#: A measured pulse moves only once it leaves ± one quantum of where it was (Eq. S1 of
-#: this width): the firmware's edges jitter by under a quantum (benchmarks/servo.py), which
-#: rounds a still servo's width one quantum off now and then.
-FLICKER_US = 2 * PULSE_QUANTUM_US
+
+
+def tick_rad(profile: Profile) -> tuple[float, float]:
+    """Each arm's largest joint angle of one pulse quantum (0.5 µs), rad: the steepest
+    piece of its curve (a table is piecewise linear, so its steepest piece bounds it)."""
+    if profile.joints is None:
+        raise FivebarError("the pulse quantum needs a servo profile ([joints])")
+    out = []
+    for j in profile.joints.joints:
+        c = j.curve
+        out.append(float(np.max(np.abs(np.diff(c.angle_rad) / np.diff(c.pulse_us))))
+                   * PULSE_QUANTUM_US)
+    return out[0], out[1]
+
+
+def pulse_quantum_mm(job: Job, profile: Profile) -> float:
+    """The pulse quantum at the pen, mm: the largest pen displacement from each arm off by
+    one pulse tick (module doc), ‖J·δθ‖ ≤ ‖J[:, 0]‖·t₀ + ‖J[:, 1]‖·t₁ (triangle
+    inequality, as `compile.steps.step_quantum_mm`), over the job's targets."""
+    t0, t1 = tick_rad(profile)
+    th = np.asarray(job.home_rad) + job.joint_steps * (2.0 * math.pi / job.steps_per_rev)
+    fwd = profile.geometry.forward_batch(th, "+" if job.assembly > 0 else "-")
+    ok = fwd.valid
+    if not ok.any():
+        return 0.0
+    jac = profile.geometry.jacobian(th[ok], fwd.points[ok])
+    q = np.hypot(jac[:, 0, 0], jac[:, 1, 0]) * t0 + np.hypot(jac[:, 0, 1], jac[:, 1, 1]) * t1
+    return float(q.max())
 
 
 def servo_angles(trace: Trace, profile: Profile, deadband_deg: tuple[float, float] | None
                  ) -> tuple[FloatArray, FloatArray]:
-    """(times (E,) cycles, joint angles (E, 2) rad): each arm's pulses (to the 0.5 µs
-    quantum) through the profile's curve and the true dead band's hysteresis, each at the
+    """(times (E,) cycles, joint angles (E, 2) rad): each arm's pulses (as traced, to the
+    cycle) through the profile's curve and the true dead band's hysteresis, each at the
     time its width was taken (the arm's previous fall, board_servo.c), and both arms on
     the union of those times, each interpolated linearly between its own samples (a servo
     moves on between its frames, and arm B's frames start 3 ms after arm A's)."""
@@ -56,9 +99,7 @@ def servo_angles(trace: Trace, profile: Profile, deadband_deg: tuple[float, floa
             return np.zeros(0), np.zeros((0, 2))
         curve = profile.joints.joints[j].curve
         lo, hi = curve.range_us
-        us = np.rint(pul[1:, 1] * 1e6 / trace.freq / PULSE_QUANTUM_US) * PULSE_QUANTUM_US
-        # a pulse one quantum off and back (the edges' sub-µs jitter) is no motion
-        us = hysteresis(us, FLICKER_US)
+        us = pul[1:, 1] * 1e6 / trace.freq  # the width the servo receives (module doc)
         th = curve.angle(np.clip(us, lo, hi))
         if deadband_deg is not None and deadband_deg[j] > 0:
             th = hysteresis(th, math.radians(deadband_deg[j]))
