@@ -35,6 +35,8 @@ NUMBER_DIGITS = 6
 #: Bytes the escape adds, per byte value.
 _ESC = np.zeros(256, dtype=np.int64)
 _ESC[list(protocol.PX_ESCAPED)] = 1
+#: 0, 1, 2 … as floats: a line's change indices (sliced: a line holds few changes).
+_INDEX = np.arange(1024, dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -76,6 +78,8 @@ def escaped_varint_len(x: IntArray) -> IntArray:
         live = (rest > 0) | (out == 0)
         b = (rest & 0x7F) | np.where(more, 0x80, 0)
         out += np.where(live, 1 + _ESC[b], 0)
+        if not more.any():  # every varint ended here: later rounds would add nothing
+            break
         rest = rest >> 7
     return out
 
@@ -131,7 +135,6 @@ def _fit_line(c: _Costs, j: int, end: int, t_prev: int | None
     n = b - a
     if n == 0:
         return 0, 0, 0.0
-    i = np.arange(n, dtype=np.float64)
     cands: list[int] = []
     if n > 1:
         if t_prev is not None:
@@ -140,18 +143,20 @@ def _fit_line(c: _Costs, j: int, end: int, t_prev: int | None
         cands += [int(np.floor(t0)), int(np.ceil(t0))]
     else:
         cands.append(0)
-    best: tuple[int, int, float] | None = None
     total = int(c.start[end] - c.start[j])
     if n > 1:  # the longest T with every change inside at U = 0: always a valid line
         cands.append((total - 1) // (n - 1))
+    i = _INDEX[:n] if n <= _INDEX.shape[0] else np.arange(n, dtype=np.float64)
+    best: tuple[int, int, float] | None = None
     for k, t in enumerate(cands):
         r = off - i * t
-        u = round((float(r.max()) + float(r.min())) / 2)
+        mx, mn = float(r.max()), float(r.min())
+        u = round((mx + mn) / 2)
         # every change inside the line's segments (the firmware's rule), U ≥ 0 (a varint)
         u = max(min(u, total - 1 - (n - 1) * t), 0)
         if u + (n - 1) * t > total - 1:
             continue
-        res = float(np.abs(r - u).max())
+        res = max(mx - u, u - mn)  # = max |r − u| (rounding is monotone)
         if k == 0 and t_prev is not None and n > 1 and res <= FIT_CYCLES:
             return u, t, res  # the modal T: a shorter line
         if best is None or res < best[2]:

@@ -32,6 +32,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from fivebar_host import protocol
 from fivebar_host.compile import planner
@@ -117,13 +118,21 @@ class LineGeo:
     ramp acceleration once found.  Unchecked: `check` checks a planned scanline's points
     (its piece ends and the samples over its extent) at once."""
 
-    def __init__(self, ctx: RasterCtx, sl: Scanline) -> None:
+    def __init__(self, ctx: RasterCtx, sl: Scanline, pad_mm: tuple[float, float] | None = None
+                 ) -> None:
         self.ctx, self.sl = ctx, sl
         self.p0, self.d, self.length = line_frame(ctx.grid, sl)
         self.n_px = sl.c1 - sl.c0
         self._bounds: FloatArray | None = None
         self._k0, self._th = 0, np.zeros((0, 2))
+        # samples solved ahead in one batch (`pad_mm`: how far before 0 and after L the
+        # planning will likely ask, e.g. the scanline before's overscan): first index,
+        # angles, reachable; `samples` takes them where they cover what it asks
+        self._pad = pad_mm
+        self._pre: tuple[int, FloatArray, NDArray[np.bool_]] = (0, np.zeros((0, 2)),
+                                                               np.zeros(0, bool))
         self.accel: float | None = None
+        self._scan: dict[tuple[int, int, int], tuple[IntArray, IntArray, FloatArray]] = {}
 
     @property
     def bounds(self) -> FloatArray:
@@ -149,15 +158,36 @@ class LineGeo:
         have_hi = self._k0 + self._th.shape[0]
         if not self._th.shape[0]:
             self._k0, have_hi = k_lo, k_lo
+            if self._pad is not None:
+                self._prefetch(k_lo - math.ceil(self._pad[0] / SAMPLE_MM),
+                               k_hi + 1 + math.ceil(self._pad[1] / SAMPLE_MM))
         if k_lo < self._k0:
-            new = self.ik(np.arange(k_lo, self._k0, dtype=np.float64) * SAMPLE_MM)
+            new = self._solved(k_lo, self._k0)
             self._th, self._k0 = np.concatenate((new, self._th)), k_lo
         if k_hi + 1 > have_hi:
-            new = self.ik(np.arange(have_hi, k_hi + 1, dtype=np.float64) * SAMPLE_MM)
+            new = self._solved(have_hi, k_hi + 1)
             self._th = np.concatenate((self._th, new))
         i = k_lo - self._k0
         th = self._th[i:i + k_hi - k_lo + 1]
         return np.arange(k_lo, k_hi + 1, dtype=np.float64) * SAMPLE_MM, th
+
+    def _prefetch(self, ka: int, kb: int) -> None:
+        """Solve the samples ka … kb − 1 ahead, unchecked (module docstring of `samples`)."""
+        c = self.ctx.checker
+        sigma = np.arange(ka, kb, dtype=np.float64) * SAMPLE_MM
+        inv = c.fb.inverse_batch(self.p0 + np.multiply.outer(sigma, self.d), c.mode)
+        self._pre = (ka, wrap_to_limits(inv.angles, self.ctx.profile.motors.limits_rad)[0],
+                     inv.valid)
+
+    def _solved(self, ka: int, kb: int) -> FloatArray:
+        """Angles of the samples ka … kb − 1: the prefetched ones where they cover the range
+        and are all reachable (each point is solved on its own: the same angles), else
+        `ik`'s (which refuses an unreachable one, naming it)."""
+        k0, th, ok = self._pre
+        i, j = ka - k0, kb - k0
+        if i >= 0 and j <= th.shape[0] and ok[i:j].all():
+            return th[i:j]
+        return self.ik(np.arange(ka, kb, dtype=np.float64) * SAMPLE_MM)
 
     def gains(self, lo: float, hi: float) -> tuple[float, float]:
         """Largest |g| (rad/mm) and |dg/dσ| (rad/mm²) of either motor on σ ∈ [lo, hi]."""
@@ -182,6 +212,22 @@ class LineGeo:
             msg = self.ctx.checker.explain(c, ang[i], pts[i], m[i])
             raise _named(self.ctx, self.sl, CheckFailedError(
                 i, (float(pts[i, 0]), float(pts[i, 1])), REASON_KEY[c], msg), float(sig[i]))
+
+    def scan_part(self, k: int, entry: IntArray) -> tuple[IntArray, IntArray, FloatArray]:
+        """The scan pieces at k pixels a piece, entered at absolute steps `entry` (the ramp
+        in's last end): their pixel boundaries, the steps of their ends after the entry and
+        the executed along-track σ of all their ends (forward kinematics of the quantised
+        ends), solved once — the ramps, which `plan` may retry, end on the same steps."""
+        key = (k, int(entry[0]), int(entry[1]))
+        got = self._scan.get(key)
+        if got is None:
+            ctx = self.ctx
+            ends = _piece_ends(self.n_px, k)
+            steps = absolute_steps(self.bounds[ends[1:]], ctx.home, ctx.spr)
+            th = step_angles(np.concatenate((entry.reshape(1, 2), steps)), ctx.home, ctx.spr)
+            pts, _ = ctx.checker.forward(th)
+            got = self._scan[key] = (ends, steps, (pts - self.p0) @ self.d)
+        return got
 
 
 def _named(ctx: RasterCtx, sl: Scanline, e: CheckFailedError, s: float) -> JobError:
@@ -273,19 +319,17 @@ def plan_scanline(geo: LineGeo, k: int, a: float) -> ScanMotion:
     if t_r / n < protocol.P_MIN_US * 1e-6:  # pieces of at least the shortest P
         n = max(1, math.floor(t_r / (protocol.P_MIN_US * 1e-6)))
     s_in, t_in = _ramp_sigma(v, a, n)
-    ends = _piece_ends(geo.n_px, k)
-    scan = ends * ctx.grid.pitch
     s_out = length - s_in[::-1]
+    ramps = absolute_steps(geo.ik(np.concatenate((s_in, s_out[1:]))), ctx.home, ctx.spr)
+    ends, scan_steps, s_exec = geo.scan_part(k, ramps[n])
+    scan = ends * ctx.grid.pitch
     sigma = np.concatenate((s_in, scan[1:], s_out[1:]))
     kind = np.concatenate((np.full(n, RAMP_IN), np.full(scan.shape[0] - 1, SCAN),
                            np.full(n, RAMP_OUT))).astype(np.int64)
-    th = np.concatenate((geo.ik(s_in), geo.bounds[ends[1:]], geo.ik(s_out[1:])))
-    steps = absolute_steps(th, ctx.home, ctx.spr)
+    steps = np.concatenate((ramps[:n + 1], scan_steps, ramps[n + 1:]))
     # the scan pieces last what the pen really travels along the line between their
-    # quantised ends, at v: every pixel boundary is crossed at σ/v from one time origin,
-    # across pieces too, so one G7 line's U + i·T spans several pieces
-    pts, _ = ctx.checker.forward(step_angles(steps[n:n + scan.shape[0]], ctx.home, ctx.spr))
-    s_exec = (pts - p0) @ d
+    # quantised ends (s_exec), at v: every pixel boundary is crossed at σ/v from one time
+    # origin, across pieces too, so one G7 line's U + i·T spans several pieces
     times = np.concatenate((t_in, t_in[-1] + (s_exec[1:] - s_exec[0]) / v))
     times = np.concatenate((times, times[-1] + t_in[1:]))
     dur = np.maximum(_cum_us(times), protocol.P_MIN_US)
@@ -293,10 +337,11 @@ def plan_scanline(geo: LineGeo, k: int, a: float) -> ScanMotion:
                       geo.n_px, a)
 
 
-def staircase_ok(ctx: RasterCtx, sm: ScanMotion) -> bool:
+def staircase_ok(ctx: RasterCtx, sm: ScanMotion, th: FloatArray | None = None) -> bool:
     """Whether the firmware's staircase of the scanline keeps the jump and acceleration
-    limits at every boundary, from rest to rest."""
-    th = step_angles(sm.steps, ctx.home, ctx.spr)
+    limits at every boundary, from rest to rest (`th`: its steps' angles, when known)."""
+    if th is None:
+        th = step_angles(sm.steps, ctx.home, ctx.spr)
     jump, acc = planner.staircase_ratios(np.diff(th, axis=0), sm.duration_us, None,
                                          ctx.profile.motion.max_joint_rad_s2,
                                          ctx.profile.motion.junction_jump_rad_s)
@@ -311,9 +356,10 @@ def plan(geo: LineGeo, k: int) -> ScanMotion:
     a = geo.accel if geo.accel is not None else ramp_accel(geo)
     for _ in range(TRIES):
         sm = plan_scanline(geo, k, a)
-        if staircase_ok(ctx, sm):
+        th = step_angles(sm.steps, ctx.home, ctx.spr)
+        if staircase_ok(ctx, sm, th):
             geo.accel = a
-            geo.check(sm.sigma, step_angles(sm.steps, ctx.home, ctx.spr))
+            geo.check(sm.sigma, th)
             return sm
         a *= RELAX
     raise JobError(f"scanline of row {geo.sl.row}: no ramp keeps the joints within "

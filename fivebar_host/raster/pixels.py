@@ -65,14 +65,16 @@ def crossings(ctx: RasterCtx, sm: ScanMotion, powers: NDArray[np.uint8]) -> Chan
     q = th[used][:, None, :] + _LAMBDA[None, :, None] * dth[:, None, :]
     p, _ = fk(q.reshape(-1, 2))
     s = ((p - sm.p0) @ sm.d).reshape(-1, _LAMBDA.shape[0])
-    coef = (s @ _VINV.T)[which]  # s(λ) of each boundary's piece, exact at both ends
+    # s(λ) of each boundary's piece, exact at both ends: cₘ per boundary, m = 0 … 4, each
+    # row contiguous (the Newton steps below run on whole rows)
+    c = np.ascontiguousarray((s @ _VINV.T).T)[:, which]
     s0, s1 = s_end[j], s_end[j + 1]
-    lam = np.clip((bound - s0) / np.where(s1 != s0, s1 - s0, 1.0), 0.0, 1.0)
-    c = coef.T  # cₘ per boundary, m = 0 … 4
+    lam = np.minimum(np.maximum((bound - s0) / np.where(s1 != s0, s1 - s0, 1.0), 0.0), 1.0)
+    c4x4, c3x3, c2x2 = 4 * c[4], 3 * c[3], 2 * c[2]  # the derivative's coefficients
     for _ in range(4):  # Newton on the quartic (Horner) from the linear guess
         f = (((c[4] * lam + c[3]) * lam + c[2]) * lam + c[1]) * lam + c[0] - bound
-        df = ((4 * c[4] * lam + 3 * c[3]) * lam + 2 * c[2]) * lam + c[1]
-        lam = np.clip(lam - f / np.where(df != 0, df, 1.0), 0.0, 1.0)
+        df = ((c4x4 * lam + c3x3) * lam + c2x2) * lam + c[1]
+        lam = np.minimum(np.maximum(lam - f / np.where(df != 0, df, 1.0), 0.0), 1.0)
     t = start[j] + lam * cyc[j]
     return Changes(t, np.concatenate((np.asarray(powers, dtype=np.uint8), [0])).astype(np.uint8))
 

@@ -63,16 +63,18 @@ class Planned:
                              w.nseg)
 
 
-def plan_line(ctx: motion.RasterCtx, sl: gridmod.Scanline, k_hint: int | None = None
+def plan_line(ctx: motion.RasterCtx, sl: gridmod.Scanline, k_hint: int | None = None,
+              pad_mm: tuple[float, float] | None = None
               ) -> tuple[motion.ScanMotion, pixels.Changes]:
     """One scanline planned, with its changes: scan pieces short enough that each piece's
     changes fit one progression U + i·T within `pixels.FIT_CYCLES` (the pen's speed drifts
     slightly along a joint-space chord; in cycles the drift grows as the speed falls, and
     quadratically with the piece's length).  `k_hint`: the pixels a piece held on the
-    scanline before (a neighbour fits about as many; one more is tried)."""
+    scanline before (a neighbour fits about as many; one more is tried); `pad_mm`: how far
+    its overscan reached (the line's samples are solved that far ahead at once)."""
     row = ctx.grid.powers[sl.row, sl.c0:sl.c1]
     row = row if sl.sign > 0 else row[::-1]
-    geo = motion.LineGeo(ctx, sl)
+    geo = motion.LineGeo(ctx, sl, pad_mm)
     k = motion.scan_k(geo)
     if k_hint is not None:
         k = min(k, k_hint + 1)
@@ -89,15 +91,26 @@ def plan_all(ctx: motion.RasterCtx, lines: list[gridmod.Scanline], home: IntArra
     """Every scanline planned at ctx.v, its changes, its G7 lines, and the job's segments."""
     scans, changes, groups = [], [], []
     k: int | None = None
+    pad: tuple[float, float] | None = None
     for sl in lines:
-        sm, ch = plan_line(ctx, sl, k)
+        sm, ch = plan_line(ctx, sl, k, pad)
         k = _piece_px(sm, ctx.grid.pitch)
+        pad = _overscan_pad(sm)
         scans.append(sm)
         changes.append(ch)
         groups.append(linesmod.groups(sm, ch))
     col = assemble.collect(ctx.profile, ctx.checker, scans, groups, home,
                            lead_us(linkrate.bytes_per_s(ctx.profile)))
     return Planned(ctx, scans, changes, groups, col)
+
+
+def _overscan_pad(sm: motion.ScanMotion) -> tuple[float, float]:
+    """How far the next scanline's samples are solved ahead before 0 and after L, mm: this
+    one's overscan (the same on both sides), with room for a lowered ramp acceleration
+    (`motion.RELAX`) and the samples around it — a guess: what it does not cover is solved
+    when asked."""
+    pad = 1.5 * max(-float(sm.sigma[0]), 0.0) + 2 * motion.SAMPLE_MM
+    return pad, pad
 
 
 def _piece_px(sm: motion.ScanMotion, pitch: float) -> int:

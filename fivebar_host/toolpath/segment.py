@@ -72,16 +72,15 @@ class CheckFailedError(Exception):
 def wrap_to_limits(theta: FloatArray,
                    limits: tuple[tuple[float, float], tuple[float, float]]
                    ) -> tuple[FloatArray, BoolArray, BoolArray]:
-    """Angles (N, 2) mapped to θ + 2πk ∈ [lo, lo + 2π), and per-motor in-limit masks."""
-    out = np.empty_like(theta)
-    oks = []
-    for i in range(2):
-        lo, hi = limits[i]
-        t = lo + np.mod(theta[:, i] - lo, 2.0 * math.pi)
-        t = np.where(t - lo >= 2.0 * math.pi - 1e-12, lo, t)
-        out[:, i] = t
-        oks.append(t <= hi + 1e-12)
-    return out, oks[0], oks[1]
+    """Angles (N, 2) mapped to θ + 2πk ∈ [lo, lo + 2π), and per-motor in-limit masks.
+    Both motors at once (the same arithmetic per element as one column at a time: the
+    raster planner calls this for every scanline)."""
+    lo = np.array([limits[0][0], limits[1][0]])
+    hi = np.array([limits[0][1] + 1e-12, limits[1][1] + 1e-12])
+    t = lo + np.mod(theta - lo, 2.0 * math.pi)
+    out: FloatArray = np.where(t - lo >= 2.0 * math.pi - 1e-12, lo, t)
+    ok = out <= hi
+    return out, ok[:, 0], ok[:, 1]
 
 
 @dataclass(frozen=True)
