@@ -231,7 +231,13 @@ class G7Data:
     powers: bytes
 
 
+#: The one-byte varints.
+_VARINT1 = tuple(bytes((v,)) for v in range(0x80))
+
+
 def _varint(v: int) -> bytes:
+    if 0 <= v < 0x80:
+        return _VARINT1[v]
     out = bytearray()
     while True:
         b = v & 0x7F

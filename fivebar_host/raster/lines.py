@@ -101,16 +101,17 @@ class _Costs:
     px_b: list[int]  # escaped pixel bytes
     has_p: list[bool]
     cyc: list[int]  # cycles
-    start: IntArray  # cycles at each piece's start (K + 1)
-    cuts: IntArray  # changes of piece j: cuts[j] … cuts[j + 1] − 1
+    start: list[int]  # cycles at each piece's start (K + 1)
+    cuts: list[int]  # changes of piece j: cuts[j] … cuts[j + 1] − 1
     ch: Changes
+    acc: list[int]  # item + pixel bytes of the pieces before piece j (K + 1)
 
 
 def _costs(sm: ScanMotion, ch: Changes) -> _Costs:
     dur = sm.duration_us.astype(np.int64)
     cyc = dur * CYCLES_PER_US
     start = np.concatenate(([0], np.cumsum(cyc)))
-    d = np.diff(sm.steps, axis=0).astype(np.int64)
+    d = (sm.steps[1:] - sm.steps[:-1]).astype(np.int64)
     zz = np.where(d >= 0, 2 * d, -2 * d - 1)
     has_p = np.concatenate(([True], dur[1:] != dur[:-1]))
     item = (np.where(has_p, escaped_varint_len(dur), 0) + escaped_varint_len(zz[:, 0])
@@ -118,10 +119,11 @@ def _costs(sm: ScanMotion, ch: Changes) -> _Costs:
     piece = np.clip(np.searchsorted(start, ch.t, side="right") - 1, 0, len(cyc) - 1)
     cuts = np.searchsorted(piece, np.arange(len(cyc) + 1))
     esc = np.concatenate(([0], np.cumsum(_ESC[ch.power])))
-    px = np.diff(cuts)
+    px = cuts[1:] - cuts[:-1]
     px_b = px + esc[cuts[1:]] - esc[cuts[:-1]]
+    acc = np.concatenate(([0], np.cumsum(item + px_b)))
     return _Costs(item.tolist(), px.tolist(), px_b.tolist(), has_p.tolist(), cyc.tolist(),
-                  start, cuts, ch)
+                  start.tolist(), cuts.tolist(), ch, acc.tolist())
 
 
 def _fit_line(c: _Costs, j: int, end: int, t_prev: int | None
@@ -130,7 +132,7 @@ def _fit_line(c: _Costs, j: int, end: int, t_prev: int | None
     ceil (or the modal `t_prev` when it fits within `FIT_CYCLES`, or the longest that keeps
     every change inside at U = 0), U the minimax offset, lowered where the last change
     would fall past the line's segments and never below 0."""
-    a, b = int(c.cuts[j]), int(c.cuts[end])
+    a, b = c.cuts[j], c.cuts[end]
     off = c.ch.t[a:b] - float(c.start[j])
     n = b - a
     if n == 0:
@@ -143,7 +145,7 @@ def _fit_line(c: _Costs, j: int, end: int, t_prev: int | None
         cands += [int(np.floor(t0)), int(np.ceil(t0))]
     else:
         cands.append(0)
-    total = int(c.start[end] - c.start[j])
+    total = c.start[end] - c.start[j]
     if n > 1:  # the longest T with every change inside at U = 0: always a valid line
         cands.append((total - 1) // (n - 1))
     i = _INDEX[:n] if n <= _INDEX.shape[0] else np.arange(n, dtype=np.float64)
@@ -168,17 +170,19 @@ def _fit_line(c: _Costs, j: int, end: int, t_prev: int | None
 def _exact(c: _Costs, j: int, end: int, u: int, t: int, t_prev: int | None) -> int:
     """Bytes on the wire of pieces j … end − 1 as one line with this U and T."""
     count = end - j
-    n_px = int(c.cuts[end] - c.cuts[j])
+    n_px = c.cuts[end] - c.cuts[j]
     write_t = n_px > 1 and t != t_prev
     head = (count - 1) | (0x20 if u else 0) | (0x40 if write_t else 0)
-    mask = sum(1 << i for i in range(count) if c.has_p[j + i])
+    mask = 0
+    for i, p in enumerate(c.has_p[j:end]):
+        if p:
+            mask |= 1 << i
     data = bytes([head]) + mask.to_bytes((count + 7) // 8, "little")
     if u:
         data += varint_bytes(u)
     if write_t:
         data += varint_bytes(t)
-    size = _esc_len(data) + sum(c.item[j:end]) + sum(c.px_b[j:end])
-    return line_size(size)
+    return line_size(_esc_len(data) + c.acc[end] - c.acc[j])
 
 
 def groups(sm: ScanMotion, ch: Changes) -> list[Group]:
@@ -193,7 +197,7 @@ def groups(sm: ScanMotion, ch: Changes) -> list[Group]:
     ring = PX_RING - protocol.PX_HEAD
     while j < k:
         end = j + 1
-        est = 1 + sum(c.item[j:end]) + sum(c.px_b[j:end])
+        est = 1 + c.item[j] + c.px_b[j]
         cycles, px = c.cyc[j], c.px[j]
         while end < k and end - j < MAX_SEGMENTS:
             nxt_cycles = cycles + c.cyc[end]
@@ -207,13 +211,13 @@ def groups(sm: ScanMotion, ch: Changes) -> list[Group]:
         while True:
             u, t, res = _fit_line(c, j, end, t_prev)
             size = _exact(c, j, end, max(u, 0), t, t_prev)
-            n_px = int(c.cuts[end] - c.cuts[j])
+            n_px = c.cuts[end] - c.cuts[j]
             ok = (size <= LINE_LIMIT and res <= FIT_CYCLES and u >= 0
                   and (n_px < 2 or t >= protocol.PX_T_MIN))
             if ok or end == j + 1:
                 break
             end -= 1
-        a, b = int(c.cuts[j]), int(c.cuts[end])
+        a, b = c.cuts[j], c.cuts[end]
         out.append(Group(j, end - j, u, t, ch.power[a:b].tobytes(), res, size))
         if b - a > 1:
             t_prev = t

@@ -192,8 +192,9 @@ class LineGeo:
     def gains(self, lo: float, hi: float) -> tuple[float, float]:
         """Largest |g| (rad/mm) and |dg/dσ| (rad/mm²) of either motor on σ ∈ [lo, hi]."""
         sig, th = self.samples(lo, hi)
-        g = np.diff(th, axis=0) / np.diff(sig)[:, None]
-        dg = np.abs(np.diff(g, axis=0)) / SAMPLE_MM
+        # (differences as slices: np.diff's own overhead counts, called for every try)
+        g = (th[1:] - th[:-1]) / (sig[1:] - sig[:-1])[:, None]
+        dg = np.abs(g[1:] - g[:-1]) / SAMPLE_MM
         return float(np.abs(g).max()), float(dg.max()) if dg.size else 0.0
 
     def check(self, sigma: FloatArray, th: FloatArray) -> None:
@@ -305,7 +306,7 @@ def _ramp_sigma(v: float, a: float, n: int) -> tuple[FloatArray, FloatArray]:
 def _cum_us(times_s: FloatArray) -> IntArray:
     """Whole-µs durations between consecutive times, rounded on the running time (no drift)."""
     us = np.rint(np.asarray(times_s) * 1e6).astype(np.int64)
-    return np.diff(us)
+    return us[1:] - us[:-1]
 
 
 def plan_scanline(geo: LineGeo, k: int, a: float) -> ScanMotion:
@@ -342,10 +343,11 @@ def staircase_ok(ctx: RasterCtx, sm: ScanMotion, th: FloatArray | None = None) -
     limits at every boundary, from rest to rest (`th`: its steps' angles, when known)."""
     if th is None:
         th = step_angles(sm.steps, ctx.home, ctx.spr)
-    jump, acc = planner.staircase_ratios(np.diff(th, axis=0), sm.duration_us, None,
+    dth = th[1:] - th[:-1]
+    jump, acc = planner.staircase_ratios(dth, sm.duration_us, None,
                                          ctx.profile.motion.max_joint_rad_s2,
                                          ctx.profile.motion.junction_jump_rad_s)
-    rate = np.abs(np.diff(th, axis=0)).max(axis=1) / (sm.duration_us * 1e-6)
+    rate = np.abs(dth).max(axis=1) / (sm.duration_us * 1e-6)
     return (float(jump.max()) <= 1.0 and float(acc.max()) <= 1.0
             and float(rate.max()) <= ctx.profile.motion.max_joint_rad_s * (1 + 1e-9))
 

@@ -77,8 +77,15 @@ def wrap_to_limits(theta: FloatArray,
     raster planner calls this for every scanline)."""
     lo = np.array([limits[0][0], limits[1][0]])
     hi = np.array([limits[0][1] + 1e-12, limits[1][1] + 1e-12])
-    t = lo + np.mod(theta - lo, 2.0 * math.pi)
-    out: FloatArray = np.where(t - lo >= 2.0 * math.pi - 1e-12, lo, t)
+    turn = 2.0 * math.pi
+    x = theta - lo
+    if x.size and not (float(x.min()) >= 0.0 and float(x.max()) < turn):
+        x = np.mod(x, turn)  # (on [0, 2π) the remainder is x itself, exactly)
+    t = lo + x
+    d = t - lo
+    out: FloatArray = t
+    if d.size and float(d.max()) >= turn - 1e-12:
+        out = np.where(d >= turn - 1e-12, lo, t)
     ok = out <= hi
     return out, ok[:, 0], ok[:, 1]
 
