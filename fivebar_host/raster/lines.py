@@ -14,6 +14,7 @@ so their escaped sizes are counted once for the whole scanline.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -114,8 +115,8 @@ def _costs(sm: ScanMotion, ch: Changes) -> _Costs:
     d = (sm.steps[1:] - sm.steps[:-1]).astype(np.int64)
     zz = np.where(d >= 0, 2 * d, -2 * d - 1)
     has_p = np.concatenate(([True], dur[1:] != dur[:-1]))
-    item = (np.where(has_p, escaped_varint_len(dur), 0) + escaped_varint_len(zz[:, 0])
-            + escaped_varint_len(zz[:, 1]))
+    esc_p, esc_a, esc_b = escaped_varint_len(np.stack((dur, zz[:, 0], zz[:, 1])))
+    item = np.where(has_p, esc_p, 0) + esc_a + esc_b
     piece = np.clip(np.searchsorted(start, ch.t, side="right") - 1, 0, len(cyc) - 1)
     cuts = np.searchsorted(piece, np.arange(len(cyc) + 1))
     esc = np.concatenate(([0], np.cumsum(_ESC[ch.power])))
@@ -142,7 +143,7 @@ def _fit_line(c: _Costs, j: int, end: int, t_prev: int | None
         if t_prev is not None:
             cands.append(t_prev)
         t0 = (float(off[-1]) - float(off[0])) / (n - 1)
-        cands += [int(np.floor(t0)), int(np.ceil(t0))]
+        cands += [math.floor(t0), math.ceil(t0)]
     else:
         cands.append(0)
     total = c.start[end] - c.start[j]

@@ -35,7 +35,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fivebar_host import protocol
-from fivebar_host.compile import planner
 from fivebar_host.compile.steps import absolute_steps, step_angles
 from fivebar_host.config import Profile
 from fivebar_host.errors import JobError
@@ -118,12 +117,12 @@ class LineGeo:
     ramp acceleration once found.  Unchecked: `check` checks a planned scanline's points
     (its piece ends and the samples over its extent) at once."""
 
-    def __init__(self, ctx: RasterCtx, sl: Scanline, pad_mm: tuple[float, float] | None = None
-                 ) -> None:
+    def __init__(self, ctx: RasterCtx, sl: Scanline, pad_mm: tuple[float, float] | None = None,
+                 bounds: FloatArray | None = None) -> None:
         self.ctx, self.sl = ctx, sl
         self.p0, self.d, self.length = line_frame(ctx.grid, sl)
         self.n_px = sl.c1 - sl.c0
-        self._bounds: FloatArray | None = None
+        self._bounds: FloatArray | None = bounds  # (`solve_bounds`)
         self._k0, self._th = 0, np.zeros((0, 2))
         # samples solved ahead in one batch (`pad_mm`: how far before 0 and after L the
         # planning will likely ask, e.g. the scanline before's overscan): first index,
@@ -229,6 +228,37 @@ class LineGeo:
             pts, _ = ctx.checker.forward(th)
             got = self._scan[key] = (ends, steps, (pts - self.p0) @ self.d)
         return got
+
+
+#: Pixel boundaries solved at a time by `solve_bounds`.
+BOUNDS_BLOCK = 1 << 16
+
+
+def solve_bounds(ctx: RasterCtx, lines: list[Scanline]) -> list[FloatArray | None]:
+    """`LineGeo.bounds` of every scanline, solved in blocks of about `BOUNDS_BLOCK` points
+    (each point on its own: the same angles as one scanline at a time, without a call per
+    scanline); None for a scanline with an unreachable boundary (its `LineGeo` solves it
+    again and names the point)."""
+    out: list[FloatArray | None] = []
+    c, limits = ctx.checker, ctx.profile.motors.limits_rad
+    i = 0
+    while i < len(lines):
+        block, n = [], 0
+        while i < len(lines) and (not block or n < BOUNDS_BLOCK):
+            sl = lines[i]
+            p0, d, _ = line_frame(ctx.grid, sl)
+            sigma = np.arange(sl.c1 - sl.c0 + 1, dtype=np.float64) * ctx.grid.pitch
+            block.append(p0 + np.multiply.outer(sigma, d))
+            n += sigma.shape[0]
+            i += 1
+        inv = c.fb.inverse_batch(np.concatenate(block), c.mode)
+        th = wrap_to_limits(inv.angles, limits)[0]
+        at = 0
+        for pts in block:
+            k = pts.shape[0]
+            out.append(th[at:at + k] if inv.valid[at:at + k].all() else None)
+            at += k
+    return out
 
 
 def _named(ctx: RasterCtx, sl: Scanline, e: CheckFailedError, s: float) -> JobError:
@@ -343,13 +373,24 @@ def staircase_ok(ctx: RasterCtx, sm: ScanMotion, th: FloatArray | None = None) -
     limits at every boundary, from rest to rest (`th`: its steps' angles, when known)."""
     if th is None:
         th = step_angles(sm.steps, ctx.home, ctx.spr)
+    mo = ctx.profile.motion
     dth = th[1:] - th[:-1]
-    jump, acc = planner.staircase_ratios(dth, sm.duration_us, None,
-                                         ctx.profile.motion.max_joint_rad_s2,
-                                         ctx.profile.motion.junction_jump_rad_s)
-    rate = np.abs(dth).max(axis=1) / (sm.duration_us * 1e-6)
-    return (float(jump.max()) <= 1.0 and float(acc.max()) <= 1.0
-            and float(rate.max()) <= ctx.profile.motion.max_joint_rad_s * (1 + 1e-9))
+    # `planner.staircase_ratios` of one run from rest to rest (every piece lasts ≥ P_MIN,
+    # so no piece is motionless), reduced to its largest jump and acceleration: the
+    # largest ratio is the largest difference divided by the limit (rounding is monotone)
+    t = sm.duration_us * 1e-6
+    w = dth / t[:, None]
+    aw = np.abs(w)
+    dw = np.abs(w[1:] - w[:-1])
+    dw = np.maximum(dw[:, 0], dw[:, 1])
+    wn = np.maximum(aw[[0, -1], 0], aw[[0, -1], 1])  # into the first, out of the last
+    tb = 0.5 * (t[1:] + t[:-1])
+    jump = max(float(dw.max()) if dw.size else 0.0, float(wn.max())) / mo.junction_jump_rad_s
+    acc = max(float((dw / tb).max()) if dw.size else 0.0,
+              float((wn / (0.5 * t[[0, -1]])).max())) / mo.max_joint_rad_s2
+    rate = np.maximum(np.abs(dth[:, 0]), np.abs(dth[:, 1])) / t
+    return (jump <= 1.0 and acc <= 1.0
+            and float(rate.max()) <= mo.max_joint_rad_s * (1 + 1e-9))
 
 
 def plan(geo: LineGeo, k: int) -> ScanMotion:

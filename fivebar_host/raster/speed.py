@@ -29,7 +29,7 @@ from fivebar_host.compile import linkrate
 from fivebar_host.raster import assemble, motion, pixels
 from fivebar_host.raster import grid as gridmod
 from fivebar_host.raster import lines as linesmod
-from kinematics.arrays import IntArray
+from kinematics.arrays import FloatArray, IntArray
 
 #: Share of max_joint_rad_s the scan speed may ask of a joint.
 SPEED_SHARE = 0.9
@@ -64,17 +64,18 @@ class Planned:
 
 
 def plan_line(ctx: motion.RasterCtx, sl: gridmod.Scanline, k_hint: int | None = None,
-              pad_mm: tuple[float, float] | None = None
+              pad_mm: tuple[float, float] | None = None, bounds: FloatArray | None = None
               ) -> tuple[motion.ScanMotion, pixels.Changes]:
     """One scanline planned, with its changes: scan pieces short enough that each piece's
     changes fit one progression U + i·T within `pixels.FIT_CYCLES` (the pen's speed drifts
     slightly along a joint-space chord; in cycles the drift grows as the speed falls, and
     quadratically with the piece's length).  `k_hint`: the pixels a piece held on the
     scanline before (a neighbour fits about as many; one more is tried); `pad_mm`: how far
-    its overscan reached (the line's samples are solved that far ahead at once)."""
+    its overscan reached (the line's samples are solved that far ahead at once); `bounds`:
+    its pixel boundaries' angles when solved already (`motion.solve_bounds`)."""
     row = ctx.grid.powers[sl.row, sl.c0:sl.c1]
     row = row if sl.sign > 0 else row[::-1]
-    geo = motion.LineGeo(ctx, sl, pad_mm)
+    geo = motion.LineGeo(ctx, sl, pad_mm, bounds)
     k = motion.scan_k(geo)
     if k_hint is not None:
         k = min(k, k_hint + 1)
@@ -92,8 +93,8 @@ def plan_all(ctx: motion.RasterCtx, lines: list[gridmod.Scanline], home: IntArra
     scans, changes, groups = [], [], []
     k: int | None = None
     pad: tuple[float, float] | None = None
-    for sl in lines:
-        sm, ch = plan_line(ctx, sl, k, pad)
+    for sl, bounds in zip(lines, motion.solve_bounds(ctx, lines), strict=True):
+        sm, ch = plan_line(ctx, sl, k, pad, bounds)
         k = _piece_px(sm, ctx.grid.pitch)
         pad = _overscan_pad(sm)
         scans.append(sm)
