@@ -243,7 +243,8 @@ def solve_bounds(ctx: RasterCtx, lines: list[Scanline]) -> list[FloatArray | Non
     c, limits = ctx.checker, ctx.profile.motors.limits_rad
     i = 0
     while i < len(lines):
-        block, n = [], 0
+        block: list[FloatArray] = []
+        n = 0
         while i < len(lines) and (not block or n < BOUNDS_BLOCK):
             sl = lines[i]
             p0, d, _ = line_frame(ctx.grid, sl)
