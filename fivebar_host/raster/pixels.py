@@ -133,7 +133,11 @@ def piece_residual(sm: ScanMotion, ch: Changes) -> float:
     more, at once."""
     start = np.concatenate(([0], np.cumsum(sm.duration_us.astype(np.int64) * CYCLES_PER_US)))
     piece = np.searchsorted(start, ch.t, side="right") - 1
-    cuts = np.searchsorted(piece, np.unique(piece))
+    step = piece[1:] != piece[:-1]
+    if (piece[1:] >= piece[:-1]).all():  # (the changes in time order: each piece's first)
+        cuts = np.concatenate(([0], np.flatnonzero(step) + 1))
+    else:
+        cuts = np.searchsorted(piece, np.unique(piece))
     n = np.diff(np.concatenate((cuts, [piece.shape[0]]))).astype(np.int64)
     big = n > 2
     if not big.any():

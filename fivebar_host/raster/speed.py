@@ -26,7 +26,7 @@ import numpy as np
 
 from fivebar_host import protocol
 from fivebar_host.compile import linkrate
-from fivebar_host.raster import assemble, motion, pixels
+from fivebar_host.raster import assemble, linegeo, motion, pixels
 from fivebar_host.raster import grid as gridmod
 from fivebar_host.raster import lines as linesmod
 from kinematics.arrays import FloatArray, IntArray
@@ -125,7 +125,7 @@ def speed_cap(ctx: motion.RasterCtx, lines: list[gridmod.Scanline]) -> float:
     mot = ctx.profile.motion
     wmax = SPEED_SHARE * min(mot.max_joint_rad_s,
                              protocol.SETTINGS[0][2] * 2 * math.pi / ctx.spr)
-    g = max(motion.gains(ctx, sl, 0.0, (sl.c1 - sl.c0) * ctx.grid.pitch)[0] for sl in lines)
+    g = linegeo.max_gain(ctx, lines)  # max over the lines of gains(ctx, sl, 0, L)[0]
     return wmax / g
 
 
