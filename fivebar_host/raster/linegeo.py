@@ -28,7 +28,7 @@ SAMPLE_MM = 0.5
 
 
 def line_frame(grid: ScanGrid, sl: Scanline) -> tuple[FloatArray, FloatArray, float]:
-    """P₀, d and L of a scanline (module docstring)."""
+    """P₀, d and L of a scanline (module `motion`'s docstring)."""
     h = grid.pitch
     s_entry = sl.c0 * h if sl.sign > 0 else sl.c1 * h
     p0 = grid.point(s_entry, sl.row)
@@ -37,9 +37,11 @@ def line_frame(grid: ScanGrid, sl: Scanline) -> tuple[FloatArray, FloatArray, fl
 
 class LineGeo:
     """One scanline's frame and its inverse kinematics, each point solved once: the pixel
-    boundaries' angles, the samples' every `SAMPLE_MM` (grown as the overscan asks), the
-    ramp acceleration once found.  Unchecked: `check` checks a planned scanline's points
-    (its piece ends and the samples over its extent) at once."""
+    boundaries' angles (or `bounds`, solved with other scanlines'), the samples' every
+    `SAMPLE_MM` (grown as the overscan asks; solved `pad_mm` ahead on the first ask), the
+    scan pieces' steps per piece size, the ramp acceleration once found.  Unchecked:
+    `check` checks a planned scanline's points (its piece ends and the samples over its
+    extent) at once."""
 
     def __init__(self, ctx: RasterCtx, sl: Scanline, pad_mm: tuple[float, float] | None = None,
                  bounds: FloatArray | None = None) -> None:
@@ -95,7 +97,8 @@ class LineGeo:
         return np.arange(k_lo, k_hi + 1, dtype=np.float64) * SAMPLE_MM, th
 
     def _prefetch(self, ka: int, kb: int) -> None:
-        """Solve the samples ka … kb − 1 ahead, unchecked (module docstring of `samples`)."""
+        """Solve the samples ka … kb − 1 ahead, unchecked, in one call (`_solved` takes
+        them)."""
         c = self.ctx.checker
         sigma = np.arange(ka, kb, dtype=np.float64) * SAMPLE_MM
         inv = c.fb.inverse_batch(self.p0 + np.multiply.outer(sigma, self.d), c.mode)
