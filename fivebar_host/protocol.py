@@ -231,7 +231,13 @@ class G7Data:
     powers: bytes
 
 
+#: The one-byte varints.
+_VARINT1 = tuple(bytes((v,)) for v in range(0x80))
+
+
 def _varint(v: int) -> bytes:
+    if 0 <= v < 0x80:
+        return _VARINT1[v]
     out = bytearray()
     while True:
         b = v & 0x7F
@@ -254,11 +260,14 @@ def write_g7(g: G7Data) -> bytes:
             out += _varint(v)
     mask = sum(1 << i for i, (p, _, _) in enumerate(g.items) if p is not None)
     out += mask.to_bytes((n + 7) // 8, "little")
+    one = _VARINT1  # (most values are one byte: no call for them)
     for p, da, db in g.items:
         if p is not None:
-            out += _varint(p)
-        for d in (da, db):
-            out += _varint(2 * d if d >= 0 else -2 * d - 1)  # zigzag
+            out += one[p] if 0 <= p < 0x80 else _varint(p)
+        za = 2 * da if da >= 0 else -2 * da - 1  # zigzag
+        zb = 2 * db if db >= 0 else -2 * db - 1
+        out += one[za] if za < 0x80 else _varint(za)
+        out += one[zb] if zb < 0x80 else _varint(zb)
     return escape_pixels(bytes(out) + g.powers)
 
 

@@ -62,7 +62,9 @@ def test_kernel_taps_are_the_published_weights(name: str) -> None:
 @pytest.mark.parametrize("name", sorted(PUBLISHED))
 def test_diffusion_matches_the_textbook_loop(name: str) -> None:
     rng = np.random.default_rng(7)
-    for shape in ((1, 9), (7, 1), (13, 17), (5, 40)):
+    # widths at and just above each kernel's wavefront slope too (the strided views'
+    # smallest strides; narrower images take the index-array path)
+    for shape in ((1, 9), (7, 1), (13, 17), (5, 40), (6, 3), (9, 5), (4, 4), (8, 2)):
         dark = rng.random(shape)
         assert np.array_equal(dither.diffuse(dark, dither.KERNELS[name]), textbook(dark, name))
 

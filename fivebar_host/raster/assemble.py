@@ -90,28 +90,34 @@ def collect(profile: Profile, checker: PoseChecker, planned_scans: list[motion.S
     spans: list[tuple[int, int]] = []
     wire = WireLines([], [], [])
     t_us = 0
-    cur = np.asarray(home_steps, dtype=np.int64)
+    home = np.asarray(home_steps, dtype=np.int64).reshape(1, 2)
+    # the moves between: home → first scanline → … → last scanline → home, checked and
+    # planned all at once (each on its own, `travel.check_moves`, `travel.joint_moves`)
+    starts = np.concatenate([home] + [sm.steps[-1:] for sm in planned_scans])
+    ends = np.concatenate([sm.steps[:1] for sm in planned_scans] + [home])
+    n = len(planned_scans)
+    travel.check_moves(profile, checker, starts, ends,
+                       lambda i: (f"move to scanline {i + 1} (row {planned_scans[i].line.row})"
+                                  if i < n else "move back to the homed pose"))
+    moves = travel.joint_moves(profile, starts, ends)
 
-    def move(to: IntArray, scan: int, what: str, lead: int = 0) -> None:
-        nonlocal cur, t_us
-        travel.check_move(profile, checker, cur, to, what)
-        tg, du = travel.joint_move(profile, cur, to)
+    def move(i: int, lead: int = 0) -> None:
+        nonlocal t_us
+        tg, du = moves[i]
         if 0 < du.sum() < lead:  # slower, so that the stream gets ahead
             du = np.minimum(-(-du * lead // int(du.sum())), protocol.P_MAX_US)
         if du.shape[0]:
-            seg.add(tg, du, np.zeros(du.shape[0], bool), scan, np.full(du.shape[0], -1), False)
+            seg.add(tg, du, np.zeros(du.shape[0], bool), i, np.full(du.shape[0], -1), False)
             at = np.concatenate(([0], np.cumsum(du)))
             for a in range(0, du.shape[0], TRAVEL_ITEMS):  # G6 lines of TRAVEL_ITEMS
-                n = min(TRAVEL_ITEMS, du.shape[0] - a)
-                wire.nbytes.append(TRAVEL_LINE_B + TRAVEL_ITEM_B * (n - 1))
+                k = min(TRAVEL_ITEMS, du.shape[0] - a)
+                wire.nbytes.append(TRAVEL_LINE_B + TRAVEL_ITEM_B * (k - 1))
                 wire.start_s.append((t_us + int(at[a])) * 1e-6)
-                wire.nseg.append(n)
+                wire.nseg.append(k)
             t_us += int(du.sum())
-        cur = np.asarray(to, dtype=np.int64)
 
     for i, sm in enumerate(planned_scans):
-        move(sm.steps[0], i, f"move to scanline {i + 1} (row {sm.line.row})",
-             0 if i else lead_us)
+        move(i, 0 if i else lead_us)
         run = np.full(sm.duration_us.shape[0], -1, dtype=np.int64)
         start_us = np.concatenate(([0], np.cumsum(sm.duration_us)))
         for g in groups[i]:
@@ -123,8 +129,7 @@ def collect(profile: Profile, checker: PoseChecker, planned_scans: list[motion.S
         first = seg.add(sm.steps[1:], sm.duration_us, sm.kind == motion.SCAN, i, run, True)
         spans.append((first, seg.n))
         t_us += sm.time_us
-        cur = sm.steps[-1]
-    move(home_steps, len(planned_scans), "move back to the homed pose")
+    move(n)
     return Collected(seg, runs, spans, wire)
 
 

@@ -14,6 +14,7 @@ so their escaped sizes are counted once for the whole scanline.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,6 +36,8 @@ NUMBER_DIGITS = 6
 #: Bytes the escape adds, per byte value.
 _ESC = np.zeros(256, dtype=np.int64)
 _ESC[list(protocol.PX_ESCAPED)] = 1
+#: 0, 1, 2 … as floats: a line's change indices (sliced: a line holds few changes).
+_INDEX = np.arange(1024, dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -76,6 +79,8 @@ def escaped_varint_len(x: IntArray) -> IntArray:
         live = (rest > 0) | (out == 0)
         b = (rest & 0x7F) | np.where(more, 0x80, 0)
         out += np.where(live, 1 + _ESC[b], 0)
+        if not more.any():  # every varint ended here: later rounds would add nothing
+            break
         rest = rest >> 7
     return out
 
@@ -97,27 +102,29 @@ class _Costs:
     px_b: list[int]  # escaped pixel bytes
     has_p: list[bool]
     cyc: list[int]  # cycles
-    start: IntArray  # cycles at each piece's start (K + 1)
-    cuts: IntArray  # changes of piece j: cuts[j] … cuts[j + 1] − 1
+    start: list[int]  # cycles at each piece's start (K + 1)
+    cuts: list[int]  # changes of piece j: cuts[j] … cuts[j + 1] − 1
     ch: Changes
+    acc: list[int]  # item + pixel bytes of the pieces before piece j (K + 1)
 
 
 def _costs(sm: ScanMotion, ch: Changes) -> _Costs:
     dur = sm.duration_us.astype(np.int64)
     cyc = dur * CYCLES_PER_US
     start = np.concatenate(([0], np.cumsum(cyc)))
-    d = np.diff(sm.steps, axis=0).astype(np.int64)
+    d = (sm.steps[1:] - sm.steps[:-1]).astype(np.int64)
     zz = np.where(d >= 0, 2 * d, -2 * d - 1)
     has_p = np.concatenate(([True], dur[1:] != dur[:-1]))
-    item = (np.where(has_p, escaped_varint_len(dur), 0) + escaped_varint_len(zz[:, 0])
-            + escaped_varint_len(zz[:, 1]))
+    esc_p, esc_a, esc_b = escaped_varint_len(np.stack((dur, zz[:, 0], zz[:, 1])))
+    item = np.where(has_p, esc_p, 0) + esc_a + esc_b
     piece = np.clip(np.searchsorted(start, ch.t, side="right") - 1, 0, len(cyc) - 1)
     cuts = np.searchsorted(piece, np.arange(len(cyc) + 1))
     esc = np.concatenate(([0], np.cumsum(_ESC[ch.power])))
-    px = np.diff(cuts)
+    px = cuts[1:] - cuts[:-1]
     px_b = px + esc[cuts[1:]] - esc[cuts[:-1]]
+    acc = np.concatenate(([0], np.cumsum(item + px_b)))
     return _Costs(item.tolist(), px.tolist(), px_b.tolist(), has_p.tolist(), cyc.tolist(),
-                  start, cuts, ch)
+                  start.tolist(), cuts.tolist(), ch, acc.tolist())
 
 
 def _fit_line(c: _Costs, j: int, end: int, t_prev: int | None
@@ -126,32 +133,33 @@ def _fit_line(c: _Costs, j: int, end: int, t_prev: int | None
     ceil (or the modal `t_prev` when it fits within `FIT_CYCLES`, or the longest that keeps
     every change inside at U = 0), U the minimax offset, lowered where the last change
     would fall past the line's segments and never below 0."""
-    a, b = int(c.cuts[j]), int(c.cuts[end])
+    a, b = c.cuts[j], c.cuts[end]
     off = c.ch.t[a:b] - float(c.start[j])
     n = b - a
     if n == 0:
         return 0, 0, 0.0
-    i = np.arange(n, dtype=np.float64)
     cands: list[int] = []
     if n > 1:
         if t_prev is not None:
             cands.append(t_prev)
         t0 = (float(off[-1]) - float(off[0])) / (n - 1)
-        cands += [int(np.floor(t0)), int(np.ceil(t0))]
+        cands += [math.floor(t0), math.ceil(t0)]
     else:
         cands.append(0)
-    best: tuple[int, int, float] | None = None
-    total = int(c.start[end] - c.start[j])
+    total = c.start[end] - c.start[j]
     if n > 1:  # the longest T with every change inside at U = 0: always a valid line
         cands.append((total - 1) // (n - 1))
+    i = _INDEX[:n] if n <= _INDEX.shape[0] else np.arange(n, dtype=np.float64)
+    best: tuple[int, int, float] | None = None
     for k, t in enumerate(cands):
         r = off - i * t
-        u = round((float(r.max()) + float(r.min())) / 2)
+        mx, mn = float(r.max()), float(r.min())
+        u = round((mx + mn) / 2)
         # every change inside the line's segments (the firmware's rule), U ≥ 0 (a varint)
         u = max(min(u, total - 1 - (n - 1) * t), 0)
         if u + (n - 1) * t > total - 1:
             continue
-        res = float(np.abs(r - u).max())
+        res = max(mx - u, u - mn)  # = max |r − u| (rounding is monotone)
         if k == 0 and t_prev is not None and n > 1 and res <= FIT_CYCLES:
             return u, t, res  # the modal T: a shorter line
         if best is None or res < best[2]:
@@ -163,17 +171,19 @@ def _fit_line(c: _Costs, j: int, end: int, t_prev: int | None
 def _exact(c: _Costs, j: int, end: int, u: int, t: int, t_prev: int | None) -> int:
     """Bytes on the wire of pieces j … end − 1 as one line with this U and T."""
     count = end - j
-    n_px = int(c.cuts[end] - c.cuts[j])
+    n_px = c.cuts[end] - c.cuts[j]
     write_t = n_px > 1 and t != t_prev
     head = (count - 1) | (0x20 if u else 0) | (0x40 if write_t else 0)
-    mask = sum(1 << i for i in range(count) if c.has_p[j + i])
+    mask = 0
+    for i, p in enumerate(c.has_p[j:end]):
+        if p:
+            mask |= 1 << i
     data = bytes([head]) + mask.to_bytes((count + 7) // 8, "little")
     if u:
         data += varint_bytes(u)
     if write_t:
         data += varint_bytes(t)
-    size = _esc_len(data) + sum(c.item[j:end]) + sum(c.px_b[j:end])
-    return line_size(size)
+    return line_size(_esc_len(data) + c.acc[end] - c.acc[j])
 
 
 def groups(sm: ScanMotion, ch: Changes) -> list[Group]:
@@ -188,7 +198,7 @@ def groups(sm: ScanMotion, ch: Changes) -> list[Group]:
     ring = PX_RING - protocol.PX_HEAD
     while j < k:
         end = j + 1
-        est = 1 + sum(c.item[j:end]) + sum(c.px_b[j:end])
+        est = 1 + c.item[j] + c.px_b[j]
         cycles, px = c.cyc[j], c.px[j]
         while end < k and end - j < MAX_SEGMENTS:
             nxt_cycles = cycles + c.cyc[end]
@@ -202,13 +212,13 @@ def groups(sm: ScanMotion, ch: Changes) -> list[Group]:
         while True:
             u, t, res = _fit_line(c, j, end, t_prev)
             size = _exact(c, j, end, max(u, 0), t, t_prev)
-            n_px = int(c.cuts[end] - c.cuts[j])
+            n_px = c.cuts[end] - c.cuts[j]
             ok = (size <= LINE_LIMIT and res <= FIT_CYCLES and u >= 0
                   and (n_px < 2 or t >= protocol.PX_T_MIN))
             if ok or end == j + 1:
                 break
             end -= 1
-        a, b = int(c.cuts[j]), int(c.cuts[end])
+        a, b = c.cuts[j], c.cuts[end]
         out.append(Group(j, end - j, u, t, ch.power[a:b].tobytes(), res, size))
         if b - a > 1:
             t_prev = t

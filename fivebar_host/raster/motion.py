@@ -34,18 +34,22 @@ from dataclasses import dataclass
 import numpy as np
 
 from fivebar_host import protocol
-from fivebar_host.compile import planner
 from fivebar_host.compile.steps import absolute_steps, step_angles
 from fivebar_host.config import Profile
 from fivebar_host.errors import JobError
 from fivebar_host.raster.grid import ScanGrid, Scanline
-from fivebar_host.toolpath.segment import (
-    REASON_KEY,
-    CheckFailedError,
-    PoseChecker,
-    wrap_to_limits,
+from fivebar_host.raster.linegeo import (
+    SAMPLE_MM,
+    LineGeo,
+    gains,
+    line_frame,
+    piece_ends,
+    solve_bounds,
 )
+from fivebar_host.toolpath.segment import PoseChecker
 from kinematics.arrays import FloatArray, IntArray
+
+__all__ = ["SAMPLE_MM", "LineGeo", "gains", "line_frame", "piece_ends", "solve_bounds"]  # (linegeo)
 
 #: Share of the joint acceleration limit the ramps plan with (the rest absorbs the step
 #: quantisation of the staircase).
@@ -55,10 +59,9 @@ JUMP_SHARE = 0.6
 #: Factor on the acceleration when the staircase check fails, and how often.
 RELAX = 0.8
 TRIES = 12
-#: Step of the line samples the joint gains are read from, mm.
-SAMPLE_MM = 0.5
 #: Piece kinds.
 RAMP_IN, SCAN, RAMP_OUT = 0, 1, 2
+_KINDS = np.array([RAMP_IN, SCAN, RAMP_OUT], dtype=np.int64)
 
 
 @dataclass(frozen=True)
@@ -103,112 +106,6 @@ class ScanMotion:
         return int(self.duration_us.sum())
 
 
-def line_frame(grid: ScanGrid, sl: Scanline) -> tuple[FloatArray, FloatArray, float]:
-    """P₀, d and L of a scanline (module docstring)."""
-    h = grid.pitch
-    s_entry = sl.c0 * h if sl.sign > 0 else sl.c1 * h
-    p0 = grid.point(s_entry, sl.row)
-    return p0, sl.sign * grid.u, (sl.c1 - sl.c0) * h
-
-
-class LineGeo:
-    """One scanline's frame and its inverse kinematics, each point solved once: the pixel
-    boundaries' angles, the samples' every `SAMPLE_MM` (grown as the overscan asks), the
-    ramp acceleration once found.  Unchecked: `check` checks a planned scanline's points
-    (its piece ends and the samples over its extent) at once."""
-
-    def __init__(self, ctx: RasterCtx, sl: Scanline) -> None:
-        self.ctx, self.sl = ctx, sl
-        self.p0, self.d, self.length = line_frame(ctx.grid, sl)
-        self.n_px = sl.c1 - sl.c0
-        self._bounds: FloatArray | None = None
-        self._k0, self._th = 0, np.zeros((0, 2))
-        self.accel: float | None = None
-
-    @property
-    def bounds(self) -> FloatArray:
-        """Joint angles of the pixel boundaries (n_px + 1)."""
-        if self._bounds is None:
-            self._bounds = self.ik(np.arange(self.n_px + 1, dtype=np.float64)
-                                   * self.ctx.grid.pitch)
-        return self._bounds
-
-    def ik(self, sigma: FloatArray) -> FloatArray:
-        """Joint angles (wrapped into the limits) of the line's points at σ; an unreachable
-        one is the checked JobError (`_inverse`)."""
-        c = self.ctx.checker
-        inv = c.fb.inverse_batch(self.p0 + np.multiply.outer(sigma, self.d), c.mode)
-        if not inv.valid.all():
-            _inverse(self.ctx, self.sl, self.p0, self.d, sigma)
-        return wrap_to_limits(inv.angles, self.ctx.profile.motors.limits_rad)[0]
-
-    def samples(self, lo: float, hi: float) -> tuple[FloatArray, FloatArray]:
-        """σ and angles of the samples k·`SAMPLE_MM` covering [lo, hi]."""
-        k_lo, k_hi = math.floor(lo / SAMPLE_MM), math.ceil(hi / SAMPLE_MM)
-        k_hi = max(k_hi, k_lo + 2)
-        have_hi = self._k0 + self._th.shape[0]
-        if not self._th.shape[0]:
-            self._k0, have_hi = k_lo, k_lo
-        if k_lo < self._k0:
-            new = self.ik(np.arange(k_lo, self._k0, dtype=np.float64) * SAMPLE_MM)
-            self._th, self._k0 = np.concatenate((new, self._th)), k_lo
-        if k_hi + 1 > have_hi:
-            new = self.ik(np.arange(have_hi, k_hi + 1, dtype=np.float64) * SAMPLE_MM)
-            self._th = np.concatenate((self._th, new))
-        i = k_lo - self._k0
-        th = self._th[i:i + k_hi - k_lo + 1]
-        return np.arange(k_lo, k_hi + 1, dtype=np.float64) * SAMPLE_MM, th
-
-    def gains(self, lo: float, hi: float) -> tuple[float, float]:
-        """Largest |g| (rad/mm) and |dg/dσ| (rad/mm²) of either motor on σ ∈ [lo, hi]."""
-        sig, th = self.samples(lo, hi)
-        g = np.diff(th, axis=0) / np.diff(sig)[:, None]
-        dg = np.abs(np.diff(g, axis=0)) / SAMPLE_MM
-        return float(np.abs(g).max()), float(dg.max()) if dg.size else 0.0
-
-    def check(self, sigma: FloatArray, th: FloatArray) -> None:
-        """A planned scanline's points and the samples over its extent checked like a
-        drawing's (module docstring); JobError naming the row and column of the first
-        failing one."""
-        ss, ts = self.samples(float(sigma.min()), float(sigma.max()))
-        sig = np.concatenate((sigma, ss))
-        ang = np.concatenate((th, ts))
-        pts = self.p0 + np.multiply.outer(sig, self.d)
-        code, m = self.ctx.checker.codes(ang, pts)
-        bad = np.flatnonzero(code)
-        if bad.size:
-            i = int(bad[np.argmin(sig[bad])])
-            c = int(code[i])
-            msg = self.ctx.checker.explain(c, ang[i], pts[i], m[i])
-            raise _named(self.ctx, self.sl, CheckFailedError(
-                i, (float(pts[i, 0]), float(pts[i, 1])), REASON_KEY[c], msg), float(sig[i]))
-
-
-def _named(ctx: RasterCtx, sl: Scanline, e: CheckFailedError, s: float) -> JobError:
-    """The JobError of a failing point σ = s of the scanline: its row and pixel column."""
-    col = sl.c0 + s / ctx.grid.pitch if sl.sign > 0 else sl.c1 - s / ctx.grid.pitch
-    where = ("in the overscan before" if s < 0 else "in the overscan after"
-             if s > (sl.c1 - sl.c0) * ctx.grid.pitch else "at")
-    return JobError(f"scanline of row {sl.row}: {where} column {col:.1f} "
-                    f"({e.point[0]:.2f}, {e.point[1]:.2f}) mm: {e.message}", None, e.reason)
-
-
-def _inverse(ctx: RasterCtx, sl: Scanline, p0: FloatArray, d: FloatArray,
-             sigma: FloatArray) -> FloatArray:
-    """Checked joint angles of the line's points at σ; a failing point is a JobError naming
-    the row and the pixel column."""
-    pts = p0 + np.multiply.outer(sigma, d)
-    try:
-        return ctx.checker.inverse(pts)
-    except CheckFailedError as e:
-        raise _named(ctx, sl, e, float(sigma[e.index])) from None
-
-
-def gains(ctx: RasterCtx, sl: Scanline, lo: float, hi: float) -> tuple[float, float]:
-    """Largest |g| (rad/mm) and |dg/dσ| (rad/mm²) of either motor on σ ∈ [lo, hi]."""
-    return LineGeo(ctx, sl).gains(lo, hi)
-
-
 def ramp_accel(geo: LineGeo) -> float:
     """The Cartesian acceleration of the scanline's ramps (module docstring)."""
     ctx, sl, length = geo.ctx, geo.sl, geo.length
@@ -226,17 +123,12 @@ def ramp_accel(geo: LineGeo) -> float:
     return a
 
 
-def _piece_ends(n_px: int, k: int) -> IntArray:
-    """Pixel boundaries that end the scan pieces (k pixels each, the last the rest)."""
-    return np.asarray([*range(0, n_px, k), n_px], dtype=np.int64)
-
-
 def scan_k(geo: LineGeo) -> int:
     """The most pixels a scan piece may hold (module docstring: its chord's bow)."""
     ctx = geo.ctx
     k = min(ctx.k_max, geo.n_px)
     while k > 1:
-        ends = _piece_ends(geo.n_px, k)
+        ends = piece_ends(geo.n_px, k)
         mids = 0.5 * (ends[:-1] + ends[1:]) * ctx.grid.pitch
         th = geo.bounds[ends]
         pts, _ = ctx.checker.forward(0.5 * (th[:-1] + th[1:]))
@@ -259,7 +151,7 @@ def _ramp_sigma(v: float, a: float, n: int) -> tuple[FloatArray, FloatArray]:
 def _cum_us(times_s: FloatArray) -> IntArray:
     """Whole-µs durations between consecutive times, rounded on the running time (no drift)."""
     us = np.rint(np.asarray(times_s) * 1e6).astype(np.int64)
-    return np.diff(us)
+    return us[1:] - us[:-1]
 
 
 def plan_scanline(geo: LineGeo, k: int, a: float) -> ScanMotion:
@@ -273,19 +165,16 @@ def plan_scanline(geo: LineGeo, k: int, a: float) -> ScanMotion:
     if t_r / n < protocol.P_MIN_US * 1e-6:  # pieces of at least the shortest P
         n = max(1, math.floor(t_r / (protocol.P_MIN_US * 1e-6)))
     s_in, t_in = _ramp_sigma(v, a, n)
-    ends = _piece_ends(geo.n_px, k)
-    scan = ends * ctx.grid.pitch
     s_out = length - s_in[::-1]
+    ramps = absolute_steps(geo.ik(np.concatenate((s_in, s_out[1:]))), ctx.home, ctx.spr)
+    ends, scan_steps, s_exec = geo.scan_part(k, ramps[n])
+    scan = ends * ctx.grid.pitch
     sigma = np.concatenate((s_in, scan[1:], s_out[1:]))
-    kind = np.concatenate((np.full(n, RAMP_IN), np.full(scan.shape[0] - 1, SCAN),
-                           np.full(n, RAMP_OUT))).astype(np.int64)
-    th = np.concatenate((geo.ik(s_in), geo.bounds[ends[1:]], geo.ik(s_out[1:])))
-    steps = absolute_steps(th, ctx.home, ctx.spr)
+    kind = np.repeat(_KINDS, (n, scan.shape[0] - 1, n))
+    steps = np.concatenate((ramps[:n + 1], scan_steps, ramps[n + 1:]))
     # the scan pieces last what the pen really travels along the line between their
-    # quantised ends, at v: every pixel boundary is crossed at σ/v from one time origin,
-    # across pieces too, so one G7 line's U + i·T spans several pieces
-    pts, _ = ctx.checker.forward(step_angles(steps[n:n + scan.shape[0]], ctx.home, ctx.spr))
-    s_exec = (pts - p0) @ d
+    # quantised ends (s_exec), at v: every pixel boundary is crossed at σ/v from one time
+    # origin, across pieces too, so one G7 line's U + i·T spans several pieces
     times = np.concatenate((t_in, t_in[-1] + (s_exec[1:] - s_exec[0]) / v))
     times = np.concatenate((times, times[-1] + t_in[1:]))
     dur = np.maximum(_cum_us(times), protocol.P_MIN_US)
@@ -293,16 +182,29 @@ def plan_scanline(geo: LineGeo, k: int, a: float) -> ScanMotion:
                       geo.n_px, a)
 
 
-def staircase_ok(ctx: RasterCtx, sm: ScanMotion) -> bool:
+def staircase_ok(ctx: RasterCtx, sm: ScanMotion, th: FloatArray | None = None) -> bool:
     """Whether the firmware's staircase of the scanline keeps the jump and acceleration
-    limits at every boundary, from rest to rest."""
-    th = step_angles(sm.steps, ctx.home, ctx.spr)
-    jump, acc = planner.staircase_ratios(np.diff(th, axis=0), sm.duration_us, None,
-                                         ctx.profile.motion.max_joint_rad_s2,
-                                         ctx.profile.motion.junction_jump_rad_s)
-    rate = np.abs(np.diff(th, axis=0)).max(axis=1) / (sm.duration_us * 1e-6)
-    return (float(jump.max()) <= 1.0 and float(acc.max()) <= 1.0
-            and float(rate.max()) <= ctx.profile.motion.max_joint_rad_s * (1 + 1e-9))
+    limits at every boundary, from rest to rest (`th`: its steps' angles, when known)."""
+    if th is None:
+        th = step_angles(sm.steps, ctx.home, ctx.spr)
+    mo = ctx.profile.motion
+    dth = th[1:] - th[:-1]
+    # `planner.staircase_ratios` of one run from rest to rest (every piece lasts ≥ P_MIN,
+    # so no piece is motionless), reduced to its largest jump and acceleration: the
+    # largest ratio is the largest difference divided by the limit (rounding is monotone)
+    t = sm.duration_us * 1e-6
+    w = dth / t[:, None]
+    aw = np.abs(w)
+    dw = np.abs(w[1:] - w[:-1])
+    dw = np.maximum(dw[:, 0], dw[:, 1])
+    wn = np.maximum(aw[[0, -1], 0], aw[[0, -1], 1])  # into the first, out of the last
+    tb = 0.5 * (t[1:] + t[:-1])
+    jump = max(float(dw.max()) if dw.size else 0.0, float(wn.max())) / mo.junction_jump_rad_s
+    acc = max(float((dw / tb).max()) if dw.size else 0.0,
+              float((wn / (0.5 * t[[0, -1]])).max())) / mo.max_joint_rad_s2
+    rate = np.maximum(np.abs(dth[:, 0]), np.abs(dth[:, 1])) / t
+    return (jump <= 1.0 and acc <= 1.0
+            and float(rate.max()) <= mo.max_joint_rad_s * (1 + 1e-9))
 
 
 def plan(geo: LineGeo, k: int) -> ScanMotion:
@@ -311,9 +213,10 @@ def plan(geo: LineGeo, k: int) -> ScanMotion:
     a = geo.accel if geo.accel is not None else ramp_accel(geo)
     for _ in range(TRIES):
         sm = plan_scanline(geo, k, a)
-        if staircase_ok(ctx, sm):
+        th = step_angles(sm.steps, ctx.home, ctx.spr)
+        if staircase_ok(ctx, sm, th):
             geo.accel = a
-            geo.check(sm.sigma, step_angles(sm.steps, ctx.home, ctx.spr))
+            geo.check(sm.sigma, th)
             return sm
         a *= RELAX
     raise JobError(f"scanline of row {geo.sl.row}: no ramp keeps the joints within "

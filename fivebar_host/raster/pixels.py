@@ -57,22 +57,51 @@ def crossings(ctx: RasterCtx, sm: ScanMotion, powers: NDArray[np.uint8]) -> Chan
     cyc = sm.duration_us.astype(np.float64) * CYCLES_PER_US
     start = np.concatenate(([0.0], np.cumsum(cyc)))
     bound = np.arange(sm.n_px + 1, dtype=np.float64) * ctx.grid.pitch
-    pts, _ = fk(th)
-    s_end = (pts - sm.p0) @ sm.d  # executed along-track σ of every piece end
+    # one forward kinematics for the piece ends and every piece's λ samples (each point
+    # on its own: only the pieces holding a boundary are used below)
+    k = th.shape[0] - 1
+    q = th[:-1, None, :] + _LAMBDA[None, :, None] * (th[1:] - th[:-1])[:, None, :]
+    pts, _ = fk(np.concatenate((th, q.reshape(-1, 2))))
+    s_end = (pts[:k + 1] - sm.p0) @ sm.d  # executed along-track σ of every piece end
+    s_all = ((pts[k + 1:] - sm.p0) @ sm.d).reshape(-1, _LAMBDA.shape[0])
     j = np.clip(np.searchsorted(s_end, bound, side="right") - 1, 0, len(cyc) - 1)
-    used, which = np.unique(j, return_inverse=True)
-    dth = th[used + 1] - th[used]
-    q = th[used][:, None, :] + _LAMBDA[None, :, None] * dth[:, None, :]
-    p, _ = fk(q.reshape(-1, 2))
-    s = ((p - sm.p0) @ sm.d).reshape(-1, _LAMBDA.shape[0])
-    coef = (s @ _VINV.T)[which]  # s(λ) of each boundary's piece, exact at both ends
+    # the pieces holding a boundary: `np.unique(j)`, without its sort where j is sorted
+    # (the executed piece ends advance along the line)
+    new = np.empty(j.shape[0], dtype=bool)
+    new[0] = True
+    np.not_equal(j[1:], j[:-1], out=new[1:])
+    if (j[1:] >= j[:-1]).all():
+        used, which = j[new], np.cumsum(new) - 1
+    else:
+        used, which = np.unique(j, return_inverse=True)
+    s = s_all[used]
+    # s(λ) of each boundary's piece, exact at both ends: cₘ per boundary, m = 0 … 4, each
+    # row contiguous (the Newton steps below run on whole rows)
+    c = np.ascontiguousarray((s @ _VINV.T).T)[:, which]
     s0, s1 = s_end[j], s_end[j + 1]
-    lam = np.clip((bound - s0) / np.where(s1 != s0, s1 - s0, 1.0), 0.0, 1.0)
-    c = coef.T  # cₘ per boundary, m = 0 … 4
+    lam = np.minimum(np.maximum((bound - s0) / np.where(s1 != s0, s1 - s0, 1.0), 0.0), 1.0)
+    c4x4, c3x3, c2x2 = 4 * c[4], 3 * c[3], 2 * c[2]  # the derivative's coefficients
+    f, df = np.empty_like(lam), np.empty_like(lam)
     for _ in range(4):  # Newton on the quartic (Horner) from the linear guess
-        f = (((c[4] * lam + c[3]) * lam + c[2]) * lam + c[1]) * lam + c[0] - bound
-        df = ((4 * c[4] * lam + 3 * c[3]) * lam + 2 * c[2]) * lam + c[1]
-        lam = np.clip(lam - f / np.where(df != 0, df, 1.0), 0.0, 1.0)
+        # f = (((c₄λ + c₃)λ + c₂)λ + c₁)λ + c₀ − σᵢ,  f' = ((4c₄λ + 3c₃)λ + 2c₂)λ + c₁
+        np.multiply(c[4], lam, out=f)
+        for m in (3, 2, 1):
+            f += c[m]
+            f *= lam
+        f += c[0]
+        f -= bound
+        np.multiply(c4x4, lam, out=df)
+        df += c3x3
+        df *= lam
+        df += c2x2
+        df *= lam
+        df += c[1]
+        if not df.all():
+            df[df == 0] = 1.0
+        f /= df
+        np.subtract(lam, f, out=lam)
+        np.maximum(lam, 0.0, out=lam)
+        np.minimum(lam, 1.0, out=lam)
     t = start[j] + lam * cyc[j]
     return Changes(t, np.concatenate((np.asarray(powers, dtype=np.uint8), [0])).astype(np.uint8))
 
@@ -104,7 +133,11 @@ def piece_residual(sm: ScanMotion, ch: Changes) -> float:
     more, at once."""
     start = np.concatenate(([0], np.cumsum(sm.duration_us.astype(np.int64) * CYCLES_PER_US)))
     piece = np.searchsorted(start, ch.t, side="right") - 1
-    cuts = np.searchsorted(piece, np.unique(piece))
+    step = piece[1:] != piece[:-1]
+    if (piece[1:] >= piece[:-1]).all():  # (the changes in time order: each piece's first)
+        cuts = np.concatenate(([0], np.flatnonzero(step) + 1))
+    else:
+        cuts = np.searchsorted(piece, np.unique(piece))
     n = np.diff(np.concatenate((cuts, [piece.shape[0]]))).astype(np.int64)
     big = n > 2
     if not big.any():

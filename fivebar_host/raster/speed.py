@@ -26,10 +26,10 @@ import numpy as np
 
 from fivebar_host import protocol
 from fivebar_host.compile import linkrate
-from fivebar_host.raster import assemble, motion, pixels
+from fivebar_host.raster import assemble, linegeo, motion, pixels
 from fivebar_host.raster import grid as gridmod
 from fivebar_host.raster import lines as linesmod
-from kinematics.arrays import IntArray
+from kinematics.arrays import FloatArray, IntArray
 
 #: Share of max_joint_rad_s the scan speed may ask of a joint.
 SPEED_SHARE = 0.9
@@ -63,16 +63,19 @@ class Planned:
                              w.nseg)
 
 
-def plan_line(ctx: motion.RasterCtx, sl: gridmod.Scanline, k_hint: int | None = None
+def plan_line(ctx: motion.RasterCtx, sl: gridmod.Scanline, k_hint: int | None = None,
+              pad_mm: tuple[float, float] | None = None, bounds: FloatArray | None = None
               ) -> tuple[motion.ScanMotion, pixels.Changes]:
     """One scanline planned, with its changes: scan pieces short enough that each piece's
     changes fit one progression U + i·T within `pixels.FIT_CYCLES` (the pen's speed drifts
     slightly along a joint-space chord; in cycles the drift grows as the speed falls, and
     quadratically with the piece's length).  `k_hint`: the pixels a piece held on the
-    scanline before (a neighbour fits about as many; one more is tried)."""
+    scanline before (a neighbour fits about as many; one more is tried); `pad_mm`: how far
+    its overscan reached (the line's samples are solved that far ahead at once); `bounds`:
+    its pixel boundaries' angles when solved already (`motion.solve_bounds`)."""
     row = ctx.grid.powers[sl.row, sl.c0:sl.c1]
     row = row if sl.sign > 0 else row[::-1]
-    geo = motion.LineGeo(ctx, sl)
+    geo = motion.LineGeo(ctx, sl, pad_mm, bounds)
     k = motion.scan_k(geo)
     if k_hint is not None:
         k = min(k, k_hint + 1)
@@ -89,15 +92,26 @@ def plan_all(ctx: motion.RasterCtx, lines: list[gridmod.Scanline], home: IntArra
     """Every scanline planned at ctx.v, its changes, its G7 lines, and the job's segments."""
     scans, changes, groups = [], [], []
     k: int | None = None
-    for sl in lines:
-        sm, ch = plan_line(ctx, sl, k)
+    pad: tuple[float, float] | None = None
+    for sl, bounds in zip(lines, motion.solve_bounds(ctx, lines), strict=True):
+        sm, ch = plan_line(ctx, sl, k, pad, bounds)
         k = _piece_px(sm, ctx.grid.pitch)
+        pad = _overscan_pad(sm)
         scans.append(sm)
         changes.append(ch)
         groups.append(linesmod.groups(sm, ch))
     col = assemble.collect(ctx.profile, ctx.checker, scans, groups, home,
                            lead_us(linkrate.bytes_per_s(ctx.profile)))
     return Planned(ctx, scans, changes, groups, col)
+
+
+def _overscan_pad(sm: motion.ScanMotion) -> tuple[float, float]:
+    """How far the next scanline's samples are solved ahead before 0 and after L, mm: this
+    one's overscan (the same on both sides), with room for a lowered ramp acceleration
+    (`motion.RELAX`) and the samples around it — a guess: what it does not cover is solved
+    when asked."""
+    pad = 1.5 * max(-float(sm.sigma[0]), 0.0) + 2 * motion.SAMPLE_MM
+    return pad, pad
 
 
 def _piece_px(sm: motion.ScanMotion, pitch: float) -> int:
@@ -111,7 +125,7 @@ def speed_cap(ctx: motion.RasterCtx, lines: list[gridmod.Scanline]) -> float:
     mot = ctx.profile.motion
     wmax = SPEED_SHARE * min(mot.max_joint_rad_s,
                              protocol.SETTINGS[0][2] * 2 * math.pi / ctx.spr)
-    g = max(motion.gains(ctx, sl, 0.0, (sl.c1 - sl.c0) * ctx.grid.pitch)[0] for sl in lines)
+    g = linegeo.max_gain(ctx, lines)  # max over the lines of gains(ctx, sl, 0, L)[0]
     return wmax / g
 
 

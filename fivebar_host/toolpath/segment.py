@@ -72,16 +72,22 @@ class CheckFailedError(Exception):
 def wrap_to_limits(theta: FloatArray,
                    limits: tuple[tuple[float, float], tuple[float, float]]
                    ) -> tuple[FloatArray, BoolArray, BoolArray]:
-    """Angles (N, 2) mapped to θ + 2πk ∈ [lo, lo + 2π), and per-motor in-limit masks."""
-    out = np.empty_like(theta)
-    oks = []
-    for i in range(2):
-        lo, hi = limits[i]
-        t = lo + np.mod(theta[:, i] - lo, 2.0 * math.pi)
-        t = np.where(t - lo >= 2.0 * math.pi - 1e-12, lo, t)
-        out[:, i] = t
-        oks.append(t <= hi + 1e-12)
-    return out, oks[0], oks[1]
+    """Angles (N, 2) mapped to θ + 2πk ∈ [lo, lo + 2π), and per-motor in-limit masks.
+    Both motors at once (the same arithmetic per element as one column at a time: the
+    raster planner calls this for every scanline)."""
+    lo = np.array([limits[0][0], limits[1][0]])
+    hi = np.array([limits[0][1] + 1e-12, limits[1][1] + 1e-12])
+    turn = 2.0 * math.pi
+    x = theta - lo
+    if x.size and not (float(x.min()) >= 0.0 and float(x.max()) < turn):
+        x = np.mod(x, turn)  # (on [0, 2π) the remainder is x itself, exactly)
+    t = lo + x
+    d = t - lo
+    out: FloatArray = t
+    if d.size and float(d.max()) >= turn - 1e-12:
+        out = np.where(d >= turn - 1e-12, lo, t)
+    ok = out <= hi
+    return out, ok[:, 0], ok[:, 1]
 
 
 @dataclass(frozen=True)
