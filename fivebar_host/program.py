@@ -5,9 +5,10 @@ A `Program` is a sequence of items in parallel arrays, one row an item:
 
 =========  ===============================================================================
 kind       `MOVE`, `DWELL`, `PEN`, `TOOL_ON`, `TOOL_OFF`, `ABSOLUTE`, `PEN_PARK`, `TEXT`,
-           `RASTER`
+           `RASTER`, `SET_POSITION`
 a, b       MOVE, RASTER: the absolute targets, steps from the homed pose (docs/protocol.md
-           6). PEN: the servo's move time (R) and settle time (D), ms
+           6). SET_POSITION: the position the firmware takes as its own (`G92 A<a> B<b>`).
+           PEN: the servo's move time (R) and settle time (D), ms
 p_us       MOVE, DWELL, RASTER: the duration, µs
 s          MOVE, DWELL: the laser power 0-255. PEN, PEN_PARK: the servo pulse, µs.
            TOOL_ON: 3 or 4, the enable command (M3 or M4, always at S0).
@@ -23,8 +24,9 @@ at `u + i·t` cycles after the line's first segment starts.
 
 `ABSENT` in a, b or s of a move or a dwell: the word is left out (a hand-written line,
 `wire.read_lines`: `G1 A10 P1000` keeps B where it is); the host's own programs give every
-word. `TEXT` items carry a command the records do not model (`G92 A0 B0`, `$H`), sent as
-written and never packed.
+word. `TEXT` items carry a command the records do not model (`$H`, `$0=…`), sent as
+written and never packed; a position is set by a `SET_POSITION` item, so a link that maps
+positions (the servo firmware's ticks) maps it as it maps a move's target.
 
 Every program is absolute (`ABSOLUTE` = G90 in force from there on); a relative encoding is
 the wire's choice (`fivebar_host.wire.file_lines`). Programs are built once — a job's
@@ -60,6 +62,7 @@ class Kind(IntEnum):
     PEN_PARK = 6
     TEXT = 7
     RASTER = 8
+    SET_POSITION = 9
 
 
 @dataclass(frozen=True)
@@ -136,8 +139,13 @@ class Program:
         return Program.of([kind], a, b, 0, s, -1)
 
     @staticmethod
+    def set_position(a: int, b: int) -> Program:
+        """One `SET_POSITION` item: the firmware takes (a, b) steps as where it is (G92)."""
+        return Program.of([Kind.SET_POSITION], a, b, 0, 0, -1)
+
+    @staticmethod
     def text(line: str) -> Program:
-        """One `TEXT` item: a command the records do not model (`$H`, `G92 A0 B0`)."""
+        """One `TEXT` item: a command the records do not model (`$H`, `$0=…`)."""
         return replace(Program.of([Kind.TEXT], s=0), texts=(line,))
 
     @staticmethod
@@ -187,10 +195,11 @@ class Program:
         return out
 
     def positions(self, start_position: ArrayLike) -> IntArray:
-        """Firmware position after each item, from `start_position` (only MOVEs move)."""
+        """Firmware position after each item, from `start_position` (moves move, and a
+        `SET_POSITION` says where the firmware is)."""
         n = len(self)
         start = np.asarray(start_position, dtype=np.int64)
-        mv = np.flatnonzero(self.is_motion)
+        mv = np.flatnonzero(self.is_motion | (self.kind == Kind.SET_POSITION))
         out = np.empty((n, 2), dtype=np.int64)
         if n == 0:
             return out

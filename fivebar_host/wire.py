@@ -103,6 +103,10 @@ def body(prog: Program, i: int, p_us: int | None = None, s: int | None = None) -
         return f"$14={sv}"
     if k == Kind.TEXT:
         return prog.texts[sv]
+    if k == Kind.SET_POSITION:
+        words = [f"{n}{v}" for n, v in (("A", int(prog.a[i])), ("B", int(prog.b[i])))
+                 if v != ABSENT]
+        return " ".join(["G92", *words])
     if k == Kind.RASTER:  # for messages: a G7 line's data is bytes (g7_line writes it)
         run = f" run {sv}" if sv >= 0 else ""
         return f"G7 segment A{int(prog.a[i])} B{int(prog.b[i])} P{p}{run}"
@@ -138,11 +142,12 @@ def file_lines(prog: Program, relative: bool = False) -> list[str]:
 _G1 = re.compile(r"G1(?: A(-?\d+))?(?: B(-?\d+))? P(\d+)(?: S(\d+))?")
 _M280 = re.compile(r"M280 S(\d+)(?: R(\d+))?(?: D(\d+))?")
 _PARK = re.compile(r"\$14=(\d+)")
+_G92 = re.compile(r"G92(?: A(-?\d+))?(?: B(-?\d+))?")
 
 
 def read_lines(lines: Sequence[str]) -> Program:
     """Line bodies in this module's forms as a program (hand-written programs: tests,
-    scripts). A body in another form (`G92 A0 B0`, `$H`, `M3 S255` …) is a `TEXT` item,
+    scripts). A body in another form (`$H`, `M3 S255` …) is a `TEXT` item,
     sent as it is and never packed."""
     rows: list[tuple[int, int, int, int, int]] = []
     texts: list[str] = []
@@ -166,6 +171,8 @@ def read_lines(lines: Sequence[str]) -> Program:
             rows.append((Kind.ABSOLUTE, 0, 0, 0, 0))
         elif (m := _PARK.fullmatch(text)) is not None:
             rows.append((Kind.PEN_PARK, 0, 0, 0, int(m.group(1))))
+        elif (m := _G92.fullmatch(text)) is not None:
+            rows.append((Kind.SET_POSITION, opt(m.group(1)), opt(m.group(2)), 0, 0))
         else:
             rows.append((Kind.TEXT, 0, 0, 0, len(texts)))
             texts.append(text)

@@ -494,7 +494,7 @@ class Bridge:
         if self.alarm is None and not self.locked:
             return
         if self.locked:
-            self.machine.submit(Batch(Program.text("G92 A0 B0"), 0.0, (0, 0)))
+            self.machine.submit(Batch(Program.set_position(0, 0), 0.0, (0, 0)))
             self.wait_idle(10.0)
         self.alarm = None
         self.locked = False

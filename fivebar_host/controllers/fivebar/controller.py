@@ -174,7 +174,7 @@ class FivebarController:
                                 "from +x)?"):
             raise SendError("position unknown: place the arms at the home pose and confirm, "
                             "or run `fivebar home`")
-        link.command("G92 A0 B0")
+        link.command(Program.set_position(0, 0))
         st = link.wait_idle(10.0)  # G92 is queued: its ok comes before it takes effect
         return (st.a, st.b)
 
@@ -279,14 +279,14 @@ class FivebarController:
         if pos is not None and operator.confirm_placed(
                 f"The controller lost power. Are the arms still exactly where the job stopped "
                 f"(A = {pos[0]}, B = {pos[1]} steps)?"):
-            link.command(f"G92 A{pos[0]} B{pos[1]}")
+            link.command(Program.set_position(pos[0], pos[1]))
             st = link.wait_idle(10.0)  # G92 is queued: its ok comes before it takes effect
             return (st.a, st.b)
         h1, h2 = (math.degrees(v) for v in self.profile.motors.home_rad)
         if operator.confirm_placed(f"The controller lost power. Are the arms at the home pose "
                                    f"θ1 = {h1:g}°, θ2 = {h2:g}° (motor angles from +x)?"):
             homed_note()
-            link.command("G92 A0 B0")
+            link.command(Program.set_position(0, 0))
             st = link.wait_idle(10.0)
             return (st.a, st.b)
         raise PowerLossError(

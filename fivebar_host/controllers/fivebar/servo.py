@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import re
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
@@ -48,7 +47,6 @@ if TYPE_CHECKING:
 
 #: Pulse ticks per µs of the servo firmware (config.h CFG_SERVO_TICKS_US).
 TICKS_PER_US = 2
-_G92 = re.compile(r"G92((?: [AB]-?\d+)*)")
 
 
 @dataclass(frozen=True)
@@ -90,23 +88,12 @@ class ServoMap:
                           + self.offset_steps[joint] + 0.5)
 
     def program(self, prog: Program) -> Program:
-        """A program with its moves' targets and its `G92` texts in ticks."""
-        move = prog.kind == Kind.MOVE
+        """A program with its moves' targets and its set positions (`G92`) in ticks."""
+        mapped = (prog.kind == Kind.MOVE) | (prog.kind == Kind.SET_POSITION)
         a, b = prog.a.copy(), prog.b.copy()
-        a[move] = self.ticks(0, a[move])
-        b[move] = self.ticks(1, b[move])
-        return replace(prog, a=a, b=b, texts=tuple(self.text(t) for t in prog.texts))
-
-    def text(self, line: str) -> str:
-        """A `G92 A<steps> B<steps>` text in ticks; any other text as it is."""
-        m = _G92.fullmatch(line.strip())
-        if m is None:
-            return line
-        words = []
-        for w in m.group(1).split():
-            j = "AB".index(w[0])
-            words.append(f"{w[0]}{int(self.ticks(j, np.array([int(w[1:])]))[0])}")
-        return " ".join(["G92", *words])
+        a[mapped] = self.ticks(0, a[mapped])
+        b[mapped] = self.ticks(1, b[mapped])
+        return replace(prog, a=a, b=b)
 
 
 class ServoLink(Link):
