@@ -20,6 +20,9 @@
 static uint16_t frac16(uint16_t m, uint16_t n, uint16_t *r)
 {
 	uint16_t q = 0;
+	*r = 0;
+	if (!m)
+		return 0;  /* C a multiple of n (one step always): no loop */
 	for (uint8_t i = 0; i < 16; i++) {
 		m = (uint16_t)(m << 1);
 		q = (uint16_t)(q << 1);

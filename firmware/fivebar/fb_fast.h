@@ -78,8 +78,9 @@ enum { FAST_ONE, FAST_TINY, FAST_CLOSE, FAST_PAIR };
 /*
  * The fast form of a MOVE block whose motor i has n[i] steps at q[i] whole
  * cycles apart with remainder m[i] < n[i] (its C cycles are q n + m): 1 and
- * *f filled when the block qualifies (see FAST_NMAX), else 0.  Main loop: a
- * few hundred cycles on the AVR.
+ * *f filled when the block qualifies (see FAST_NMAX), else 0 with *f not
+ * written at all (mo_seal forms a block in place, over its C form).  Main
+ * loop: a few hundred cycles on the AVR.
  */
 uint8_t fast_form(fast_t *f, const uint32_t n[2], const uint32_t q[2], const uint32_t m[2]);
 
