@@ -146,13 +146,15 @@ def functions(elf: Path, addrs: list[int], by_line: bool = False) -> dict[int, s
 class Profile:
     """One profiled run: cycles per function, all cycles, lines sent, underruns, and the
     stack's headroom at its deepest (bytes between the lowest stack pointer and the end of
-    the static RAM, `_end`)."""
+    the static RAM, `_end`), and the emulated cycles from the first step to the last (the
+    pin trace's: exact whatever the load on the machine)."""
 
     per: dict[str, int]
     total: int
     lines: int
     underruns: int
     headroom: int
+    step_span_cycles: int
 
 
 def ram_end(elf: Path) -> int:
@@ -202,6 +204,8 @@ def profile(segments: int, p_us: int, baud: int, by_line: bool = False) -> Profi
         dev = boot(emu, Path(tmp) / "trace.txt", 20.0)
         final = stream(dev.session, dev.port, lines, baud)
         dev.close()
+        steps = [int(ln.split()[0]) for ln in (Path(tmp) / "trace.txt").read_text().splitlines()
+                 if ln.endswith((" stepA 1", " stepB 1"))]
         text = prof.read_text()
         rows = [tuple(map(int, ln.split()[:2])) for ln in text.splitlines()
                 if not ln.startswith("#")]
@@ -213,7 +217,8 @@ def profile(segments: int, p_us: int, baud: int, by_line: bool = False) -> Profi
         name = names.get(addr, "?")
         per[name] = per.get(name, 0) + cyc
         total += cyc
-    return Profile(per, total, len(lines), final.underruns - 1, min_sp[0] - ram_end(elf))
+    return Profile(per, total, len(lines), final.underruns - 1, min_sp[0] - ram_end(elf),
+                   steps[-1] - steps[0])
 
 
 def main() -> None:
@@ -232,8 +237,10 @@ def main() -> None:
     for name, cyc in sorted(prof.per.items(), key=lambda kv: -kv[1])[:args.top]:
         print(f"  {name:32s} {cyc / n:9.0f}")
     print(f"  {'(all, idle included)':32s} {prof.total / n:9.0f}")
-    print(f"mid-path underruns {prof.underruns}; stack headroom at its deepest "
-          f"{prof.headroom} bytes (lowest stack pointer less _end)")
+    print(f"first to last step: {prof.step_span_cycles} emulated cycles, "
+          f"{n / (prof.step_span_cycles / 16e6):.0f} segments/s; mid-path underruns "
+          f"{prof.underruns}; stack headroom at its deepest {prof.headroom} bytes (lowest "
+          f"stack pointer less _end)")
 
 
 if __name__ == "__main__":

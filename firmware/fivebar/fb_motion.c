@@ -347,24 +347,30 @@ void mo_prepare_pen(mo_block_t *b, uint16_t from_us, uint16_t to_us, uint16_t mo
 __attribute__((noinline)) uint8_t mo_prepare_fast(mo_block_t *b, int32_t da, int32_t db,
 						  uint32_t cycles, uint32_t min_interval)
 {
-	uint32_t n[2], q[2], m[2];
-	uint8_t dirs = 0;
+	uint16_t n16[2], q16[2], m16[2];
+	uint8_t dirs = 0, fast = 1;
 	for (uint8_t i = 0; i < 2; i++) {
 		int32_t d = i ? db : da;
-		n[i] = (uint32_t)d;
+		uint32_t n = (uint32_t)d;
 		if (d < 0) {
 			dirs |= (uint8_t)(1u << i);
-			n[i] = (uint32_t)0 - (uint32_t)d;
+			n = (uint32_t)0 - (uint32_t)d;
 		}
-		q[i] = m[i] = 0;
-		if (!n[i])
+		n16[i] = q16[i] = m16[i] = 0;
+		if (!n)
 			continue;
-		q[i] = div_cn(cycles, n[i], &m[i]);
-		if (q[i] < min_interval)
+		uint32_t m, q = div_cn(cycles, n, &m);
+		if (q < min_interval)
 			return FB_ERR_TOO_FAST;  /* prep_axis's test, in its order */
+		if (n > FAST_NMAX || q > FAST_QMAX)
+			fast = 0;  /* fast_form's rules */
+		n16[i] = (uint16_t)n;
+		q16[i] = (uint16_t)q;
+		m16[i] = (uint16_t)m;
 	}
-	if (!fast_form(&b->f, n, q, m))  /* writes b->f only when it takes it */
+	if (!fast || (!n16[0] && !n16[1]))  /* a dwell: the C path's waits */
 		return mo_prepare_cycles(b, da, db, cycles, min_interval);
+	fast_form16(&b->f, n16, q16, m16);
 	b->type = MO_BLK_MOVE;
 	b->dirs = dirs;
 	b->cycles = cycles;

@@ -243,7 +243,7 @@ static unsigned long long *profile;
 static const char *profile_path;
 /* the lowest stack pointer seen while profiling (the stack's deepest point;
  * the headroom is that less the end of .bss/.noinit, avr-nm's _end) */
-static unsigned profile_min_sp = 0xffffu, profile_min_sp_pc;
+static unsigned profile_min_sp = 0xffffu, profile_min_sp_pc, profile_prev_sp = 0xffffu;
 static unsigned short *profile_sp;  /* the lowest stack pointer at each address */
 
 static void profile_write(void)
@@ -1196,7 +1196,12 @@ int main(int argc, char **argv)
 			avr_cycle_count_t c0 = avr->cycle;
 			state = avr_run(avr);
 			profile[(pc / 2u) % PROFILE_WORDS] += avr->cycle - c0;
-			unsigned sp = avr->data[0x5d] | (unsigned)avr->data[0x5e] << 8;  /* SPL, SPH */
+			/* SPL, SPH; an `out` to SPH then one to SPL (a frame's set-up) leave a
+			 * mixed value between them for one instruction: the higher of two
+			 * consecutive values is one the stack really reached */
+			unsigned now_sp = avr->data[0x5d] | (unsigned)avr->data[0x5e] << 8;
+			unsigned sp = now_sp > profile_prev_sp ? now_sp : profile_prev_sp;
+			profile_prev_sp = now_sp;
 			if (sp < profile_sp[(pc / 2u) % PROFILE_WORDS])
 				profile_sp[(pc / 2u) % PROFILE_WORDS] = (unsigned short)sp;
 			if (sp < profile_min_sp) {
