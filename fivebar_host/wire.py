@@ -190,8 +190,18 @@ def read_lines(lines: Sequence[str]) -> Program:
 #: and the newline.
 LINE_BYTES = 64
 LINE_OVERHEAD_B = 36
-#: The longest checksum field: `*65535/99`.
+#: The longest checksum field of a body under 100 bytes: `*65535/99`; a longer body's
+#: length has 3 digits (protocol 4), one byte more (`field_max`).
 FIELD_MAX = 9
+
+
+def field_max(limit_bytes: int) -> int:
+    """The longest checksum field of a line of at most `limit_bytes` (newline included):
+    its body is shorter than the limit, so its length has 3 digits only from a limit of
+    101 bytes. Counting 9 there made 128-byte lines under the Streamer's 127 (half the
+    255-byte ring): two of them no longer fitted in flight, and the firmware waited a
+    round trip for every line (issue 39, `python benchmarks/segcost.py`)."""
+    return FIELD_MAX + 1 if limit_bytes > 100 else FIELD_MAX
 
 #: (P µs, S) of an item as it is to be written (overrides applied), asked for in order.
 ValueAt = Callable[[int], tuple[int, int]]
@@ -253,7 +263,7 @@ def pack_line(prog: Program, start: int, number: int, absolute: bool, limit_byte
     _check(a, b, p_head, s_head)
     words = f"G6A{a}B{b}P{p_head}" + ("" if s_head == ABSENT else f"S{s_head}")
     text = f"N{number}{words} "
-    room = limit_bytes - FIELD_MAX - 1
+    room = limit_bytes - field_max(limit_bytes) - 1
     p_prev = p_head
     count = 1
     while start + count < total:

@@ -163,26 +163,44 @@ static uint8_t exec_g1(const proto_cmd_t *c)
 	return FB_OK;
 }
 
+/* The step-rate limit of segments of one duration: the most steps a motor may
+ * make in p_us, floor(C / min_interval) (lim), for the duration p_us it was
+ * worked out for (0: none yet).  A line's segments mostly share their
+ * duration, so g6_check and g7_check keep one on their stack and divide only
+ * when the duration changes: the 32-bit division (~600 cycles on the AVR) per
+ * segment was a tenth of a segment's cost (python benchmarks/segcost.py). */
+typedef struct {
+	int32_t p_us;
+	uint32_t lim;
+} rate_lim_t;
+
 /* Whether target t may be reached from `from` in a segment of p_us (the G1
  * checks of protocol section 6, in order, with mo_prepare's step rate test:
  * floor(C / n) >= min_interval <=> n <= floor(C / min_interval)). */
-static uint8_t check_target(const int32_t from[2], const int32_t t[2], int32_t p_us)
+static uint8_t check_target(const int32_t from[2], const int32_t t[2], int32_t p_us,
+			    rate_lim_t *rl)
 {
 	uint8_t st = check_position(from, t);
 	if (st != FB_OK)
 		return st;
-	uint32_t lim = (uint32_t)p_us * (FB_F_CPU / 1000000UL) / fb_state.min_interval;
+	if (rl->p_us != p_us) {
+		rl->p_us = p_us;
+		rl->lim = (uint32_t)p_us * (FB_F_CPU / 1000000UL) / fb_state.min_interval;
+	}
 	for (uint8_t i = 0; i < 2; i++) {
 		int32_t d = t[i] - from[i];
-		if ((uint32_t)(d < 0 ? -d : d) > lim)
+		if ((uint32_t)(d < 0 ? -d : d) > rl->lim)
 			return FB_ERR_TOO_FAST;
 	}
 	return FB_OK;
 }
 
 /* Every segment of a G6 line against the checks of a G1, before any is
- * queued: a line is queued whole or not at all (docs/protocol.md 6.3). */
-static uint8_t g6_check(const proto_cmd_t *c)
+ * queued: a line is queued whole or not at all (docs/protocol.md 6.3).  Not
+ * inlined (nor g7_check): its arrays would stay in exec_g6's frame while that
+ * prepares and queues blocks, the stack's deepest point (python
+ * benchmarks/segcost.py prints the headroom). */
+static __attribute__((noinline)) uint8_t g6_check(const proto_cmd_t *c)
 {
 	int32_t from[2] = { plan[0], plan[1] }, t[2] = { plan[0], plan[1] }, d[2];
 	if (c->has & PROTO_W_A)
@@ -191,13 +209,14 @@ static uint8_t g6_check(const proto_cmd_t *c)
 		t[1] = absolute ? c->b : plan[1] + c->b;
 	int32_t p = c->p;
 	uint8_t at = c->g6_at;
-	uint8_t st = check_target(from, t, p);
+	rate_lim_t rl = { 0, 0 };
+	uint8_t st = check_target(from, t, p, &rl);
 	while (st == FB_OK && proto_g6_next(fb_state.line, &at, c->g6_end, &p, d)) {
 		from[0] = t[0];
 		from[1] = t[1];
 		t[0] += d[0];
 		t[1] += d[1];
-		st = check_target(from, t, p);
+		st = check_target(from, t, p, &rl);
 	}
 	return st;
 }
@@ -242,6 +261,12 @@ static uint8_t exec_g6(const proto_cmd_t *c)
 		plan[0] += d[0];
 		plan[1] += d[1];
 		g6_queued++;
+		/* a stopped queue starts as soon as it may (it ran empty while
+		 * this line was read): the main loop's look comes only once the
+		 * line waits for a slot, with the queue full, which kept the
+		 * motors still while 16 blocks were prepared (seen in the
+		 * emulator's pin trace with a marker pin around the parse) */
+		exec_maybe_start();
 	}
 	return FB_OK;
 }
@@ -251,12 +276,13 @@ static uint8_t exec_g6(const proto_cmd_t *c)
  * modal one), and its pixel run: at most what the ring holds, a period T of
  * at least PX_T_MIN_CYCLES, every change inside the line's segments. */
 #define PX_T_MIN_CYCLES 400u
-static uint8_t g7_check(const proto_cmd_t *c)
+static __attribute__((noinline)) uint8_t g7_check(const proto_cmd_t *c)
 {
 	int32_t from[2] = { plan[0], plan[1] }, t[2] = { plan[0], plan[1] }, d[2];
 	int32_t p = g7_p;
 	uint8_t at = c->g6_at, st = FB_OK;
 	uint32_t total = 0;
+	rate_lim_t rl = { 0, 0 };
 	for (uint8_t k = 0; st == FB_OK && k <= c->g6_count; k++) {
 		if (!proto_g7_next(fb_state.line, &at, c->g6_end, (uint8_t)((c->g7_pmask >> k) & 1u),
 				   &p, d))
@@ -267,7 +293,7 @@ static uint8_t g7_check(const proto_cmd_t *c)
 		from[1] = t[1];
 		t[0] += d[0];
 		t[1] += d[1];
-		st = check_target(from, t, p);
+		st = check_target(from, t, p, &rl);
 		uint32_t cyc = (uint32_t)p * (FB_F_CPU / 1000000UL);
 		total = total + cyc < total ? 0xffffffffUL : total + cyc;
 	}
@@ -357,6 +383,7 @@ static uint8_t exec_g7(const proto_cmd_t *c)
 		plan[0] += d[0];
 		plan[1] += d[1];
 		g6_queued++;
+		exec_maybe_start();  /* as exec_g6's */
 	}
 	g7_p = g6_p;
 	if (c->has & PROTO_W_T)

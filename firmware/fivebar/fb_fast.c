@@ -20,6 +20,9 @@
 static uint16_t frac16(uint16_t m, uint16_t n, uint16_t *r)
 {
 	uint16_t q = 0;
+	*r = 0;
+	if (!m)
+		return 0;  /* C a multiple of n (one step always): no loop */
 	for (uint8_t i = 0; i < 16; i++) {
 		m = (uint16_t)(m << 1);
 		q = (uint16_t)(q << 1);
@@ -34,11 +37,22 @@ static uint16_t frac16(uint16_t m, uint16_t n, uint16_t *r)
 
 uint8_t fast_form(fast_t *f, const uint32_t n[2], const uint32_t q[2], const uint32_t m[2])
 {
-	for (uint8_t i = 0; i < 2; i++)
+	uint16_t n16[2], q16[2], m16[2];
+	for (uint8_t i = 0; i < 2; i++) {
 		if (n[i] > FAST_NMAX || (n[i] && q[i] > FAST_QMAX))
 			return 0;
+		n16[i] = (uint16_t)n[i];
+		q16[i] = n[i] ? (uint16_t)q[i] : 0u;
+		m16[i] = n[i] ? (uint16_t)m[i] : 0u;
+	}
 	if (!n[0] && !n[1])
 		return 0;  /* a pure dwell: the C path's waits */
+	fast_form16(f, n16, q16, m16);
+	return 1;
+}
+
+void fast_form16(fast_t *f, const uint16_t n[2], const uint16_t q[2], const uint16_t m[2])
+{
 	uint16_t tail = 0xffffu;
 	for (uint8_t i = 0; i < 2; i++) {
 		f->cnt[i] = (uint16_t)n[i];
@@ -47,8 +61,8 @@ uint8_t fast_form(fast_t *f, const uint32_t n[2], const uint32_t q[2], const uin
 			continue;
 		}
 		uint16_t r;
-		uint16_t qf = frac16((uint16_t)m[i], (uint16_t)n[i], &r);
-		f->q[i] = (uint16_t)q[i];
+		uint16_t qf = frac16(m[i], n[i], &r);
+		f->q[i] = q[i];
 		f->qf[i] = qf;
 		/* step 1 at C/2n = (q + qf/65536) / 2 */
 		f->t[i] = (uint16_t)(q[i] >> 1);
@@ -68,7 +82,6 @@ uint8_t fast_form(fast_t *f, const uint32_t n[2], const uint32_t q[2], const uin
 			tail = ti;
 	}
 	f->tail = tail;
-	return 1;
 }
 
 void fast_begin(fast_t *f, uint16_t base)

@@ -78,10 +78,16 @@ enum { FAST_ONE, FAST_TINY, FAST_CLOSE, FAST_PAIR };
 /*
  * The fast form of a MOVE block whose motor i has n[i] steps at q[i] whole
  * cycles apart with remainder m[i] < n[i] (its C cycles are q n + m): 1 and
- * *f filled when the block qualifies (see FAST_NMAX), else 0.  Main loop: a
- * few hundred cycles on the AVR.
+ * *f filled when the block qualifies (see FAST_NMAX), else 0 with *f not
+ * written at all (mo_seal forms a block in place, over its C form).  Main
+ * loop: a few hundred cycles on the AVR.
  */
 uint8_t fast_form(fast_t *f, const uint32_t n[2], const uint32_t q[2], const uint32_t m[2]);
+/* fast_form's work for a block it takes (some n > 0, each n <= FAST_NMAX and
+ * its q <= FAST_QMAX, m < n; q and m 0 where n is): in 16 bits, so a caller
+ * that checked those rules itself (mo_prepare_fast) keeps 12 bytes of
+ * arguments on the stack instead of 24. */
+void fast_form16(fast_t *f, const uint16_t n[2], const uint16_t q[2], const uint16_t m[2]);
 
 /* The block starts at timer time base: its times become timer times. */
 void fast_begin(fast_t *f, uint16_t base);

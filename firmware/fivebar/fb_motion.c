@@ -213,9 +213,9 @@ uint8_t mo_queue_free(void) { return (uint8_t)(CFG_QUEUE_SIZE - mo_queue_count()
 
 mo_block_t *mo_slot(void)
 {
-	mo_block_t *b = &mo_state.queue[mo_state.head & QMASK];
-	b->fast = 0;  /* the C form until mo_seal() says otherwise */
-	return b;
+	/* its form is what fills it says: mo_prepare_cycles the C form (fast 0),
+	 * mo_prepare_fast the fast one (MO_FAST_FORMED), a memset 0 */
+	return &mo_state.queue[mo_state.head & QMASK];
 }
 void mo_push(void) { mo_state.head = (uint8_t)(mo_state.head + 1u); }
 
@@ -225,6 +225,27 @@ void mo_clear_queue(void)
 {
 	mo_state.tail = mo_state.head;
 	px_init();  /* the dropped G7 blocks' runs */
+}
+
+/*
+ * q = C / n and m = C % n (n > 0).  Segments up to 4.1 ms (C < 2^16, most of
+ * a dense job) divide in 16 bits: avr-libc's __udivmodhi4 gives both in ~200
+ * cycles against ~600 for the 32-bit one; one step needs none.
+ */
+static uint32_t div_cn(uint32_t c, uint32_t n, uint32_t *m)
+{
+	if (n == 1u) {
+		*m = 0;
+		return c;
+	}
+	if (c <= 0xffffu && n <= 0xffffu) {
+		uint16_t c16 = (uint16_t)c, n16 = (uint16_t)n;
+		*m = (uint16_t)(c16 % n16);
+		return (uint16_t)(c16 / n16);
+	}
+	uint32_t q = c / n;
+	*m = c - q * n;
+	return q;
 }
 
 static uint8_t prep_axis(mo_block_t *b, uint8_t i, int32_t d, uint32_t min_interval)
@@ -242,7 +263,7 @@ static uint8_t prep_axis(mo_block_t *b, uint8_t i, int32_t d, uint32_t min_inter
 		b->den[i] = 1;
 		return FB_OK;
 	}
-	uint32_t q = b->cycles / n, m = b->cycles - q * n;
+	uint32_t m, q = div_cn(b->cycles, n, &m);
 	if (q < min_interval)
 		return FB_ERR_TOO_FAST;
 	b->q[i] = q;
@@ -258,6 +279,7 @@ uint8_t mo_prepare_cycles(mo_block_t *b, int32_t da, int32_t db, uint32_t cycles
 			  uint32_t min_interval)
 {
 	b->type = MO_BLK_MOVE;
+	b->fast = 0;  /* the C form until mo_seal() says otherwise */
 	b->dirs = 0;
 	b->cycles = cycles;
 	uint8_t st = prep_axis(b, 0, da, min_interval);
@@ -281,11 +303,21 @@ uint8_t mo_fast_form(const mo_block_t *b, fast_t *f)
 
 void mo_seal(mo_block_t *b)
 {
-	fast_t f;
-	b->fast = 0;
-	if (!BOARD_FAST_PATH || !mo_fast_form(b, &f))
+	if (b->fast == MO_FAST_FORMED && BOARD_FAST_PATH && (b->type == MO_BLK_MOVE ||
+							     is_raster(b->type))) {
+		/* mo_prepare_fast formed it: only its kind and pins are left */
+		b->pdirs = board_dir_bits(b->dirs);
+		b->fast = b->type == MO_BLK_SCAN ? MO_FAST_SCAN
+			  : b->type == MO_BLK_RASTER ? MO_FAST_RASTER : MO_FAST_PLAIN;
 		return;
-	b->f = f;
+	}
+	b->fast = 0;
+	/* straight into the block: mo_fast_form reads the C form (the union's
+	 * other half) into locals before fast_form writes, and fast_form refuses
+	 * before it writes anything, so a refused block keeps its C form (a copy
+	 * through the stack cost ~150 cycles a block) */
+	if (!BOARD_FAST_PATH || !mo_fast_form(b, &b->f))
+		return;
 	b->pdirs = board_dir_bits(b->dirs);
 	b->fast = b->type == MO_BLK_SCAN ? MO_FAST_SCAN
 		  : b->type == MO_BLK_RASTER ? MO_FAST_RASTER : MO_FAST_PLAIN;
@@ -309,9 +341,49 @@ void mo_prepare_pen(mo_block_t *b, uint16_t from_us, uint16_t to_us, uint16_t mo
 	b->r2[0] = (uint32_t)move_ms + settle_ms;
 }
 
+/* Not inlined: its arrays would stay in the caller's frame (exec_g6's) through
+ * everything else it calls, and the stack has a few dozen bytes to spare at
+ * its deepest (python benchmarks/segcost.py prints it). */
+__attribute__((noinline)) uint8_t mo_prepare_fast(mo_block_t *b, int32_t da, int32_t db,
+						  uint32_t cycles, uint32_t min_interval)
+{
+	uint16_t n16[2], q16[2], m16[2];
+	uint8_t dirs = 0, fast = 1;
+	for (uint8_t i = 0; i < 2; i++) {
+		int32_t d = i ? db : da;
+		uint32_t n = (uint32_t)d;
+		if (d < 0) {
+			dirs |= (uint8_t)(1u << i);
+			n = (uint32_t)0 - (uint32_t)d;
+		}
+		n16[i] = q16[i] = m16[i] = 0;
+		if (!n)
+			continue;
+		uint32_t m, q = div_cn(cycles, n, &m);
+		if (q < min_interval)
+			return FB_ERR_TOO_FAST;  /* prep_axis's test, in its order */
+		if (n > FAST_NMAX || q > FAST_QMAX)
+			fast = 0;  /* fast_form's rules */
+		n16[i] = (uint16_t)n;
+		q16[i] = (uint16_t)q;
+		m16[i] = (uint16_t)m;
+	}
+	if (!fast || (!n16[0] && !n16[1]))  /* a dwell: the C path's waits */
+		return mo_prepare_cycles(b, da, db, cycles, min_interval);
+	fast_form16(&b->f, n16, q16, m16);
+	b->type = MO_BLK_MOVE;
+	b->dirs = dirs;
+	b->cycles = cycles;
+	b->fast = MO_FAST_FORMED;
+	return FB_OK;
+}
+
 uint8_t mo_prepare(mo_block_t *b, int32_t da, int32_t db, uint32_t p_us, uint32_t min_interval)
 {
-	return mo_prepare_cycles(b, da, db, p_us * (FB_F_CPU / 1000000UL), min_interval);
+	uint32_t cycles = p_us * (FB_F_CPU / 1000000UL);
+	if (BOARD_FAST_PATH && !s_es_enabled)
+		return mo_prepare_fast(b, da, db, cycles, min_interval);
+	return mo_prepare_cycles(b, da, db, cycles, min_interval);
 }
 
 BOARD_INLINE void set_laser(uint8_t p)

@@ -38,6 +38,8 @@ enum mo_block_type {
 #define MO_FAST_PLAIN 1u    /* switch bit */
 #define MO_FAST_SCAN 4u     /* raster bit: entered through the C path */
 #define MO_FAST_RASTER 5u   /* both */
+#define MO_FAST_FORMED 0x80u /* between mo_prepare_fast and mo_seal: the fast
+			      * form is filled, its kind not yet given */
 
 /*
  * One queue entry.  The main loop fills every field (all divisions happen
@@ -105,6 +107,18 @@ uint8_t mo_prepare(mo_block_t *b, int32_t da, int32_t db, uint32_t p_us,
 		   uint32_t min_interval);
 uint8_t mo_prepare_cycles(mo_block_t *b, int32_t da, int32_t db, uint32_t cycles,
 			  uint32_t min_interval);
+/*
+ * mo_prepare_cycles, straight into the fast form when the block takes one:
+ * the same divisions and step-rate test, then fast_form() on them (fast
+ * MO_FAST_FORMED until mo_seal gives the kind), else mo_prepare_cycles.  The
+ * C form written and read back cost ~800 cycles a block (python
+ * benchmarks/segcost.py).  mo_prepare uses it on a board with the fast path
+ * while endstops are not supervised (the same rule as mo_fast_form, for the
+ * MOVE and G7 blocks it prepares); tests/fast_tests.c holds it to
+ * mo_prepare_cycles + mo_fast_form.
+ */
+uint8_t mo_prepare_fast(mo_block_t *b, int32_t da, int32_t db, uint32_t cycles,
+			uint32_t min_interval);
 
 /*
  * Fill a PEN block (M280): when it starts, the servo pulse moves from where

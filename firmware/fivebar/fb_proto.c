@@ -243,69 +243,153 @@ static uint8_t command_kind(char letter, uint32_t code)
 }
 
 /*
- * A G6 item number: an optional sign and decimal digits, ending at the end,
- * whitespace, a letter or the next item's sign; |value| <= CFG_POS_LIMIT.
+ * A G6 item number at *pp: an optional sign and decimal digits, ending at the
+ * end, whitespace, a letter or the next item's sign; |value| <=
+ * CFG_POS_LIMIT.  A G6 line's items are read three times (parse, checks,
+ * queueing), most of them one or two digits, so this is the parser's inner
+ * loop: it walks a pointer (the AVR's post-increment loads, where an index
+ * into the line cost an address sum at every byte), values below 1000 grow
+ * in 16 bits (the 8x8 multiplier) and the rest in 32 bits, stopping above the
+ * limit (python benchmarks/segcost.py: about a third of the cycles of the
+ * general loop).
  */
-static uint8_t item_num(const char *s, uint8_t *pi, uint8_t end, int32_t *out)
+/* Whether c may end an item's number: whitespace, a letter or a sign. */
+static inline __attribute__((always_inline)) uint8_t item_num_end(char c)
 {
-	uint8_t i = *pi, neg = 0, digits = 0;
-	if (i < end && (s[i] == '-' || s[i] == '+')) {
-		neg = s[i] == '-';
-		i++;
-	}
-	int32_t v = 0;
-	uint8_t over = 0;
-	while (i < end && is_digit(s[i])) {
-		if (v > CFG_POS_LIMIT)
-			over = 1;
-		else
-			v = v * 10 + (int32_t)(s[i] - '0');
-		i++;
-		digits++;
-	}
-	if (!digits || !(number_ends(s, i, end) || s[i] == '+' || s[i] == '-'))
-		return FB_ERR_BAD_NUMBER;
-	*pi = i;
-	if (over || v > CFG_POS_LIMIT)
-		return FB_ERR_OUT_OF_RANGE;
-	*out = neg ? -v : v;
-	return FB_OK;
+	return c == ' ' || c == '\t' || (uint8_t)((uint8_t)(c | 0x20) - 'a') < 26u || c == '+' ||
+	       c == '-';
 }
 
-/* One G6 item from s[*pi]: [P<us>] then <+|-><a><+|-><b> (docs/protocol.md 6.3). */
-static uint8_t g6_item(const char *s, uint8_t *pi, uint8_t end, int32_t *p, int32_t d[2])
+/* item_num for a number of five digits or more, from its sign at s: the
+ * general 32-bit loop, stopping above the limit (so it never overflows). */
+static __attribute__((noinline)) const char *item_num_long(const char *s, const char *end,
+							  int32_t *out, uint8_t *st)
 {
-	uint8_t i = skip_ws(s, *pi, end);
-	if (i < end && upper(s[i]) == 'P') {
-		i++;
+	uint8_t neg = 0, d;
+	if (*s == '-' || *s == '+') {  /* s < end: digits follow */
+		neg = *s == '-';
+		s++;
+	}
+	uint32_t v = 0;
+	while (s < end && (d = (uint8_t)(*s - '0')) <= 9u) {
+		if (v <= (uint32_t)CFG_POS_LIMIT)
+			v = v * 10u + d;
+		s++;
+	}
+	if (s < end && !item_num_end(*s)) {
+		*st = FB_ERR_BAD_NUMBER;
+		return 0;
+	}
+	if (v > (uint32_t)CFG_POS_LIMIT) {
+		*st = FB_ERR_OUT_OF_RANGE;
+		return 0;
+	}
+	*out = neg ? -(int32_t)v : (int32_t)v;
+	return s;
+}
+
+/*
+ * A G6 item number at s: an optional sign and decimal digits, ending at the
+ * end, whitespace, a letter or the next item's sign; |value| <=
+ * CFG_POS_LIMIT.  Returns where it ends, or 0 with *st the error.  A G6
+ * line's items are read three times (parse, checks, queueing), most of them
+ * one or two digits, so this is the parser's inner loop: it walks a pointer
+ * it returns (the AVR's post-increment loads; an index into the line cost an
+ * address sum at every byte, a pointer passed by address a stack slot), and
+ * numbers up to four digits stay in 16 bits (the 8x8 multiplier); longer
+ * ones go to item_num_long, whose 32-bit multiply (a call) would otherwise
+ * make every short number save a dozen registers (python
+ * benchmarks/segcost.py).
+ */
+static const char *item_num(const char *s, const char *end, int32_t *out, uint8_t *st)
+{
+	const char *num = s;
+	uint8_t neg = 0, d;
+	if (s < end && (*s == '-' || *s == '+')) {
+		neg = *s == '-';
+		s++;
+	}
+	const char *start = s;
+	uint16_t v = 0;
+	uint8_t digits = 0;
+	while (s < end && (d = (uint8_t)(*s - '0')) <= 9u) {
+		if (++digits > 4u)
+			return item_num_long(num, end, out, st);
+		v = (uint16_t)(v * 10u + d);
+		s++;
+	}
+	if (s == start || (s < end && !item_num_end(*s))) {
+		*st = FB_ERR_BAD_NUMBER;
+		return 0;
+	}
+	*out = neg ? -(int32_t)v : (int32_t)v;
+	return s;
+}
+
+/* One G6 item from s: [P<us>] then <+|-><a><+|-><b> (docs/protocol.md 6.3).
+ * Returns where it ends, or 0 with *st the error.  The two moves, nearly
+ * always a few digits, are read here without a call (item_num's rules, its
+ * long numbers to item_num_long): each call cost its register saves, about
+ * as much as the digits (python benchmarks/segcost.py). */
+static const char *g6_item(const char *s, const char *end, int32_t *p, int32_t d[2], uint8_t *st)
+{
+	while (s < end && (*s == ' ' || *s == '\t'))
+		s++;
+	if (s < end && (*s == 'P' || *s == 'p')) {
+		s++;
 		int32_t v = 0;
-		if (i < end && (s[i] == '+' || s[i] == '-'))
-			return FB_ERR_BAD_NUMBER;
-		uint8_t st = item_num(s, &i, end, &v);
-		if (st != FB_OK)
-			return st;
+		*st = FB_ERR_BAD_NUMBER;
+		if (s < end && (*s == '+' || *s == '-'))
+			return 0;
+		s = item_num(s, end, &v, st);
+		if (!s)
+			return 0;
+		*st = FB_ERR_OUT_OF_RANGE;
 		if (v < CFG_P_MIN_US || v > CFG_P_MAX_US)
-			return FB_ERR_OUT_OF_RANGE;
+			return 0;
 		*p = v;
-		i = skip_ws(s, i, end);
+		while (s < end && (*s == ' ' || *s == '\t'))
+			s++;
 	}
 	for (uint8_t k = 0; k < 2; k++) {
-		if (i >= end || (s[i] != '+' && s[i] != '-'))
-			return FB_ERR_BAD_WORD;
-		uint8_t st = item_num(s, &i, end, &d[k]);
-		if (st != FB_OK)
-			return st;
+		if (s >= end || (*s != '+' && *s != '-')) {
+			*st = FB_ERR_BAD_WORD;
+			return 0;
+		}
+		const char *num = s;
+		uint8_t neg = *s == '-', digits = 0, c;
+		uint16_t v = 0;
+		s++;
+		while (s < end && (c = (uint8_t)(*s - '0')) <= 9u) {
+			if (++digits > 4u)
+				break;
+			v = (uint16_t)(v * 10u + c);
+			s++;
+		}
+		if (digits > 4u) {
+			s = item_num_long(num, end, &d[k], st);
+			if (!s)
+				return 0;
+			continue;
+		}
+		if (!digits || (s < end && !item_num_end(*s))) {
+			*st = FB_ERR_BAD_NUMBER;
+			return 0;
+		}
+		d[k] = neg ? -(int32_t)v : (int32_t)v;
 	}
-	*pi = i;
-	return FB_OK;
+	return s;
 }
 
 uint8_t proto_g6_next(const char *line, uint8_t *at, uint8_t end, int32_t *p, int32_t d[2])
 {
-	uint8_t i = skip_ws(line, *at, end);
-	if (i >= end || g6_item(line, &i, end, p, d) != FB_OK)
+	const char *s = line + *at, *e = line + end;
+	while (s < e && is_ws(*s))
+		s++;
+	uint8_t st;
+	if (s >= e || !(s = g6_item(s, e, p, d, &st)))
 		return 0;
-	*at = i;
+	*at = (uint8_t)(s - line);
 	return 1;
 }
 
@@ -315,13 +399,18 @@ static uint8_t g6_items(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cmd)
 	int32_t p = cmd->p, d[2];
 	cmd->g6_at = i;
 	cmd->g6_end = end;
-	while ((i = skip_ws(s, i, end)) < end) {
-		uint8_t st = g6_item(s, &i, end, &p, d);
-		if (st != FB_OK)
+	const char *at = s + i, *e = s + end;
+	for (;;) {
+		while (at < e && is_ws(*at))
+			at++;
+		if (at >= e)
+			return FB_OK;
+		uint8_t st = FB_OK;
+		at = g6_item(at, e, &p, d, &st);
+		if (!at)
 			return st;
 		cmd->g6_count++;
 	}
-	return FB_OK;
 }
 
 /* Whether the command at s[i] (after blanks) is G7: the index past its code,
@@ -380,15 +469,17 @@ static uint8_t parse_body(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cm
 			return FB_ERR_MISSING_WORD;  /* no data: a G7 has at least one segment */
 		return proto_g7_parse(s, (uint8_t)(k + 1u), end, cmd);
 	}
-	for (uint8_t k = i; k < end; k++) {
-		uint8_t c = (uint8_t)s[k];
-		if ((c < 0x20u || c > 0x7eu) && c != '\t')
+	/* one walk: every byte printable (or a tab), and the comment's ';' (the
+	 * body ends there); the two index loops it replaces cost ~10 cycles a
+	 * byte more (python benchmarks/segcost.py) */
+	uint8_t comment = 0;
+	for (const char *k = s + i, *e = s + end; k < e; k++) {
+		uint8_t c = (uint8_t)*k;
+		if ((uint8_t)(c - 0x20u) > 0x5eu && c != '\t')
 			return FB_ERR_INVALID_CHAR;
-	}
-	for (uint8_t k = i; k < end; k++) {
-		if (s[k] == ';') {
-			end = k;
-			break;
+		if (c == ';' && !comment) {
+			comment = 1;
+			end = (uint8_t)(k - s);
 		}
 	}
 	i = skip_ws(s, i, end);

@@ -241,6 +241,10 @@ static int servo_pins;
 #define PROFILE_WORDS (32768u / 2u)
 static unsigned long long *profile;
 static const char *profile_path;
+/* the lowest stack pointer seen while profiling (the stack's deepest point;
+ * the headroom is that less the end of .bss/.noinit, avr-nm's _end) */
+static unsigned profile_min_sp = 0xffffu, profile_min_sp_pc, profile_prev_sp = 0xffffu;
+static unsigned short *profile_sp;  /* the lowest stack pointer at each address */
 
 static void profile_write(void)
 {
@@ -251,7 +255,8 @@ static void profile_write(void)
 	}
 	for (unsigned i = 0; i < PROFILE_WORDS; i++)
 		if (profile[i])
-			fprintf(f, "%u %llu\n", i * 2u, profile[i]);
+			fprintf(f, "%u %llu %u\n", i * 2u, profile[i], profile_sp[i]);
+	fprintf(f, "# min_sp %u at %u\n", profile_min_sp, profile_min_sp_pc);
 	fclose(f);
 }
 
@@ -1156,10 +1161,13 @@ int main(int argc, char **argv)
 		avr->data[REG_MCUSR] = (uint8_t)(1u << BIT_EXTRF | (restored > 0 ? 0u : 1u << BIT_PORF));
 	clock_gettime(CLOCK_MONOTONIC, &wall_start);
 
-	if (profile_path && !(profile = calloc(PROFILE_WORDS, sizeof(*profile)))) {
+	if (profile_path && (!(profile = calloc(PROFILE_WORDS, sizeof(*profile))) ||
+			     !(profile_sp = malloc(PROFILE_WORDS * sizeof(*profile_sp))))) {
 		perror("fbsim: profile");
 		return 1;
 	}
+	if (profile_sp)
+		memset(profile_sp, 0xff, PROFILE_WORDS * sizeof(*profile_sp));
 	int state = cpu_Running;
 	while (!stop_req) {
 		if (held) {
@@ -1188,6 +1196,18 @@ int main(int argc, char **argv)
 			avr_cycle_count_t c0 = avr->cycle;
 			state = avr_run(avr);
 			profile[(pc / 2u) % PROFILE_WORDS] += avr->cycle - c0;
+			/* SPL, SPH; an `out` to SPH then one to SPL (a frame's set-up) leave a
+			 * mixed value between them for one instruction: the higher of two
+			 * consecutive values is one the stack really reached */
+			unsigned now_sp = avr->data[0x5d] | (unsigned)avr->data[0x5e] << 8;
+			unsigned sp = now_sp > profile_prev_sp ? now_sp : profile_prev_sp;
+			profile_prev_sp = now_sp;
+			if (sp < profile_sp[(pc / 2u) % PROFILE_WORDS])
+				profile_sp[(pc / 2u) % PROFILE_WORDS] = (unsigned short)sp;
+			if (sp < profile_min_sp) {
+				profile_min_sp = sp;
+				profile_min_sp_pc = (unsigned)avr->pc;
+			}
 		} else {
 			state = avr_run(avr);
 		}

@@ -251,6 +251,43 @@ static void random_block(int32_t d[2], uint32_t *c)
 		d[i] = between(0, 1) ? -(int32_t)n[i] : (int32_t)n[i];
 }
 
+/*
+ * mo_prepare_fast (what the firmware's mo_prepare runs on the AVR) against
+ * the two steps this test holds to the DDA, mo_prepare_cycles then
+ * mo_fast_form (b, its form f, fast whether it took it): the same fast form
+ * byte for byte when it takes one, else the same C form; and the same
+ * step-rate refusal when the limit is raised past a motor's interval.
+ */
+static void check_prepare_fast(const mo_block_t *b, const int32_t d[2], uint32_t c, uint8_t fast,
+			       const fast_t *f, unsigned long j)
+{
+	mo_block_t g;
+	memset(&g, 0xa5, sizeof g);
+	CHECK(mo_prepare_fast(&g, d[0], d[1], c, MIN_INTERVAL) == FB_OK, "block %lu: prepare_fast", j);
+	CHECK(g.type == MO_BLK_MOVE && g.dirs == b->dirs && g.cycles == b->cycles,
+	      "block %lu: prepare_fast type %u dirs %u cycles %" PRIu32, j, g.type, g.dirs, g.cycles);
+	if (fast)
+		CHECK(g.fast == MO_FAST_FORMED && memcmp(&g.f, f, sizeof *f) == 0,
+		      "block %lu: prepare_fast's form differs (fast %u)", j, g.fast);
+	else
+		CHECK(g.fast == 0 && memcmp(g.q, b->q, sizeof b->q) == 0 &&
+		      memcmp(g.next, b->next, sizeof b->next) == 0 &&
+		      memcmp(g.err, b->err, sizeof b->err) == 0 &&
+		      memcmp(g.r2, b->r2, sizeof b->r2) == 0 && memcmp(g.den, b->den, sizeof b->den) == 0,
+		      "block %lu: prepare_fast's C form differs", j);
+	/* one cycle above the tighter motor's interval: both refuse, or neither */
+	uint32_t qmin = 0xffffffffu;
+	for (int i = 0; i < 2; i++)
+		if (d[i] && c / (uint32_t)(d[i] < 0 ? -d[i] : d[i]) < qmin)
+			qmin = c / (uint32_t)(d[i] < 0 ? -d[i] : d[i]);
+	if (qmin != 0xffffffffu) {
+		mo_block_t h;
+		uint8_t want = mo_prepare_cycles(&h, d[0], d[1], c, qmin + 1u);
+		CHECK(want == FB_ERR_TOO_FAST && mo_prepare_fast(&g, d[0], d[1], c, qmin + 1u) == want,
+		      "block %lu: the step-rate test at %" PRIu32, j, qmin + 1u);
+	}
+}
+
 static void run_job(uint64_t seed, unsigned long blocks)
 {
 	rng_state = seed ? seed : 1u;
@@ -266,6 +303,7 @@ static void run_job(uint64_t seed, unsigned long blocks)
 			n[i] = (uint32_t)(d[i] < 0 ? -d[i] : d[i]);
 		fast_t f;
 		uint8_t fast = mo_fast_form(&b, &f);
+		check_prepare_fast(&b, d, c, fast, &f, j);
 		stat.blocks++;
 		CHECK(fast == !refused_by_rules(c, n), "block %lu (c=%" PRIu32 " n=%" PRIu32 ",%" PRIu32
 		      "): fast form %u", j, c, n[0], n[1], fast);

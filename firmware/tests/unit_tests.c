@@ -90,6 +90,58 @@ static void test_number_bounds(void)
 	CHECK(parse(&ln, "G1 A100000000 P1000", &c) == FB_OK && c.a == 100000000L, "A at the limit");
 }
 
+/*
+ * G6 item numbers (fb_proto.c's item_num, its 16-bit short path and
+ * item_num_long) against a reference reading of the same digits: random
+ * values of 1 to 12 digits (leading zeros included), either sign, after an
+ * optional P item, followed by the line's end, a blank, the next item, or a
+ * byte that cannot end a number.  Expected: the value when it is at most
+ * 100,000,000, else error:7; error:3 for the bad end, whatever the value.
+ */
+static void test_g6_item_numbers(void)
+{
+	static const char *const ends[] = { "", " ", "+1+1", "#", "." };
+	uint64_t x = 12345;
+	for (int round = 0; round < 20000; round++) {
+		char digits[2][16], buf[96];
+		uint64_t want[2];
+		int neg[2];
+		for (int k = 0; k < 2; k++) {
+			x = x * 6364136223846793005ULL + 1442695040888963407ULL;
+			int nd = 1 + (int)((x >> 33) % 12), zeros = (int)((x >> 40) % 4);
+			want[k] = 0;
+			for (int i = 0; i < nd; i++) {
+				x = x * 6364136223846793005ULL + 1442695040888963407ULL;
+				int dg = i < zeros ? 0 : (int)((x >> 35) % 10);
+				digits[k][i] = (char)('0' + dg);
+				want[k] = want[k] * 10u + (uint64_t)dg;
+			}
+			digits[k][nd] = 0;
+			neg[k] = (int)((x >> 50) & 1u);
+		}
+		const char *end = ends[(x >> 20) % 5];
+		snprintf(buf, sizeof buf, "G6 P1000 %s%c%s%c%s%s", (x >> 24) & 1u ? "P2000" : "",
+			 neg[0] ? '-' : '+', digits[0], neg[1] ? '-' : '+', digits[1], end);
+		/* the first number (ended by the second's sign) is judged first */
+		uint8_t expect = want[0] > 100000000u ? FB_ERR_OUT_OF_RANGE
+				 : (end[0] == '#' || end[0] == '.') ? FB_ERR_BAD_NUMBER
+				 : want[1] > 100000000u ? FB_ERR_OUT_OF_RANGE : FB_OK;
+		proto_lines_t ln = { 0 };
+		proto_cmd_t c;
+		uint8_t st = parse(&ln, buf, &c);
+		CHECK(st == expect, "'%s': %u, expected %u", buf, st, expect);
+		if (st != FB_OK)
+			continue;
+		uint8_t at = c.g6_at;
+		int32_t p = c.p, d[2];
+		CHECK(proto_g6_next(buf, &at, c.g6_end, &p, d) &&
+		      d[0] == (neg[0] ? -(int32_t)want[0] : (int32_t)want[0]) &&
+		      d[1] == (neg[1] ? -(int32_t)want[1] : (int32_t)want[1]) &&
+		      p == ((x >> 24) & 1u ? 2000 : 1000), "'%s': read %ld %ld P %ld", buf,
+		      (long)d[0], (long)d[1], (long)p);
+	}
+}
+
 /* G6 (protocol 3): a G1 head and relative items, one line number each. */
 static void test_parse_g6(void)
 {
@@ -214,6 +266,7 @@ static void test_parse_table(void)
 	CHECK(parse(&ln, "$13=-3", &c) == FB_OK && c.setting == 13 && c.value == -3, "setting values");
 	CHECK(parse(&ln, "G1 A-100000000 P100", &c) == FB_OK && c.a == -100000000, "lowest A");
 	test_parse_g6();
+	test_g6_item_numbers();
 }
 
 static void test_framing(void)
