@@ -6,7 +6,12 @@
  *     -f HZ       clock (default 16000000)
  *     -t FILE     trace file: one "<cycle> <pin> <level>" line per change of a
  *                 step, direction, enable, laser or pen servo pin (names
- *                 stepA stepB dirA dirB enable laser pen; pins from config.h)
+ *                 stepA stepB dirA dirB enable laser pen; pins from config.h),
+ *                 and one "<cycle> lwrite <0|1>" line per write of TCCR2A: the
+ *                 firmware's board_laser() writes it exactly once a call, so
+ *                 it is the time the laser took a new power (1: the PWM
+ *                 output is connected, a power 1..254 in OCR2A; 0: the pin
+ *                 is driven, power 0 or 255) whatever the pin shows then
  *     -w          hold the CPU until a client opens the pty, so the boot
  *                 banner is not lost to the client's input flush
  *     -g MS       grace after the client opened (default 50 ms, with -w)
@@ -285,6 +290,26 @@ static void ocr_write_hook(avr_t *a, avr_io_addr_t addr, uint8_t v, void *param)
 	(void)param;
 	ocr_write_orig(a, addr, v, ocr_write_param);
 	fprintf(dbg, "%llu w %u %u\n", (unsigned long long)a->cycle, ocr1a(), tcnt1_now());
+}
+
+/* Laser power writes (-t): TCCR2A is written once per board_laser() call
+ * (board.h), so its writes time the power changes; level 1 = the PWM output
+ * connected (COM2A1). */
+#define REG_TCCR2A 0xB0
+#define BIT_COM2A1 7
+static avr_io_write_t tccr2a_write_orig;
+static void *tccr2a_write_param;
+
+static void tccr2a_write_hook(avr_t *a, avr_io_addr_t addr, uint8_t v, void *param)
+{
+	(void)param;
+	if (tccr2a_write_orig)
+		tccr2a_write_orig(a, addr, v, tccr2a_write_param);
+	else
+		a->data[addr] = v;
+	if (trace)
+		fprintf(trace, "%llu lwrite %u\n", (unsigned long long)a->cycle,
+			(unsigned)(v >> BIT_COM2A1) & 1u);
 }
 
 static void on_signal(int sig)
@@ -1094,6 +1119,12 @@ int main(int argc, char **argv)
 					named_hook, (void *)(intptr_t)PIN_SVA);
 		avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_SERVO_B_PORT), PIN_SERVO_B_BIT),
 					named_hook, (void *)(intptr_t)PIN_SVB);
+	}
+	if (trace) {
+		avr_io_addr_t io = AVR_DATA_TO_IO(REG_TCCR2A);
+		tccr2a_write_orig = avr->io[io].w.c;
+		tccr2a_write_param = avr->io[io].w.param;
+		avr->io[io].w.c = tccr2a_write_hook;
 	}
 	if (debug_path) {
 		dbg = fopen(debug_path, "w");
