@@ -16,7 +16,12 @@
  *                 banner is not lost to the client's input flush
  *     -g MS       grace after the client opened (default 50 ms, with -w)
  *     -c CYCLES   stop after this many cycles
- *     -R          throttle to real time
+ *     -R          throttle to real time.  Where the emulation falls more than
+ *                 2 ms behind the wall clock (the harness was not scheduled) it
+ *                 goes on at real-time pace from there, without catching up (a
+ *                 catch-up played the lost time flat out and starved the
+ *                 firmware's queue); with -t, "<cycle> lag 1" and "<cycle> lag 0"
+ *                 mark the place
  *     -a STEPS    endstop A is pressed while motor A's position <= STEPS
  *     -b STEPS    endstop B likewise (positions counted from the trace)
  *     -D FILE     debug log of Timer1: "<cycle> r|w <OCR1A> <TCNT1>" for every
@@ -446,6 +451,11 @@ static void pump_io(void)
 	}
 }
 
+/* -R: the emulation more than LAG_S behind the wall clock moves the clock's
+ * origin (traced as lag) */
+#define LAG_S 0.002
+static void trace_event(const char *name, uint32_t value);
+
 static double wall_seconds(void)
 {
 	struct timespec now;
@@ -565,6 +575,22 @@ static avr_cycle_count_t pump_timer(avr_t *a, avr_cycle_count_t when, void *para
 		double ahead = (double)a->cycle / (double)a->frequency - wall_seconds();
 		if (ahead > 0.0005)
 			usleep((useconds_t)(ahead * 1e6));
+		/* Behind the wall clock (this process was not scheduled, the machine
+		 * is busy): carry on at real-time pace from here rather than run flat
+		 * out to catch up.  A board never lags; the catch-up did: it played
+		 * the lost time at several times real time, the host had to keep
+		 * pace with that, and the firmware's queue ran dry (benchmarks/
+		 * raster.py's underruns at 250000 baud and up).  To the host the
+		 * lag is a pause of the link, as a busy USB bus makes.  Traced (lag
+		 * 1, then 0) so that a stall near it can be told from others. */
+		if (ahead < -LAG_S) {
+			double lag = -ahead;
+			long sec = (long)lag;
+			wall_start.tv_sec += sec;
+			wall_start.tv_nsec += (long)((lag - (double)sec) * 1e9);
+			trace_event("lag", 1);
+			trace_event("lag", 0);
+		}
 	}
 	return when + pump_period;
 }
