@@ -15,7 +15,7 @@ next rise follows within a period: a step then is a step with the laser on.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -46,6 +46,9 @@ __all__ = ["CHUNK", "F_CPU", "PWM_PERIOD", "STALL_S", "Boundaries", "Figures", "
 CHUNK = 64
 #: A pause of the steps longer than this inside a scanline is an underrun, s.
 STALL_S = 0.002
+#: A stall up to this long after the emulator caught up with the wall clock is put down
+#: to its lag (`lagging_at`): the firmware's queue holds about 30 ms at the fastest scan.
+LAG_AFTER_S = 0.05
 
 def dose_grid(job: Job, profile: Profile, pt: PinTrace, mo: Motion) -> FloatArray:
     """Laser-high cycles inside each cell of the scan grid (R, C) (module docstring)."""
@@ -80,6 +83,9 @@ class Figures:
     outside_steps: int
     dose: FloatArray  # burned power per cell (R, C), 255 = full power for a pixel's time
     boundaries: Boundaries
+    #: the underruns' cycles, and whether each came while the emulator lagged (`lagging_at`)
+    stalls: FloatArray = field(default_factory=lambda: np.zeros(0))
+    stalls_lagging: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
     @property
     def rate(self) -> float:
@@ -145,23 +151,41 @@ def figures(job: Job, profile: Profile, pt: PinTrace) -> Figures:
     s, t = grid_coords(r, pen_at(job, profile, mo, steps[on]))
     outside = int((~_inside_image(r, s, t)).sum())
     dose = dose_grid(job, profile, pt, mo) * 255.0 / pixel_cycles(r)
-    return Figures(r.n_pixels, seconds, _stalls(job, profile, mo, steps),
+    stalls = stall_times(job, profile, edges, steps)
+    return Figures(r.n_pixels, seconds, int(stalls.shape[0]),
                    float(b.placement_mm.max(initial=0.0)), float(np.abs(b.dt_us).max(initial=0.0)),
-                   outside, dose, b)
+                   outside, dose, b, stalls, lagging_at(pt, stalls))
 
 
-def _stalls(job: Job, profile: Profile, mo: Motion, steps: FloatArray) -> int:
-    """Underruns inside the image: pauses of the steps while the pen is on a burned stretch,
-    longer than `STALL_S` and than 20 times the usual step interval there."""
+def stall_times(job: Job, profile: Profile, mo: Motion, steps: FloatArray) -> FloatArray:
+    """Underruns inside the image: the cycles where the steps paused while the pen was on a
+    burned stretch, longer than `STALL_S` and than 20 times the usual step interval there."""
     r = job.raster
     assert r is not None
+    none = np.zeros(0)
     if steps.size < 2:
-        return 0
+        return none
     s, t = grid_coords(r, pen_at(job, profile, mo, steps))
     inside = _inside_image(r, s, t)
     both = inside[1:] & inside[:-1]
     gaps = np.diff(steps)[both]
     if gaps.size == 0:
-        return 0
+        return none
     limit = max(STALL_S * F_CPU, 20.0 * float(np.median(gaps)))
-    return int((gaps > limit).sum())
+    out: FloatArray = steps[:-1][both][gaps > limit]
+    return out
+
+
+def lagging_at(pt: PinTrace, cycles: FloatArray) -> BoolArray:
+    """Whether the emulator (fbsim -R) had fallen behind the wall clock at each of `cycles`
+    or within `LAG_AFTER_S` before: the trace's `lag` events.  The harness then runs flat
+    out to catch up, and the host has to keep pace with that: a stall there says the machine
+    running the emulator was busy, not that the link or the firmware fell short."""
+    c, lv = pt.of("lag")
+    start, end = c[lv == 1], c[lv == 0]
+    out = np.zeros(cycles.shape[0], dtype=bool)
+    for a in start.tolist():
+        later = end[end >= a]
+        b = (later.min() if later.size else np.iinfo(np.int64).max // 2) + LAG_AFTER_S * F_CPU
+        out |= (cycles >= a) & (cycles <= b)
+    return out
