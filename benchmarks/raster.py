@@ -13,9 +13,10 @@ forward kinematics of the executed steps and the laser pin's duty, `raster.dose`
   the wall clock, fbsim's `lag` trace events: the machine was busy, `raster.dose.
   lagging_at`), the bytes on the wire a pixel, and the host CPU µs a pixel (compile +
   plan + encode every wire line, in this process);
-- on the default profile (configs/default.toml): executed / planned time (the `done:` line's
-  elapsed over its planned), and the burned-image figures (placement, power-change timing,
-  laser-on steps outside the image);
+- on the default profile (configs/default.toml): executed / planned time (the emulated time
+  from the first step to the last over the `done:` line's planned; the host's wall clock
+  beside it: fbsim -R pauses where the machine running it fell behind), and the burned-image
+  figures (placement, power-change timing, laser-on steps outside the image);
 - a flat 50 % grey patch (10 × 10 mm at 10 px/mm, grayscale) on the default profile: the
   dose variation across the patch ((max − min) / mean of the burned power of the patch's
   cells, its outermost cells left out);
@@ -93,7 +94,7 @@ def burn(image: Path, config: Path | None, tmp: Path, extra: list[str]) -> dict[
             "elapsed": float(d[1]), "planned": float(d[2]), "bytes": int(d[3]),
             "within20": float((dt <= 20.0).mean()) if dt.size else 1.0,
             "p99": float(np.percentile(dt, 99)) if dt.size else 0.0, "measured": int(dt.size),
-            "lagging": int(npz["stalls_lagging"].sum())}
+            "lagging": int(npz["stalls_lagging"].sum()), "motion": float(npz["motion_s"])}
 
 
 def host_cpu(image: Path, config: Path | None, values: dict[str, object]) -> tuple[float, int,
@@ -186,9 +187,10 @@ def main() -> None:
             (f["rate"] >= 5000 if baud == 115200 else True) and f["under"] == 0)
     print("default profile (configs/default.toml), the same image at 10 px/mm:")
     f = burn(noisy, None, tmp, size)
-    ratio = f["elapsed"] / f["planned"]
-    row("executed / planned ≤ 1.02", f"{ratio:.3f} ({f['elapsed']:.1f} / {f['planned']:.1f} s)",
-        ratio <= 1.02)
+    ratio = f["motion"] / f["planned"]
+    row("executed / planned ≤ 1.02",
+        f"{ratio:.3f} ({f['motion']:.1f} / {f['planned']:.1f} s, first to last step in "
+        f"emulated time; the host's wall clock {f['elapsed']:.1f} s)", ratio <= 1.02)
     row("pixel placement max ≤ 0.05 mm", f"{f['place']:.3f} mm", f["place"] <= 0.05)
     row("power changes within 20 µs of the boundaries",
         f"{f['change']:.1f} µs max; {100 * f['within20']:.2f} % of {f['measured']} within "

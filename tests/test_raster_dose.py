@@ -200,3 +200,15 @@ def test_power_writes_are_timed_against_the_crossings(tmp_path: Path) -> None:
     assert b.clean == offsets.shape[0] == b.found
     assert np.abs(np.sort(b.dt_us) - np.sort(offsets)).max() <= 1.0
     assert fig.change_us == pytest.approx(float(np.abs(offsets).max()), abs=1.0)
+
+
+def test_stalls_near_the_emulators_lag_are_told_apart() -> None:
+    """`lagging_at`: a stall from a lag event (fbsim -R fell behind the wall clock) to
+    `LAG_AFTER_S` after it counts as the emulator's; before it, or later, not."""
+    f = dose.F_CPU
+    lag = int(1.0 * f)
+    pt = dose.PinTrace(np.array([lag, lag]), np.array([1, 0]), np.array([0, 0]), ("lag",))
+    at = np.array([0.5, 0.999, 1.0, 1.0 + 0.5 * dose.LAG_AFTER_S, 1.0 + 2 * dose.LAG_AFTER_S]) * f
+    assert dose.lagging_at(pt, at).tolist() == [False, False, True, True, False]
+    none = dose.PinTrace(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64), ())
+    assert not dose.lagging_at(none, at).any()

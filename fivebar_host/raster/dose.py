@@ -38,9 +38,10 @@ from fivebar_host.raster.trace import (
 )
 from kinematics.arrays import BoolArray, FloatArray, IntArray
 
-__all__ = ["CHUNK", "F_CPU", "PWM_PERIOD", "STALL_S", "Boundaries", "Figures", "Motion",
-           "PinTrace", "crossings", "dose_grid", "figures", "grid_coords", "high_intervals",
-           "laser_on", "motion_of", "pen_at", "pixel_cycles", "read_pins"]
+__all__ = ["CHUNK", "F_CPU", "LAG_AFTER_S", "PWM_PERIOD", "STALL_S", "Boundaries", "Figures",
+           "Motion", "PinTrace", "crossings", "dose_grid", "figures", "grid_coords",
+           "high_intervals", "lagging_at", "laser_on", "motion_of", "pen_at", "pixel_cycles",
+           "read_pins", "stall_times"]
 
 #: Laser high time is burned in chunks of at most this many cycles.
 CHUNK = 64
@@ -86,6 +87,9 @@ class Figures:
     #: the underruns' cycles, and whether each came while the emulator lagged (`lagging_at`)
     stalls: FloatArray = field(default_factory=lambda: np.zeros(0))
     stalls_lagging: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    #: emulated seconds from the first step to the last (the machine's own time: fbsim -R
+    #: pauses with the wall clock where it lagged, which a host's elapsed time includes)
+    motion_s: float = 0.0
 
     @property
     def rate(self) -> float:
@@ -154,7 +158,8 @@ def figures(job: Job, profile: Profile, pt: PinTrace) -> Figures:
     stalls = stall_times(job, profile, edges, steps)
     return Figures(r.n_pixels, seconds, int(stalls.shape[0]),
                    float(b.placement_mm.max(initial=0.0)), float(np.abs(b.dt_us).max(initial=0.0)),
-                   outside, dose, b, stalls, lagging_at(pt, stalls))
+                   outside, dose, b, stalls, lagging_at(pt, stalls),
+                   float(steps[-1] - steps[0]) / F_CPU if steps.size else 0.0)
 
 
 def stall_times(job: Job, profile: Profile, mo: Motion, steps: FloatArray) -> FloatArray:

@@ -85,4 +85,4 @@ def save_burned(fig: Figures, path: Path) -> None:
     Image.fromarray(burn_picture(fig.dose)).save(path)
     np.savez_compressed(path.with_suffix(".npz"), placement_mm=fig.boundaries.placement_mm,
                         dt_us=fig.boundaries.dt_us, dose=fig.dose, stalls=fig.stalls,
-                        stalls_lagging=fig.stalls_lagging)
+                        stalls_lagging=fig.stalls_lagging, motion_s=fig.motion_s)
