@@ -89,12 +89,13 @@ def plan_all(ctx: motion.RasterCtx, lines: list[gridmod.Scanline], home: IntArra
     """Every scanline planned at ctx.v, its changes, its G7 lines, and the job's segments."""
     scans, changes, groups = [], [], []
     k: int | None = None
+    ring = linesmod.ring_share(ctx.v / ctx.grid.pitch)
     for sl in lines:
         sm, ch = plan_line(ctx, sl, k)
         k = _piece_px(sm, ctx.grid.pitch)
         scans.append(sm)
         changes.append(ch)
-        groups.append(linesmod.groups(sm, ch))
+        groups.append(linesmod.groups(sm, ch, ring))
     col = assemble.collect(ctx.profile, ctx.checker, scans, groups, home,
                            lead_us(linkrate.bytes_per_s(ctx.profile)))
     return Planned(ctx, scans, changes, groups, col)
