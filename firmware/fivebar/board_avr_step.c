@@ -60,7 +60,12 @@
  * more than the fast path does (the C path's entry and mo_event() up to
  * board_steps_high(): the due time to the edge); its pixel timeline starts
  * as much later, so that changes and steps keep their planned distance.
- * Measured as PX_LEAD.
+ * Measured as PX_LEAD: the writes of a C-path scan (the default profile) came
+ * a median 3.3 us before their planned times, a fast-path scan's 6.6 us
+ * after, with the same interrupt in between: ~158 cycles, 144 taken (with
+ * both, the default profile's changes fall a median 0.02 us from their
+ * crossings).  Stack: the nesting below adds one pixel interrupt frame (22
+ * registers and its calls' returns, about 40 bytes) on top of this one.
  */
 #define PX_C_LAG 144u
 
@@ -166,8 +171,9 @@ static uint16_t fast_start(uint16_t base)
  * come in.  mo_event() makes its changes of the pixel timeline and the laser
  * with interrupts off (fb_motion.c).  Nothing else either side touches is
  * shared: the pixel interrupt writes px_state, OCR1B, TIMSK1's OCIE1B and
- * the laser.  Stack: one pixel interrupt frame more at most, on top of this
- * one (it cannot nest in itself).  Without a scan, mo_event() as before.
+ * the laser.  Stack: one pixel interrupt frame more at most (about 40 bytes),
+ * on top of this one (it cannot nest in itself).  Without a scan, mo_event()
+ * as before.
  */
 static uint16_t event_px_nested(void)
 {
