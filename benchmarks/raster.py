@@ -9,11 +9,14 @@ forward kinematics of the executed steps and the laser pin's duty, `raster.dose`
   power changes at every pixel (random powers 20…235), on configs/raster-fast.toml
   (800 mm/s, 8000 rad/s²) with `[serial] link_baud` set; beside it the profile's cruise
   px/s (the planned scan speed / pixel), the turnaround share (1 − pixels / cruise px/s /
-  measured time), the underruns, the bytes on the wire a pixel, and the host CPU µs a
-  pixel (compile + plan + encode every wire line, in this process);
-- on the default profile (configs/default.toml): executed / planned time (the `done:` line's
-  elapsed over its planned), and the burned-image figures (placement, power-change timing,
-  laser-on steps outside the image);
+  measured time), the underruns (and how many came while the emulator had fallen behind
+  the wall clock, fbsim's `lag` trace events: the machine was busy, `raster.dose.
+  lagging_at`), the bytes on the wire a pixel, and the host CPU µs a pixel (compile +
+  plan + encode every wire line, in this process);
+- on the default profile (configs/default.toml): executed / planned time (the emulated time
+  from the first step to the last over the `done:` line's planned; the host's wall clock
+  beside it: fbsim -R pauses where the machine running it fell behind), and the burned-image
+  figures (placement, power-change timing, laser-on steps outside the image);
 - a flat 50 % grey patch (10 × 10 mm at 10 px/mm, grayscale) on the default profile: the
   dose variation across the patch ((max − min) / mean of the burned power of the patch's
   cells, its outermost cells left out);
@@ -78,7 +81,8 @@ def run_cli(args: list[str]) -> str:
 
 def burn(image: Path, config: Path | None, tmp: Path, extra: list[str]) -> dict[str, float]:
     """Burn on the real-time emulator; the `done:` and `raster:` figures."""
-    args = ["plot", str(image), "--laser", "--yes", "--port", "fivebar-sim://?realtime=1",
+    args = ["plot", str(image), "--laser", "--yes", "--port",
+            "fivebar-sim://?realtime=1&state=off",  # a fresh machine, not another run's
             "--preview", str(tmp / "pv.png"), *extra]
     if config is not None:
         args += ["--config", str(config)]
@@ -86,12 +90,14 @@ def burn(image: Path, config: Path | None, tmp: Path, extra: list[str]) -> dict[
     m, d = RASTER.search(out), DONE.search(out)
     if m is None or d is None:
         raise SystemExit(f"no raster:/done: line in:\n{out}")
-    dt = np.abs(np.load(tmp / "pv.burned.npz")["dt_us"])
+    npz = np.load(tmp / "pv.burned.npz")
+    dt = np.abs(npz["dt_us"])
     return {"px": int(m[1]), "s": float(m[2]), "rate": int(m[3]), "under": int(m[4]),
             "place": float(m[5]), "change": float(m[6]), "outside": int(m[7]),
             "elapsed": float(d[1]), "planned": float(d[2]), "bytes": int(d[3]),
             "within20": float((dt <= 20.0).mean()) if dt.size else 1.0,
-            "p99": float(np.percentile(dt, 99)) if dt.size else 0.0, "measured": int(dt.size)}
+            "p99": float(np.percentile(dt, 99)) if dt.size else 0.0, "measured": int(dt.size),
+            "lagging": int(npz["stalls_lagging"].sum()), "motion": float(npz["motion_s"])}
 
 
 def host_cpu(image: Path, config: Path | None, values: dict[str, object]) -> tuple[float, int,
@@ -187,15 +193,18 @@ def main() -> None:
         turn = 1 - f["px"] / cruise / f["s"]
         goal = "≥ 5000 px/s, 0 underruns" if baud == 115200 else "px/s, 0 underruns"
         row(f"{baud:>7} baud: {goal}",
-            f"{f['rate']} px/s, {f['under']} underruns (cruise {cruise:.0f} px/s, "
+            f"{f['rate']} px/s, {f['under']} underruns, {f['lagging']} in the emulator's "
+            f"lag (cruise {cruise:.0f} px/s, "
             f"turnarounds {100 * turn:.0f} %), {f['bytes'] / f['px']:.2f} B/px on the wire, "
-            f"host {1e6 * cpu / n:.1f} µs CPU/px",
+            f"host {1e6 * cpu / n:.1f} µs CPU/px; power changes max {f['change']:.1f} µs, "
+            f"{100 * f['within20']:.2f} % within 20 µs",
             (f["rate"] >= 5000 if baud == 115200 else True) and f["under"] == 0)
     print("default profile (configs/default.toml), the same image at 10 px/mm:")
     f = burn(noisy, None, tmp, size)
-    ratio = f["elapsed"] / f["planned"]
-    row("executed / planned ≤ 1.02", f"{ratio:.3f} ({f['elapsed']:.1f} / {f['planned']:.1f} s)",
-        ratio <= 1.02)
+    ratio = f["motion"] / f["planned"]
+    row("executed / planned ≤ 1.02",
+        f"{ratio:.3f} ({f['motion']:.1f} / {f['planned']:.1f} s, first to last step in "
+        f"emulated time; the host's wall clock {f['elapsed']:.1f} s)", ratio <= 1.02)
     row("pixel placement max ≤ 0.05 mm", f"{f['place']:.3f} mm", f["place"] <= 0.05)
     row("power changes within 20 µs of the boundaries",
         f"{f['change']:.1f} µs max; {100 * f['within20']:.2f} % of {f['measured']} within "

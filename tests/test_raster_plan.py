@@ -213,3 +213,34 @@ def test_without_laser_every_pixel_is_sent_at_power_zero(tmp_path: Path) -> None
     assert rehearse.runs and not any(any(r.powers) for r in rehearse.runs)
     assert [len(r.powers) for r in rehearse.runs] == [len(r.powers) for r in burn.runs]
     assert Kind.TOOL_ON in burn.kind.tolist() and Kind.TOOL_ON not in rehearse.kind.tolist()
+
+
+@pytest.mark.parametrize(("baud", "half"), [(1000000, True), (115200, False)])
+def test_fast_scans_leave_the_ring_room_for_the_next_line(tmp_path: Path, baud: int,
+                                                          half: bool) -> None:
+    """A scan the joints allow above `lines.HALF_RING_PX_S` on a link that carries it
+    (configs/raster-fast.toml, 8,000 px/s, at 1000000 baud): every G7 line's record (its
+    10-byte head and its powers) takes at most half the firmware's 128-byte pixel ring, so
+    the next line's record fits beside it and its segments are queued while the line
+    burns; where the link sets the speed (115200 baud) lines may fill the ring (fewer bytes
+    a pixel)."""
+    from fivebar_host.raster import lines
+
+    root = Path(__file__).resolve().parent.parent
+    text = (root / "configs" / "raster-fast.toml").read_text()
+    cfg = tmp_path / "fast.toml"
+    cfg.write_text(text.replace("# link_baud = 500000", f"link_baud = {baud}"))
+    prof = load_profile(cfg)
+    img = tmp_path / "noise.png"
+    rng = np.random.default_rng(3)
+    Image.fromarray(rng.integers(20, 236, (4, 400)).astype(np.uint8)).save(img)
+    v = defaults()
+    v.update(width_mm=40.0, line_interval_mm=0.1)
+    job = rjob.compile_raster(img, prof, rjob.raster_options(v, prof))
+    r = job.raster
+    assert r is not None
+    record = max(10 + len(run.powers) for run in r.runs)
+    if half:
+        assert record <= lines.PX_RING // 2
+    else:
+        assert lines.PX_RING // 2 < record <= lines.PX_RING

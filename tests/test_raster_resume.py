@@ -84,3 +84,40 @@ def test_a_fresh_start_is_the_job_itself_and_rate_comes_first(tmp_path: Path) ->
         moves = np.flatnonzero(np.isin(prog.kind, (Kind.MOVE, Kind.RASTER)))
         assert text.size == 1 and prog.texts[int(prog.s[text[0]])].startswith("$0=")
         assert text[0] < moves[0]
+
+
+def test_resume_from_inside_a_segment_counts_what_it_got_through(tmp_path: Path) -> None:
+    """Stopped part of the way through a segment (the firmware's exact position after a
+    reset), the pixels changed before the last step it issued are at 0 too, not only those
+    before the segment's start (the emulator showed them burned twice: test_raster_resume_
+    sim.py); the time it surely reached is its last step's DDA time, (i − ½)/n."""
+    prof = load_profile(None)
+    p = tmp_path / "grey.png"
+    Image.fromarray(np.full((2, 80), 100, dtype=np.uint8)).save(p)
+    v = defaults()
+    v.update(width_mm=8.0)
+    job = rjob.compile_raster(p, prof, rjob.raster_options(v, prof))
+    r = job.raster
+    assert r is not None
+    sl = r.lines[0]
+    g7 = [g for g in range(sl.first, sl.end) if r.g7[g]]
+    k = g7[len(g7) // 2]
+    d = job.steps[k + 1] - job.steps[k]
+    i = int(np.argmax(np.abs(d)))
+    n = abs(int(d[i]))
+    assert n >= 4
+    done = n // 2
+    pos = job.steps[k].copy()
+    pos[i] += done * int(np.sign(d[i]))  # the dominant motor half way (the other: its start)
+    prog = build_program(job, prof, True, k, pos)
+    powers = b"".join(prog.runs[int(s)].powers for s, kind, seg in
+                      zip(prog.s, prog.kind, prog.segment, strict=True)
+                      if kind == Kind.RASTER and s >= 0 and r.line_of(int(seg)) == 0)
+    got = np.frombuffer(powers, dtype=np.uint8)
+    start = float(job.duration_us[sl.first:k].astype(np.int64).sum())
+    stop = (start + (done - 0.5) / n * float(job.duration_us[k])) * 16
+    zero = sl.change_t[:-1] < stop
+    assert zero.any() and not zero.all()
+    assert (got[:-1][zero] == 0).all() and (got[:-1][~zero] > 0).all()
+    # more than the segment-start rule zeroed: the half segment counts
+    assert int(zero.sum()) > int((sl.change_t[:-1] < start * 16).sum())

@@ -42,6 +42,33 @@
 #define START_MARGIN 48
 #define START_SHIFT 128
 
+/* The pixel interrupt (below). */
+/*
+ * Its compare fires PX_LEAD cycles before the change is due: the cycles the
+ * interrupt takes from its compare to the laser write (entry, the registers'
+ * save, px_event() up to board_laser()), so that the write lands on the
+ * change's time (the schedule, px_sched, keeps the exact time).  Measured in
+ * the emulator (fbsim -t's lwrite events against the planned times, fast-path
+ * scans of configs/raster-fast.toml): 51 cycles at the least, 106 the
+ * median; docs/raster.md.
+ */
+#define PX_LEAD 96u
+/*
+ * A scan started on the C path (a block the fast path cannot take: the
+ * default profile's G7 blocks, one motor's steps farther apart than
+ * FAST_QMAX) puts its step edges this many cycles after their timer times
+ * more than the fast path does (the C path's entry and mo_event() up to
+ * board_steps_high(): the due time to the edge); its pixel timeline starts
+ * as much later, so that changes and steps keep their planned distance.
+ * Measured as PX_LEAD: the writes of a C-path scan (the default profile) came
+ * a median 3.3 us before their planned times, a fast-path scan's 6.6 us
+ * after, with the same interrupt in between: ~158 cycles, 144 taken (with
+ * both, the default profile's changes fall a median 0.02 us from their
+ * crossings).  Stack: the nesting below adds one pixel interrupt frame (22
+ * registers and its calls' returns, about 40 bytes) on top of this one.
+ */
+#define PX_C_LAG 144u
+
 #define STEP_A_BIT PIN_STEP_A_BIT
 #define STEP_B_BIT PIN_STEP_B_BIT
 
@@ -132,6 +159,37 @@ static uint16_t fast_start(uint16_t base)
 	return shift;
 }
 
+/*
+ * mo_event() with the pixel interrupt let in (a scan runs: OCIE1B set).  The
+ * C path takes 400-480 cycles an event (measured with fbsim -D: the due time
+ * to the OCR1A write), and a power change due in it waited for all of it: on
+ * the default profile every G7 block runs on the C path (one motor's steps
+ * are more than FAST_QMAX apart), and 2 % of its changes came 20-55 us late.
+ * So the other sources are masked (the serial interrupts' enables in UCSR0B,
+ * Timer0's in TIMSK0, this interrupt's own OCIE1A: they wait as long as they
+ * waited before) and interrupts are enabled: only the pixel interrupt can
+ * come in.  mo_event() makes its changes of the pixel timeline and the laser
+ * with interrupts off (fb_motion.c).  Nothing else either side touches is
+ * shared: the pixel interrupt writes px_state, OCR1B, TIMSK1's OCIE1B and
+ * the laser.  Stack: one pixel interrupt frame more at most (about 40 bytes),
+ * on top of this one (it cannot nest in itself).  Without a scan, mo_event()
+ * as before.
+ */
+static uint16_t event_px_nested(void)
+{
+	uint8_t m0 = TIMSK0, ub = UCSR0B;
+	TIMSK0 = 0;
+	UCSR0B = (uint8_t)(ub & (uint8_t)~((1u << RXCIE0) | (1u << UDRIE0)));
+	TIMSK1 &= (uint8_t)~(1u << OCIE1A);
+	sei();
+	uint16_t d = mo_event();
+	cli();
+	TIMSK1 |= (uint8_t)(1u << OCIE1A);
+	UCSR0B = ub;
+	TIMSK0 = m0;
+	return d;
+}
+
 /* The C path: a complete interrupt of its own, entered by a jump from the
  * vector (board_avr_step.S) before anything was saved; named __vector_* so
  * that avr-gcc (its LTO link too) takes the handler attributes without a
@@ -145,7 +203,7 @@ void __vector_fb_step_slow(void)
 	uint16_t t = board_step.sched;
 	for (;;) {
 		uint16_t t0 = TCNT1;
-		uint16_t d = mo_event();
+		uint16_t d = (TIMSK1 & (1u << OCIE1B)) ? event_px_nested() : mo_event();
 		while ((uint16_t)(TCNT1 - t0) < PULSE_CYCLES)
 			;
 		BOARD_STEP_PORT &= (uint8_t)~BOARD_STEP_PINS;
@@ -157,7 +215,7 @@ void __vector_fb_step_slow(void)
 		 * fast_start() arms the steps after its cycles (a compare armed in
 		 * the past waits a whole timer period) */
 		if (px_state.pending)
-			px_start(t);
+			px_start(d == MO_FAST ? t : (uint16_t)(t + PX_C_LAG));
 		if (d == MO_FAST) {
 			uint16_t shift = fast_start(t);
 			if (shift)
@@ -184,11 +242,10 @@ void __vector_fb_step_slow(void)
  * interrupt is used.
  */
 #define PX_NEAR 24
-
 static void px_arm_at(uint16_t t)
 {
 	px_sched = t;
-	OCR1B = ocr_value(t);
+	OCR1B = ocr_value((uint16_t)(t - PX_LEAD));
 }
 
 ISR(TIMER1_COMPB_vect)
@@ -200,7 +257,8 @@ ISR(TIMER1_COMPB_vect)
 			return;
 		}
 		uint16_t t = (uint16_t)(px_sched + d);
-		if ((int16_t)(t - TCNT1) >= PX_NEAR) {
+		uint16_t fire = (uint16_t)(t - PX_LEAD);
+		if ((int16_t)(fire - TCNT1) >= PX_NEAR) {
 			px_arm_at(t);
 			return;
 		}
@@ -208,7 +266,7 @@ ISR(TIMER1_COMPB_vect)
 		 * compare the timer passes while we wait would set the flag and run
 		 * the event a second time after the return */
 		px_sched = t;
-		while ((int16_t)(TCNT1 - t) < 0)
+		while ((int16_t)(TCNT1 - fire) < 0)
 			;
 	}
 }
@@ -218,7 +276,8 @@ void board_px_arm(uint16_t t)
 	uint8_t s = board_irq_save();
 	/* the schedule keeps t (the events after it follow from it); the compare
 	 * comes at once when t is past or too close */
-	uint16_t at = (int16_t)(t - TCNT1) < PX_NEAR ? (uint16_t)(TCNT1 + PX_NEAR) : t;
+	uint16_t fire = (uint16_t)(t - PX_LEAD);
+	uint16_t at = (int16_t)(fire - TCNT1) < PX_NEAR ? (uint16_t)(TCNT1 + PX_NEAR) : fire;
 	px_sched = t;
 	OCR1B = ocr_value(at);
 	TIFR1 = (uint8_t)(1u << OCF1B);

@@ -471,8 +471,10 @@ BOARD_INLINE mo_block_t *boundary(void)
 			mo_state.tail = t;
 			s_running = 0;
 			s_underruns++;
+			uint8_t sreg = board_irq_save();  /* the pixel interrupt may nest here */
 			px_end();
 			set_laser(0);
+			board_irq_restore(sreg);
 			return 0;
 		}
 		mo_block_t *b = &mo_state.queue[t & QMASK];
@@ -505,16 +507,23 @@ BOARD_INLINE mo_block_t *boundary(void)
 					(b->next[1] != MO_NEVER ? 2u : 0u));
 		s_now = 0;
 		mo_state.cur = b;
-		if (b->type == MO_BLK_SCAN) {
-			px_begin(b->power);  /* the board's px_start() gives its time */
-			set_laser(0);
-		} else if (b->type != MO_BLK_RASTER) {
-			px_end();
-			set_laser(b->power);
-		} else if (s_rest || !px_state.run) {
-			/* a scan's later block after a stop: its timeline is lost */
-			px_break(b->power);
-			set_laser(0);
+		/* a scan's next block (the common case) touches neither the pixel
+		 * timeline nor the laser; the rest does with interrupts off: the
+		 * pixel interrupt may nest in mo_event() (board.h) */
+		if (b->type != MO_BLK_RASTER || s_rest || !px_state.run) {
+			uint8_t sreg = board_irq_save();
+			if (b->type == MO_BLK_SCAN) {
+				px_begin(b->power);  /* the board's px_start() gives its time */
+				set_laser(0);
+			} else if (b->type != MO_BLK_RASTER) {
+				px_end();
+				set_laser(b->power);
+			} else {
+				/* a scan's later block after a stop: its timeline is lost */
+				px_break(b->power);
+				set_laser(0);
+			}
+			board_irq_restore(sreg);
 		}
 		return b;
 	}
@@ -541,7 +550,9 @@ BOARD_INLINE uint8_t check_endstops(mo_block_t *b, uint8_t due)
 		s_running = 0;
 		mo_state.tail = (uint8_t)(mo_state.tail + 1u);
 		mo_state.cur = 0;
+		uint8_t sreg = board_irq_save();
 		set_laser(0);
+		board_irq_restore(sreg);
 		return 0;
 	}
 	return 1;

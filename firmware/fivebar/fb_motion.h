@@ -157,7 +157,9 @@ void mo_start(void);
  * next one (1..MO_MAX_DELAY), or 0 once stopped (queue empty, alarm).
  * Longer gaps are split into waits of MO_WAIT cycles.  MO_MAX_DELAY stays
  * well below 32768 because the board compares 16-bit timer values as
- * signed differences. */
+ * signed differences.  The board may let the pixel interrupt (fb_raster.h)
+ * nest in it (board_avr_step.c): what it changes of the pixel timeline and
+ * the laser it changes with interrupts off. */
 #define MO_MAX_DELAY 0x6000u
 #define MO_WAIT 0x4000u
 uint16_t mo_event(void);

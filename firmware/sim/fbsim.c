@@ -6,12 +6,22 @@
  *     -f HZ       clock (default 16000000)
  *     -t FILE     trace file: one "<cycle> <pin> <level>" line per change of a
  *                 step, direction, enable, laser or pen servo pin (names
- *                 stepA stepB dirA dirB enable laser pen; pins from config.h)
+ *                 stepA stepB dirA dirB enable laser pen; pins from config.h),
+ *                 and one "<cycle> lwrite <0|1>" line per write of TCCR2A: the
+ *                 firmware's board_laser() writes it exactly once a call, so
+ *                 it is the time the laser took a new power (1: the PWM
+ *                 output is connected, a power 1..254 in OCR2A; 0: the pin
+ *                 is driven, power 0 or 255) whatever the pin shows then
  *     -w          hold the CPU until a client opens the pty, so the boot
  *                 banner is not lost to the client's input flush
  *     -g MS       grace after the client opened (default 50 ms, with -w)
  *     -c CYCLES   stop after this many cycles
- *     -R          throttle to real time
+ *     -R          throttle to real time.  Where the emulation falls more than
+ *                 2 ms behind the wall clock (the harness was not scheduled) it
+ *                 goes on at real-time pace from there, without catching up (a
+ *                 catch-up played the lost time flat out and starved the
+ *                 firmware's queue); with -t, "<cycle> lag 1" and "<cycle> lag 0"
+ *                 mark the place
  *     -a STEPS    endstop A is pressed while motor A's position <= STEPS
  *     -b STEPS    endstop B likewise (positions counted from the trace)
  *     -D FILE     debug log of Timer1: "<cycle> r|w <OCR1A> <TCNT1>" for every
@@ -292,6 +302,26 @@ static void ocr_write_hook(avr_t *a, avr_io_addr_t addr, uint8_t v, void *param)
 	fprintf(dbg, "%llu w %u %u\n", (unsigned long long)a->cycle, ocr1a(), tcnt1_now());
 }
 
+/* Laser power writes (-t): TCCR2A is written once per board_laser() call
+ * (board.h), so its writes time the power changes; level 1 = the PWM output
+ * connected (COM2A1). */
+#define REG_TCCR2A 0xB0
+#define BIT_COM2A1 7
+static avr_io_write_t tccr2a_write_orig;
+static void *tccr2a_write_param;
+
+static void tccr2a_write_hook(avr_t *a, avr_io_addr_t addr, uint8_t v, void *param)
+{
+	(void)param;
+	if (tccr2a_write_orig)
+		tccr2a_write_orig(a, addr, v, tccr2a_write_param);
+	else
+		a->data[addr] = v;
+	if (trace)
+		fprintf(trace, "%llu lwrite %u\n", (unsigned long long)a->cycle,
+			(unsigned)(v >> BIT_COM2A1) & 1u);
+}
+
 static void on_signal(int sig)
 {
 	(void)sig;
@@ -426,6 +456,11 @@ static void pump_io(void)
 	}
 }
 
+/* -R: the emulation more than LAG_S behind the wall clock moves the clock's
+ * origin (traced as lag) */
+#define LAG_S 0.002
+static void trace_event(const char *name, uint32_t value);
+
 static double wall_seconds(void)
 {
 	struct timespec now;
@@ -545,6 +580,22 @@ static avr_cycle_count_t pump_timer(avr_t *a, avr_cycle_count_t when, void *para
 		double ahead = (double)a->cycle / (double)a->frequency - wall_seconds();
 		if (ahead > 0.0005)
 			usleep((useconds_t)(ahead * 1e6));
+		/* Behind the wall clock (this process was not scheduled, the machine
+		 * is busy): carry on at real-time pace from here rather than run flat
+		 * out to catch up.  A board never lags; the catch-up did: it played
+		 * the lost time at several times real time, the host had to keep
+		 * pace with that, and the firmware's queue ran dry (benchmarks/
+		 * raster.py's underruns at 250000 baud and up).  To the host the
+		 * lag is a pause of the link, as a busy USB bus makes.  Traced (lag
+		 * 1, then 0) so that a stall near it can be told from others. */
+		if (ahead < -LAG_S) {
+			double lag = -ahead;
+			long sec = (long)lag;
+			wall_start.tv_sec += sec;
+			wall_start.tv_nsec += (long)((lag - (double)sec) * 1e9);
+			trace_event("lag", 1);
+			trace_event("lag", 0);
+		}
 	}
 	return when + pump_period;
 }
@@ -1099,6 +1150,12 @@ int main(int argc, char **argv)
 					named_hook, (void *)(intptr_t)PIN_SVA);
 		avr_irq_register_notify(pin_irq(PORT_CHAR(PIN_SERVO_B_PORT), PIN_SERVO_B_BIT),
 					named_hook, (void *)(intptr_t)PIN_SVB);
+	}
+	if (trace) {
+		avr_io_addr_t io = AVR_DATA_TO_IO(REG_TCCR2A);
+		tccr2a_write_orig = avr->io[io].w.c;
+		tccr2a_write_param = avr->io[io].w.param;
+		avr->io[io].w.c = tccr2a_write_hook;
 	}
 	if (debug_path) {
 		dbg = fopen(debug_path, "w");

@@ -98,7 +98,7 @@ DEFAULT_MAX_RATE = 20000
 
 def raster_program(job: Job, profile: Profile, laser: bool, first: int = 0,
                    end: int | None = None, reached: int | None = None,
-                   lead: Program | None = None) -> Program:
+                   lead: Program | None = None, into: float = 0.0) -> Program:
     """The items of a raster job's segments `first` … `end` − 1 (`first` a G7 line's first
     segment or a travel segment): RASTER items for the G7 segments (the line's first
     carries its run's index), MOVE items for the moves between scanlines. With `laser` the
@@ -107,12 +107,13 @@ def raster_program(job: Job, profile: Profile, laser: bool, first: int = 0,
     scan is rehearsed, as a pen job without `--laser` sends S0 on every line.
     A raster faster than the firmware's boot step rate (`$0`) sets it
     first (the setting needs an idle machine: a program starts on one).  `reached`: a
-    resumed run got as far as that segment; the pixels changed before it are burned at 0
-    (`RasterRuns.runs_after`).  `lead` (a resume's travel back) runs after the `$0`
-    setting, which needs the machine idle, and before the laser is enabled."""
+    resumed run got as far as that segment (and `into` of the way through it); the pixels
+    changed before that are burned at 0 (`RasterRuns.runs_after`).  `lead` (a resume's
+    travel back) runs after the `$0` setting, which needs the machine idle, and before the
+    laser is enabled."""
     r = job.raster
     assert r is not None
-    runs = r.runs if reached is None else r.runs_after(first, reached, job.duration_us)
+    runs = r.runs if reached is None else r.runs_after(first, reached, job.duration_us, into)
     if not laser:  # a rehearsal: nothing above power 0 leaves the host without --laser
         runs = tuple(replace(run, powers=bytes(len(run.powers))) for run in runs)
     n = job.n_segments if end is None else end

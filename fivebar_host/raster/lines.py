@@ -29,6 +29,10 @@ from kinematics.arrays import IntArray
 LINE_LIMIT = 127
 #: The firmware's pixel ring (fb_raster.h).
 PX_RING = 128
+#: Above this pixel rate a line's record takes at most half the ring (`ring_share`) ...
+HALF_RING_PX_S = 6000.0
+#: ... where the link carries this many bytes a pixel at that rate.
+HALF_RING_BYTES = 2.0
 #: Segments one G7 line carries at most (its head's 5-bit count).
 MAX_SEGMENTS = 32
 #: Digits of the line numbers a line is sized with (`wire.G7_NUMBER_DIGITS`).
@@ -186,16 +190,32 @@ def _exact(c: _Costs, j: int, end: int, u: int, t: int, t_prev: int | None) -> i
     return line_size(_esc_len(data) + c.acc[end] - c.acc[j])
 
 
-def groups(sm: ScanMotion, ch: Changes) -> list[Group]:
-    """The scanline's G7 lines (module docstring).  A scanline's first line writes its P and
-    T (a stream may start there: a resume restarts a scanline); later lines leave out what
-    the line before set (the firmware's modal P and T), as the wire writes them."""
+def ring_share(px_per_s: float, link_bytes_s: float) -> int:
+    """The ring bytes one G7 line's record may take for a scan the joints allow at
+    `px_per_s`, on a link carrying `link_bytes_s`: half the ring when that rate is above
+    `HALF_RING_PX_S` and the link carries it at `HALF_RING_BYTES` a pixel, else the whole
+    ring.  The firmware stores a line's record only once the ring has room for all of it,
+    and queues the line's segments only then; with records of more than half the ring the
+    next line waits until the current one is half burned, and at 8,000 px/s the ~4 ms left
+    were not always enough to parse and queue it (benchmarks/raster.py: 1–4 underruns a
+    run at 250000–1000000 baud, none with half-ring lines).  Where the link sets the speed
+    (115200 baud) the whole ring is used: fewer, longer lines cost fewer bytes a pixel.
+    Decided once for the image, before its speed is searched."""
+    fast = px_per_s > HALF_RING_PX_S and link_bytes_s >= HALF_RING_BYTES * px_per_s
+    return PX_RING // 2 if fast else PX_RING
+
+
+def groups(sm: ScanMotion, ch: Changes, ring_bytes: int = PX_RING) -> list[Group]:
+    """The scanline's G7 lines (module docstring), each record within `ring_bytes` of the
+    ring (`ring_share`).  A scanline's first line writes its P and T (a stream may start
+    there: a resume restarts a scanline); later lines leave out what the line before set
+    (the firmware's modal P and T), as the wire writes them."""
     c = _costs(sm, ch)
     k = len(c.cyc)
     out: list[Group] = []
     j = 0
     t_prev: int | None = None
-    ring = PX_RING - protocol.PX_HEAD
+    ring = ring_bytes - protocol.PX_HEAD
     while j < k:
         end = j + 1
         est = 1 + c.item[j] + c.px_b[j]

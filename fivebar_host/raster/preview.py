@@ -78,9 +78,11 @@ def save_burned(fig: Figures, path: Path) -> None:
     """Write the burned image reconstructed from the trace (`dose.figures`: power per cell,
     255 = full power for a pixel's time) as a picture like the preview's, and beside it
     (`.npz`) the boundaries' placement (mm) and change − crossing times (µs) and the dose
-    grid, for a closer look."""
+    grid, and the underruns' cycles and whether the emulator lagged there, for a closer
+    look."""
     from PIL import Image
 
     Image.fromarray(burn_picture(fig.dose)).save(path)
     np.savez_compressed(path.with_suffix(".npz"), placement_mm=fig.boundaries.placement_mm,
-                        dt_us=fig.boundaries.dt_us, dose=fig.dose)
+                        dt_us=fig.boundaries.dt_us, dose=fig.dose, stalls=fig.stalls,
+                        stalls_lagging=fig.stalls_lagging, motion_s=fig.motion_s)

@@ -93,18 +93,19 @@ class RasterRuns:
             return segment
         return self.lines[line].first
 
-    def runs_after(self, first: int, reached: int, duration_us: IntArray
+    def runs_after(self, first: int, reached: int, duration_us: IntArray, into: float = 0.0
                    ) -> tuple[PixelRun, ...]:
         """The runs with every pixel of the G7 lines from segment `first` whose change comes
-        before segment `reached` starts at power 0: restarted at `first` (a scanline's
-        start) after a run reached `reached`, nothing is burned twice (a pixel under way
-        at the stop stays as far as it got)."""
+        before the stop at power 0 — the stop `into` (a fraction, 0 … 1) of the way through
+        segment `reached`: restarted at `first` (a scanline's start) after a run got that
+        far, nothing is burned twice (a pixel under way at the stop stays as far as it
+        got)."""
         out = list(self.runs)
-        if reached <= first:
+        if reached < first or (reached == first and into <= 0.0):
             return tuple(out)
         start = np.concatenate(([0], np.cumsum(duration_us[first:reached].astype(np.int64))))
-        stop = int(start[-1]) * CYCLES_PER_US
-        for g in range(first, reached):
+        stop = (int(start[-1]) + into * float(duration_us[reached])) * CYCLES_PER_US
+        for g in range(first, min(reached + 1, self.g7.shape[0])):
             k = int(self.run[g])
             if k < 0:
                 continue

@@ -88,8 +88,10 @@ def plan_line(ctx: motion.RasterCtx, sl: gridmod.Scanline, k_hint: int | None = 
         k = max(1, min(k - 1, math.floor(k * math.sqrt(pixels.FIT_CYCLES / worst) * 0.9)))
 
 
-def plan_all(ctx: motion.RasterCtx, lines: list[gridmod.Scanline], home: IntArray) -> Planned:
-    """Every scanline planned at ctx.v, its changes, its G7 lines, and the job's segments."""
+def plan_all(ctx: motion.RasterCtx, lines: list[gridmod.Scanline], home: IntArray,
+             ring: int = linesmod.PX_RING) -> Planned:
+    """Every scanline planned at ctx.v, its changes, its G7 lines (records within `ring`
+    bytes of the pixel ring), and the job's segments."""
     scans, changes, groups = [], [], []
     k: int | None = None
     pad: tuple[float, float] | None = None
@@ -99,7 +101,7 @@ def plan_all(ctx: motion.RasterCtx, lines: list[gridmod.Scanline], home: IntArra
         pad = _overscan_pad(sm)
         scans.append(sm)
         changes.append(ch)
-        groups.append(linesmod.groups(sm, ch))
+        groups.append(linesmod.groups(sm, ch, ring))
     col = assemble.collect(ctx.profile, ctx.checker, scans, groups, home,
                            lead_us(linkrate.bytes_per_s(ctx.profile)))
     return Planned(ctx, scans, changes, groups, col)
@@ -195,11 +197,12 @@ def plan_image(ctx: motion.RasterCtx, lines: list[gridmod.Scanline], home: IntAr
                      "image")
         ctx = replace(ctx, v=cap)
     v0 = ctx.v
+    ring = linesmod.ring_share(ctx.v / ctx.grid.pitch, linkrate.bytes_per_s(ctx.profile))
     # a pixel is a byte at least: no faster than the link's bytes a second in pixels
     ctx = replace(ctx, v=min(ctx.v, linkrate.bytes_per_s(ctx.profile) * ctx.grid.pitch))
     for subset, margin in ((probe(lines), PROBE_MARGIN), (lines, LINK_MARGIN)):
         for _ in range(6):
-            pl = plan_all(ctx, subset, home)
+            pl = plan_all(ctx, subset, home, ring)
             if pl.late_s <= 0:
                 break
             ctx = replace(ctx, v=_scaled_speed(pl, margin))

@@ -192,8 +192,25 @@ def _raster_rest(job: Job, profile: Profile, laser: bool, k: int, pos: IntArray,
     if k0 < job.n_segments and not np.array_equal(pos, job.steps[k0]):
         lead = travel(profile, job.assembly, pos, job.steps[k0],
                       f"travel back to segment {k0 + 1}")
-    return [raster_program(job, profile, laser, k0, end_segment, k if k0 < k else None,
-                           lead)]
+    into = _steps_into(job.steps, k, pos) if k < job.n_segments else 0.0
+    reached = k if k0 < k or into > 0.0 else None
+    return [raster_program(job, profile, laser, k0, end_segment, reached, lead, into)]
+
+
+def _steps_into(steps: IntArray, k: int, pos: IntArray) -> float:
+    """How far into segment k (a fraction of its time) a run stopped at firmware steps
+    `pos` had surely got: the time of the last step it issued of the motor with the most
+    steps, (i − ½) / n of the segment (the DDA's time of step i of n, fb_fast.h), 0 when
+    `pos` is not on the segment's way.  The surely-reached time, not a later guess: a
+    pixel changed after it is burned again whole (at most a step's time of it twice),
+    never skipped."""
+    d = steps[k + 1] - steps[k]
+    i = int(np.argmax(np.abs(d)))
+    n = abs(int(d[i]))
+    done = (int(pos[i]) - int(steps[k, i])) * (1 if d[i] > 0 else -1)
+    if n == 0 or not 0 < done <= n:
+        return 0.0
+    return (done - 0.5) / n
 
 
 # ------------------------------------------------------------------ framing and jogging
