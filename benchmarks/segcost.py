@@ -33,7 +33,10 @@ from pathlib import Path
 from typing import Any
 
 _HERE = Path(__file__).resolve().parent
-sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
+# this folder off the path (benchmarks/kinematics.py would shadow the package), the
+# repository on it (benchmarks.link's job)
+sys.path[:] = [str(_HERE.parent)] + [p for p in sys.path if Path(p or ".").resolve() != _HERE]
+from benchmarks.link import issue_job  # noqa: E402
 from fivebar_host import protocol, wire  # noqa: E402
 from fivebar_host.devices.sim import (  # noqa: E402
     Emulator,
@@ -45,17 +48,6 @@ from fivebar_host.protocol import StatusReport  # noqa: E402
 
 #: The receive ring the firmware reports (banner rx:), halved: the host's line limit.
 LINE_LIMIT = 127
-
-
-def issue_job(n: int, p_us: int) -> list[str]:
-    """`n` short segments (1–2 steps per motor), P µs each (benchmarks/link.py's job)."""
-    out = ["G90"]
-    a = b = 0
-    for k in range(n):
-        a += 1 + (k % 3 == 0)
-        b -= 1 + (k % 2)
-        out.append(wire.g1(a, b, p_us, 0))
-    return out
 
 
 def packed_lines(bodies: list[str], first: int) -> list[bytes]:

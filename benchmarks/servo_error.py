@@ -79,12 +79,7 @@ def held_angles(trace: Any, prof: Profile) -> tuple[np.ndarray, np.ndarray]:
         th = hysteresis(th, prof.joints.joints[j].dead_band_rad)
         times.append(pul[:-1, 0] + pul[:-1, 1])
         angles.append(th)
-    t = np.unique(np.concatenate(times))
-    t = t[(t >= max(x[0] for x in times)) & (t <= min(x[-1] for x in times))]
-    th = np.stack([np.interp(t, times[j], angles[j]) for j in (0, 1)], axis=1)
-    moved = np.ones(t.size, dtype=bool)
-    moved[1:] = (np.diff(th, axis=0) != 0).any(axis=1)
-    return t[moved], th[moved]
+    return es.merge_arms(times, angles)
 
 
 def run_once(cfg: Path, tmp: Path) -> tuple[float, float, float]:

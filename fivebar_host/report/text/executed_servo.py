@@ -105,10 +105,17 @@ def servo_angles(trace: Trace, profile: Profile, deadband_deg: tuple[float, floa
             th = hysteresis(th, math.radians(deadband_deg[j]))
         times.append(pul[:-1, 0] + pul[:-1, 1])  # the previous pulse's fall
         angles.append(th)
+    return merge_arms(times, angles)
+
+
+def merge_arms(times: list[FloatArray], angles: list[FloatArray]
+               ) -> tuple[FloatArray, FloatArray]:
+    """Both arms' angles (each sampled at its own times) on the union of those times where
+    both are known, interpolated linearly; frames that repeat the last angles dropped (a
+    frame that repeats the last pulses is no motion: the reports count motion events)."""
     t = np.unique(np.concatenate(times))
     t = t[(t >= max(x[0] for x in times)) & (t <= min(x[-1] for x in times))]
     th = np.stack([np.interp(t, times[j], angles[j]) for j in (0, 1)], axis=1)
-    # a frame that repeats the last pulses is no motion (the reports count motion events)
     moved = np.ones(t.size, dtype=bool)
     moved[1:] = (np.diff(th, axis=0) != 0).any(axis=1)
     return t[moved], th[moved]
