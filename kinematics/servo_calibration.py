@@ -3,240 +3,67 @@ dead band, the link lengths and the pen's extension, with their uncertainties (p
 
 The stepper fit (`kinematics.calibration`) knows the angle of every commanded step; a hobby
 servo does not: its angle is an unknown, non-linear function of the pulse, and where the arm
-stops depends on the side it came from (the dead band, `kinematics.servo` Eq. S1). So the
-model of one mark i, drawn with the pulses p_ik (k = 1, 2) after a move in which joint k's
-commanded angle went up (s_ik = +1) or down (s_ik = −1), is
-
-    u = (p_ik − centre_k) / 500 µs
-    θ_ik = c_k0 + c_k1·u + c_k2·u² + c_k3·u³ − s_ik·w_k/2                    (SC1)
-    P_i = FK(a1, b1, a2, b2, w, e, γ; θ_i)   (kinematics.extension, the machine's assembly)
-    m_i = Rot(φ)·P_i + (tx, ty),   r_i = m_i − y_i                                 (SC2)
-
-— a cubic curve per servo (the issue's "low-order fit"), a dead band of width w_k per servo,
-the seven lengths/angles of the geometry and the paper placement: `N_SERVO_PARAMS` = 20
-unknowns, vector order `SERVO_PARAM_NAMES`. The dead band is told apart from the curve's
-offset c_k0 only by marks approached from both sides, which is why the pattern
-(`approach_signs`) alternates the approach of each joint from mark to mark.
+stops depends on the side it came from (the dead band, `kinematics.servo` Eq. S1). The model
+(`kinematics.servo_model`, Eqs. SC1–SC2): a polynomial curve of order d_k per servo, a dead
+band per servo, the geometry and the paper placement.
 
 The fit is Levenberg–Marquardt with Marquardt's diagonal scaling, as for steppers, on a
-central-difference Jacobian (the model is 20 parameters × 2N residuals; the analytic one
-would not pay). The covariance is s²·(JᵀJ)⁻¹ with s the given measurement σ or the residual
-standard deviation √(|r|²/(2N − n_free)) (`kinematics.calibration.covariance`, F1/F2); fixed
-parameters (`free` = False) get zero variance.
+central-difference Jacobian. The covariance is s²·(JᵀJ)⁻¹ with s the given measurement σ or
+the residual standard deviation √(|r|²/(2N − n_free)) (`kinematics.calibration.covariance`,
+F1/F2); fixed parameters (`free` = False, the coefficients above each servo's order among
+them) get zero variance.
 
-The drawing-shape error (`pattern_shape_error`): a model M draws intended point p with
-approach s by commanding the pulses that, under M, put the arm there (the inverse curve of
-the IK angle overshot by s·w/2, `commanded_pulses`); the true machine T turns them into
-θ = T's curve − s·w_T/2 and draws FK_T(θ). The error is the max |aligned drawn − intended|
-after the rigid alignment that fits all points best (the paper may sit anywhere).
+The orders are chosen from the marks (issue 38: a cubic misses a real servo's ripple by up
+to 0.5 mm on the drawing): every (d_1, d_2) in 3…`MAX_ORDER` is fitted, each started from
+the fitted lower order it extends, and the one with the least Bayesian information
+criterion is kept (Schwarz 1978; Gaussian residuals, n = 2N, k free parameters):
+
+    BIC = |r|²/σ² + k·ln n          with σ given                                (SC3)
+    BIC = n·ln(|r|²/n) + k·ln n     with σ estimated from the residuals
+
+An order is tried only while k ≤ N (at least two equations per unknown). The ln n per
+parameter keeps a term only where it explains more than the noise: on a cubic true curve
+the cubic is kept, on a rippled one the order that follows the ripple.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from kinematics.arrays import BoolArray, FloatArray
 from kinematics.calibration import CalibrationError, covariance, rigid_fit, rotation
-from kinematics.extension import ExtendedFiveBar
-from kinematics.servo import ServoCurve
+from kinematics.servo_model import (
+    COEFFS,
+    DEAD,
+    GEOMETRY_NAMES,
+    MAX_ORDER,
+    N_COEFFS,
+    N_SERVO_PARAMS,
+    PLACE,
+    PULSE_SCALE_US,
+    SERVO_PARAM_NAMES,
+    ServoMachine,
+    ServoMarks,
+    approach_signs,
+    commanded_pulses,
+    pattern_points,
+    pattern_shape_error,
+    with_dead_band,
+)
 
-__all__ = ["GEOMETRY_NAMES", "N_SERVO_PARAMS", "PULSE_SCALE_US", "SERVO_PARAM_NAMES",
-           "ServoFit", "ServoMachine", "ServoMarks", "approach_signs", "commanded_pulses",
-           "fit_servo", "pattern_points", "pattern_shape_error", "servo_model_points",
-           "with_dead_band"]
+__all__ = ["COEFFS", "DEAD", "GEOMETRY_NAMES", "MAX_ORDER", "MIN_ORDER", "N_SERVO_PARAMS",
+           "PLACE", "PULSE_SCALE_US", "SERVO_PARAM_NAMES", "ServoFit", "ServoMachine",
+           "ServoMarks", "approach_signs", "commanded_pulses", "fit_servo", "pattern_points",
+           "pattern_shape_error", "servo_model_points", "with_dead_band"]
 
-GEOMETRY_NAMES: tuple[str, ...] = ("a1", "b1", "a2", "b2", "w", "e", "gamma")
-SERVO_PARAM_NAMES: tuple[str, ...] = (
-    *GEOMETRY_NAMES, "c10", "c11", "c12", "c13", "c20", "c21", "c22", "c23",
-    "dead1", "dead2", "phi", "tx", "ty")
-N_SERVO_PARAMS = len(SERVO_PARAM_NAMES)
-N_MACHINE = N_SERVO_PARAMS - 3
-#: The pulse scale of the curve's variable u (SC1), µs.
-PULSE_SCALE_US = 500.0
 #: Fewest marks a servo fit accepts (2N ≥ 2·20 equations).
 MIN_SERVO_MARKS = 20
-
-
-@dataclass(frozen=True)
-class ServoMachine:
-    """A servo five-bar's true (or modelled) parameters: geometry (7: a1, b1, a2, b2, w mm,
-    extension e mm, γ rad), cubic curve coefficients (2, 4) rad per servo in u (SC1), the
-    pulse each curve is centred on (2,) µs and the dead band widths (2,) rad."""
-
-    geometry: tuple[float, ...]
-    coeffs: FloatArray
-    centre_us: tuple[float, float]
-    dead_band: tuple[float, float]
-
-    @classmethod
-    def from_vector(cls, v: ArrayLike, centre_us: tuple[float, float]) -> ServoMachine:
-        """From the first 17 entries of a parameter vector (`SERVO_PARAM_NAMES` order)."""
-        x = np.asarray(v, dtype=np.float64)
-        return cls(tuple(float(c) for c in x[:7]), x[7:15].reshape(2, 4).copy(), centre_us,
-                   (float(x[15]), float(x[16])))
-
-    @classmethod
-    def from_curves(cls, geometry: ExtendedFiveBar, curves: tuple[ServoCurve, ServoCurve],
-                    dead_band: tuple[float, float], centre_us: tuple[float, float]
-                    ) -> ServoMachine:
-        """A profile's servos: each curve (a table) replaced by its least-squares cubic in u."""
-        g = (geometry.a1, geometry.b1, geometry.a2, geometry.b2, geometry.w,
-             geometry.extension, geometry.extension_angle)
-        co = np.zeros((2, 4))
-        for k, c in enumerate(curves):
-            ps = np.linspace(*c.range_us, 65)
-            u = (ps - centre_us[k]) / PULSE_SCALE_US
-            co[k] = np.polynomial.polynomial.polyfit(u, c.angle(ps), 3)
-        return cls(g, co, centre_us, dead_band)
-
-    def vector(self) -> FloatArray:
-        """(17,) in `SERVO_PARAM_NAMES` order (no placement)."""
-        return np.concatenate((self.geometry, self.coeffs.ravel(), self.dead_band))
-
-    def fivebar(self) -> ExtendedFiveBar:
-        """The geometry (raises ValueError when it cannot close)."""
-        a1, b1, a2, b2, w, e, g = self.geometry
-        return ExtendedFiveBar(a1, b1, a2, b2, w, extension=e, extension_angle=g)
-
-    def curve_angles(self, pulses: ArrayLike) -> FloatArray:
-        """The curves' angles (N, 2) rad of pulses (N, 2) µs, without the dead band."""
-        p = np.asarray(pulses, dtype=np.float64).reshape(-1, 2)
-        u = (p - np.asarray(self.centre_us)) / PULSE_SCALE_US
-        return np.asarray(np.stack([np.polynomial.polynomial.polyval(u[:, k], self.coeffs[k])
-                                    for k in range(2)], axis=1), dtype=np.float64)
-
-    def angles(self, pulses: ArrayLike, approach: ArrayLike) -> FloatArray:
-        """Joint angles (N, 2) rad reached with pulses (N, 2) after moves of sign `approach`
-        (N, 2) in angle (SC1)."""
-        s = np.asarray(approach, dtype=np.float64).reshape(-1, 2)
-        return np.asarray(self.curve_angles(pulses) - 0.5 * s * np.asarray(self.dead_band),
-                          dtype=np.float64)
-
-    def pen_points(self, pulses: ArrayLike, approach: ArrayLike, assembly: str) -> FloatArray:
-        """Pen positions (N, 2) mm; NaN rows where the loop cannot close."""
-        fwd = self.fivebar().forward_batch(self.angles(pulses, approach), assembly)
-        pts = np.asarray(fwd.points, dtype=np.float64).copy()
-        pts[~fwd.valid] = np.nan
-        return pts
-
-    def pulses_for(self, angles: ArrayLike, range_us: tuple[float, float] = (500.0, 2500.0)
-                   ) -> FloatArray:
-        """Pulses (N, 2) µs whose curve angles are `angles` (N, 2) rad (taken within half a turn
-        of each curve's centre angle c_k0), by bisection over `range_us` (each cubic taken as
-        monotone there); NaN where the range cannot reach the angle."""
-        th = np.asarray(angles, dtype=np.float64).reshape(-1, 2)
-        c0 = self.coeffs[:, 0]
-        th = c0 + (th - c0 + math.pi) % (2.0 * math.pi) - math.pi  # the turn nearest c_k0
-        cu = np.asarray(self.centre_us)
-        lo = np.broadcast_to((range_us[0] - cu) / PULSE_SCALE_US, th.shape).copy()
-        hi = np.broadcast_to((range_us[1] - cu) / PULSE_SCALE_US, th.shape).copy()
-        rising = np.array([np.polynomial.polynomial.polyval(1.0, c)
-                           > np.polynomial.polynomial.polyval(-1.0, c) for c in self.coeffs])
-        for _ in range(60):
-            mid = 0.5 * (lo + hi)
-            f = np.stack([np.polynomial.polynomial.polyval(mid[:, k], self.coeffs[k])
-                          for k in range(2)], axis=1)
-            below = (f < th) == rising
-            lo = np.where(below, mid, lo)
-            hi = np.where(below, hi, mid)
-        u = 0.5 * (lo + hi)
-        ends = ((np.asarray(range_us)[:, None] - cu) / PULSE_SCALE_US)  # (2 ends, 2 servos)
-        f_ends = np.array([[np.polynomial.polynomial.polyval(ends[e, k], self.coeffs[k])
-                            for k in range(2)] for e in range(2)])
-        tol = 1e-9
-        inside = ((th >= f_ends.min(axis=0) - tol) & (th <= f_ends.max(axis=0) + tol))
-        return np.asarray(np.where(inside, cu + u * PULSE_SCALE_US, np.nan), dtype=np.float64)
-
-    def curve(self, k: int, range_us: tuple[float, float], samples: int = 17) -> ServoCurve:
-        """Servo k's cubic as a `ServoCurve` table over `range_us` (raises `ServoError` if it
-        is not monotone there)."""
-        ps = np.linspace(range_us[0], range_us[1], samples)
-        u = (ps - self.centre_us[k]) / PULSE_SCALE_US
-        return ServoCurve(ps, np.polynomial.polynomial.polyval(u, self.coeffs[k]))
-
-
-@dataclass(frozen=True)
-class ServoMarks:
-    """What one servo fit sees: the pulses (N, 2) µs each mark was drawn with, the sign (N, 2)
-    of each joint's last commanded move into it, the measured positions (N, 2) mm in the
-    paper frame and the machine's assembly ("+"/"-")."""
-
-    pulses: FloatArray
-    approach: FloatArray
-    measured: FloatArray
-    assembly: str
-
-    @property
-    def n(self) -> int:
-        return int(self.pulses.shape[0])
-
-
-def approach_signs(n: int) -> FloatArray:
-    """The pattern's approach signs (n, 2): the four combinations (+,+), (−,−), (+,−), (−,+)
-    in turn, so that every joint comes from both sides in every part of the pattern."""
-    cycle = np.array([[1.0, 1.0], [-1.0, -1.0], [1.0, -1.0], [-1.0, 1.0]])
-    return np.asarray(cycle[np.arange(n) % 4])
-
-
-def pattern_points(model: ServoMachine, mode: str, assembly: str,
-                   limits: tuple[tuple[float, float], tuple[float, float]],
-                   margins: tuple[float, float], n: int) -> FloatArray:
-    """`n` mark centres (n, 2) mm spread over the joint limits (rad) of a servo five-bar: a
-    61×61 grid of joint angles, kept where the loop closes in `assembly`, the pen is in
-    working mode `mode` and the type 1 / type 2 singularity margins (rad) hold, thinned by
-    farthest-point sampling in joint space (so the marks cover each curve's range)."""
-    fb = model.fivebar()
-    g1 = np.linspace(*limits[0], 61)
-    g2 = np.linspace(*limits[1], 61)
-    th = np.stack(np.meshgrid(g1, g2, indexing="ij"), axis=-1).reshape(-1, 2)
-    fwd = fb.forward_batch(th, assembly)
-    th, pts = th[fwd.valid], np.asarray(fwd.points)[fwd.valid]
-    want = np.array([1 if c == "+" else -1 for c in mode])
-    sm = fb.singularity_margins(th, pts)
-    ok = ((fb.mode_of(pts, th) == want).all(axis=1)
-          & (np.abs(sm[:, :2]) >= margins[0]).all(axis=1) & (np.abs(sm[:, 2]) >= margins[1]))
-    th, pts = th[ok], pts[ok]
-    if th.shape[0] < n:
-        raise CalibrationError(f"only {th.shape[0]} safe poses inside the joint limits; "
-                               f"{n} marks asked for")
-    pick = [int(np.argmin(np.linalg.norm(th - th.mean(axis=0), axis=1)))]
-    dist = np.linalg.norm(th - th[pick[0]], axis=1)
-    for _ in range(n - 1):
-        pick.append(int(np.argmax(dist)))
-        dist = np.minimum(dist, np.linalg.norm(th - th[pick[-1]], axis=1))
-    return np.asarray(pts[pick])
-
-
-def commanded_pulses(model: ServoMachine, points: ArrayLike, approach: ArrayLike, mode: str
-                     ) -> FloatArray:
-    """The pulses (N, 2) µs a model sends to draw `points` (N, 2) after moves of sign
-    `approach`: the IK angles overshot by s·w/2 (the dead-band take-up) through the inverse
-    curves (NaN outside 500–2500 µs; raises `UnreachableError` off the model's reach)."""
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    th = np.asarray(model.fivebar().inverse_batch(pts, mode).require(pts))
-    s = np.asarray(approach, dtype=np.float64).reshape(-1, 2)
-    return model.pulses_for(th + 0.5 * s * np.asarray(model.dead_band))
-
-
-def pattern_shape_error(true: ServoMachine, model: ServoMachine, points: ArrayLike,
-                        approach: ArrayLike, mode: str, assembly: str) -> FloatArray:
-    """|aligned drawn − intended| (N,) mm when `model` draws `points` on the machine `true`
-    (module doc); NaN where the model's pulses or the true machine cannot reach a point."""
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    s = np.asarray(approach, dtype=np.float64).reshape(-1, 2)
-    pulses = commanded_pulses(model, pts, s, mode)
-    drawn = np.full_like(pts, np.nan)
-    have = np.isfinite(pulses).all(axis=1)
-    drawn[have] = true.pen_points(pulses[have], s[have], assembly)
-    ok = np.isfinite(drawn).all(axis=1)
-    phi, t = rigid_fit(drawn[ok], pts[ok])
-    err = np.full(pts.shape[0], np.nan)
-    err[ok] = np.linalg.norm(drawn[ok] @ rotation(phi).T + t - pts[ok], axis=1)
-    return err
+#: The lowest curve order tried (the issue's cubic).
+MIN_ORDER = 3
 
 
 def servo_model_points(x: FloatArray, marks: ServoMarks, centre_us: tuple[float, float]
@@ -244,7 +71,24 @@ def servo_model_points(x: FloatArray, marks: ServoMarks, centre_us: tuple[float,
     """Predicted mark positions (N, 2) in the paper frame for parameters `x` (SC2)."""
     m = ServoMachine.from_vector(x, centre_us)
     p = m.pen_points(marks.pulses, marks.approach, marks.assembly)
-    return np.asarray(p @ rotation(float(x[17])).T + x[18:20], dtype=np.float64)
+    out = np.empty_like(p)
+    sheet = marks.sheet_of()
+    for j in range(marks.sheets):
+        ph = x[_placement(j)]
+        on = sheet == j
+        out[on] = p[on] @ rotation(float(ph[0])).T + ph[1:]
+    return out
+
+
+def _placement(sheet: int) -> slice:
+    """Where sheet `sheet`'s placement (φ, tx, ty) sits in the parameter vector."""
+    start = PLACE.start if sheet == 0 else N_SERVO_PARAMS + 3 * (sheet - 1)
+    return slice(start, start + 3)
+
+
+def _n_params(marks: ServoMarks) -> int:
+    """The parameter vector's length: the machine, one placement per sheet."""
+    return N_SERVO_PARAMS + 3 * (marks.sheets - 1)
 
 
 def _residuals(x: FloatArray, marks: ServoMarks, centre_us: tuple[float, float]
@@ -261,8 +105,9 @@ def _residuals(x: FloatArray, marks: ServoMarks, centre_us: tuple[float, float]
 
 def _jacobian(x: FloatArray, marks: ServoMarks, centre_us: tuple[float, float],
               free: BoolArray) -> FloatArray:
-    """Central-difference d residuals / d parameters (2N, 20); zero columns where fixed."""
-    jac = np.zeros((2 * marks.n, N_SERVO_PARAMS))
+    """Central-difference d residuals / d parameters (2N, `N_SERVO_PARAMS`); zero columns
+    where fixed."""
+    jac = np.zeros((2 * marks.n, _n_params(marks)))
     for j in np.flatnonzero(free):
         h = 1e-6 * max(1.0, abs(float(x[j])))
         xp, xm = x.copy(), x.copy()
@@ -317,9 +162,11 @@ def _levenberg_marquardt(x0: FloatArray, marks: ServoMarks, centre_us: tuple[flo
 
 @dataclass(frozen=True)
 class ServoFit:
-    """A converged servo fit: parameters (20,), covariance (20, 20) (zero rows for fixed
+    """A converged servo fit: parameters (`N_SERVO_PARAMS` and 3 per further sheet), covariance
+    (zero rows for fixed
     parameters), residuals (N, 2) before (the profile, best placement) and after, σ and its
-    source ("given"/"residual"), the free mask, iterations, degrees of freedom, centres."""
+    source ("given"/"residual"), the free mask, iterations, degrees of freedom, centres, each
+    servo's curve order and the criterion (SC3) of every pair of orders tried."""
 
     x: FloatArray
     covariance: FloatArray
@@ -331,6 +178,8 @@ class ServoFit:
     iterations: int
     dof: int
     centre_us: tuple[float, float]
+    orders: tuple[int, int] = (3, 3)
+    criteria: tuple[tuple[tuple[int, int], float], ...] = ()
 
     @property
     def machine(self) -> ServoMachine:
@@ -338,8 +187,18 @@ class ServoFit:
 
     @property
     def std(self) -> FloatArray:
-        """Standard deviations (20,) (inf where undetermined, 0 where fixed)."""
+        """Standard deviations (as `x`) (inf where undetermined, 0 where fixed)."""
         return np.sqrt(np.maximum(np.diag(self.covariance), 0.0))
+
+    @property
+    def dead_band(self) -> FloatArray:
+        """The fitted dead band widths (2,) rad."""
+        return np.asarray(self.x[DEAD])
+
+    @property
+    def dead_band_std(self) -> FloatArray:
+        """Their standard deviations (2,) rad."""
+        return np.asarray(self.std[DEAD])
 
     @property
     def rms_before_mm(self) -> float:
@@ -351,20 +210,71 @@ class ServoFit:
 
     def curve_std(self, k: int, pulses: ArrayLike) -> FloatArray:
         """Standard deviation (N,) rad of servo k's fitted curve angle at `pulses`, from the
-        covariance of its four coefficients (and its correlations)."""
+        covariance of its coefficients (and their correlations)."""
         u = (np.asarray(pulses, dtype=np.float64) - self.centre_us[k]) / PULSE_SCALE_US
-        basis = np.stack([u ** j for j in range(4)], axis=-1)
-        sl = slice(7 + 4 * k, 11 + 4 * k)
+        basis = np.stack([u ** j for j in range(N_COEFFS)], axis=-1)
+        sl = slice(COEFFS.start + N_COEFFS * k, COEFFS.start + N_COEFFS * (k + 1))
         cov = self.covariance[sl, sl]
         return np.asarray(np.sqrt(np.maximum(np.einsum("...i,ij,...j->...", basis, cov,
                                                        basis), 0.0)))
 
 
+def _free_mask(orders: tuple[int, int], fit_dead_band: bool, fit_extension: bool,
+               n_params: int) -> BoolArray:
+    """Free parameters: all but the coefficients above each servo's order, the dead bands
+    unless fitted, the extension unless fitted."""
+    free = np.ones(n_params, dtype=bool)
+    free[COEFFS] = (np.arange(N_COEFFS)[None, :] <= np.array(orders)[:, None]).ravel()
+    free[DEAD] = fit_dead_band
+    free[5:7] = fit_extension
+    return free
+
+
+def _criterion(cost: float, n: int, k: int, sigma: float | None) -> float:
+    """The Bayesian information criterion (SC3) of a fit with ½|r|² = `cost`."""
+    if sigma is not None:
+        return 2.0 * cost / sigma ** 2 + k * math.log(n)
+    return n * math.log(max(2.0 * cost, 1e-300) / n) + k * math.log(n)
+
+
+def _select_orders(x0: FloatArray, marks: ServoMarks, cu: tuple[float, float],
+                   orders: tuple[int, int] | None, fit_dead_band: bool, fit_extension: bool,
+                   sigma: float | None, max_iterations: int
+                   ) -> tuple[FloatArray, tuple[int, int], int, dict[tuple[int, int], float]]:
+    """Fit every pair of orders (or the given pair) and keep the least BIC (module doc):
+    the parameters, the orders, the iterations of that fit and every pair's criterion."""
+    tried = range(MIN_ORDER, MAX_ORDER + 1)
+    pairs = [orders] if orders is not None else [(a, b) for a in tried for b in tried]
+    n = 2 * marks.n
+    fits: dict[tuple[int, int], tuple[FloatArray, float, int]] = {}
+    crit: dict[tuple[int, int], float] = {}
+    for d in sorted(pairs, key=lambda p: (p[0] + p[1], p)):
+        free = _free_mask(d, fit_dead_band, fit_extension, x0.size)
+        if int(free.sum()) > marks.n and d != (MIN_ORDER, MIN_ORDER) and orders is None:
+            continue  # fewer than two equations per unknown
+        below = [fits[p] for p in ((d[0] - 1, d[1]), (d[0], d[1] - 1)) if p in fits]
+        start = min(below, key=lambda f: f[1])[0] if below else x0
+        try:
+            x, its = _levenberg_marquardt(start, marks, cu, free, max_iterations)
+        except CalibrationError:
+            if orders is not None or d == (MIN_ORDER, MIN_ORDER):
+                raise
+            continue  # a high order that does not settle is not the answer
+        r = _residuals(x, marks, cu)
+        assert r is not None
+        cost = 0.5 * float(r @ r)
+        fits[d] = (x, cost, its)
+        crit[d] = _criterion(cost, n, int(free.sum()), sigma)
+    best = min(crit, key=lambda p: crit[p])
+    return fits[best][0], best, fits[best][2], crit
+
+
 def fit_servo(nominal: ServoMachine, marks: ServoMarks, *, sigma: float | None = None,
               fit_dead_band: bool = True, fit_extension: bool = True,
-              max_iterations: int = 200) -> ServoFit:
+              max_iterations: int = 200, orders: tuple[int, int] | None = None) -> ServoFit:
     """Fit the servo model (module doc) to the measured marks, starting from `nominal` and
     the paper placement that best maps its predicted marks onto the measured ones.
+    `orders` fixes each servo's curve order (3 ≤ d ≤ `MAX_ORDER`; None: chosen by SC3).
     `fit_dead_band` False keeps the nominal dead band (what a fit that ignores it gets);
     `fit_extension` False keeps e and γ (a pen at the joint has none to fit)."""
     if marks.n < MIN_SERVO_MARKS:
@@ -373,30 +283,33 @@ def fit_servo(nominal: ServoMachine, marks: ServoMarks, *, sigma: float | None =
     if sigma is not None and not (math.isfinite(sigma) and sigma > 0):
         raise CalibrationError(f"measurement sigma must be a positive number of mm; got "
                                f"{sigma!r}")
+    if orders is not None and not all(MIN_ORDER <= d <= MAX_ORDER for d in orders):
+        raise CalibrationError(f"servo curve orders must be {MIN_ORDER}–{MAX_ORDER}; got "
+                               f"{orders!r}")
     p0 = nominal.pen_points(marks.pulses, marks.approach, marks.assembly)
     if not np.all(np.isfinite(p0)):
         raise CalibrationError("the profile cannot reach some of the pattern's pulses")
-    phi, t = rigid_fit(p0, marks.measured)
-    x0 = np.concatenate((nominal.vector(), [phi], t))
-    free = np.ones(N_SERVO_PARAMS, dtype=bool)
-    free[15:17] = fit_dead_band
-    free[5:7] = fit_extension
+    sheet = marks.sheet_of()
+    if sheet.min() < 0 or np.bincount(sheet).min() < 2:
+        raise CalibrationError("every sheet of marks needs at least two marks to place it")
+    place = [np.concatenate(([phi], t)) for phi, t in
+             (rigid_fit(p0[sheet == j], marks.measured[sheet == j])
+              for j in range(marks.sheets))]
+    x0 = np.concatenate((nominal.vector(), *place))
     cu = nominal.centre_us
     before = servo_model_points(x0, marks, cu) - marks.measured
-    x, its = _levenberg_marquardt(x0, marks, cu, free, max_iterations)
+    x, best, its, crit = _select_orders(x0, marks, cu, orders, fit_dead_band, fit_extension,
+                                        sigma, max_iterations)
+    free = _free_mask(best, fit_dead_band, fit_extension, x.size)
     r = _residuals(x, marks, cu)
     assert r is not None
     jac = _jacobian(x, marks, cu, free)
     dof = 2 * marks.n - int(free.sum())
     s_res = math.sqrt(float(r @ r) / dof)
     s, source = (sigma, "given") if sigma is not None else (s_res, "residual")
-    cov = np.zeros((N_SERVO_PARAMS, N_SERVO_PARAMS))
+    cov = np.zeros((x.size, x.size))
     cov[np.ix_(free, free)] = covariance(jac[:, free], s)
     return ServoFit(x=x, covariance=cov, residual_before=before,
                     residual_after=r.reshape(-1, 2), sigma=s, sigma_source=source, free=free,
-                    iterations=its, dof=dof, centre_us=cu)
-
-
-def with_dead_band(m: ServoMachine, dead_band: tuple[float, float]) -> ServoMachine:
-    """`m` with other dead band widths (rad)."""
-    return replace(m, dead_band=dead_band)
+                    iterations=its, dof=dof, centre_us=cu, orders=best,
+                    criteria=tuple(sorted(crit.items())))

@@ -130,3 +130,73 @@ def test_servo_dead_band_is_the_profile_slack(tmp_path: Path) -> None:
                                                  "endstops = false\nbacklash_steps = [4, 4]"))
     with pytest.raises(ConfigError, match="dead_band_deg"):
         load_profile(bad)
+
+
+def _measure(doc: dict, true: ServoMachine, rng: np.random.Generator, turn: float,
+             csv: Path) -> None:
+    """Where `true` draws each tick of a marks file, on a sheet turned by `turn` rad, with
+    0.05 mm noise, written as the measured CSV."""
+    p = np.array([m["pulses_us"] for m in doc["marks"]])
+    s = np.array([m["approach"] for m in doc["marks"]])
+    y = true.pen_points(p, s, "+")
+    keep = np.isfinite(y).all(axis=1)
+    y = y @ rotation(turn).T + [50.0, -20.0] + rng.normal(0.0, 0.05, y.shape)
+    csv.write_text("id,x_mm,y_mm\n" + "".join(
+        f"{m['id']},{x:.4f},{v:.4f}\n"
+        for m, (x, v), k in zip(doc["marks"], y, keep, strict=True) if k))
+
+
+def test_servo_two_rounds(tmp_path: Path) -> None:
+    """`calibrate pattern --second-round` draws the first round's marks again with the first
+    fit's pulses (the same centres, the pulses the truth needs there: nearer the truth's than
+    the profile's), and `calibrate fit --also` fits both rounds, each sheet placed on its
+    own: the dead bands and curves of the truth within the reported uncertainty."""
+    true = truth()
+    rng = np.random.default_rng(4)
+    pat1, pat2 = tmp_path / "p1.svg", tmp_path / "p2.svg"
+    m1, m2 = tmp_path / "p1.json", tmp_path / "p2.json"
+    csv1, csv2 = tmp_path / "m1.csv", tmp_path / "m2.csv"
+    fit1, fit2 = tmp_path / "fit1.toml", tmp_path / "fit2.toml"
+    code, out = run("calibrate", "pattern", "--config", str(PLOTCLOCK), "-o", str(pat1),
+                    "--marks", str(m1), "--count", "30")
+    assert code == 0, out
+    doc1 = json.loads(m1.read_text())
+    _measure(doc1, true, rng, 0.3, csv1)
+    code, out = run("calibrate", "fit", str(csv1), "--marks", str(m1), "--config",
+                    str(PLOTCLOCK), "-o", str(fit1), "--sigma", "0.05")
+    assert code == 0, out
+    code, out = run("calibrate", "pattern", "--config", str(fit1), "-o", str(pat2),
+                    "--marks", str(m2), "--second-round", str(m1))
+    assert code == 0, out
+    doc2 = json.loads(m2.read_text())
+    c1 = {(round(m["x_mm"], 3), round(m["y_mm"], 3)) for m in doc1["marks"]}
+    c2 = {(round(m["x_mm"], 3), round(m["y_mm"], 3)) for m in doc2["marks"]}
+    assert len(c2) >= 20 and c2 <= c1  # the first round's centres
+    # the second round's pulses are those the truth needs there (up to the turn of the
+    # drawing the placement absorbs): far closer than the first's
+    first = {(round(m["x_mm"], 3), round(m["y_mm"], 3)): m for m in doc1["marks"]}
+    xy = np.array([[m["x_mm"], m["y_mm"]] for m in doc2["marks"]])
+    s2 = np.array([m["approach"] for m in doc2["marks"]])
+    th = true.fivebar().inverse_batch(xy, "+-").angles
+    need = true.pulses_for(th + 0.5 * s2 * np.array(true.dead_band))
+    p1 = np.array([first[(round(x, 3), round(y, 3))]["pulses_us"] for x, y in xy])
+    p2 = np.array([m["pulses_us"] for m in doc2["marks"]])
+    off1, off2 = np.abs(p1 - need).max(axis=0), np.abs(p2 - need).max(axis=0)
+    assert np.all(off2 < off1 / 3.0), (off1, off2)
+    _measure(doc2, true, rng, -0.5, csv2)
+    code, out = run("calibrate", "fit", str(csv2), "--marks", str(m2), "--config", str(fit1),
+                    "-o", str(fit2), "--sigma", "0.05", "--also", str(csv1), str(m1))
+    assert code == 0, out
+    assert "in 2 rounds" in out
+    prof = load_profile(fit2)
+    assert prof.joints is not None
+    for k, j in enumerate(prof.joints.joints):
+        line = next(ln for ln in out.splitlines() if f"dead band {k + 1}" in ln)
+        val, sd = (float(v) for v in line.split("=")[1].replace("°", "").split("±"))
+        assert abs(val - math.degrees(true.dead_band[k])) <= 3.0 * sd
+        assert math.degrees(j.dead_band_rad) == pytest.approx(val, abs=1e-3)
+    # --also with a stepper profile is refused, nothing written
+    code, out = run("calibrate", "fit", str(csv2), "--marks", str(m2), "--config",
+                    str(ROOT / "configs" / "default.toml"), "-o", str(tmp_path / "x.toml"),
+                    "--also", str(csv1), str(m1))
+    assert code != 0 and not (tmp_path / "x.toml").exists()

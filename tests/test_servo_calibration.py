@@ -21,6 +21,7 @@ from kinematics.calibration import CalibrationError, rigid_fit, rotation
 from kinematics.extension import ExtendedFiveBar
 from kinematics.servo import hysteresis
 from kinematics.servo_calibration import (
+    DEAD,
     ServoMachine,
     ServoMarks,
     approach_signs,
@@ -105,13 +106,14 @@ def test_pulses_for_inverts_the_curves() -> None:
 def test_known_machine_recovered_within_its_uncertainty() -> None:
     true, marks, _ = synthetic_marks(np.random.default_rng(7))
     res = fit_servo(nominal(), marks, sigma=SIGMA)
-    z = np.abs(res.x[:17] - true.vector()) / res.std[:17]
-    assert np.all(z <= 4.0), dict(zip(range(17), z.round(2), strict=True))
+    free = res.free[:DEAD.stop]  # the geometry, the chosen orders' coefficients, dead bands
+    z = np.abs(res.x[:DEAD.stop] - true.vector())[free] / res.std[:DEAD.stop][free]
+    assert np.all(z <= 4.0), dict(zip(np.flatnonzero(free), z.round(2), strict=True))
     # the fit explains the marks to the noise: χ²/dof near 1
     chi2 = float(np.sum(res.residual_after ** 2)) / SIGMA ** 2 / res.dof
     assert 0.6 < chi2 < 1.5
     # the dead bands, each to better than 0.15°
-    assert np.all(np.abs(np.degrees(res.x[15:17] - true.dead_band)) < 0.15)
+    assert np.all(np.abs(np.degrees(res.dead_band - true.dead_band)) < 0.15)
     # the curves over the pattern's pulses: within 4σ of the truth at every pulse
     for k in range(2):
         p = np.linspace(marks.pulses[:, k].min(), marks.pulses[:, k].max(), 11)
@@ -153,7 +155,7 @@ def test_one_sided_approach_leaves_the_dead_band_undetermined() -> None:
     n = 60
     _, marks, _ = synthetic_marks(np.random.default_rng(10), n, np.ones((n, 2)))
     res = fit_servo(nominal(), marks, sigma=SIGMA)
-    assert np.all(res.std[15:17] > math.radians(5.0))
+    assert np.all(res.dead_band_std > math.radians(5.0))
 
 
 def test_too_few_marks_refused() -> None:

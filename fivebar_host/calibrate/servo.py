@@ -11,9 +11,12 @@ angle, 0.5 µs) and the sign of each joint's last move into it (`approach`), bot
 the compiled job itself.
 
 The fit (`calibrate_servo`) is `kinematics.servo_calibration.fit_servo`: the geometry
-(lengths, the pen's extension), each servo's cubic pulse ↔ angle curve and dead band, with
-standard deviations. The fitted profile gets `[geometry]`, and in `[joints]` the curves as
-tables (`curve_us`/`curve_deg`, `curve_fit = "table"`, over each servo's pulse range) and
+(lengths, the pen's extension), each servo's pulse ↔ angle curve (a polynomial whose order
+the marks choose) and dead band, with standard deviations; the ticks of a second round (laid
+out by the first round's fit, `second_round`) are fitted together with the first's. The
+fitted profile gets `[geometry]`, and in `[joints]` the curves as tables (`curve_us`/
+`curve_deg`, `curve_fit = "table"`, 33 nodes over each servo's pulse range: 62.5 µs apart
+over 500–2500 µs, so that the piecewise-linear table follows a higher-order curve) and
 `dead_band_deg`.
 """
 
@@ -21,6 +24,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -48,6 +52,7 @@ from kinematics.calibration_analysis import SafeGrid
 from kinematics.extension import ExtendedFiveBar
 from kinematics.servo import ServoError
 from kinematics.servo_calibration import (
+    MIN_SERVO_MARKS,
     SERVO_PARAM_NAMES,
     ServoFit,
     ServoMachine,
@@ -100,20 +105,29 @@ def _label_corner(start: FloatArray, middle: FloatArray, n: int) -> tuple[float,
     return float(centre[0] - 0.5 * w), float(centre[1] - 0.5 * DIGIT_H)
 
 
-def _layout_ticks(profile: Profile, model: ServoMachine, m: str, count: int
-                  ) -> tuple[FloatArray, list[FloatArray]]:
-    """Mark centres (count, 2) and the strokes (ticks and numbers): candidates spread over
-    the joint limits (`pattern_points`, three per mark), kept in turn while the tick and its
-    number lie where the profile reaches safely; the approach signs go in that order."""
+def _candidates(profile: Profile, model: ServoMachine, m: str, count: int) -> FloatArray:
+    """Candidate mark centres spread over the joint limits (`pattern_points`, three per
+    mark, `LIMIT_INSET_RAD` inside the limits)."""
     k = profile.kinematics
     lim = tuple((lo + LIMIT_INSET_RAD, hi - LIMIT_INSET_RAD)
                 for lo, hi in profile.motors.limits_rad)
     try:
-        cand = pattern_points(model, m, k.assembly, lim,  # type: ignore[arg-type]
+        return pattern_points(model, m, k.assembly, lim,  # type: ignore[arg-type]
                               (max(k.min_type1_margin_rad, math.radians(15.0)),
                                max(k.min_type2_margin_rad, math.radians(20.0))), 3 * count)
     except CalibrationError as e:
         raise PatternError(f"working mode {m}: {e}") from e
+
+
+def _layout_ticks(profile: Profile, model: ServoMachine, m: str, count: int,
+                  given: FloatArray | None = None) -> tuple[FloatArray, list[FloatArray]]:
+    """Mark centres (count, 2) and the strokes (ticks and numbers): candidates (`given`, or
+    `_candidates`) kept in turn while the tick and its number lie where the profile reaches
+    safely; the approach signs go in that order. With `given` centres (a second round) all
+    that fit are kept, at least `MIN_SERVO_MARKS`."""
+    k = profile.kinematics
+    cand = _candidates(profile, model, m, count) if given is None else given
+    count = count if given is None else given.shape[0]
     fb = model.fivebar()
     signs = approach_signs(count)
     middle = cand.mean(axis=0)
@@ -136,17 +150,23 @@ def _layout_ticks(profile: Profile, model: ServoMachine, m: str, count: int
         strokes.extend(label)
         if len(centres) == count:
             return np.array(centres), strokes
+    if given is not None and len(centres) >= MIN_SERVO_MARKS:
+        return np.array(centres), strokes
     raise PatternError(f"working mode {m}: room for only {len(centres)} ticks; make fewer "
                        "(--count)")
 
 
 def make_servo_pattern(profile: Profile, svg_path: Path, *, mode: str | None = None,
-                       count: int = 60) -> tuple[Pattern, list[dict[str, list[float]]]]:
+                       count: int = 60, centres_from: FloatArray | None = None
+                       ) -> tuple[Pattern, list[dict[str, list[float]]]]:
     """Lay out the ticks, write the SVG and compile it the way `fivebar plot` will; the
-    pattern and each mark's servo fields (`servo_mark_fields`)."""
+    pattern and each mark's servo fields (`servo_mark_fields`). `centres_from`: a second
+    round's marks (mm, machine frame): the first round's, drawn again with the pulses the
+    profile (the first round's fit) sends there (docs/calibration.md)."""
     m = pattern_mode(profile, mode)
     model = servo_nominal(profile)
-    centres, strokes = _layout_ticks(profile, model, m, count)
+    centres, strokes = _layout_ticks(profile, model, m, count, centres_from)
+    count = centres.shape[0]
     allpts = np.concatenate(strokes)
     x0, y0 = (float(math.floor(v)) - 2.0 for v in allpts.min(axis=0))
     x1, y1 = (float(math.ceil(v)) + 2.0 for v in allpts.max(axis=0))
@@ -207,7 +227,8 @@ class ServoCalibration:
     result: ServoFit
     measured: Measured
     nominal: ServoMachine
-    pulses: FloatArray  # (N, 2) µs the measured marks were drawn with
+    pulses: FloatArray  # (N, 2) µs the measured marks (of every round) were drawn with
+    rounds: int = 1
 
 
 def servo_marks(pattern: PatternMarks, measured: Measured) -> ServoMarks:
@@ -228,17 +249,26 @@ def servo_marks(pattern: PatternMarks, measured: Measured) -> ServoMarks:
 
 
 def calibrate_servo(profile: Profile, pattern: PatternMarks, measured: Measured, *,
-                    sigma: float | None = None, max_iterations: int = 200) -> ServoCalibration:
-    """Fit the servo model to the measured ticks (module doc)."""
-    if pattern.assembly != profile.kinematics.assembly:
-        raise MeasurementError(f"{pattern.source}: made for assembly {pattern.assembly}, the "
-                               f"profile {profile.source} is {profile.kinematics.assembly}")
+                    sigma: float | None = None, max_iterations: int = 200,
+                    also: Sequence[tuple[PatternMarks, Measured]] = ()) -> ServoCalibration:
+    """Fit the servo model to the measured ticks (module doc); `also`: the ticks of other
+    rounds of the pattern (each its own sheet, placed on its own), fitted together."""
+    rounds = [(pattern, measured), *also]
+    for pat, _ in rounds:
+        if pat.assembly != profile.kinematics.assembly:
+            raise MeasurementError(f"{pat.source}: made for assembly {pat.assembly}, the "
+                                   f"profile {profile.source} is "
+                                   f"{profile.kinematics.assembly}")
     nominal = servo_nominal(profile)
     fit_ext = isinstance(profile.geometry, ExtendedFiveBar) and profile.geometry.extension > 0
-    data = servo_marks(pattern, measured)
+    parts = [servo_marks(pat, meas) for pat, meas in rounds]
+    data = ServoMarks(np.concatenate([d.pulses for d in parts]),
+                      np.concatenate([d.approach for d in parts]),
+                      np.concatenate([d.measured for d in parts]), pattern.assembly,
+                      np.concatenate([np.full(d.n, j) for j, d in enumerate(parts)]))
     res = fit_servo(nominal, data, sigma=sigma, fit_extension=fit_ext,
                     max_iterations=max_iterations)
-    return ServoCalibration(res, measured, nominal, data.pulses)
+    return ServoCalibration(res, measured, nominal, data.pulses, len(rounds))
 
 
 def servo_report_lines(cal: ServoCalibration) -> list[str]:
@@ -246,9 +276,11 @@ def servo_report_lines(cal: ServoCalibration) -> list[str]:
     the profile's."""
     r = cal.result
     x, sd = r.x, r.std
-    lines = [f"servo fit: {cal.measured.ids.size} marks, rms residual {r.rms_before_mm:.4f} mm "
-             f"(profile) → {r.rms_after_mm:.4f} mm (fitted), σ = {r.sigma:.4f} mm "
-             f"({r.sigma_source}), {r.iterations} iterations"]
+    rounds = f" in {cal.rounds} rounds" if cal.rounds > 1 else ""
+    lines = [f"servo fit: {cal.pulses.shape[0]} marks{rounds}, rms residual "
+             f"{r.rms_before_mm:.4f} mm (profile) → {r.rms_after_mm:.4f} mm (fitted), σ = "
+             f"{r.sigma:.4f} mm ({r.sigma_source}), {r.iterations} iterations; curve orders "
+             f"{r.orders[0]} and {r.orders[1]} (least BIC of {len(r.criteria)} tried)"]
     for i, name in enumerate(SERVO_PARAM_NAMES[:7]):
         if not r.free[i]:
             continue
@@ -258,8 +290,8 @@ def servo_report_lines(cal: ServoCalibration) -> list[str]:
         else:
             lines.append(f"  {name:<15} = {x[i]:9.4f} mm ± {sd[i]:.4f} mm")
     for k in range(2):
-        lines.append(f"  dead band {k + 1}     = {math.degrees(x[15 + k]):9.4f}° ± "
-                     f"{math.degrees(sd[15 + k]):.4f}°")
+        lines.append(f"  dead band {k + 1}     = {math.degrees(r.dead_band[k]):9.4f}° ± "
+                     f"{math.degrees(r.dead_band_std[k]):.4f}°")
     for k in range(2):
         p = np.linspace(*_measured_range(cal, k), 9)
         pp = np.column_stack((p, p))
@@ -288,7 +320,7 @@ def _set_value(text: str, table: str, key: str, value: str) -> str:
 
 
 def fitted_servo_text(profile: Profile, profile_text: str, res: ServoFit, note: str,
-                      samples: int = 9) -> str:
+                      samples: int = 33) -> str:
     """The profile text with the fitted [geometry] and the [joints] curves (tables over
     each servo's pulse range) and dead bands (module doc)."""
     m = res.machine

@@ -36,9 +36,14 @@ def calibrate() -> None:
               "twice the unknowns).")
 @click.option("--mode", type=click.Choice(["++", "+-", "-+", "--"]), default=None,
               help="Working mode (default: the profile's).")
+@click.option("--second-round", "first_marks", default=None,
+              type=click.Path(dir_okay=False, path_type=Path), metavar="MARKS",
+              help="Servo profiles: the first round's marks file; its marks drawn again with "
+              "the pulses of the profile, the first round's fit (then `calibrate fit "
+              "--also`).")
 @handle_errors
 def pattern_cmd(config_path: Path | None, output: Path, marks_path: Path, count: int | None,
-                mode: str | None) -> None:
+                mode: str | None, first_marks: Path | None) -> None:
     """Write a test pattern of numbered marks over the safe region and its marks file."""
     from fivebar_host.calibrate.pattern import (
         make_pattern,
@@ -48,10 +53,19 @@ def pattern_cmd(config_path: Path | None, output: Path, marks_path: Path, count:
     )
 
     prof = load(config_path)
+    if first_marks is not None and prof.joints is None:
+        raise click.UsageError("--second-round is for servo profiles")
     if prof.joints is not None:  # servos: ticks with planned approaches (calibrate/servo.py)
+        from fivebar_host.calibrate.measure import read_pattern
         from fivebar_host.calibrate.servo import make_servo_pattern, servo_plot_command
 
-        pat, fields = make_servo_pattern(prof, output, mode=mode, count=count or 60)
+        given = None
+        if first_marks is not None:
+            first = read_pattern(first_marks)
+            given = first.nominal
+            mode = mode or first.mode
+        pat, fields = make_servo_pattern(prof, output, mode=mode, count=count or 60,
+                                         centres_from=given)
         doc = marks_document(prof, pat, output)
         doc["plot_command"] = servo_plot_command(output, prof, pat)
         for mk, f in zip(doc["marks"], fields, strict=True):
@@ -62,6 +76,10 @@ def pattern_cmd(config_path: Path | None, output: Path, marks_path: Path, count:
         click.echo(f"plot it 1:1 with: {doc['plot_command']}")
         click.echo("then measure each numbered tick's end (where the pen stopped) and write "
                    "a CSV with the header id,x_mm,y_mm")
+        if first_marks is None:
+            click.echo(f"after `calibrate fit`, draw the same marks again with the fitted "
+                       f"profile: calibrate pattern --config FITTED --second-round "
+                       f"{marks_path} (docs/calibration.md: two rounds of 30)")
         return
     pat = make_pattern(prof, output, mode=mode, count=count or 30)
     write_marks(marks_path, marks_document(prof, pat, output))
@@ -84,9 +102,14 @@ def pattern_cmd(config_path: Path | None, output: Path, marks_path: Path, count:
               "(default: the residual standard deviation).")
 @click.option("--max-iterations", type=click.IntRange(1, 10_000), default=100,
               show_default=True, help="Give up (and write nothing) after this many.")
+@click.option("--also", nargs=2, multiple=True,
+              type=click.Path(dir_okay=False, path_type=Path), metavar="MEASURED MARKS",
+              help="Servo profiles: the measured CSV and marks file of another round of the "
+              "pattern, fitted together with this one (repeatable).")
 @handle_errors
 def fit_cmd(measured: Path, marks_path: Path, config_path: Path | None, output: Path,
-            sigma: float | None, max_iterations: int) -> None:
+            sigma: float | None, max_iterations: int,
+            also: tuple[tuple[Path, Path], ...]) -> None:
     """Fit a1, b1, a2, b2, w and the home angles (servos: the curves and dead bands) to
     MEASURED (CSV id,x_mm,y_mm)."""
     from fivebar_host.calibrate.fit import calibrate as run_fit
@@ -96,8 +119,14 @@ def fit_cmd(measured: Path, marks_path: Path, config_path: Path | None, output: 
     prof = load(config_path)
     pat = read_pattern(marks_path)
     meas = read_measured(measured, pat)
+    if also and prof.joints is None:
+        raise click.UsageError("--also is for servo profiles")
     if prof.joints is not None:
-        _fit_servo(prof, pat, meas, measured, marks_path, output, sigma, max_iterations)
+        more = []
+        for m_csv, m_json in also:
+            p2 = read_pattern(m_json)
+            more.append((p2, read_measured(m_csv, p2)))
+        _fit_servo(prof, pat, meas, measured, marks_path, output, sigma, max_iterations, more)
         return
     cal = run_fit(prof, pat, meas, sigma=sigma, max_iterations=max_iterations)
     for line in report_lines(cal, prof):
@@ -111,7 +140,8 @@ def fit_cmd(measured: Path, marks_path: Path, config_path: Path | None, output: 
 
 
 def _fit_servo(prof: Profile, pat: PatternMarks, meas: Measured, measured: Path, marks_path: Path,
-               output: Path, sigma: float | None, max_iterations: int) -> None:
+               output: Path, sigma: float | None, max_iterations: int,
+               also: list[tuple[PatternMarks, Measured]]) -> None:
     """`calibrate fit` on a servo profile: curves, dead bands and geometry."""
     from fivebar_host.calibrate.servo import (
         calibrate_servo,
@@ -119,12 +149,15 @@ def _fit_servo(prof: Profile, pat: PatternMarks, meas: Measured, measured: Path,
         write_fitted_servo,
     )
 
-    cal = calibrate_servo(prof, pat, meas, sigma=sigma, max_iterations=max_iterations)
+    cal = calibrate_servo(prof, pat, meas, sigma=sigma, max_iterations=max_iterations,
+                          also=also)
     for line in servo_report_lines(cal):
         click.echo(line)
     note = (f"[geometry] and [joints] curves and dead bands fitted by `fivebar calibrate "
-            f"fit` on {date.today().isoformat()}\nfrom {meas.ids.size} marks of {measured} "
-            f"(pattern {marks_path}), starting from {prof.source}; rms residual "
+            f"fit` on {date.today().isoformat()}\nfrom {cal.pulses.shape[0]} marks of "
+            f"{measured} (pattern {marks_path})"
+            + "".join(f" and {m.source}" for _, m in also)
+            + f", starting from {prof.source}; rms residual "
             f"{cal.result.rms_after_mm:.4f} mm")
     write_fitted_servo(output, prof, cal, note)
     click.echo(f"wrote {output}")
