@@ -58,12 +58,12 @@ def run(tmp: Path) -> list[list[tuple[int, float]]]:
         for line in (f"G92 A{CENTRE} B{CENTRE}", "G91"):
             if s.send(line) != protocol.Ok():
                 raise sim.EmulatorError(f"{line} refused")
-        replies = s.stream([wire.g1(a, b, p) for a, b, p in SEGMENTS], numbered_from=3)
+        # the job, then 0.3 s of dwell: the last 8 frames are at rest whatever the pace
+        rest = [wire.g1(None, None, 60_000) for _ in range(5)]
+        replies = s.stream([wire.g1(a, b, p) for a, b, p in SEGMENTS] + rest, numbered_from=3)
         if any(r != protocol.Ok() for r in replies):
             raise sim.EmulatorError(f"refused: {replies}")
         s.wait_idle()
-        for _ in range(10):  # frames at rest after the job
-            s.status()
         trace = dev.finish()
     finally:
         dev.close()
