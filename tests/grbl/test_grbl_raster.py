@@ -1,0 +1,123 @@
+"""LaserGRBL-style raster files through `fivebar bridge` (issue 32): each row of run-length
+`G1 X.. S..` moves is recognised as a scanline and burned by the raster machinery at one
+speed, the power changing at the file's run boundaries and nowhere else.
+
+The emulator tests stream a small file with a character-counting GRBL sender and measure the
+burn from the pin trace (`benchmarks/lasergrbl.py`: step pulses → forward kinematics, the
+laser pin's PWM) against the file's own runs — cycle-exact, not real time."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from benchmarks import lasergrbl as lg
+from fivebar_host.bridge import scanlines
+from fivebar_host.compile.incremental import OnlineCompiler, Solved
+from fivebar_host.config import load_profile
+from fivebar_host.program import Kind
+
+ORIGIN = (0.0, 95.0)
+H = 0.1
+
+
+def _row_moves(oc: OnlineCompiler, s_row: np.ndarray, y: float, *, dynamic: bool,
+               feed: float = 50.0) -> list[Solved]:
+    return lg.row_moves(oc, s_row, y, dynamic=dynamic, feed_mm_s=feed)
+
+
+def test_a_row_of_runs_becomes_one_scanline_with_the_files_powers() -> None:
+    prof = load_profile(None)
+    oc = OnlineCompiler(prof, "+-", 0.05, True)
+    row = lg.image(1, 120, seed=5)[0]
+    row[0] = row[-1] = 450  # burned to both ends: the scanline is the whole row
+    moves = _row_moves(oc, row, 100.0, dynamic=True)
+    found = scanlines.find(moves)
+    assert len(found) == 1
+    sc = found[0]
+    assert (sc.first, sc.end) == (0, len(moves))
+    assert sc.pitch == pytest.approx(H, abs=1e-9)
+    want = np.rint(255 * row / 1000).astype(np.uint8)  # the file's S, independently
+    assert np.array_equal(sc.power, want)
+    start = scanlines._steps(oc, oc.checker.inverse(np.array([[-2.0, 100.0]]))[0])
+    prog, _ = scanlines.compile_scan(oc, sc, start)
+    raster = prog.kind == Kind.RASTER
+    assert raster.sum() > 0 and (prog.kind == Kind.MOVE).sum() > 0  # travel, then the scan
+    # the G7 runs carry every pixel in order and 0 after the last (at F: M4 scale 1)
+    got = np.frombuffer(b"".join(r.powers for r in prog.runs), dtype=np.uint8)
+    assert np.array_equal(got, np.concatenate((want, [0])))
+    # progress: each piece names a move of the row, never going back
+    seg = prog.segment[raster]
+    assert seg.min() >= 0 and seg.max() == len(moves) - 1 and (np.diff(seg) >= 0).all()
+
+
+def test_m4_power_is_scaled_once_by_the_scan_speed() -> None:
+    prof = load_profile(None)
+    oc = OnlineCompiler(prof, "+-", 0.05, True)
+    row = np.array([600] * 10 + [300] * 10 + [900] * 10)
+    # F far above what the joints allow: the scan runs slower, M4 scales every power by v/F
+    moves = _row_moves(oc, row, 100.0, dynamic=True, feed=400.0)
+    sc = scanlines.find(moves)[0]
+    prog, _ = scanlines.compile_scan(oc, sc, scanlines._steps(oc, moves[0].th[0]))
+    got = np.frombuffer(b"".join(r.powers for r in prog.runs), dtype=np.uint8)[:-1]
+    assert sc.pitch == pytest.approx(10 * H)  # every run 1 mm: pixels of 1 mm
+    base = np.rint(255 * row[::10] / 1000)
+    ratio = got / base
+    assert ratio.max() < 0.999  # scaled down
+    assert np.ptp(ratio) < 0.02  # by one factor (the rounding aside)
+
+
+def test_moves_that_are_not_a_raster_row_stay_ordinary_moves() -> None:
+    prof = load_profile(None)
+    oc = OnlineCompiler(prof, "+-", 0.05, True)
+    one_power = _row_moves(oc, np.array([450] * 30 + [450] * 20), 100.0, dynamic=False)
+    assert scanlines.find(one_power) == []  # one power: a vector line, not a raster
+    # a corner: the second run turns
+    a = oc.solve(oc.checker.inverse(np.array([[0.0, 100.0]]))[0], (0.0, 100.0), [(2.0, 100.0)],
+                 rapid=False, draw=True, feed_mm_s=50.0, power=100, dynamic=False, arc=False)
+    assert a is not None
+    b = oc.solve(a.th[-1], (2.0, 100.0), [(2.0, 102.0)], rapid=False, draw=True,
+                 feed_mm_s=50.0, power=200, dynamic=False, arc=False)
+    assert b is not None
+    assert scanlines.find([a, b]) == []
+    # boundaries on no common pixel grid (0.1 and 0.0137 … mm)
+    assert scanlines.pitch(np.array([0.1, 0.2137, 0.3])) is None
+    assert scanlines.pitch(np.array([0.3, 0.5, 0.6])) == pytest.approx(0.1)
+
+
+def _burn(tmp_path: Path, spindle: int, rows: int, cols: int) -> tuple[lg.BurnFigures,
+                                                                        list[str]]:
+    prof = load_profile(None)
+    img = lg.image(rows, cols, seed=11)
+    lines, ref = lg.raster_file(img, 1 / H, 3000.0, spindle, (0.0, rows * H), ORIGIN)
+    trace = tmp_path / "pins.trace"
+    run = lg.stream_file(lines, trace, prof, ORIGIN, realtime=False)
+    return lg.burn_figures(trace, prof, ref, run.start), run.log
+
+
+@pytest.mark.sim
+@pytest.mark.parametrize("spindle", [3, 4])
+def test_lasergrbl_file_changes_power_at_the_run_boundaries_only(
+        tmp_path: Path, sim_build: object, spindle: int) -> None:
+    f, log = _burn(tmp_path, spindle, rows=4, cols=150)
+    print(f"M{spindle}: {f.line()}")
+    assert not [s for s in log if "runs as ordinary" in s]
+    assert f.boundaries > 40
+    assert f.coverage >= 0.999
+    assert f.max_distance_mm <= 0.05
+    assert f.inside_changes == 0
+    assert f.outside_steps == 0
+
+
+@pytest.mark.sim
+def test_the_check_sees_power_changes_inside_runs_without_scanlines(
+        tmp_path: Path, sim_build: object, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The same file with the scanlines switched off (every run its own planned move, M4
+    power following the planned speed): the trace shows changes inside constant runs, so
+    the check above can fail."""
+    monkeypatch.setattr(scanlines, "find", lambda chunk: [])
+    f, _ = _burn(tmp_path, 4, rows=2, cols=150)
+    print(f"without scanlines: {f.line()}")
+    assert f.inside_changes > 0
