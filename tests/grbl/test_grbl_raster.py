@@ -8,18 +8,22 @@ laser pin's PWM) against the file's own runs — cycle-exact, not real time."""
 
 from __future__ import annotations
 
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from grbl_client import GrblClient
+from grbl_support import ORIGIN, Running, start_bridge, stop_bridge
 
 from benchmarks import lasergrbl as lg
 from fivebar_host.bridge import scanlines
 from fivebar_host.compile.incremental import OnlineCompiler, Solved
 from fivebar_host.config import load_profile
 from fivebar_host.program import Kind
+from fivebar_host.raster import dose
 
-ORIGIN = (0.0, 95.0)
 H = 0.1
 
 
@@ -121,3 +125,103 @@ def test_the_check_sees_power_changes_inside_runs_without_scanlines(
     f, _ = _burn(tmp_path, 4, rows=2, cols=150)
     print(f"without scanlines: {f.line()}")
     assert f.inside_changes > 0
+
+
+def _stream_in_background(c: GrblClient, lines: list[str]) -> threading.Thread:
+    def send() -> None:
+        try:
+            c.stream(lines, timeout=120)
+        except (OSError, TimeoutError):  # a reset drops lines: the sender gives up
+            pass
+
+    th = threading.Thread(target=send, daemon=True)
+    th.start()
+    return th
+
+
+def _inside_a_row(run: Running, lo: float, hi: float, timeout: float = 30.0) -> bool:
+    """Wait until the machine runs with the pen inside x ∈ (lo, hi) on the image's rows."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        x, y, _ = run.core._mpos()
+        if run.core.grbl_state() == "Run" and lo < x < hi and ORIGIN[1] < y < ORIGIN[1] + 0.6:
+            return True
+        time.sleep(0.005)
+    return False
+
+
+@pytest.mark.sim
+def test_a_feed_hold_inside_a_scanline_resumes_the_burn_in_place(
+        tmp_path: Path, sim_build: object) -> None:
+    """`!` in the middle of a row: Hold:0, the laser off and the pen still while held; `~`
+    finishes the file, every run boundary still changes the power where it should, and the
+    only changes inside a run are the hold's laser-off and the resume's laser-on, next to
+    each other."""
+    prof = load_profile(None)
+    run = start_bridge("sim", tmp_path, realtime=True)
+    img = lg.image(6, 150, seed=11)
+    lines, ref = lg.raster_file(img, 1 / H, 3000.0, 4, (0.0, 0.6), ORIGIN)
+    try:
+        c = run.client()
+        start = (run.core.machine.status.a, run.core.machine.status.b)
+        assert c.command("$X")[1] == "ok"
+        th = _stream_in_background(c, lines)
+        assert _inside_a_row(run, ORIGIN[0] + 4.0, ORIGIN[0] + 11.0)
+        c.write(b"!")
+        time.sleep(0.3)
+        assert run.core.grbl_state() == "Hold:0"
+        held = run.core._mpos()
+        time.sleep(0.3)
+        assert run.core._mpos() == held  # still
+        assert run.core.machine.status.laser == 0
+        c.write(b"~")
+        th.join(120)
+        assert not th.is_alive()
+        c.wait_state("Idle", 60)
+        c.close()
+    finally:
+        stop_bridge(run)
+    assert run.trace is not None
+    f = lg.burn_figures(run.trace, prof, ref, start)
+    print(f"hold and resume: {f.line()}; inside: {f.inside_at}")
+    assert f.coverage >= 0.999 and f.max_distance_mm <= 0.05
+    assert f.outside_steps == 0
+    assert f.inside_changes <= 2
+    if f.inside_changes == 2:  # the hold's off and the resume's on, at the same place
+        (r0, x0, _), (r1, x1, _) = f.inside_at
+        assert r0 == r1 and abs(x0 - x1) <= 0.1
+
+
+@pytest.mark.sim
+def test_a_soft_reset_inside_a_scanline_turns_the_laser_off(
+        tmp_path: Path, sim_build: object) -> None:
+    """Ctrl-X in the middle of a row: the machine stops with the laser off, the look-ahead is
+    dropped, the banner comes, and nothing burns afterwards."""
+    run = start_bridge("sim", tmp_path, realtime=True)
+    img = lg.image(6, 150, seed=11)
+    lines, _ = lg.raster_file(img, 1 / H, 3000.0, 3, (0.0, 0.6), ORIGIN)
+    try:
+        c = run.client()
+        assert c.command("$X")[1] == "ok"
+        _stream_in_background(c, lines)
+        assert _inside_a_row(run, ORIGIN[0] + 4.0, ORIGIN[0] + 11.0)
+        n = len(c.lines)
+        c.write(b"\x18")
+        c.wait_for(lambda s: s.startswith("Grbl 1.1h"), 10, n)
+        time.sleep(0.5)
+        assert run.core.grbl_state() == "Idle"
+        assert run.core.machine.status.laser == 0
+        assert not run.core.pending
+        stopped = run.core._mpos()
+        time.sleep(0.5)
+        assert run.core._mpos() == stopped
+        c.close()
+    finally:
+        stop_bridge(run)
+    assert run.trace is not None
+    pt = dose.read_pins(run.trace)
+    rise, fall = dose.high_intervals(pt)
+    steps = dose.motion_of(pt).step_cycles()
+    # the laser's last fall comes at the reset, with the last step (within a step's time at
+    # F3000, ~0.5 ms): nothing burns after it, though the bridge ran on for a second
+    assert rise.size and fall.max() - steps.max() < 0.002 * dose.F_CPU
