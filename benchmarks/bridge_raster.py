@@ -19,6 +19,7 @@ Also printed: a row's planned cost beyond its burn (the two overscan ramps, the 
 next row) and the px/s it allows — what limits the rate on a profile.
 
 Run: python benchmarks/bridge_raster.py [--rows 200] [--cols 400] [--config PROFILE]
+[--accel RAD_S2]
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from __future__ import annotations
 import argparse
 import sys
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -52,6 +54,8 @@ def main() -> int:
     ap.add_argument("--cols", type=int, default=400)
     ap.add_argument("--config", default=None, help="a machine profile (default: the bundled "
                     "configs/default.toml)")
+    ap.add_argument("--accel", type=float, default=None, help="the profile with this "
+                    "max_joint_rad_s2 instead (what the joints' acceleration costs)")
     args = ap.parse_args()
     register()
     reason = toolchain_missing()
@@ -59,6 +63,10 @@ def main() -> int:
         print(f"emulator unavailable: {reason}")
         return 1
     prof = load_profile(args.config)
+    if args.accel is not None:
+        prof = replace(prof, motion=replace(prof.motion, max_joint_rad_s2=args.accel))
+        args.config = (f"{args.config or 'configs/default.toml'} with max_joint_rad_s2 "
+                       f"{args.accel:g}")
     img = lg.image(args.rows, args.cols, seed=7)
     h = 0.1
     print(f"LaserGRBL-style file: {args.rows} rows x {args.cols} px at 10 px/mm, F{FEED:g}, "
@@ -78,6 +86,11 @@ def main() -> int:
         with tempfile.TemporaryDirectory() as tmp:
             trace = Path(tmp) / "pins.trace"
             run = lg.stream_file(lines, trace, prof, ORIGIN, realtime=True)
+            if run.error is not None:
+                print(f"M{spindle}: the sender got {run.error}; the bridge said:")
+                print("\n".join("  " + s for s in run.log if not s.startswith("'"))[:800])
+                ok = False
+                continue
             f = lg.burn_figures(trace, prof, ref, run.start)
         image_px = args.rows * args.cols
         rate = image_px / f.seconds

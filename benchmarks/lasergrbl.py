@@ -34,6 +34,7 @@ laser high intervals):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -316,6 +317,7 @@ class Streamed:
     ok_s: float
     idle_s: float
     log: list[str]
+    error: str | None = None  # the sender's first error reply, if any
 
 
 def stream_file(lines: list[str], trace: Path, profile: Profile,
@@ -344,7 +346,10 @@ def stream_file(lines: list[str], trace: Path, profile: Profile,
         snd.sock.sendall(b"$X\n")
         snd.wait(lambda x: x == "ok")
         t0 = time.monotonic()
-        snd.stream(lines)
+        try:
+            snd.stream(lines)
+        except RuntimeError as e:
+            return Streamed((st.a, st.b), time.monotonic() - t0, math.nan, log, str(e))
         t_ok = time.monotonic() - t0
         snd.wait_idle()
         t_idle = time.monotonic() - t0

@@ -56,6 +56,7 @@ from fivebar_host.compile.incremental import Batch, OnlineCompiler, Solved
 from fivebar_host.compile.steps import absolute_steps, step_angles
 from fivebar_host.errors import FivebarError, JobError
 from fivebar_host.program import Kind, PixelRun, Program
+from fivebar_host.protocol import P_MIN_US
 from fivebar_host.raster import lines as linesmod
 from fivebar_host.raster import motion, speed, travel
 from fivebar_host.raster.grid import ScanGrid, Scanline
@@ -285,6 +286,8 @@ def compile_scan(oc: OnlineCompiler, sc: Scan, start: IntArray) -> tuple[Program
         raise ScanRefusedError(f"{rate.max():.0f} steps/s exceeds the firmware's step rate")
     groups = linesmod.groups(sm, ch)
     tg, du = travel.joint_move(prof, start, sm.steps[0])
+    if not du.shape[0]:  # already there: a G7 line's deltas need a target before it
+        tg, du = np.asarray(start, dtype=np.int64).reshape(1, 2), np.array([P_MIN_US])
     first = int(sc.move[0])
     move_in = Program.moves(tg[:, 0], tg[:, 1], du, 0, first)
     run = np.full(sm.duration_us.shape[0], -1, dtype=np.int64)

@@ -8,6 +8,7 @@ laser pin's PWM) against the file's own runs — cycle-exact, not real time."""
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 from pathlib import Path
@@ -129,10 +130,9 @@ def test_the_check_sees_power_changes_inside_runs_without_scanlines(
 
 def _stream_in_background(c: GrblClient, lines: list[str]) -> threading.Thread:
     def send() -> None:
-        try:
+        # a reset drops lines: the sender gives up
+        with contextlib.suppress(OSError, TimeoutError):
             c.stream(lines, timeout=120)
-        except (OSError, TimeoutError):  # a reset drops lines: the sender gives up
-            pass
 
     th = threading.Thread(target=send, daemon=True)
     th.start()
