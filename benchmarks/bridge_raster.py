@@ -19,7 +19,7 @@ Also printed: a row's planned cost beyond its burn (the two overscan ramps, the 
 next row) and the px/s it allows — what limits the rate on a profile.
 
 Run: python benchmarks/bridge_raster.py [--rows 200] [--cols 400] [--config PROFILE]
-[--accel RAD_S2]
+[--accel RAD_S2] [--no-scanlines]
 """
 
 from __future__ import annotations
@@ -56,7 +56,13 @@ def main() -> int:
                     "configs/default.toml)")
     ap.add_argument("--accel", type=float, default=None, help="the profile with this "
                     "max_joint_rad_s2 instead (what the joints' acceleration costs)")
+    ap.add_argument("--no-scanlines", action="store_true", help="every run its own planned "
+                    "move, as before the scanlines (the comparison)")
     args = ap.parse_args()
+    if args.no_scanlines:
+        from fivebar_host.bridge import scanlines
+
+        scanlines.find = lambda chunk: []  # type: ignore[assignment]
     register()
     reason = toolchain_missing()
     if reason is not None:
@@ -98,7 +104,8 @@ def main() -> int:
         turn_ms = (f.seconds - burn_s) / args.rows * 1e3
         refused = [s for s in run.log if "runs as ordinary" in s]
         print(f"M{spindle}: {len(lines)} G-code lines, last ok {run.ok_s:.1f} s, idle "
-              f"{run.idle_s:.1f} s; {len(refused)} raster lines run as ordinary moves")
+              f"{run.idle_s:.1f} s; {len(refused)} raster lines run as ordinary moves; motion "
+              f"{f.motion_s:.2f} s executed / {run.planned_s:.2f} s planned")
         checks = [
             (f"px/s >= 1.0 x GRBL's {GRBL_PX_S:.0f}", rate >= GRBL_PX_S,
              f"{rate:.0f} px/s ({rate / GRBL_PX_S:.2f}x; {image_px} px in {f.seconds:.2f} s;"

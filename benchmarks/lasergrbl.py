@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from fivebar_host.compile.incremental import OnlineCompiler, Solved
+from fivebar_host.compile.incremental import Batch, OnlineCompiler, Solved
 from fivebar_host.compile.steps import step_angles
 from fivebar_host.config import Profile
 from fivebar_host.raster import dose
@@ -175,6 +175,7 @@ class BurnFigures:
     changes: int
     #: (row, x mm, cycle) of each change inside a constant run
     inside_at: tuple[tuple[int, float, float], ...] = ()
+    motion_s: float = 0.0  # from the first step to the last
 
     @property
     def rate(self) -> float:
@@ -304,8 +305,9 @@ def burn_figures(trace: str | Path, profile: Profile, ref: Reference,
                 ok |= inb & (powers[np.clip(c, 0, powers.shape[0] - 1)] > 0)
             bad[np.flatnonzero(sel)[~ok]] = True
         outside = int(bad.sum())
+    motion_s = float(steps[-1] - steps[0]) / dose.F_CPU if steps.size else 0.0
     return BurnFigures(ref.pixels, seconds, total, covered, dist_max, inside, outside,
-                       int(ev.shape[0]), tuple(inside_at))
+                       int(ev.shape[0]), tuple(inside_at), motion_s)
 
 
 @dataclass(frozen=True)
@@ -318,6 +320,7 @@ class Streamed:
     idle_s: float
     log: list[str]
     error: str | None = None  # the sender's first error reply, if any
+    planned_s: float = 0.0  # the batches' planned time, summed
 
 
 def stream_file(lines: list[str], trace: Path, profile: Profile,
@@ -337,6 +340,14 @@ def stream_file(lines: list[str], trace: Path, profile: Profile,
     core = Bridge(link, profile, laser=True, tolerance_mm=profile.motion.tolerance_mm,
                   origin_mm=origin, log=log.append)
     st = link.status()
+    planned = [0.0]
+    submit = core.machine.submit
+
+    def count(batch: Batch) -> None:
+        planned[0] += batch.duration_s
+        submit(batch)
+
+    core.machine.submit = count  # type: ignore[method-assign]
     server = Server(core, None, ("127.0.0.1", 0))
     core.start()
     server.start()
@@ -349,7 +360,8 @@ def stream_file(lines: list[str], trace: Path, profile: Profile,
         try:
             snd.stream(lines)
         except RuntimeError as e:
-            return Streamed((st.a, st.b), time.monotonic() - t0, math.nan, log, str(e))
+            return Streamed((st.a, st.b), time.monotonic() - t0, math.nan, log, str(e),
+                            planned[0])
         t_ok = time.monotonic() - t0
         snd.wait_idle()
         t_idle = time.monotonic() - t0
@@ -358,7 +370,7 @@ def stream_file(lines: list[str], trace: Path, profile: Profile,
         server.stop()
         core.close()
         link.close()
-    return Streamed((st.a, st.b), t_ok, t_idle, log)
+    return Streamed((st.a, st.b), t_ok, t_idle, log, None, planned[0])
 
 
 def row_moves(oc: OnlineCompiler, s_row: NDArray[np.int64], y: float, *, dynamic: bool,

@@ -56,6 +56,13 @@ def test_a_row_of_runs_becomes_one_scanline_with_the_files_powers() -> None:
     # progress: each piece names a move of the row, never going back
     seg = prog.segment[raster]
     assert seg.min() >= 0 and seg.max() == len(moves) - 1 and (np.diff(seg) >= 0).all()
+    # from the overscan start itself: still a target before the first G7 line (a stand)
+    over = np.array([prog.a[raster][0], prog.b[raster][0]])
+    first_g7 = int(np.flatnonzero(raster)[0])
+    at = np.array([prog.a[first_g7 - 1], prog.b[first_g7 - 1]])
+    again, _ = scanlines.compile_scan(oc, sc, at)
+    assert again.kind[1] == Kind.MOVE and again.p_us[1] == 100
+    assert np.array_equal([again.a[1], again.b[1]], at) and not np.array_equal(at, over)
 
 
 def test_m4_power_is_scaled_once_by_the_scan_speed() -> None:
