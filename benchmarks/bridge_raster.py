@@ -59,10 +59,6 @@ def main() -> int:
     ap.add_argument("--no-scanlines", action="store_true", help="every run its own planned "
                     "move, as before the scanlines (the comparison)")
     args = ap.parse_args()
-    if args.no_scanlines:
-        from fivebar_host.bridge import scanlines
-
-        scanlines.find = lambda chunk: []  # type: ignore[assignment]
     register()
     reason = toolchain_missing()
     if reason is not None:
@@ -87,6 +83,11 @@ def main() -> int:
     print(f"GRBL 1.1h on such a file (issue 32, Cartesian): {GRBL_PX_S:.0f} px/s; the file's F: "
           f"{FEED / 60 / h:.0f} px/s")
     ok = True
+    if args.no_scanlines:
+        from fivebar_host.bridge import scanlines
+
+        scanlines.find = lambda chunk: []  # type: ignore[assignment]
+        print("scanlines off: every run its own planned move (the comparison)")
     for spindle in (3, 4):
         lines, ref = lg.raster_file(img, 1 / h, FEED, spindle, (0.0, args.rows * h), ORIGIN)
         with tempfile.TemporaryDirectory() as tmp:
