@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fivebar_host.bridge import codes, policy, views
+from fivebar_host.bridge import codes, policy, scanlines, views
 from fivebar_host.bridge.codes import GrblAlarmError, GrblError, ascii_text
 from fivebar_host.bridge.machine import MachineDriver
 from fivebar_host.bridge.realtime import (
@@ -120,6 +120,9 @@ class Bridge:
         self.flushing = False  # `flush` is planning the look-ahead into batches
         self.plan_th = self.th
         self.plan_pt = self.modal.position[:2]
+        #: the last batch ended with a raster scanline: where it ended in the file (the
+        #: machine is at its overscan end; `scanlines.Cursor`)
+        self.scan_end: tuple[float, float] | None = None
         self.alarm: int | None = None
         self.locked = not st.homed  # position unknown: GRBL's boot alarm lock
         self.check_mode = False
@@ -275,7 +278,9 @@ class Bridge:
                 self._stop_motion()
                 continue
             n_moves = sum(isinstance(i, Solved) for i in self.pending)
-            if n_moves >= LOOKAHEAD_MOVES:
+            open_scan = self._open_scan()
+            if (n_moves - open_scan >= LOOKAHEAD_MOVES
+                    or n_moves >= scanlines.SCAN_LOOKAHEAD):
                 if self.machine.batches.qsize() < 1:
                     self.flush()
                 else:
@@ -283,8 +288,10 @@ class Bridge:
                 continue
             got = self.input.take(0.01 if self.pending else 0.1)
             if got is None:
+                # a raster scanline still arriving waits for the sender's pause, not for
+                # the machine: it is burned once complete (`scanlines`)
                 if self.pending and (time.monotonic() - self._last_line_at > FLUSH_IDLE_S
-                                     or self.machine.idle):
+                                     or (self.machine.idle and not open_scan)):
                     self.flush()
                 continue
             self._last_line_at = time.monotonic()
@@ -296,17 +303,30 @@ class Bridge:
         """Accepted moves the machine has not run to their end."""
         return self.moves_acked - self.machine.moves_done
 
+    def _open_scan(self) -> int:
+        """Moves at the end of the look-ahead that form a raster scanline the next line may
+        continue (`scanlines.open_tail`; 0 without the laser)."""
+        return scanlines.open_tail(self.pending) if self.laser and self.pending else 0
+
     def _wait_window(self) -> bool:
         """Hold the line's `ok` until at most `ok_window` accepted moves are ahead of the
         motion, running the look-ahead when the machine has nothing else (module doc);
-        False when a reset, an alarm or the bridge's end came first (no reply then)."""
-        if not self.ok_window:
+        False when a reset, an alarm or the bridge's end came first (no reply then).
+
+        A raster scanline still arriving is not held (it is burned once complete, so the
+        window cannot cut it); once a line ends it, the complete scanline is planned and
+        queued at once while the machine runs the one before (`scanlines.complete`), and
+        the window holds as usual."""
+        if not self.ok_window or self._open_scan():
             return True
         while self._moves_ahead() > self.ok_window:
             if self._reset_req.is_set() or self._stop.is_set() or self.alarm is not None:
                 return False
-            if self.pending and self.machine.batches.empty() and not self.machine.busy:
-                self.flush()
+            if self.pending and self.machine.batches.empty():
+                if not self.machine.busy:
+                    self.flush()
+                elif self.laser and (k := scanlines.complete(self.pending)):
+                    self.flush(k)
             time.sleep(0.005)
         return True
 
@@ -398,9 +418,11 @@ class Bridge:
             self.machine.hold()
 
     # ------------------------------------------------------------------ batches
-    def flush(self) -> None:
-        """Plan the look-ahead buffer into batches and hand them to the machine."""
-        items, self.pending = self.pending, []
+    def flush(self, upto: int | None = None) -> None:
+        """Plan the look-ahead buffer (its first `upto` items) into batches and hand them
+        to the machine."""
+        n = len(self.pending) if upto is None else upto
+        items, self.pending = self.pending[:n], self.pending[n:]
         self.flushing = True  # planning: Run, not Idle, until the batches are queued
         try:
             self._flush(items)
@@ -426,9 +448,9 @@ class Bridge:
     def _submit_chunk(self, chunk: list[Solved]) -> None:
         if not chunk:
             return
-        batch = self.compiler.plan(self.plan_th, self.plan_pt, chunk)
-        self.plan_th = chunk[-1].th[-1]
-        self.plan_pt = (float(chunk[-1].pts[-1, 0]), float(chunk[-1].pts[-1, 1]))
+        cur = scanlines.Cursor(self.plan_th, self.plan_pt, self.scan_end)
+        batch = scanlines.plan(self.compiler, cur, chunk, self.log)
+        self.plan_th, self.plan_pt, self.scan_end = cur.th, cur.pt, cur.scan_end
         self.machine.submit(batch)
 
     def wait_idle(self, timeout_s: float = 600.0) -> bool:
@@ -513,6 +535,7 @@ class Bridge:
         self.th = self.plan_th = self.compiler.angles_of_steps(st.a, st.b)
         self._sync_position()
         self.plan_pt = self.modal.position[:2]
+        self.scan_end = None
         self.compiler.pen_down = False
 
     def _stop_motion(self) -> None:

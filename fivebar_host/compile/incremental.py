@@ -90,6 +90,9 @@ class Solved:
     power: int  # 0–255 at the programmed feed
     dynamic: bool  # M4: power scaled with the real speed (GRBL laser mode)
     jog: bool = False
+    #: a straight move (G0/G1, not an arc, not a jog): its start and end, machine mm, which
+    #: `bridge.scanlines` reads raster scanlines from (None otherwise)
+    line: tuple[float, float, float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -154,8 +157,11 @@ class OnlineCompiler:
                 th, p, length = self._chords(th_from, start, pts, arc)
         except CheckFailedError as cf:
             raise self._refuse(cf) from None
+        line = None
+        if pts.shape[0] == 1 and not arc and not jog:
+            line = (float(start[0]), float(start[1]), float(pts[0, 0]), float(pts[0, 1]))
         return Solved(th, p, length, draw and not rapid, feed_mm_s, power if draw else 0,
-                      dynamic, jog)
+                      dynamic, jog, line)
 
     def _chords(self, th_from: FloatArray, start: tuple[float, float], pts: FloatArray,
                 arc: bool) -> tuple[FloatArray, FloatArray, FloatArray]:
