@@ -18,7 +18,7 @@ laser high intervals):
 * a *change* on the pin (`pin_changes`): a PWM rise after a laser-off stretch, one that
   moves the high time to a new level (medians of `LEVEL_N` pulses `WIDTH_TOL` apart: the
   trace's edges jitter by ±3 cycles; `RESTART_TOL` at a rise that restarts the PWM period,
-  as the firmware's write of a new power does), or a laser-off fall (`dose.off_writes`); changes
+  as the firmware's write of a new power does), or a laser-off fall (`changes.off_writes`); changes
   within `MERGE_PERIODS` PWM periods are one;
 * each run boundary of the file (a power change between neighbouring runs, the row's first
   and last burned pixel included) is *covered* when a change happens with the pen within
@@ -26,7 +26,7 @@ laser high intervals):
   the nearest change;
 * a change with the pen on a row's burned stretch farther than `NEAR_MM` from every
   boundary is a change *inside a constant run*;
-* a step taken with the laser on (`dose.laser_on`) with the pen off every burning run (by
+* a step taken with the laser on (`raster.dose.laser_on`) with the pen off every burning run (by
   more than `NEAR_MM` along the row, or off the row's band) is a laser-on step *outside*;
 * px/s: the rows' burned stretches in pixels ÷ the time from the first laser rise to the
   last fall.
@@ -44,7 +44,8 @@ from numpy.typing import NDArray
 from fivebar_host.compile.incremental import Batch, OnlineCompiler, Solved
 from fivebar_host.compile.steps import step_angles
 from fivebar_host.config import Profile
-from fivebar_host.raster import dose
+from fivebar_host.raster import changes, dose
+from fivebar_host.raster import trace as rtrace
 from kinematics.arrays import FloatArray
 
 #: S values of the random image's runs (0 = white), with `$30` = 1000.
@@ -211,30 +212,30 @@ def _strongest(cand: NDArray[np.int64], score: FloatArray) -> NDArray[np.int64]:
     return np.array([int(g[np.argmax(score[g])]) for g in groups], dtype=np.int64)
 
 
-def pin_changes(pt: dose.PinTrace) -> FloatArray:
+def pin_changes(pt: rtrace.PinTrace) -> FloatArray:
     """Cycles of the laser's power changes on the pin (module doc): rises after the laser
     was off; rises where the high time moves to a new level (medians `WIDTH_TOL` apart), or
-    that restart the PWM period (`dose.restarts`: the firmware's write of a new power) with
+    that restart the PWM period (`changes.restarts`: the firmware's write of a new power) with
     the level moving by `RESTART_TOL` (a restart at the same power is none); laser-off
-    falls (`dose.off_writes`); changes within `MERGE_PERIODS` PWM periods are one."""
-    rise, fall = dose.high_intervals(pt)
+    falls (`changes.off_writes`); changes within `MERGE_PERIODS` PWM periods are one."""
+    rise, fall = rtrace.high_intervals(pt)
     if not rise.size:
         return np.zeros(0)
     gap = np.diff(rise, prepend=-(10**12))
     step = _level_steps(fall - rise)
-    _, restart = dose.restarts(pt)
-    flag = gap > dose.PWM_PERIOD + dose.SLACK
+    _, restart = changes.restarts(pt)
+    flag = gap > rtrace.PWM_PERIOD + changes.SLACK
     flag[_strongest(np.flatnonzero(step >= WIDTH_TOL), step)] = True
     flag |= (restart > 0) & (step >= RESTART_TOL)
-    ev = np.sort(np.concatenate((rise[flag].astype(np.float64), dose.off_writes(pt))))
+    ev = np.sort(np.concatenate((rise[flag].astype(np.float64), changes.off_writes(pt))))
     if not ev.size:
         return ev
-    keep = np.concatenate(([True], np.diff(ev) > MERGE_PERIODS * dose.PWM_PERIOD))
+    keep = np.concatenate(([True], np.diff(ev) > MERGE_PERIODS * rtrace.PWM_PERIOD))
     out: FloatArray = ev[keep]
     return out
 
 
-def _pen(profile: Profile, mo: dose.Motion, cycles: FloatArray,
+def _pen(profile: Profile, mo: rtrace.Motion, cycles: FloatArray,
          start: tuple[int, int] = (0, 0)) -> FloatArray:
     """The pen (N, 2) mm at the cycles: forward kinematics of the motors' positions, steps
     from the homed pose (the trace counts from `start`, where the machine stood)."""
@@ -258,10 +259,10 @@ def burn_figures(trace: str | Path, profile: Profile, ref: Reference,
                  start: tuple[int, int] = (0, 0)) -> BurnFigures:
     """The figures of a raster file's burn from the pin trace (module doc); `start`: the
     machine's steps from the homed pose when the trace began."""
-    pt = dose.read_pins(trace)
-    mo = dose.motion_of(pt)
-    rise, fall = dose.high_intervals(pt)
-    seconds = float(fall.max() - rise.min()) / dose.F_CPU if rise.size else 0.0
+    pt = rtrace.read_pins(trace)
+    mo = rtrace.motion_of(pt)
+    rise, fall = rtrace.high_intervals(pt)
+    seconds = float(fall.max() - rise.min()) / rtrace.F_CPU if rise.size else 0.0
     ev = pin_changes(pt)
     where = _pen(profile, mo, ev, start) if ev.size else np.zeros((0, 2))
     rows = _row_of(ref, where)
@@ -305,7 +306,7 @@ def burn_figures(trace: str | Path, profile: Profile, ref: Reference,
                 ok |= inb & (powers[np.clip(c, 0, powers.shape[0] - 1)] > 0)
             bad[np.flatnonzero(sel)[~ok]] = True
         outside = int(bad.sum())
-    motion_s = float(steps[-1] - steps[0]) / dose.F_CPU if steps.size else 0.0
+    motion_s = float(steps[-1] - steps[0]) / rtrace.F_CPU if steps.size else 0.0
     return BurnFigures(ref.pixels, seconds, total, covered, dist_max, inside, outside,
                        int(ev.shape[0]), tuple(inside_at), motion_s)
 

@@ -23,7 +23,7 @@ from fivebar_host.bridge import scanlines
 from fivebar_host.compile.incremental import OnlineCompiler, Solved
 from fivebar_host.config import load_profile
 from fivebar_host.program import Kind
-from fivebar_host.raster import dose
+from fivebar_host.raster import trace as rtrace
 
 H = 0.1
 
@@ -226,9 +226,9 @@ def test_a_soft_reset_inside_a_scanline_turns_the_laser_off(
     finally:
         stop_bridge(run)
     assert run.trace is not None
-    pt = dose.read_pins(run.trace)
-    rise, fall = dose.high_intervals(pt)
-    steps = dose.motion_of(pt).step_cycles()
+    pt = rtrace.read_pins(run.trace)
+    rise, fall = rtrace.high_intervals(pt)
+    steps = rtrace.motion_of(pt).step_cycles()
     # the laser's last fall comes at the reset, with the last step (within a step's time at
     # F3000, ~0.5 ms): nothing burns after it, though the bridge ran on for a second
-    assert rise.size and fall.max() - steps.max() < 0.002 * dose.F_CPU
+    assert rise.size and fall.max() - steps.max() < 0.002 * rtrace.F_CPU
