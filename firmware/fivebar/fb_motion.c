@@ -341,10 +341,18 @@ void mo_prepare_pen(mo_block_t *b, uint16_t from_us, uint16_t to_us, uint16_t mo
 	b->r2[0] = (uint32_t)move_ms + settle_ms;
 }
 
-/* Not inlined: its arrays would stay in the caller's frame (exec_g6's) through
- * everything else it calls, and the stack has a few dozen bytes to spare at
- * its deepest (python benchmarks/segcost.py prints it). */
-__attribute__((noinline)) uint8_t mo_prepare_fast(mo_block_t *b, int32_t da, int32_t db,
+/* fast_try's answer for a block the fast form does not take (a dwell, or
+ * steps too many or too far apart): the caller prepares the C form */
+#define PREP_C_FORM 0xffu
+
+/* The fast form straight from the move, or PREP_C_FORM.  Not inlined: its
+ * arrays would stay in the caller's frame (exec_g6's) through everything else
+ * it calls.  It returns before mo_prepare_cycles() runs, so that its 32 bytes
+ * of locals and 18 saved registers are off the stack during the C form's
+ * divisions: the default profile's G7 blocks take that way, and with the
+ * step interrupt's C path and mo_event() on top of it that was the stack's
+ * deepest point, 30 bytes above the static RAM (benchmarks/stack.py). */
+static __attribute__((noinline)) uint8_t fast_try(mo_block_t *b, int32_t da, int32_t db,
 						  uint32_t cycles, uint32_t min_interval)
 {
 	uint16_t n16[2], q16[2], m16[2];
@@ -369,13 +377,22 @@ __attribute__((noinline)) uint8_t mo_prepare_fast(mo_block_t *b, int32_t da, int
 		m16[i] = (uint16_t)m;
 	}
 	if (!fast || (!n16[0] && !n16[1]))  /* a dwell: the C path's waits */
-		return mo_prepare_cycles(b, da, db, cycles, min_interval);
+		return PREP_C_FORM;
 	fast_form16(&b->f, n16, q16, m16);
 	b->type = MO_BLK_MOVE;
 	b->dirs = dirs;
 	b->cycles = cycles;
 	b->fast = MO_FAST_FORMED;
 	return FB_OK;
+}
+
+uint8_t mo_prepare_fast(mo_block_t *b, int32_t da, int32_t db, uint32_t cycles,
+			uint32_t min_interval)
+{
+	uint8_t st = fast_try(b, da, db, cycles, min_interval);
+	if (st != PREP_C_FORM)
+		return st;
+	return mo_prepare_cycles(b, da, db, cycles, min_interval);
 }
 
 uint8_t mo_prepare(mo_block_t *b, int32_t da, int32_t db, uint32_t p_us, uint32_t min_interval)
