@@ -116,7 +116,7 @@ def main() -> None:
     ap.add_argument("--jobs", default=",".join(["g6", *JOBS]))
     ap.add_argument("--segments", type=int, default=1000, help="the g6 job's segments")
     args = ap.parse_args()
-    print(f"{'job':16s} {'headroom':>8s}  lowest SP  deepest in            what")
+    print(f"{'job':16s} {'headroom':>8s}  lowest SP  deepest near          what")
     for name in args.jobs.split(","):
         with tempfile.TemporaryDirectory() as tmp:
             depth, what = (g6_job(Path(tmp), args.segments) if name == "g6"

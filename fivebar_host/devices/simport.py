@@ -55,8 +55,9 @@ URL options: `fivebar-sim://?trace=PATH&realtime=1&endstops=A,B&machine=NAME&res
   is random, the arms stay); `fresh=1`: a new machine at the home pose;
 - `stack=FILE`: the harness records, per flash address, the emulated cycles spent there and
   the lowest stack pointer seen, and the lowest of all (`# min_sp`), written to FILE when it
-  stops (fbsim `-P`; emulation about NNx slower); `devices.simstack.read_stack` turns it into
-  the stack's headroom at its deepest (bytes above the static RAM's end);
+  stops (fbsim `-P`: it then emulates one instruction a step, slower);
+  `devices.simstack.read_stack` turns it into the stack's headroom at its deepest (bytes
+  above the static RAM's end; `python benchmarks/stack.py`);
 - `drop=P`, `corrupt=P`, `seed=N`: line noise, as on the mock: each host→device byte other than
   a real-time byte is lost with probability P, or replaced by another printable byte that is
   not a real-time byte (seeded generator, default seed 0); line counting for the options

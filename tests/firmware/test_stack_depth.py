@@ -14,9 +14,10 @@ the pixel interrupt (TIMER1_COMPB) can come in; its frame, from the disassembly
 (`avr-objdump -d build/fivebar.elf`, __vector_12): the return address 2 bytes, 22 saved
 registers, 4 bytes of locals, 2 more for its call of advance(): 30 bytes.  32 leaves room for
 it on top of any measured point, plus the one byte by which the figure errs low
-(devices/simstack.py) and one spare.  The figure can fail: before the fix of fb_motion.c's
-mo_prepare_fast (the C form prepared inside the fast attempt's frame) the default profile's
-raster measured 30.
+(devices/simstack.py) and one spare.  The figures can fail: before the C form was prepared
+outside the fast attempt's frame (fb_motion.c mo_prepare_fast) and px_start/fast_start left
+the C path's frame (board_avr_step.c), the default profile's raster and the pen servo
+measured 30 and the raster under noise 0 to 30 (firmware/README.md "The stack").
 """
 
 from __future__ import annotations
