@@ -64,10 +64,14 @@
  * a median 3.3 us before their planned times, a fast-path scan's 6.6 us
  * after, with the same interrupt in between: ~158 cycles, 144 taken (with
  * both, the default profile's changes fall a median 0.02 us from their
- * crossings).  Stack: the nesting below adds one pixel interrupt frame (22
- * registers and its calls' returns, about 40 bytes) on top of this one.
+ * crossings).  Then 32 cycles came off the C path's entry (113 to 81 from
+ * the vector's jump to mo_event()'s call, counted on the disassembly: px_start
+ * and fast_start no longer inlined, 9 registers fewer saved, no frame), so its
+ * edges come that much sooner: 144 - 32.  Stack: the nesting below adds one
+ * pixel interrupt frame (2 + 22 registers + 4 bytes of locals + 2 for its
+ * call of advance(): 30 bytes) on top of this one (benchmarks/stack.py).
  */
-#define PX_C_LAG 144u
+#define PX_C_LAG 112u
 
 #define STEP_A_BIT PIN_STEP_A_BIT
 #define STEP_B_BIT PIN_STEP_B_BIT
@@ -101,7 +105,11 @@ static uint8_t step_pins(uint8_t motors)
 /* Start the fast block mo_event() just started at timer time base; returns
  * how much later it really starts (0, or the shift of a start from a stop
  * whose first step the C path had run past). */
-static uint16_t fast_start(uint16_t base)
+/* Not inlined (nor px_start, fb_raster.c): their locals and registers would
+ * be the C path's, saved by its prologue on every event and kept on the stack
+ * through mo_event() and the pixel interrupt nested in it, the stack's deepest
+ * point (13 bytes: 38 to 25 a frame; benchmarks/stack.py). */
+static __attribute__((noinline)) uint16_t fast_start(uint16_t base)
 {
 	fast_event_t e;
 	uint8_t rest = mo_fast_begin(base, &e);
@@ -171,8 +179,8 @@ static uint16_t fast_start(uint16_t base)
  * come in.  mo_event() makes its changes of the pixel timeline and the laser
  * with interrupts off (fb_motion.c).  Nothing else either side touches is
  * shared: the pixel interrupt writes px_state, OCR1B, TIMSK1's OCIE1B and
- * the laser.  Stack: one pixel interrupt frame more at most (about 40 bytes),
- * on top of this one (it cannot nest in itself).  Without a scan, mo_event()
+ * the laser.  Stack: one pixel interrupt frame more at most (30 bytes), on
+ * top of this one (it cannot nest in itself).  Without a scan, mo_event()
  * as before.
  */
 static uint16_t event_px_nested(void)

@@ -341,22 +341,23 @@ void mo_prepare_pen(mo_block_t *b, uint16_t from_us, uint16_t to_us, uint16_t mo
 	b->r2[0] = (uint32_t)move_ms + settle_ms;
 }
 
-/* Not inlined: its arrays would stay in the caller's frame (exec_g6's) through
- * everything else it calls, and the stack has a few dozen bytes to spare at
- * its deepest (python benchmarks/segcost.py prints it). */
-__attribute__((noinline)) uint8_t mo_prepare_fast(mo_block_t *b, int32_t da, int32_t db,
-						  uint32_t cycles, uint32_t min_interval)
+/* fast_axes' answer for a block the fast form does not take (a
+ * dwell, or steps too many or too far apart): the caller prepares the C form */
+#define PREP_C_FORM 0xffu
+
+/* Each motor's n, q = C / n and m = C % n in 16 bits (v[i], v[2 + i], v[4 + i]:
+ * fast_form16's three arrays), with prep_axis's step-rate test in its order;
+ * FB_OK when the fast form takes the block.  Not inlined: its divisions'
+ * registers and spills stay out of mo_prepare_fast's frame, which
+ * fast_form16 and mo_prepare_cycles run on. */
+static __attribute__((noinline)) uint8_t fast_axes(int32_t da, int32_t db, uint32_t cycles,
+						   uint32_t min_interval, uint16_t v[6])
 {
-	uint16_t n16[2], q16[2], m16[2];
-	uint8_t dirs = 0, fast = 1;
+	uint8_t fast = 1;
 	for (uint8_t i = 0; i < 2; i++) {
 		int32_t d = i ? db : da;
-		uint32_t n = (uint32_t)d;
-		if (d < 0) {
-			dirs |= (uint8_t)(1u << i);
-			n = (uint32_t)0 - (uint32_t)d;
-		}
-		n16[i] = q16[i] = m16[i] = 0;
+		uint32_t n = d < 0 ? (uint32_t)0 - (uint32_t)d : (uint32_t)d;
+		v[i] = v[2 + i] = v[4 + i] = 0;
 		if (!n)
 			continue;
 		uint32_t m, q = div_cn(cycles, n, &m);
@@ -364,15 +365,36 @@ __attribute__((noinline)) uint8_t mo_prepare_fast(mo_block_t *b, int32_t da, int
 			return FB_ERR_TOO_FAST;  /* prep_axis's test, in its order */
 		if (n > FAST_NMAX || q > FAST_QMAX)
 			fast = 0;  /* fast_form's rules */
-		n16[i] = (uint16_t)n;
-		q16[i] = (uint16_t)q;
-		m16[i] = (uint16_t)m;
+		v[i] = (uint16_t)n;
+		v[2 + i] = (uint16_t)q;
+		v[4 + i] = (uint16_t)m;
 	}
-	if (!fast || (!n16[0] && !n16[1]))  /* a dwell: the C path's waits */
+	if (!fast || (!v[0] && !v[1]))  /* a dwell: the C path's waits */
+		return PREP_C_FORM;
+	return FB_OK;
+}
+
+/* The fast form straight from the move, or the C form.  The stack's deepest
+ * points run through here (the main loop's, with the serial, step and pixel
+ * interrupts nested on top of it; benchmarks/stack.py), hence one frame that
+ * holds the arrays and calls three functions in turn, none inside another:
+ * fast_axes() divides and returns before fast_form16() multiplies, and
+ * mo_prepare_cycles() divides again for a C-form block (the default
+ * profile's G7 blocks).  That one used to run inside the frame of the fast
+ * attempt (its 32 bytes of arrays and spills, 18 saved registers): 30 bytes
+ * above the static RAM at the deepest. */
+uint8_t mo_prepare_fast(mo_block_t *b, int32_t da, int32_t db, uint32_t cycles,
+			uint32_t min_interval)
+{
+	uint16_t v[6];
+	uint8_t st = fast_axes(da, db, cycles, min_interval, v);
+	if (st == PREP_C_FORM)
 		return mo_prepare_cycles(b, da, db, cycles, min_interval);
-	fast_form16(&b->f, n16, q16, m16);
+	if (st != FB_OK)
+		return st;
+	fast_form16(&b->f, v, v + 2, v + 4);
 	b->type = MO_BLK_MOVE;
-	b->dirs = dirs;
+	b->dirs = (uint8_t)((da < 0 ? 1u : 0u) | (db < 0 ? 2u : 0u));
 	b->cycles = cycles;
 	b->fast = MO_FAST_FORMED;
 	return FB_OK;

@@ -180,7 +180,10 @@ static uint16_t advance(void)
 	return d;
 }
 
-void px_start(uint16_t t)
+/* Not inlined into the step interrupt's C path (its only caller): its record
+ * and constants would be the C path's frame through mo_event() (board_avr_step.c
+ * fast_start says how much). */
+__attribute__((noinline)) void px_start(uint16_t t)
 {
 	uint8_t id = X.pending;
 	X.pending = 0;

@@ -1,7 +1,7 @@
 """The chip, its bootloader and the machine between runs, for `fivebar-sim://`
 (`devices/simport.py`): the URL options `bootloader=`, `chip=`, `app=`, `held=`,
-`stuck_page=`, `usb=`, `state=`, `power_loss=`, `fresh=` and the harness options they
-become (firmware/sim/fbsim.c: -m, -B, -F, -H, -X, -S, -L)."""
+`stuck_page=`, `usb=`, `state=`, `power_loss=`, `fresh=`, `stack=` and the harness options
+they become (firmware/sim/fbsim.c: -m, -B, -F, -H, -X, -S, -L, -P)."""
 
 from __future__ import annotations
 
@@ -71,6 +71,12 @@ def parse_board_option(opts: SimOptions, key: str, value: str, url: str) -> bool
             raise ValueError(f"{url}: deadband must be two angles A,B in 0..30 degrees, got "
                              f"{value!r}")
         opts.deadband = (da, db)
+    elif key == "stack":
+        path = Path(value)
+        if not value or path.is_dir() or not path.parent.is_dir():
+            raise ValueError(f"{url}: stack must be a file to write in an existing directory, "
+                             f"got {value!r}")
+        opts.stack = path
     elif key == "state":
         if not value:
             raise ValueError(f"{url}: state must be a directory or off")
@@ -78,7 +84,6 @@ def parse_board_option(opts: SimOptions, key: str, value: str, url: str) -> bool
     else:
         return False
     return True
-
 
 
 def state_path(opts: SimOptions) -> Path | None:
@@ -115,6 +120,10 @@ def harness_args(opts: SimOptions, work: Path) -> tuple[list[str], bool]:
         if opts.fresh:
             state.unlink(missing_ok=True)
         args += ["-S", str(state), *(["-L"] if opts.power_loss else [])]
+    if opts.stack is not None:
+        # the cycle profile, written when the harness stops: its "# min_sp" line is the
+        # lowest stack pointer of the run (devices/simstack.py reads it)
+        args += ["-P", str(opts.stack)]
     return args, app
 
 

@@ -53,6 +53,11 @@ URL options: `fivebar-sim://?trace=PATH&realtime=1&endstops=A,B&machine=NAME&res
   done, as after the DTR reset of opening a port) and the arms where they stopped, as a
   real machine that stayed on. `power_loss=1`: the controller lost power since (its RAM
   is random, the arms stay); `fresh=1`: a new machine at the home pose;
+- `stack=FILE`: the harness records, per flash address, the emulated cycles spent there and
+  the lowest stack pointer seen, and the lowest of all (`# min_sp`), written to FILE when it
+  stops (fbsim `-P`: it then emulates one instruction a step, slower);
+  `devices.simstack.read_stack` turns it into the stack's headroom at its deepest (bytes
+  above the static RAM's end; `python benchmarks/stack.py`);
 - `drop=P`, `corrupt=P`, `seed=N`: line noise, as on the mock: each host→device byte other than
   a real-time byte is lost with probability P, or replaced by another printable byte that is
   not a real-time byte (seeded generator, default seed 0); line counting for the options
@@ -94,7 +99,7 @@ SCHEME = "fivebar-sim"
 
 #: Options that configure the harness process (fixed by a machine's first open).
 HARNESS_OPTIONS = ("trace", "realtime", "endstops", "bootloader", "chip", "app", "held",
-                   "stuck_page", "state", "servo")
+                   "stuck_page", "state", "servo", "stack")
 #: Fault options: what happens after the N-th line, and the harness command for it.
 FAULTS = {"disconnect_after": None, "reset_after": "reset", "power_cut_after": "power",
           "stall_after": "hang"}
@@ -135,6 +140,9 @@ class SimOptions:
     held: bool = False
     stuck_page: int | None = None
     usb: tuple[int, int] | None = None
+    #: Where the harness writes its cycle profile and lowest stack pointer (`stack=FILE`,
+    #: fbsim -P) when it stops: the stack's deepest point over the run (devices/simstack.py).
+    stack: Path | None = None
     state: str | None = None  # a directory, "off", or None: $FIVEBAR_SIM_STATE or the default
     power_loss: bool = False
     fresh: bool = False
