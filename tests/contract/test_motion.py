@@ -106,8 +106,11 @@ def test_status_fields_are_one_instant(device: Device) -> None:
     s = device.session
     assert s.send("M3") == Ok()  # line 1
     n, rounds, first = device.banner.queue, 50, 2
-    checked = 0
-    for _ in range(rounds):
+    checked = done = 0
+    # at least `rounds` rounds, more (up to 4×) until enough reports were checked: how many
+    # polls land on a running block depends on how busy the machine is, not on the firmware
+    while done < rounds or (checked < rounds // 4 and done < 4 * rounds):
+        done += 1
         power = {first + i: 1 + (first + i) % 250 for i in range(n)}
         lines = [f"G1 P1000 S{power[k]}" for k in sorted(power)]
         assert s.stream(lines, numbered_from=first) == [Ok()] * n
