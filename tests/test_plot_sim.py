@@ -83,23 +83,27 @@ def test_error_reply_mid_job_then_exact_resume(tmp_path: Path) -> None:
     with the laser off, the host names the fault and position, and the resume draws each
     remaining step once."""
     drawing, prof, job = compiled_copy(tmp_path, "simple.svg")
-    a = job.steps[:, 0]
-    # A soft limit on motor A that the first third of the job respects and a later target
-    # crosses: the firmware refuses that line.
+    # A soft limit ($1 A min, $2 A max, $3 B min, $4 B max) that the first third of the job
+    # respects and a later target crosses: the firmware refuses that line.
     third = job.n_segments // 3
-    limit = int(a[: third + 1].max())
-    assert (a[third:] > limit).any()
+    early, late = job.steps[: third + 1], job.steps[third:]
+    limits = [(2 + 2 * m, int(early[:, m].max()), bool((late[:, m] > early[:, m].max()).any()))
+              for m in (0, 1)]
+    limits += [(1 + 2 * m, int(early[:, m].min()), bool((late[:, m] < early[:, m].min()).any()))
+               for m in (0, 1)]
+    setting, limit = next((k, v) for k, v, crossed in limits if crossed)
+    free = 100000 if setting % 2 == 0 else -100000
     trace = tmp_path / "pins.trace"
     link = Link.open(f"fivebar-sim://?trace={trace}")
     try:
-        link.command(f"$2={limit}")
+        link.command(f"${setting}={limit}")
         with pytest.raises(SendError) as ei:
             run_with(link, job, prof, drawing=drawing, laser=True, confirm=lambda q: True)
         msg = str(ei.value)
         assert "error:11" in msg and "stopped at A = " in msg and "laser off" in msg
         st = link.status()
         assert st.laser == 0
-        link.command("$2=100000")
+        link.command(f"${setting}={free}")
         run_with(link, job, prof, drawing=drawing, laser=True, confirm=lambda q: True,
                 resume=True)
     finally:
