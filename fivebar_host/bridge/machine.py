@@ -28,6 +28,7 @@ from fivebar_host import protocol
 from fivebar_host.compile.incremental import Batch, moves_finished
 from fivebar_host.controllers.fivebar.link import Link
 from fivebar_host.controllers.fivebar.stream import StreamProgress
+from fivebar_host.errors import FivebarError
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.errors import FaultKind, LinkError, LinkFaultError
 
@@ -132,6 +133,9 @@ class MachineDriver:
             except LinkError as e:
                 self.on_fault(str(e), None)
                 time.sleep(POLL_S)
+            except FivebarError as e:  # a batch the wire cannot write: stop, say why
+                self._halt()
+                self.on_fault(f"batch refused by the host: {e}", None)
 
     def _realtime(self) -> None:
         """Hold / resume requests while no batch is streaming."""
@@ -216,6 +220,11 @@ class MachineDriver:
 
     def _fault(self, e: LinkFaultError) -> None:
         """A link fault: stop the machine (laser off) and tell the GRBL side."""
+        self._halt()
+        self.on_fault(e.message, e.code if e.kind is FaultKind.ALARM else None)
+
+    def _halt(self) -> None:
+        """Stop the machine: the batches dropped, a hold, then a reset (laser off)."""
         self._drop_batches()
         self.busy = self.jogging = False
         self._settle()
@@ -224,4 +233,3 @@ class MachineDriver:
         with contextlib.suppress(LinkError):
             self.link.reset()
             self.status = self.link.status()
-        self.on_fault(e.message, e.code if e.kind is FaultKind.ALARM else None)
