@@ -53,6 +53,7 @@ from fivebar_host.bridge.realtime import (
     Overrides,
 )
 from fivebar_host.bridge.system import run_system
+from fivebar_host.compile.emit import DEFAULT_MAX_RATE, firmware_rate
 from fivebar_host.compile.incremental import (
     LOOKAHEAD_MOVES,
     Batch,
@@ -109,6 +110,7 @@ class Bridge:
         st = self.machine.status
         mot = profile.motors
         self.compiler = OnlineCompiler(profile, self._mode(mode), tolerance_mm, laser)
+        self._raise_step_rate(link)
         home_pt = self.compiler.point_of(np.array(mot.home_rad)) or (0.0, 0.0)
         self.home_point: Vec = (home_pt[0], home_pt[1], 0.0)
         self.default_offsets = ((origin_mm[0], origin_mm[1], 0.0),) + ((0.0, 0.0, 0.0),) * 5
@@ -148,6 +150,16 @@ class Bridge:
         th = np.array(mot.home_rad)
         pt = fb.forward_batch(th.reshape(1, 2), self.profile.kinematics.assembly).points[0]
         return mode_at(fb, th, pt, "+-")
+
+    def _raise_step_rate(self, link: Link) -> None:
+        """A profile whose joints may step faster than the firmware's boot `$0` (20,000
+        steps/s) gets `$0` raised once, as `fivebar plot` does per job (`compile.emit`),
+        so its G0 travel is not refused (error:12); the settings outlive a soft reset."""
+        need = self.profile.motion.max_joint_rad_s / self.profile.motors.rad_per_step
+        if need > DEFAULT_MAX_RATE:
+            rate = firmware_rate(need)
+            link.command(f"$0={rate}")
+            self.compiler.max_rate_steps_s = rate
 
     # ------------------------------------------------------------------ life cycle
     def start(self) -> None:

@@ -51,7 +51,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fivebar_host.compile import linkrate
-from fivebar_host.compile.emit import DEFAULT_MAX_RATE
 from fivebar_host.compile.incremental import Batch, OnlineCompiler, Solved
 from fivebar_host.compile.steps import absolute_steps, step_angles
 from fivebar_host.errors import FivebarError, JobError
@@ -282,8 +281,9 @@ def compile_scan(oc: OnlineCompiler, sc: Scan, start: IntArray) -> tuple[Program
     except FivebarError as e:
         raise ScanRefusedError(str(e)) from None
     rate = np.abs(np.diff(sm.steps, axis=0)).max(axis=1) / (sm.duration_us * 1e-6)
-    if float(rate.max()) > DEFAULT_MAX_RATE:
-        raise ScanRefusedError(f"{rate.max():.0f} steps/s exceeds the firmware's step rate")
+    if float(rate.max()) > oc.max_rate_steps_s:
+        raise ScanRefusedError(f"{rate.max():.0f} steps/s exceeds the firmware's step rate "
+                               f"({oc.max_rate_steps_s})")
     groups = linesmod.groups(sm, ch)
     tg, du = travel.joint_move(prof, start, sm.steps[0])
     if not du.shape[0]:  # already there: a G7 line's deltas need a target before it

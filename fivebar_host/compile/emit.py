@@ -127,13 +127,19 @@ def raster_program(job: Job, profile: Profile, laser: bool, first: int = 0,
     parts = []
     rate = max_step_rate(job, first, n)
     if rate > DEFAULT_MAX_RATE:
-        parts.append(Program.text(f"$0={min(60000, int(rate * 1.02) + 1)}"))
+        parts.append(Program.text(f"$0={firmware_rate(rate)}"))
     if lead is not None:
         parts.append(lead)
     if laser:
         parts.append(tool_on_item(profile))
     parts += [body, Program.command(Kind.TOOL_OFF)]
     return Program.join(parts)
+
+
+def firmware_rate(steps_s: float) -> int:
+    """The firmware's `$0` (steps/s) for motion up to `steps_s`: 2 % above it, within the
+    setting's 60,000 (docs/protocol.md, settings)."""
+    return min(60000, int(steps_s * 1.02) + 1)
 
 
 def max_step_rate(job: Job, first: int = 0, end: int | None = None) -> float:

@@ -114,6 +114,9 @@ class OnlineCompiler:
     mode: str
     tolerance_mm: float
     laser: bool
+    #: the firmware's step rate (`$0`, steps/s) the session runs under (its boot value
+    #: unless the bridge raised it for a fast profile)
+    max_rate_steps_s: int = 20000
 
     def __post_init__(self) -> None:
         kin = self.profile.kinematics

@@ -35,7 +35,7 @@ class Running:
 
 
 def start_bridge(kind: str, tmp_path: Path, *, laser: bool = True, pty: bool = False,
-                 realtime: bool = False) -> Running:
+                 realtime: bool = False, profile: Path | None = None) -> Running:
     """Open the machine, start the bridge core and its server (TCP on a free port)."""
     trace = None
     if kind == "sim":
@@ -44,7 +44,8 @@ def start_bridge(kind: str, tmp_path: Path, *, laser: bool = True, pty: bool = F
     else:
         url = "fivebar-mock://?speed=10"
     link = Link.open(url)
-    core = Bridge(link, load_profile(), laser=laser, tolerance_mm=0.05, origin_mm=ORIGIN)
+    core = Bridge(link, load_profile(profile), laser=laser, tolerance_mm=0.05,
+                  origin_mm=ORIGIN)
     server = Server(core, tmp_path / "grbl-tty" if pty else None, ("127.0.0.1", 0))
     core.start()
     server.start()
