@@ -178,7 +178,7 @@ static __attribute__((noinline)) uint16_t fast_start(uint16_t base)
  * waited before) and interrupts are enabled: only the pixel interrupt can
  * come in.  mo_event() makes its changes of the pixel timeline and the laser
  * with interrupts off (fb_motion.c).  Nothing else either side touches is
- * shared: the pixel interrupt writes px_state, OCR1B, TIMSK1's OCIE1B and
+ * shared: the pixel interrupt writes mo_state.px, OCR1B, TIMSK1's OCIE1B and
  * the laser.  Stack: one pixel interrupt frame more at most (30 bytes), on
  * top of this one (it cannot nest in itself).  Without a scan, mo_event()
  * as before.
@@ -222,7 +222,7 @@ void __vector_fb_step_slow(void)
 		/* a scan's first block starts at t: the pixel timeline first, so that
 		 * fast_start() arms the steps after its cycles (a compare armed in
 		 * the past waits a whole timer period) */
-		if (px_state.pending)
+		if (mo_state.px.pending)
 			px_start(d == MO_FAST ? t : (uint16_t)(t + PX_C_LAG));
 		if (d == MO_FAST) {
 			uint16_t shift = fast_start(t);

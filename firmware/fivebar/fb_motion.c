@@ -468,7 +468,7 @@ void mo_resume(void)
 	uint8_t sreg = board_irq_save();
 	if (s_running) {
 		if (mo_state.cur)
-			set_laser(is_raster(mo_state.cur->type) ? (px_state.run ? px_state.power : 0u)
+			set_laser(is_raster(mo_state.cur->type) ? (mo_state.px.run ? mo_state.px.power : 0u)
 								: mo_state.cur->power);
 		s_held = 0;
 		board_timer_resume();
@@ -532,7 +532,7 @@ BOARD_INLINE mo_block_t *boundary(void)
 		/* a scan's next block (the common case) touches neither the pixel
 		 * timeline nor the laser; the rest does with interrupts off: the
 		 * pixel interrupt may nest in mo_event() (board.h) */
-		if (b->type != MO_BLK_RASTER || s_rest || !px_state.run) {
+		if (b->type != MO_BLK_RASTER || s_rest || !mo_state.px.run) {
 			uint8_t sreg = board_irq_save();
 			if (b->type == MO_BLK_SCAN) {
 				px_begin(b->power);  /* the board's px_start() gives its time */

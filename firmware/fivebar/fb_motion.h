@@ -14,6 +14,7 @@
 #include <stdint.h>
 #include "config.h"
 #include "fb_fast.h"
+#include "fb_raster.h"
 
 enum mo_block_type {
 	MO_BLK_MOVE = 0,   /* steps both motors over a duration */
@@ -200,11 +201,15 @@ void mo_fast_shift(uint16_t delta);
  * Readers: the step interrupt (all of it), the main loop (head - tail, the
  * count; cur in mo_status()).  Indices run free (mod 256); head - tail is
  * the count, the running block included.
+ *   px       the pixel interrupt's state and ring (G7 scans): its writers and
+ *            readers are listed at px_state_t (fb_raster.h).  Last in the
+ *            struct, so the fields the fast path reads keep their offsets.
  */
 typedef struct {
 	mo_block_t queue[CFG_QUEUE_SIZE];
 	mo_block_t *volatile cur;
 	volatile uint8_t head, tail;
+	px_state_t px;
 } mo_state_t;
 
 extern mo_state_t mo_state;

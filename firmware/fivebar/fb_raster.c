@@ -17,8 +17,7 @@
 
 #define RMASK (CFG_PX_RING - 1u)
 
-px_state_t px_state;
-#define X px_state
+#define X mo_state.px
 
 /* A record that comes later than its first change: up to PX_LATE_MAX cycles
  * late its changes keep their times (the first at once); later still, the

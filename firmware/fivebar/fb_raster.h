@@ -67,8 +67,7 @@ typedef struct {
 	uint32_t since;             /* cycles from the last change (or the scan start) to it */
 	volatile uint16_t late;     /* changes that came more than PX_LATE cycles late */
 } px_state_t;
-
-extern px_state_t px_state;
+/* The one instance is mo_state.px (fb_motion.h): the motion state's struct. */
 
 /* A change is counted late when the interrupt ran this many cycles after it. */
 #define PX_LATE 320u

@@ -195,7 +195,7 @@ size_t fake_run(uint64_t max_cycles)
 			next_frame += FRAME_CYCLES;
 		}
 		uint16_t d = mo_event();
-		if (px_state.pending)
+		if (mo_state.px.pending)
 			px_start((uint16_t)fake_now);
 		events++;
 		if (!d) {
