@@ -179,6 +179,11 @@ def jacobian(x: FloatArray, data: MarkData) -> FloatArray:
     return jac.reshape(2 * n, N_PARAMS)
 
 
+def rms_mm(residual: FloatArray) -> float:
+    """RMS distance (mm) of residual vectors (N, 2): sqrt(mean ‖r_i‖²)."""
+    return float(np.sqrt(np.mean(np.sum(residual ** 2, axis=1))))
+
+
 def rigid_fit(src: FloatArray, dst: FloatArray) -> tuple[float, FloatArray]:
     """Best rotation φ and translation t with Rot(φ)·src + t ≈ dst in least squares
     (the 2-D Kabsch/Procrustes solution, no reflection, no scale)."""
@@ -227,11 +232,11 @@ class FitResult:
 
     @property
     def rms_before_mm(self) -> float:
-        return float(np.sqrt(np.mean(np.sum(self.residual_before ** 2, axis=1))))
+        return rms_mm(self.residual_before)
 
     @property
     def rms_after_mm(self) -> float:
-        return float(np.sqrt(np.mean(np.sum(self.residual_after ** 2, axis=1))))
+        return rms_mm(self.residual_after)
 
 
 def _cost(x: FloatArray, data: MarkData) -> tuple[float, FloatArray]:

@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from kinematics.arrays import BoolArray, FloatArray
-from kinematics.calibration import CalibrationError, covariance, rigid_fit, rotation
+from kinematics.calibration import CalibrationError, covariance, rigid_fit, rms_mm, rotation
 from kinematics.servo_model import (
     COEFFS,
     DEAD,
@@ -202,11 +202,11 @@ class ServoFit:
 
     @property
     def rms_before_mm(self) -> float:
-        return float(np.sqrt(np.mean(np.sum(self.residual_before ** 2, axis=1))))
+        return rms_mm(self.residual_before)
 
     @property
     def rms_after_mm(self) -> float:
-        return float(np.sqrt(np.mean(np.sum(self.residual_after ** 2, axis=1))))
+        return rms_mm(self.residual_after)
 
     def curve_std(self, k: int, pulses: ArrayLike) -> FloatArray:
         """Standard deviation (N,) rad of servo k's fitted curve angle at `pulses`, from the

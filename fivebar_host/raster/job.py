@@ -21,7 +21,8 @@ the move back home.  The job's `draw` marks the image pieces; its power is 0 eve
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -131,8 +132,15 @@ def compile_raster(path: str | Path, profile: Profile, ro: RasterOptions,
     SVG `<image>`). Raises `InputError`, `JobError` or `OptionError`."""
     file = str(path)
     refuse_servo(profile, file)
-    try:
+    with located(file):
         return _compile(file, profile, ro, gray)
+
+
+@contextmanager
+def located(file: str) -> Iterator[None]:
+    """A `JobError` raised inside that names no place is raised again naming `file`."""
+    try:
+        yield
     except JobError as e:
         if e.where is None:
             raise JobError(e.detail, Where(file=file), e.reason) from None

@@ -53,7 +53,7 @@ from fivebar_host.errors import InputError, JobError, Where
 from fivebar_host.options import compile_values
 from fivebar_host.raster import image
 from fivebar_host.raster.grid import ScanGrid
-from fivebar_host.raster.job import burn_grid, raster_mode, raster_options, refuse_servo
+from fivebar_host.raster.job import burn_grid, located, raster_mode, raster_options, refuse_servo
 from fivebar_host.raster.modes import to_powers
 from fivebar_host.toolpath import layout
 from fivebar_host.toolpath.geometry import LINE, Drawing, DrawingBuilder
@@ -253,12 +253,8 @@ def compile_svg_images(d: Drawing, profile: Profile, values: Mapping[str, Any],
     `JobError`, `OptionError`."""
     file = d.file
     refuse_servo(profile, file)
-    try:
+    with located(file):
         return _compile(d, profile, values, base)
-    except JobError as e:
-        if e.where is None:
-            raise JobError(e.detail, Where(file=file), e.reason) from None
-        raise
 
 
 def _compile(d: Drawing, profile: Profile, values: Mapping[str, Any], base: Path | None
