@@ -54,6 +54,10 @@
 #define TIMER_H _SFR_MEM_ADDR(TCNT1H)
 #define OCR_L _SFR_MEM_ADDR(OCR1AL)
 #define OCR_H _SFR_MEM_ADDR(OCR1AH)
+#define TIFR_1 _SFR_IO_ADDR(TIFR1)
+#define TIMSK_1 _SFR_MEM_ADDR(TIMSK1)
+#define TIMSK_0 _SFR_MEM_ADDR(TIMSK0)
+#define UCSR_B _SFR_MEM_ADDR(UCSR0B)
 
 #define STEP_A_BIT PIN_STEP_A_BIT
 #define STEP_B_BIT PIN_STEP_B_BIT
@@ -228,6 +232,59 @@
 \L\()_go:
 .endm
 
+/*
+ * The pixel interrupt's window (raster scans): when its compare has fired
+ * (TIFR1 OCF1B) and it is enabled (TIMSK1 OCIE1B), it runs here, nested,
+ * instead of after the whole stay (a pair's wait and a block switch, a
+ * cluster: up to ~480 cycles with interrupts off, and its power changes came
+ * up to 30 us late, docs/raster.md).  The windows are where no edge is due
+ * at once: after each group of edges, after a motor's bookkeeping, before a
+ * cluster's wait, at both ends of a block switch.  The other sources are
+ * masked as the C path's event_px_nested() masks them (Timer0's TIMSK0, the
+ * serial interrupts' enables in UCSR0B, this interrupt's own OCIE1A: they
+ * wait as they waited before), so only the pixel interrupt comes in; it
+ * touches px_state, OCR1B, TIMSK1's OCIE1B and the laser, nothing of the fast
+ * path's, and saves every register it uses.  A step edge due meanwhile waits
+ * for it, as one waits when the pixel interrupt runs from the main loop.  The
+ * interrupt is taken after the instruction that follows sei on the chip;
+ * simavr 1.6 takes it only after two more (with one nop the window never let
+ * it in: measured), hence three.  Not pending: 3 cycles (with the pixel
+ * interrupt off, the flag its compare sets at every timer wrap is cleared).
+ * Stack: one pixel interrupt frame above this vector's 10 bytes.  Uses r25,
+ * r26, r27.
+ */
+.macro PX_WINDOW L
+	sbis TIFR_1, OCF1B
+	rjmp \L\()_x
+	lds r25, TIMSK_1
+	sbrc r25, OCIE1B
+	rjmp \L\()_in
+	ldi r25, 1 << OCF1B             /* off: the timer's wraps set the flag, clear it */
+	out TIFR_1, r25
+	rjmp \L\()_x
+\L\()_in:
+	andi r25, (~(1 << OCIE1A)) & 0xff
+	sts TIMSK_1, r25
+	lds r26, TIMSK_0
+	lds r27, UCSR_B
+	clr r25
+	sts TIMSK_0, r25
+	mov r25, r27
+	andi r25, (~((1 << RXCIE0) | (1 << UDRIE0))) & 0xff
+	sts UCSR_B, r25
+	sei
+	nop
+	nop
+	nop
+	cli
+	sts UCSR_B, r27
+	sts TIMSK_0, r26
+	lds r25, TIMSK_1
+	ori r25, 1 << OCIE1A
+	sts TIMSK_1, r25
+\L\()_x:
+.endm
+
 	.section .text.board_step_fast, "ax", @progbits
 	.global TIMER1_COMPA_vect
 	.type TIMER1_COMPA_vect, @function
@@ -252,6 +309,7 @@ TIMER1_COMPA_vect:
 	lds r30, CUR
 	lds r31, CUR+1
 fp_edge_done:
+	PX_WINDOW pxw
 	sbic GP0, BOARD_FL_PAIR
 	rjmp fp_pair
 /* ---- bookkeeping of the motors in r24 ---- */
@@ -267,6 +325,7 @@ fp_steps_b:
  * next time in r18:r19 unless it is done ---- */
 	clr r25
 	sts board_keep+KEEP_BUSY, r25
+	PX_WINDOW pxb
 	sbic GP0, BOARD_FL_BDONE
 	rjmp fp_b_done
 	sbic GP0, BOARD_FL_ADONE
@@ -278,6 +337,7 @@ fp_steps_b:
 fp_pick_a:
 	clr r25
 	sts board_keep+KEEP_BUSY, r25
+	PX_WINDOW pxa
 	sbic GP0, BOARD_FL_ADONE
 	rjmp fp_a_done
 	sbic GP0, BOARD_FL_BDONE
@@ -394,6 +454,7 @@ fp_select:
 	rjmp fp_both
 /* ---- the next event is too close to leave: wait for it here ---- */
 fp_cluster:
+	PX_WINDOW pxk
 	lds r26, TIMER_L
 	lds r27, TIMER_H
 	sub r26, r18
@@ -444,6 +505,7 @@ fp_close_cluster:                       /* 5 cycles fewer before the wait */
 	or r24, r25
 	cbi GP0, BOARD_FL_CLOSE
 fp_close_done:
+	PX_WINDOW pxd
 	lds r18, T2                     /* now = the second edge */
 	lds r19, T2+1
 	sts SCHED, r18
@@ -475,6 +537,7 @@ fp_pair:
 	SPIN pf
 	in r24, GP2
 	out PIN_D, r24
+	PX_WINDOW pxf
 	sts SCHED, r18                  /* now = the second edge */
 	sts SCHED+1, r19
 	rjmp fp_steps
@@ -483,11 +546,13 @@ fp_pair_close:
 	in r25, GP2
 	out PIN_D, r25
 	or r24, r25
+	PX_WINDOW pxc
 	sts SCHED, r18
 	sts SCHED+1, r19
 	rjmp fp_steps
 /* ---- both motors done: the block ends tail cycles after this event ---- */
 fp_block_end:
+	PX_WINDOW pxe
 	lds r18, SCHED
 	lds r19, SCHED+1
 	ldd r26, Z+BLK_TAIL
@@ -574,6 +639,7 @@ fp_block_end:
 	adc r25, r19
 	std Z+BLK_T+2, r24
 	std Z+BLK_T+3, r25
+	PX_WINDOW pxs
 	rjmp fp_select
 /* ---- the C path takes the block's end, at its exact time ---- */
 fp_to_c:
