@@ -237,52 +237,30 @@
  * (TIFR1 OCF1B) and it is enabled (TIMSK1 OCIE1B), it runs here, nested,
  * instead of after the whole stay (a pair's wait and a block switch, a
  * cluster: up to ~480 cycles with interrupts off, and its power changes came
- * up to 30 us late, docs/raster.md).  The windows are where no edge is due
- * at once: after each group of edges, after a motor's bookkeeping, before a
- * cluster's wait, at both ends of a block switch.  The other sources are
- * masked as the C path's event_px_nested() masks them (Timer0's TIMSK0, the
- * serial interrupts' enables in UCSR0B, this interrupt's own OCIE1A: they
- * wait as they waited before), so only the pixel interrupt comes in; it
- * touches px_state, OCR1B, TIMSK1's OCIE1B and the laser, nothing of the fast
- * path's, and saves every register it uses.  A step edge due meanwhile waits
- * for it, as one waits when the pixel interrupt runs from the main loop.  The
- * interrupt is taken after the instruction that follows sei on the chip;
- * simavr 1.6 takes it only after two more (with one nop the window never let
- * it in: measured), hence three.  Not pending: 3 cycles (with the pixel
- * interrupt off, the flag its compare sets at every timer wrap is cleared).
- * Stack: one pixel interrupt frame above this vector's 10 bytes.  Uses r25,
- * r26, r27.
+ * up to 31 us late on configs/raster-fast.toml, docs/raster.md).  The
+ * windows are where the path stays and no edge is due at once: after a
+ * motor's bookkeeping (every event passes one), before a cluster's and a
+ * pair's wait, after a pair's second edge, at both ends of a block switch
+ * (leaving needs none: the interrupt comes after reti).  The other sources
+ * are masked as the C path's event_px_nested() masks them (Timer0's TIMSK0,
+ * the serial interrupts' enables in UCSR0B, this interrupt's own OCIE1A:
+ * they wait as they waited before), so only the pixel interrupt comes in; it
+ * touches mo_state.px, OCR1B, TIMSK1's OCIE1B and the laser, nothing of the
+ * fast path's, and saves every register it uses.  A step edge due meanwhile
+ * waits for it, as one waits when the pixel interrupt runs from the main
+ * loop.  The chip takes an interrupt after the instruction that follows sei;
+ * simavr 1.6 only after two more (with one nop the window never let it in:
+ * measured), hence three.  Not pending: 2 cycles (sbic skips the rcall); with
+ * the pixel interrupt off, the flag its compare sets at every timer wrap is
+ * cleared.  Fewer windows cost more than they save: without the ones after
+ * the bookkeeping, or after a pair's second edge, a few changes of the photo
+ * came 20-23 us late (measured), for 0.1-0.3 cycles of step interval jitter.
+ * Stack: the call's 2 bytes and one pixel interrupt frame above this
+ * vector's 10 bytes.  Uses r25, r26, r27.
  */
 .macro PX_WINDOW L
-	sbis TIFR_1, OCF1B
-	rjmp \L\()_x
-	lds r25, TIMSK_1
-	sbrc r25, OCIE1B
-	rjmp \L\()_in
-	ldi r25, 1 << OCF1B             /* off: the timer's wraps set the flag, clear it */
-	out TIFR_1, r25
-	rjmp \L\()_x
-\L\()_in:
-	andi r25, (~(1 << OCIE1A)) & 0xff
-	sts TIMSK_1, r25
-	lds r26, TIMSK_0
-	lds r27, UCSR_B
-	clr r25
-	sts TIMSK_0, r25
-	mov r25, r27
-	andi r25, (~((1 << RXCIE0) | (1 << UDRIE0))) & 0xff
-	sts UCSR_B, r25
-	sei
-	nop
-	nop
-	nop
-	cli
-	sts UCSR_B, r27
-	sts TIMSK_0, r26
-	lds r25, TIMSK_1
-	ori r25, 1 << OCIE1A
-	sts TIMSK_1, r25
-\L\()_x:
+	sbic TIFR_1, OCF1B
+	rcall fp_px_window
 .endm
 
 	.section .text.board_step_fast, "ax", @progbits
@@ -309,7 +287,6 @@ TIMER1_COMPA_vect:
 	lds r30, CUR
 	lds r31, CUR+1
 fp_edge_done:
-	PX_WINDOW pxw
 	sbic GP0, BOARD_FL_PAIR
 	rjmp fp_pair
 /* ---- bookkeeping of the motors in r24 ---- */
@@ -532,6 +509,7 @@ fp_pair:
 1:
 	STEP_MOTOR 1, pb
 2:
+	PX_WINDOW pxp
 	lds r18, T2
 	lds r19, T2+1
 	SPIN pf
@@ -662,4 +640,33 @@ fp_to_c:
 	movw r18, r24
 1:
 	rjmp fp_ocr
+/* the window's body (PX_WINDOW): entered when OCF1B is set */
+fp_px_window:
+	lds r25, TIMSK_1
+	sbrc r25, OCIE1B
+	rjmp 1f
+	ldi r25, 1 << OCF1B             /* off: the timer's wraps set the flag, clear it */
+	out TIFR_1, r25
+	ret
+1:
+	andi r25, (~(1 << OCIE1A)) & 0xff
+	sts TIMSK_1, r25
+	lds r26, TIMSK_0
+	lds r27, UCSR_B
+	clr r25
+	sts TIMSK_0, r25
+	mov r25, r27
+	andi r25, (~((1 << RXCIE0) | (1 << UDRIE0))) & 0xff
+	sts UCSR_B, r25
+	sei
+	nop
+	nop
+	nop
+	cli
+	sts UCSR_B, r27
+	sts TIMSK_0, r26
+	lds r25, TIMSK_1
+	ori r25, 1 << OCIE1A
+	sts TIMSK_1, r25
+	ret
 	.size TIMER1_COMPA_vect, . - TIMER1_COMPA_vect

@@ -85,7 +85,11 @@ static uint8_t paused;
  * paused (a hold) the cycles it had left; px_paused: it was on */
 static uint16_t px_sched, px_paused_rem;
 static uint8_t px_paused;
+/* px_lagged: the pixel timeline runs PX_C_LAG behind the plan, as the C
+ * path's step edges do (the block running is in the C form) */
+static uint8_t px_lagged;
 static void board_px_shift(uint16_t delta);
+static void board_px_lag(uint8_t lagged);
 
 /* simavr 1.6 arms a compare at OCR1A < ~5 only if it handles the timer
  * overflow within that many cycles, and otherwise misses it by a whole
@@ -222,8 +226,12 @@ void __vector_fb_step_slow(void)
 		/* a scan's first block starts at t: the pixel timeline first, so that
 		 * fast_start() arms the steps after its cycles (a compare armed in
 		 * the past waits a whole timer period) */
-		if (mo_state.px.pending)
-			px_start(d == MO_FAST ? t : (uint16_t)(t + PX_C_LAG));
+		if (mo_state.px.pending) {
+			px_lagged = d != MO_FAST;
+			px_start(px_lagged ? (uint16_t)(t + PX_C_LAG) : t);
+		} else if ((d == MO_FAST) == px_lagged) {
+			board_px_lag(d != MO_FAST);  /* a scan's block of the other form */
+		}
 		if (d == MO_FAST) {
 			uint16_t shift = fast_start(t);
 			if (shift)
@@ -308,6 +316,34 @@ static void board_px_shift(uint16_t delta)
 {
 	if (TIMSK1 & (1u << OCIE1B))
 		px_arm_at((uint16_t)(px_sched + delta));
+}
+
+/*
+ * A scan's blocks change form (its ramp's slow pieces are in the C form, its
+ * cruise in the fast form, and a motor slowing below FAST_QMAX mid-scan
+ * makes C-form pieces there): its timeline moves PX_C_LAG later or earlier
+ * with the step edges, so that changes and steps keep their planned
+ * distance.  (Lagged at the scan's start and never moved back, the changes
+ * of a scan whose ramp began on the C path came ~7 us late through its whole
+ * image, and its first pixel, due at the ramp's fast block's start, up to
+ * 21.6 us: measured on configs/raster-fast.toml, docs/raster.md.)  A change
+ * moved into the past is run at once.  Without a running timeline only the
+ * state changes.
+ */
+static void board_px_lag(uint8_t lagged)
+{
+	px_lagged = lagged;
+	if (!(TIMSK1 & (1u << OCIE1B)))
+		return;
+	uint16_t t = (uint16_t)(px_sched + (lagged ? PX_C_LAG : (uint16_t)-PX_C_LAG));
+	uint16_t fire = (uint16_t)(t - PX_LEAD);
+	px_sched = t;
+	if ((int16_t)(fire - TCNT1) < PX_NEAR) {
+		OCR1B = ocr_value((uint16_t)(TCNT1 + PX_NEAR));  /* a flag already set runs it */
+		return;
+	}
+	OCR1B = ocr_value(fire);
+	TIFR1 = (uint8_t)(1u << OCF1B);  /* set for the old time */
 }
 
 uint16_t board_px_sched(void) { return px_sched; }
