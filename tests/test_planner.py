@@ -17,6 +17,7 @@ from fivebar_host.compile.planner import (
     plan,
     raise_staircase,
     ramp_fractions,
+    sharp_junctions,
     staircase_ratios,
 )
 
@@ -151,6 +152,43 @@ def test_raise_staircase_is_the_whole_staircase_again(n: int, seed: int) -> None
     whole = enforce_staircase(d, out, stop, 60.0, 0.5)
     raise_staircase(d, out, raised, 60.0, 0.5)
     assert np.array_equal(out, whole)
+
+
+def test_sharp_junctions_by_the_jump_at_peak_speed() -> None:
+    """A junction is sharp where |u_k − u_j|∞ · v_peak,k > J (u = dθ/D): a joint's reversal
+    at 0.4 rad/s jumps 0.8; the same direction jumps 0; from rest the whole speed."""
+    jump = 0.5
+    d = np.array([[0.2, 0.0], [-0.2, 0.0], [-0.2, 0.0], [0.0, 0.2]])
+    p = plan(d, np.full(4, 1.0), np.full(4, 1e9), 0.4, 1e6, junction_jump_rad_s=10.0)
+    np.testing.assert_allclose(p.v_peak, 0.4)
+    s_in, s_out = sharp_junctions(d, p, jump)
+    # entries: from rest (0.4 ≤ J: not sharp), a reversal (2 · 0.4), straight on (0), a
+    # right angle (|(0,1) − (−1,0)|∞ = 1 → 0.4: not sharp)
+    assert s_in.tolist() == [False, True, False, False]
+    assert s_out.tolist() == [True, False, False, False]
+    p = plan(d, np.full(4, 1.0), np.full(4, 1e9), 0.6, 1e6, junction_jump_rad_s=10.0)
+    s_in, s_out = sharp_junctions(d, p, jump, stop_after=np.array([False, True, False, True]))
+    assert s_in.tolist() == [True, True, True, True]  # 0.6 from rest; 1.2; rest; 0.6
+    assert s_out.tolist() == [True, True, True, True]  # 1.2; to rest; 0.6; to rest
+
+
+def test_ramp_fractions_cut_the_piece_at_a_sharp_junction() -> None:
+    """A one-piece ramp up from a sharp junction is kept as its own piece, grown to the
+    least piece; without the flag it joins the cruise (one piece)."""
+    a, piece, least = 45.0, 0.01, 0.002
+    d = np.array([[0.1, 0.0], [-0.3, 0.0]])
+    p = plan(d, np.array([1.0, 3.0]), np.full(2, 1e9), 0.4, a, junction_jump_rad_s=0.5)
+    assert p.v_entry[1] == pytest.approx(0.25)  # the reversal's cap: J / 2
+    dist = np.abs(d).max(axis=1)
+    counts, f = ramp_fractions(p, dist, a, piece, least)
+    assert counts.tolist() == [1, 1]  # every ramp fits one piece: joined
+    counts, f = ramp_fractions(p, dist, a, piece, least,
+                               (np.array([False, True]), np.array([True, False])))
+    assert counts[1] == 2
+    ends = f[counts[0]:] * dist[1]
+    # the ramp up (0.25 → 0.4 at 45 rad/s²: 1.1 mrad) grown to the least piece
+    assert ends[0] == pytest.approx(least)
+    assert counts[0] == 2 and (1.0 - f[0]) * dist[0] >= least - 1e-12
 
 
 def test_ramp_fractions_cut_ramps_into_short_pieces() -> None:

@@ -212,9 +212,11 @@ def _time(profile: Profile, checker: PoseChecker, handed: list[Stepped],
     pln = planner.plan(dq, sp.length, feed, motion.max_joint_rad_s, a_c, stop_after=stop,
                        **prof_kw)
     dist = np.maximum(np.abs(dq[:, 0]), np.abs(dq[:, 1]))  # Chebyshev joint distance
+    sharp = planner.sharp_junctions(dq, pln, j_lim, stop)
     del dq
     counts, f1 = planner.ramp_fractions(pln, dist, a_c, PLAN_PIECE_JUMP_SHARE * j_lim / a_c,
-                                        PLAN_MIN_PIECE_STEPS * mot.rad_per_step)
+                                        PLAN_MIN_PIECE_STEPS * mot.rad_per_step, sharp)
+    del sharp
     del pln, dist
     th_all, pts_all, st, seg_of, f0, f1, slack = _cut_ramps(mot, checker, sp, counts, f1)
     del counts
