@@ -64,7 +64,12 @@ the segment before is slower than a start from rest through it would be — and 
 every bound is a *nondecreasing* function of the neighbour's duration. Where the joint
 reverses, a/q + b/p ≤ J and ≤ α(p + q)/2 are met by the separate bounds
 
-    q, p ≥ (a + b)/J   and   q ≥ √(2a/α),  p ≥ √(2b/α)                                  (5)
+    q ≥ √a(√a + √b)/J,  p ≥ √b(√a + √b)/J   and   q ≥ √(2a/α),  p ≥ √(2b/α)            (5)
+
+— J shared between the two sides as √a : √b, the split with the least p + q when both are
+held by it.  (It was (a + b)/J on both sides, J shared as a : b: a 3-step segment after a
+joint's 37-step run in the other direction lasted 39 ms for 13; issue 39: against TOPP-RA,
+benchmarks/plotter.svg 1.108 → 1.081, voronoi.svg 1.068 → 1.040, benchmarks/topp.py.)
 
 So every limit is a lower bound on one duration, a constant or a nondecreasing function of a
 neighbour's: the integer durations meeting them all are closed under the element-wise
@@ -483,11 +488,14 @@ def _static_bounds(dth: FloatArray, lo: FloatArray, rest: BoolArray, act: IntArr
     r = np.flatnonzero(rev[:, 0] | rev[:, 1])
     if r.size:
         rv, (ar, br) = rev[r], _moves_at(dth, act[r])
-        both = np.where(rv, ar + br, 0.0).max(axis=1) / jump
+        ra, rb = np.sqrt(ar), np.sqrt(br)
+        split = np.where(rv, ra + rb, 0.0) / jump  # (5): J shared as √a : √b
         np.maximum.at(lo, act[r] + 1,
-                      np.maximum(both, np.sqrt(2 * np.where(rv, ar, 0.0).max(axis=1) / acc)))
+                      np.maximum((ra * split).max(axis=1),
+                                 np.sqrt(2 * np.where(rv, ar, 0.0).max(axis=1) / acc)))
         np.maximum.at(lo, act[r],
-                      np.maximum(both, np.sqrt(2 * np.where(rv, br, 0.0).max(axis=1) / acc)))
+                      np.maximum((rb * split).max(axis=1),
+                                 np.sqrt(2 * np.where(rv, br, 0.0).max(axis=1) / acc)))
     return rev
 
 
