@@ -185,6 +185,7 @@ class FivebarController:
         link, job = self.link, piece.job
         end = None if piece.end >= job.n_segments else piece.end
         prog = build_program(job, self.profile, piece.laser, piece.begin, piece.position, end)
+        link.number_past_kept()
         first_line = link.next_line
         last_line = first_line + len(prog) - 1
         if len(prog) > 1:

@@ -231,6 +231,20 @@ class Link:
         raise LinkFaultError(FaultKind.TIMEOUT, f"{self.url}: no status report within "
                              f"{timeout_s or self.reply_timeout_s:g} s", -1)
 
+    def number_past_kept(self) -> None:
+        """Number the next lines past the controller's `Ln` done.  A reset restarts the line
+        counter but keeps `Ln` done (docs/protocol.md 7), so a new stream numbered from 1
+        could reuse the number of the old stream's last executed line: until its own first
+        block ended, `Ln` done would read as one of its lines — its progress and a recovery
+        after a fault there mapped the old count onto the new stream (a daemon recovery
+        resumed from the wrong segment, `tests/test_serve.py`).  `N<done> M110` sets the
+        counter to `done` (section 5.2), so a new stream starts after it and a stale
+        `Ln` done is its line before the first: nothing of it done."""
+        st = self.status()
+        if st.done_line >= self.next_line:
+            self.next_line = st.done_line
+            self.command("M110")
+
     def command(self, body: str | Program, timeout_s: float | None = None) -> None:
         """Send one numbered line (or a small program, a line at a time) and wait for its
         `ok`; raise LinkFaultError on `error:`."""
