@@ -336,7 +336,9 @@ def stream_file(lines: list[str], trace: Path, profile: Profile,
     from fivebar_host.bridge.serve import Server
     from fivebar_host.controllers.fivebar.link import Link
 
-    link = Link.open(f"fivebar-sim://?trace={trace}" + ("&realtime=1" if realtime else ""))
+    # a fresh machine at the home pose (state=off: no arms left elsewhere by an earlier run)
+    link = Link.open(f"fivebar-sim://?state=off&trace={trace}"
+                     + ("&realtime=1" if realtime else ""))
     log: list[str] = []
     core = Bridge(link, profile, laser=True, tolerance_mm=profile.motion.tolerance_mm,
                   origin_mm=origin, log=log.append)
