@@ -16,10 +16,9 @@ from fivebar_host.compile.planner import (
     enforce_staircase,
     plan,
     raise_staircase,
-    ramp_fractions,
-    sharp_junctions,
     staircase_ratios,
 )
+from fivebar_host.compile.ramps import ramp_fractions, sharp_junctions
 
 
 def test_triangle_and_trapezoid_rest_to_rest() -> None:

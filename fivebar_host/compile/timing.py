@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fivebar_host import protocol
-from fivebar_host.compile import linkrate, planner, steps
+from fivebar_host.compile import linkrate, planner, ramps, steps
 from fivebar_host.compile.dwell import dwell_stops, insert_dwells
 from fivebar_host.compile.layers import section_stops
 from fivebar_host.compile.model import compact_ints, compact_steps, release_free_memory
@@ -212,9 +212,9 @@ def _time(profile: Profile, checker: PoseChecker, handed: list[Stepped],
     pln = planner.plan(dq, sp.length, feed, motion.max_joint_rad_s, a_c, stop_after=stop,
                        **prof_kw)
     dist = np.maximum(np.abs(dq[:, 0]), np.abs(dq[:, 1]))  # Chebyshev joint distance
-    sharp = planner.sharp_junctions(dq, pln, j_lim, stop)
+    sharp = ramps.sharp_junctions(dq, pln, j_lim, stop)
     del dq
-    counts, f1 = planner.ramp_fractions(pln, dist, a_c, PLAN_PIECE_JUMP_SHARE * j_lim / a_c,
+    counts, f1 = ramps.ramp_fractions(pln, dist, a_c, PLAN_PIECE_JUMP_SHARE * j_lim / a_c,
                                         PLAN_MIN_PIECE_STEPS * mot.rad_per_step, sharp)
     del sharp
     del pln, dist

@@ -21,7 +21,7 @@ from collections.abc import Callable
 import numpy as np
 
 from fivebar_host import protocol
-from fivebar_host.compile import planner
+from fivebar_host.compile import planner, ramps
 from fivebar_host.compile.steps import step_angles
 from fivebar_host.config import Profile
 from fivebar_host.errors import JobError
@@ -61,7 +61,7 @@ def joint_moves(profile: Profile, starts: IntArray, ends: IntArray
     pl = planner.plan(dth, np.zeros(m), np.full(m, np.inf), motion.max_joint_rad_s, alpha,
                       stop_after=np.ones(m, dtype=bool), junction_jump_rad_s=jump,
                       min_duration_s=protocol.P_MIN_US * 1e-6)
-    count, f1 = planner.ramp_fractions(pl, dist, alpha, JUMP_SHARE * jump / alpha,
+    count, f1 = ramps.ramp_fractions(pl, dist, alpha, JUMP_SHARE * jump / alpha,
                                        MIN_PIECE_STEPS * mo.rad_per_step)
     move = np.repeat(np.arange(m), count)
     last = np.cumsum(count) - 1
