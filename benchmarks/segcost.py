@@ -36,7 +36,7 @@ _HERE = Path(__file__).resolve().parent
 # this folder off the path (benchmarks/kinematics.py would shadow the package), the
 # repository on it (benchmarks.link's job)
 sys.path[:] = [str(_HERE.parent)] + [p for p in sys.path if Path(p or ".").resolve() != _HERE]
-from benchmarks.link import issue_job  # noqa: E402
+from benchmarks.link import issue_job, step_span_s  # noqa: E402
 from fivebar_host import protocol, wire  # noqa: E402
 from fivebar_host.devices.sim import (  # noqa: E402
     Emulator,
@@ -196,8 +196,7 @@ def profile(segments: int, p_us: int, baud: int, by_line: bool = False) -> Profi
         dev = boot(emu, Path(tmp) / "trace.txt", 20.0)
         final = stream(dev.session, dev.port, lines, baud)
         dev.close()
-        steps = [int(ln.split()[0]) for ln in (Path(tmp) / "trace.txt").read_text().splitlines()
-                 if ln.endswith((" stepA 1", " stepB 1"))]
+        span = round(step_span_s(Path(tmp) / "trace.txt") * 16e6)
         text = prof.read_text()
         rows = [tuple(map(int, ln.split()[:2])) for ln in text.splitlines()
                 if not ln.startswith("#")]
@@ -210,7 +209,7 @@ def profile(segments: int, p_us: int, baud: int, by_line: bool = False) -> Profi
         per[name] = per.get(name, 0) + cyc
         total += cyc
     return Profile(per, total, len(lines), final.underruns - 1, min_sp[0] - ram_end(elf),
-                   steps[-1] - steps[0])
+                   span)
 
 
 def main() -> None:
