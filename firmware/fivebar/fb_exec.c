@@ -195,11 +195,38 @@ static uint8_t check_target(const int32_t from[2], const int32_t t[2], int32_t p
 	return FB_OK;
 }
 
+/* Whether the items of a G6 line whose head reaches t pass every check of
+ * check_target, from the parse's summary (proto_cmd_t g6_lo, g6_hi, g6_cps):
+ * each item's target is t plus a running sum, inside a box exactly when the
+ * lowest and highest sums are; a motor moves when a sum is not 0; and the
+ * step rates pass when g6_cps >= min_interval (fb_proto.h).  1 proves the
+ * line good; 0 says only that some item fails (or the summary does not
+ * bound the line), which the item-by-item pass then names. */
+static uint8_t g6_fits(const proto_cmd_t *c, const int32_t t[2])
+{
+	if (!c->g6_cps || c->g6_cps < fb_state.min_interval)
+		return 0;
+	uint8_t soft = fb_state.settings[SET_SOFT_LIMITS] != 0;
+	for (uint8_t i = 0; i < 2; i++) {
+		if ((c->g6_lo[i] || c->g6_hi[i]) && !fb_state.motors_on)
+			return 0;
+		int32_t lo = t[i] + c->g6_lo[i], hi = t[i] + c->g6_hi[i];
+		if (lo < -CFG_POS_LIMIT || hi > CFG_POS_LIMIT)
+			return 0;
+		if (soft && (lo < fb_state.settings[i ? SET_B_MIN : SET_A_MIN] ||
+			     hi > fb_state.settings[i ? SET_B_MAX : SET_A_MAX]))
+			return 0;
+	}
+	return 1;
+}
+
 /* Every segment of a G6 line against the checks of a G1, before any is
- * queued: a line is queued whole or not at all (docs/protocol.md 6.3).  Not
- * inlined (nor g7_check): its arrays would stay in exec_g6's frame while that
- * prepares and queues blocks, the stack's deepest point (python
- * benchmarks/segcost.py prints the headroom). */
+ * queued: a line is queued whole or not at all (docs/protocol.md 6.3).  The
+ * parse's summary clears a good line at once (g6_fits); a line it does not
+ * clear is read item by item for the first one that fails, so the error is
+ * the one the items name in order.  Not inlined (nor g7_check): its arrays
+ * would stay in exec_g6's frame while that prepares and queues blocks, the
+ * stack's deepest point (python benchmarks/segcost.py prints the headroom). */
 static __attribute__((noinline)) uint8_t g6_check(const proto_cmd_t *c)
 {
 	int32_t from[2] = { plan[0], plan[1] }, t[2] = { plan[0], plan[1] }, d[2];
@@ -211,6 +238,8 @@ static __attribute__((noinline)) uint8_t g6_check(const proto_cmd_t *c)
 	uint8_t at = c->g6_at;
 	rate_lim_t rl = { 0, 0 };
 	uint8_t st = check_target(from, t, p, &rl);
+	if (st != FB_OK || !c->g6_count || g6_fits(c, t))
+		return st;
 	while (st == FB_OK && proto_g6_next(fb_state.line, &at, c->g6_end, &p, d)) {
 		from[0] = t[0];
 		from[1] = t[1];

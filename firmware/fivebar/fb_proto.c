@@ -393,10 +393,49 @@ uint8_t proto_g6_next(const char *line, uint8_t *at, uint8_t end, int32_t *p, in
 	return 1;
 }
 
-/* The items of a G6 line from s[i]: each must parse; counted in cmd. */
+/* floor(p_us * F_CPU/1e6 / n), at most 65535: the step interval of n steps in
+ * p_us, in cycles (the G6 summary's g6_cps; n >= 1).  In 16 bits when the
+ * duration's cycles fit (p_us < 4096), as mo_prepare divides. */
+static uint16_t item_cps(int32_t p_us, uint16_t n)
+{
+	uint32_t c = (uint32_t)p_us * (FB_F_CPU / 1000000UL);
+	if (n == 1u)
+		return c > 0xffffu ? 0xffffu : (uint16_t)c;
+	if (c <= 0xffffu)
+		return (uint16_t)((uint16_t)c / n);
+	c /= n;
+	return c > 0xffffu ? 0xffffu : (uint16_t)c;
+}
+
+/* A G6 item's larger step count, or 0 when a motor moves more than 65535
+ * steps (the summary's bound: no running sum can overflow then). */
+static uint16_t item_steps(const int32_t d[2])
+{
+	uint16_t n = 0;
+	for (uint8_t k = 0; k < 2; k++) {
+		int32_t v = d[k] < 0 ? -d[k] : d[k];
+		if (v > 0xffffL)
+			return 0;
+		if ((uint16_t)v > n)
+			n = (uint16_t)v;
+	}
+	return n ? n : 0xffffu;  /* 0xffff: no step (and no bound from it) */
+}
+
+/*
+ * The items of a G6 line from s[i]: each must parse; counted in cmd, and
+ * summed up for the checks (proto_cmd_t's g6_lo, g6_hi, g6_cps).  The checks
+ * read the line once here instead of again item by item: a third of a
+ * segment's parse and all of its checks, and the queue ran empty while a
+ * line of 23 items was read and checked (python benchmarks/segcost.py).  A
+ * duration run's step interval is divided once, when its P changes.
+ */
 static uint8_t g6_items(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cmd)
 {
-	int32_t p = cmd->p, d[2];
+	int32_t p = cmd->p, d[2], sum[2] = { 0, 0 };
+	int32_t run_p = p;
+	uint16_t run_n = 0, cps = 0xffffu;  /* the run's most steps; the least interval */
+	uint8_t wide = 0;                   /* an item moves a motor over 65535 steps */
 	cmd->g6_at = i;
 	cmd->g6_end = end;
 	const char *at = s + i, *e = s + end;
@@ -404,13 +443,41 @@ static uint8_t g6_items(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cmd)
 		while (at < e && is_ws(*at))
 			at++;
 		if (at >= e)
-			return FB_OK;
+			break;
 		uint8_t st = FB_OK;
 		at = g6_item(at, e, &p, d, &st);
 		if (!at)
 			return st;
 		cmd->g6_count++;
+		uint16_t n = item_steps(d);
+		if (!n) {
+			wide = 1;
+			continue;
+		}
+		if (p != run_p) {
+			if (run_n) {
+				uint16_t c = item_cps(run_p, run_n);
+				cps = c < cps ? c : cps;
+			}
+			run_p = p;
+			run_n = 0;
+		}
+		if (n != 0xffffu && n > run_n)
+			run_n = n;
+		for (uint8_t k = 0; k < 2; k++) {
+			sum[k] += d[k];
+			if (sum[k] < cmd->g6_lo[k])
+				cmd->g6_lo[k] = sum[k];
+			if (sum[k] > cmd->g6_hi[k])
+				cmd->g6_hi[k] = sum[k];
+		}
 	}
+	if (run_n) {
+		uint16_t c = item_cps(run_p, run_n);
+		cps = c < cps ? c : cps;
+	}
+	cmd->g6_cps = wide ? 0 : cps;
+	return FB_OK;
 }
 
 /* Whether the command at s[i] (after blanks) is G7: the index past its code,

@@ -61,18 +61,38 @@ typedef struct {
 	uint8_t setting;    /* PROTO_CMD_SET: setting number */
 	uint32_t n;         /* line number when has_n */
 	int32_t a, b, p, s; /* word values */
-	int32_t r, d;       /* M280: move and settle time, ms; G7: U and T, cycles */
-	int32_t value;      /* PROTO_CMD_SET: value */
 	uint8_t g6_count;   /* PROTO_CMD_G6: segments after the head (the line uses
 			     * 1 + g6_count line numbers) */
 	uint8_t g6_at;      /* PROTO_CMD_G6: index of its first item in the line */
 	uint8_t g6_end;     /* PROTO_CMD_G6: end of its items (the '*', ';' or line end) */
-	/* PROTO_CMD_G7 (fb_g7.c): its items from line[g6_at] (g6_count = items - 1:
-	 * the line uses 1 + g6_count numbers), bit i of g7_pmask set when item i
-	 * carries its P, its powers line[px_at..px_end) (escaped), px_n of them;
-	 * U in r and T in d (PROTO_W_U, PROTO_W_T in has) */
-	uint8_t px_at, px_end, px_n;
-	uint32_t g7_pmask;
+	union {
+		struct {
+			int32_t r, d;    /* M280: move and settle time, ms; G7: U and T, cycles */
+			int32_t value;   /* PROTO_CMD_SET: value */
+			/* PROTO_CMD_G7 (fb_g7.c): its items from line[g6_at] (g6_count =
+			 * items - 1: the line uses 1 + g6_count numbers), bit i of
+			 * g7_pmask set when item i carries its P, its powers
+			 * line[px_at..px_end) (escaped), px_n of them; U in r and T in d
+			 * (PROTO_W_U, PROTO_W_T in has) */
+			uint32_t g7_pmask;
+			uint8_t px_at, px_end, px_n;
+		};
+		/* PROTO_CMD_G6: what its items add up to, read by the parse so that
+		 * the checks need not read them again (fb_exec.c g6_check): the
+		 * lowest and highest running sum of the items' moves per motor (the
+		 * targets after the head's, relative to it; 0 included), and
+		 * g6_cps, the least over the items of floor(P * F_CPU/1e6 / n), n
+		 * the larger of an item's two step counts (65535 at most, and for
+		 * an item that moves no motor; 0 when an item moves a motor more
+		 * than 65535 steps, which the summary does not bound: such a line is
+		 * checked item by item).  An item's step rate passes mo_prepare's
+		 * test floor(C / n) >= min_interval exactly when n <= floor(C /
+		 * min_interval), so g6_cps >= min_interval passes every item. */
+		struct {
+			int32_t g6_lo[2], g6_hi[2];
+			uint16_t g6_cps;
+		};
+	};
 } proto_cmd_t;
 
 /* Line-number state shared by consecutive lines. */

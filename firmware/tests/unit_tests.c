@@ -16,6 +16,7 @@
 #include "fb_main.h"
 #include "fb_motion.h"
 #include "fb_proto.h"
+#include "fb_state.h"
 #include "status.h"
 
 static int failures, checks;
@@ -954,6 +955,234 @@ static void test_g6_app(void)
 	expect("?", "<Idle|A:41,B:-2|Q:0|Ln:42,42|L:0|U:3|H:0|P:0>\r\n");
 }
 
+/* ---- G6 checks from the parse's summary -------------------------------------------------- */
+
+static uint32_t rng_state = 12345u;
+static uint32_t rnd(uint32_t n)
+{
+	/* xorshift32: the trials are the same on every run */
+	rng_state ^= rng_state << 13;
+	rng_state ^= rng_state >> 17;
+	rng_state ^= rng_state << 5;
+	return rng_state % n;
+}
+
+static int32_t rnd_in(int32_t lo, int32_t hi) { return lo + (int32_t)rnd((uint32_t)(hi - lo + 1)); }
+
+/* The reply the protocol promises for a G6 line (docs/protocol.md 6, 6.3),
+ * worked out item by item in order as the G1 lines it stands for: the first
+ * target outside +-CFG_POS_LIMIT (7), outside the soft limits (11), moving a
+ * motor while they are off (15), or asking more than floor(P * 16 / I) steps
+ * of a motor, I the least step interval (12), names the error. */
+typedef struct {
+	int32_t lim[4];   /* A min, A max, B min, B max */
+	uint8_t soft, motors_on;
+	uint32_t interval;
+} g6_model_t;
+
+static int g6_model(const g6_model_t *m, const int32_t from0[2], int n, const int32_t t_all[][2],
+		    const int32_t p_all[])
+{
+	int32_t from[2] = { from0[0], from0[1] };
+	for (int k = 0; k < n; k++) {
+		const int32_t *t = t_all[k];
+		for (int i = 0; i < 2; i++)
+			if (t[i] > CFG_POS_LIMIT || t[i] < -CFG_POS_LIMIT)
+				return FB_ERR_OUT_OF_RANGE;
+		for (int i = 0; i < 2; i++)
+			if (m->soft && (t[i] < m->lim[2 * i] || t[i] > m->lim[2 * i + 1]))
+				return FB_ERR_SOFT_LIMIT;
+		if (!m->motors_on && (t[0] != from[0] || t[1] != from[1]))
+			return FB_ERR_MOTORS_OFF;
+		uint64_t lim = (uint64_t)p_all[k] * 16u / m->interval;
+		for (int i = 0; i < 2; i++)
+			if ((uint64_t)llabs((long long)t[i] - from[i]) > lim)
+				return FB_ERR_TOO_FAST;
+		from[0] = t[0];
+		from[1] = t[1];
+	}
+	return FB_OK;
+}
+
+/* One item's move: mostly a few steps, now and then many (past the step
+ * rate), past 65535 (which the summary does not bound) or near the
+ * position limit. */
+static int32_t g6_rand_move(uint8_t fine)
+{
+	uint32_t r = rnd(100);
+	if (fine)
+		return r < 97 ? rnd_in(-1, 1) : rnd_in(-3, 3);
+	if (r < 93)
+		return rnd_in(-4, 4);
+	if (r < 97)
+		return rnd_in(-300, 300);
+	if (r < 99)
+		return rnd_in(-70000, 70000);
+	return rnd(2) ? CFG_POS_LIMIT - (int32_t)rnd(1000) : -CFG_POS_LIMIT + (int32_t)rnd(1000);
+}
+
+/* Random G6 lines (items with and without P, settings, soft limits, motors
+ * off, far targets) through the whole firmware: each reply is the one the
+ * item-by-item model names.  The firmware clears most lines from the
+ * parse's summary without reading the items again (fb_exec.c g6_fits):
+ * this holds it to the per-item rules, the first failing item's error
+ * included. */
+static void test_g6_checks_random(void)
+{
+	static const int32_t rates[] = { 1000, 8000, 30000, 60000 };
+	int failed_before = failures, ok_lines = 0, errs[16] = { 0 };
+	for (int trial = 0; trial < 4000 && failures == failed_before; trial++) {
+		g6_model_t m;
+		m.lim[0] = rnd_in(-600, -1);
+		m.lim[1] = rnd_in(1, 600);
+		m.lim[2] = rnd_in(-600, -1);
+		m.lim[3] = rnd_in(1, 600);
+		m.soft = (uint8_t)rnd(2);
+		m.motors_on = rnd(10) != 0;
+		int32_t rate = rates[rnd(4)];
+		int32_t pos[2] = { rnd_in(-500, 500), rnd_in(-500, 500) };
+		/* a fifth of the lines of single steps (their rates alone can be too
+		 * fast), a tenth near the position limit (reached by small items) */
+		uint8_t fine = rnd(5) == 0, up = rnd(6) == 0;  /* up: every move >= 0 */
+		if (rnd(2)) {
+			/* soft limits a few steps around the position: lines reach them exactly */
+			m.lim[0] = pos[0] - (int32_t)rnd(7);
+			m.lim[1] = pos[0] + 1 + (int32_t)rnd(7);
+			m.lim[2] = pos[1] - (int32_t)rnd(7);
+			m.lim[3] = pos[1] + 1 + (int32_t)rnd(7);
+		}
+		if (rnd(10) == 0) {
+			uint8_t i = (uint8_t)rnd(2);
+			pos[i] = rnd(2) ? CFG_POS_LIMIT - (int32_t)rnd(20) : -CFG_POS_LIMIT + (int32_t)rnd(20);
+			m.soft = 0;
+		}
+		boot_at_zero();
+		char line[CFG_LINE_MAX + 64], tmp[40];
+		if (m.lim[0] >= m.lim[1] || m.lim[2] >= m.lim[3])
+			continue;
+		snprintf(line, sizeof line, "$0=%ld\n$1=%ld\n$2=%ld\n$3=%ld\n$4=%ld\n$5=%u\n"
+			 "G92 A%ld B%ld\n%s", (long)rate, (long)m.lim[0], (long)m.lim[1],
+			 (long)m.lim[2], (long)m.lim[3], (unsigned)m.soft, (long)pos[0], (long)pos[1],
+			 m.motors_on ? "" : "M18\n");
+		send(line);
+		const char *got = poll_out(20);
+		CHECK(strstr(got, "error") == NULL, "set-up: %s", got);
+		fake_ms += 1000;
+		poll_out(5);
+		int32_t at0[2], at[2];
+		mo_get_pos(at0);
+		m.interval = fb_state.min_interval;
+		/* the head (absolute, G90) and up to 14 items: the line's blocks fit the queue */
+		int32_t t[16][2], p[16];
+		p[0] = rnd_in(100, 3000);
+		t[0][0] = pos[0] + (fine ? g6_rand_move(1) : rnd_in(-8, 8));
+		t[0][1] = pos[1] + (fine ? g6_rand_move(1) : rnd_in(-8, 8));
+		snprintf(line, sizeof line, "G6 A%ld B%ld P%ld ", (long)t[0][0], (long)t[0][1], (long)p[0]);
+		int n = 1, items = 1 + (int)rnd(14);
+		for (; n <= items; n++) {
+			p[n] = p[n - 1];
+			tmp[0] = 0;
+			if (rnd(4) == 0) {
+				p[n] = rnd(10) ? rnd_in(100, 3000) : rnd_in(3000, 200000);
+				snprintf(tmp, sizeof tmp, "P%ld", (long)p[n]);
+			}
+			int32_t d[2] = { g6_rand_move(fine), g6_rand_move(fine) };
+			for (int i = 0; up && i < 2; i++)
+				d[i] = d[i] < 0 ? -d[i] : d[i];
+			size_t len = strlen(line);
+			snprintf(line + len, sizeof line - len, "%s%+ld%+ld", tmp, (long)d[0], (long)d[1]);
+			if (strlen(line) > CFG_LINE_MAX - 1) {
+				line[len] = 0;
+				break;
+			}
+			t[n][0] = t[n - 1][0] + d[0];
+			t[n][1] = t[n - 1][1] + d[1];
+		}
+		int want = g6_model(&m, pos, n, (const int32_t(*)[2])t, p);
+		errs[want & 15]++;
+		ok_lines += want == FB_OK;
+		char want_s[24];
+		if (want == FB_OK)
+			snprintf(want_s, sizeof want_s, "ok\r\n");
+		else
+			snprintf(want_s, sizeof want_s, "error:%d\r\n", want);
+		strcat(line, "\n");
+		expect(line, want_s);
+		/* all or nothing: a refused line moved nothing, a good one every item */
+		fake_ms += 1000;
+		poll_out(5);
+		mo_get_pos(at);
+		const int32_t *end = want == FB_OK ? t[n - 1] : pos;
+		CHECK(at[0] - at0[0] == end[0] - pos[0] && at[1] - at0[1] == end[1] - pos[1] &&
+		      !mo_queue_count(), "'%s': moved %ld,%ld, want %ld,%ld", line, (long)(at[0] - at0[0]),
+		      (long)(at[1] - at0[1]), (long)(end[0] - pos[0]), (long)(end[1] - pos[1]));
+	}
+	/* the trials reach every outcome, most of them often */
+	CHECK(ok_lines > 400 && errs[FB_ERR_OUT_OF_RANGE] > 10 && errs[FB_ERR_SOFT_LIMIT] > 200 &&
+	      errs[FB_ERR_MOTORS_OFF] > 50 && errs[FB_ERR_TOO_FAST] > 200,
+	      "outcomes: ok %d, 7: %d, 11: %d, 15: %d, 12: %d", ok_lines, errs[FB_ERR_OUT_OF_RANGE],
+	      errs[FB_ERR_SOFT_LIMIT], errs[FB_ERR_MOTORS_OFF], errs[FB_ERR_TOO_FAST]);
+}
+
+/* One G6 line after a fresh boot and `setup`: its reply, and how far it moved
+ * motor A and B once the queue ran. */
+static void g6_case(const char *setup, const char *line, const char *want, int32_t da, int32_t db)
+{
+	int32_t at0[2], at[2];
+	boot_at_zero();
+	send(setup);
+	const char *got = poll_out(20);
+	CHECK(strstr(got, "error") == NULL, "set-up '%s': %s", setup, got);
+	fake_ms += 1000;
+	poll_out(5);
+	mo_get_pos(at0);
+	expect(line, want);
+	fake_ms += 1000;
+	poll_out(5);
+	mo_get_pos(at);
+	CHECK(at[0] - at0[0] == da && at[1] - at0[1] == db && !mo_queue_count(),
+	      "'%s': moved %ld,%ld, want %ld,%ld; %u blocks queued", line, (long)(at[0] - at0[0]),
+	      (long)(at[1] - at0[1]), (long)da, (long)db, (unsigned)mo_queue_count());
+}
+
+/* Each bound of the G6 summary at its edge: a line that just passes and one
+ * that just fails, the failing item after items that move (so a line cleared
+ * wrongly would move before its error). */
+static void test_g6_checks_edges(void)
+{
+	/* step rate: $0=1000 is 16000 cycles a step; P2000 allows 2 steps, P1000 1, P999 0 */
+	g6_case("$0=1000\n", "G6 A0 B0 P2000 +2+0P1000+1+1\n", "ok\r\n", 3, 1);
+	g6_case("$0=1000\n", "G6 A1 B0 P2000 +2+0P999+1+0\n", "error:12\r\n", 0, 0);
+	/* P16000 allows 16 steps exactly (256000 / 16000), P15999 15 */
+	g6_case("$0=1000\n", "G6 A1 B0 P2000 +2+0P16000+16+0\n", "ok\r\n", 19, 0);
+	g6_case("$0=1000\n", "G6 A1 B0 P2000 +2+0P15999+16+0\n", "error:12\r\n", 0, 0);
+	g6_case("$0=1000\n", "G6 A0 B0 P2000 +2+0+1+3\n", "error:12\r\n", 0, 0);
+	g6_case("$0=1000\n", "G6 A0 B0 P2000 +1+0P1000+0+0+0-1P2000+0-2\n", "ok\r\n", 1, -3);
+	/* soft limits, reached exactly and passed by one step, low and high, both motors */
+	g6_case("$1=-5\n$2=5\n$3=-5\n$4=5\n$5=1\n", "G6 A0 B0 P1000 +3-3+2-2-5+5\n", "ok\r\n", 0, 0);
+	g6_case("$1=-5\n$2=5\n$3=-5\n$4=5\n$5=1\n", "G6 A0 B0 P1000 +3-3+2-2+1+0\n",
+		"error:11\r\n", 0, 0);
+	g6_case("$1=-5\n$2=5\n$3=-5\n$4=5\n$5=1\n", "G6 A0 B0 P1000 -3+3-2+2-1+0\n",
+		"error:11\r\n", 0, 0);
+	g6_case("$1=-5\n$2=5\n$3=-5\n$4=5\n$5=1\n", "G6 A0 B0 P1000 +3+3+2+2-9+1\n",
+		"error:11\r\n", 0, 0);
+	/* the position limit, reached by small items from near it */
+	g6_case("$5=0\nG92 A99999997 B-99999997\n", "G6 A99999997 B-99999997 P1000 +1-1+2-2\n", "ok\r\n",
+		3, -3);
+	g6_case("$5=0\nG92 A99999997 B-99999997\n", "G6 A99999997 B-99999997 P1000 +1+0+3+0\n",
+		"error:7\r\n", 0, 0);
+	g6_case("$5=0\nG92 A99999997 B-99999997\n", "G6 A99999997 B-99999997 P1000 +1+0+0-4\n",
+		"error:7\r\n", 0, 0);
+	/* motors off: items that move only forward, or only motor B */
+	g6_case("M18\n", "G6 A0 B0 P1000 +0+0+0+0\n", "ok\r\n", 0, 0);
+	g6_case("M18\n", "G6 A0 B0 P1000 +0+0+1+0\n", "error:15\r\n", 0, 0);
+	g6_case("M18\n", "G6 A0 B0 P1000 +0+0+0+1\n", "error:15\r\n", 0, 0);
+	/* an item past 65535 steps (the summary does not bound it): checked item by item */
+	g6_case("$0=60000\n$5=0\n", "G6 A5 B0 P2000000 +70000+0+1+0\n", "ok\r\n", 70006, 0);
+	g6_case("$0=60000\n$5=0\n", "G6 A5 B0 P2000000 P1000000+70000+0\n", "error:12\r\n", 0,
+		0);
+}
+
 /* $B (protocol 1.1): ok at the old rate, then the switch; a rate kept once a
  * valid line arrives, back to 115200 after 1 s without one, on Ctrl-X, and
  * never to a rate the Uno cannot make. */
@@ -1486,6 +1715,8 @@ int main(void)
 	test_homed_flag();
 	test_strict_framing();
 	test_g6_app();
+	test_g6_checks_random();
+	test_g6_checks_edges();
 	test_baud();
 	test_kept_record();
 	test_reset_during_homing();
