@@ -32,10 +32,11 @@
 
 #define CTRL_X 0x18
 
-/* receive ring: free-running 8-bit indices over all 256 bytes; CFG_RX_SIZE of them used */
-static volatile uint8_t rx_buf[RX_BUF];
-static volatile uint8_t rx_head, rx_tail, rx_discard, rx_overflow;
-static volatile uint32_t last_rx_ms;
+/* the receive ring (fb_main.h); the head at a Ctrl-X, and a byte lost to a full ring */
+fb_rx_t fb_rx;
+static volatile uint8_t rx_discard, rx_overflow;
+/* when the main loop last saw fb_rx.heard set (since_last_rx) */
+static uint32_t last_rx_ms;
 /* a '~' lowered a parked pen again: the timeline resumes at this board_ms()
  * (0 = no resume pending) */
 static volatile uint32_t resume_at;
@@ -66,7 +67,7 @@ static void do_reset(void)
 {
 	uint8_t sreg = board_irq_save();
 	fb_state.f_reset = 0;
-	rx_tail = rx_discard;
+	fb_rx.tail = rx_discard;
 	rx_overflow = 0;
 	fb_state.held = 0;
 	resume_at = 0;
@@ -84,7 +85,7 @@ static void do_reset(void)
 
 void fb_rx_isr(uint8_t c)
 {
-	last_rx_ms = board_ms();
+	fb_rx.heard = 1;
 	switch (c) {
 	case '?':
 		fb_state.f_status = 1;
@@ -123,18 +124,20 @@ void fb_rx_isr(uint8_t c)
 		if (fb_state.homing)
 			fb_state.f_home_abort = 1;
 		fb_state.f_reset = 1;
-		rx_discard = rx_head;
+		rx_discard = fb_rx.head;
 		return;
 	default:
 		break;
 	}
-	uint8_t h = rx_head;
-	if ((uint8_t)(h - rx_tail) >= CFG_RX_SIZE) {
+	/* board_avr.c's fast path does these lines (and heard) for a byte it
+	 * takes: keep them alike */
+	uint8_t h = fb_rx.head;
+	if ((uint8_t)(h - fb_rx.tail) >= CFG_RX_SIZE) {
 		rx_overflow = 1;
 		return;
 	}
-	rx_buf[h & RX_MASK] = c;
-	rx_head = (uint8_t)(h + 1u);
+	fb_rx.buf[h & RX_MASK] = c;
+	fb_rx.head = (uint8_t)(h + 1u);
 }
 
 /*
@@ -222,17 +225,17 @@ static void handle_line(void)
  * needs it to see the ring's room, which a late store can only understate):
  * a byte took ~70 cycles when each went through the volatile indices
  * (python benchmarks/segcost.py).  After a Ctrl-X the lines received before
- * it are do_reset()'s to discard (it sets rx_tail to rx_discard and empties
+ * it are do_reset()'s to discard (it sets the tail to rx_discard and empties
  * the line buffer): no line is handled once f_reset is seen.
  */
 static void assemble(void)
 {
-	uint8_t t = rx_tail, h = rx_head;
+	uint8_t t = fb_rx.tail, h = fb_rx.head;
 	if (fb_state.f_reset || t == h)
 		return;
 	uint8_t len = line_len, over = line_over, nl = 0;
 	while (t != h) {
-		uint8_t c = rx_buf[t & RX_MASK];
+		uint8_t c = fb_rx.buf[t & RX_MASK];
 		t = (uint8_t)(t + 1u);
 		if (c == '\n') {
 			nl = 1;
@@ -247,17 +250,26 @@ static void assemble(void)
 	}
 	line_len = len;
 	line_over = over;
-	rx_tail = t;  /* only the main loop writes it (do_reset: after a Ctrl-X) */
+	fb_rx.tail = t;  /* only the main loop writes it (do_reset: after a Ctrl-X) */
 	if (nl && !fb_state.f_reset)
 		handle_line();
 }
 
+/* Milliseconds since the last byte came, as the main loop saw it: the
+ * receive interrupt only sets fb_rx.heard (its fast path has no time for
+ * board_ms()), and every pass of the main loop stamps it (late by at most a
+ * pass, a few ms, against a timeout of hundreds). */
+static void stamp_rx(void)
+{
+	if (fb_rx.heard) {
+		fb_rx.heard = 0;
+		last_rx_ms = board_ms();
+	}
+}
+
 static uint32_t since_last_rx(void)
 {
-	uint8_t sreg = board_irq_save();
-	uint32_t t = last_rx_ms;
-	board_irq_restore(sreg);
-	return board_ms() - t;
+	return board_ms() - last_rx_ms;
 }
 
 /*
@@ -267,6 +279,7 @@ static uint32_t since_last_rx(void)
  */
 static void laser_watchdog(void)
 {
+	stamp_rx();
 	if (!fb_state.held && (mo_laser() || mo_pen_down()) &&
 	    since_last_rx() > (uint32_t)fb_state.settings[SET_LASER_TIMEOUT]) {
 		uint8_t sreg = board_irq_save();
