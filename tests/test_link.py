@@ -163,3 +163,31 @@ def test_a_command_after_a_refused_one_runs(url: str) -> None:
         assert st.accepted_line == line + 2
     finally:
         link.close()
+
+
+def test_waiting_for_the_end_polls_soon_then_backs_off(monkeypatch: pytest.MonkeyPatch) -> None:
+    """`wait_idle` asks for a status report 3 ms after the first, then doubles its pause up
+    to the link's poll interval: a job that ends just after its last line is seen to end
+    within milliseconds, not up to the interval later (the wall-clock segments/s of
+    `benchmarks/link.py`), and a long wait still polls at the interval."""
+    import sys
+    import time
+    pauses: list[float] = []
+    real_sleep = time.sleep
+
+    def sleep(s: float) -> None:
+        if sys._getframe(1).f_globals["__name__"] == Link.__module__:  # the link's own pauses
+            pauses.append(s)
+        real_sleep(s)
+
+    link = Link.open("fivebar-mock://?speed=1")
+    try:
+        link.command("G1 A50 B-50 P300000")  # 0.3 s of motion
+        monkeypatch.setattr(time, "sleep", sleep)
+        st = link.wait_idle(5.0)
+    finally:
+        monkeypatch.undo()
+        link.close()
+    assert (st.a, st.b) == (50, -50)
+    assert pauses[:5] == pytest.approx([0.003, 0.006, 0.012, 0.024, 0.048])
+    assert len(pauses) > 6 and set(pauses[5:]) == {link.poll_interval_s}

@@ -38,6 +38,11 @@ from fivebar_host.run.overrides import Overrides
 #: How long the link waits for the replies of lines still in flight before it reads the
 #: firmware's line counter after a refused line (`Link.resync_numbering`), s.
 RESYNC_SETTLE_S = 0.2
+#: wait_idle's first pause between status reports; each next one doubles, up to the link's
+#: poll interval.  A wait usually starts as a stream ends, with at most the firmware's queue
+#: (16 blocks) left to run: a fixed 50 ms pause added up to 50 ms to every job's end (the
+#: issue-39 job of `benchmarks/link.py` runs 0.3 s in all).  Five more reports in a long wait.
+WAIT_FIRST_POLL_S = 0.003
 
 
 class Link:
@@ -385,6 +390,7 @@ class Link:
         """Poll until the machine is Idle with an empty queue (and `last_line` accepted, so
         every line up to it has run: nothing is left to execute)."""
         deadline = time.monotonic() + timeout_s
+        pause = min(WAIT_FIRST_POLL_S, self.poll_interval_s)
         while True:
             st = self.status()
             if on_status is not None:
@@ -400,7 +406,8 @@ class Link:
             if time.monotonic() > deadline:
                 raise LinkFaultError(FaultKind.TIMEOUT, f"{self.url}: machine still {st.state} "
                                      f"after {timeout_s:g} s", -1, status=st)
-            time.sleep(self.poll_interval_s)
+            time.sleep(pause)
+            pause = min(2 * pause, self.poll_interval_s)
 
     # ------------------------------------------------------------------ streaming
     def stream(self, program: Program | Sequence[str], *, counting: bool = True,
