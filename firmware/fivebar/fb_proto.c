@@ -148,15 +148,21 @@ static uint8_t parse_int(const char *s, uint8_t *pi, uint8_t end, int32_t *out)
 	return FB_OK;
 }
 
+/* The words (PROTO_W_*) a command may carry.  Tests, not a switch: avr-gcc
+ * turned the switch into a 16-byte lookup table in the static RAM (.data,
+ * CSWTCH), 16 of the bytes the stack has above it (python
+ * benchmarks/stack.py). */
 static uint8_t allowed_words(uint8_t kind)
 {
-	switch (kind) {
-	case PROTO_CMD_G1: case PROTO_CMD_G6: return PROTO_W_A | PROTO_W_B | PROTO_W_P | PROTO_W_S;
-	case PROTO_CMD_G92: return PROTO_W_A | PROTO_W_B;
-	case PROTO_CMD_M3: return PROTO_W_S;
-	case PROTO_CMD_M280: return PROTO_W_S | PROTO_W_R | PROTO_W_D;
-	default: return 0;
-	}
+	if (kind == PROTO_CMD_G1 || kind == PROTO_CMD_G6)
+		return PROTO_W_A | PROTO_W_B | PROTO_W_P | PROTO_W_S;
+	if (kind == PROTO_CMD_G92)
+		return PROTO_W_A | PROTO_W_B;
+	if (kind == PROTO_CMD_M3)
+		return PROTO_W_S;
+	if (kind == PROTO_CMD_M280)
+		return PROTO_W_S | PROTO_W_R | PROTO_W_D;
+	return 0;
 }
 
 static uint8_t parse_dollar(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cmd)
@@ -407,19 +413,20 @@ static uint16_t item_cps(int32_t p_us, uint16_t n)
 	return c > 0xffffu ? 0xffffu : (uint16_t)c;
 }
 
-/* A G6 item's larger step count, or 0 when a motor moves more than 65535
- * steps (the summary's bound: no running sum can overflow then). */
+/* A G6 item's larger step count (0xffff for an item that moves no motor), or
+ * 0 when a motor moves more than 32767 steps: the summary's bound, which keeps
+ * every move an int16_t. */
 static uint16_t item_steps(const int32_t d[2])
 {
 	uint16_t n = 0;
 	for (uint8_t k = 0; k < 2; k++) {
 		int32_t v = d[k] < 0 ? -d[k] : d[k];
-		if (v > 0xffffL)
+		if (v > 0x7fffL)
 			return 0;
 		if ((uint16_t)v > n)
 			n = (uint16_t)v;
 	}
-	return n ? n : 0xffffu;  /* 0xffff: no step (and no bound from it) */
+	return n ? n : 0xffffu;
 }
 
 /*
@@ -428,14 +435,20 @@ static uint16_t item_steps(const int32_t d[2])
  * read the line once here instead of again item by item: a third of a
  * segment's parse and all of its checks, and the queue ran empty while a
  * line of 23 items was read and checked (python benchmarks/segcost.py).  A
- * duration run's step interval is divided once, when its P changes.
+ * duration run's step interval is divided once, when its P changes.  The sums
+ * are 16-bit (a line whose sums leave the int16_t range, or with a move over
+ * 32767 steps, is not summed up: g6_cps 0).  Not inlined: its locals would
+ * stay in the main loop's frame under every line, G7 scans (the stack's
+ * deepest point, benchmarks/stack.py) included.
  */
-static uint8_t g6_items(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cmd)
+static __attribute__((noinline)) uint8_t g6_items(const char *s, uint8_t i, uint8_t end,
+						  proto_cmd_t *cmd)
 {
-	int32_t p = cmd->p, d[2], sum[2] = { 0, 0 };
+	int32_t p = cmd->p, d[2];
+	int16_t sum[2] = { 0, 0 }, lo[2] = { 0, 0 }, hi[2] = { 0, 0 };
 	int32_t run_p = p;
 	uint16_t run_n = 0, cps = 0xffffu;  /* the run's most steps; the least interval */
-	uint8_t wide = 0;                   /* an item moves a motor over 65535 steps */
+	uint8_t wide = 0;                   /* not summed up (above) */
 	cmd->g6_at = i;
 	cmd->g6_end = end;
 	const char *at = s + i, *e = s + end;
@@ -449,6 +462,8 @@ static uint8_t g6_items(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cmd)
 		if (!at)
 			return st;
 		cmd->g6_count++;
+		if (wide)
+			continue;
 		uint16_t n = item_steps(d);
 		if (!n) {
 			wide = 1;
@@ -465,12 +480,17 @@ static uint8_t g6_items(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cmd)
 		if (n != 0xffffu && n > run_n)
 			run_n = n;
 		for (uint8_t k = 0; k < 2; k++) {
-			sum[k] += d[k];
-			if (sum[k] < cmd->g6_lo[k])
-				cmd->g6_lo[k] = sum[k];
-			if (sum[k] > cmd->g6_hi[k])
-				cmd->g6_hi[k] = sum[k];
+			if (__builtin_add_overflow(sum[k], (int16_t)d[k], &sum[k]))
+				wide = 1;
+			if (sum[k] < lo[k])
+				lo[k] = sum[k];
+			if (sum[k] > hi[k])
+				hi[k] = sum[k];
 		}
+	}
+	for (uint8_t k = 0; k < 2; k++) {
+		cmd->g6_lo[k] = lo[k];
+		cmd->g6_hi[k] = hi[k];
 	}
 	if (run_n) {
 		uint16_t c = item_cps(run_p, run_n);

@@ -83,13 +83,14 @@ typedef struct {
 		 * targets after the head's, relative to it; 0 included), and
 		 * g6_cps, the least over the items of floor(P * F_CPU/1e6 / n), n
 		 * the larger of an item's two step counts (65535 at most, and for
-		 * an item that moves no motor; 0 when an item moves a motor more
-		 * than 65535 steps, which the summary does not bound: such a line is
-		 * checked item by item).  An item's step rate passes mo_prepare's
-		 * test floor(C / n) >= min_interval exactly when n <= floor(C /
-		 * min_interval), so g6_cps >= min_interval passes every item. */
+		 * an item that moves no motor; 0 when the summary does not bound
+		 * the line, an item moving a motor more than 32767 steps or a sum
+		 * leaving the int16_t range: such a line is checked item by item).
+		 * An item's step rate passes mo_prepare's test floor(C / n) >=
+		 * min_interval exactly when n <= floor(C / min_interval), so g6_cps
+		 * >= min_interval passes every item. */
 		struct {
-			int32_t g6_lo[2], g6_hi[2];
+			int16_t g6_lo[2], g6_hi[2];
 			uint16_t g6_cps;
 		};
 	};
