@@ -17,7 +17,11 @@ function whose instruction reached it.
 - raster-noise: raster-default with line noise (`corrupt=0.003`): damaged G7 lines refused and
   resent.
 
-Run: python benchmarks/stack.py [--jobs g6,raster-default,...] [--segments 1000]
+With --chain, each job's line is followed by the functions its deepest point's return
+addresses go back to (devices/simstack.py `return_chain`: the calls and interrupts on top
+of each other there, deepest first).
+
+Run: python benchmarks/stack.py [--jobs g6,raster-default,...] [--segments 1000] [--chain]
 """
 
 from __future__ import annotations
@@ -115,6 +119,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--jobs", default=",".join(["g6", *JOBS]))
     ap.add_argument("--segments", type=int, default=1000, help="the g6 job's segments")
+    ap.add_argument("--chain", action="store_true",
+                    help="also print the calls and interrupts on the stack at its deepest")
     args = ap.parse_args()
     print(f"{'job':16s} {'headroom':>8s}  lowest SP  deepest near          what")
     for name in args.jobs.split(","):
@@ -123,6 +129,8 @@ def main() -> None:
                            else JOBS[name](Path(tmp)))
         print(f"{name:16s} {depth.headroom:6d} B  {depth.min_sp:#06x}     "
               f"{depth.function:20s}  {what}", flush=True)
+        if args.chain:
+            print(f"{'':16s} under it: {' < '.join(depth.chain)}")
 
 
 if __name__ == "__main__":

@@ -255,6 +255,10 @@ static const char *profile_path;
  * the headroom is that less the end of .bss/.noinit, avr-nm's _end) */
 static unsigned profile_min_sp = 0xffffu, profile_min_sp_pc, profile_prev_sp = 0xffffu;
 static unsigned short *profile_sp;  /* the lowest stack pointer at each address */
+/* the stack's bytes above the lowest stack pointer, when it was reached (its
+ * return addresses name the chain of calls and interrupts that got there) */
+static uint8_t profile_min_stack[512];
+static unsigned profile_min_stack_len;
 
 static void profile_write(void)
 {
@@ -267,6 +271,10 @@ static void profile_write(void)
 		if (profile[i])
 			fprintf(f, "%u %llu %u\n", i * 2u, profile[i], profile_sp[i]);
 	fprintf(f, "# min_sp %u at %u\n", profile_min_sp, profile_min_sp_pc);
+	fprintf(f, "# min_stack");
+	for (unsigned i = 0; i < profile_min_stack_len; i++)
+		fprintf(f, " %02x", profile_min_stack[i]);
+	fprintf(f, "\n");
 	fclose(f);
 }
 
@@ -1264,6 +1272,11 @@ int main(int argc, char **argv)
 			if (sp < profile_min_sp) {
 				profile_min_sp = sp;
 				profile_min_sp_pc = (unsigned)avr->pc;
+				unsigned top = avr->ramend;
+				profile_min_stack_len = 0;
+				for (unsigned a = sp + 1u; a <= top && profile_min_stack_len <
+				     sizeof profile_min_stack; a++)
+					profile_min_stack[profile_min_stack_len++] = avr->data[a];
 			}
 		} else {
 			state = avr_run(avr);

@@ -6,12 +6,15 @@ On the Uno the stack grows down from the top of the 2 KB SRAM towards the static
 `-P`) keeps the lowest stack pointer the run reached (its "# min_sp SP at PC" line; a
 frame's two-instruction SP update is not counted as a dip); the headroom is that less
 `_end`: the bytes still free below the deepest frame (SP points at the next free byte, so
-one more is free in fact: the figure errs low, as segcost.py's).
+one more is free in fact: the figure errs low, as segcost.py's).  The harness also keeps the
+stack's bytes at that moment ("# min_stack"): the return addresses among them name the
+calls and interrupts that were on top of each other there (`return_chain`).
 """
 
 from __future__ import annotations
 
 import bisect
+import re
 import subprocess
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +37,8 @@ class StackDepth:
     function: str
     ram_end: int
     headroom: int
+    #: the functions the return addresses on the stack go back to, deepest first
+    chain: tuple[str, ...] = ()
 
 
 def _nm(elf: Path) -> list[str]:
@@ -66,6 +71,30 @@ def function_at(elf: Path, pc: int) -> str:
     return names[k] if k >= 0 else "?"
 
 
+def return_chain(elf: Path, stack: bytes) -> tuple[str, ...]:
+    """The functions that the return addresses in `stack` (the bytes from SP + 1 up, as
+    the harness copied them at the deepest point) go back to, deepest first.  A call
+    pushes its return address high byte below low byte (a word address); a pair counts
+    when the instruction before that address is a call (`call`, `rcall`, `icall`), so an
+    interrupt's return address (any instruction) shows only when it follows a call, and a
+    stale pair left by an earlier call can show too: a reading aid, not a proof."""
+    try:
+        dis = subprocess.run(["avr-objdump", "-d", str(elf)], capture_output=True, text=True,
+                             check=True).stdout
+    except (OSError, subprocess.CalledProcessError) as e:
+        raise EmulatorError(f"avr-objdump {elf}: {e}") from e
+    after_call: set[int] = set()
+    for m in re.finditer(r"^\s*([0-9a-f]+):\s+(?:[0-9a-f]{2} )+\s*\t(call|rcall|icall)\b",
+                         dis, re.MULTILINE):
+        after_call.add(int(m.group(1), 16) + (4 if m.group(2) == "call" else 2))
+    out: list[str] = []
+    for i in range(len(stack) - 1):
+        addr = 2 * (stack[i] << 8 | stack[i + 1])
+        if addr in after_call:
+            out.append(function_at(elf, addr))
+    return tuple(out)
+
+
 def read_stack(profile: Path, elf: Path) -> StackDepth:
     """The deepest stack of the run whose harness wrote `profile` (`stack=` / `-P`), on the
     firmware `elf` it ran.  EmulatorError when the file has no min_sp line (the harness did
@@ -74,6 +103,8 @@ def read_stack(profile: Path, elf: Path) -> StackDepth:
         text = profile.read_text()
     except OSError as e:
         raise EmulatorError(f"stack profile {profile}: {e}") from e
+    stack = bytes(int(b, 16) for line in text.splitlines() if line.startswith("# min_stack")
+                  for b in line.split()[2:])
     for line in text.splitlines():
         if line.startswith("# min_sp "):
             parts = line.split()  # "# min_sp SP at PC"
@@ -81,5 +112,6 @@ def read_stack(profile: Path, elf: Path) -> StackDepth:
             if sp >= 0xFFFF:
                 raise EmulatorError(f"stack profile {profile}: no instruction was run")
             end = ram_end(elf)
-            return StackDepth(sp, pc, function_at(elf, pc), end, sp - end)
+            return StackDepth(sp, pc, function_at(elf, pc), end, sp - end,
+                              return_chain(elf, stack) if stack else ())
     raise EmulatorError(f"stack profile {profile}: no '# min_sp' line (harness not stopped?)")

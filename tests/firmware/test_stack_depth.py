@@ -37,6 +37,8 @@ def test_g6_segments_at_1mbaud(tmp_path: Path) -> None:
     depth, what = stack.g6_job(tmp_path, 600)
     assert depth.ram_end > 0x100 and depth.min_sp <= 0x8FF - 64, depth  # a real run
     assert depth.headroom >= stack.MIN_HEADROOM, (depth, what)
+    # the harness kept the stack's bytes there: their return addresses lead back to main
+    assert "main" in depth.chain and depth.chain.index("main") > 0, depth
 
 
 @pytest.mark.parametrize("job", sorted(stack.JOBS))
