@@ -387,16 +387,74 @@ static const char *g6_item(const char *s, const char *end, int32_t *p, int32_t d
 	return s;
 }
 
+/* n bytes little-endian from r (n = 1, 2, 4), sign-extended / as they are. */
+static int32_t get_le(const uint8_t *r, uint8_t n)
+{
+	if (n == 1u)
+		return (int8_t)r[0];
+	if (n == 2u)
+		return (int16_t)(uint16_t)(r[0] | (uint16_t)r[1] << 8);
+	return (int32_t)((uint32_t)r[0] | (uint32_t)r[1] << 8 | (uint32_t)r[2] << 16 |
+			 (uint32_t)r[3] << 24);
+}
+
 uint8_t proto_g6_next(const char *line, uint8_t *at, uint8_t end, int32_t *p, int32_t d[2])
 {
-	const char *s = line + *at, *e = line + end;
-	while (s < e && is_ws(*s))
-		s++;
-	uint8_t st;
-	if (s >= e || !(s = g6_item(s, e, p, d, &st)))
+	if (*at >= end)
 		return 0;
-	*at = (uint8_t)(s - line);
+	const uint8_t *r = (const uint8_t *)line + *at;
+	uint8_t tag = *r++;
+	if (!tag) {
+		/* two 1-byte moves, no P: nearly every item (a few steps each) */
+		d[0] = (int8_t)r[0];
+		d[1] = (int8_t)r[1];
+		*at = (uint8_t)(*at + 3u);
+		return 1;
+	}
+	for (uint8_t k = 0; k < 2; k++) {
+		uint8_t n = (uint8_t)(1u << ((tag >> (2u * k)) & 3u));
+		d[k] = get_le(r, n);
+		r += n;
+	}
+	if (tag & PROTO_G6_HAS_P) {
+		*p = get_le(r, 4);
+		r += 4;
+	}
+	*at = (uint8_t)((const char *)r - line);
 	return 1;
+}
+
+/* n bytes of v little-endian at w; where they end. */
+static char *put_le(char *w, uint32_t v, uint8_t n)
+{
+	for (uint8_t k = 0; k < n; k++, v >>= 8)
+		*w++ = (char)(uint8_t)v;
+	return w;
+}
+
+/* An item's record (fb_proto.h) at w, with its P when has_p; where it ends. */
+static char *put_item(char *w, const int32_t d[2], uint8_t has_p, int32_t p)
+{
+	if (!has_p && d[0] >= -128 && d[0] <= 127 && d[1] >= -128 && d[1] <= 127) {
+		/* nearly every item: its record in three stores */
+		w[0] = 0;
+		w[1] = (char)(int8_t)d[0];
+		w[2] = (char)(int8_t)d[1];
+		return w + 3;
+	}
+	char *tag = w++;
+	uint8_t t = has_p ? PROTO_G6_HAS_P : 0u;
+	for (uint8_t k = 0; k < 2; k++) {
+		int32_t v = d[k];
+		uint8_t code = (v >= -128 && v <= 127) ? PROTO_G6_I8
+			       : (v >= -32768 && v <= 32767) ? PROTO_G6_I16 : PROTO_G6_I32;
+		t = (uint8_t)(t | code << (2u * k));
+		w = put_le(w, (uint32_t)v, (uint8_t)(1u << code));
+	}
+	if (has_p)
+		w = put_le(w, (uint32_t)p, 4);
+	*tag = (char)t;
+	return w;
 }
 
 /* floor(p_us * F_CPU/1e6 / n), at most 65535: the step interval of n steps in
@@ -441,7 +499,7 @@ static uint16_t item_steps(const int32_t d[2])
  * stay in the main loop's frame under every line, G7 scans (the stack's
  * deepest point, benchmarks/stack.py) included.
  */
-static __attribute__((noinline)) uint8_t g6_items(const char *s, uint8_t i, uint8_t end,
+static __attribute__((noinline)) uint8_t g6_items(char *s, uint8_t i, uint8_t end,
 						  proto_cmd_t *cmd)
 {
 	int32_t p = cmd->p, d[2];
@@ -450,17 +508,20 @@ static __attribute__((noinline)) uint8_t g6_items(const char *s, uint8_t i, uint
 	uint16_t run_n = 0, cps = 0xffffu;  /* the run's most steps; the least interval */
 	uint8_t wide = 0;                   /* not summed up (above) */
 	cmd->g6_at = i;
-	cmd->g6_end = end;
 	const char *at = s + i, *e = s + end;
+	char *w = s + i;  /* the records (fb_proto.h), behind what is read */
 	for (;;) {
 		while (at < e && is_ws(*at))
 			at++;
 		if (at >= e)
 			break;
 		uint8_t st = FB_OK;
+		int32_t p_was = p;
 		at = g6_item(at, e, &p, d, &st);
 		if (!at)
 			return st;
+		w = put_item(w, d, p != p_was, p);
+		cmd->g6_end = (uint8_t)(w - s);
 		cmd->g6_count++;
 		if (wide)
 			continue;
@@ -546,7 +607,7 @@ static uint8_t check_ranges(proto_cmd_t *cmd)
 /* Parse the command part of a line: s[i..end) with the checksum removed.  A
  * G7 is its code, blanks, ':' and binary data to the end (fb_g7.c): only its
  * code is text. */
-static uint8_t parse_body(const char *s, uint8_t i, uint8_t end, proto_cmd_t *cmd)
+static uint8_t parse_body(char *s, uint8_t i, uint8_t end, proto_cmd_t *cmd)
 {
 	uint8_t g7 = g7_code_end(s, i, end);
 	if (g7) {
@@ -648,7 +709,7 @@ static uint8_t lost_number(const char *s, uint8_t i, uint8_t end, uint8_t len, u
 	return j < last && j >= 2 && s[j - 1] == '/' && is_digit(s[j - 2]);
 }
 
-uint8_t proto_parse_line(proto_lines_t *lines, const char *line, uint8_t len, proto_cmd_t *cmd)
+uint8_t proto_parse_line(proto_lines_t *lines, char *line, uint8_t len, proto_cmd_t *cmd)
 {
 	memset(cmd, 0, sizeof(*cmd));
 	uint8_t end = len;

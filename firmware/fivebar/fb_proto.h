@@ -127,14 +127,29 @@ uint16_t proto_crc16(const char *s, uint8_t len);
  * "<digit>/<digits>" (and blanks), is refused the same way: a numbered line
  * that lost both (the first one, before strict framing begins, included).
  */
-uint8_t proto_parse_line(proto_lines_t *lines, const char *line, uint8_t len, proto_cmd_t *cmd);
+uint8_t proto_parse_line(proto_lines_t *lines, char *line, uint8_t len, proto_cmd_t *cmd);
 
 /*
- * The next segment of a G6 line already checked by proto_parse_line: from
- * line[*at] up to end, an optional P<us> (the new duration, into *p) and the
- * relative move "<+|-><a><+|-><b>" (into d).  Advances *at past them.
- * Returns 0 at the end of the items (or on a malformed item, which
- * proto_parse_line has refused before), else 1.
+ * A G6 line's items as proto_parse_line leaves them: rewritten in place, as
+ * it reads them, into records of a few bytes from line[g6_at] to line[g6_end]
+ * (proto_cmd_t), so that the queueing reads each segment in a few cycles
+ * instead of parsing its text again (python benchmarks/segcost.py).  A record
+ * is a tag byte, then the two moves little-endian in 1, 2 or 4 bytes (the
+ * tag's bits 0-1 and 2-3: PROTO_G6_I8, _I16, _I32), then the item's P (4
+ * bytes) when bit PROTO_G6_HAS_P is set.  A record is shorter than the text
+ * it replaces (a move of 1, 2 or 4 bytes is at least 2, 4 or 6 characters, a
+ * P at least 4), so it never overtakes the text still to be read.
+ */
+#define PROTO_G6_I8 0u
+#define PROTO_G6_I16 1u
+#define PROTO_G6_I32 2u
+#define PROTO_G6_HAS_P 0x10u
+
+/*
+ * The next segment of a G6 line proto_parse_line accepted: the record at
+ * line[*at] (before end): its P, when it has one, into *p (the duration of
+ * this item and the later ones), its relative move into d.  Advances *at
+ * past it.  Returns 0 at the end of the items, else 1.
  */
 uint8_t proto_g6_next(const char *line, uint8_t *at, uint8_t end, int32_t *p, int32_t d[2]);
 

@@ -160,7 +160,9 @@ static void boot(void)
 static uint8_t parse_l(const line_t *l, proto_cmd_t *c)
 {
 	proto_lines_t ln = { 0, 0 };
-	return proto_parse_line(&ln, l->b, (uint8_t)l->n, c);
+	char b[sizeof l->b];
+	memcpy(b, l->b, l->n);  /* proto_parse_line may rewrite a line (a G6's items) */
+	return proto_parse_line(&ln, b, (uint8_t)l->n, c);
 }
 
 static void test_parse(void)
