@@ -138,7 +138,7 @@ def test_reset_inside_a_scanline_resumes_it_burning_each_pixel_once(
     # (run.moves._steps_into: it restarts at the time the interrupted segment had surely
     # reached, its major motor's last step, so the burn from there until the reset drove
     # the pin low, at most about a step's time, can come again): measured from the trace
-    # (0.16–0.28 of a 5 ms pixel here; a pixel it fell in measured 1.28) — far below a
+    # (0.35–0.36 of a 5 ms pixel here; a pixel it fell in measured 1.28) — far below a
     # second burn (2×)
     d = job.steps[stop + 1] - job.steps[stop]
     major = int(np.argmax(np.abs(d)))
