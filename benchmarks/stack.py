@@ -1,6 +1,6 @@
 """The firmware's deepest stack on every kind of job, in the emulator (exact, cycle by cycle).
 
-The Uno's static RAM (.data + .bss + .noinit) is 1,738 of its 2,048 bytes; the stack grows
+The Uno's static RAM (.data + .bss + .noinit) is 1,737 of its 2,048 bytes; the stack grows
 down towards it and nothing stops it there (an overflow silently corrupts .bss).  Each job
 below runs the real firmware in simavr with the harness's profile on (fbsim -P: the lowest
 stack pointer of the run, `fivebar-sim://?stack=FILE`) and prints the headroom at the
