@@ -231,8 +231,7 @@ uint8_t mo_running(void);
  * only when this says 1): 1 when the generator is legitimately quiet
  * (stopped, or held with its timer paused), or when the step interrupt has
  * run mo_event() since the previous call; 0 while it should be running and
- * has not run since (a beat is a change of a count the interrupt steps: 256
- * mo_event()s between two calls look like none, for that one call).  While running,
+ * has not run since.  Each call consumes the interrupt's beat.  While running,
  * the interrupt runs at least every MO_MAX_DELAY cycles (1.5 ms), so a main
  * loop that calls this more often misses some beats but feeds every ~1.5 ms;
  * a step interrupt that stopped while the generator runs stops the feeding.
