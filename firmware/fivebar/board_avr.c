@@ -443,28 +443,15 @@ void board_uart_baud(uint32_t baud)
 	UBRR0L = (uint8_t)ubrr;
 }
 
-/*
- * Interrupts go off only to switch the transmit interrupt on, at a burst's
- * first byte: tx_head is one byte, written here alone, and while UDRIE0 is on
- * the transmit interrupt sends every byte queued.  Its stub clears UDRIE0
- * while it runs and sets it again when bytes remain, and to the main loop it
- * runs whole, so UDRIE0 read off here is off until this sets it (at worst
- * one interrupt more, which finds the ring empty).  Before, every byte held
- * the step interrupt off for its read-modify-write of UCSR0B: with the status
- * reports, a fifth of the step interrupt's latency (an interrupt-latency log
- * by interrupted address in the emulator, 1:0.73).
- */
 void board_tx(uint8_t c)
 {
 	while ((uint8_t)(tx_head - tx_tail) >= CFG_TX_SIZE)
 		;
 	tx_buf[tx_head & (CFG_TX_SIZE - 1u)] = c;
+	uint8_t s = board_irq_save();
 	tx_head = (uint8_t)(tx_head + 1u);
-	if (!(UCSR0B & (1u << UDRIE0))) {
-		uint8_t s = board_irq_save();
-		UCSR0B |= (uint8_t)(1u << UDRIE0);
-		board_irq_restore(s);
-	}
+	UCSR0B |= (uint8_t)(1u << UDRIE0);
+	board_irq_restore(s);
 }
 
 void board_idle(void)

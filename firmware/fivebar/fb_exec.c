@@ -81,27 +81,19 @@ static uint8_t slot_free(void)
 	return ok;
 }
 
-/* Queue the block prepared in mo_slot(); 0 (nothing queued) once a Ctrl-X came.
- * Interrupts are off only for the test of f_reset, the queue's state and the
- * push (a Ctrl-X in between would otherwise find its queue cleared and a
- * block come after); the clock and the slot's kind are read before: the
- * section held the step interrupt off for a tenth of its latency (an
- * interrupt-latency log by interrupted address in the emulator, 1:0.73). */
+/* Queue the block prepared in mo_slot(); 0 (nothing queued) once a Ctrl-X came. */
 static uint8_t commit_block(void)
 {
 	mo_seal(mo_slot());
-	uint32_t now = board_ms();
-	uint8_t raster = mo_slot_raster();
 	uint8_t sreg = board_irq_save();
 	uint8_t ok = !fb_state.f_reset;
 	if (ok) {
 		if (!mo_running() && mo_queue_count() == 0)
-			first_queued_ms = now;
+			first_queued_ms = board_ms();
+		g7_in_scan = mo_slot_raster();
 		mo_push();
 	}
 	board_irq_restore(sreg);
-	if (ok)
-		g7_in_scan = raster;
 	return ok;
 }
 

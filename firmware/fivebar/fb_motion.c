@@ -33,9 +33,9 @@ static uint8_t s_due;            /* motors stepping at that event */
 static uint8_t s_home_axes, s_es_enabled, s_seek_neg;
 static uint8_t s_rest;           /* the block boundary() last started follows a stop */
 static volatile uint8_t s_running, s_alarm, s_home_hits, s_laser;
-/* s_beat: counted up by every mo_event() (the step interrupt is alive), a
- * change seen by mo_alive() (the fast path's beat is its left[] counting
- * down); s_held: the generator's timer is paused by mo_hold() */
+/* s_beat: set by every mo_event() (the step interrupt is alive), consumed by
+ * mo_alive() (the fast path's beat is its left[] counting down); s_held: the
+ * generator's timer is paused by mo_hold() */
 static volatile uint8_t s_beat;
 static volatile uint8_t s_held;
 static volatile uint32_t s_underruns;
@@ -617,7 +617,7 @@ uint16_t mo_event(void)
 {
 	mo_block_t *b = mo_state.cur;
 	uint8_t due = s_due;
-	s_beat = (uint8_t)(s_beat + 1u);
+	s_beat = 1;
 	if (due) {
 		/* a reset from here until busy = 0 finds the record invalid: a
 		 * boot cannot know whether the drivers saw the step */
@@ -725,22 +725,19 @@ uint8_t mo_running(void) { return s_running; }
 
 uint8_t mo_alive(void)
 {
-	/* Every beat is a change of a byte the interrupts count up (s_beat for
-	 * mo_event(); the fast path (board_avr_step.S) sets no beat: each of its
-	 * steps counts a kept left[] down, which changes its low byte), so a
-	 * look is a few one-byte reads with interrupts on: the interrupts-off
-	 * read-and-clear of a beat flag it replaces ran on every pass of the main
-	 * loop and held the step interrupt off for up to 35 cycles, the largest
-	 * part of the step jitter (an interrupt-latency log by interrupted
-	 * address in the emulator: 46 % of its square sum at 1:0.73).  A torn
-	 * look at s_running and s_held is only one pass's answer. */
-	static uint8_t seen[3];
-	uint8_t l0 = (uint8_t)K.left[0], l1 = (uint8_t)K.left[1], beat = s_beat;
-	uint8_t ok = (uint8_t)(!s_running || s_held || beat != seen[2] || l0 != seen[0] ||
-			       l1 != seen[1]);
+	/* the fast path (board_avr_step.S) sets no beat: each of its steps
+	 * counts a kept left[] down, which changes its low byte, so a change of
+	 * a low byte since the last look is its beat (read outside the
+	 * interrupts-off section: one byte is read whole) */
+	static uint8_t seen[2];
+	uint8_t l0 = (uint8_t)K.left[0], l1 = (uint8_t)K.left[1];
+	uint8_t sreg = board_irq_save();
+	uint8_t ok = s_beat || !s_running || s_held;
+	s_beat = 0;
+	board_irq_restore(sreg);
+	ok = (uint8_t)(ok || l0 != seen[0] || l1 != seen[1]);
 	seen[0] = l0;
 	seen[1] = l1;
-	seen[2] = beat;
 	return ok;
 }
 
