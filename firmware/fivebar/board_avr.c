@@ -22,6 +22,7 @@
 #include "board_uart.h"
 #include "config.h"
 #include "fb_main.h"
+#include "fb_state.h"
 #include "fb_motion.h"
 
 #define REG_PORT(p) BOARD_PORT(p)
@@ -338,7 +339,7 @@ void board_rx_slow(uint8_t c)
 /*
  * The receive interrupt: UART_STUB's entry and tail, and between them a fast
  * path for the bytes of a line.  A byte that is not a real-time one ('?',
- * '!', '~', Ctrl-X), while the ring has room, goes straight into fb_rx (the
+ * '!', '~', Ctrl-X), while the ring has room, goes straight into fb_state.rx (the
  * last lines of fb_rx_isr, its C model, which the host tests run: buf[head],
  * head + 1, heard) with four registers saved; any other byte goes to
  * fb_rx_isr with the registers a C call may change saved, as UART_STUB does.
@@ -401,8 +402,9 @@ ISR(USART_RX_vect, ISR_NAKED)
 		"rjmp 1b\n\t"
 		:: [ucsrb] "n" (_SFR_MEM_ADDR(UCSR0B)), [udr] "n" (_SFR_MEM_ADDR(UDR0)),
 		   [mask] "n" (0xff & ~(1 << RXCIE0)), [bitv] "n" (1 << RXCIE0),
-		   [room] "n" (CFG_RX_SIZE), [buf] "i" (&fb_rx.buf[0]), [head] "i" (&fb_rx.head),
-		   [tail] "i" (&fb_rx.tail), [heard] "i" (&fb_rx.heard));
+		   [room] "n" (CFG_RX_SIZE), [buf] "i" (&fb_state.rx.buf[0]),
+		   [head] "i" (&fb_state.rx.head), [tail] "i" (&fb_state.rx.tail),
+		   [heard] "i" (&fb_state.rx.heard));
 }
 
 /* nonzero while bytes wait: only an interrupt could queue more, and none

@@ -22,9 +22,9 @@
 #include "config.h"
 #include "status.h"
 
-/* the ring's bytes: a power of two up to 256 (8-bit free-running indices);
- * it holds CFG_RX_SIZE of them, at most one less than its size when 256 */
-#define RX_BUF 256u
+/* the ring's bytes (fb_state.h): a power of two up to 256 (8-bit free-running
+ * indices); it holds CFG_RX_SIZE of them, at most one less than its size when 256 */
+#define RX_BUF FB_RX_RING
 #if CFG_RX_SIZE > 255 || CFG_RX_SIZE > RX_BUF || (CFG_RX_SIZE < RX_BUF && CFG_RX_SIZE * 2 <= RX_BUF)
 #error "CFG_RX_SIZE must be 129..255 for a 256-byte ring"
 #endif
@@ -32,10 +32,10 @@
 
 #define CTRL_X 0x18
 
-/* the receive ring (fb_main.h); the head at a Ctrl-X, and a byte lost to a full ring */
-fb_rx_t fb_rx;
+/* the receive ring's head at a Ctrl-X, and a byte lost to a full ring (the ring:
+ * fb_state.rx) */
 static volatile uint8_t rx_discard, rx_overflow;
-/* when the main loop last saw fb_rx.heard set (since_last_rx) */
+/* when the main loop last saw fb_state.rx.heard set (since_last_rx) */
 static uint32_t last_rx_ms;
 /* a '~' lowered a parked pen again: the timeline resumes at this board_ms()
  * (0 = no resume pending) */
@@ -74,7 +74,7 @@ static void do_reset(void)
 {
 	uint8_t sreg = board_irq_save();
 	fb_state.f_reset = 0;
-	fb_rx.tail = rx_discard;
+	fb_state.rx.tail = rx_discard;
 	rx_overflow = 0;
 	fb_state.held = 0;
 	resume_at = 0;
@@ -91,7 +91,7 @@ static void do_reset(void)
 
 void fb_rx_isr(uint8_t c)
 {
-	fb_rx.heard = 1;
+	fb_state.rx.heard = 1;
 	switch (c) {
 	case '?':
 		fb_state.f_status = 1;
@@ -130,20 +130,20 @@ void fb_rx_isr(uint8_t c)
 		if (fb_state.homing)
 			fb_state.f_home_abort = 1;
 		fb_state.f_reset = 1;
-		rx_discard = fb_rx.head;
+		rx_discard = fb_state.rx.head;
 		return;
 	default:
 		break;
 	}
 	/* board_avr.c's fast path does these lines (and heard) for a byte it
 	 * takes: keep them alike */
-	uint8_t h = fb_rx.head;
-	if ((uint8_t)(h - fb_rx.tail) >= CFG_RX_SIZE) {
+	uint8_t h = fb_state.rx.head;
+	if ((uint8_t)(h - fb_state.rx.tail) >= CFG_RX_SIZE) {
 		rx_overflow = 1;
 		return;
 	}
-	fb_rx.buf[h & RX_MASK] = c;
-	fb_rx.head = (uint8_t)(h + 1u);
+	fb_state.rx.buf[h & RX_MASK] = c;
+	fb_state.rx.head = (uint8_t)(h + 1u);
 }
 
 /*
@@ -235,12 +235,12 @@ static void handle_line(void)
  */
 static void assemble(void)
 {
-	uint8_t t = fb_rx.tail, h = fb_rx.head;
+	uint8_t t = fb_state.rx.tail, h = fb_state.rx.head;
 	if (fb_state.f_reset || t == h)
 		return;
 	uint8_t len = line_len, nl = 0;
 	while (t != h) {
-		uint8_t c = fb_rx.buf[t & RX_MASK];
+		uint8_t c = fb_state.rx.buf[t & RX_MASK];
 		t = (uint8_t)(t + 1u);
 		if (c == '\n') {
 			nl = 1;
@@ -254,19 +254,19 @@ static void assemble(void)
 			len = LINE_OVER;
 	}
 	line_len = len;
-	fb_rx.tail = t;  /* only the main loop writes it (do_reset: after a Ctrl-X) */
+	fb_state.rx.tail = t;  /* only the main loop writes it (do_reset: after a Ctrl-X) */
 	if (nl && !fb_state.f_reset)
 		handle_line();
 }
 
 /* Milliseconds since the last byte came, as the main loop saw it: the
- * receive interrupt only sets fb_rx.heard (its fast path has no time for
+ * receive interrupt only sets fb_state.rx.heard (its fast path has no time for
  * board_ms()), and every pass of the main loop stamps it (late by at most a
  * pass, a few ms, against a timeout of hundreds). */
 static void stamp_rx(void)
 {
-	if (fb_rx.heard) {
-		fb_rx.heard = 0;
+	if (fb_state.rx.heard) {
+		fb_state.rx.heard = 0;
 		last_rx_ms = board_ms();
 	}
 }

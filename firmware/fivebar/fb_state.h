@@ -21,10 +21,28 @@
 #include "fb_proto.h"
 #include "fb_settings.h"
 
+/* The receive ring: free-running 8-bit indices over all FB_RX_RING bytes,
+ * CFG_RX_SIZE of them used (fb_state_t.rx; board_avr.c's fast path takes the
+ * head as the index, so 256). */
+#define FB_RX_RING 256u
+typedef struct {
+	volatile uint8_t buf[FB_RX_RING];
+	volatile uint8_t head, tail, heard;
+} fb_rx_t;
+
 /* why a job is held (the n of the status report's Hold:n) */
 enum { FB_HOLD_HOST = 0, FB_HOLD_LASER_TIMEOUT = 1, FB_HOLD_ERROR = 2 };
 
 typedef struct {
+	/* The receive ring, from the receive interrupt to the line assembly.
+	 * Written: head, buf[head] and heard by rx (fb_rx_isr, or the board's
+	 * fast path for a byte that is not a real-time one while the ring has
+	 * room: board_avr.c USART_RX_vect, whose C model is fb_rx_isr); tail by
+	 * fb_main.c (line assembly, do_reset).  heard: a byte came since the main
+	 * loop last looked (the host-silence clock; read and cleared by
+	 * fb_main.c).  First in the struct: the fast path's addresses are
+	 * fb_state's own. */
+	fb_rx_t rx;
 	/* '?': a status report is due.  Set: rx.  Cleared (and the report
 	 * written): fb_poll(), the homing wait (fb_home.c). */
 	volatile uint8_t f_status;
