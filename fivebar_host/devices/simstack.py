@@ -58,8 +58,8 @@ def ram_end(elf: Path) -> int:
     raise EmulatorError(f"{elf}: no _end symbol")
 
 
-def function_at(elf: Path, pc: int) -> str:
-    """The text symbol of `elf` at or below flash byte address `pc` ('?' before the first)."""
+def _text_symbols(elf: Path) -> tuple[list[int], list[str]]:
+    """The text symbols of `elf`: their start addresses, ascending, and their names."""
     starts: list[int] = []
     names: list[str] = []
     for line in _nm(elf):
@@ -67,8 +67,17 @@ def function_at(elf: Path, pc: int) -> str:
         if len(parts) == 3 and parts[1].lower() == "t":
             starts.append(int(parts[0], 16))
             names.append(parts[2])
-    k = bisect.bisect_right(starts, pc) - 1
-    return names[k] if k >= 0 else "?"
+    return starts, names
+
+
+def _symbol_at(symbols: tuple[list[int], list[str]], pc: int) -> str:
+    k = bisect.bisect_right(symbols[0], pc) - 1
+    return symbols[1][k] if k >= 0 else "?"
+
+
+def function_at(elf: Path, pc: int) -> str:
+    """The text symbol of `elf` at or below flash byte address `pc` ('?' before the first)."""
+    return _symbol_at(_text_symbols(elf), pc)
 
 
 def return_chain(elf: Path, stack: bytes) -> tuple[str, ...]:
@@ -87,12 +96,9 @@ def return_chain(elf: Path, stack: bytes) -> tuple[str, ...]:
     for m in re.finditer(r"^\s*([0-9a-f]+):\s+(?:[0-9a-f]{2} )+\s*\t(call|rcall|icall)\b",
                          dis, re.MULTILINE):
         after_call.add(int(m.group(1), 16) + (4 if m.group(2) == "call" else 2))
-    out: list[str] = []
-    for i in range(len(stack) - 1):
-        addr = 2 * (stack[i] << 8 | stack[i + 1])
-        if addr in after_call:
-            out.append(function_at(elf, addr))
-    return tuple(out)
+    symbols = _text_symbols(elf)
+    pairs = (2 * (stack[i] << 8 | stack[i + 1]) for i in range(len(stack) - 1))
+    return tuple(_symbol_at(symbols, addr) for addr in pairs if addr in after_call)
 
 
 def read_stack(profile: Path, elf: Path) -> StackDepth:
