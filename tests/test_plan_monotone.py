@@ -3,7 +3,7 @@
 29.6 s at 200 / 30 / 1200 — the old staircase repair's cascade, planner module doc).
 
 Three levels:
-- the staircase durations on given segments (`planner.enforce_staircase`) are the least that
+- the staircase durations on given segments (`staircase.enforce_staircase`) are the least that
   meet every limit, so they are *exactly* monotone: raising α, the junction jump or lowering
   the floor never lengthens any segment, to the µs;
 - whole compiled jobs (seeded random drawings and limit pairs, `tests/plan_jobs.py`): the
@@ -30,7 +30,7 @@ from benchmarks.plan_jobs import (
     random_limits,
     with_limits,
 )
-from fivebar_host.compile import planner
+from fivebar_host.compile import staircase
 from fivebar_host.config import load_profile
 
 PROF = load_profile()
@@ -55,13 +55,13 @@ def test_staircase_durations_exactly_monotone_in_the_limits(seed: int) -> None:
     stop = rng.random(n) < 0.1
     floor = rng.integers(100, 20_000, n)
     alpha, jump = float(rng.uniform(10, 2000)), float(rng.uniform(0.1, 2.0))
-    base = planner.enforce_staircase(d, floor, stop, alpha, jump)
-    jr, ar = planner.staircase_ratios(d, base, stop, alpha, jump)
+    base = staircase.enforce_staircase(d, floor, stop, alpha, jump)
+    jr, ar = staircase.staircase_ratios(d, base, stop, alpha, jump)
     assert jr.max() <= 1 + 1e-9 and ar.max() <= 1 + 1e-9 and (base >= floor).all()
     lower_floor = np.maximum(floor - rng.integers(0, 5000, n), 1)
-    for raised in (planner.enforce_staircase(d, floor, stop, alpha * rng.uniform(1, 4), jump),
-                   planner.enforce_staircase(d, floor, stop, alpha, jump * rng.uniform(1, 4)),
-                   planner.enforce_staircase(d, lower_floor, stop, alpha, jump)):
+    for raised in (staircase.enforce_staircase(d, floor, stop, alpha * rng.uniform(1, 4), jump),
+                   staircase.enforce_staircase(d, floor, stop, alpha, jump * rng.uniform(1, 4)),
+                   staircase.enforce_staircase(d, lower_floor, stop, alpha, jump)):
         assert (raised <= base).all()
 
 

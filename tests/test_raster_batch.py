@@ -4,10 +4,8 @@ an error from a batch the error of the first failing item on its own.
 
 - `wrap_to_limits` against Python's own float remainder, element by element;
 - `raster.travel.joint_moves` against `joint_move` one move at a time, and each move's
-  durations against `compile.planner.staircase_ratios` (from rest to rest, ≤ 1);
+  durations against `compile.staircase.staircase_ratios` (from rest to rest, ≤ 1);
 - `raster.travel.check_moves`: the refusal names the first failing move;
-- `raster.motion.staircase_ok` against `planner.staircase_ratios` on planned scanlines at
-  accelerations that pass and that fail;
 - `raster.linegeo.solve_bounds` / `max_gain` against `LineGeo` one scanline at a time;
 - `raster.lines._fit_line`'s residual against max |r − u| computed directly.
 """
@@ -19,7 +17,7 @@ import math
 import numpy as np
 import pytest
 
-from fivebar_host.compile import planner
+from fivebar_host.compile import staircase
 from fivebar_host.compile.steps import absolute_steps, step_angles
 from fivebar_host.config import Profile, load_profile
 from fivebar_host.errors import JobError
@@ -89,7 +87,7 @@ def test_joint_moves_are_each_move_on_its_own() -> None:
             continue
         assert np.array_equal(tg[-1], b[i])
         th = step_angles(np.concatenate((a[i:i + 1], tg)), mo.home_rad, mo.steps_per_rev)
-        jr, ar = planner.staircase_ratios(np.diff(th, axis=0), du, None, alpha, jump)
+        jr, ar = staircase.staircase_ratios(np.diff(th, axis=0), du, None, alpha, jump)
         assert jr.max() <= 1.0 + 1e-9 and ar.max() <= 1.0 + 1e-9
 
 
@@ -107,28 +105,6 @@ def test_check_moves_names_the_first_failing_move() -> None:
     with pytest.raises(JobError) as alone:
         travel.check_move(PROF, ck, a[3], far[3], "move 3")
     assert str(batch.value) == str(alone.value)
-
-
-def test_staircase_ok_is_the_planners_staircase() -> None:
-    """Accepted and refused accelerations alike: the same verdict as the planner's ratios."""
-    rng = np.random.default_rng(3)
-    ctx = _ctx(PROF, rng.integers(1, 255, (6, 80)), v=60.0)
-    mot = PROF.motion
-    verdicts = set()
-    for sl in gridmod.scanlines(ctx.grid, True, 1):
-        geo = motion.LineGeo(ctx, sl)
-        a0 = motion.ramp_accel(geo)
-        for f in (4.0, 1.0, 0.8, 0.5, 0.2):
-            sm = motion.plan_scanline(geo, 20, a0 * f)
-            th = step_angles(sm.steps, ctx.home, ctx.spr)
-            jr, ar = planner.staircase_ratios(np.diff(th, axis=0), sm.duration_us, None,
-                                              mot.max_joint_rad_s2, mot.junction_jump_rad_s)
-            rate = np.abs(np.diff(th, axis=0)).max(axis=1) / (sm.duration_us * 1e-6)
-            want = bool(jr.max() <= 1 and ar.max() <= 1
-                        and rate.max() <= mot.max_joint_rad_s * (1 + 1e-9))
-            assert motion.staircase_ok(ctx, sm) == want
-            verdicts.add(want)
-    assert verdicts == {True, False}
 
 
 def test_solve_bounds_and_max_gain_are_each_scanline_on_its_own() -> None:

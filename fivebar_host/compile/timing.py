@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fivebar_host import protocol
-from fivebar_host.compile import linkrate, planner, ramps, steps
+from fivebar_host.compile import linkrate, planner, ramps, staircase, steps
 from fivebar_host.compile.dwell import dwell_stops, insert_dwells
 from fivebar_host.compile.layers import section_stops
 from fivebar_host.compile.model import compact_ints, compact_steps, release_free_memory
@@ -244,36 +244,41 @@ def _time(profile: Profile, checker: PoseChecker, handed: list[Stepped],
                                          protocol.P_MIN_US)]
     if trim:
         release_free_memory()  # the per-segment settings' and the floors' inputs' holes
-    duration_us = compact_ints(_link_bound_staircase(profile, dq, floor_us, stop, st, power))
+    duration_us = compact_ints(_link_bound_staircase(profile, (dq, length), floor_us, stop, st,
+                                                      power))
     del dq, stop
     return Planned(th=th_all, pts=pts_all, draw=seg_draw, length=length, steps=st,
                    power=power, f0=f0, f1=f1, duration_us=duration_us,
                    dwell=np.zeros(seg_draw.shape[0], dtype=bool), slack=slack, **kept)
 
 
-def _link_bound_staircase(profile: Profile, dq: FloatArray, handed: list[IntArray],
-                          stop: BoolArray, st: IntArray, power: NDArray[np.uint8]) -> IntArray:
+def _link_bound_staircase(profile: Profile, path: tuple[FloatArray, FloatArray],
+                          handed: list[IntArray], stop: BoolArray, st: IntArray,
+                          power: NDArray[np.uint8]) -> IntArray:
     """Step 4 with the link's floor (`compile.linkrate`) on the floors in `handed` (emptied:
     the staircase frees them): the staircase on the floors raised to what the wire carries,
     again while a segment of its result is shorter than the floor its own durations give
     (an item that needs a `P` costs more bytes). A later pass starts from the durations
     before it, raised where short: the least durations above those floors are the least
     above the raised floors (every pass's result is at least the one before), and the
-    staircase is only measured again near the raised segments (`planner.raise_staircase`:
+    staircase is only measured again near the raised segments (`staircase.raise_staircase`:
     a few hundred of a large job's, where a whole staircase took some 70 ms a pass on
-    100k segments)."""
+    100k segments). `path`: the pieces' joint moves (rad) and pen path lengths (mm)."""
+    dq, length = path
     j_lim = profile.motion.junction_jump_rad_s
     acc = profile.motion.max_joint_rad_s2
-    linkrate.raise_to_link(handed[0], st, power, profile)
-    duration_us = planner.enforce_staircase(dq, handed.pop(), stop, acc, j_lim)
+    floor = handed.pop()
+    linkrate.raise_to_link(floor, st, power, profile)
+    duration_us = staircase.enforce_staircase(dq, floor, stop, acc, j_lim, length_mm=length)
     for _ in range(linkrate.LINK_PASSES - 1):
         need = linkrate.link_floor_us(st, power, duration_us, profile)
         short = np.flatnonzero(duration_us < need)
         if not short.size:
             break
-        duration_us[short] = need[short]
+        duration_us[short] = floor[short] = need[short]
         del need
-        planner.raise_staircase(dq, duration_us, short, acc, j_lim)
+        staircase.raise_staircase(dq, duration_us, short, stop, acc, j_lim, length_mm=length,
+                                  floor_us=floor)
     return duration_us
 
 

@@ -21,7 +21,7 @@ from collections.abc import Callable
 import numpy as np
 
 from fivebar_host import protocol
-from fivebar_host.compile import planner, ramps
+from fivebar_host.compile import planner, ramps, staircase
 from fivebar_host.compile.steps import step_angles
 from fivebar_host.config import Profile
 from fivebar_host.errors import JobError
@@ -84,8 +84,8 @@ def joint_moves(profile: Profile, starts: IntArray, ends: IntArray
     # a motionless segment before every move but the first: each move starts and ends at
     # rest, and the staircase never looks across it
     sep = np.flatnonzero(first)[1:]
-    dur = planner.enforce_staircase(np.insert(dq, sep, 0.0, axis=0), np.insert(lo, sep, 0),
-                                    None, alpha, jump)
+    dur = staircase.enforce_staircase(np.insert(dq, sep, 0.0, axis=0), np.insert(lo, sep, 0),
+                                      None, alpha, jump)
     dur = np.delete(dur, sep + np.arange(sep.shape[0]))
     cuts = [*np.flatnonzero(first).tolist(), targets.shape[0]]
     for c0, c1 in itertools.pairwise(cuts):
