@@ -86,4 +86,4 @@ def test_a_cruise_at_its_top_speed_slows_for_a_slow_neighbour() -> None:
     assert x_long / p <= top - 2 * (top - c) ** 2 / (2 * 60.0 * p) + 1e-9
     assert x_long / (p - 2e-6) > top - 2 * (top - c) ** 2 / (2 * 60.0 * (p - 2e-6))
     jr, ar = staircase_ratios(d, out, None, 60.0, 0.5, floor_us=floor)
-    assert ar.max() <= 1 + 1e-9
+    assert jr.max() <= 1 + 1e-9 and ar.max() <= 1 + 1e-9

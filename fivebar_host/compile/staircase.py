@@ -86,7 +86,8 @@ class Moves:
 
     @classmethod
     def of(cls, dtheta_rad: FloatArray, length_mm: FloatArray | None,
-           limits: tuple[float, float], floor_us: FloatArray | None) -> Moves:
+           limits: tuple[float, float],
+           floor_us: IntArray | FloatArray | None) -> Moves:
         """The moves with their path: the pen's length where given and positive, else the
         Chebyshev joint distance (α_k = α·x_k/D_k, module doc); `limits` (α rad/s², J rad/s);
         each segment's top path speed x/floor from its shortest duration `floor_us` (none
@@ -217,7 +218,8 @@ def staircase_ratios(dtheta_rad: FloatArray, duration_us: IntArray,
                      stop_after: BoolArray | None, max_joint_rad_s2: float,
                      junction_jump_rad_s: float = JUNCTION_JUMP_RAD_S, *,
                      length_mm: FloatArray | None = None,
-                     floor_us: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
+                     floor_us: IntArray | FloatArray | None = None
+                     ) -> tuple[FloatArray, FloatArray]:
     """The staircase the firmware runs against the limits (module doc). Returns (jump,
     accel) ratios, each ≤ 1 when honoured: jump = (J1) at every boundary and next to every
     stop; accel = (A1) per moving segment, its path speed against its tent's mean (its top
@@ -247,7 +249,7 @@ def enforce_staircase(dtheta_rad: FloatArray, duration_us: IntArray,
                       stop_after: BoolArray | None, max_joint_rad_s2: float,
                       junction_jump_rad_s: float = JUNCTION_JUMP_RAD_S, *,
                       length_mm: FloatArray | None = None,
-                      floor_us: FloatArray | None = None) -> IntArray:
+                      floor_us: IntArray | FloatArray | None = None) -> IntArray:
     """The least integer durations (µs) at least `duration_us` that meet bounds (2)–(6) of
     the module doc — so `staircase_ratios` are all ≤ 1 — found by raising durations from
     below until no bound moves one (Kleene's iteration: every bound is a constant or a
@@ -280,7 +282,7 @@ def raise_staircase(dtheta_rad: FloatArray, duration_us: IntArray, raised: IntAr
                     stop_after: BoolArray | None, max_joint_rad_s2: float,
                     junction_jump_rad_s: float = JUNCTION_JUMP_RAD_S, *,
                     length_mm: FloatArray | None = None,
-                    floor_us: FloatArray | None = None) -> None:
+                    floor_us: IntArray | FloatArray | None = None) -> None:
     """`enforce_staircase` again, in place, on durations it returned (for these moves, stops
     and limits) that were then raised at the segments `raised` only: the same least
     durations, found by revisiting only the segments next to the raises. Why the same: the
@@ -326,7 +328,8 @@ def _next_to(changed: IntArray, moving: BoolArray) -> IntArray:
     """The moving segments among `changed` and their neighbours."""
     k = np.unique(np.concatenate((changed - 1, changed, changed + 1)))
     k = k[(k >= 0) & (k < moving.shape[0])]
-    return k[moving[k]]
+    out: IntArray = k[moving[k]]
+    return out
 
 
 def _raise_near(p: FloatArray, todo: IntArray, mv: Moves,
