@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from staircase_reference import staircase_reference
 
 from fivebar_host.compile.planner import check_plan, plan
-from fivebar_host.compile.ramps import ramp_fractions, sharp_junctions
+from fivebar_host.compile.ramps import SHARP_SHARE, ramp_fractions, sharp_junctions
 from fivebar_host.compile.staircase import enforce_staircase, raise_staircase, staircase_ratios
 
 
@@ -152,8 +152,9 @@ def test_sharp_junctions_by_the_jump_at_peak_speed() -> None:
 
 
 def test_ramp_fractions_cut_the_piece_at_a_sharp_junction() -> None:
-    """A one-piece ramp up from a sharp junction is kept as its own piece, grown to the
-    least piece; without the flag it joins the cruise (one piece)."""
+    """A one-piece ramp up from a sharp junction is kept as its own piece: cut to
+    `SHARP_SHARE` of the least piece where that piece lasts `sharp_s` at the junction's
+    speed, else grown to the least piece; without the flag it joins the cruise (one piece)."""
     a, piece, least = 45.0, 0.01, 0.002
     d = np.array([[0.1, 0.0], [-0.3, 0.0]])
     p = plan(d, np.array([1.0, 3.0]), np.full(2, 1e9), 0.4, a, junction_jump_rad_s=0.5)
@@ -161,13 +162,15 @@ def test_ramp_fractions_cut_the_piece_at_a_sharp_junction() -> None:
     dist = np.abs(d).max(axis=1)
     counts, f = ramp_fractions(p, dist, a, piece, least)
     assert counts.tolist() == [1, 1]  # every ramp fits one piece: joined
-    counts, f = ramp_fractions(p, dist, a, piece, least,
-                               (np.array([False, True]), np.array([True, False])))
-    assert counts[1] == 2
-    ends = f[counts[0]:] * dist[1]
-    # the ramp up (0.25 → 0.4 at 45 rad/s²: 1.1 mrad) grown to the least piece
-    assert ends[0] == pytest.approx(least)
-    assert counts[0] == 2 and (1.0 - f[0]) * dist[0] >= least - 1e-12
+    sharp = (np.array([False, True]), np.array([True, False]))
+    short = SHARP_SHARE * least  # 1.33 mrad: 5.3 ms at the junction's 0.25 rad/s
+    for sharp_s, first in ((5e-3, short), (6e-3, least)):
+        counts, f = ramp_fractions(p, dist, a, piece, least, sharp, sharp_s)
+        assert counts.tolist() == [2, 2]
+        ends = f[counts[0]:] * dist[1]
+        # the ramp up (0.25 → 0.4 at 45 rad/s²: 1.1 mrad) cut to the sharp piece, or grown
+        assert ends[0] == pytest.approx(first)
+        assert (1.0 - f[0]) * dist[0] == pytest.approx(first)
 
 
 def test_ramp_fractions_cut_ramps_into_short_pieces() -> None:

@@ -13,8 +13,8 @@ from kinematics.arrays import BoolArray, FloatArray, IntArray
 
 def ramp_fractions(pl: Plan, dist: FloatArray, alpha: float, piece_s: float,
                    min_piece_rad: float = 0.0,
-                   sharp: tuple[BoolArray, BoolArray] | None = None
-                   ) -> tuple[IntArray, FloatArray]:
+                   sharp: tuple[BoolArray, BoolArray] | None = None,
+                   sharp_s: float = 0.0) -> tuple[IntArray, FloatArray]:
     """Where to cut each segment so that its speed-up and slow-down parts (under the planned
     trapezoid with acceleration `alpha` along the Chebyshev distance `dist`) become pieces of
     at most `piece_s` each — the planned speed changes by at most alpha·piece_s within a
@@ -27,13 +27,16 @@ def ramp_fractions(pl: Plan, dist: FloatArray, alpha: float, piece_s: float,
 
     `sharp` (entry, exit), per segment: its junction there is sharp — the joints' speeds
     would jump by more than the junction allows if the whole segment ran at its peak
-    speed (`sharp_junctions`).  There a ramp's piece next to the junction is kept on its
-    own even when the ramp fits one piece, and grown to `min_piece_rad` when shorter: the
-    staircase runs that piece near the junction's speed, and the rest of the segment at
-    its own (joined, the whole segment — or its neighbour — ran at the junction's speed:
-    a short segment after a joint's reversal at a few per cent of its speed; measured
-    against TOPP-RA, `benchmarks/topp.py`: planned/optimal on benchmarks/drawings/plotter.svg
-    1.346 → 1.108, examples/fivebar_text.svg 1.026 → 1.005)."""
+    speed (`sharp_junctions`).  There the piece next to the junction is kept on its own
+    even when the ramp fits one piece: cut to `SHARP_SHARE` of `min_piece_rad` where it
+    lasts at least `sharp_s` (s) at the junction's planned speed, else grown to
+    `min_piece_rad` when shorter (`_sharp_pieces`). The staircase runs that piece near the
+    junction's speed, and the rest of the segment at its own (joined, the whole segment —
+    or its neighbour — ran at the junction's speed: a short segment after a joint's reversal
+    at a few per cent of its speed; measured against TOPP-RA, `benchmarks/topp.py`:
+    planned/optimal on benchmarks/drawings/plotter.svg 1.346 → 1.108,
+    examples/fivebar_text.svg 1.026 → 1.005 when the piece was first kept; the cut: the
+    constants' comment)."""
     k = pl.v_entry.shape[0]
     d = np.asarray(dist, dtype=np.float64)
     s_in, s_out = sharp if sharp is not None else (np.zeros(k, bool), np.zeros(k, bool))
@@ -41,8 +44,8 @@ def ramp_fractions(pl: Plan, dist: FloatArray, alpha: float, piece_s: float,
     fracs: list[FloatArray] = []
     for b in range(0, max(k, 1), RAMP_BLOCK):
         sl = slice(b, b + RAMP_BLOCK)
-        n, f = _ramp_block(pl.v_entry[sl], pl.v_exit[sl], pl.v_peak[sl], d[sl], alpha,
-                           piece_s, min_piece_rad, (s_in[sl], s_out[sl]))
+        n, f = _ramp_block((pl.v_entry[sl], pl.v_exit[sl], pl.v_peak[sl]), d[sl], alpha,
+                           (piece_s, min_piece_rad, sharp_s), (s_in[sl], s_out[sl]))
         counts.append(n)
         fracs.append(f)
     if len(counts) == 1:
@@ -52,12 +55,24 @@ def ramp_fractions(pl: Plan, dist: FloatArray, alpha: float, piece_s: float,
 
 #: Segments cut at a time by `ramp_fractions`.
 RAMP_BLOCK = 1 << 16
-#: A sharp junction's piece is cut from a segment of at least this many least pieces
-#: (`ramp_fractions`).  Measured (benchmarks/topp.py and a comb of 0.3 mm teeth): from
-#: shorter segments the cut costs more than it saves — its short pieces' boundaries bind
-#: the staircase's average acceleration (the comb took 1.22× its continuous profile's
-#: time at 2, 1.01× at 8; the drawings' ratios moved by < 0.01 between 2 and 8).
-SHARP_ROOM = 8.0
+#: A sharp junction's piece (`ramp_fractions`): `SHARP_SHARE` of the least piece (2 of 3
+#: steps), cut from segments at least `SHARP_ROOM` such pieces long, where it lasts at least
+#: `SHARP_FLOORS` × the firmware's least segment time (`linkrate.FIRMWARE_SEGMENT_US`) at the
+#: junction's planned speed — a faster short piece runs at its link floor and holds its
+#: neighbours back (the 5 × 1000-chord circle at 200 mm/s, 15 rad/s: 0.56 of the time at
+#: 100 mm/s instead of 0.51). Elsewhere a piece shorter than the least grows to it, from
+#: segments at least `GROW_ROOM` least pieces long (measured before the staircase's
+#: path-speed rules: from shorter ones the cut cost more than it saved — a comb of 0.3 mm
+#: teeth took 1.22× its continuous profile's time at 2, 1.01× at 8). Measured with
+#: `python benchmarks/topp.py` against TOPP-RA on the uncut segments (the staircase's
+#: path-speed rules, the grown piece only → these): benchmarks/drawings/bc_template.svg
+#: 1.046 → 1.019, docs_command_line.svg 1.091 → 1.047, voronoi.svg 1.032 → 1.013; a 1-step
+#: piece rounds the segment's direction off by up to half a step on the other motor (a
+#: sharper junction) and lost to 2; without the pieces at stops 1.024, 1.052, 1.018.
+SHARP_SHARE = 2.0 / 3.0
+SHARP_ROOM = 1.5
+SHARP_FLOORS = 2.0
+GROW_ROOM = 8.0
 
 
 def sharp_junctions(dtheta_rad: FloatArray, pl: Plan, jump_rad_s: float,
@@ -81,12 +96,14 @@ def sharp_junctions(dtheta_rad: FloatArray, pl: Plan, jump_rad_s: float,
             np.abs(nxt - u).max(axis=1) * vp > jump_rad_s)
 
 
-def _ramp_block(v0: FloatArray, v1: FloatArray, vp: FloatArray, d: FloatArray, alpha: float,
-                piece_s: float, min_piece_rad: float,
+def _ramp_block(speeds: tuple[FloatArray, FloatArray, FloatArray], d: FloatArray,
+                alpha: float, cut: tuple[float, float, float],
                 sharp: tuple[BoolArray, BoolArray]) -> tuple[IntArray, FloatArray]:
-    """`ramp_fractions` on the segments with entry/exit/peak speeds v0, v1, vp and
-    distances d; each piece's position is computed only where it applies (ramp up, ramp
-    down, else the cruise's end)."""
+    """`ramp_fractions` on the segments with entry/exit/peak `speeds` v0, v1, vp and
+    distances d, cut by (piece_s, min_piece_rad, sharp_s); each piece's position is
+    computed only where it applies (ramp up, ramp down, else the cruise's end)."""
+    v0, v1, vp = speeds
+    piece_s, min_piece_rad, sharp_s = cut
     with np.errstate(invalid="ignore", divide="ignore"):
         ta = np.where(vp > v0, (vp - v0) / alpha, 0.0)
         td = np.where(vp > v1, (vp - v1) / alpha, 0.0)
@@ -113,27 +130,55 @@ def _ramp_block(v0: FloatArray, v1: FloatArray, vp: FloatArray, d: FloatArray, a
     x[last] = ds[last]
     # Boundaries not needed: after a one-piece ramp up, before a one-piece ramp down,
     # unless at a sharp junction (`ramp_fractions`).
-    s_in, s_out = sharp[0][seg], sharp[1][seg]
-    keep = last | ~(((i == nas) & (nas == 1) & ~s_in)
-                    | ((i == nas + ncs) & (nds == 1) & (ncs == 1) & ~s_out))
+    s_in, s_out = sharp
+    keep = last | ~(((i == nas) & (nas == 1) & ~s_in[seg])
+                    | ((i == nas + ncs) & (nds == 1) & (ncs == 1) & ~s_out[seg]))
     del i, nas, nds, ncs
     if min_piece_rad > 0.0:
-        # a sharp junction's piece shorter than the least piece grows to it, where the
-        # segment has room (`SHARP_ROOM`)
-        first = np.concatenate(([True], seg[1:] != seg[:-1])) & ~last
-        before_last = np.concatenate((last[1:], [False])) & ~last
-        room = ds >= SHARP_ROOM * min_piece_rad
-        grow = first & room & s_in & (x < min_piece_rad)
-        x[grow] = min_piece_rad
-        grow = before_last & room & s_out & (ds - x < min_piece_rad)
-        x[grow] = ds[grow] - min_piece_rad
-        del first, before_last, room, grow
-        prev = np.concatenate(([0.0], x[:-1]))
-        prev[np.concatenate(([True], seg[1:] != seg[:-1]))] = 0.0
-        keep &= last | ((x - prev >= min_piece_rad) & (ds - x >= min_piece_rad))
-        del prev
+        x, keep = _sharp_pieces(x, keep, (seg, last, ds), (v0[seg], v1[seg]),
+                                (s_in[seg], s_out[seg]), (min_piece_rad, sharp_s))
     seg, x, ds = seg[keep], x[keep], ds[keep]
+    # ascending within each segment (a sharp piece cut where a ramp's boundary was nearer
+    # its junction): a boundary behind the one before it coincides with it, an empty
+    # piece, which `compile.timing` drops with the pieces that round to no move
+    if seg.size:
+        off = seg * 4.0 * (float(ds.max()) + 1.0)
+        x = np.maximum.accumulate(x + off) - off
     with np.errstate(invalid="ignore", divide="ignore"):
         f = np.clip(np.where(ds > 0, x / ds, 1.0), 0.0, 1.0)
     f[np.concatenate((seg[1:] != seg[:-1], [True])) if seg.size else np.zeros(0, bool)] = 1.0
     return np.bincount(seg, minlength=d.shape[0]).astype(np.int64), f
+
+
+def _sharp_pieces(x: FloatArray, keep: BoolArray,
+                  rows: tuple[IntArray, BoolArray, FloatArray],
+                  v_ends: tuple[FloatArray, FloatArray], sharp: tuple[BoolArray, BoolArray],
+                  least: tuple[float, float]) -> tuple[FloatArray, BoolArray]:
+    """The pieces at sharp junctions (`ramp_fractions`), on the boundaries `x` of one block
+    (per row: its segment, whether it is the segment's last, the segment's distance; the
+    junction speeds and sharp flags at the row's segment's entry and exit; the least piece
+    and `sharp_s`): a piece is cut to `SHARP_SHARE` of the least piece where it lasts at
+    least `sharp_s` at the junction's planned speed and the segment has `SHARP_ROOM` of it;
+    else one shorter than the least piece grows to it, where the segment has `GROW_ROOM`.
+    Returns the boundaries and which rows to keep: the cut ones, and the others that leave
+    pieces of the least length."""
+    seg, last, ds = rows
+    min_piece_rad, sharp_s = least
+    first = np.concatenate(([True], seg[1:] != seg[:-1])) & ~last
+    before_last = np.concatenate((last[1:], [False])) & ~last
+    short = SHARP_SHARE * min_piece_rad
+    room = ds >= SHARP_ROOM * short
+    cut_in = first & room & sharp[0] & (short >= sharp_s * v_ends[0])
+    cut_out = before_last & room & sharp[1] & (short >= sharp_s * v_ends[1])
+    room = ds >= GROW_ROOM * min_piece_rad
+    grow = first & room & sharp[0] & (x < min_piece_rad) & ~cut_in
+    x[grow] = min_piece_rad
+    grow = before_last & room & sharp[1] & (ds - x < min_piece_rad) & ~cut_out
+    x[grow] = ds[grow] - min_piece_rad
+    x[cut_in] = short
+    x[cut_out] = ds[cut_out] - short
+    prev = np.concatenate(([0.0], x[:-1]))
+    prev[np.concatenate(([True], seg[1:] != seg[:-1]))] = 0.0
+    keep &= (last | cut_in | cut_out
+             | ((x - prev >= min_piece_rad) & (ds - x >= min_piece_rad)))
+    return x, keep

@@ -215,7 +215,8 @@ def _time(profile: Profile, checker: PoseChecker, handed: list[Stepped],
     sharp = ramps.sharp_junctions(dq, pln, j_lim, stop)
     del dq
     counts, f1 = ramps.ramp_fractions(pln, dist, a_c, PLAN_PIECE_JUMP_SHARE * j_lim / a_c,
-                                        PLAN_MIN_PIECE_STEPS * mot.rad_per_step, sharp)
+                                        PLAN_MIN_PIECE_STEPS * mot.rad_per_step, sharp,
+                                        ramps.SHARP_FLOORS * linkrate.FIRMWARE_SEGMENT_US * 1e-6)
     del sharp
     del pln, dist
     th_all, pts_all, st, seg_of, f0, f1, slack = _cut_ramps(mot, checker, sp, counts, f1)
