@@ -125,7 +125,7 @@ def test_upload_preview_queue_progress_done(browser: Any, tmp_path: Path) -> Non
         wait(d, lambda d: css(d, "#dryrun").is_displayed(), what="the dry run")
         prof = load_profile(None)
         job = compile_upload(data, TEXT.name, JobOptions(), prof).job
-        expected = report_lines(job, nbar_opinion(job, prof))
+        expected = report_lines(job, nbar_opinion(job, prof), profile=prof)
         assert d.execute_script("return document.querySelector('#report').textContent") \
             == "\n".join(expected)
         assert format_duration(job.total_time_s) in text(d, "#estimate")

@@ -141,9 +141,12 @@ def _ramp_block(speeds: tuple[FloatArray, FloatArray, FloatArray], d: FloatArray
     # ascending within each segment (a sharp piece cut where a ramp's boundary was nearer
     # its junction): a boundary behind the one before it coincides with it, an empty
     # piece, which `compile.timing` drops with the pieces that round to no move
-    if seg.size:
-        off = seg * 4.0 * (float(ds.max()) + 1.0)
-        x = np.maximum.accumulate(x + off) - off
+    same = seg[1:] == seg[:-1]
+    while True:  # (exact: no boundary moves but onto the one before it)
+        behind = np.flatnonzero(same & (x[1:] < x[:-1])) + 1
+        if not behind.size:
+            break
+        x[behind] = x[behind - 1]
     with np.errstate(invalid="ignore", divide="ignore"):
         f = np.clip(np.where(ds > 0, x / ds, 1.0), 0.0, 1.0)
     f[np.concatenate((seg[1:] != seg[:-1], [True])) if seg.size else np.zeros(0, bool)] = 1.0
