@@ -8,47 +8,48 @@ benchmarks/topp.py): the joints' speeds ≤ ω_max, their accelerations ≤ α, 
 junction of the joint path a jump of the joints' speeds ≤ J, where the path's own speed is
 continuous. With x_k the segment's path distance (the pen's path length L_k, or the
 Chebyshev joint distance D_k = max_j |Δθ_kj| where no length is given), its path speed
-S_k = x_k / P_k, its slopes g_k = Δθ_k / x_k and its path-acceleration limit α_k = α / max_j
-|g_kj| = α·x_k / D_k (a joint's acceleration is its slope times the path's):
+S_k = x_k / P_k, its slopes g_k = Δθ_k / x_k, its path-acceleration limit α_k = α / max_j
+|g_kj| = α·x_k / D_k (a joint's acceleration is its slope times the path's) and its top
+speed V_k = x_k / (its shortest duration: feed, ω_max, the firmware's shortest P):
 
     jump  (J1)  max_j |ω_{k,j} − ω_{k−1,j}| ≤ J at every boundary, and max_j |ω_kj| ≤ J next to
                 a stop — the instantaneous change the firmware really makes;
-    accel (A1)  |S_k − S_{k−1}| ≤ (α_{k−1} P_{k−1} + α_k P_k) / 2 — two segments' mean path
-                speeds differ by at most what a path speed changing at α_k within each can
-                give, between their midpoints;
-    turn  (T1)  S_k ≤ the mean over P_k of min(c_in + α_k t, c_out + α_k (P_k − t)), where
-                c_in, c_out are the path speeds allowed at the segment's entry and exit:
-                J / δ at a junction whose slopes change by δ = max_j |g_{k,j} − g_{k−1,j}|
-                (the joints' speeds jump by δ·S there), 0 at a stop — the segment's mean
-                speed is one a path speed leaving one junction and reaching the next at
-                their caps, changing at α_k, can have (a "tent").
+    accel (A1)  S_k ≤ the mean over P_k of min(c_in + α_k t, c_out + α_k (P_k − t), V_k) —
+                the highest mean of a path speed that leaves the segment's entry at most at
+                c_in, reaches its exit at most at c_out, changes at most at α_k and never
+                exceeds V_k (a "tent", flat-topped where V_k binds). Each end's cap is the
+                least of: J / δ at a junction whose slopes change by δ = max_j |g_{k,j} −
+                g_{k−1,j}| (the joints' speeds jump by δ times the path speed there), 0 at a
+                stop, and what the neighbour's own mean speed reaches there, S_j + α_j P_j/2
+                (a path speed changing at α_j through its mean).
 
-(Before issue 39's second round the acceleration was measured joint by joint, |Δω_kj| ≤ α
-(P_{k−1} + P_k)/2, which counts a joint's direction change at a junction as acceleration —
-a joint that stood still in one segment had to start the next as if from rest; against
-TOPP-RA that cost 1.059× on benchmarks/drawings/bc_template.svg.)
+Two neighbours' means so differ by at most α's worth between their midpoints, a mean above
+both neighbours' is held to a tent between them, and a segment at its top speed must start
+and end at it. (Before issue 39's second round the acceleration was measured joint by
+joint, |Δω_kj| ≤ α (P_{k−1} + P_k)/2, which counts a joint's direction change at a junction as
+acceleration — a joint that stood still in one segment had to start the next as if from
+rest; against TOPP-RA that cost 1.061× on benchmarks/drawings/bc_template.svg.)
 
-The repair. With a, b the joints' |Δθ| on the two sides of a boundary, q = P_k, p = P_{k−1}:
+The repair. With a, b the joints' |Δθ| on the two sides of a boundary and q, p their
+durations:
 
     rest    P_k ≥ D_k / J  (first and last segment of every run)                        (2)
-    (J1) where the joint keeps its direction (or stands in one of the two segments),
-         speeding up: a/q − b/p ≤ J  ⇔  q ≥ a / (J + b/p)                                 (3)
-    (A1) speeding up, with x, α on each side: x_k/q − α_k q/2 ≤ c(p̂),
-         c(p) = x_{k−1}/p + α_{k−1} p/2,  p̂ = min(p, √(2x_{k−1}/α_{k−1}))
-                                       ⇔  q ≥ 2x_k / (c + √(c² + 2α_k x_k))              (4)
+    (J1) where the joint keeps its direction (or stands in one of the two segments):
+         a/q − b/p ≤ J  ⇔  q ≥ a / (J + b/p), and the same with the sides swapped       (3)
+    (A1) q ≥ the least duration whose tent mean covers x_k (`tent_duration`, closed
+         form), each end's neighbour reach taken at p̂ = min(p, √(2x_j/α_j)), where
+         x_j/p + α_j p/2 is least                                                       (4)
     (J1) where the joint reverses: a/q + b/p ≤ J, met by q ≥ √a(√a + √b)/J and
          p ≥ √b(√a + √b)/J — J shared as √a : √b, the split with the least p + q       (5)
-    (T1) the least q whose tent mean reaches x_k / q (`tent_duration`)                  (6)
 
-and slowing down the same with the sides swapped. (4) takes p̂ for p — c is smallest at
-√(2x/α), so (4) is a little stricter than (A1) only where the segment before is slower
-than a start from rest through it would be — and in exchange every bound is a constant or a
-*nondecreasing* function of one neighbour's duration: the integer durations meeting them
+(4) takes p̂ for p — a little stricter than (A1) only where the neighbour is slower than a
+start from rest through it would be — and in exchange every bound is a constant or a
+*nondecreasing* function of the neighbours' durations: the integer durations meeting them
 all are closed under the element-wise minimum and have a least element, the shortest plan
 of every segment at once, which `enforce_staircase` reaches by Kleene's iteration. Raising
 α or J lowers every bound, so on given pieces no segment's duration ever grows when a
 limit is raised — exactly, to the µs. `staircase_ratios` measures a staircase against
-(J1), (A1), (T1).
+(J1) and (A1).
 """
 
 from __future__ import annotations
@@ -136,7 +137,7 @@ def rest_flags(moving: BoolArray, stop_after: BoolArray | None) -> tuple[BoolArr
 
 def turn_caps(mv: Moves, left: IntArray) -> FloatArray:
     """The path speed allowed at the boundaries after the moving segments `left` (per µs):
-    J / δ with δ = max_j |g_{k+1,j} − g_{k,j}| (module doc, (T1)); infinite where the slopes
+    J / δ with δ = max_j |g_{k+1,j} − g_{k,j}| (module doc, (A1)); infinite where the slopes
     do not change."""
     gl = mv.dth[left] / mv.x[left, None]
     gr = mv.dth[left + 1] / mv.x[left + 1, None]
@@ -148,8 +149,8 @@ def turn_caps(mv: Moves, left: IntArray) -> FloatArray:
 
 def segment_caps(mv: Moves, rest: tuple[BoolArray, BoolArray],
                  act: IntArray) -> tuple[FloatArray, FloatArray]:
-    """Each segment's entry and exit caps c_in, c_out ((T1)): 0 at rest, the turn cap at a
-    boundary `act` between two moves, else infinite."""
+    """Each segment's entry and exit caps c_in, c_out ((A1)) before the neighbours' reach:
+    0 at rest, the turn cap at a boundary `act` between two moves, else infinite."""
     c_in = np.where(rest[0], 0.0, np.inf)
     c_out = np.where(rest[1], 0.0, np.inf)
     for i in range(0, act.shape[0], STAIRCASE_BLOCK):
@@ -184,7 +185,7 @@ def tent_mean(ends: tuple[FloatArray, FloatArray], q: FloatArray, acc: FloatArra
 
 def tent_duration(x: FloatArray, ends: tuple[FloatArray, FloatArray], acc: FloatArray,
                   top: FloatArray) -> FloatArray:
-    """The least duration q with x ≤ q · `tent_mean`(ends, q, acc, top) (bound (6)), in
+    """The least duration q with x ≤ q · `tent_mean`(ends, q, acc, top) (bound (4)), in
     closed form, branch by branch of `tent_mean` (q · mean grows with q): the rise alone,
     q = (√(c² + 2·acc·x) − c)/acc, where it ends before the other cap binds; else the root
     of acc·q²/4 + (c + C)·q/2 = x + Δ²/(4·acc); and where that q has room for the rise to
@@ -250,7 +251,7 @@ def enforce_staircase(dtheta_rad: FloatArray, duration_us: IntArray,
                       junction_jump_rad_s: float = JUNCTION_JUMP_RAD_S, *,
                       length_mm: FloatArray | None = None,
                       floor_us: IntArray | FloatArray | None = None) -> IntArray:
-    """The least integer durations (µs) at least `duration_us` that meet bounds (2)–(6) of
+    """The least integer durations (µs) at least `duration_us` that meet bounds (2)–(5) of
     the module doc — so `staircase_ratios` are all ≤ 1 — found by raising durations from
     below until no bound moves one (Kleene's iteration: every bound is a constant or a
     nondecreasing function of the neighbours' durations, so the least fixed point exists
@@ -260,7 +261,7 @@ def enforce_staircase(dtheta_rad: FloatArray, duration_us: IntArray,
     (raising a limit never lengthens a segment). Segments without motion keep their
     duration and count as stops on both sides. `length_mm`: the pen's path per segment
     (the path whose speed is continuous; module doc); `floor_us`: each segment's shortest
-    duration (its feed, joint speed and the firmware's floor: its top speed, (T1)),
+    duration (its feed, joint speed and the firmware's floor: its top speed, (A1)),
     `duration_us` where not given."""
     mv = Moves.of(dtheta_rad, length_mm, (max_joint_rad_s2, junction_jump_rad_s),
                   duration_us if floor_us is None else floor_us)
@@ -335,7 +336,7 @@ def _next_to(changed: IntArray, moving: BoolArray) -> IntArray:
 def _raise_near(p: FloatArray, todo: IntArray, mv: Moves,
                 caps: tuple[FloatArray, FloatArray]) -> None:
     """Kleene's rounds on durations `p` (µs, in place): a round raises each segment in
-    `todo` (all moving) to its bounds (3), (4), (6) from its neighbours' durations at the
+    `todo` (all moving) to its bounds (3), (4) from its neighbours' durations at the
     round's start; the next round revisits the segments next to one that changed, until
     none does. `caps`: the segments' constant entry and exit caps (`segment_caps`)."""
     moving = chebyshev(mv.dth) > 0
@@ -353,7 +354,7 @@ def _raise_near(p: FloatArray, todo: IntArray, mv: Moves,
 def _least(p: FloatArray, k: IntArray, mv: Moves, caps: tuple[FloatArray, FloatArray],
            moving: BoolArray) -> FloatArray:
     """The least duration (µs) of each moving segment in `k` from its neighbours' durations
-    `p`: bound (3) per joint from each moving neighbour, and (6) with each end's cap lowered
+    `p`: bound (3) per joint from each moving neighbour, and (4) with each end's cap lowered
     to what the neighbour there reaches (`reach`)."""
     last = p.shape[0] - 1
     c_in, c_out = caps[0][k], caps[1][k]
