@@ -8,8 +8,8 @@ the horn really turns to, the two arms' angles are merged in time and forward ki
 (the pen off the joint included) gives where the pen was. A frame is a sample, not a
 target: it belongs to the segment whose joint-space line it lies nearest (on the joints'
 steps: the counts less the dead-band slack the run takes up, compile/backlash.py), walking
-forward from the last one (segments are executed in order) as far as an arm moves in a
-frame (a frame lands past a sharp corner's short pieces), and a frame on a drawing
+forward from the last one (segments are executed in order; past a sharp corner's short
+pieces), and a frame on a drawing
 segment is measured against its requested curve as the stepper report measures a step
 (`executed.executed_path`).
 
@@ -41,6 +41,7 @@ from dataclasses import replace
 import numpy as np
 
 from fivebar_host.compile import Job
+from fivebar_host.compile.timing import PLAN_MIN_PIECE_STEPS
 from fivebar_host.config import Profile
 from fivebar_host.devices.simtrace import Trace
 from fivebar_host.errors import FivebarError
@@ -130,14 +131,14 @@ def _line_distance(tgt: FloatArray, k: int, q: FloatArray) -> float:
     return float(np.hypot(*(a + s * d - q)))
 
 
-def _segment_of(job: Job, q: FloatArray, first: int, reach_steps: float) -> IntArray:
-    """Each frame's segment: from the last frame's one, on to the nearest of the segments
-    that start within `reach_steps` (what an arm can move in a frame) of its end, while that
-    one lies nearer the frame (segments run in order and a frame is a sample of a
-    continuous path, so the walk never jumps to a far segment a travel passes). Not just
-    the next one: a frame skips the short pieces at a sharp corner, and after a reversal it
-    lies on the line it came along as near as on the one it goes on (a walk one segment at
-    a time stuck there and measured the rest of the run against it)."""
+def _segment_of(job: Job, q: FloatArray, first: int, short_steps: float) -> IntArray:
+    """Each frame's segment: from the last frame's one, on to the next (non-empty) segment
+    while the frame lies nearer its joint-space line — looking past segments of at most
+    `short_steps` that it does not lie nearer (a frame, a sample every 20 ms, lands past the
+    short pieces the planner cuts at a sharp corner: a walk one segment at a time stuck
+    before them and measured the rest of the run against that segment). Segments run in
+    order and a frame is a sample of a continuous path, so the walk never jumps to a far
+    segment a travel passes."""
     tgt = job.steps.astype(np.float64)
     n = job.n_segments
     seg = np.full(q.shape[0], -1, dtype=np.int64)
@@ -145,18 +146,15 @@ def _segment_of(job: Job, q: FloatArray, first: int, reach_steps: float) -> IntA
     span = np.abs(np.diff(tgt, axis=0)).max(axis=1)
     for i in range(q.shape[0]):
         d = _line_distance(tgt, k, q[i])
-        while True:
-            best, d_best, ahead, j = -1, d, 0.0, k + 1
-            while j < n and ahead <= reach_steps:  # (the next moving one at least)
-                if span[j] > 0:
-                    dj = _line_distance(tgt, j, q[i])
-                    if dj < d_best:  # a frame at a junction still belongs to the one it ends
-                        best, d_best = j, dj
-                    ahead += span[j]
-                j += 1
-            if best < 0:
-                break
-            k, d = best, d_best
+        j = k + 1
+        while j < n:
+            if span[j] > 0:
+                dj = _line_distance(tgt, j, q[i])
+                if dj < d:  # a frame at a junction still belongs to the segment it ends
+                    k, d = j, dj
+                elif span[j] > short_steps:
+                    break
+            j += 1
         seg[i] = k
     return seg
 
@@ -174,10 +172,7 @@ def executed_servo_path(job: Job, profile: Profile, trace: Trace, first_segment:
     keep = np.ones(t.size, dtype=bool)
     keep[1:] = (np.diff(grid, axis=0) != 0).any(axis=1)
     t, th, q = t[keep], th[keep], q[keep]
-    # an arm moves at most max_joint_rad_s for a frame between two pulses (twice, for room)
-    reach = (2.0 * profile.motion.max_joint_rad_s / profile.joints.refresh_hz
-             * job.steps_per_rev / (2.0 * math.pi)) if profile.joints is not None else 0.0
-    seg = _segment_of(job, q, first_segment, reach)
+    seg = _segment_of(job, q, first_segment, PLAN_MIN_PIECE_STEPS)
     fwd = profile.geometry.forward_batch(th, "+" if job.assembly > 0 else "-")
     dev = np.full(t.size, np.nan)
     draw = np.flatnonzero((seg >= 0) & job.draw[np.maximum(seg, 0)])
