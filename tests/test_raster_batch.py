@@ -6,6 +6,8 @@ an error from a batch the error of the first failing item on its own.
 - `raster.travel.joint_moves` against `joint_move` one move at a time, and each move's
   durations against `compile.staircase.staircase_ratios` (from rest to rest, ≤ 1);
 - `raster.travel.check_moves`: the refusal names the first failing move;
+- `raster.motion.staircase_ok` against a plain loop over the boundaries on planned
+  scanlines at accelerations that pass and that fail;
 - `raster.linegeo.solve_bounds` / `max_gain` against `LineGeo` one scanline at a time;
 - `raster.lines._fit_line`'s residual against max |r − u| computed directly.
 """
@@ -105,6 +107,48 @@ def test_check_moves_names_the_first_failing_move() -> None:
     with pytest.raises(JobError) as alone:
         travel.check_move(PROF, ck, a[3], far[3], "move 3")
     assert str(batch.value) == str(alone.value)
+
+
+def _joint_by_joint(dth: np.ndarray, us: np.ndarray, alpha: float, jump: float
+                    ) -> tuple[float, float]:
+    """Worst jump and average-acceleration ratios joint by joint (raster.motion's rule), by
+    a plain loop over the boundaries of one run from rest to rest."""
+    t = us * 1e-6
+    w = dth / t[:, None]
+    worst_j, worst_a = 0.0, 0.0
+    for i in range(len(t)):
+        for side in (i == 0, i == len(t) - 1):
+            if side:
+                m = float(np.abs(w[i]).max())
+                worst_j, worst_a = max(worst_j, m / jump), max(worst_a, m / (alpha * t[i] / 2))
+        if i:
+            m = float(np.abs(w[i] - w[i - 1]).max())
+            worst_j = max(worst_j, m / jump)
+            worst_a = max(worst_a, m / (alpha * (t[i] + t[i - 1]) / 2))
+    return worst_j, worst_a
+
+
+def test_staircase_ok_is_the_joint_by_joint_staircase() -> None:
+    """Accepted and refused accelerations alike: the verdict of a plain loop over the
+    boundaries (the jump and each joint's average acceleration, from rest to rest)."""
+    rng = np.random.default_rng(3)
+    ctx = _ctx(PROF, rng.integers(1, 255, (6, 80)), v=60.0)
+    mot = PROF.motion
+    verdicts = set()
+    for sl in gridmod.scanlines(ctx.grid, True, 1):
+        geo = motion.LineGeo(ctx, sl)
+        a0 = motion.ramp_accel(geo)
+        for f in (4.0, 1.0, 0.8, 0.5, 0.2):
+            sm = motion.plan_scanline(geo, 20, a0 * f)
+            th = step_angles(sm.steps, ctx.home, ctx.spr)
+            jr, ar = _joint_by_joint(np.diff(th, axis=0), sm.duration_us,
+                                     mot.max_joint_rad_s2, mot.junction_jump_rad_s)
+            rate = np.abs(np.diff(th, axis=0)).max(axis=1) / (sm.duration_us * 1e-6)
+            want = bool(jr <= 1 and ar <= 1 + 1e-12
+                        and rate.max() <= mot.max_joint_rad_s * (1 + 1e-9))
+            assert motion.staircase_ok(ctx, sm) == want
+            verdicts.add(want)
+    assert verdicts == {True, False}
 
 
 def test_solve_bounds_and_max_gain_are_each_scanline_on_its_own() -> None:
