@@ -76,6 +76,6 @@ def fill_queue(dev: Device, p_us: int = 1_000_000) -> int:
     n = dev.banner.queue
     assert dev.session.stream([f"G1 P{p_us}"] * n) == [Ok()] * n
     r = dev.session.status()
-    assert (r.state, r.queued, r.done_line) == ("Run", n - 1, 0)
+    assert (r.state, r.queued, r.done_line) == ("Run", n - 1, 0), r  # (what it was, if not)
     return n
 
