@@ -67,14 +67,19 @@ def dtr_reset(dev: Device) -> None:
 
 
 
-def fill_queue(dev: Device, p_us: int = 1_000_000) -> int:
+def fill_queue(dev: Device, p_us: int = 1_000_000, first_us: int = 10_000_000) -> int:
     """Take every queue slot with dwells (streamed: fast); return the lines sent.
 
     The banner's ``queue:`` counts the block executing as well: once one runs,
-    ``queue - 1`` wait (``Q:`` counts only those).
+    ``queue - 1`` wait (``Q:`` counts only those).  The queue stays full until the first
+    dwell ends, which the tests' next steps rely on: both devices run about ten times
+    faster than real time, so a 1 s first dwell left ~0.1 s of wall clock, and a busy
+    machine stalling the test that long let it end early (CI saw ``Q:14``, line 2 done).
+    The first dwell lasts ``first_us`` (~1 s of wall clock) instead.
     """
     n = dev.banner.queue
-    assert dev.session.stream([f"G1 P{p_us}"] * n) == [Ok()] * n
+    lines = [f"G1 P{first_us}"] + [f"G1 P{p_us}"] * (n - 1)
+    assert dev.session.stream(lines) == [Ok()] * n
     r = dev.session.status()
     assert (r.state, r.queued, r.done_line) == ("Run", n - 1, 0), r  # (what it was, if not)
     return n
