@@ -79,8 +79,11 @@ void board_timer_resume(void);
  * after it still counted from t), then again after each delay it returns
  * until it returns 0.  The step timer's pause
  * and resume (a hold) freeze and move it with the step timeline.  sched is
- * the time of the pending event, now the timer's count.  Interrupts off or
- * in an interrupt.
+ * the time of the pending event, now the timer's count.  While paused the
+ * timeline stands still: now is the count it was paused at, and an arm
+ * (a record placed during a hold) only sets the event, which runs after the
+ * resume at the same distance from the steps.  Interrupts off or in an
+ * interrupt.
  */
 void board_px_arm(uint16_t t);
 void board_px_stop(void);

@@ -79,7 +79,7 @@
 /* The pending event (board_avr_step.h); the assembly half reads and writes
  * it too, by name, hence not static. */
 board_step_t board_step;
-static uint16_t paused_rem;
+static uint16_t paused_rem, paused_at;  /* paused_at: TCNT1 when held */
 static uint8_t paused;
 /* the pixel timer (compare B): its pending event's exact time, and while
  * paused (a hold) the cycles it had left; px_paused: it was on */
@@ -290,6 +290,16 @@ ISR(TIMER1_COMPB_vect)
 void board_px_arm(uint16_t t)
 {
 	uint8_t s = board_irq_save();
+	if (paused) {
+		/* held: the event waits for the resume, its distance from the
+		 * timeline's frozen "now" kept (board.h) */
+		uint16_t rem = (uint16_t)(t - paused_at);
+		px_sched = t;
+		px_paused_rem = (int16_t)rem < 0 ? 0u : rem;
+		px_paused = 1;
+		board_irq_restore(s);
+		return;
+	}
 	/* the schedule keeps t (the events after it follow from it); the compare
 	 * comes at once when t is past or too close */
 	uint16_t fire = (uint16_t)(t - PX_LEAD);
@@ -347,7 +357,7 @@ static void board_px_lag(uint8_t lagged)
 }
 
 uint16_t board_px_sched(void) { return px_sched; }
-uint16_t board_px_now(void) { return TCNT1; }
+uint16_t board_px_now(void) { return paused ? paused_at : TCNT1; }
 
 void board_timer_start(uint16_t delay_cycles)
 {
@@ -379,14 +389,15 @@ void board_timer_pause(void)
 	uint8_t s = board_irq_save();
 	if (!paused && (TIMSK1 & (1u << OCIE1A))) {
 		TIMSK1 &= (uint8_t)~(1u << OCIE1A);
-		uint16_t rem = (uint16_t)(board_step.sched - TCNT1);
+		paused_at = TCNT1;
+		uint16_t rem = (uint16_t)(board_step.sched - paused_at);
 		if ((TIFR1 & (1u << OCF1A)) || (int16_t)rem < 0)
 			rem = 0;  /* due now (or matched already) */
 		paused_rem = rem;
 		paused = 1;
 		if (TIMSK1 & (1u << OCIE1B)) {
 			TIMSK1 &= (uint8_t)~(1u << OCIE1B);
-			rem = (uint16_t)(px_sched - TCNT1);
+			rem = (uint16_t)(px_sched - paused_at);
 			if ((TIFR1 & (1u << OCF1B)) || (int16_t)rem < 0)
 				rem = 0;
 			px_paused_rem = rem;

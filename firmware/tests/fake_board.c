@@ -145,17 +145,22 @@ void board_idle(void)
 }
 
 /* The pixel timer: the same 16-bit timer as the steps, fake_now's low bits. */
+/* While held the timeline stands at paused_at (board.h): an arm is placed
+ * from there, and the resume moves it by the time held. */
+static uint64_t px_now64(void) { return fake_timer_paused ? paused_at : fake_now; }
+
 void board_px_arm(uint16_t t)
 {
-	int16_t ahead = (int16_t)(uint16_t)(t - (uint16_t)fake_now);
-	px_sched = (uint64_t)((int64_t)fake_now + ahead);
-	fake_px_at = ahead < 0 ? fake_now : px_sched;  /* a time already past: at once */
+	uint64_t now = px_now64();
+	int16_t ahead = (int16_t)(uint16_t)(t - (uint16_t)now);
+	px_sched = (uint64_t)((int64_t)now + ahead);
+	fake_px_at = ahead < 0 ? now : px_sched;  /* a time already past: at once */
 	fake_px_on = 1;
 }
 
 void board_px_stop(void) { fake_px_on = 0; }
 uint16_t board_px_sched(void) { return (uint16_t)px_sched; }
-uint16_t board_px_now(void) { return (uint16_t)fake_now; }
+uint16_t board_px_now(void) { return (uint16_t)px_now64(); }
 
 /* The pixel events due before the next step event (which comes first at an
  * equal time, as Timer1's compare A beats compare B), then 1 when that step

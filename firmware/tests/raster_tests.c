@@ -522,6 +522,66 @@ static void test_broken_scan(void)
 	CHECK(nchanges == 6 && changes[1].p == 10, "the next scan burns: %zu changes", nchanges);
 }
 
+
+/* A hold while the timeline waits for the scan's next record (the last change
+ * of the running line is past), and that record arriving during the hold:
+ * it is placed on the timeline as it stood when held, nothing changes the
+ * laser while held, and after the resume its changes come the time held
+ * later than the line arithmetic.  (The boards read "now" and armed the pixel
+ * timer as if the timeline ran on through the hold: the AVR's pixel interrupt
+ * came back on while held, and the record counted as late.) */
+static void test_record_during_hold(void)
+{
+	boot();
+	fill(4);
+	send("$0=60000\nG90\nM3 S0\n");
+	run_slices(8, 0);
+	take();
+	line_t l;
+	/* line 1: its changes end 301,000 cycles before its segment; line 2's
+	 * first change 100 cycles into its own */
+	g7_t a = { .d = { { 200, 100 } }, .items = 1, .p_us = 20000, .u = 1000, .t = 2000,
+		   .px = pix[0], .n = 10 };
+	g7_t b = { .d = { { 200, 100 } }, .items = 1, .p_us = 20000, .u = 100, .t = 2000,
+		   .px = pix[1], .n = 10 };
+	g7_line(&l, 1, &a);
+	send_n(l.b, l.n);
+	for (int i = 0; i < 1000 && !mo_running(); i++)
+		run_slices(1, 2000);
+	CHECK(mo_running(), "the scan runs");
+	while (nchanges < 1u + a.n && fake_timer_on)
+		fake_run(50);
+	CHECK(nchanges == 1u + a.n, "line 1's changes: %zu", nchanges);
+	if (nchanges != 1u + a.n)
+		return;
+	uint64_t start = changes[1].at - a.u;  /* line 1's segment starts */
+	/* hold 1,000 cycles before line 1's segment ends */
+	fake_run(start + 319000u - fake_now);
+	fb_rx_isr('!');
+	run_slices(1, 0);
+	uint64_t held_at = fake_now;
+	size_t at_hold = nchanges;
+	fake_now += 100000;
+	g7_line(&l, 2, &b);
+	send_n(l.b, l.n);
+	run_slices(3, 0);
+	fake_now += 23456;
+	CHECK(nchanges == at_hold && fake_laser == 0, "held: no change (%zu, laser %u)",
+	      nchanges - at_hold, fake_laser);
+	uint64_t held = fake_now - held_at;
+	fb_rx_isr('~');
+	run_slices(400, 1000);
+	/* past the hold's 0 and the resume's power: line 2's run, by its time */
+	uint64_t want0 = start + 320000u + b.u + held;
+	size_t k = at_hold;
+	while (k < nchanges && changes[k].at < want0)
+		k++;
+	size_t end = check_run(k, start + 320000u + held, &b);
+	CHECK(end + 1 == nchanges, "line 2's run, then the queue's end (%zu of %zu)", end, nchanges);
+	CHECK(mo_state.px.late == 0, "no record counted late (%u)", (unsigned)mo_state.px.late);
+	take();
+}
+
 int main(void)
 {
 	test_parse();
@@ -529,6 +589,7 @@ int main(void)
 	test_refused();
 	test_dark_hold_underrun();
 	test_broken_scan();
+	test_record_during_hold();
 	printf("raster: %d checks, %d failed\n", checks, failures);
 	return failures ? 1 : 0;
 }
