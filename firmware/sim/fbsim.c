@@ -46,7 +46,10 @@
  *                 positions), written at exit, so the next run finds the
  *                 controller as a powered machine keeps it (its RAM, as after
  *                 a DTR reset) and the arms where they stopped; the trace's
- *                 first line says where they start ("start=A,B")
+ *                 first line says where they start ("start=A,B").  It is
+ *                 saved where a reset takes effect (below: interrupts
+ *                 enabled, outside interrupt handlers), the CPU run on to
+ *                 there after the stop
  *     -V          also trace the servo build's arm servo pins (make SERVO=1,
  *                 config.h: OC1A/OC1B, D9/D10) as svA and svB
  *     -L          with -S: the controller lost power since the state was saved
@@ -1003,11 +1006,19 @@ static void apply_fault(int fault)
 	ack(fault_names[fault]);
 }
 
+/* The firmware is between two of its state updates: interrupts enabled and
+ * no interrupt handler running (the step interrupt's C path runs with them
+ * enabled during a raster scan, and a step holds the kept record busy). */
+static int between_updates(void)
+{
+	return avr->sreg[S_I] && avr->interrupts.running_ptr == 0;
+}
+
 /* A pending reset or freeze, once the firmware is between two of its state
- * updates (interrupts enabled), or at once if it never gets there. */
+ * updates, or at once if it never gets there. */
 static void apply_pending(void)
 {
-	if (!frozen && !(settled && avr->sreg[S_I]) && avr->cycle - pending_since < 1000000u)
+	if (!frozen && !(settled && between_updates()) && avr->cycle - pending_since < 1000000u)
 		return;
 	if (pending_reset) {
 		apply_reset(pending_reset);
@@ -1291,8 +1302,17 @@ int main(int argc, char **argv)
 			apply_pending();
 	}
 	pump_io();
-	if (state_path)
+	if (state_path) {
+		/* the next run starts from this state as after a reset (-S), so it is
+		 * saved where a reset would take effect (apply_pending): a stop in the
+		 * middle of a step left the kept record busy, and the next run found
+		 * the position lost (about 1 stop in 100 while the arms moved) */
+		avr_cycle_count_t until = avr->cycle + 1000000u;
+		while (state != cpu_Done && state != cpu_Crashed && !held && !frozen &&
+		       !between_updates() && avr->cycle < until)
+			state = avr_run(avr);
 		state_save();
+	}
 	if (profile)
 		profile_write();
 	if (trace)
