@@ -1006,6 +1006,10 @@ static void apply_fault(int fault)
 	ack(fault_names[fault]);
 }
 
+/* How long a reset, freeze, fault or state save waits for between_updates()
+ * before it takes effect regardless: 1,000,000 cycles, 62 ms at 16 MHz. */
+#define SETTLE_MAX_CYCLES 1000000u
+
 /* The firmware is between two of its state updates: interrupts enabled and
  * no interrupt handler running (the step interrupt's C path runs with them
  * enabled during a raster scan, and a step holds the kept record busy). */
@@ -1018,7 +1022,8 @@ static int between_updates(void)
  * updates, or at once if it never gets there. */
 static void apply_pending(void)
 {
-	if (!frozen && !(settled && between_updates()) && avr->cycle - pending_since < 1000000u)
+	if (!frozen && !(settled && between_updates()) &&
+	    avr->cycle - pending_since < SETTLE_MAX_CYCLES)
 		return;
 	if (pending_reset) {
 		apply_reset(pending_reset);
@@ -1307,7 +1312,7 @@ int main(int argc, char **argv)
 		 * saved where a reset would take effect (apply_pending): a stop in the
 		 * middle of a step left the kept record busy, and the next run found
 		 * the position lost (about 1 stop in 100 while the arms moved) */
-		avr_cycle_count_t until = avr->cycle + 1000000u;
+		avr_cycle_count_t until = avr->cycle + SETTLE_MAX_CYCLES;
 		while (state != cpu_Done && state != cpu_Crashed && !held && !frozen &&
 		       !between_updates() && avr->cycle < until)
 			state = avr_run(avr);
