@@ -106,6 +106,13 @@
  *   flush    write the trace file out
  *   dump     write the flash to the -F file and the EEPROM to FILE.eeprom
  *   cycle    acknowledged as "ok cycle N": the emulated cycle count now
+ *   byte HH N  the byte 0xHH reaches the UART N cycles from now (1..2^31),
+ *            acknowledged as the command once it has (its receive interrupt
+ *            comes a byte time later): a real-time byte at a chosen instant.
+ *            Bytes from the client arrive where the harness pumps them, at
+ *            the end of a sleeping batch (the next timer event), so they
+ *            land at a fixed phase of the step timeline; a real link's do
+ *            not.  One at a time; the client's bytes keep their own order
  *   quit     stop
  * A reset, power cut or freeze first lets the bytes the client wrote before
  * the command reach the firmware (as on a real link, where they were on the
@@ -490,6 +497,22 @@ static void ack(const char *cmd)
 static void dump_memories(void);
 static void set_reset_cause(int kind);
 
+/* "byte HH N" (one at a time): the byte and the command to acknowledge */
+static uint8_t timed_byte;
+static int timed_pending;
+static char timed_cmd[64];
+
+static avr_cycle_count_t timed_byte_due(avr_t *a, avr_cycle_count_t when, void *param)
+{
+	(void)a;
+	(void)when;
+	(void)param;
+	timed_pending = 0;
+	avr_raise_irq(uart_in_irq, timed_byte);
+	ack(timed_cmd);
+	return 0;
+}
+
 static void run_command(const char *cmd)
 {
 	if (!strcmp(cmd, "reset")) {
@@ -528,6 +551,20 @@ static void run_command(const char *cmd)
 		char msg[64];
 		snprintf(msg, sizeof(msg), "cycle %llu", (unsigned long long)avr->cycle);
 		ack(msg);
+		return;
+	} else if (!strncmp(cmd, "byte ", 5)) {
+		unsigned v;
+		unsigned long n;
+		char end;
+		if (timed_pending || sscanf(cmd + 5, "%x %lu%c", &v, &n, &end) != 2 || v > 0xff ||
+		    n < 1 || n > 0x7fffffffUL || strlen(cmd) >= sizeof timed_cmd) {
+			fprintf(stderr, "fbsim: bad or overlapping command '%s'\n", cmd);
+			return;
+		}
+		timed_byte = (uint8_t)v;
+		timed_pending = 1;
+		snprintf(timed_cmd, sizeof timed_cmd, "%s", cmd);
+		avr_cycle_timer_register(avr, n, timed_byte_due, NULL);
 		return;
 	} else if (!strcmp(cmd, "quit")) {
 		stop_req = 1;

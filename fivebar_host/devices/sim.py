@@ -214,6 +214,31 @@ class Emulator:
         firmware has interrupts enabled (firmware/sim/fbsim.c)."""
         if command not in CONTROL_COMMANDS:
             raise ValueError(f"unknown harness command {command!r}")
+        line = self._ask(command, timeout)
+        if line != f"ok {command}":
+            raise EmulatorError(f"harness did not acknowledge {command!r} (got {line!r})")
+
+    def byte_at(self, value: int, after_cycles: int, timeout: float = 10.0) -> None:
+        """Hand one byte to the firmware's UART ``after_cycles`` emulated cycles from now and
+        wait until it is there (the harness's ``byte``): a real-time byte at an instant the
+        client picks, where the client's own bytes land at a fixed phase of the firmware's
+        timer events (the harness pumps them when a sleeping batch ends)."""
+        if not 0 <= value <= 0xFF or not 1 <= after_cycles < 2**31:
+            raise ValueError(f"byte {value} after {after_cycles} cycles is out of range")
+        command = f"byte {value:02x} {after_cycles}"
+        line = self._ask(command, timeout)
+        if line != f"ok {command}":
+            raise EmulatorError(f"harness did not acknowledge {command!r} (got {line!r})")
+
+    def cycle(self, timeout: float = 10.0) -> int:
+        """The emulated CPU cycle count now (the harness's ``cycle`` command)."""
+        line = self._ask("cycle", timeout)
+        if not line.startswith("ok cycle "):
+            raise EmulatorError(f"harness did not answer 'cycle' (got {line!r})")
+        return int(line.split()[2])
+
+    def _ask(self, command: str, timeout: float) -> str:
+        """Write one command line to the harness and read its answer line."""
         with self._lock:
             proc = self.proc
             if proc is None or proc.stdin is None or proc.poll() is not None:
@@ -223,22 +248,7 @@ class Emulator:
                 proc.stdin.flush()
             except OSError as e:
                 raise EmulatorError(f"harness gone (command {command!r}): {e}") from e
-            line = self._read_line(timeout)
-            if line != f"ok {command}":
-                raise EmulatorError(f"harness did not acknowledge {command!r} (got {line!r})")
-
-    def cycle(self, timeout: float = 10.0) -> int:
-        """The emulated CPU cycle count now (the harness's ``cycle`` command)."""
-        with self._lock:
-            proc = self.proc
-            if proc is None or proc.stdin is None or proc.poll() is not None:
-                raise EmulatorError("harness not running (command 'cycle')")
-            proc.stdin.write(b"cycle\n")
-            proc.stdin.flush()
-            line = self._read_line(timeout)
-        if not line.startswith("ok cycle "):
-            raise EmulatorError(f"harness did not answer 'cycle' (got {line!r})")
-        return int(line.split()[2])
+            return self._read_line(timeout)
 
     @property
     def running(self) -> bool:
