@@ -73,6 +73,21 @@
  */
 #define PX_C_LAG 112u
 
+/*
+ * A resume restarts the held timeline this many cycles after its read of
+ * TCNT1: more than the cycles until its compare writes (counted on the
+ * disassembly: ~76 to the step compare, after the shift of the fast block's
+ * times; ~116 to the pixel compare, which fires PX_LEAD early, so it needs
+ * 116 + PX_LEAD).
+ * With 64, a step due within ~14 cycles of the hold (or already due, its
+ * flag set) had its compare written after the timer passed it and waited a
+ * whole timer period: the steps 4.1 ms late, a raster scan's burn that much
+ * ahead of the arms for the rest of its row (tests/firmware/
+ * test_hold_timeline_sim.py holds at random instants and checks every
+ * resume).  16 us more of a resume is nothing a hold notices.
+ */
+#define RESUME_CYCLES 256u
+
 #define STEP_A_BIT PIN_STEP_A_BIT
 #define STEP_B_BIT PIN_STEP_B_BIT
 
@@ -397,8 +412,10 @@ void board_timer_pause(void)
 		paused = 1;
 		if (TIMSK1 & (1u << OCIE1B)) {
 			TIMSK1 &= (uint8_t)~(1u << OCIE1B);
+			/* its compare fires PX_LEAD early: a set flag does not mean
+			 * the change is due, px_sched says when it is */
 			rem = (uint16_t)(px_sched - paused_at);
-			if ((TIFR1 & (1u << OCF1B)) || (int16_t)rem < 0)
+			if ((int16_t)rem < 0)
 				rem = 0;
 			px_paused_rem = rem;
 			px_paused = 1;
@@ -412,7 +429,7 @@ void board_timer_resume(void)
 	uint8_t s = board_irq_save();
 	if (paused) {
 		paused = 0;
-		uint16_t t = (uint16_t)(TCNT1 + paused_rem + 64u);
+		uint16_t t = (uint16_t)(TCNT1 + paused_rem + RESUME_CYCLES);
 		/* the whole timeline moves: the fast block's stored times too */
 		uint16_t delta = (uint16_t)(t - board_step.sched);
 		mo_fast_shift(delta);
