@@ -25,7 +25,9 @@
  *     -a STEPS    endstop A is pressed while motor A's position <= STEPS
  *     -b STEPS    endstop B likewise (positions counted from the trace)
  *     -D FILE     debug log of Timer1: "<cycle> r|w <OCR1A> <TCNT1>" for every
- *                 read (the step interrupt's entry) and write of OCR1A
+ *                 read (the step interrupt's entry) and write of OCR1A, and
+ *                 "<cycle> b <OCR1B> <TCNT1>" for every write of OCR1B (the
+ *                 pixel interrupt's compare)
  *     -C          control commands on stdin, one per line, each acknowledged
  *                 on stdout with "ok <command>" once done (see below)
  *     -B HEX      boot a bootloader (Intel HEX, e.g. Debian's optiboot_atmega328.hex
@@ -318,6 +320,21 @@ static void ocr_write_hook(avr_t *a, avr_io_addr_t addr, uint8_t v, void *param)
 	(void)param;
 	ocr_write_orig(a, addr, v, ocr_write_param);
 	fprintf(dbg, "%llu w %u %u\n", (unsigned long long)a->cycle, ocr1a(), tcnt1_now());
+}
+
+#define REG_OCR1BL 0x8A
+static avr_io_write_t ocrb_write_orig;
+static void *ocrb_write_param;
+
+static void ocrb_write_hook(avr_t *a, avr_io_addr_t addr, uint8_t v, void *param)
+{
+	(void)param;
+	if (ocrb_write_orig)
+		ocrb_write_orig(a, addr, v, ocrb_write_param);
+	else
+		a->data[addr] = v;
+	unsigned ocr = a->data[REG_OCR1BL] | (unsigned)a->data[REG_OCR1BL + 1] << 8;
+	fprintf(dbg, "%llu b %u %u\n", (unsigned long long)a->cycle, ocr, tcnt1_now());
 }
 
 /* Laser power writes (-t): TCCR2A is written once per board_laser() call
@@ -1229,6 +1246,9 @@ int main(int argc, char **argv)
 		ocr_write_param = avr->io[AVR_DATA_TO_IO(REG_OCR1AL)].w.param;
 		avr->io[AVR_DATA_TO_IO(REG_OCR1AL)].w.c = ocr_write_hook;
 		avr->io[AVR_DATA_TO_IO(REG_OCR1AL)].r.c = ocr_read_hook;
+		ocrb_write_orig = avr->io[AVR_DATA_TO_IO(REG_OCR1BL)].w.c;
+		ocrb_write_param = avr->io[AVR_DATA_TO_IO(REG_OCR1BL)].w.param;
+		avr->io[AVR_DATA_TO_IO(REG_OCR1BL)].w.c = ocrb_write_hook;
 	}
 	if (timer_fix) {
 		tccr0b_write_orig = avr->io[AVR_DATA_TO_IO(REG_TCCR0B)].w.c;

@@ -71,12 +71,12 @@ def parse_board_option(opts: SimOptions, key: str, value: str, url: str) -> bool
             raise ValueError(f"{url}: deadband must be two angles A,B in 0..30 degrees, got "
                              f"{value!r}")
         opts.deadband = (da, db)
-    elif key == "stack":
+    elif key in ("stack", "timers"):
         path = Path(value)
         if not value or path.is_dir() or not path.parent.is_dir():
-            raise ValueError(f"{url}: stack must be a file to write in an existing directory, "
-                             f"got {value!r}")
-        opts.stack = path
+            raise ValueError(f"{url}: {key} must be a file to write in an existing "
+                             f"directory, got {value!r}")
+        setattr(opts, key, path)
     elif key == "state":
         if not value:
             raise ValueError(f"{url}: state must be a directory or off")
@@ -124,6 +124,9 @@ def harness_args(opts: SimOptions, work: Path) -> tuple[list[str], bool]:
         # the cycle profile, written when the harness stops: its "# min_sp" line is the
         # lowest stack pointer of the run (devices/simstack.py reads it)
         args += ["-P", str(opts.stack)]
+    if opts.timers is not None:
+        # Timer1's compare reads and writes (devices/simtimers.py checks them)
+        args += ["-D", str(opts.timers)]
     return args, app
 
 

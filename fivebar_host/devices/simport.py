@@ -58,6 +58,9 @@ URL options: `fivebar-sim://?trace=PATH&realtime=1&endstops=A,B&machine=NAME&res
   stops (fbsim `-P`: it then emulates one instruction a step, slower);
   `devices.simstack.read_stack` turns it into the stack's headroom at its deepest (bytes
   above the static RAM's end; `python benchmarks/stack.py`);
+- `timers=FILE`: the harness logs every write of Timer1's compares with the timer's count
+  then (fbsim `-D`); `devices.simtimers.late_compares` finds a compare armed at or behind
+  the timer (which waits a whole timer period, 4.1 ms; tests/firmware/test_compares_sim.py);
 - `drop=P`, `corrupt=P`, `seed=N`: line noise, as on the mock: each host→device byte other than
   a real-time byte is lost with probability P, or replaced by another printable byte that is
   not a real-time byte (seeded generator, default seed 0); line counting for the options
@@ -99,7 +102,7 @@ SCHEME = "fivebar-sim"
 
 #: Options that configure the harness process (fixed by a machine's first open).
 HARNESS_OPTIONS = ("trace", "realtime", "endstops", "bootloader", "chip", "app", "held",
-                   "stuck_page", "state", "servo", "stack")
+                   "stuck_page", "state", "servo", "stack", "timers")
 #: Fault options: what happens after the N-th line, and the harness command for it.
 FAULTS = {"disconnect_after": None, "reset_after": "reset", "power_cut_after": "power",
           "stall_after": "hang"}
@@ -143,6 +146,9 @@ class SimOptions:
     #: Where the harness writes its cycle profile and lowest stack pointer (`stack=FILE`,
     #: fbsim -P) when it stops: the stack's deepest point over the run (devices/simstack.py).
     stack: Path | None = None
+    #: Where the harness logs Timer1's compare writes (`timers=FILE`, fbsim -D): every
+    #: compare armed ahead of the timer (devices/simtimers.py).
+    timers: Path | None = None
     state: str | None = None  # a directory, "off", or None: $FIVEBAR_SIM_STATE or the default
     power_loss: bool = False
     fresh: bool = False

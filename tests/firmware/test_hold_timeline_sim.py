@@ -13,11 +13,14 @@ from __future__ import annotations
 
 import itertools
 import random
+from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
 from fivebar_host import protocol, wire
-from fivebar_host.devices.sim import SimDevice as Device
+from fivebar_host.devices import sim
+from fivebar_host.devices.simtimers import late_compares
 from fivebar_host.protocol import Ok
 
 pytestmark = pytest.mark.sim
@@ -37,7 +40,18 @@ def ideal_a(segments: int) -> list[int]:
             for j in range(segments) for k in range(1, STEPS_A + 1)]
 
 
-def test_every_resume_continues_the_held_timeline(device: Device) -> None:
+@pytest.fixture
+def device(build: sim.BuildPaths, tmp_path: Path) -> Iterator[sim.SimDevice]:
+    """The firmware in the emulator with its compare writes logged to tmp_path/timers.log."""
+    emu = sim.Emulator(build.elf, build.harness, tmp_path / "fw.trace",
+                       extra=["-D", str(tmp_path / "timers.log")])
+    dev = sim.boot(emu, tmp_path / "fw.trace", 10.0)
+    yield dev
+    dev.close()
+
+
+def test_every_resume_continues_the_held_timeline(device: sim.SimDevice,
+                                                  tmp_path: Path) -> None:
     session = device.session
     assert session.send("$0=40000") == Ok()  # 40,000 steps/s
     assert session.send("M3 S200") == Ok()
@@ -54,6 +68,8 @@ def test_every_resume_continues_the_held_timeline(device: Device) -> None:
     done = session.wait_idle()
     assert (done.a, done.b) == (0, 0)
     trace = device.finish()
+    late = late_compares(tmp_path / "timers.log")
+    assert not late, f"{len(late)} compares armed behind the timer: {late[:5]}"
     steps = [s.cycle for s in trace.steps("A")]
     assert len(steps) == SEGMENTS * STEPS_A
     writes = [c for c, _ in trace.pin("lwrite")]
