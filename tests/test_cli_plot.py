@@ -124,3 +124,18 @@ def test_bad_options(tmp_path: Path) -> None:
     code, text = run("plot", str(EXAMPLES / "simple.svg"), "--dry-run", "--fit", "--scale", "2",
                      "--preview", str(tmp_path / "p.png"))
     assert code != 0 and "--fit and --scale" in text
+
+
+def test_convert_refuses_an_image_and_writes_nothing(tmp_path: Path) -> None:
+    """A raster job's G7 lines are binary and numbered for one session (docs/protocol.md
+    6.4): `convert` wrote them as "G7 segment …" messages, which the firmware answers with
+    error:6. Now it refuses, naming the file, and writes no file."""
+    import numpy as np
+    from PIL import Image
+
+    img = tmp_path / "grey.png"
+    Image.fromarray(np.full((4, 20), 100, dtype=np.uint8)).save(img)
+    out = tmp_path / "job.gcode"
+    code, text = run("convert", str(img), "--laser", "--width", "4mm", "-o", str(out))
+    assert code == 2 and f"{img}: an image (raster) job cannot be written" in text, text
+    assert "fivebar plot" in text and not out.exists()

@@ -365,3 +365,25 @@ def test_what_grbl_cannot_do_is_refused_before_anything_moves(tmp_path: Path) ->
     finally:
         link.close()
     assert sum(r.startswith("G4") for r in grblmock.board("no").received) == 2
+
+
+def test_an_image_is_refused_before_anything_reaches_the_board(tmp_path: Path) -> None:
+    """A raster job's pixels are a timeline inside the scan's moves (G7), which fivebar does
+    not write as GRBL lines: plotting it on a GRBL board ran the scan with the laser never on
+    and said "done"; `convert` wrote the moves alone. Now both refuse, naming the file, and
+    nothing is sent or written; the dry run says so."""
+    from PIL import Image
+
+    img = tmp_path / "grey.png"
+    Image.fromarray(np.full((4, 20), 100, dtype=np.uint8)).save(img)
+    _configure("img")
+    code, out = _cli("plot", str(img), "--laser", "--width", "4mm", "--controller", "grbl",
+                     "--yes", "--port", "fivebar-grbl://img?speed=50")
+    assert code == 2 and f"{img}: an image (raster) job" in out, out
+    assert grblmock.board("img").blocks == []
+    code, out = _cli("convert", str(img), "--laser", "--width", "4mm", "--controller", "grbl",
+                     "-o", str(tmp_path / "out.gcode"))
+    assert code == 2 and "an image (raster) job" in out and not (tmp_path / "out.gcode").exists()
+    code, out = _cli("plot", str(img), "--laser", "--width", "4mm", "--controller", "grbl",
+                     "--dry-run", "--preview", str(tmp_path / "p.png"))
+    assert code == 0 and "--controller grbl cannot engrave it" in out, out

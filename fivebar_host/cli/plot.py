@@ -27,6 +27,7 @@ from fivebar_host.cli.remote import server_option
 from fivebar_host.cli.session import Plot, plot_on_machine
 from fivebar_host.cli.stops import check_stops
 from fivebar_host.controllers import controller_for
+from fivebar_host.run.controller import check_job
 from fivebar_host.run.stops import Copies
 
 
@@ -98,11 +99,17 @@ def plot_file(drawing: Path, dry_run: bool, preview_path: Path, port: str | None
 
         refuse_if_held(port)  # before compiling: another process owns the machine
     prof, job = compile_from_cli(drawing, config_path, job_values)
+    features = controller_for(controller).features
+    if not dry_run:
+        check_job(features, job)  # before the port opens
     if dry_run and job.raster is not None:
         from fivebar_host.raster import preview
 
         for line in preview.report_lines(job, laser):
             click.echo(line)
+        if features.raster is not None:
+            click.echo(f"controller    --controller {controller} cannot engrave it: "
+                       f"{features.raster}")
         preview.draw_preview(job, preview_path)
         click.echo(f"preview       {preview_path}")
         return

@@ -8,7 +8,8 @@ place, `fivebar_host.controllers.controller_for`, the way pyserial finds a URL s
 handler or Klipper a kinematics module.
 
 What a controller cannot do it says in its `Features`; `run.job.check_features` refuses such a
-job before anything moves, with the reason, for every controller alike.
+job before anything moves, with the reason, for every controller alike (`check_job`, the
+part that needs no run: also before a port is opened, and by `fivebar convert`).
 """
 
 from __future__ import annotations
@@ -39,6 +40,16 @@ class Features:
     live_overrides: str | None = None
     tool_on_dwells: str | None = None  # a dwell with the laser on (G4 after M3 S>0)
     motors_off: str | None = None  # the stepper drivers switched off by command
+    raster: str | None = None  # an image job: its pixels on a timeline inside the scan (G7)
+
+
+def check_job(features: Features, job: Job) -> None:
+    """Refuse (UsageError, the reason quoted) what a controller with these features cannot
+    do with this job, whatever the run's options."""
+    from fivebar_host.errors import UsageError
+
+    if job.raster is not None and features.raster is not None:
+        raise UsageError(f"{job.file}: an image (raster) job: {features.raster}")
 
 
 @dataclass(frozen=True)

@@ -27,7 +27,7 @@ import numpy as np
 
 from fivebar_host.compile import Job
 from fivebar_host.errors import UsageError
-from fivebar_host.run.controller import Controller, Piece, Position
+from fivebar_host.run.controller import Controller, Piece, Position, check_job
 from fivebar_host.run.errors import FaultKind, LinkFaultError, SendError
 from fivebar_host.run.operator import Operator, Progress
 from fivebar_host.run.overrides import Overrides
@@ -68,6 +68,7 @@ class RunReport:
 def check_features(controller: Controller, job: Job, operator: Operator,
                    options: RunOptions) -> None:
     """Refuse, before anything moves, what this controller or this operator cannot do."""
+    check_job(controller.features, job)
     if options.overrides is not None and controller.features.live_overrides is not None:
         raise UsageError(f"live feed and power overrides: {controller.features.live_overrides}")
     dwells = job.is_dwell & (job.power > 0)

@@ -35,6 +35,7 @@ from fivebar_host.controllers.fivebar.faults import StreamRun, after_fault
 from fivebar_host.controllers.fivebar.kept import kept_stream_segment
 from fivebar_host.controllers.fivebar.link import Link
 from fivebar_host.controllers.fivebar.stream import StreamProgress
+from fivebar_host.errors import UsageError
 from fivebar_host.program import Program
 from fivebar_host.protocol import StatusReport
 from fivebar_host.run.controller import (
@@ -105,9 +106,16 @@ class FivebarController:
         """The firmware's lines (`compile.encode`), absolute or relative."""
         from fivebar_host.compile import encode_lines, mode_sequence
 
+        if job.raster is not None:
+            # wire.body writes a G7 item only as a message; its line is binary (protocol.md
+            # 6.4) and numbered and checksummed for one session, so no file holds it
+            raise UsageError(
+                f"{job.file}: an image (raster) job cannot be written as firmware lines: its "
+                "G7 lines carry binary pixel data, numbered and checksummed for one session "
+                "(docs/protocol.md 6.4). Engrave it with `fivebar plot` (or the web page); "
+                "`fivebar plot --dry-run` shows the job")
         lines = encode_lines(job, profile, relative=relative, laser=laser)
-        top = (int(job.raster.target.max(initial=0)) if job.raster is not None
-               else int(job.power.max(initial=0)))  # a raster's powers are its pixels'
+        top = int(job.power.max(initial=0))
         tool = f"laser (power up to S{top})" if laser else "pen (S0, no laser power)"
         changes = (f" ({len(job.mode_changes)} pen-up mode changes)" if job.mode_changes
                    else "")
@@ -116,8 +124,7 @@ class FivebarController:
                                          for p in job.pauses) if job.pauses else "")
         return Converted(lines, f"{job.n_segments} segments, mode {mode_sequence(job)}"
                          f"{changes}, {tool}, ≈ {job.total_time_s:.1f} s, "
-                         + (f"{job.raster.n_pixels} px" if job.raster is not None
-                            else f"max deviation {job.max_dev_mm:.4f} mm") + pauses)
+                         f"max deviation {job.max_dev_mm:.4f} mm" + pauses)
 
     def close(self) -> None:
         self.link.close()

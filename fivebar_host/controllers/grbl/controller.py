@@ -61,6 +61,7 @@ from fivebar_host.run.controller import (
     Position,
     Recording,
     Status,
+    check_job,
 )
 from fivebar_host.run.errors import PowerLossError
 from fivebar_host.run.moves import travel
@@ -85,7 +86,10 @@ class GrblController:
         tool_on_dwells="GRBL's laser mode switches the laser off at rest (M4), so a dwell "
         "with the laser on would burn nothing; plot it on fivebar's firmware",
         motors_off="GRBL switches its drivers off only after its idle delay ($1) or in "
-        "sleep ($SLP, which needs a reset); send those to the board yourself")
+        "sleep ($SLP, which needs a reset); send those to the board yourself",
+        raster="its pixels need fivebar's firmware (G7: the power changes timed inside the "
+        "scan's moves, docs/raster.md); fivebar does not write them as GRBL lines, so the "
+        "board would run the scan with the laser off. Engrave it on fivebar's firmware")
 
     def __init__(self, link: GrblLink, profile: Profile) -> None:
         self.link = link
@@ -122,6 +126,7 @@ class GrblController:
         if relative:
             raise UsageError("--relative: GRBL's lines are absolute motor angles (G90); "
                              "leave --relative out")
+        check_job(cls.features, job)
         lines = job_program(job, profile, laser).lines
         return Converted(lines, f"{len(lines)} GRBL lines (G1 X/Y = motor angles in degrees) "
                          f"for {job.n_segments} segments, ≈ {job.total_time_s:.1f} s planned")
