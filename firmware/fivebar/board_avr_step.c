@@ -84,7 +84,8 @@
  * whole timer period: the steps 4.1 ms late, a raster scan's burn that much
  * ahead of the arms for the rest of its row (tests/firmware/
  * test_hold_timeline_sim.py holds at random instants and checks every
- * resume).  16 us more of a resume is nothing a hold notices.
+ * resume).  The timeline restarting 16 us after the resume (12 more than
+ * before) is nothing a hold notices.
  */
 #define RESUME_CYCLES 256u
 
