@@ -3,6 +3,7 @@ errors (never a traceback, a non-zero exit, nothing compiled)."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -83,3 +84,22 @@ def test_bad_images_on_the_cli_exit_non_zero_without_traceback(tmp_path: Path) -
         assert "Traceback" not in r.output and reason in r.output, what
         assert not isinstance(r.exception, AssertionError), what
         assert not (tmp_path / "pv.png").exists(), what
+
+
+def test_the_dry_run_counts_copies_of_an_image(tmp_path: Path) -> None:
+    """`--copies 2` engraves the image twice with the page delay between (run.job), so the
+    dry run's time says so, as it does for a drawing (before: one copy's time only)."""
+    img = tmp_path / "g.png"
+    _grey().save(img)
+    args = ["plot", str(img), "--laser", "--dry-run", "--width", "10",
+            "--preview", str(tmp_path / "pv.png")]
+    one = CliRunner().invoke(main, args)
+    two = CliRunner().invoke(main, [*args, "--copies", "2", "--page-delay", "7s"])
+    assert one.exit_code == 0 and two.exit_code == 0, two.output
+    assert not any(ln.startswith("copies") for ln in one.output.splitlines())
+    t = float(re.search(r"^time +([\d.]+) s", one.output, re.MULTILINE)[1])  # type: ignore[index]
+    line = next(ln for ln in two.output.splitlines() if ln.startswith("copies"))
+    assert "2 copies of" in line and "1 page delay of 7 s" in line, line
+    total = re.search(r"≈ (?:(\d+) min )?([\d.]+) s \(", line)
+    assert total is not None, line
+    assert float(total[1] or 0) * 60 + float(total[2]) == pytest.approx(2 * t + 7, abs=0.15)

@@ -105,7 +105,7 @@ def plot_file(drawing: Path, dry_run: bool, preview_path: Path, port: str | None
     if dry_run and job.raster is not None:
         from fivebar_host.raster import preview
 
-        for line in preview.report_lines(job, laser):
+        for line in preview.report_lines(job, laser, copies):
             click.echo(line)
         if features.raster is not None:
             click.echo(f"controller    --controller {controller} cannot engrave it: "

@@ -15,6 +15,7 @@ import numpy as np
 from fivebar_host.compile.model import Job
 from fivebar_host.raster.dose import Figures
 from fivebar_host.raster.runs import RasterRuns
+from fivebar_host.run.stops import Copies, plan_text
 from kinematics.arrays import FloatArray
 
 #: The preview's long side at least, picture pixels.
@@ -29,9 +30,10 @@ def raster_of(job: Job) -> RasterRuns:
     return r
 
 
-def report_lines(job: Job, laser: bool) -> list[str]:
+def report_lines(job: Job, laser: bool, copies: Copies | None = None) -> list[str]:
     """The dry run's report of a raster job (module docstring); without `laser` it says the
-    scan is a rehearsal, every pixel at power 0 (`compile.emit.raster_program`)."""
+    scan is a rehearsal, every pixel at power 0 (`compile.emit.raster_program`); `copies`
+    (`--copies`, `--page-delay`): the run's whole time beside one copy's."""
     r = raster_of(job)
     rows, cols = r.target.shape
     total_s = float(np.sum(job.duration_us)) * 1e-6
@@ -50,6 +52,10 @@ def report_lines(job: Job, laser: bool) -> list[str]:
         f"time          {total_s:.1f} s (scanlines with overscan {scan_s:.1f} s, "
         f"moves {total_s - scan_s:.1f} s)",
     ]
+    if copies is not None and copies.count > 1:
+        from fivebar_host.report.text.dryrun import format_duration
+
+        out.append(f"copies        {plan_text(job, copies, format_duration)}")
     if not laser:
         out.append("tool          laser off: every pixel sent at power 0, the scan only "
                    "rehearsed (burn with --laser)")

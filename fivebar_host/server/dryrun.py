@@ -58,7 +58,7 @@ def _dry_run(job: Job, profile: Profile, laser: bool,
         with tempfile.TemporaryDirectory(prefix="fivebar-preview-") as d, _PREVIEW_LOCK:
             path = Path(d) / "preview.png"
             preview.draw_preview(job, path)
-            return preview.report_lines(job, laser), path.read_bytes()
+            return preview.report_lines(job, laser, copies), path.read_bytes()
     lines = report_lines(job, nbar_opinion(job, profile), laser=laser, profile=profile,
                          copies=copies)
     with tempfile.TemporaryDirectory(prefix="fivebar-preview-") as d, _PREVIEW_LOCK:
