@@ -60,6 +60,20 @@ def parse_length(text: str) -> float:
 
 
 _SPEED = re.compile(r"^(.*?)\s*/\s*(s|sec|min)\s*$", re.IGNORECASE)
+#: Time units in seconds, as a duration may be written ("15", "15s", "500ms", "1.5min").
+TIME_UNITS: dict[str, float] = {"ms": 1e-3, "s": 1.0, "sec": 1.0, "min": 60.0}
+
+
+def parse_duration(text: str, unit: str = "s") -> float:
+    """A duration in `unit` (s or ms) from text: a number with an optional unit (ms, s,
+    min; none means `unit`), e.g. "15", "15s", "500ms", "1.5min". ValueError says what it
+    must look like."""
+    m = _LENGTH.match(text)
+    given = m.group(2).lower() if m else ""
+    if m is None or given not in ("", *TIME_UNITS):
+        raise ValueError(f"must be a duration such as 15 ({unit}), 15s, 500ms or 1.5min; "
+                         f"got {text!r}")
+    return float(m.group(1)) * (TIME_UNITS[given] / TIME_UNITS[unit] if given else 1.0)
 
 
 def parse_speed(text: str) -> float:
@@ -168,7 +182,7 @@ class Option:
             try:
                 v = self._number(text)
             except ValueError as e:
-                why = str(e) if self.unit in ("mm", "mm/s") else (
+                why = str(e) if self.unit in ("mm", "mm/s", "s", "ms") else (
                     f"must be a number{self._unit_text()}"
                     + (" or a percentage (50%)" if self.percent else "") + f"; got {text!r}")
                 return self._fail(why)
@@ -191,6 +205,8 @@ class Option:
             return parse_length(text)
         if self.unit == "mm/s":
             return parse_speed(text)
+        if self.unit in ("s", "ms"):
+            return parse_duration(text, self.unit)
         return parse_fraction(text) if self.percent else float(text)
 
     def check(self, value: Any) -> Any:
@@ -348,9 +364,11 @@ JOB_OPTIONS: tuple[Option, ...] = (
            lo=0.0, lo_open=True, help="Pen lowering speed, percent of the servo range per "
            "second."),
     Option("pen_up_delay_ms", "--pen-delay-up", "pen_delay_up", "float", unit="ms", lo=0.0,
-           hi=10_000.0, help="Wait after raising the pen before the arms move, ms."),
+           hi=10_000.0, help="Wait after raising the pen before the arms move, ms or with a "
+           "unit (0.2s)."),
     Option("pen_down_delay_ms", "--pen-delay-down", "pen_delay_down", "float", unit="ms",
-           lo=0.0, hi=10_000.0, help="Wait after lowering the pen before the arms move, ms."),
+           lo=0.0, hi=10_000.0, help="Wait after lowering the pen before the arms move, ms or "
+           "with a unit (0.2s)."),
     # layers, pen changes and copies (AxiDraw's names)
     Option("layer_pause", "--layer-pause", "layer_pause", "bool", default=False,
            help="Stop between the drawing's Inkscape layers for a pen change: the pen goes "
@@ -369,7 +387,8 @@ JOB_OPTIONS: tuple[Option, ...] = (
            help="Plot the whole job N times, the pen up and the arms parked between copies."),
     Option("page_delay_s", "--page-delay", "page_delay", "float", unit="s", lo=0.0,
            hi=3600.0, default=15.0, metavar="SECONDS",
-           help="Wait between copies, seconds (time to change the paper; Ctrl-C holds)."),
+           help="Wait between copies, seconds or with a unit (500ms, 1.5min): time to "
+           "change the paper (Ctrl-C holds)."),
     Option("confirm", "--yes", "confirm", "bool", default=False, cli=False,
            help="Answer yes if the daemon must ask whether the arms are at the home pose "
            "(first job after power-up)."),

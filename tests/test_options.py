@@ -72,6 +72,9 @@ def test_query_round_trip_of_every_option() -> None:
     ("copies", "2.5", "whole number"),
     ("page_delay", "-1", "within 0..3600 s"),
     ("page_delay", "3601", "within 0..3600 s"),
+    ("page_delay", "61min", "within 0..3600 s"),
+    ("page_delay", "1h", "must be a duration such as 15 (s), 15s, 500ms or 1.5min"),
+    ("pen_delay_up", "soon", "must be a duration such as 15 (ms)"),
     ("layer_pause", "sometimes", "true or false"),
 ])
 def test_bad_query_values_are_named(key: str, text: str, why: str) -> None:
@@ -164,6 +167,8 @@ def test_check_values_fills_defaults_and_checks() -> None:
     ("accel", "50%", 0.5), ("accel", "1", 1.0),
     ("draw_speed", "25", 25.0), ("draw_speed", "25mm/s", 25.0), ("draw_speed", "1in/s", 25.4),
     ("travel_speed", "1200mm/min", 20.0), ("travel_speed", "6 cm / s", 60.0),
+    ("pen_delay_up", "250", 250.0), ("pen_delay_up", "0.5s", 500.0),
+    ("pen_delay_down", "40ms", 40.0),
 ])
 def test_values_with_units_on_the_api_and_the_cli(key: str, text: str, value: object) -> None:
     """Units are read once, in `fivebar_host.options`: the daemon's query and the CLI take
@@ -177,6 +182,16 @@ def test_values_with_units_on_the_api_and_the_cli(key: str, text: str, value: ob
     assert "--tolerance" in res.output  # everything else parsed: the bogus one is named
     if key != "tolerance":
         assert flag not in res.output.split("Error:")[1]
+
+
+def test_the_page_delay_takes_a_time_unit_on_the_api_and_the_cli(tmp_path: Path) -> None:
+    """A duration is read once too: 15, 15s, 500ms and 1.5min are what a person types."""
+    for text, seconds in (("15", 15.0), ("15s", 15.0), ("500ms", 0.5), ("1.5min", 90.0)):
+        assert parse_query([("page_delay", text)])["page_delay_s"] == pytest.approx(seconds)
+    res = CliRunner().invoke(main, ["plot", str(EXAMPLES / "simple.svg"), "--dry-run",
+                                    "--copies", "2", "--page-delay", "1.5min",
+                                    "--preview", str(tmp_path / "p.png")])
+    assert res.exit_code == 0 and "1 page delay of 90 s" in res.output, res.output
 
 
 @pytest.mark.parametrize(("text", "landscape", "size"), [
