@@ -241,3 +241,28 @@ def test_joint_iso_arcs_move_one_motor_and_keep_their_gaps(tmp_path: Path) -> No
     lo, hi = (float(v) for v in note.split("is ")[1].split(" mm")[0].split("–"))
     assert 0 < lo <= hi <= 0.5
     assert job.max_dev_mm <= job.tolerance_mm + job.step_quantum_mm
+
+
+def test_outlines_of_filled_shapes_are_named_unless_filled_or_hidden(tmp_path: Path) -> None:
+    """Without --hatch or --hiding a filled shape is drawn as its edge, and a fill-only one
+    (the logo's grey shadow, its white mask) is outlined where the file shows no line: the
+    job says how many, and nothing once the options draw what a browser shows."""
+    prof = load_profile()
+    logo = ROOT / "examples" / "fill_logo.svg"
+    plain = compile_job(logo, prof, CompileOptions(fit=True))
+    said = [n for n in plain.notes if "filled shape" in n]
+    assert said == [n for n in said if n.startswith("6 filled shapes drawn as outlines only "
+                                                    "(2 of them with no stroke in the file)")]
+    assert len(said) == 1 and "--hatch" in said[0] and "--hiding" in said[0]
+    for opts in (CompileOptions(fit=True, hatch_mm=0.8), CompileOptions(fit=True, hiding=True)):
+        assert not any("filled shape" in n for n in compile_job(logo, prof, opts).notes)
+    one = tmp_path / "one.svg"
+    one.write_text('<svg xmlns="http://www.w3.org/2000/svg" width="40mm" height="40mm" '
+                   'viewBox="0 0 40 40"><rect x="5" y="5" width="20" height="20" '
+                   'fill="black"/><path d="M5 30 L35 30" stroke="black" fill="none"/></svg>')
+    notes = compile_job(one, prof, CompileOptions()).notes
+    assert next(n for n in notes if "filled shape" in n).startswith(
+        "1 filled shape drawn as an outline only (with no stroke in the file)")
+    assert not any("filled shape" in n
+                   for n in compile_job(ROOT / "examples" / "simple.svg", prof,
+                                        CompileOptions()).notes)

@@ -33,7 +33,7 @@ from fivebar_host.toolpath.fill.chains import join_segments
 from fivebar_host.toolpath.fill.cuts import Visible, visible_pieces
 from fivebar_host.toolpath.fill.hatch import hatch_lines, rings_of, rotation
 from fivebar_host.toolpath.fill.hiding import Hidden, convex_pieces, hidden_chords
-from fivebar_host.toolpath.fill.paint import PaintTable
+from fivebar_host.toolpath.fill.paint import NO_FILL, PaintTable
 from fivebar_host.toolpath.fill.regions import fill_regions
 from fivebar_host.toolpath.geometry import ARC, Drawing, Polylines, flatten
 from kinematics.arrays import BoolArray, FloatArray, IntArray
@@ -69,6 +69,28 @@ def describe(h: Hatch) -> str:
 def wanted(opts: CompileOptions) -> bool:
     """Whether the stage has anything to do."""
     return opts.hatch_mm is not None or opts.hiding
+
+
+def outline_notes(d: Drawing, opts: CompileOptions) -> list[str]:
+    """Without `--hatch` and `--hiding` every element is drawn as its outline: a filled
+    shape as its edge alone, a fill-only one (no stroke painted: a shadow, a white mask)
+    outlined all the same — not what the file shows, so the job says so, with the options
+    that draw it as a browser shows it."""
+    paint = d.paint
+    if wanted(opts) or paint is None:
+        return []
+    filled = paint.rule != NO_FILL
+    n = int(np.count_nonzero(filled))
+    if not n:
+        return []
+    bare = int(np.count_nonzero(filled & ~paint.stroked))
+    what = (f"{n} filled shapes drawn as outlines only" if n > 1
+            else "1 filled shape drawn as an outline only")
+    if bare:
+        what += (f" ({bare} of them with no stroke in the file)" if n > 1
+                 else " (with no stroke in the file)")
+    return [what + ": --hatch fills them, --hiding leaves out what later fills cover and "
+            "the outlines the file does not stroke (docs/fill.md)"]
 
 
 def default_width(profile: Profile) -> float:

@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fivebar_host.compile import steps
+from fivebar_host.compile.fill import outline_notes
 from fivebar_host.compile.layers import break_switches, layer_pauses
 from fivebar_host.compile.model import (
     CompileOptions,
@@ -206,7 +207,8 @@ def finish(su: Setup, placed: Placed, home: Home, routed: Routed, solved: Solved
     mode_changes = _executed_mode_changes(su, file, home, routed, tr, pd)
     g = geometry
     notes = [_mode_note(su, home, routed, len(mode_changes)), *tr.notes,
-             *placed.drawing.warnings, *_dwell_notes(routed)]
+             *placed.drawing.warnings, *outline_notes(placed.drawing, opts),
+             *_dwell_notes(routed)]
     pauses = layer_pauses(routed.sections, ch.path_section, pd.path)
     tool_on = seg_draw | (pd.dwell & (pd.power > 0))
     job = Job(
