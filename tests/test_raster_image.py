@@ -103,3 +103,24 @@ def test_the_dry_run_counts_copies_of_an_image(tmp_path: Path) -> None:
     total = re.search(r"≈ (?:(\d+) min )?([\d.]+) s \(", line)
     assert total is not None, line
     assert float(total[1] or 0) * 60 + float(total[2]) == pytest.approx(2 * t + 7, abs=0.15)
+
+
+def test_pixels_finer_than_the_spot_are_named_with_the_option_that_resamples(
+        tmp_path: Path) -> None:
+    """An image burned at its own pixels where they are finer than the laser's spot (the
+    default profile's 0.1 mm) burns each as a spot-wide dot and takes (spot/pixel)² more
+    pixels than it can show: the dry run says so and names --line-interval."""
+    img = tmp_path / "g.png"
+    _grey(400, 100).save(img)
+
+    def notes(*extra: str) -> list[str]:
+        r = CliRunner().invoke(main, ["plot", str(img), "--laser", "--dry-run", *extra,
+                                      "--preview", str(tmp_path / "pv.png")])
+        assert r.exit_code == 0, r.output
+        return [ln for ln in r.output.splitlines() if "finer than the laser" in ln]
+
+    said = notes("--width", "10mm")  # 0.025 mm pixels
+    assert len(said) == 1 and "0.025 × 0.025 mm" in said[0], said
+    assert "--line-interval 0.1mm" in said[0] and "16× fewer pixels" in said[0], said
+    assert notes("--width", "10mm", "--line-interval", "0.1mm") == []
+    assert notes("--width", "40mm") == []  # 0.1 mm pixels: the spot's own size

@@ -172,9 +172,25 @@ def _grid(file: str, g: image.Gray, ro: RasterOptions, profile: Profile, mode: s
                              ro.angle_deg)
 
 
+def fine_note(g: image.Gray, ro: RasterOptions, profile: Profile) -> list[str]:
+    """The image burned at its own pixels where they are finer than the laser's spot: each
+    burns as a spot-wide dot over its neighbours, the scan takes (spot/pixel)² more pixels
+    (and lines) than it can show, so the job says so, with the option that resamples."""
+    if ro.resolution is not None:
+        return []
+    pw, ph = pixel_size(g, ro)
+    spot = profile.laser.spot_mm
+    if max(pw, ph) >= 0.5 * spot:
+        return []
+    gain = spot * spot / (pw * ph)
+    return [f"the image's pixels are {pw:.4g} × {ph:.4g} mm, finer than the laser's "
+            f"{spot:g} mm spot ([laser] spot_mm): --line-interval {spot:g}mm burns the same "
+            f"picture in {gain:.0f}× fewer pixels"]
+
+
 def _compile(file: str, profile: Profile, ro: RasterOptions, gray: image.Gray | None) -> Job:
     g = gray if gray is not None else image.load(file)
-    notes = list(g.notes)
+    notes = list(g.notes) + fine_note(g, ro, profile)
     mode = raster_mode(profile, file)
     grid = _grid(file, g, ro, profile, mode)
     how = "origin" if ro.origin_mm is not None else "centred"
