@@ -39,6 +39,8 @@ def test_laser_on_off_decides_what_draws() -> None:
     assert np.allclose(a, [[10, 0], [10, 10]])
     assert np.allclose(b, [[10, 10], [0, 10]])  # a power change starts a new stroke
     assert d.stroke_power.tolist() == [0.5, 1.0]  # fractions of the file's largest S
+    assert any("laser power as a fraction of the file's largest S, S1000" in w
+               for w in d.warnings)  # and the job says which S is full power
 
 
 @pytest.mark.parametrize(("code", "sign"), [("G2", -1.0), ("G3", 1.0)])

@@ -570,6 +570,13 @@ def _finish(rd: _Reader) -> Drawing:
     scale = 1.0 / rd.max_s if rd.max_s > 0 else 0.0
     if rd.max_s > 0:
         drawing.stroke_power[:] = drawing.stroke_power / rd.max_s
+        if rd.has_laser:
+            # a file's S counts up to its controller's own maximum (GRBL's $30, 1000 by
+            # default; Marlin's 255), which the file does not name: say which S is full power
+            drawing.warnings.append(
+                f"{rd.name}: laser power as a fraction of the file's largest S, S{rd.max_s:g}, "
+                "which burns at the profile's [laser] power (with --laser; `fivebar bridge` "
+                "maps S by its $30 instead)")
     else:
         drawing.stroke_power[:] = 1.0
     drawing.dwells = [replace(d, power=d.power * scale if rd.max_s > 0 and rd.has_laser
