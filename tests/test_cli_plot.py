@@ -139,3 +139,13 @@ def test_convert_refuses_an_image_and_writes_nothing(tmp_path: Path) -> None:
     code, text = run("convert", str(img), "--laser", "--width", "4mm", "-o", str(out))
     assert code == 2 and f"{img}: an image (raster) job cannot be written" in text, text
     assert "fivebar plot" in text and not out.exists()
+
+
+@pytest.mark.parametrize("command", [["status"], ["jog", "--dx", "5"], ["home"],
+                                     ["frame", str(EXAMPLES / "simple.svg")]])
+def test_machine_commands_without_a_port_say_where_to_find_one(command: list[str]) -> None:
+    """A newcomer's first `fivebar status`: the refusal names the kind of port, where to find
+    the machine's (`fivebar doctor`), and the emulator."""
+    code, text = run(*command)
+    assert code != 0 and "give --port PORT" in text, text
+    assert "fivebar doctor" in text and "fivebar-sim://" in text, text

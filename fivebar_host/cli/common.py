@@ -258,7 +258,8 @@ controller_option = click.option(
 def machine(port: str | None, controller: str, prof: Profile) -> Controller:
     """Open the machine at --port (required for machine commands) with --controller."""
     if port is None:
-        fail("give --port PORT")
+        fail("give --port PORT: the machine's serial port (e.g. /dev/ttyUSB0 or COM3; "
+             "`fivebar doctor` lists them), or fivebar-sim:// for the emulator")
     from fivebar_host.cli.session import open_machine
 
     return open_machine(controller, str(port), prof)
