@@ -149,3 +149,14 @@ def test_machine_commands_without_a_port_say_where_to_find_one(command: list[str
     code, text = run(*command)
     assert code != 0 and "give --port PORT" in text, text
     assert "fivebar doctor" in text and "fivebar-sim://" in text, text
+
+
+@pytest.mark.parametrize("controller", ["fivebar", "grbl"])
+def test_a_port_that_is_not_there_is_named_with_where_to_look(tmp_path: Path,
+                                                             controller: str) -> None:
+    """The links say what `fivebar flash` says of a port that will not open (one diagnosis,
+    `controllers.ports.open_trouble`): a missing device sends the user to `fivebar doctor`."""
+    port = str(tmp_path / "ttyUSB9")
+    code, text = run("status", "--port", port, "--controller", controller)
+    assert code != 0 and f"{port}: no such port: is the board plugged in?" in text, text
+    assert "`fivebar doctor` lists the serial ports" in text

@@ -294,7 +294,7 @@ def test_no_confirmation_without_terminal(drawing: Path) -> None:
 
 
 @pytest.mark.parametrize(("port", "message"), [
-    ("/dev/ttyDOES-NOT-EXIST", "cannot open the port"),
+    ("/dev/ttyDOES-NOT-EXIST", "no such port: is the board plugged in?"),
     ("loop://", "no fivebar firmware banner"),
     ("fivebar-mock://?proto=9", "speaks protocol 9"),
     ("fivebar-mock://?bogus=1", "bogus"),

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime
+import errno
 import os
 import sys
 import threading
@@ -350,6 +351,28 @@ def open_port(url: str, *, command: str | None = None, hint: str | None = None,
         lock.release()
         raise
     return port, lock
+
+
+def open_trouble(url: str, exc: BaseException) -> tuple[str, str]:
+    """Why a port would not open, for people: (kind, message) — `permission` (the user may
+    not open serial ports: the group to join), `busy` (another program has it), `no_port`
+    (no such device: `fivebar doctor` lists them), else `open` with the OS's words. One
+    diagnosis for every command that opens a port (the links, `fivebar flash`)."""
+    code = getattr(exc, "errno", None)
+    text = str(exc)
+    if code == errno.EACCES or "Permission denied" in text or "[Errno 13]" in text:
+        return "permission", (f"{url}: permission denied: your user may not open serial "
+                              "ports. Fix: sudo usermod -aG dialout $USER (Arch, Fedora: the "
+                              "uucp group), then log out and back in")
+    if code in (errno.EBUSY, errno.EAGAIN) or "[Errno 16]" in text or "[Errno 11]" in text \
+            or "busy" in text.lower():
+        return "busy", (f"{url}: the port is in use by another program (the Arduino IDE's "
+                        "serial monitor, `fivebar serve`, a printer host, ModemManager): "
+                        "close it, then try again")
+    if code == errno.ENOENT or "No such file" in text or "[Errno 2]" in text:
+        return "no_port", (f"{url}: no such port: is the board plugged in? `fivebar doctor` "
+                           "lists the serial ports this computer has")
+    return "open", f"{url}: cannot open the port: {text}"
 
 
 def _exclusive(port: Any, on: bool) -> None:

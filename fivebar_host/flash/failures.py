@@ -5,8 +5,6 @@ denied on /dev/ttyUSB0)."""
 
 from __future__ import annotations
 
-import errno
-
 from fivebar_host.errors import FivebarError
 from fivebar_host.flash.stk500 import Fault, Stk500Error
 from fivebar_host.protocol import Banner, trailing_banner
@@ -29,22 +27,11 @@ class FlashError(FivebarError):
 
 
 def open_failure(url: str, exc: BaseException) -> FlashError:
-    """A port that would not open: busy, permission, missing, or another OS error."""
-    code = getattr(exc, "errno", None)
-    text = str(exc)
-    if code == errno.EACCES or "Permission denied" in text or "[Errno 13]" in text:
-        return FlashError("permission", f"{url}: permission denied: your user may not open "
-                          "serial ports. Fix: sudo usermod -aG dialout $USER (Arch, Fedora: "
-                          "the uucp group), then log out and back in")
-    if code in (errno.EBUSY, errno.EAGAIN) or "[Errno 16]" in text or "[Errno 11]" in text \
-            or "busy" in text.lower():
-        return FlashError("busy", f"{url}: the port is in use by another program (the Arduino "
-                          "IDE's serial monitor, `fivebar serve`, a printer host, "
-                          "ModemManager): close it, then flash again")
-    if code == errno.ENOENT or "No such file" in text or "[Errno 2]" in text:
-        return FlashError("no_port", f"{url}: no such port: is the board plugged in? "
-                          "`fivebar doctor` lists the serial ports this computer has")
-    return FlashError("open", f"{url}: cannot open the port: {text}")
+    """A port that would not open: busy, permission, missing, or another OS error
+    (`controllers.ports.open_trouble`)."""
+    from fivebar_host.controllers.ports import open_trouble
+
+    return FlashError(*open_trouble(url, exc))
 
 
 def no_bootloader(url: str, faults: dict[int, Stk500Error]) -> FlashError:

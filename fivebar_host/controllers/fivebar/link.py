@@ -83,7 +83,7 @@ class Link:
         except ValueError as e:
             raise LinkError(f"{url}: {e}") from e
         except (serial.SerialException, OSError) as e:
-            raise LinkError(f"{url}: cannot open the port: {e}") from e
+            raise LinkError(ports.open_trouble(url, e)[1]) from e
         link = cls(port, url=url, reply_timeout_s=reply_timeout_s, lock=lock)
         try:
             link.handshake(banner_timeout_s)

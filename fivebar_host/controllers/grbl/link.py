@@ -112,8 +112,10 @@ class GrblLink:
         `Grbl 1.1` is refused."""
         try:
             port, lock = ports.open_port(url, baudrate=baud, timeout=0.05)
-        except (serial.SerialException, ValueError, OSError) as e:
-            raise GrblError(f"{url}: cannot open the port: {e}") from e
+        except ValueError as e:
+            raise GrblError(f"{url}: {e}") from e
+        except (serial.SerialException, OSError) as e:
+            raise GrblError(ports.open_trouble(url, e)[1]) from e
         from fivebar_host.controllers.grbl.dialects import detect
 
         link = cls(port, url, reply_timeout_s, lock)
