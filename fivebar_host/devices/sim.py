@@ -214,9 +214,7 @@ class Emulator:
         firmware has interrupts enabled (firmware/sim/fbsim.c)."""
         if command not in CONTROL_COMMANDS:
             raise ValueError(f"unknown harness command {command!r}")
-        line = self._ask(command, timeout)
-        if line != f"ok {command}":
-            raise EmulatorError(f"harness did not acknowledge {command!r} (got {line!r})")
+        self._done(command, timeout)
 
     def byte_at(self, value: int, after_cycles: int, timeout: float = 10.0) -> None:
         """Hand one byte to the firmware's UART ``after_cycles`` emulated cycles from now and
@@ -225,10 +223,7 @@ class Emulator:
         timer events (the harness pumps them when a sleeping batch ends)."""
         if not 0 <= value <= 0xFF or not 1 <= after_cycles < 2**31:
             raise ValueError(f"byte {value} after {after_cycles} cycles is out of range")
-        command = f"byte {value:02x} {after_cycles}"
-        line = self._ask(command, timeout)
-        if line != f"ok {command}":
-            raise EmulatorError(f"harness did not acknowledge {command!r} (got {line!r})")
+        self._done(f"byte {value:02x} {after_cycles}", timeout)
 
     def cycle(self, timeout: float = 10.0) -> int:
         """The emulated CPU cycle count now (the harness's ``cycle`` command)."""
@@ -236,6 +231,12 @@ class Emulator:
         if not line.startswith("ok cycle "):
             raise EmulatorError(f"harness did not answer 'cycle' (got {line!r})")
         return int(line.split()[2])
+
+    def _done(self, command: str, timeout: float) -> None:
+        """Send `command` and wait for its acknowledgement, "ok <command>"."""
+        line = self._ask(command, timeout)
+        if line != f"ok {command}":
+            raise EmulatorError(f"harness did not acknowledge {command!r} (got {line!r})")
 
     def _ask(self, command: str, timeout: float) -> str:
         """Write one command line to the harness and read its answer line."""
