@@ -322,6 +322,17 @@ static void ocr_write_hook(avr_t *a, avr_io_addr_t addr, uint8_t v, void *param)
 	fprintf(dbg, "%llu w %u %u\n", (unsigned long long)a->cycle, ocr1a(), tcnt1_now());
 }
 
+/* A hooked register's write: simavr's own handler where it has one, else the
+ * plain store (the hooks of -D and -t log around it). */
+static void write_through(avr_io_write_t orig, void *param, avr_t *a, avr_io_addr_t addr,
+			  uint8_t v)
+{
+	if (orig)
+		orig(a, addr, v, param);
+	else
+		a->data[addr] = v;
+}
+
 #define REG_OCR1BL 0x8A
 static avr_io_write_t ocrb_write_orig;
 static void *ocrb_write_param;
@@ -329,10 +340,7 @@ static void *ocrb_write_param;
 static void ocrb_write_hook(avr_t *a, avr_io_addr_t addr, uint8_t v, void *param)
 {
 	(void)param;
-	if (ocrb_write_orig)
-		ocrb_write_orig(a, addr, v, ocrb_write_param);
-	else
-		a->data[addr] = v;
+	write_through(ocrb_write_orig, ocrb_write_param, a, addr, v);
 	unsigned ocr = a->data[REG_OCR1BL] | (unsigned)a->data[REG_OCR1BL + 1] << 8;
 	fprintf(dbg, "%llu b %u %u\n", (unsigned long long)a->cycle, ocr, tcnt1_now());
 }
@@ -348,10 +356,7 @@ static void *tccr2a_write_param;
 static void tccr2a_write_hook(avr_t *a, avr_io_addr_t addr, uint8_t v, void *param)
 {
 	(void)param;
-	if (tccr2a_write_orig)
-		tccr2a_write_orig(a, addr, v, tccr2a_write_param);
-	else
-		a->data[addr] = v;
+	write_through(tccr2a_write_orig, tccr2a_write_param, a, addr, v);
 	if (trace)
 		fprintf(trace, "%llu lwrite %u\n", (unsigned long long)a->cycle,
 			(unsigned)(v >> BIT_COM2A1) & 1u);
