@@ -39,9 +39,16 @@ from kinematics.arrays import BoolArray, FloatArray, IntArray
 PLAN_ACCEL_SHARE = 0.75
 #: Speed-up and slow-down parts are cut into pieces whose planned speed changes by at most
 #: this share of the junction jump from one piece to the next, and of at least this many
-#: steps (rounding a shorter piece to whole steps would shake its rate too much).
-PLAN_PIECE_JUMP_SHARE = 0.6
-PLAN_MIN_PIECE_STEPS = 3
+#: steps (rounding a shorter piece to whole steps would shake its rate too much). Measured
+#: against TOPP-RA (`python benchmarks/topp.py`, planned / optimal on the uncut segments;
+#: the three drawings of issue 39, then docs_command_line, voronoi and plotter.svg of
+#: benchmarks/drawings): 0.6 and 3 steps gave 0.9999, 1.0008, 1.0188, 1.0462, 1.0134,
+#: 1.0284; 0.45 and 2 steps give 0.9997, 1.0018, 1.0123, 1.0359, 1.0106, 1.0218 — shorter
+#: ramp pieces follow the continuous profile more closely, and the sharp junction's piece
+#: (2/3 of the least) shrinks to one or two steps. More pieces: 2417 → 2853 segments on
+#: bc_template.svg. 1 step, or 3 steps at 0.45: longer on every drawing but the circle.
+PLAN_PIECE_JUMP_SHARE = 0.45
+PLAN_MIN_PIECE_STEPS = 2
 
 
 @dataclass(frozen=True)
@@ -60,7 +67,8 @@ class Planned(Stepped):
 def cut_accel(profile: Profile) -> float:
     """Acceleration (rad/s²) of the continuous profile that decides the cut: the share
     `PLAN_ACCEL_SHARE` of the limit, but at most J²/(4·D_min) (J the junction jump, D_min
-    the smallest piece, `PLAN_MIN_PIECE_STEPS` steps; 42.5 rad/s² at 12800 steps/rev).
+    the smallest piece, `PLAN_MIN_PIECE_STEPS` steps; 63.7 rad/s² at 12800 steps/rev, above
+    the share of the default profile's 60 rad/s²).
 
     Why a cap (issue 20): `ramp_fractions` cuts a ramp at equal speed steps of
     `PLAN_PIECE_JUMP_SHARE`·J and joins pieces shorter than D_min. Planned steeper, a ramp's
