@@ -56,7 +56,7 @@ def test_dry_run_is_the_cli_report_and_queues_nothing(tmp_path: Path) -> None:
         assert not mock.machine("w-dry").ledger
     prof = load_profile(None)
     job = compile_upload(data, "simple.svg", JobOptions(tolerance_mm=0.1), prof).job
-    assert out["report"] == report_lines(job, nbar_opinion(job, prof))
+    assert out["report"] == report_lines(job, nbar_opinion(job, prof), profile=prof)
     assert out["segments"] == job.n_segments and out["tolerance_mm"] == 0.1
     assert base64.b64decode(out["preview_png"]).startswith(b"\x89PNG\r\n\x1a\n")
     assert bad.status == 422
