@@ -163,8 +163,9 @@ def test_ramp_fractions_cut_the_piece_at_a_sharp_junction() -> None:
     counts, f = ramp_fractions(p, dist, a, piece, least)
     assert counts.tolist() == [1, 1]  # every ramp fits one piece: joined
     sharp = (np.array([False, True]), np.array([True, False]))
-    short = SHARP_SHARE * least  # 1.33 mrad: 5.3 ms at the junction's 0.25 rad/s
-    for sharp_s, first in ((5e-3, short), (6e-3, least)):
+    short = SHARP_SHARE * least  # 1.2 mrad: 4.8 ms at the junction's 0.25 rad/s
+    lasts = short / 0.25
+    for sharp_s, first in ((0.95 * lasts, short), (1.05 * lasts, least)):
         counts, f = ramp_fractions(p, dist, a, piece, least, sharp, sharp_s)
         assert counts.tolist() == [2, 2]
         ends = f[counts[0]:] * dist[1]

@@ -69,11 +69,15 @@ RAMP_BLOCK = 1 << 16
 #: 1.046 → 1.019, docs_command_line.svg 1.091 → 1.047, voronoi.svg 1.032 → 1.013; a 1-step
 #: piece rounds the segment's direction off by up to half a step on the other motor (a
 #: sharper junction) and lost to 2; without the pieces at stops 1.024, 1.052, 1.018.
-SHARP_SHARE = 2.0 / 3.0
+#: With ramp pieces of 2 steps (`compile.timing.PLAN_MIN_PIECE_STEPS`), 0.6 of them (1 or 2
+#: steps as the start rounds) and 1.5 floors: bc_template 1.0123 → 1.0101 against 2/3 and 2
+#: floors, and shorter on 12 of 13 other drawings (benchmarks/topp.py; a shorter wait, 1
+#: floor: 1.0156; 2.5: 1.0239).
+SHARP_SHARE = 0.6
 SHARP_ROOM = 1.5
-SHARP_FLOORS = 2.0
+SHARP_FLOORS = 1.5
 #: (24 steps at the least piece of 2 steps, as 8 × 3 before: at 8 × 2 the comb of 0.3 mm
-#: teeth in tests/test_plan_sharp.py took 1.13× its continuous profile's time, at 12 1.008×)
+#: teeth in tests/test_plan_sharp.py took 1.13× its continuous profile's time, at 12 1.010×)
 GROW_ROOM = 12.0
 
 

@@ -43,10 +43,12 @@ PLAN_ACCEL_SHARE = 0.75
 #: against TOPP-RA (`python benchmarks/topp.py`, planned / optimal on the uncut segments;
 #: the three drawings of issue 39, then docs_command_line, voronoi and plotter.svg of
 #: benchmarks/drawings): 0.6 and 3 steps gave 0.9999, 1.0008, 1.0188, 1.0462, 1.0134,
-#: 1.0284; 0.45 and 2 steps give 0.9997, 1.0018, 1.0123, 1.0359, 1.0106, 1.0218 — shorter
-#: ramp pieces follow the continuous profile more closely, and the sharp junction's piece
-#: (2/3 of the least) shrinks to one or two steps. More pieces: 2417 → 2853 segments on
-#: bc_template.svg. 1 step, or 3 steps at 0.45: longer on every drawing but the circle.
+#: 1.0284; 0.45 and 2 steps (with `ramps.SHARP_SHARE` 0.6, `SHARP_FLOORS` 1.5) give
+#: 0.9999, 1.0011, 1.0101, 1.0319, 1.0093, 1.0189 — shorter ramp pieces follow the
+#: continuous profile more closely, and the sharp junction's piece shrinks to one or two
+#: steps. More pieces: 2417 → 2871 segments on bc_template.svg. 1 step, or 3 steps at
+#: 0.45: longer on every drawing but the circle; 0.4 or 0.5 instead of 0.45: longer on
+#: eight other drawings of benchmarks/drawings (0.5 is 1.0095 on bc_template).
 PLAN_PIECE_JUMP_SHARE = 0.45
 PLAN_MIN_PIECE_STEPS = 2
 
