@@ -71,8 +71,8 @@ RAMP_BLOCK = 1 << 16
 #: sharper junction) and lost to 2; without the pieces at stops 1.024, 1.052, 1.018.
 #: With ramp pieces of 2 steps (`compile.timing.PLAN_MIN_PIECE_STEPS`), 0.6 of them (1 or 2
 #: steps as the start rounds) and 1.5 floors: bc_template 1.0123 → 1.0101 against 2/3 and 2
-#: floors, and shorter on 12 of 13 other drawings (benchmarks/topp.py; a shorter wait, 1
-#: floor: 1.0156; 2.5: 1.0239).
+#: floors, shorter on 11 of 13 other drawings, the same on two_layers_a4.svg and 0.0002
+#: longer on the circle (benchmarks/topp.py; a shorter wait, 1 floor: 1.0156; 2.5: 1.0239).
 SHARP_SHARE = 0.6
 SHARP_ROOM = 1.5
 SHARP_FLOORS = 1.5

@@ -47,8 +47,9 @@ PLAN_ACCEL_SHARE = 0.75
 #: 0.9999, 1.0011, 1.0101, 1.0319, 1.0093, 1.0189 — shorter ramp pieces follow the
 #: continuous profile more closely, and the sharp junction's piece shrinks to one or two
 #: steps. More pieces: 2417 → 2871 segments on bc_template.svg. 1 step, or 3 steps at
-#: 0.45: longer on every drawing but the circle; 0.4 or 0.5 instead of 0.45: longer on
-#: eight other drawings of benchmarks/drawings (0.5 is 1.0095 on bc_template).
+#: 0.45: longer on every drawing but the circle; 0.5 instead of 0.45: 1.0095 on
+#: bc_template but longer on 6 of 8 other drawings of benchmarks/drawings (the same on 2),
+#: 0.4: 1.0114.
 PLAN_PIECE_JUMP_SHARE = 0.45
 PLAN_MIN_PIECE_STEPS = 2
 
