@@ -40,8 +40,8 @@ PROF = load_profile()
 #: steps, and a piece of 2 steps whose rounding moves by one step changes its rate by a
 #: half, which the staircase then ramps around. Measured on 440 seeded random jobs and limit
 #: pairs: 2 plans longer, by at most 0.05 % (with pieces of 3 steps none; with the cut cap
-#: at 0.35 instead of 0.25 of J²/D_min: one, by 0.19 %). 0.5 % leaves that room while any cascade like issue 20's (×1.6 to ×8 on these
-#: jobs before the fix) fails by far.
+#: at 0.35 instead of 0.25 of J²/D_min: one, by 0.19 %). 0.5 % leaves that room while any
+#: cascade like issue 20's (×1.6 to ×8 on these jobs before the fix) fails by far.
 REL_TOL = 0.005
 
 
