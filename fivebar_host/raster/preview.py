@@ -45,7 +45,7 @@ def report_lines(job: Job, laser: bool, copies: Copies | None = None) -> list[st
         f"burn          {cols} × {rows} px at {r.pitch_mm:g} × {r.interval_mm:g} mm "
         f"({cols * r.pitch_mm:.1f} × {rows * r.interval_mm:.1f} mm), {lit} lit",
         f"scanlines     {len(r.lines)} ({passes} pass{'es' if passes > 1 else ''}), "
-        f"{r.n_pixels} px burned",
+        f"{r.n_pixels} px scanned (the blank ones between lit ones too)",
         f"speed         {r.speed_mm_s:.1f} mm/s = {r.speed_mm_s / r.pitch_mm:.0f} px/s, "
         f"overscan {r.speed_mm_s ** 2 / (2 * r.accel_mm_s2):.2f} mm "
         f"(ramps at {r.accel_mm_s2:.0f} mm/s²)",

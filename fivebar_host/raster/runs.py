@@ -66,7 +66,7 @@ class RasterRuns:
 
     @property
     def n_pixels(self) -> int:
-        """Burned pixels: every cell of every scanline (blank cells between lit ones too)."""
+        """Scanned pixels: every cell of every scanline (blank cells between lit ones too)."""
         return int(sum(s.c1 - s.c0 for s in self.lines))
 
     def line_of(self, segment: int) -> int:
