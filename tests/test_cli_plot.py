@@ -109,6 +109,23 @@ def test_bad_input_clear_error_and_no_output(tmp_path: Path, content: str, suffi
     assert code != 0 and message in text and not png.exists()
 
 
+@pytest.mark.parametrize(("fmt", "says"), [("PNG", "a PNG image: give it the extension .png"),
+                                           ("JPEG", "a JPEG image: give it the extension .jpg"),
+                                           ("BMP", "a BMP image: give it the extension .bmp"),
+                                           ("WEBP", "a WebP image: give it the extension .webp")])
+def test_an_image_named_svg_is_said_to_be_one(tmp_path: Path, fmt: str, says: str) -> None:
+    from PIL import Image
+
+    src = tmp_path / "photo.svg"
+    Image.new("RGB", (8, 8)).save(src, format=fmt)
+    code, text = run("plot", str(src), "--dry-run")
+    assert code != 0 and "malformed XML" in text and says in text
+    # two letters that start a BMP do not make one
+    src.write_bytes(b"BMX is not an image\n")
+    code, text = run("plot", str(src), "--dry-run")
+    assert code != 0 and "malformed XML" in text and "the file is" not in text
+
+
 def test_unreadable_file(tmp_path: Path) -> None:
     code, text = run("convert", str(tmp_path / "missing.svg"), "-o", str(tmp_path / "o"))
     assert code != 0 and "cannot read file" in text

@@ -87,9 +87,31 @@ def run_parser(parser: xml.parsers.expat.XMLParserType, data: bytes, file: str,
         parser.Parse(b"", True)
     except xml.parsers.expat.ExpatError as e:
         raise InputError(f"malformed XML: {xml.parsers.expat.ErrorString(e.code)} "
-                         f"(line {e.lineno}, column {e.offset + 1})", file, e.lineno) from e
+                         f"(line {e.lineno}, column {e.offset + 1}){_not_xml(data)}", file,
+                         e.lineno) from e
     except (LookupError, UnicodeError) as e:  # an XML declaration naming an unknown encoding
         raise InputError(f"cannot decode the file: {e}", file) from e
+
+
+#: The first bytes of files people give as drawings that are no XML at all.
+MAGIC = ((b"\x89PNG", "a PNG image", ".png"), (b"\xff\xd8\xff", "a JPEG image", ".jpg"),
+         (b"GIF8", "a GIF image", ".gif"), (b"BM", "a BMP image", ".bmp"),
+         (b"II*\x00", "a TIFF image", ".tif"), (b"MM\x00*", "a TIFF image", ".tif"),
+         (b"%PDF", "a PDF document", ""))
+
+
+def _not_xml(data: bytes) -> str:
+    """What the file is instead, when its first bytes say (`MAGIC`), for the error."""
+    if data[:4] == b"RIFF" and data[8:12] == b"WEBP":
+        return "; the file is a WebP image: give it the extension .webp to engrave it"
+    if data[:2] == b"BM" and data[6:10] != b"\x00\x00\x00\x00":  # BMP: reserved zeros
+        return ""
+    for magic, what, ext in MAGIC:
+        if data.startswith(magic):
+            if not ext:
+                return f"; the file is {what}: export the drawing as SVG or G-code"
+            return f"; the file is {what}: give it the extension {ext} to engrave it"
+    return ""
 
 
 #: Most characters kept per text piece (a text element's content is bounded anyway).
