@@ -63,7 +63,11 @@ def _bad_files(tmp_path: Path) -> dict[str, tuple[Path, str]]:
     junk.write_bytes(b"this is not an image\n" * 20)
     bomb = tmp_path / "bomb.png"
     Image.new("1", (20000, 20000)).save(bomb)  # 400 Mpx of zeros: a few kB on disk
+    drawing = tmp_path / "drawing.png"
+    drawing.write_bytes(b'\xef\xbb\xbf<?xml version="1.0"?>\n<svg xmlns="http://www.w3.org/'
+                        b'2000/svg"><path d="M0 0 L1 1"/></svg>\n')
     return {"truncated": (trunc, "truncated"), "unknown": (junk, "not an image"),
+            "svg": (drawing, "the file is an SVG drawing: give it the extension .svg"),
             "bomb": (bomb, "decompression bomb"),
             "missing": (tmp_path / "nope.png", "cannot read")}
 
@@ -74,6 +78,7 @@ def test_bad_images_are_named_input_errors(tmp_path: Path) -> None:
             image.load(p)
         assert isinstance(ei.value, FivebarError), what
         assert str(p) in str(ei.value) and reason in str(ei.value), what
+        assert what == "svg" or "SVG drawing" not in str(ei.value), what
 
 
 def test_bad_images_on_the_cli_exit_non_zero_without_traceback(tmp_path: Path) -> None:

@@ -70,6 +70,14 @@ def load(path: str | Path) -> Gray:
     return decode(data, name)
 
 
+def _drawing_hint(data: bytes) -> str:
+    """What to do when an image file holds a drawing: SVG (XML) text, for the error."""
+    head = data[:512].lstrip(b"\xef\xbb\xbf \t\r\n").lower()
+    if head.startswith((b"<?xml", b"<svg", b"<!doctype svg", b"<!--")) and b"<svg" in data:
+        return "; the file is an SVG drawing: give it the extension .svg to draw it"
+    return ""
+
+
 def decode(data: bytes, name: str) -> Gray:
     """The image in `data` (a file's bytes or a data URI's), `name` for messages."""
     import io
@@ -96,8 +104,8 @@ def decode(data: bytes, name: str) -> Gray:
             finally:
                 Image.MAX_IMAGE_PIXELS = old
     except UnidentifiedImageError as e:
-        raise InputError("not an image Pillow can read (PNG, JPEG, BMP, GIF, TIFF, WebP)",
-                         name) from e
+        raise InputError("not an image Pillow can read (PNG, JPEG, BMP, GIF, TIFF, WebP)"
+                         + _drawing_hint(data), name) from e
     except (Image.DecompressionBombError, Image.DecompressionBombWarning) as e:
         raise InputError(f"refused as a decompression bomb: {e}", name) from e
     except (OSError, SyntaxError, ValueError) as e:  # truncated or damaged data
