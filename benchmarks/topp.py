@@ -220,7 +220,7 @@ def measure(name: str, prof: Profile, grid: tuple[int, float], fit: bool,
                                   np.concatenate((th[seg[:1]], th[seg[ends] + 1])), prof,
                                   cap_w, *grid)
         out["topp_cpu"] += time.process_time() - t1
-    return {**out, "segments": float(job.duration_us.shape[0]), "bound": float(bound),
+    return {**out, "segments": float(job.duration_us.shape[0]), "bound": float(bound.total),
             "all_cpu": time.process_time() - t0}
 
 

@@ -185,6 +185,17 @@ def test_the_dry_run_says_where_the_link_sets_the_pace(tmp_path: Path) -> None:
     link = [ln for ln in report_lines(compile_job(src, fast, opts), profile=fast)
             if ln.startswith("link")]
     assert len(link) == 1 and "115200 baud" in link[0] and "link_baud = 250000" in link[0]
+    # at 1 Mbaud the wire carries it all: the firmware's own floor sets the pace, and a
+    # faster link is no advice
+    mbaud = dataclasses.replace(fast, serial=dataclasses.replace(fast.serial,
+                                                                  link_baud=1_000_000))
+    job = compile_job(src, mbaud, opts)
+    n, wire_n = linkrate.bound_segments(job.steps, job.power, job.duration_us, mbaud)
+    link = [ln for ln in report_lines(job, profile=mbaud) if ln.startswith("link")]
+    assert n > 50 and wire_n == 0 and len(link) == 1
+    per_s = 1e6 / linkrate.FIRMWARE_SEGMENT_US
+    assert f"what the firmware (≤ {per_s:.0f} segments/s) carries" in link[0]
+    assert "baud" not in link[0] and "link_baud" not in link[0]
     slow_opts = CompileOptions(no_simplify=True)  # the profile's 40 mm/s: 400 segments/s
     slow = [ln for ln in report_lines(compile_job(src, prof, slow_opts), profile=prof)
             if ln.startswith("link")]

@@ -26,7 +26,7 @@ lengthens segments and the passes settle).
 from __future__ import annotations
 
 from collections.abc import Iterator
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -118,10 +118,19 @@ def link_floor_us(steps: IntArray, power: NDArray[np.integer[Any]], duration_us:
     return out
 
 
+class Bound(NamedTuple):
+    """Moving segments of a plan at their link floor (`bound_segments`)."""
+
+    total: int
+    wire: int  # of them, those whose floor is the wire's bytes (above the firmware's own)
+
+
 def bound_segments(steps: IntArray, power: NDArray[np.integer[Any]], duration_us: IntArray,
-                   profile: Profile) -> int:
+                   profile: Profile) -> Bound:
     """How many moving segments of a plan run at their link floor (within 1 µs): where the
-    wire or the firmware, not the machine's limits, sets the pace (the dry-run report)."""
+    wire or the firmware, not the machine's limits, sets the pace (the dry-run report) —
+    and how many of them the wire holds back (a faster link would speed those up)."""
     dur = np.asarray(duration_us, dtype=np.int64)
     floor = link_floor_us(steps, power, dur, profile)
-    return int(((floor > 0) & (dur <= floor + 1)).sum())
+    bound = (floor > 0) & (dur <= floor + 1)
+    return Bound(int(bound.sum()), int((bound & (floor > FIRMWARE_SEGMENT_US)).sum()))

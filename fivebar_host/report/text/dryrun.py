@@ -71,15 +71,17 @@ def pause_lines(job: Job) -> list[str]:
 def link_lines(job: Job, profile: Profile) -> list[str]:
     """A line when the serial link or the firmware sets the pace of some segments
     (`compile.linkrate`): the plan is slowed there so the queue never runs empty."""
-    n = linkrate.bound_segments(job.steps, job.power, job.duration_us, profile)
+    n, wire = linkrate.bound_segments(job.steps, job.power, job.duration_us, profile)
     if not n:
         return []
     baud = profile.serial.link_baud
+    fw = f"the firmware (≤ {1e6 / linkrate.FIRMWARE_SEGMENT_US:.0f} segments/s)"
     faster = ("; a faster link ([serial] link_baud = 250000 or more) would carry more"
-              if baud == protocol.BASE_BAUD else "")
-    return [f"link          {n} of {job.n_segments} segments slowed to what {baud} baud and "
-            f"the firmware carry (≤ {1e6 / linkrate.FIRMWARE_SEGMENT_US:.0f} segments/s), so "
-            f"the queue never runs dry{faster}"]
+              if baud == protocol.BASE_BAUD and wire else "")
+    what = (f"{baud} baud" if wire == n else fw if not wire
+            else f"{baud} baud ({wire}) and {fw} ({n - wire})")
+    return [f"link          {n} of {job.n_segments} segments slowed to what {what} "
+            f"{'carries' if wire in (0, n) else 'carry'}, so the queue never runs dry{faster}"]
 
 
 #: Text elements listed one by one in the report; the rest are counted.
