@@ -57,8 +57,8 @@ def ramp_fractions(pl: Plan, dist: FloatArray, alpha: float, piece_s: float,
 RAMP_BLOCK = 1 << 16
 #: A sharp junction's piece (`ramp_fractions`): `SHARP_SHARE` of the least piece (2 of 3
 #: steps), cut from segments at least `SHARP_ROOM` such pieces long, where it lasts at least
-#: `SHARP_FLOORS` × the firmware's least segment time (`linkrate.FIRMWARE_SEGMENT_US`) at the
-#: junction's planned speed — a faster short piece runs at its link floor and holds its
+#: `SHARP_WAIT_S` at the junction's planned speed (first 2 × the firmware's floor of then,
+#: 1.1 ms a segment) — a faster short piece runs at its link floor and holds its
 #: neighbours back (the 5 × 1000-chord circle at 200 mm/s, 15 rad/s: 0.56 of the time at
 #: 100 mm/s instead of 0.51). Elsewhere a piece shorter than the least grows to it, from
 #: segments at least `GROW_ROOM` least pieces long (measured before the staircase's
@@ -70,12 +70,13 @@ RAMP_BLOCK = 1 << 16
 #: piece rounds the segment's direction off by up to half a step on the other motor (a
 #: sharper junction) and lost to 2; without the pieces at stops 1.024, 1.052, 1.018.
 #: With ramp pieces of 2 steps (`compile.timing.PLAN_MIN_PIECE_STEPS`), 0.6 of them (1 or 2
-#: steps as the start rounds) and 1.5 floors: bc_template 1.0123 → 1.0101 against 2/3 and 2
-#: floors, shorter on 11 of 13 other drawings, the same on two_layers_a4.svg and 0.0002
-#: longer on the circle (benchmarks/topp.py; a shorter wait, 1 floor: 1.0156; 2.5: 1.0239).
+#: steps as the start rounds) and 1.65 ms: bc_template 1.0123 → 1.0101 against 2/3 and
+#: 2.2 ms, shorter on 11 of 13 other drawings, the same on two_layers_a4.svg and 0.0002
+#: longer on the circle (benchmarks/topp.py; 1.1 ms: 1.0156; 2.75 ms: 1.0239; the link's
+#: own floor, `compile.linkrate`, made no difference from 450 to 1100 µs a segment).
 SHARP_SHARE = 0.6
 SHARP_ROOM = 1.5
-SHARP_FLOORS = 1.5
+SHARP_WAIT_S = 1.65e-3
 #: (24 steps at the least piece of 2 steps, as 8 × 3 before: at 8 × 2 the comb of 0.3 mm
 #: teeth in tests/test_plan_sharp.py took 1.13× its continuous profile's time, at 12 1.010×)
 GROW_ROOM = 12.0

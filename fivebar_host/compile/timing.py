@@ -43,7 +43,7 @@ PLAN_ACCEL_SHARE = 0.75
 #: against TOPP-RA (`python benchmarks/topp.py`, planned / optimal on the uncut segments;
 #: the three drawings of issue 39, then docs_command_line, voronoi and plotter.svg of
 #: benchmarks/drawings): 0.6 and 3 steps gave 0.9999, 1.0008, 1.0188, 1.0462, 1.0134,
-#: 1.0284; 0.45 and 2 steps (with `ramps.SHARP_SHARE` 0.6, `SHARP_FLOORS` 1.5) give
+#: 1.0284; 0.45 and 2 steps (with `ramps.SHARP_SHARE` 0.6, `SHARP_WAIT_S` 1.65 ms) give
 #: 0.9999, 1.0011, 1.0101, 1.0319, 1.0093, 1.0189 — shorter ramp pieces follow the
 #: continuous profile more closely, and the sharp junction's piece shrinks to one or two
 #: steps. More pieces: 2417 → 2871 segments on bc_template.svg. 1 step, or 3 steps at
@@ -227,7 +227,7 @@ def _time(profile: Profile, checker: PoseChecker, handed: list[Stepped],
     del dq
     counts, f1 = ramps.ramp_fractions(pln, dist, a_c, PLAN_PIECE_JUMP_SHARE * j_lim / a_c,
                                         PLAN_MIN_PIECE_STEPS * mot.rad_per_step, sharp,
-                                        ramps.SHARP_FLOORS * linkrate.FIRMWARE_SEGMENT_US * 1e-6)
+                                        ramps.SHARP_WAIT_S)
     del sharp
     del pln, dist
     th_all, pts_all, st, seg_of, f0, f1, slack = _cut_ramps(mot, checker, sp, counts, f1)

@@ -42,6 +42,10 @@ PROBE_LINES = 24
 #: denser stretches of the image may not be).
 LINK_MARGIN = 0.98
 PROBE_MARGIN = 0.95
+#: The firmware's work a G7 segment takes at least, µs: the plain segments' floor the raster
+#: planner was measured with (`compile.linkrate.FIRMWARE_SEGMENT_US` was 1100 then); a G7
+#: segment also carries the scan's pixel records, so it keeps this value.
+G7_SEGMENT_US = 1100
 
 
 @dataclass(frozen=True)
@@ -135,12 +139,12 @@ def link_lateness(line_bytes: list[int], line_start_s: list[float], rate: float,
                   line_segments: list[int]) -> float:
     """How late the latest wire line is taken, s (≤ 0: none is late): the lines streamed in
     order at `rate` bytes/s, each taking the firmware at least its segments' work
-    (`compile.linkrate.FIRMWARE_SEGMENT_US` each), never more than `BUFFER_BYTES` of them
+    (`G7_SEGMENT_US` each), never more than `BUFFER_BYTES` of them
     sent and not yet begun, the job's clock starting when its first line has arrived and
     been taken (its line l begins at `line_start_s[l]` on that clock)."""
     if not line_bytes:
         return 0.0
-    seg_s = linkrate.FIRMWARE_SEGMENT_US * 1e-6
+    seg_s = G7_SEGMENT_US * 1e-6
     t0 = max(line_bytes[0] / rate, line_segments[0] * seg_s)
     t, ahead, started, worst = 0.0, 0, 0, -math.inf
     for i, (b, n) in enumerate(zip(line_bytes, line_segments, strict=True)):
