@@ -40,7 +40,7 @@ F = TypeVar("F", bound=Callable[..., Any])
 @click.version_option(__version__, prog_name="fivebar")
 @click.pass_context
 def main(ctx: click.Context) -> None:
-    """Drive a five-bar-linkage pen plotter or laser engraver from SVG or G-code."""
+    """Drive a five-bar-linkage pen plotter or laser engraver from SVG, G-code or images."""
     from fivebar_host.controllers import ports
     from fivebar_host.devices import register
 

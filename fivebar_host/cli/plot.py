@@ -73,9 +73,11 @@ def plot(drawing: Path, dry_run: bool, preview_path: Path, port: str | None, res
          yes: bool, controller: str, config_path: Path | None, **job_values: Any) -> None:
     """Compile and check DRAWING, then plot it on the machine at --port (or --dry-run).
 
-    Everything is checked before anything moves. Ctrl-C holds the machine at once (laser
-    off) and asks whether to resume or abort; a fault or an abort leaves a resume file, and
-    the same command with --resume continues exactly where the machine stopped.
+    DRAWING is an SVG or G-code file, or an image (PNG, JPEG, BMP, GIF, TIFF, WebP) that
+    --laser engraves pixel by pixel. Everything is checked before anything moves. Ctrl-C
+    holds the machine at once (laser off) and asks whether to resume or abort; a fault or an
+    abort leaves a resume file, and the same command with --resume continues exactly where
+    the machine stopped.
     """
     plot_file(drawing, dry_run, preview_path, port, resume, yes, controller, config_path,
               job_values)
