@@ -8,7 +8,7 @@
     space (interpolation budget tol_i, `toolpath.segment`) → pen-up travel (checked
     joint-space moves, Cartesian fallback; planned pen-up moves for working-mode changes) →
     absolute steps (quantised once) → plan durations (`planner`: speed-up and slow-down cut
-    into pieces on the same joint-space lines, the firmware's rate staircase within the joint
+    into pieces on the segments' stepped lines, the firmware's rate staircase within the joint
     acceleration and junction-jump limits at every boundary) → validate: forward kinematics
     of the *quantised* steps, including the joint-space interpolation between them, against
     the requested curves.

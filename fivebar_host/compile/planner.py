@@ -30,7 +30,8 @@ continuous profile above (with a share of α, a corner cap for direction changes
 segments, and the firmware's shortest P as a speed cap) — it only decides where to cut; (2)
 `ramps.ramp_fractions` cuts the speed-up and slow-down parts of every segment into pieces
 short enough in time that the planned speed changes by a fraction of J from one piece to the
-next — new targets on the same joint-space line, so the path does not change; at a sharp
+next — new targets on the segment's stepped line (the line between its ends' steps, which
+the firmware runs for the whole segment), so the path does not change; at a sharp
 junction (a direction change the joints could not jump at the segment's own speed,
 `sharp_junctions`) the piece next to it is cut off short, so that only it runs near the
 junction's speed; (3) every piece's own shortest duration (`cap_durations_us`); (4)

@@ -1,5 +1,5 @@
 """Step (2) of the planner (`compile.planner`, module doc): where to cut each segment's
-speed-up and slow-down into pieces (new targets on the same joint-space line), from the
+speed-up and slow-down into pieces (new targets on the segment's stepped line), from the
 continuous profile (`planner.Plan`), and which junctions are sharp — the piece next to a
 sharp junction is cut off so that only it runs at the junction's speed."""
 
@@ -69,8 +69,11 @@ RAMP_BLOCK = 1 << 16
 #: 1.046 → 1.019, docs_command_line.svg 1.091 → 1.047, voronoi.svg 1.032 → 1.013; a 1-step
 #: piece rounds the segment's direction off by up to half a step on the other motor (a
 #: sharper junction) and lost to 2; without the pieces at stops 1.024, 1.052, 1.018.
-#: With ramp pieces of 2 steps (`compile.timing.PLAN_MIN_PIECE_STEPS`), 0.6 of them (1 or 2
-#: steps as the start rounds) and 1.65 ms: bc_template 1.0123 → 1.0101 against 2/3 and
+#: With ramp pieces of 2 steps (`compile.timing.PLAN_MIN_PIECE_STEPS`), 0.6 of them (then 1 or
+#: 2 steps as the start rounds; one step of the major motor since the pieces are cut on the
+#: segment's stepped line, `compile.timing._on_steps`, where the three constants were measured
+#: again: 0.4/0.5/0.6 of J, 0.4/1.0 of the least piece and 1.1/2.2 ms all longer on
+#: bc_template) and 1.65 ms: bc_template 1.0123 → 1.0101 against 2/3 and
 #: 2.2 ms, shorter on 11 of 13 other drawings, the same on two_layers_a4.svg and 0.0002
 #: longer on the circle (benchmarks/topp.py; 1.1 ms: 1.0156; 2.75 ms: 1.0239; the link's
 #: own floor, `compile.linkrate`, made no difference from 450 to 1100 µs a segment).
