@@ -177,8 +177,13 @@ def distance_on_segments(job: Job, e: FloatArray, pos: IntArray, seg: IntArray) 
 
 #: A pulse within this of the profile's up (down) pulse counts as pen up (down), µs: the
 #: firmware's 4 µs timer count plus the jitter of its edges, which the step interrupt can
-#: delay by up to about 25 µs while steps are dense (firmware/README.md, pen servo).
-PEN_MATCH_US = 30.0
+#: delay while steps are dense (firmware/README.md, pen servo: single pulses up to 52 µs
+#: off, two frames in a row 30.1 µs short in the emulator — at 30 µs here that run's line
+#: said "travel steps with the pen down 121"). Still under the ~90 µs a frame of
+#: configs/pen-servo.toml's moves, so a step in a moving frame is one with the pen neither
+#: up nor down (a slower move's first and last frames, within 60 µs of its ends, count as
+#: there: 60 µs is about 5° of a hobby servo).
+PEN_MATCH_US = 60.0
 
 
 @dataclass(frozen=True)
