@@ -165,9 +165,9 @@ def _on_steps(ends: IntArray, seg: IntArray, frac: FloatArray,
     piece's steps were rounded from a line up to half a step beside the stepped one: a
     one-step piece came out as (−2, 1) or (0, −2) on segments of (−70, 22) or (3, −4) steps,
     a direction its neighbours do not have, so the junction jump held the pieces around it
-    back (`python benchmarks/topp.py`, planned / TOPP-RA on the uncut segments:
-    benchmarks/drawings/bc_template.svg 1.0101 → 0.9981, examples/fivebar_text.svg
-    1.0011 → 0.9977, shorter on all 18 drawings it measures)."""
+    back (`python benchmarks/topp.py`, planned / TOPP-RA on the uncut segments, with
+    `_reached_lengths`: benchmarks/drawings/bc_template.svg 1.0101 → 0.9993,
+    examples/fivebar_text.svg 1.0011 → 0.9981, shorter on all 18 drawings it measures)."""
     s0 = ends[seg]
     at = s0 + frac[:, None] * (ends[seg + 1] - s0)  # fractional steps on the stepped line
     return steps.step_angles(at, mot.home_rad, mot.steps_per_rev), np.rint(at).astype(ends.dtype)
