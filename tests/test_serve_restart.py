@@ -12,10 +12,12 @@ from __future__ import annotations
 import json
 import os
 import signal
+import sqlite3
 import subprocess
 import sys
 import time
 from collections.abc import Iterator
+from contextlib import closing
 from pathlib import Path
 from typing import Any
 
@@ -110,6 +112,22 @@ def wait_segments(client: ServerClient, job_id: int, n: int, copy: int = 1) -> d
             return j
         time.sleep(0.02)
     raise AssertionError(f"job {job_id} never reached segment {n} of copy {copy}")
+
+
+def saved_progress(tmp: Path, job_id: int) -> int:
+    """Wait until the daemon's database holds some progress of the job, and return it: the
+    daemon hands progress to its writer every 0.25 s and the writer commits every 0.5 s, so
+    a job's live count can be well ahead of its record (under load, 40 segments seen live
+    with none yet on disk)."""
+    db = tmp / "state" / "fivebar.db"
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        with closing(sqlite3.connect(f"file:{db}?mode=ro", uri=True, timeout=5.0)) as c:
+            row = c.execute("SELECT segments_done FROM jobs WHERE id = ?", (job_id,)).fetchone()
+        if row is not None and row[0] > 0:
+            return int(row[0])
+        time.sleep(0.05)
+    raise AssertionError(f"job {job_id}: no progress recorded in {db}")
 
 
 def restart_and_finish(tmp_path: Path, device: Device, job_id: int) -> dict[str, Any]:
@@ -217,7 +235,9 @@ def test_sigkill_with_a_reset_controller_asks_for_home(tmp_path: Path) -> None:
     job, _ = plan()
     d = DaemonProc(tmp_path, "fivebar-mock://?speed=2", "first")
     j = d.client.submit(SQUARE.read_bytes(), "square.gcode", plot_options(confirm=True))
-    seen = wait_segments(d.client, j["id"], 40)
+    wait_segments(d.client, j["id"], 40)
+    saved_progress(tmp_path, j["id"])
+    seen = d.client.job(j["id"])
     os.kill(d.proc.pid, signal.SIGKILL)
     d.proc.wait(10)
     d.log.close()
