@@ -21,7 +21,7 @@ from fivebar_host import protocol
 from fivebar_host.compile import linkrate, planner, ramps, staircase, steps
 from fivebar_host.compile.dwell import dwell_stops, insert_dwells
 from fivebar_host.compile.layers import section_stops
-from fivebar_host.compile.model import compact_ints, compact_steps, release_free_memory
+from fivebar_host.compile.model import compact_ints, release_free_memory
 from fivebar_host.compile.place import Setup
 from fivebar_host.compile.segments import Stepped
 from fivebar_host.compile.solve import Routed, Solved
@@ -122,7 +122,7 @@ def _cut_ramps(mot: Motors, checker: PoseChecker, sp: Stepped, counts: IntArray,
     inner = np.ones(seg_of.shape[0], dtype=bool)  # not a segment's last piece
     inner[np.cumsum(counts) - 1] = False
     # new targets on the line between their segment's stepped ends, rounded once (`_on_steps`)
-    ends = compact_steps(th_all, mot.home_rad, mot.steps_per_rev)
+    ends = _joint_steps(sp.steps, sp.slack)
     th = np.empty((seg_of.shape[0] + 1, 2))
     th[0] = th_all[0]
     th[1:][~inner] = th_all[1:]
@@ -154,6 +154,12 @@ def _cut_ramps(mot: Motors, checker: PoseChecker, sp: Stepped, counts: IntArray,
     f0 = np.where(np.concatenate(([True], seg_of[1:] != seg_of[:-1])), 0.0,
                   np.concatenate(([0.0], f1[:-1])))
     return th, pts, st, seg_of, f0, f1, slack
+
+
+def _joint_steps(st: IntArray, slack: IntArray) -> IntArray:
+    """The joints' absolute steps of targets whose motor counts are `st`: the counts less
+    the backlash slack (`compile.backlash`; none when `slack` is empty)."""
+    return st if not slack.shape[0] else compact_ints(st - slack)
 
 
 def _on_steps(ends: IntArray, seg: IntArray, frac: FloatArray,
@@ -278,8 +284,7 @@ def _time(profile: Profile, checker: PoseChecker, handed: list[Stepped],
     stop = stop[seg_of] & np.concatenate((seg_of[1:] != seg_of[:-1], [True]))
     del seg_of
     trav = np.flatnonzero(~seg_draw)  # travel: between its targets
-    length[trav] = _reached_lengths(st if not slack.shape[0] else st - slack, trav, checker,
-                                    mot)
+    length[trav] = _reached_lengths(_joint_steps(st, slack), trav, checker, mot)
     del trav
     if trim:
         release_free_memory()  # the stepped segments' arrays
